@@ -1,0 +1,254 @@
+//! Cameras and views: where the eye is and how many pixels it sees.
+
+use crate::error::{CoreError, Result};
+use crate::geom::Frustum;
+use glam::{Affine3A, Mat4, Vec2, Vec3, Vec4};
+use serde::{Deserialize, Serialize};
+
+/// Largest width or height a [`View`] accepts, in pixels.
+pub const MAX_RESOLUTION: u32 = 16384;
+/// Largest pixel count a [`View`] accepts (a 64 Mpixel frame is ~1.3 GB of buffers).
+pub const MAX_PIXEL_COUNT: u64 = 1 << 26;
+
+/// A perspective pinhole camera. Angles are degrees, distances world units.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Camera {
+    /// Eye position, world space.
+    pub eye: Vec3,
+    /// Point looked at, world space.
+    pub target: Vec3,
+    /// Up direction, world space (need not be unit or orthogonal to the view direction).
+    pub up: Vec3,
+    /// Vertical field of view, degrees, in (0, 180).
+    pub fov_y_deg: f32,
+    /// Near plane distance, > 0.
+    pub near: f32,
+    /// Far plane distance, > near.
+    pub far: f32,
+}
+
+impl Camera {
+    /// A camera at `eye` looking at `target`, up `+y`, 60° vertical fov, near 0.1, far 1000.
+    pub fn look_at(eye: Vec3, target: Vec3) -> Self {
+        Self { eye, target, up: Vec3::Y, fov_y_deg: 60.0, near: 0.1, far: 1000.0 }
+    }
+
+    /// Checks that the camera forms a view.
+    ///
+    /// # Errors
+    /// [`CoreError::DegenerateCamera`] for non-finite values, a fov outside (0°, 180°),
+    /// `near <= 0`, `near >= far`, `eye == target`, or `up` parallel to the view direction.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |why: &str| Err(CoreError::DegenerateCamera(why.to_string()));
+        if !(self.eye.is_finite() && self.target.is_finite() && self.up.is_finite()) {
+            return bad("eye, target or up is not finite");
+        }
+        if !(self.fov_y_deg > 0.0 && self.fov_y_deg < 180.0) {
+            return bad(&format!("vertical fov {}° is not in (0°, 180°)", self.fov_y_deg));
+        }
+        if !(self.near > 0.0 && self.near.is_finite()) {
+            return bad(&format!("near plane {} is not positive", self.near));
+        }
+        if !(self.far > self.near && self.far.is_finite()) {
+            return bad(&format!("far plane {} is not beyond near plane {}", self.far, self.near));
+        }
+        let dir = self.target - self.eye;
+        if dir.length_squared() <= f32::MIN_POSITIVE || !dir.length_squared().is_finite() {
+            return bad("eye and target coincide");
+        }
+        if dir.normalize().cross(self.up.normalize_or_zero()).length_squared() < 1e-10 {
+            return bad("up is parallel to the view direction (or zero)");
+        }
+        Ok(())
+    }
+
+    /// Unit view direction.
+    pub fn direction(&self) -> Vec3 {
+        (self.target - self.eye).normalize()
+    }
+}
+
+/// A validated camera with a resolution, and its matrices.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct View {
+    camera: Camera,
+    width: u32,
+    height: u32,
+    view_from_world: Mat4,
+    clip_from_view: Mat4,
+    clip_from_world: Mat4,
+}
+
+impl View {
+    /// A view of `width × height` pixels.
+    ///
+    /// # Errors
+    /// [`CoreError::DegenerateCamera`] (see [`Camera::validate`]) and
+    /// [`CoreError::BadResolution`] for a zero side, a side over [`MAX_RESOLUTION`], or more
+    /// than [`MAX_PIXEL_COUNT`] pixels.
+    pub fn new(camera: Camera, width: u32, height: u32) -> Result<Self> {
+        camera.validate()?;
+        check_resolution(width, height)?;
+        let view_from_world = look_at(camera.eye, camera.target, camera.up);
+        let aspect = width as f32 / height as f32;
+        let clip_from_view = reversed_z_infinite(camera.fov_y_deg.to_radians(), aspect, camera.near);
+        let clip_from_world = clip_from_view * view_from_world;
+        if !clip_from_world.is_finite() {
+            return Err(CoreError::DegenerateCamera("view matrix is not finite".into()));
+        }
+        Ok(Self { camera, width, height, view_from_world, clip_from_view, clip_from_world })
+    }
+
+    /// The same camera at another resolution.
+    ///
+    /// # Errors
+    /// As [`View::new`].
+    pub fn with_resolution(&self, width: u32, height: u32) -> Result<Self> {
+        Self::new(self.camera, width, height)
+    }
+
+    /// The camera.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+    /// Width in pixels.
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+    /// Height in pixels.
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+    /// World to camera space (camera looks down `-z`).
+    pub fn view_from_world(&self) -> Mat4 {
+        self.view_from_world
+    }
+    /// Camera to clip space (reversed-Z, infinite far).
+    pub fn clip_from_view(&self) -> Mat4 {
+        self.clip_from_view
+    }
+    /// World to clip space.
+    pub fn clip_from_world(&self) -> Mat4 {
+        self.clip_from_world
+    }
+
+    /// `clip_from_world * world_from_object`: the one way every renderer forms this matrix.
+    #[inline]
+    pub fn clip_from_object(&self, world_from_object: &Affine3A) -> Mat4 {
+        self.clip_from_world * Mat4::from(*world_from_object)
+    }
+
+    /// Depth (`z_ndc`) of the far plane: fragments with smaller depth are discarded.
+    pub fn far_depth(&self) -> f32 {
+        self.camera.near / self.camera.far
+    }
+
+    /// The culling frustum in object space, widened by two pixels on each side and by 0.1 %
+    /// in depth, so that nothing it rejects could reach a pixel centre through the
+    /// rasterizer's snapping and rounding.
+    pub fn frustum(&self, world_from_object: &Affine3A) -> Frustum {
+        let margin = Vec2::new(4.0 / self.width as f32, 4.0 / self.height as f32);
+        Frustum::from_reversed_z(&self.clip_from_object(world_from_object), self.camera.far, margin, 1e-3)
+    }
+}
+
+/// Right-handed look-at: the camera looks down its `-z`, `+y` is up.
+fn look_at(eye: Vec3, target: Vec3, up: Vec3) -> Mat4 {
+    let f = (target - eye).normalize();
+    let s = f.cross(up).normalize();
+    let u = s.cross(f);
+    Mat4::from_cols(
+        Vec4::new(s.x, u.x, -f.x, 0.0),
+        Vec4::new(s.y, u.y, -f.y, 0.0),
+        Vec4::new(s.z, u.z, -f.z, 0.0),
+        Vec4::new(-s.dot(eye), -u.dot(eye), f.dot(eye), 1.0),
+    )
+}
+
+/// Reversed-Z perspective with an infinite far plane: `clip = (sx·x, sy·y, near, -z_view)`.
+fn reversed_z_infinite(fov_y: f32, aspect: f32, near: f32) -> Mat4 {
+    let sy = 1.0 / (0.5 * fov_y).tan();
+    let sx = sy / aspect;
+    Mat4::from_cols(
+        Vec4::new(sx, 0.0, 0.0, 0.0),
+        Vec4::new(0.0, sy, 0.0, 0.0),
+        Vec4::new(0.0, 0.0, 0.0, -1.0),
+        Vec4::new(0.0, 0.0, near, 0.0),
+    )
+}
+
+/// Checks a resolution against the engine's limits.
+///
+/// # Errors
+/// [`CoreError::BadResolution`] for a zero side, a side over [`MAX_RESOLUTION`], or more than
+/// [`MAX_PIXEL_COUNT`] pixels.
+pub fn check_resolution(width: u32, height: u32) -> Result<()> {
+    let bad = |reason: String| Err(CoreError::BadResolution { width, height, reason });
+    if width == 0 || height == 0 {
+        return bad("zero width or height".into());
+    }
+    if width > MAX_RESOLUTION || height > MAX_RESOLUTION {
+        return bad(format!("a side exceeds {MAX_RESOLUTION} pixels"));
+    }
+    if width as u64 * height as u64 > MAX_PIXEL_COUNT {
+        return bad(format!("more than {MAX_PIXEL_COUNT} pixels"));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cam() -> Camera {
+        Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO)
+    }
+
+    #[test]
+    fn degenerate_cameras_are_errors() {
+        let mut c = cam();
+        c.fov_y_deg = 0.0;
+        assert!(View::new(c, 10, 10).is_err());
+        let mut c = cam();
+        c.near = 10.0;
+        c.far = 1.0;
+        assert!(View::new(c, 10, 10).is_err());
+        let mut c = cam();
+        c.target = c.eye;
+        assert!(View::new(c, 10, 10).is_err());
+        let mut c = cam();
+        c.up = Vec3::Z;
+        assert!(View::new(c, 10, 10).is_err());
+        let mut c = cam();
+        c.eye.x = f32::NAN;
+        assert!(View::new(c, 10, 10).is_err());
+    }
+
+    #[test]
+    fn bad_resolutions_are_errors() {
+        assert!(View::new(cam(), 0, 10).is_err());
+        assert!(View::new(cam(), 10, 0).is_err());
+        assert!(View::new(cam(), MAX_RESOLUTION + 1, 10).is_err());
+        assert!(View::new(cam(), MAX_RESOLUTION, MAX_RESOLUTION).is_err());
+        assert!(View::new(cam(), 1920, 1080).is_ok());
+    }
+
+    #[test]
+    fn reversed_z_depth_is_near_over_distance() {
+        let v = View::new(cam(), 100, 100).unwrap();
+        let p = v.clip_from_world() * glam::Vec4::new(0.0, 0.0, 0.0, 1.0);
+        assert!((p.w - 5.0).abs() < 1e-5);
+        assert!((p.z / p.w - 0.1 / 5.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn frustum_culls_behind_and_beyond() {
+        let v = View::new(cam(), 100, 100).unwrap();
+        let f = v.frustum(&Affine3A::IDENTITY);
+        let unit = |c: Vec3| crate::Aabb::new(c - 0.5, c + 0.5);
+        assert!(f.intersects_aabb(&unit(Vec3::ZERO)));
+        assert!(!f.intersects_aabb(&unit(Vec3::new(0.0, 0.0, 10.0))));
+        assert!(!f.intersects_aabb(&unit(Vec3::new(0.0, 0.0, -2000.0))));
+        assert!(!f.intersects_aabb(&unit(Vec3::new(100.0, 0.0, 0.0))));
+    }
+}

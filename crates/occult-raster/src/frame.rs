@@ -1,0 +1,203 @@
+//! The frame: depth, item id and color per pixel.
+
+use crate::RasterError;
+use occult_core::{ItemId, NO_ITEM};
+
+/// Depth of a cleared pixel: reversed-Z zero, infinitely far.
+pub const CLEAR_DEPTH: f32 = 0.0;
+
+/// A `width × height` frame, row-major, row 0 at the top. Depth is reversed-Z `z_ndc`
+/// (greater is nearer, [`CLEAR_DEPTH`] when nothing was drawn); item ids name the triangle
+/// instance kept at each pixel ([`NO_ITEM`] when none); color is filled by [`crate::shade`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    width: u32,
+    height: u32,
+    pub(crate) depth: Vec<f32>,
+    pub(crate) items: Vec<ItemId>,
+    pub(crate) color: Vec<[u8; 4]>,
+}
+
+impl Frame {
+    /// A cleared frame.
+    ///
+    /// # Errors
+    /// [`RasterError::Resolution`] for a zero or oversized resolution (see
+    /// [`occult_core::check_resolution`]); [`RasterError::OutOfMemory`] when the buffers
+    /// cannot be allocated. The check happens before any allocation.
+    pub fn new(width: u32, height: u32) -> Result<Self, RasterError> {
+        occult_core::check_resolution(width, height)?;
+        let n = width as usize * height as usize;
+        let mut depth = Vec::new();
+        let mut items = Vec::new();
+        let mut color = Vec::new();
+        let bytes = n * 16;
+        depth.try_reserve_exact(n).map_err(|_| RasterError::OutOfMemory(bytes))?;
+        items.try_reserve_exact(n).map_err(|_| RasterError::OutOfMemory(bytes))?;
+        color.try_reserve_exact(n).map_err(|_| RasterError::OutOfMemory(bytes))?;
+        depth.resize(n, CLEAR_DEPTH);
+        items.resize(n, NO_ITEM);
+        color.resize(n, [0, 0, 0, 0]);
+        Ok(Self { width, height, depth, items, color })
+    }
+
+    /// Width in pixels.
+    #[inline]
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+    /// Height in pixels.
+    #[inline]
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+    /// Depth per pixel, row-major.
+    #[inline]
+    pub fn depth(&self) -> &[f32] {
+        &self.depth
+    }
+    /// Item id per pixel, row-major.
+    #[inline]
+    pub fn items(&self) -> &[ItemId] {
+        &self.items
+    }
+    /// Color per pixel (RGBA8), row-major; valid after [`crate::shade`].
+    #[inline]
+    pub fn color(&self) -> &[[u8; 4]] {
+        &self.color
+    }
+    /// Resets depth, items and color.
+    pub fn clear(&mut self) {
+        self.depth.fill(CLEAR_DEPTH);
+        self.items.fill(NO_ITEM);
+        self.color.fill([0, 0, 0, 0]);
+    }
+    /// Pixels holding an item.
+    pub fn covered_pixel_count(&self) -> u64 {
+        self.items.iter().filter(|&&i| i != NO_ITEM).count() as u64
+    }
+    /// The distinct items visible in the frame, sorted: the exactly visible set.
+    pub fn visible_items(&self) -> Vec<ItemId> {
+        let mut v: Vec<ItemId> = self.items.iter().copied().filter(|&i| i != NO_ITEM).collect();
+        v.sort_unstable();
+        v.dedup();
+        v
+    }
+    /// True when depth (bit for bit) and items are identical; colors follow from items.
+    pub fn same_visibility(&self, other: &Frame) -> bool {
+        self.width == other.width
+            && self.height == other.height
+            && self.items == other.items
+            && self.depth.iter().zip(&other.depth).all(|(a, b)| a.to_bits() == b.to_bits())
+    }
+    /// Pixels whose item differs from `other`'s (frames of equal size).
+    ///
+    /// # Panics
+    /// If the sizes differ (a programmer error).
+    pub fn differing_item_count(&self, other: &Frame) -> u64 {
+        assert_eq!((self.width, self.height), (other.width, other.height), "frame sizes differ");
+        self.items.iter().zip(&other.items).filter(|(a, b)| a != b).count() as u64
+    }
+    /// Peak signal-to-noise ratio of this frame's color against `reference`'s, in dB over RGB;
+    /// infinite when identical.
+    ///
+    /// # Panics
+    /// If the sizes differ (a programmer error).
+    pub fn color_psnr(&self, reference: &Frame) -> f64 {
+        assert_eq!((self.width, self.height), (reference.width, reference.height), "frame sizes differ");
+        let mut sum = 0f64;
+        for (a, b) in self.color.iter().zip(&reference.color) {
+            for c in 0..3 {
+                let d = a[c] as f64 - b[c] as f64;
+                sum += d * d;
+            }
+        }
+        let mse = sum / (self.color.len() as f64 * 3.0);
+        if mse == 0.0 {
+            f64::INFINITY
+        } else {
+            10.0 * (255.0f64 * 255.0 / mse).log10()
+        }
+    }
+    /// Bytes of the frame's buffers.
+    pub fn memory_bytes(&self) -> usize {
+        self.depth.len() * 16
+    }
+
+    /// Color as an RGBA8 image (after [`crate::shade`]).
+    pub fn color_image(&self) -> image::RgbaImage {
+        let raw: Vec<u8> = self.color.iter().flatten().copied().collect();
+        // The buffer has exactly width * height * 4 bytes.
+        image::RgbaImage::from_raw(self.width, self.height, raw).expect("buffer size matches")
+    }
+
+    /// Depth visualised as grey levels: near white, far dark, cleared pixels black. Depth is
+    /// mapped logarithmically between the frame's nearest and farthest drawn depth.
+    pub fn depth_image(&self) -> image::GrayImage {
+        let drawn = || self.depth.iter().copied().filter(|&d| d > CLEAR_DEPTH && d.is_finite());
+        let lo = drawn().fold(f32::INFINITY, f32::min).max(1e-12);
+        let hi = drawn().fold(0.0f32, f32::max).max(lo);
+        let (llo, lhi) = (lo.ln(), hi.ln());
+        let span = (lhi - llo).max(1e-6);
+        let raw = self
+            .depth
+            .iter()
+            .map(|&d| if d > CLEAR_DEPTH && d.is_finite() { (32.0 + 223.0 * ((d.max(lo).ln() - llo) / span)) as u8 } else { 0 })
+            .collect();
+        image::GrayImage::from_raw(self.width, self.height, raw).expect("buffer size matches")
+    }
+
+    /// Mutable access to depth and items, for renderers that write pixels themselves (point
+    /// samples, ray casting) under the same (depth, item) rule as the rasterizer.
+    pub fn buffers_mut(&mut self) -> (&mut [f32], &mut [ItemId]) {
+        (&mut self.depth, &mut self.items)
+    }
+
+    /// Writes a fragment at pixel `(x, y)` under the frame's rule: it is kept when nearer
+    /// (greater depth), or equally near with a smaller item id. Returns whether it was kept.
+    #[inline]
+    pub fn write_fragment(&mut self, x: u32, y: u32, depth: f32, item: ItemId) -> bool {
+        let i = y as usize * self.width as usize + x as usize;
+        keep_fragment(&mut self.depth[i], &mut self.items[i], depth, item)
+    }
+}
+
+/// DESIGN invariant 1: a pixel keeps the fragment nearest by depth, ties broken by the smaller
+/// item id, so the result does not depend on submission order or thread count.
+#[inline(always)]
+pub fn keep_fragment(stored_depth: &mut f32, stored_item: &mut ItemId, depth: f32, item: ItemId) -> bool {
+    if depth > *stored_depth || (depth == *stored_depth && item < *stored_item) {
+        *stored_depth = depth;
+        *stored_item = item;
+        true
+    } else {
+        false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn zero_and_absurd_resolutions_are_errors() {
+        assert!(Frame::new(0, 10).is_err());
+        assert!(Frame::new(100_000, 100_000).is_err());
+        assert!(Frame::new(4, 3).is_ok());
+    }
+
+    #[test]
+    fn fragment_rule_is_order_independent() {
+        let frags = [(0.5f32, 7u64), (0.5, 3), (0.25, 1), (0.5, 9)];
+        let mut a = Frame::new(1, 1).unwrap();
+        let mut b = Frame::new(1, 1).unwrap();
+        for &(d, i) in &frags {
+            a.write_fragment(0, 0, d, i);
+        }
+        for &(d, i) in frags.iter().rev() {
+            b.write_fragment(0, 0, d, i);
+        }
+        assert!(a.same_visibility(&b));
+        assert_eq!(a.items()[0], 3);
+    }
+}

@@ -1,0 +1,157 @@
+//! # occult-render
+//!
+//! The renderers of occult, one module per paper, behind one [`Renderer`] trait, all drawing
+//! through the same exact rasterizer (`occult-raster`) so that their frames can be compared
+//! bit for bit, and all returning the same [`FrameStats`].
+//!
+//! | module | what |
+//! | --- | --- |
+//! | [`zbuffer`] | brute force: every triangle instance rasterized; the reference |
+//! | [`frustum`] | hierarchical view-frustum culling only: the baseline the papers compare to |
+//! | [`compare`] | runs several renderers over one camera path and measures them against each other |
+//!
+//! ```
+//! use std::sync::Arc;
+//! use occult_core::{Camera, Mesh, Scene, View, Vec3};
+//! use occult_raster::Frame;
+//! use occult_render::{Algorithm, RenderOptions};
+//! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).unwrap();
+//! let scene = Arc::new(Scene::from_mesh("tri", mesh).unwrap());
+//! let view = View::new(Camera::look_at(Vec3::new(0.3, 0.3, 2.0), Vec3::new(0.3, 0.3, 0.0)), 32, 32).unwrap();
+//! let mut renderer = Algorithm::Frustum.build(scene, &RenderOptions::default()).unwrap();
+//! let mut frame = Frame::new(32, 32).unwrap();
+//! let stats = renderer.render(&view, &mut frame).unwrap();
+//! assert_eq!(stats.triangles_rasterized, 1);
+//! assert!(frame.covered_pixel_count() > 0);
+//! ```
+#![deny(missing_docs)]
+
+pub mod compare;
+pub mod frustum;
+mod stats;
+pub mod zbuffer;
+
+use std::sync::Arc;
+
+use occult_core::{Scene, View};
+use occult_raster::{Frame, RasterConfig, RasterError};
+pub use stats::{FrameStats, Phase, PhaseTimes};
+use thiserror::Error;
+
+/// Errors of renderers.
+#[derive(Debug, Error)]
+pub enum RenderError {
+    /// A renderer parameter is out of range; the message names it.
+    #[error("bad parameter: {0}")]
+    BadParameter(String),
+    /// The rasterizer refused (frame size, thread pool).
+    #[error(transparent)]
+    Raster(#[from] RasterError),
+    /// The frame's size differs from the view's resolution.
+    #[error("frame is {frame_width}x{frame_height} but the view is {view_width}x{view_height}")]
+    FrameSizeMismatch {
+        /// Frame width.
+        frame_width: u32,
+        /// Frame height.
+        frame_height: u32,
+        /// View width.
+        view_width: u32,
+        /// View height.
+        view_height: u32,
+    },
+    /// Unknown algorithm name.
+    #[error("unknown algorithm '{0}' (known: {known})", known = Algorithm::NAMES.join(", "))]
+    UnknownAlgorithm(String),
+}
+
+/// Result with [`RenderError`].
+pub type Result<T, E = RenderError> = std::result::Result<T, E>;
+
+/// A visibility algorithm that renders frames of one scene.
+///
+/// Conservative renderers (everything except approximate ones) must produce frames
+/// bit-identical to [`zbuffer::ZBuffer`] (DESIGN invariant 2).
+pub trait Renderer: Send {
+    /// Short name, as on the command line.
+    fn name(&self) -> &'static str;
+    /// Renders `view` into `frame` (cleared first), leaving depth and item ids; colors are
+    /// resolved separately ([`occult_raster::shade`]).
+    ///
+    /// # Errors
+    /// [`RenderError::FrameSizeMismatch`] when the frame does not match the view.
+    fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats>;
+    /// Bytes held by the renderer's own structures (not the scene's).
+    fn memory_bytes(&self) -> usize;
+    /// False for renderers whose frames are approximate (measured, not held identical).
+    fn is_conservative(&self) -> bool {
+        true
+    }
+}
+
+/// Options every renderer takes.
+#[derive(Clone, Debug, Default)]
+pub struct RenderOptions {
+    /// The rasterizer's configuration (threads, tiles, culling of back faces).
+    pub raster: RasterConfig,
+}
+
+/// The renderers, chosen at run time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Algorithm {
+    /// [`zbuffer::ZBuffer`].
+    Zbuffer,
+    /// [`frustum::FrustumCulling`].
+    Frustum,
+}
+
+impl Algorithm {
+    /// Names accepted by [`Algorithm::parse`].
+    pub const NAMES: &'static [&'static str] = &["zbuffer", "frustum"];
+
+    /// All algorithms.
+    pub const ALL: &'static [Algorithm] = &[Algorithm::Zbuffer, Algorithm::Frustum];
+
+    /// The algorithm called `name`.
+    ///
+    /// # Errors
+    /// [`RenderError::UnknownAlgorithm`].
+    pub fn parse(name: &str) -> Result<Self> {
+        match name {
+            "zbuffer" => Ok(Self::Zbuffer),
+            "frustum" => Ok(Self::Frustum),
+            other => Err(RenderError::UnknownAlgorithm(other.to_string())),
+        }
+    }
+
+    /// Its command-line name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Zbuffer => "zbuffer",
+            Self::Frustum => "frustum",
+        }
+    }
+
+    /// Builds the renderer for `scene`, doing its preprocessing (time it from outside).
+    ///
+    /// # Errors
+    /// Bad options; see each renderer.
+    pub fn build(self, scene: Arc<Scene>, options: &RenderOptions) -> Result<Box<dyn Renderer>> {
+        Ok(match self {
+            Self::Zbuffer => Box::new(zbuffer::ZBuffer::new(scene, options)?),
+            Self::Frustum => Box::new(frustum::FrustumCulling::new(scene, options)?),
+        })
+    }
+}
+
+/// Checks that `frame` matches `view`.
+pub(crate) fn check_frame(view: &View, frame: &Frame) -> Result<()> {
+    if frame.width() != view.width() || frame.height() != view.height() {
+        return Err(RenderError::FrameSizeMismatch {
+            frame_width: frame.width(),
+            frame_height: frame.height(),
+            view_width: view.width(),
+            view_height: view.height(),
+        });
+    }
+    Ok(())
+}

@@ -1,0 +1,82 @@
+//! The accounting every renderer returns (DESIGN invariant 4).
+
+use serde::Serialize;
+use std::time::Duration;
+
+/// A phase of a frame, for time accounting.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Phase {
+    /// Clearing the frame.
+    Clear,
+    /// Traversing hierarchies and culling.
+    Cull,
+    /// Transforming, setting up and binning triangles.
+    Setup,
+    /// Rasterizing triangles into tiles.
+    Raster,
+    /// Depth queries (boxes, rectangles).
+    Query,
+    /// Building derived depth structures (pyramids, N-buffers).
+    DepthStructure,
+    /// Casting rays.
+    Rays,
+    /// Drawing point samples.
+    Samples,
+    /// Anything else.
+    Other,
+}
+
+/// Time spent per phase.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct PhaseTimes(pub Vec<(Phase, Duration)>);
+
+impl PhaseTimes {
+    /// Adds `d` to `phase`.
+    pub fn add(&mut self, phase: Phase, d: Duration) {
+        match self.0.iter_mut().find(|(p, _)| *p == phase) {
+            Some((_, t)) => *t += d,
+            None => self.0.push((phase, d)),
+        }
+    }
+    /// Time of `phase` (zero if never added).
+    pub fn get(&self, phase: Phase) -> Duration {
+        self.0.iter().find(|(p, _)| *p == phase).map_or(Duration::ZERO, |(_, t)| *t)
+    }
+    /// Adds every phase of `other`.
+    pub fn merge(&mut self, other: &PhaseTimes) {
+        for &(p, d) in &other.0 {
+            self.add(p, d);
+        }
+    }
+}
+
+/// What a renderer did for one frame. Every renderer fills what applies and leaves the rest 0.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct FrameStats {
+    /// Triangle instances handed to the rasterizer.
+    pub triangles_submitted: u64,
+    /// Triangles that reached setup and covered at least one pixel centre inside the viewport
+    /// (after clipping, back-face and zero-area rejection).
+    pub triangles_rasterized: u64,
+    /// Fragments that passed the depth test.
+    pub fragments_written: u64,
+    /// Hierarchy nodes visited.
+    pub nodes_visited: u64,
+    /// Bounding volumes tested (frustum, occlusion).
+    pub boxes_tested: u64,
+    /// Bounding volumes culled.
+    pub boxes_culled: u64,
+    /// Screen rectangles tested against depth.
+    pub rects_tested: u64,
+    /// Rectangles culled.
+    pub rects_culled: u64,
+    /// Rays cast.
+    pub rays_cast: u64,
+    /// Point samples drawn.
+    pub samples_drawn: u64,
+    /// Total wall time of the frame.
+    pub total: Duration,
+    /// Wall time per phase.
+    pub phases: PhaseTimes,
+}
