@@ -290,11 +290,11 @@ impl Scene {
 
     /// Calls `f(world_from_object, mesh_node, mesh, first_item)` for every mesh instance, in
     /// item order. Visits every instance: use only where brute force is meant.
-    pub fn for_each_mesh_instance(&self, mut f: impl FnMut(&Affine3A, NodeId, &Mesh, ItemId)) {
+    pub fn for_each_mesh_instance<'s>(&'s self, mut f: impl FnMut(&Affine3A, NodeId, &'s Mesh, ItemId)) {
         self.walk(self.root, &Affine3A::IDENTITY, 0, &mut f);
     }
 
-    fn walk(&self, id: NodeId, world_from_node: &Affine3A, base: ItemId, f: &mut impl FnMut(&Affine3A, NodeId, &Mesh, ItemId)) {
+    fn walk<'s>(&'s self, id: NodeId, world_from_node: &Affine3A, base: ItemId, f: &mut impl FnMut(&Affine3A, NodeId, &'s Mesh, ItemId)) {
         let node = self.node(id);
         match &node.kind {
             NodeKind::Mesh(m) => f(world_from_node, id, m, base),

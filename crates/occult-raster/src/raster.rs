@@ -1,0 +1,699 @@
+//! The tile-binned, multi-threaded, exact triangle rasterizer.
+//!
+//! Triangles flow through two phases per round of up to `threads × 2` chunks of
+//! [`CHUNK_TRIANGLES`] triangles:
+//! 1. **Setup and binning** (parallel over chunks): transform (or fetch pre-transformed)
+//!    vertices, trivially reject by outcodes, clip the rare triangle that crosses the near plane
+//!    or the guard band, snap to fixed point, reject empty bounding boxes and zero areas, build
+//!    edge functions and the depth plane, and append the triangle to the bin of each tile its
+//!    box touches.
+//! 2. **Rasterization** (parallel over tiles): each tile walks every chunk's bin for it and
+//!    scans each triangle's box within the tile.
+//!
+//! The result cannot depend on the split: every fragment's depth is a function of the
+//! triangle and the pixel alone, and pixels keep the nearest `(depth, item)` (invariant 1).
+//!
+//! Cost: O(triangles + covered pixels of their boxes). For scenes where most triangles are
+//! hidden, that is what the culling renderers avoid.
+
+use crate::frame::{keep_fragment, Frame};
+use occult_core::{ItemId, Mat4, Mesh, Vec3, Vec4, View};
+use rayon::prelude::*;
+use std::ops::Range;
+
+/// Sub-pixel precision of snapped vertices, in bits.
+pub const SUBPIXEL_BITS: u32 = 8;
+const SUB: i64 = 1 << SUBPIXEL_BITS;
+const HALF: i64 = SUB / 2;
+/// Guard band half-width in pixels: vertices beyond it are clipped, so fixed-point coordinates
+/// stay below 2^24 and edge products below 2^50.
+const GUARD_PIXELS: f32 = 32768.0;
+/// Triangles per setup chunk: a chunk's setup records (~100 B each) stay in L2/L3.
+pub const CHUNK_TRIANGLES: usize = 8 * 1024;
+
+const OUT_LEFT: u32 = 1;
+const OUT_RIGHT: u32 = 2;
+const OUT_BOTTOM: u32 = 4;
+const OUT_TOP: u32 = 8;
+const OUT_NEAR: u32 = 16;
+const OUT_OF_VIEW: u32 = OUT_LEFT | OUT_RIGHT | OUT_BOTTOM | OUT_TOP | OUT_NEAR;
+const NEEDS_CLIP: u32 = 32;
+const NOT_FINITE: u32 = 64;
+
+/// Rasterizer configuration. Results never depend on it, only speed does.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RasterConfig {
+    /// Worker threads; 0 uses rayon's global pool (all cores).
+    pub threads: usize,
+    /// Tile side in pixels (8..=1024): smaller balances load better, larger bins less.
+    pub tile_size: u32,
+    /// Skip back faces (clockwise on screen). Off by default: open meshes stay visible from
+    /// behind. Every renderer compared against another must use the same setting.
+    pub cull_backfaces: bool,
+}
+
+impl Default for RasterConfig {
+    fn default() -> Self {
+        Self { threads: 0, tile_size: 64, cull_backfaces: false }
+    }
+}
+
+/// Which triangles of a mesh a [`Draw`] sends.
+#[derive(Clone, Debug)]
+pub enum DrawTriangles<'a> {
+    /// All of them (vertices are transformed once, shared by their triangles).
+    All,
+    /// A contiguous range of triangle indices.
+    Range(Range<u32>),
+    /// An explicit list of triangle indices (each corner transformed per triangle).
+    List(&'a [u32]),
+}
+
+impl DrawTriangles<'_> {
+    fn len(&self, mesh: &Mesh) -> usize {
+        match self {
+            Self::All => mesh.triangle_count(),
+            Self::Range(r) => r.len(),
+            Self::List(l) => l.len(),
+        }
+    }
+    #[inline]
+    fn triangle_index(&self, j: usize) -> u32 {
+        match self {
+            Self::All => j as u32,
+            Self::Range(r) => r.start + j as u32,
+            Self::List(l) => l[j],
+        }
+    }
+}
+
+/// One mesh instance (or part of it) to rasterize.
+#[derive(Clone, Debug)]
+pub struct Draw<'a> {
+    /// The mesh.
+    pub mesh: &'a Mesh,
+    /// Which of its triangles.
+    pub triangles: DrawTriangles<'a>,
+    /// Object to clip space, formed by [`View::clip_from_object`].
+    pub clip_from_object: Mat4,
+    /// Item id of the mesh's triangle 0 in this instance; triangle `i` is `first_item + i`.
+    pub first_item: ItemId,
+}
+
+/// What to write.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RasterMode {
+    /// Depth and item id, under the (depth, item) rule.
+    Full,
+    /// Depth only (for occluders and depth structures); items are left untouched.
+    DepthOnly,
+}
+
+/// Counts from one [`Rasterizer::draw`] call.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RasterCounts {
+    /// Triangles handed in.
+    pub triangles_submitted: u64,
+    /// Triangles (after clipping, each clipped piece counted) whose box held a pixel centre,
+    /// with non-zero area, facing right, not beyond the far plane: the ones scanned.
+    pub triangles_rasterized: u64,
+    /// Fragments that won their pixel when written.
+    pub fragments_written: u64,
+}
+
+impl std::ops::AddAssign for RasterCounts {
+    fn add_assign(&mut self, o: Self) {
+        self.triangles_submitted += o.triangles_submitted;
+        self.triangles_rasterized += o.triangles_rasterized;
+        self.fragments_written += o.fragments_written;
+    }
+}
+
+/// A vertex in clip space with its snapped screen position.
+#[derive(Clone, Copy, Debug, Default)]
+struct ProjVertex {
+    clip: Vec4,
+    x: i32,
+    y: i32,
+    z: f32,
+    code: u32,
+}
+
+/// Edge functions and depth plane of a triangle ready to scan. `e` holds the three edge
+/// functions (top-left bias folded in) at the centre of pixel `(px0, py0)`; a centre is inside
+/// when all three are `>= 0`.
+#[derive(Clone, Copy, Debug)]
+struct TriSetup {
+    e: [i64; 3],
+    a: [i32; 3],
+    b: [i32; 3],
+    px0: u16,
+    py0: u16,
+    px1: u16,
+    py1: u16,
+    z0: f32,
+    dzdx: f32,
+    dzdy: f32,
+    x0: f32,
+    y0: f32,
+    zmin: f32,
+    zmax: f32,
+    item: ItemId,
+}
+
+/// Per-frame constants.
+#[derive(Clone, Copy, Debug)]
+struct Viewport {
+    width: u32,
+    height: u32,
+    fwidth: f32,
+    fheight: f32,
+    guard_x: f32,
+    guard_y: f32,
+    far_depth: f32,
+    tile_size: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+    cull_backfaces: bool,
+}
+
+impl Viewport {
+    fn new(view: &View, config: &RasterConfig) -> Self {
+        let (width, height) = (view.width(), view.height());
+        let tile_size = config.tile_size;
+        Self {
+            width,
+            height,
+            fwidth: width as f32,
+            fheight: height as f32,
+            guard_x: 2.0 * GUARD_PIXELS / width as f32 - 1.0,
+            guard_y: 2.0 * GUARD_PIXELS / height as f32 - 1.0,
+            far_depth: view.far_depth(),
+            tile_size,
+            tiles_x: width.div_ceil(tile_size),
+            tiles_y: height.div_ceil(tile_size),
+            cull_backfaces: config.cull_backfaces,
+        }
+    }
+
+    #[inline(always)]
+    fn project(&self, clip_from_object: &Mat4, p: Vec3) -> ProjVertex {
+        self.project_clip(*clip_from_object * p.extend(1.0))
+    }
+
+    /// Outcodes and, when no clipping is needed, the snapped screen position and depth.
+    #[inline(always)]
+    fn project_clip(&self, c: Vec4) -> ProjVertex {
+        let mut code = 0;
+        if !c.is_finite() {
+            return ProjVertex { clip: c, x: 0, y: 0, z: 0.0, code: NOT_FINITE };
+        }
+        code |= if c.x < -c.w { OUT_LEFT } else { 0 };
+        code |= if c.x > c.w { OUT_RIGHT } else { 0 };
+        code |= if c.y < -c.w { OUT_BOTTOM } else { 0 };
+        code |= if c.y > c.w { OUT_TOP } else { 0 };
+        code |= if c.z > c.w { OUT_NEAR | NEEDS_CLIP } else { 0 };
+        if c.x.abs() > self.guard_x * c.w || c.y.abs() > self.guard_y * c.w {
+            code |= NEEDS_CLIP;
+        }
+        if code & NEEDS_CLIP != 0 {
+            return ProjVertex { clip: c, x: 0, y: 0, z: 0.0, code };
+        }
+        let inv_w = 1.0 / c.w;
+        let sx = (c.x * inv_w * 0.5 + 0.5) * self.fwidth;
+        let sy = (0.5 - c.y * inv_w * 0.5) * self.fheight;
+        ProjVertex { clip: c, x: snap(sx), y: snap(sy), z: c.z * inv_w, code }
+    }
+}
+
+/// Rounds a screen coordinate to the fixed-point grid (to nearest, ties to even), without
+/// depending on SSE4.1's `roundss`.
+#[inline(always)]
+fn snap(v: f32) -> i32 {
+    const MAGIC: f64 = 6755399441055744.0; // 1.5 · 2^52
+    ((v as f64 * SUB as f64 + MAGIC) - MAGIC) as i32
+}
+
+/// Reusable per-chunk storage.
+#[derive(Default)]
+struct ChunkBins {
+    records: Vec<TriSetup>,
+    bins: Vec<Vec<u32>>,
+    rasterized: u64,
+}
+
+/// The rasterizer: configuration, thread pool and reusable scratch memory.
+pub struct Rasterizer {
+    config: RasterConfig,
+    pool: Option<rayon::ThreadPool>,
+    vertices: Vec<ProjVertex>,
+    chunks: Vec<ChunkBins>,
+}
+
+impl std::fmt::Debug for Rasterizer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Rasterizer").field("config", &self.config).finish_non_exhaustive()
+    }
+}
+
+impl Rasterizer {
+    /// A rasterizer with its own pool of `config.threads` threads (or rayon's global pool).
+    ///
+    /// # Errors
+    /// [`crate::RasterError::BadConfig`] for a tile size outside 8..=1024 or a thread pool
+    /// that cannot be started.
+    pub fn new(config: RasterConfig) -> Result<Self, crate::RasterError> {
+        if !(8..=1024).contains(&config.tile_size) {
+            return Err(crate::RasterError::BadConfig(format!("tile size {} is not in 8..=1024", config.tile_size)));
+        }
+        if config.threads > 1024 {
+            return Err(crate::RasterError::BadConfig(format!("{} threads is absurd", config.threads)));
+        }
+        let pool = if config.threads > 0 {
+            Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(config.threads)
+                    .build()
+                    .map_err(|e| crate::RasterError::BadConfig(format!("thread pool: {e}")))?,
+            )
+        } else {
+            None
+        };
+        Ok(Self { config, pool, vertices: Vec::new(), chunks: Vec::new() })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &RasterConfig {
+        &self.config
+    }
+
+    /// Worker threads used.
+    pub fn thread_count(&self) -> usize {
+        self.pool.as_ref().map_or_else(rayon::current_num_threads, |p| p.current_num_threads())
+    }
+
+    /// Runs `f` on this rasterizer's thread pool (so that callers' own parallel work uses the
+    /// same threads).
+    pub fn install<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
+        match &self.pool {
+            Some(p) => p.install(f),
+            None => f(),
+        }
+    }
+
+    /// Rasterizes `draws` into `frame` (not cleared first).
+    ///
+    /// # Panics
+    /// If the frame's size differs from the view's (a programmer error).
+    pub fn draw(&mut self, view: &View, frame: &mut Frame, draws: &[Draw<'_>], mode: RasterMode) -> RasterCounts {
+        assert_eq!((frame.width(), frame.height()), (view.width(), view.height()), "frame and view sizes differ");
+        let vp = Viewport::new(view, &self.config);
+        let pool = self.pool.take();
+        let counts = match &pool {
+            Some(p) => p.install(|| self.draw_in_pool(&vp, frame, draws, mode)),
+            None => self.draw_in_pool(&vp, frame, draws, mode),
+        };
+        self.pool = pool;
+        counts
+    }
+
+    fn draw_in_pool(&mut self, vp: &Viewport, frame: &mut Frame, draws: &[Draw<'_>], mode: RasterMode) -> RasterCounts {
+        let mut counts = RasterCounts::default();
+        // Pre-transform the vertices of whole-mesh draws, in parallel.
+        let mut vertex_offsets = Vec::with_capacity(draws.len());
+        let mut vertex_total = 0usize;
+        for d in draws {
+            vertex_offsets.push(vertex_total);
+            if matches!(d.triangles, DrawTriangles::All) {
+                vertex_total += d.mesh.positions().len();
+            }
+        }
+        self.vertices.clear();
+        self.vertices.resize(vertex_total, ProjVertex::default());
+        {
+            let mut rest = &mut self.vertices[..];
+            let mut jobs = Vec::new();
+            for d in draws.iter().filter(|d| matches!(d.triangles, DrawTriangles::All)) {
+                let (head, tail) = rest.split_at_mut(d.mesh.positions().len());
+                rest = tail;
+                jobs.push((d, head));
+            }
+            jobs.into_par_iter().for_each(|(d, out)| {
+                out.par_chunks_mut(4096).enumerate().for_each(|(ci, out)| {
+                    let positions = &d.mesh.positions()[ci * 4096..];
+                    for (o, &p) in out.iter_mut().zip(positions) {
+                        *o = vp.project(&d.clip_from_object, p);
+                    }
+                });
+            });
+        }
+
+        let mut draw_starts = Vec::with_capacity(draws.len() + 1);
+        let mut total = 0usize;
+        for d in draws {
+            draw_starts.push(total);
+            total += d.triangles.len(d.mesh);
+        }
+        draw_starts.push(total);
+        counts.triangles_submitted = total as u64;
+
+        let tile_count = (vp.tiles_x * vp.tiles_y) as usize;
+        let chunks_per_round = rayon::current_num_threads().max(1) * 2;
+        if self.chunks.len() < chunks_per_round {
+            self.chunks.resize_with(chunks_per_round, ChunkBins::default);
+        }
+        for ch in &mut self.chunks {
+            ch.bins.resize_with(tile_count, Vec::new);
+        }
+        let vertices = &self.vertices[..];
+        let target = FrameTarget::new(frame);
+        let mut start = 0;
+        while start < total {
+            let round_end = (start + chunks_per_round * CHUNK_TRIANGLES).min(total);
+            let used = (round_end - start).div_ceil(CHUNK_TRIANGLES);
+            // Phase 1: setup and binning.
+            self.chunks[..used].par_iter_mut().enumerate().for_each(|(ci, ch)| {
+                let lo = start + ci * CHUNK_TRIANGLES;
+                let hi = (lo + CHUNK_TRIANGLES).min(round_end);
+                ch.records.clear();
+                for b in &mut ch.bins {
+                    b.clear();
+                }
+                ch.rasterized = 0;
+                setup_range(vp, draws, &draw_starts, &vertex_offsets, vertices, lo..hi, ch);
+            });
+            counts.triangles_rasterized += self.chunks[..used].iter().map(|c| c.rasterized).sum::<u64>();
+            // Phase 2: rasterize tile by tile.
+            let chunks = &self.chunks[..used];
+            let target = &target;
+            let fragments: u64 = (0..tile_count)
+                .into_par_iter()
+                .map(|tile| {
+                    let tx = tile as u32 % vp.tiles_x;
+                    let ty = tile as u32 / vp.tiles_x;
+                    let rect = [
+                        tx * vp.tile_size,
+                        ty * vp.tile_size,
+                        ((tx + 1) * vp.tile_size).min(vp.width) - 1,
+                        ((ty + 1) * vp.tile_size).min(vp.height) - 1,
+                    ];
+                    let mut written = 0;
+                    for ch in chunks {
+                        for &r in &ch.bins[tile] {
+                            // SAFETY: tiles are disjoint and each is scanned by exactly one task.
+                            written += unsafe { scan_triangle(vp, &ch.records[r as usize], rect, target, mode) };
+                        }
+                    }
+                    written
+                })
+                .sum();
+            counts.fragments_written += fragments;
+            start = round_end;
+        }
+        counts
+    }
+}
+
+/// Raw access to a frame's buffers, shared by tile tasks that write disjoint pixels.
+struct FrameTarget {
+    depth: *mut f32,
+    items: *mut ItemId,
+    width: usize,
+}
+
+// SAFETY: the pointers are only written through `scan_triangle`, whose callers guarantee that
+// concurrent calls touch disjoint pixels (one task per tile), and the frame outlives the draw.
+unsafe impl Sync for FrameTarget {}
+unsafe impl Send for FrameTarget {}
+
+impl FrameTarget {
+    fn new(frame: &mut Frame) -> Self {
+        let width = frame.width() as usize;
+        let (depth, items) = frame.buffers_mut();
+        Self { depth: depth.as_mut_ptr(), items: items.as_mut_ptr(), width }
+    }
+}
+
+/// Sets up and bins the triangles `range` of the global stream.
+fn setup_range(
+    vp: &Viewport,
+    draws: &[Draw<'_>],
+    draw_starts: &[usize],
+    vertex_offsets: &[usize],
+    vertices: &[ProjVertex],
+    range: Range<usize>,
+    out: &mut ChunkBins,
+) {
+    let mut d = draw_starts.partition_point(|&s| s <= range.start) - 1;
+    let mut t = range.start;
+    while t < range.end {
+        while draw_starts[d + 1] <= t {
+            d += 1;
+        }
+        let draw = &draws[d];
+        let end = draw_starts[d + 1].min(range.end);
+        let mesh = draw.mesh;
+        let tris = mesh.triangles();
+        match &draw.triangles {
+            DrawTriangles::All => {
+                let verts = &vertices[vertex_offsets[d]..vertex_offsets[d] + mesh.positions().len()];
+                for j in (t - draw_starts[d])..(end - draw_starts[d]) {
+                    let [i0, i1, i2] = tris[j];
+                    let v = [verts[i0 as usize], verts[i1 as usize], verts[i2 as usize]];
+                    setup_triangle(vp, v, draw.first_item + j as u64, out);
+                }
+            }
+            sel => {
+                let pos = mesh.positions();
+                for j in (t - draw_starts[d])..(end - draw_starts[d]) {
+                    let ti = sel.triangle_index(j);
+                    let [i0, i1, i2] = tris[ti as usize];
+                    let m = &draw.clip_from_object;
+                    let v = [vp.project(m, pos[i0 as usize]), vp.project(m, pos[i1 as usize]), vp.project(m, pos[i2 as usize])];
+                    setup_triangle(vp, v, draw.first_item + ti as u64, out);
+                }
+            }
+        }
+        t = end;
+    }
+}
+
+#[inline(always)]
+fn setup_triangle(vp: &Viewport, v: [ProjVertex; 3], item: ItemId, out: &mut ChunkBins) {
+    let or = v[0].code | v[1].code | v[2].code;
+    if v[0].code & v[1].code & v[2].code & OUT_OF_VIEW != 0 || or & NOT_FINITE != 0 {
+        return;
+    }
+    if or & NEEDS_CLIP != 0 {
+        clip_and_setup(vp, [v[0].clip, v[1].clip, v[2].clip], item, out);
+        return;
+    }
+    setup_snapped(vp, [(v[0].x, v[0].y, v[0].z), (v[1].x, v[1].y, v[1].z), (v[2].x, v[2].y, v[2].z)], item, out);
+}
+
+/// Clips a triangle against the near plane and the guard band in homogeneous space and sets up
+/// the fan of the resulting polygon.
+#[cold]
+fn clip_and_setup(vp: &Viewport, c: [Vec4; 3], item: ItemId, out: &mut ChunkBins) {
+    let planes = [
+        Vec4::new(0.0, 0.0, -1.0, 1.0),        // near: w - z >= 0
+        Vec4::new(-1.0, 0.0, 0.0, vp.guard_x), // guard: g·w - x >= 0
+        Vec4::new(1.0, 0.0, 0.0, vp.guard_x),
+        Vec4::new(0.0, -1.0, 0.0, vp.guard_y),
+        Vec4::new(0.0, 1.0, 0.0, vp.guard_y),
+    ];
+    let mut poly: Vec<Vec4> = c.to_vec();
+    let mut next = Vec::with_capacity(9);
+    for plane in planes {
+        next.clear();
+        for i in 0..poly.len() {
+            let a = poly[i];
+            let b = poly[(i + 1) % poly.len()];
+            let da = plane.dot(a);
+            let db = plane.dot(b);
+            if da >= 0.0 {
+                next.push(a);
+            }
+            if (da >= 0.0) != (db >= 0.0) {
+                // Interpolate from the inside vertex, so a shared edge clips identically.
+                next.push(if da >= 0.0 { a + (b - a) * (da / (da - db)) } else { b + (a - b) * (db / (db - da)) });
+            }
+        }
+        std::mem::swap(&mut poly, &mut next);
+        if poly.len() < 3 {
+            return;
+        }
+    }
+    let p: Vec<ProjVertex> = poly
+        .iter()
+        .map(|&c| {
+            // Clipped vertices lie on or inside every clip plane up to rounding; project them
+            // directly (their code may still flag the guard band by an ulp).
+            let inv_w = 1.0 / c.w;
+            let sx = (c.x * inv_w * 0.5 + 0.5) * vp.fwidth;
+            let sy = (0.5 - c.y * inv_w * 0.5) * vp.fheight;
+            ProjVertex { clip: c, x: snap(sx), y: snap(sy), z: c.z * inv_w, code: 0 }
+        })
+        .collect();
+    if p.iter().any(|v| !(v.clip.w > 0.0) || !v.z.is_finite()) {
+        return;
+    }
+    for i in 1..p.len() - 1 {
+        setup_snapped(vp, [(p[0].x, p[0].y, p[0].z), (p[i].x, p[i].y, p[i].z), (p[i + 1].x, p[i + 1].y, p[i + 1].z)], item, out);
+    }
+}
+
+/// Sets up a triangle from snapped vertices `(x, y, z)` and bins it.
+#[inline(always)]
+fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut ChunkBins) {
+    let (x0, y0) = (v[0].0 as i64, v[0].1 as i64);
+    let (mut x1, mut y1, mut z1) = (v[1].0 as i64, v[1].1 as i64, v[1].2);
+    let (mut x2, mut y2, mut z2) = (v[2].0 as i64, v[2].1 as i64, v[2].2);
+    let z0 = v[0].2;
+    // Pixel box: centres (i + 1/2) inside [min, max] of the snapped corners.
+    let minx = x0.min(x1).min(x2);
+    let maxx = x0.max(x1).max(x2);
+    let miny = y0.min(y1).min(y2);
+    let maxy = y0.max(y1).max(y2);
+    let px0 = ((minx - HALF + SUB - 1) >> SUBPIXEL_BITS).max(0);
+    let px1 = ((maxx - HALF) >> SUBPIXEL_BITS).min(vp.width as i64 - 1);
+    let py0 = ((miny - HALF + SUB - 1) >> SUBPIXEL_BITS).max(0);
+    let py1 = ((maxy - HALF) >> SUBPIXEL_BITS).min(vp.height as i64 - 1);
+    if px0 > px1 || py0 > py1 {
+        return;
+    }
+    let mut area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
+    if area == 0 {
+        return;
+    }
+    // On screen (y down) a counter-clockwise front face has negative area.
+    if area > 0 && vp.cull_backfaces {
+        return;
+    }
+    if area < 0 {
+        std::mem::swap(&mut x1, &mut x2);
+        std::mem::swap(&mut y1, &mut y2);
+        std::mem::swap(&mut z1, &mut z2);
+        area = -area;
+    }
+    let zmin = z0.min(z1).min(z2);
+    let zmax = z0.max(z1).max(z2);
+    if zmax < vp.far_depth {
+        return;
+    }
+    // Edge i runs from corner i to corner i+1; E(p) = A·px + B·py + C >= 0 inside.
+    let xs = [x0, x1, x2];
+    let ys = [y0, y1, y2];
+    let cx = px0 * SUB + HALF;
+    let cy = py0 * SUB + HALF;
+    let mut e = [0i64; 3];
+    let mut a = [0i32; 3];
+    let mut b = [0i32; 3];
+    for i in 0..3 {
+        let j = (i + 1) % 3;
+        let ea = ys[i] - ys[j];
+        let eb = xs[j] - xs[i];
+        let c = -(ea * xs[i] + eb * ys[i]);
+        // Top-left rule: a centre on the edge counts only for left (A > 0) or top
+        // (A = 0, B > 0) edges.
+        let bias = if ea > 0 || (ea == 0 && eb > 0) { 0 } else { -1 };
+        e[i] = ea * cx + eb * cy + c + bias;
+        a[i] = ea as i32;
+        b[i] = eb as i32;
+    }
+    // Depth plane in pixel units, relative to corner 0, computed in f64 and stored in f32.
+    let inv = 1.0 / (area as f64 / (SUB * SUB) as f64);
+    let (fx1, fy1) = ((x1 - x0) as f64 / SUB as f64, (y1 - y0) as f64 / SUB as f64);
+    let (fx2, fy2) = ((x2 - x0) as f64 / SUB as f64, (y2 - y0) as f64 / SUB as f64);
+    let (dz1, dz2) = ((z1 - z0) as f64, (z2 - z0) as f64);
+    let dzdx = ((dz1 * fy2 - dz2 * fy1) * inv) as f32;
+    let dzdy = ((fx1 * dz2 - fx2 * dz1) * inv) as f32;
+    out.rasterized += 1;
+    let r = out.records.len() as u32;
+    out.records.push(TriSetup {
+        e,
+        a,
+        b,
+        px0: px0 as u16,
+        py0: py0 as u16,
+        px1: px1 as u16,
+        py1: py1 as u16,
+        z0,
+        dzdx,
+        dzdy,
+        x0: (x0 as f64 / SUB as f64) as f32,
+        y0: (y0 as f64 / SUB as f64) as f32,
+        zmin,
+        zmax,
+        item,
+    });
+    let ts = vp.tile_size as i64;
+    for ty in (py0 / ts)..=(py1 / ts) {
+        for tx in (px0 / ts)..=(px1 / ts) {
+            out.bins[(ty * vp.tiles_x as i64 + tx) as usize].push(r);
+        }
+    }
+}
+
+/// Depth of a triangle at the centre of pixel `(x, y)`: the one formula every path uses.
+#[inline(always)]
+fn depth_at(t: &TriSetup, row_depth: f32, x: u32) -> f32 {
+    (row_depth + t.dzdx * ((x as f32 + 0.5) - t.x0)).max(t.zmin).min(t.zmax)
+}
+
+/// Scans triangle `t` inside the inclusive pixel rectangle `rect`; returns fragments written.
+///
+/// # Safety
+/// No other thread may access the pixels of `rect` in `target` during the call.
+unsafe fn scan_triangle(vp: &Viewport, t: &TriSetup, rect: [u32; 4], target: &FrameTarget, mode: RasterMode) -> u64 {
+    let x0 = (t.px0 as u32).max(rect[0]);
+    let y0 = (t.py0 as u32).max(rect[1]);
+    let x1 = (t.px1 as u32).min(rect[2]);
+    let y1 = (t.py1 as u32).min(rect[3]);
+    if x0 > x1 || y0 > y1 {
+        return 0;
+    }
+    let dx = (x0 - t.px0 as u32) as i64;
+    let dy = (y0 - t.py0 as u32) as i64;
+    let step_x = [t.a[0] as i64 * SUB, t.a[1] as i64 * SUB, t.a[2] as i64 * SUB];
+    let step_y = [t.b[0] as i64 * SUB, t.b[1] as i64 * SUB, t.b[2] as i64 * SUB];
+    let mut row = [
+        t.e[0] + step_x[0] * dx + step_y[0] * dy,
+        t.e[1] + step_x[1] * dx + step_y[1] * dy,
+        t.e[2] + step_x[2] * dx + step_y[2] * dy,
+    ];
+    let mut written = 0;
+    for y in y0..=y1 {
+        let row_depth = t.z0 + t.dzdy * ((y as f32 + 0.5) - t.y0);
+        let mut e = row;
+        let base = y as usize * target.width;
+        for x in x0..=x1 {
+            if (e[0] | e[1] | e[2]) >= 0 {
+                let z = depth_at(t, row_depth, x);
+                if z >= vp.far_depth {
+                    let i = base + x as usize;
+                    // SAFETY: (x, y) lies in `rect`, inside the frame, owned by this task.
+                    let (d, it) = unsafe { (&mut *target.depth.add(i), &mut *target.items.add(i)) };
+                    let kept = match mode {
+                        RasterMode::Full => keep_fragment(d, it, z, t.item),
+                        RasterMode::DepthOnly => {
+                            let nearer = z > *d;
+                            if nearer {
+                                *d = z;
+                            }
+                            nearer
+                        }
+                    };
+                    written += kept as u64;
+                }
+            }
+            e[0] += step_x[0];
+            e[1] += step_x[1];
+            e[2] += step_x[2];
+        }
+        row[0] += step_y[0];
+        row[1] += step_y[1];
+        row[2] += step_y[2];
+    }
+    written
+}

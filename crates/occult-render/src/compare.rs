@@ -1,0 +1,1 @@
+//! Comparison harness (in progress).

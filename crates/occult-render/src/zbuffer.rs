@@ -1,0 +1,79 @@
+//! Brute-force z-buffering: every triangle instance of the scene goes to the rasterizer, which
+//! clips. The reference every other renderer is held to (DESIGN invariant 2).
+//!
+//! Cost: O(triangle instances) per frame, whatever is visible. It refuses scenes above
+//! [`MAX_BRUTE_FORCE_ITEMS`] triangle instances, where a frame would take hours;
+//! [`crate::compare`] then takes `frustum` as the reference.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use occult_core::{Scene, View};
+use occult_raster::{Draw, DrawTriangles, Frame, RasterMode, Rasterizer};
+
+use crate::{check_frame, FrameStats, Phase, RenderError, RenderOptions, Renderer, Result};
+
+/// Largest scene (in triangle instances) the brute-force renderer accepts.
+pub const MAX_BRUTE_FORCE_ITEMS: u64 = 2_000_000_000;
+
+/// The brute-force renderer.
+pub struct ZBuffer {
+    scene: Arc<Scene>,
+    raster: Rasterizer,
+}
+
+impl ZBuffer {
+    /// A z-buffer renderer of `scene`.
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] for a scene above [`MAX_BRUTE_FORCE_ITEMS`]; raster
+    /// configuration errors.
+    pub fn new(scene: Arc<Scene>, options: &RenderOptions) -> Result<Self> {
+        if scene.item_count() > MAX_BRUTE_FORCE_ITEMS {
+            return Err(RenderError::BadParameter(format!(
+                "zbuffer: the scene has {} triangle instances, more than brute force accepts ({MAX_BRUTE_FORCE_ITEMS}); use a culling renderer as the reference",
+                scene.item_count()
+            )));
+        }
+        Ok(Self { scene, raster: Rasterizer::new(options.raster.clone())? })
+    }
+}
+
+impl Renderer for ZBuffer {
+    fn name(&self) -> &'static str {
+        "zbuffer"
+    }
+
+    fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
+        check_frame(view, frame)?;
+        let start = Instant::now();
+        let mut stats = FrameStats::default();
+        frame.clear();
+        stats.phases.add(Phase::Clear, start.elapsed());
+        let t = Instant::now();
+        let mut draws = Vec::new();
+        self.scene.for_each_mesh_instance(|world_from_object, _, mesh, first_item| {
+            if mesh.triangle_count() > 0 {
+                draws.push(Draw {
+                    mesh,
+                    triangles: DrawTriangles::All,
+                    clip_from_object: view.clip_from_object(world_from_object),
+                    first_item,
+                });
+            }
+        });
+        stats.phases.add(Phase::Other, t.elapsed());
+        let t = Instant::now();
+        let counts = self.raster.draw(view, frame, &draws, RasterMode::Full);
+        stats.phases.add(Phase::Raster, t.elapsed());
+        stats.triangles_submitted = counts.triangles_submitted;
+        stats.triangles_rasterized = counts.triangles_rasterized;
+        stats.fragments_written = counts.fragments_written;
+        stats.total = start.elapsed();
+        Ok(stats)
+    }
+
+    fn memory_bytes(&self) -> usize {
+        0
+    }
+}
