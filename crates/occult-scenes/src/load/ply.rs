@@ -1,0 +1,669 @@
+//! Stanford PLY: ascii, binary little-endian and binary big-endian.
+//!
+//! # References
+//! - Greg Turk, *The PLY Polygon File Format* (1994): the header (`element`, `property`,
+//!   `property list`), the three encodings, the `vertex` and `face` elements.
+//!
+//! Read: the `vertex` element's `x`, `y`, `z` (any scalar type; other vertex properties such as
+//! `confidence`, `intensity` or colors are skipped), and the `face` element's `vertex_indices` (or
+//! `vertex_index`) list of any integer type, fan-triangulated. Without a `face` element, a
+//! `tristrips` element (`vertex_indices` with `-1` restarts, as in some Stanford scans) is read
+//! as triangle strips. Every other element is read past and ignored.
+//!
+//! The header is parsed by `ply-rs-bw`; then, **before** anything is allocated, each declared
+//! element count is checked against the bytes after the header (an element takes at least one
+//! byte per scalar in binary, two characters per value in ascii), so a header claiming 10^12
+//! vertices is an error, not an allocation attempt. Binary payloads are read element by element
+//! by `ply-rs-bw`; the ascii payload is tokenized here (see the module doc of `load`), so that
+//! errors name the line and the element and extra or missing values on a line are caught.
+//! Truncated data, data after the last declared element, non-finite coordinates and indices out
+//! of range are errors.
+
+use std::io::Cursor;
+use std::path::Path;
+
+use occult_core::Vec3;
+use ply_rs_bw::parser::{ParseError, Parser, Reader};
+use ply_rs_bw::ply::{ElementDef, Encoding, Header, PropertyAccess, PropertyAccessResult, PropertyType, ScalarType};
+
+use super::{fan_triangulate, file_stem, read_bytes, scene_of_meshes, LoadError, LoadedScene, Location};
+
+/// Names of the vertex index list, in order of preference.
+const INDEX_LIST_NAMES: [&str; 2] = ["vertex_indices", "vertex_index"];
+
+/// Loads a PLY file as one mesh.
+///
+/// # Errors
+/// [`LoadError::Io`]; [`LoadError::Parse`] for a malformed header or value;
+/// [`LoadError::AbsurdCount`] when the header declares more elements than the file can hold;
+/// [`LoadError::Truncated`] when the data ends early; [`LoadError::CountMismatch`] for extra
+/// values on an ascii line or data after the last element; [`LoadError::NonFinite`];
+/// [`LoadError::IndexOutOfRange`]; [`LoadError::Unsupported`] for an index list of floats;
+/// [`LoadError::Empty`] without faces.
+pub fn load_ply(path: &Path) -> Result<LoadedScene, LoadError> {
+    ply_from_bytes(path, &read_bytes(path)?)
+}
+
+/// [`load_ply`] of bytes in memory; `path` names them.
+pub(super) fn ply_from_bytes(path: &Path, data: &[u8]) -> Result<LoadedScene, LoadError> {
+    let parser = Parser::<PlyRecord>::new();
+    let mut reader = Reader::new(Cursor::new(data));
+    let header = parser.read_header(&mut reader).map_err(|e| header_error(path, e))?;
+    // The cursor stops right after `end_header\n`: `read_header` reads line by line.
+    let header_len = usize::try_from(reader.get_ref().position()).unwrap_or(data.len()).min(data.len());
+    let payload = &data[header_len..];
+    let layout = Layout::of(path, &header)?;
+    check_declared_counts(path, &header, payload.len())?;
+    if u32::try_from(layout.vertex_count).is_err() {
+        return Err(LoadError::Unsupported {
+            path: path.to_path_buf(),
+            location: Location::Part("element 'vertex'".into()),
+            message: format!("{} vertices, more than 32-bit indices address", layout.vertex_count),
+        });
+    }
+
+    let mut sink = MeshSink::new(path, &layout);
+    match header.encoding {
+        Encoding::Ascii => {
+            let header_line_count = data[..header_len].iter().filter(|&&b| b == b'\n').count() as u64;
+            read_ascii(path, &header, &layout, payload, header_line_count, &mut sink)?;
+        }
+        Encoding::BinaryLittleEndian | Encoding::BinaryBigEndian => {
+            read_binary(path, &parser, &header, &layout, payload, &mut sink)?;
+        }
+    }
+
+    let mut warnings = Vec::new();
+    if sink.short_face_count > 0 {
+        warnings.push(format!("{}: {} faces with fewer than 3 corners skipped", path.display(), sink.short_face_count));
+    }
+    let name = file_stem(path);
+    let mesh = occult_core::Mesh::new(sink.positions, sink.triangles).map_err(|source| LoadError::Core {
+        path: path.to_path_buf(),
+        part: "mesh".into(),
+        source,
+    })?;
+    let scene = scene_of_meshes(path, &name, vec![(name.clone(), mesh)])?;
+    Ok(LoadedScene { scene, warnings })
+}
+
+/// What the loader takes from the header.
+struct Layout {
+    vertex_count: usize,
+    /// The element holding the polygons, and whether it is triangle strips.
+    polygons: Option<(String, bool)>,
+}
+
+impl Layout {
+    fn of(path: &Path, header: &Header) -> Result<Self, LoadError> {
+        let location = |kind: &str| Location::Part(format!("element '{kind}'"));
+        let vertex_count = header.elements.get("vertex").map_or(0, |e| e.count);
+        if let Some(vertex) = header.elements.get("vertex") {
+            for axis in ["x", "y", "z"] {
+                match vertex.properties.get(axis).map(|p| &p.data_type) {
+                    Some(PropertyType::Scalar(_)) => {}
+                    Some(PropertyType::List(..)) => {
+                        return Err(LoadError::Unsupported {
+                            path: path.to_path_buf(),
+                            location: location("vertex"),
+                            message: format!("property '{axis}' is a list"),
+                        })
+                    }
+                    None => {
+                        return Err(LoadError::Parse {
+                            path: path.to_path_buf(),
+                            location: location("vertex"),
+                            message: format!("no property '{axis}'"),
+                        })
+                    }
+                }
+            }
+        }
+        let mut polygons = None;
+        for (name, strips) in [("face", false), ("tristrips", true)] {
+            let Some(element) = header.elements.get(name) else {
+                continue;
+            };
+            match index_list(element).map(|p| &p.data_type) {
+                Some(PropertyType::List(_, ScalarType::Float | ScalarType::Double)) => {
+                    return Err(LoadError::Unsupported {
+                        path: path.to_path_buf(),
+                        location: location(name),
+                        message: "vertex indices stored as floating point".into(),
+                    })
+                }
+                Some(PropertyType::List(..)) => {
+                    polygons = Some((name.to_string(), strips));
+                    break;
+                }
+                _ => {
+                    return Err(LoadError::Parse {
+                        path: path.to_path_buf(),
+                        location: location(name),
+                        message: "no list property 'vertex_indices' or 'vertex_index'".into(),
+                    })
+                }
+            }
+        }
+        let has_polygons =
+            polygons.as_ref().and_then(|(name, _)| header.elements.get(name)).is_some_and(|e| e.count > 0);
+        if !has_polygons {
+            return Err(LoadError::Empty {
+                path: path.to_path_buf(),
+                reason: "no 'face' or 'tristrips' element, or zero faces (a point cloud?)".into(),
+            });
+        }
+        Ok(Self { vertex_count, polygons })
+    }
+
+    fn role(&self, element_name: &str) -> Role {
+        match &self.polygons {
+            _ if element_name == "vertex" => Role::Vertex,
+            Some((name, strips)) if name == element_name => {
+                if *strips {
+                    Role::Strips
+                } else {
+                    Role::Faces
+                }
+            }
+            _ => Role::Other,
+        }
+    }
+}
+
+/// The index list property of a polygon element.
+fn index_list(element: &ElementDef) -> Option<&ply_rs_bw::ply::PropertyDef> {
+    INDEX_LIST_NAMES.iter().find_map(|name| element.properties.get(*name))
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Role {
+    Vertex,
+    Faces,
+    Strips,
+    Other,
+}
+
+fn scalar_size(t: &ScalarType) -> u64 {
+    match t {
+        ScalarType::Char | ScalarType::UChar => 1,
+        ScalarType::Short | ScalarType::UShort => 2,
+        ScalarType::Int | ScalarType::UInt | ScalarType::Float => 4,
+        ScalarType::Double => 8,
+    }
+}
+
+/// Refuses a header whose element counts need more bytes than `available` (the bytes after the
+/// header), before anything is allocated for them: [`LoadError::Truncated`] when the need is
+/// within twice what is there, [`LoadError::AbsurdCount`] beyond.
+fn check_declared_counts(path: &Path, header: &Header, available: usize) -> Result<(), LoadError> {
+    let ascii = header.encoding == Encoding::Ascii;
+    // An ascii file may end without a newline after its last value.
+    let available = available as u128 + u128::from(ascii);
+    let mut needed: u128 = 0;
+    for (name, element) in &header.elements {
+        let min_bytes = if ascii {
+            // Every property is at least one value (a list at least its count): a character and a
+            // separator each.
+            2 * element.properties.len() as u64
+        } else {
+            element
+                .properties
+                .values()
+                .map(|p| match &p.data_type {
+                    PropertyType::Scalar(t) => scalar_size(t),
+                    PropertyType::List(count_type, _) => scalar_size(count_type),
+                })
+                .sum()
+        }
+        .max(1);
+        let element_bytes = element.count as u128 * u128::from(min_bytes);
+        if needed + element_bytes > available {
+            // Within twice the bytes present, the file was most likely cut short; beyond, the
+            // header lies. Either way nothing has been allocated.
+            if needed + element_bytes <= 2 * available + 64 {
+                return Err(LoadError::Truncated {
+                    path: path.to_path_buf(),
+                    location: Location::element(name.as_str(), 0),
+                    message: format!(
+                        "the header declares {} '{name}' elements, which need at least {} bytes; {} bytes are left",
+                        element.count,
+                        element_bytes,
+                        available.saturating_sub(needed)
+                    ),
+                });
+            }
+            return Err(LoadError::AbsurdCount {
+                path: path.to_path_buf(),
+                what: format!("element '{name}'"),
+                count: element.count as u64,
+                min_bytes,
+                available_bytes: u64::try_from(available.saturating_sub(needed)).unwrap_or(u64::MAX),
+            });
+        }
+        needed += element_bytes;
+    }
+    Ok(())
+}
+
+/// Positions and triangles as they are read, with the checks that name the element.
+struct MeshSink<'p> {
+    path: &'p Path,
+    vertex_count: usize,
+    positions: Vec<Vec3>,
+    triangles: Vec<[u32; 3]>,
+    corners: Vec<u32>,
+    short_face_count: u64,
+}
+
+impl<'p> MeshSink<'p> {
+    fn new(path: &'p Path, layout: &Layout) -> Self {
+        // Bounded: `check_declared_counts` held the count to the file size.
+        Self {
+            path,
+            vertex_count: layout.vertex_count,
+            positions: Vec::with_capacity(layout.vertex_count),
+            triangles: Vec::new(),
+            corners: Vec::new(),
+            short_face_count: 0,
+        }
+    }
+
+    fn vertex(&mut self, xyz: [f64; 3], location: impl Fn() -> Location) -> Result<(), LoadError> {
+        let p = Vec3::new(xyz[0] as f32, xyz[1] as f32, xyz[2] as f32);
+        if let Some(&value) = p.to_array().iter().find(|v| !v.is_finite()) {
+            return Err(LoadError::NonFinite { path: self.path.to_path_buf(), location: location(), value });
+        }
+        self.positions.push(p);
+        Ok(())
+    }
+
+    /// Checks `indices` and keeps them as the corners of the current polygon.
+    fn take_corners(
+        &mut self,
+        indices: &[i64],
+        strips: bool,
+        location: &impl Fn() -> Location,
+    ) -> Result<(), LoadError> {
+        self.corners.clear();
+        for &index in indices {
+            match u32::try_from(index) {
+                Ok(i) if (i as usize) < self.vertex_count => self.corners.push(i),
+                _ if strips && index == -1 => self.corners.push(u32::MAX),
+                _ => {
+                    return Err(LoadError::IndexOutOfRange {
+                        path: self.path.to_path_buf(),
+                        location: location(),
+                        index,
+                        vertex_count: self.vertex_count as u64,
+                    })
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn face(&mut self, indices: &[i64], location: impl Fn() -> Location) -> Result<(), LoadError> {
+        self.take_corners(indices, false, &location)?;
+        if self.corners.len() < 3 {
+            self.short_face_count += 1;
+        }
+        fan_triangulate(&self.corners, &mut self.triangles);
+        Ok(())
+    }
+
+    /// Triangle strips separated by `-1`; odd triangles flipped to keep the winding; triangles
+    /// with a repeated corner (the strips' swaps) dropped.
+    fn strips(&mut self, indices: &[i64], location: impl Fn() -> Location) -> Result<(), LoadError> {
+        self.take_corners(indices, true, &location)?;
+        for strip in self.corners.split(|&i| i == u32::MAX) {
+            for (k, w) in strip.windows(3).enumerate() {
+                let t = if k % 2 == 0 { [w[0], w[1], w[2]] } else { [w[1], w[0], w[2]] };
+                if t[0] != t[1] && t[1] != t[2] && t[0] != t[2] {
+                    self.triangles.push(t);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn record(&mut self, role: Role, record: &PlyRecord, location: impl Fn() -> Location) -> Result<(), LoadError> {
+        match role {
+            Role::Vertex => self.vertex(record.xyz, location),
+            Role::Faces => self.face(&record.indices, location),
+            Role::Strips => self.strips(&record.indices, location),
+            Role::Other => Ok(()),
+        }
+    }
+}
+
+/// One element as `ply-rs-bw` reads it (binary): the coordinates and the index list, whatever
+/// their stored types; every other property is ignored.
+#[derive(Default)]
+struct PlyRecord {
+    xyz: [f64; 3],
+    indices: Vec<i64>,
+}
+
+impl PlyRecord {
+    fn scalar(&mut self, name: &str, value: f64) -> PropertyAccessResult {
+        let axis = match name {
+            "x" => 0,
+            "y" => 1,
+            "z" => 2,
+            _ => return PropertyAccessResult::Ignored,
+        };
+        self.xyz[axis] = value;
+        PropertyAccessResult::Set
+    }
+
+    fn list<T: Copy + Into<i64>>(&mut self, name: &str, values: Vec<T>) -> PropertyAccessResult {
+        if !INDEX_LIST_NAMES.contains(&name) {
+            return PropertyAccessResult::Ignored;
+        }
+        self.indices.clear();
+        self.indices.extend(values.iter().map(|&v| v.into()));
+        PropertyAccessResult::Set
+    }
+}
+
+impl PropertyAccess for PlyRecord {
+    fn new() -> Self {
+        Self::default()
+    }
+    fn set_char(&mut self, name: &str, value: i8) -> PropertyAccessResult {
+        self.scalar(name, value.into())
+    }
+    fn set_uchar(&mut self, name: &str, value: u8) -> PropertyAccessResult {
+        self.scalar(name, value.into())
+    }
+    fn set_short(&mut self, name: &str, value: i16) -> PropertyAccessResult {
+        self.scalar(name, value.into())
+    }
+    fn set_ushort(&mut self, name: &str, value: u16) -> PropertyAccessResult {
+        self.scalar(name, value.into())
+    }
+    fn set_int(&mut self, name: &str, value: i32) -> PropertyAccessResult {
+        self.scalar(name, value.into())
+    }
+    fn set_uint(&mut self, name: &str, value: u32) -> PropertyAccessResult {
+        self.scalar(name, value.into())
+    }
+    fn set_float(&mut self, name: &str, value: f32) -> PropertyAccessResult {
+        self.scalar(name, value.into())
+    }
+    fn set_double(&mut self, name: &str, value: f64) -> PropertyAccessResult {
+        self.scalar(name, value)
+    }
+    fn set_list_char(&mut self, name: &str, value: Vec<i8>) -> PropertyAccessResult {
+        self.list(name, value)
+    }
+    fn set_list_uchar(&mut self, name: &str, value: Vec<u8>) -> PropertyAccessResult {
+        self.list(name, value)
+    }
+    fn set_list_short(&mut self, name: &str, value: Vec<i16>) -> PropertyAccessResult {
+        self.list(name, value)
+    }
+    fn set_list_ushort(&mut self, name: &str, value: Vec<u16>) -> PropertyAccessResult {
+        self.list(name, value)
+    }
+    fn set_list_int(&mut self, name: &str, value: Vec<i32>) -> PropertyAccessResult {
+        self.list(name, value)
+    }
+    fn set_list_uint(&mut self, name: &str, value: Vec<u32>) -> PropertyAccessResult {
+        self.list(name, value)
+    }
+    // Float lists are ignored: `Layout::of` refused float index lists already.
+}
+
+fn header_error(path: &Path, error: ParseError) -> LoadError {
+    let location = error.line().map_or(Location::File, |line| Location::Line(line as u64));
+    let text = error.to_string();
+    // `ParseError` displays as "Line N: message"; the location already says the line.
+    let message = match error.line() {
+        Some(line) => text.strip_prefix(&format!("Line {line}: ")).unwrap_or(&text).to_string(),
+        None => text,
+    };
+    let message = message.replace("\n\t", "; ").replace('\n', " ");
+    if error.kind() == std::io::ErrorKind::UnexpectedEof {
+        LoadError::Truncated { path: path.to_path_buf(), location, message }
+    } else {
+        LoadError::Parse { path: path.to_path_buf(), location, message: format!("bad header: {message}") }
+    }
+}
+
+fn read_binary(
+    path: &Path,
+    parser: &Parser<PlyRecord>,
+    header: &Header,
+    layout: &Layout,
+    payload: &[u8],
+    sink: &mut MeshSink<'_>,
+) -> Result<(), LoadError> {
+    let big_endian = header.encoding == Encoding::BinaryBigEndian;
+    let mut rest = payload;
+    for (name, element) in &header.elements {
+        let role = layout.role(name);
+        for index in 0..element.count {
+            let location = || Location::element(name.as_str(), index as u64);
+            let read = if big_endian {
+                parser.read_big_endian_element(&mut rest, element)
+            } else {
+                parser.read_little_endian_element(&mut rest, element)
+            };
+            let record = read.map_err(|e| {
+                if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                    LoadError::Truncated {
+                        path: path.to_path_buf(),
+                        location: location(),
+                        message: format!("the header declares {} '{name}' elements", element.count),
+                    }
+                } else {
+                    LoadError::Parse {
+                        path: path.to_path_buf(),
+                        location: location(),
+                        message: e.to_string().replace("\n\t", "; ").replace('\n', " "),
+                    }
+                }
+            })?;
+            sink.record(role, &record, location)?;
+        }
+    }
+    if !rest.is_empty() {
+        return Err(LoadError::CountMismatch {
+            path: path.to_path_buf(),
+            location: Location::File,
+            message: format!("{} bytes follow the last element the header declares", rest.len()),
+        });
+    }
+    Ok(())
+}
+
+fn read_ascii(
+    path: &Path,
+    header: &Header,
+    layout: &Layout,
+    payload: &[u8],
+    header_line_count: u64,
+    sink: &mut MeshSink<'_>,
+) -> Result<(), LoadError> {
+    let mut lines = payload.split(|&b| b == b'\n');
+    let mut line_number = header_line_count;
+    let mut record = PlyRecord::default();
+    for (name, element) in &header.elements {
+        let role = layout.role(name);
+        for index in 0..element.count {
+            let line = loop {
+                let Some(line) = lines.next() else {
+                    return Err(LoadError::Truncated {
+                        path: path.to_path_buf(),
+                        location: Location::element(name.as_str(), index as u64),
+                        message: format!("the header declares {} '{name}' elements", element.count),
+                    });
+                };
+                line_number += 1;
+                if !line.trim_ascii().is_empty() {
+                    break line;
+                }
+            };
+            let location =
+                || Location::ElementAtLine { kind: name.to_string(), index: index as u64, line: line_number };
+            parse_ascii_element(path, element, role, line, &mut record, &location)?;
+            sink.record(role, &record, location)?;
+        }
+    }
+    for line in lines {
+        line_number += 1;
+        if !line.trim_ascii().is_empty() {
+            return Err(LoadError::CountMismatch {
+                path: path.to_path_buf(),
+                location: Location::Line(line_number),
+                message: "data follows the last element the header declares".into(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Parses one ascii element line into `record` (coordinates and index list; other values are
+/// checked to be numbers and dropped).
+fn parse_ascii_element(
+    path: &Path,
+    element: &ElementDef,
+    role: Role,
+    line: &[u8],
+    record: &mut PlyRecord,
+    location: &impl Fn() -> Location,
+) -> Result<(), LoadError> {
+    let parse_error = |message: String| LoadError::Parse { path: path.to_path_buf(), location: location(), message };
+    let mismatch =
+        |message: String| LoadError::CountMismatch { path: path.to_path_buf(), location: location(), message };
+    let mut tokens = line.split(|b| b.is_ascii_whitespace()).filter(|t| !t.is_empty());
+    let mut next_value =
+        |property: &str| tokens.next().ok_or_else(|| mismatch(format!("the line ends before property '{property}'")));
+    record.indices.clear();
+    for (property, def) in &element.properties {
+        match &def.data_type {
+            PropertyType::Scalar(_) => {
+                let token = next_value(property)?;
+                let value = parse_f64(token).ok_or_else(|| {
+                    parse_error(format!("bad value '{}' for property '{property}'", String::from_utf8_lossy(token)))
+                })?;
+                if role == Role::Vertex {
+                    record.scalar(property, value);
+                }
+            }
+            PropertyType::List(..) => {
+                let token = next_value(property)?;
+                let count = std::str::from_utf8(token).ok().and_then(|s| s.parse::<u32>().ok()).ok_or_else(|| {
+                    parse_error(format!(
+                        "bad list length '{}' for property '{property}'",
+                        String::from_utf8_lossy(token)
+                    ))
+                })?;
+                let is_index_list =
+                    matches!(role, Role::Faces | Role::Strips) && INDEX_LIST_NAMES.contains(&property.as_str());
+                for item in 0..count {
+                    let token = next_value(property).map_err(|_| {
+                        mismatch(format!("list '{property}' declares {count} values, the line has {item}"))
+                    })?;
+                    if is_index_list {
+                        let index =
+                            std::str::from_utf8(token).ok().and_then(|s| s.parse::<i64>().ok()).ok_or_else(|| {
+                                parse_error(format!("bad vertex index '{}'", String::from_utf8_lossy(token)))
+                            })?;
+                        record.indices.push(index);
+                    } else if parse_f64(token).is_none() {
+                        return Err(parse_error(format!(
+                            "bad value '{}' in list '{property}'",
+                            String::from_utf8_lossy(token)
+                        )));
+                    }
+                }
+            }
+        }
+    }
+    if tokens.next().is_some() {
+        return Err(mismatch(format!(
+            "the line has more values than the {} properties the header declares",
+            element.properties.len()
+        )));
+    }
+    Ok(())
+}
+
+fn parse_f64(token: &[u8]) -> Option<f64> {
+    std::str::from_utf8(token).ok()?.parse::<f64>().ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ply_rs_bw::ply::{Addable, PropertyDef};
+
+    fn header(encoding: Encoding, vertex_count: usize) -> Header {
+        let mut vertex = ElementDef::new("vertex".into());
+        vertex.count = vertex_count;
+        for axis in ["x", "y", "z"] {
+            vertex.properties.add(PropertyDef::new(axis.into(), PropertyType::Scalar(ScalarType::Float)));
+        }
+        let mut header = Header::new();
+        header.encoding = encoding;
+        header.elements.add(vertex);
+        header
+    }
+
+    #[test]
+    fn declared_counts_are_checked_against_the_bytes() {
+        let path = Path::new("t.ply");
+        assert!(check_declared_counts(path, &header(Encoding::BinaryLittleEndian, 10), 120).is_ok());
+        assert!(matches!(
+            check_declared_counts(path, &header(Encoding::BinaryLittleEndian, 10), 100),
+            Err(LoadError::Truncated { .. })
+        ));
+        assert!(matches!(
+            check_declared_counts(path, &header(Encoding::BinaryBigEndian, 1 << 40), 1000),
+            Err(LoadError::AbsurdCount { count, min_bytes: 12, .. }) if count == 1 << 40
+        ));
+        // Ascii: at least two characters per value ("0 0 0\n"); the last newline may be missing.
+        assert!(check_declared_counts(path, &header(Encoding::Ascii, 2), 11).is_ok());
+        assert!(check_declared_counts(path, &header(Encoding::Ascii, 0), 0).is_ok());
+        assert!(matches!(
+            check_declared_counts(path, &header(Encoding::Ascii, usize::MAX), 10),
+            Err(LoadError::AbsurdCount { .. })
+        ));
+    }
+
+    #[test]
+    fn strips_restart_flip_and_drop_degenerates() {
+        let layout = Layout { vertex_count: 5, polygons: None };
+        let mut sink = MeshSink::new(Path::new("t.ply"), &layout);
+        sink.strips(&[0, 1, 2, 3, -1, 4, 4, 1, 2], || Location::File).unwrap();
+        // The second strip starts with a swap (4 4 1, dropped), so 4 1 2 is odd: flipped.
+        assert_eq!(sink.triangles, vec![[0, 1, 2], [2, 1, 3], [1, 4, 2]]);
+        assert!(matches!(sink.strips(&[0, 1, 5], || Location::File), Err(LoadError::IndexOutOfRange { index: 5, .. })));
+        assert!(matches!(sink.face(&[0, -1, 2], || Location::File), Err(LoadError::IndexOutOfRange { index: -1, .. })));
+    }
+
+    #[test]
+    fn faces_of_fewer_than_three_corners_are_counted_not_drawn() {
+        let layout = Layout { vertex_count: 3, polygons: None };
+        let mut sink = MeshSink::new(Path::new("t.ply"), &layout);
+        sink.face(&[0, 1], || Location::File).unwrap();
+        sink.face(&[], || Location::File).unwrap();
+        assert!(sink.triangles.is_empty());
+        assert_eq!(sink.short_face_count, 2);
+    }
+
+    #[test]
+    fn non_finite_and_overflowing_coordinates_are_errors() {
+        let layout = Layout { vertex_count: 1, polygons: None };
+        let mut sink = MeshSink::new(Path::new("t.ply"), &layout);
+        let at = || Location::element("vertex", 0);
+        assert!(matches!(sink.vertex([0.0, f64::NAN, 0.0], at), Err(LoadError::NonFinite { .. })));
+        assert!(
+            matches!(sink.vertex([1e300, 0.0, 0.0], at), Err(LoadError::NonFinite { value, .. }) if value == f32::INFINITY)
+        );
+        assert!(sink.vertex([1.0, 2.0, 3.0], at).is_ok());
+    }
+}
