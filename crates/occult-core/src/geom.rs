@@ -20,7 +20,10 @@ impl Default for Aabb {
 
 impl Aabb {
     /// The empty box: the identity of [`Aabb::union`].
-    pub const EMPTY: Aabb = Aabb { min: Vec3::splat(f32::INFINITY), max: Vec3::splat(f32::NEG_INFINITY) };
+    pub const EMPTY: Aabb = Aabb {
+        min: Vec3::splat(f32::INFINITY),
+        max: Vec3::splat(f32::NEG_INFINITY),
+    };
 
     /// The box spanning `min..=max`.
     pub fn new(min: Vec3, max: Vec3) -> Self {
@@ -40,18 +43,27 @@ impl Aabb {
     /// This box grown to hold `p`.
     #[inline]
     pub fn including(self, p: Vec3) -> Self {
-        Self { min: self.min.min(p), max: self.max.max(p) }
+        Self {
+            min: self.min.min(p),
+            max: self.max.max(p),
+        }
     }
 
     /// The smallest box holding both.
     #[inline]
     pub fn union(self, other: Aabb) -> Self {
-        Self { min: self.min.min(other.min), max: self.max.max(other.max) }
+        Self {
+            min: self.min.min(other.min),
+            max: self.max.max(other.max),
+        }
     }
 
     /// The common part (possibly empty).
     pub fn intersection(self, other: Aabb) -> Self {
-        Self { min: self.min.max(other.min), max: self.max.min(other.max) }
+        Self {
+            min: self.min.max(other.min),
+            max: self.max.min(other.max),
+        }
     }
 
     /// Centre point.
@@ -107,7 +119,11 @@ impl Aabb {
         if self.is_empty() {
             return *self;
         }
-        Aabb::from_points(self.corners().into_iter().map(|c| dst_from_src.transform_point3(c)))
+        Aabb::from_points(
+            self.corners()
+                .into_iter()
+                .map(|c| dst_from_src.transform_point3(c)),
+        )
     }
 }
 
@@ -126,9 +142,15 @@ impl Plane {
     pub fn from_vec4(v: Vec4) -> Self {
         let len = v.truncate().length();
         if len > 0.0 && len.is_finite() {
-            Self { normal: v.truncate() / len, d: v.w / len }
+            Self {
+                normal: v.truncate() / len,
+                d: v.w / len,
+            }
         } else {
-            Self { normal: Vec3::ZERO, d: 1.0 }
+            Self {
+                normal: Vec3::ZERO,
+                d: 1.0,
+            }
         }
     }
 
@@ -164,7 +186,12 @@ impl Frustum {
     /// `= near`, `w` = view distance), cut at view distance `far`, in object space.
     /// `margin_ndc` widens the side planes (in NDC units, `2/width` is one pixel) and
     /// `depth_margin` moves near and far outwards by that fraction.
-    pub fn from_reversed_z(clip_from_object: &Mat4, far: f32, margin_ndc: glam::Vec2, depth_margin: f32) -> Self {
+    pub fn from_reversed_z(
+        clip_from_object: &Mat4,
+        far: f32,
+        margin_ndc: glam::Vec2,
+        depth_margin: f32,
+    ) -> Self {
         let m = clip_from_object.transpose(); // rows of clip_from_object as columns
         let (r0, r1, r2, r3) = (m.x_axis, m.y_axis, m.z_axis, m.w_axis);
         let sx = 1.0 + margin_ndc.x;
@@ -232,7 +259,10 @@ mod tests {
         let b = Aabb::new(Vec3::ZERO, Vec3::ONE);
         assert_eq!(b.corners()[7], Vec3::ONE);
         let t = Affine3A::from_translation(Vec3::new(1.0, 2.0, 3.0));
-        assert_eq!(b.transformed(&t), Aabb::new(Vec3::new(1.0, 2.0, 3.0), Vec3::new(2.0, 3.0, 4.0)));
+        assert_eq!(
+            b.transformed(&t),
+            Aabb::new(Vec3::new(1.0, 2.0, 3.0), Vec3::new(2.0, 3.0, 4.0))
+        );
         assert!(Aabb::EMPTY.transformed(&t).is_empty());
     }
 

@@ -40,16 +40,28 @@ impl Mesh {
             return Err(CoreError::TooManyVertices(positions.len()));
         }
         if let Some(vertex_index) = positions.iter().position(|p| !p.is_finite()) {
-            return Err(CoreError::NonFiniteVertex { vertex_index, value: positions[vertex_index].to_array() });
+            return Err(CoreError::NonFiniteVertex {
+                vertex_index,
+                value: positions[vertex_index].to_array(),
+            });
         }
         let vertex_count = positions.len();
         for (triangle_index, t) in triangles.iter().enumerate() {
             if let Some(&vertex_index) = t.iter().find(|&&i| i as usize >= vertex_count) {
-                return Err(CoreError::IndexOutOfRange { triangle_index, vertex_index, vertex_count });
+                return Err(CoreError::IndexOutOfRange {
+                    triangle_index,
+                    vertex_index,
+                    vertex_count,
+                });
             }
         }
         let bounds = Aabb::from_points(triangles.iter().flatten().map(|&i| positions[i as usize]));
-        Ok(Self { positions, triangles, colors: None, bounds })
+        Ok(Self {
+            positions,
+            triangles,
+            colors: None,
+            bounds,
+        })
     }
 
     /// This mesh with colors attached.
@@ -59,7 +71,10 @@ impl Mesh {
     pub fn with_colors(mut self, colors: MeshColors) -> Result<Self> {
         if let MeshColors::PerTriangle(c) = &colors {
             if c.len() != self.triangles.len() {
-                return Err(CoreError::ColorCountMismatch { triangle_count: self.triangles.len(), color_count: c.len() });
+                return Err(CoreError::ColorCountMismatch {
+                    triangle_count: self.triangles.len(),
+                    color_count: c.len(),
+                });
             }
         }
         self.colors = Some(colors);
@@ -102,7 +117,11 @@ impl Mesh {
     #[inline]
     pub fn triangle_positions(&self, triangle_index: usize) -> [Vec3; 3] {
         let t = self.triangles[triangle_index];
-        [self.positions[t[0] as usize], self.positions[t[1] as usize], self.positions[t[2] as usize]]
+        [
+            self.positions[t[0] as usize],
+            self.positions[t[1] as usize],
+            self.positions[t[2] as usize],
+        ]
     }
     /// Bytes held by this mesh's arrays.
     pub fn memory_bytes(&self) -> usize {
@@ -134,11 +153,18 @@ mod tests {
     fn rejects_nan_and_out_of_range() {
         assert!(matches!(
             Mesh::new(vec![Vec3::new(f32::NAN, 0.0, 0.0)], vec![]),
-            Err(CoreError::NonFiniteVertex { vertex_index: 0, .. })
+            Err(CoreError::NonFiniteVertex {
+                vertex_index: 0,
+                ..
+            })
         ));
         assert!(matches!(
             Mesh::new(vec![Vec3::ZERO; 3], vec![[0, 1, 3]]),
-            Err(CoreError::IndexOutOfRange { triangle_index: 0, vertex_index: 3, vertex_count: 3 })
+            Err(CoreError::IndexOutOfRange {
+                triangle_index: 0,
+                vertex_index: 3,
+                vertex_count: 3
+            })
         ));
         assert!(Mesh::new(vec![Vec3::ZERO; 3], vec![[0, 1, 2]])
             .unwrap()

@@ -34,7 +34,12 @@ pub struct RayHit {
 impl Ray {
     /// A ray over `[0, ∞)`.
     pub fn new(origin: Vec3, direction: Vec3) -> Self {
-        Self { origin, direction, t_min: 0.0, t_max: f32::INFINITY }
+        Self {
+            origin,
+            direction,
+            t_min: 0.0,
+            t_max: f32::INFINITY,
+        }
     }
 
     /// Point at `t`.
@@ -84,7 +89,9 @@ pub fn intersect_ray_triangle(ray: &Ray, p0: Vec3, p1: Vec3, p2: Vec3) -> Option
     let mut w = bx * ay - by * ax;
     // Woop §3: recompute in double precision when an edge function rounds to zero.
     if u == 0.0 || v == 0.0 || w == 0.0 {
-        let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
+        let (ax, ay, bx, by, cx, cy) = (
+            ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64,
+        );
         u = (cx * by - cy * bx) as f32;
         v = (ax * cy - ay * cx) as f32;
         w = (bx * ay - by * ax) as f32;
@@ -105,7 +112,11 @@ pub fn intersect_ray_triangle(ray: &Ray, p0: Vec3, p1: Vec3, p2: Vec3) -> Option
     if !(t >= ray.t_min && t <= ray.t_max) {
         return None;
     }
-    Some(RayHit { t, u: v * inv_det, v: w * inv_det })
+    Some(RayHit {
+        t,
+        u: v * inv_det,
+        v: w * inv_det,
+    })
 }
 
 #[cfg(test)]
@@ -128,7 +139,8 @@ mod tests {
         for i in 0..1000 {
             let s = i as f32 / 1000.0;
             let r = Ray::new(Vec3::new(s, s, 1.0), Vec3::new(0.0, 0.0, -1.0));
-            let hit = intersect_ray_triangle(&r, a, b, c).is_some() || intersect_ray_triangle(&r, a, c, d).is_some();
+            let hit = intersect_ray_triangle(&r, a, b, c).is_some()
+                || intersect_ray_triangle(&r, a, c, d).is_some();
             assert!(hit, "ray at {s} fell through the shared edge");
         }
     }

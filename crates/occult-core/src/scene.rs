@@ -167,35 +167,56 @@ impl SceneBuilder {
     /// [`CoreError::UnknownNode`] for a child not yet added, [`CoreError::BadTransform`] for a
     /// non-finite or singular transform, [`CoreError::ItemOverflow`] past 2^64 items, and
     /// [`CoreError::EmptyScene`] if the chain below is deeper than 64 nodes.
-    pub fn add_group(&mut self, name: impl Into<String>, instances: Vec<Instance>) -> Result<NodeId> {
+    pub fn add_group(
+        &mut self,
+        name: impl Into<String>,
+        instances: Vec<Instance>,
+    ) -> Result<NodeId> {
         let name = name.into();
         let mut bounds = Aabb::EMPTY;
         let mut item_count = 0u64;
         let mut item_offsets = Vec::with_capacity(instances.len());
         let mut depth = 1;
         for (instance_index, inst) in instances.iter().enumerate() {
-            let child = self.nodes.get(inst.child.index()).ok_or_else(|| CoreError::UnknownNode {
-                group: name.clone(),
-                instance_index,
-                child: inst.child.0,
-            })?;
+            let child =
+                self.nodes
+                    .get(inst.child.index())
+                    .ok_or_else(|| CoreError::UnknownNode {
+                        group: name.clone(),
+                        instance_index,
+                        child: inst.child.0,
+                    })?;
             let t = &inst.parent_from_child;
             if !t.is_finite() || t.matrix3.determinant() == 0.0 {
-                return Err(CoreError::BadTransform { group: name.clone(), instance_index });
+                return Err(CoreError::BadTransform {
+                    group: name.clone(),
+                    instance_index,
+                });
             }
             bounds = bounds.union(child.bounds.transformed(t));
             item_offsets.push(item_count);
-            item_count = item_count.checked_add(child.item_count).ok_or_else(|| CoreError::ItemOverflow(name.clone()))?;
+            item_count = item_count
+                .checked_add(child.item_count)
+                .ok_or_else(|| CoreError::ItemOverflow(name.clone()))?;
             depth = depth.max(child.depth + 1);
         }
         if depth > MAX_DEPTH {
-            return Err(CoreError::EmptyScene(format!("group '{name}' nests deeper than {MAX_DEPTH} levels")));
+            return Err(CoreError::EmptyScene(format!(
+                "group '{name}' nests deeper than {MAX_DEPTH} levels"
+            )));
         }
         if item_count == u64::MAX {
             // NO_ITEM must stay free.
             return Err(CoreError::ItemOverflow(name));
         }
-        Ok(self.push(Node { name, kind: NodeKind::Group(instances), bounds, item_count, item_offsets, depth }))
+        Ok(self.push(Node {
+            name,
+            kind: NodeKind::Group(instances),
+            bounds,
+            item_count,
+            item_offsets,
+            depth,
+        }))
     }
 
     /// The node added as `id`, if any.
@@ -215,12 +236,22 @@ impl SceneBuilder {
     /// holds no triangle.
     pub fn build(self, root: NodeId) -> Result<Scene> {
         let Some(r) = self.nodes.get(root.index()) else {
-            return Err(CoreError::UnknownNode { group: "<root>".into(), instance_index: 0, child: root.0 });
+            return Err(CoreError::UnknownNode {
+                group: "<root>".into(),
+                instance_index: 0,
+                child: root.0,
+            });
         };
         if r.item_count == 0 {
-            return Err(CoreError::EmptyScene(format!("root '{}' holds no triangle", r.name)));
+            return Err(CoreError::EmptyScene(format!(
+                "root '{}' holds no triangle",
+                r.name
+            )));
         }
-        Ok(Scene { nodes: self.nodes, root })
+        Ok(Scene {
+            nodes: self.nodes,
+            root,
+        })
     }
 }
 
@@ -269,7 +300,11 @@ impl Scene {
     }
     /// Triangles stored (each mesh counted once, however often it is instanced).
     pub fn unique_triangle_count(&self) -> u64 {
-        self.nodes.iter().filter_map(|n| n.mesh()).map(|m| m.triangle_count() as u64).sum()
+        self.nodes
+            .iter()
+            .filter_map(|n| n.mesh())
+            .map(|m| m.triangle_count() as u64)
+            .sum()
     }
     /// Instances stored in all groups.
     pub fn instance_count(&self) -> u64 {
@@ -290,18 +325,32 @@ impl Scene {
 
     /// Calls `f(world_from_object, mesh_node, mesh, first_item)` for every mesh instance, in
     /// item order. Visits every instance: use only where brute force is meant.
-    pub fn for_each_mesh_instance<'s>(&'s self, mut f: impl FnMut(&Affine3A, NodeId, &'s Mesh, ItemId)) {
+    pub fn for_each_mesh_instance<'s>(
+        &'s self,
+        mut f: impl FnMut(&Affine3A, NodeId, &'s Mesh, ItemId),
+    ) {
         self.walk(self.root, &Affine3A::IDENTITY, 0, &mut f);
     }
 
-    fn walk<'s>(&'s self, id: NodeId, world_from_node: &Affine3A, base: ItemId, f: &mut impl FnMut(&Affine3A, NodeId, &'s Mesh, ItemId)) {
+    fn walk<'s>(
+        &'s self,
+        id: NodeId,
+        world_from_node: &Affine3A,
+        base: ItemId,
+        f: &mut impl FnMut(&Affine3A, NodeId, &'s Mesh, ItemId),
+    ) {
         let node = self.node(id);
         match &node.kind {
             NodeKind::Mesh(m) => f(world_from_node, id, m, base),
             NodeKind::Group(instances) => {
                 for (i, inst) in instances.iter().enumerate() {
                     let world_from_child = compose(world_from_node, &inst.parent_from_child);
-                    self.walk(inst.child, &world_from_child, base + node.item_offsets[i], f);
+                    self.walk(
+                        inst.child,
+                        &world_from_child,
+                        base + node.item_offsets[i],
+                        f,
+                    );
                 }
             }
         }
@@ -330,7 +379,9 @@ impl Scene {
                 NodeKind::Group(instances) => {
                     // The last instance whose range starts at or before `local` and is non-empty.
                     let i = node.item_offsets.partition_point(|&o| o <= local) - 1;
-                    let i = (0..=i).rev().find(|&j| self.node(instances[j].child).item_count > 0)?;
+                    let i = (0..=i)
+                        .rev()
+                        .find(|&j| self.node(instances[j].child).item_count > 0)?;
                     local -= node.item_offsets[i];
                     base += node.item_offsets[i];
                     world = compose(&world, &instances[i].parent_from_child);
@@ -348,18 +399,31 @@ impl Scene {
     pub fn flatten(&self, limit: u64) -> Result<Mesh> {
         let triangle_count = self.item_count();
         if triangle_count > limit {
-            return Err(CoreError::TooLargeToFlatten { triangle_count, limit });
+            return Err(CoreError::TooLargeToFlatten {
+                triangle_count,
+                limit,
+            });
         }
-        let any_color = self.nodes.iter().any(|n| n.mesh().is_some_and(|m| m.colors().is_some()));
+        let any_color = self
+            .nodes
+            .iter()
+            .any(|n| n.mesh().is_some_and(|m| m.colors().is_some()));
         let mut positions: Vec<Vec3> = Vec::new();
         let mut triangles = Vec::with_capacity(triangle_count as usize);
         let mut colors = Vec::new();
         self.for_each_mesh_instance(|world_from_object, _, mesh, _| {
             let first = positions.len() as u32;
-            positions.extend(mesh.positions().iter().map(|&p| world_from_object.transform_point3(p)));
+            positions.extend(
+                mesh.positions()
+                    .iter()
+                    .map(|&p| world_from_object.transform_point3(p)),
+            );
             triangles.extend(mesh.triangles().iter().map(|t| t.map(|i| i + first)));
             if any_color {
-                colors.extend((0..mesh.triangle_count()).map(|i| mesh.triangle_color(i).unwrap_or([200, 200, 200, 255])));
+                colors.extend(
+                    (0..mesh.triangle_count())
+                        .map(|i| mesh.triangle_color(i).unwrap_or([200, 200, 200, 255])),
+                );
             }
         });
         let mesh = Mesh::new(positions, triangles)?;
@@ -383,11 +447,17 @@ mod tests {
         let mut b = SceneBuilder::new();
         let m = b.add_mesh("tri", tri()).unwrap();
         let row: Vec<_> = (0..3)
-            .map(|i| Instance { parent_from_child: Affine3A::from_translation(Vec3::X * i as f32 * 2.0), child: m })
+            .map(|i| Instance {
+                parent_from_child: Affine3A::from_translation(Vec3::X * i as f32 * 2.0),
+                child: m,
+            })
             .collect();
         let g = b.add_group("row", row).unwrap();
         let rows: Vec<_> = (0..4)
-            .map(|j| Instance { parent_from_child: Affine3A::from_translation(Vec3::Y * j as f32 * 2.0), child: g })
+            .map(|j| Instance {
+                parent_from_child: Affine3A::from_translation(Vec3::Y * j as f32 * 2.0),
+                child: g,
+            })
             .collect();
         let root = b.add_group("grid", rows).unwrap();
         b.build(root).unwrap()
@@ -412,7 +482,9 @@ mod tests {
         for item in 0..s.item_count() {
             let loc = s.resolve_item(item).unwrap();
             let mesh = s.node(loc.mesh_node).mesh().unwrap();
-            let p = loc.world_from_object.transform_point3(mesh.triangle_positions(loc.triangle_index as usize)[0]);
+            let p = loc
+                .world_from_object
+                .transform_point3(mesh.triangle_positions(loc.triangle_index as usize)[0]);
             assert_eq!(p, flat.triangle_positions(item as usize)[0]);
         }
         assert!(s.resolve_item(12).is_none());
@@ -422,22 +494,42 @@ mod tests {
     #[test]
     fn empty_and_bad_scenes_are_errors() {
         let mut b = SceneBuilder::new();
-        let m = b.add_mesh("empty", Mesh::new(vec![], vec![]).unwrap()).unwrap();
+        let m = b
+            .add_mesh("empty", Mesh::new(vec![], vec![]).unwrap())
+            .unwrap();
         assert!(matches!(b.build(m), Err(CoreError::EmptyScene(_))));
         let mut b = SceneBuilder::new();
         assert!(matches!(
-            b.add_group("g", vec![Instance { parent_from_child: Affine3A::IDENTITY, child: NodeId(5) }]),
+            b.add_group(
+                "g",
+                vec![Instance {
+                    parent_from_child: Affine3A::IDENTITY,
+                    child: NodeId(5)
+                }]
+            ),
             Err(CoreError::UnknownNode { .. })
         ));
         let m = b.add_mesh("tri", tri()).unwrap();
         let bad = Affine3A::from_scale(Vec3::new(1.0, 0.0, 1.0));
-        assert!(matches!(b.add_group("g", vec![Instance { parent_from_child: bad, child: m }]), Err(CoreError::BadTransform { .. })));
+        assert!(matches!(
+            b.add_group(
+                "g",
+                vec![Instance {
+                    parent_from_child: bad,
+                    child: m
+                }]
+            ),
+            Err(CoreError::BadTransform { .. })
+        ));
         assert!(SceneBuilder::new().build(NodeId(0)).is_err());
     }
 
     #[test]
     fn flatten_limit_is_an_error() {
-        assert!(matches!(two_level().flatten(5), Err(CoreError::TooLargeToFlatten { .. })));
+        assert!(matches!(
+            two_level().flatten(5),
+            Err(CoreError::TooLargeToFlatten { .. })
+        ));
     }
 
     #[test]
@@ -446,7 +538,10 @@ mod tests {
         let mut id = b.add_mesh("tri", tri()).unwrap();
         for level in 0..14 {
             let inst: Vec<_> = (0..10)
-                .map(|i| Instance { parent_from_child: Affine3A::from_translation(Vec3::X * i as f32), child: id })
+                .map(|i| Instance {
+                    parent_from_child: Affine3A::from_translation(Vec3::X * i as f32),
+                    child: id,
+                })
                 .collect();
             id = b.add_group(format!("l{level}"), inst).unwrap();
         }

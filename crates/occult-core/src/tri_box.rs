@@ -25,7 +25,11 @@ pub fn tri_box_overlap(aabb: &Aabb, tri: [Vec3; 3]) -> bool {
     let e = [v[1] - v[0], v[2] - v[1], v[0] - v[2]];
     // Nine axes a_ij = e_box_i × e_j.
     for edge in e {
-        for axis in [Vec3::new(0.0, -edge.z, edge.y), Vec3::new(edge.z, 0.0, -edge.x), Vec3::new(-edge.y, edge.x, 0.0)] {
+        for axis in [
+            Vec3::new(0.0, -edge.z, edge.y),
+            Vec3::new(edge.z, 0.0, -edge.x),
+            Vec3::new(-edge.y, edge.x, 0.0),
+        ] {
             let p0 = axis.dot(v[0]);
             let p1 = axis.dot(v[1]);
             let p2 = axis.dot(v[2]);
@@ -52,22 +56,47 @@ mod tests {
 
     #[test]
     fn inside_touching_and_outside() {
-        assert!(tri_box_overlap(&unit(), [Vec3::splat(0.2), Vec3::splat(0.3), Vec3::new(0.2, 0.5, 0.3)]));
-        assert!(tri_box_overlap(&unit(), [Vec3::new(1.0, 0.0, 0.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(2.0, 1.0, 0.0)]));
-        assert!(!tri_box_overlap(&unit(), [Vec3::new(1.1, 0.0, 0.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(2.0, 1.0, 0.0)]));
+        assert!(tri_box_overlap(
+            &unit(),
+            [Vec3::splat(0.2), Vec3::splat(0.3), Vec3::new(0.2, 0.5, 0.3)]
+        ));
+        assert!(tri_box_overlap(
+            &unit(),
+            [
+                Vec3::new(1.0, 0.0, 0.0),
+                Vec3::new(2.0, 0.0, 0.0),
+                Vec3::new(2.0, 1.0, 0.0)
+            ]
+        ));
+        assert!(!tri_box_overlap(
+            &unit(),
+            [
+                Vec3::new(1.1, 0.0, 0.0),
+                Vec3::new(2.0, 0.0, 0.0),
+                Vec3::new(2.0, 1.0, 0.0)
+            ]
+        ));
         assert!(!tri_box_overlap(&Aabb::EMPTY, [Vec3::ZERO; 3]));
     }
 
     #[test]
     fn large_triangle_through_box_overlaps() {
-        let t = [Vec3::new(-10.0, -10.0, 0.5), Vec3::new(10.0, -10.0, 0.5), Vec3::new(0.0, 10.0, 0.5)];
+        let t = [
+            Vec3::new(-10.0, -10.0, 0.5),
+            Vec3::new(10.0, -10.0, 0.5),
+            Vec3::new(0.0, 10.0, 0.5),
+        ];
         assert!(tri_box_overlap(&unit(), t));
     }
 
     #[test]
     fn diagonal_triangle_missing_the_corner_is_separated_by_an_edge_axis() {
         // Bounds overlap and the plane cuts the box, but an edge cross-product axis separates.
-        let t = [Vec3::new(1.5, -0.5, 0.5), Vec3::new(2.5, 0.5, 0.5), Vec3::new(1.5, 0.5, 0.6)];
+        let t = [
+            Vec3::new(1.5, -0.5, 0.5),
+            Vec3::new(2.5, 0.5, 0.5),
+            Vec3::new(1.5, 0.5, 0.6),
+        ];
         let brute = brute_force(&unit(), t);
         assert_eq!(tri_box_overlap(&unit(), t), brute);
     }
@@ -93,7 +122,11 @@ mod tests {
             (s >> 40) as f32 / (1u64 << 24) as f32 * 3.0 - 1.0
         };
         for _ in 0..300 {
-            let t = [Vec3::new(rnd(), rnd(), rnd()), Vec3::new(rnd(), rnd(), rnd()), Vec3::new(rnd(), rnd(), rnd())];
+            let t = [
+                Vec3::new(rnd(), rnd(), rnd()),
+                Vec3::new(rnd(), rnd(), rnd()),
+                Vec3::new(rnd(), rnd(), rnd()),
+            ];
             // Sampling finds a subset of true overlaps: every sampled overlap must be reported.
             if brute_force(&unit(), t) {
                 assert!(tri_box_overlap(&unit(), t), "{t:?}");

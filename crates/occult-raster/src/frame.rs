@@ -32,13 +32,25 @@ impl Frame {
         let mut items = Vec::new();
         let mut color = Vec::new();
         let bytes = n * 16;
-        depth.try_reserve_exact(n).map_err(|_| RasterError::OutOfMemory(bytes))?;
-        items.try_reserve_exact(n).map_err(|_| RasterError::OutOfMemory(bytes))?;
-        color.try_reserve_exact(n).map_err(|_| RasterError::OutOfMemory(bytes))?;
+        depth
+            .try_reserve_exact(n)
+            .map_err(|_| RasterError::OutOfMemory(bytes))?;
+        items
+            .try_reserve_exact(n)
+            .map_err(|_| RasterError::OutOfMemory(bytes))?;
+        color
+            .try_reserve_exact(n)
+            .map_err(|_| RasterError::OutOfMemory(bytes))?;
         depth.resize(n, CLEAR_DEPTH);
         items.resize(n, NO_ITEM);
         color.resize(n, [0, 0, 0, 0]);
-        Ok(Self { width, height, depth, items, color })
+        Ok(Self {
+            width,
+            height,
+            depth,
+            items,
+            color,
+        })
     }
 
     /// Width in pixels.
@@ -66,11 +78,10 @@ impl Frame {
     pub fn color(&self) -> &[[u8; 4]] {
         &self.color
     }
-    /// Resets depth, items and color.
+    /// Resets depth and items (colors are stale until the next [`crate::shade`]).
     pub fn clear(&mut self) {
         self.depth.fill(CLEAR_DEPTH);
         self.items.fill(NO_ITEM);
-        self.color.fill([0, 0, 0, 0]);
     }
     /// Pixels holding an item.
     pub fn covered_pixel_count(&self) -> u64 {
@@ -78,7 +89,12 @@ impl Frame {
     }
     /// The distinct items visible in the frame, sorted: the exactly visible set.
     pub fn visible_items(&self) -> Vec<ItemId> {
-        let mut v: Vec<ItemId> = self.items.iter().copied().filter(|&i| i != NO_ITEM).collect();
+        let mut v: Vec<ItemId> = self
+            .items
+            .iter()
+            .copied()
+            .filter(|&i| i != NO_ITEM)
+            .collect();
         v.sort_unstable();
         v.dedup();
         v
@@ -88,15 +104,27 @@ impl Frame {
         self.width == other.width
             && self.height == other.height
             && self.items == other.items
-            && self.depth.iter().zip(&other.depth).all(|(a, b)| a.to_bits() == b.to_bits())
+            && self
+                .depth
+                .iter()
+                .zip(&other.depth)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
     }
     /// Pixels whose item differs from `other`'s (frames of equal size).
     ///
     /// # Panics
     /// If the sizes differ (a programmer error).
     pub fn differing_item_count(&self, other: &Frame) -> u64 {
-        assert_eq!((self.width, self.height), (other.width, other.height), "frame sizes differ");
-        self.items.iter().zip(&other.items).filter(|(a, b)| a != b).count() as u64
+        assert_eq!(
+            (self.width, self.height),
+            (other.width, other.height),
+            "frame sizes differ"
+        );
+        self.items
+            .iter()
+            .zip(&other.items)
+            .filter(|(a, b)| a != b)
+            .count() as u64
     }
     /// Peak signal-to-noise ratio of this frame's color against `reference`'s, in dB over RGB;
     /// infinite when identical.
@@ -104,7 +132,11 @@ impl Frame {
     /// # Panics
     /// If the sizes differ (a programmer error).
     pub fn color_psnr(&self, reference: &Frame) -> f64 {
-        assert_eq!((self.width, self.height), (reference.width, reference.height), "frame sizes differ");
+        assert_eq!(
+            (self.width, self.height),
+            (reference.width, reference.height),
+            "frame sizes differ"
+        );
         let mut sum = 0f64;
         for (a, b) in self.color.iter().zip(&reference.color) {
             for c in 0..3 {
@@ -134,7 +166,12 @@ impl Frame {
     /// Depth visualised as grey levels: near white, far dark, cleared pixels black. Depth is
     /// mapped logarithmically between the frame's nearest and farthest drawn depth.
     pub fn depth_image(&self) -> image::GrayImage {
-        let drawn = || self.depth.iter().copied().filter(|&d| d > CLEAR_DEPTH && d.is_finite());
+        let drawn = || {
+            self.depth
+                .iter()
+                .copied()
+                .filter(|&d| d > CLEAR_DEPTH && d.is_finite())
+        };
         let lo = drawn().fold(f32::INFINITY, f32::min).max(1e-12);
         let hi = drawn().fold(0.0f32, f32::max).max(lo);
         let (llo, lhi) = (lo.ln(), hi.ln());
@@ -142,7 +179,13 @@ impl Frame {
         let raw = self
             .depth
             .iter()
-            .map(|&d| if d > CLEAR_DEPTH && d.is_finite() { (32.0 + 223.0 * ((d.max(lo).ln() - llo) / span)) as u8 } else { 0 })
+            .map(|&d| {
+                if d > CLEAR_DEPTH && d.is_finite() {
+                    (32.0 + 223.0 * ((d.max(lo).ln() - llo) / span)) as u8
+                } else {
+                    0
+                }
+            })
             .collect();
         image::GrayImage::from_raw(self.width, self.height, raw).expect("buffer size matches")
     }
@@ -165,7 +208,12 @@ impl Frame {
 /// DESIGN invariant 1: a pixel keeps the fragment nearest by depth, ties broken by the smaller
 /// item id, so the result does not depend on submission order or thread count.
 #[inline(always)]
-pub fn keep_fragment(stored_depth: &mut f32, stored_item: &mut ItemId, depth: f32, item: ItemId) -> bool {
+pub fn keep_fragment(
+    stored_depth: &mut f32,
+    stored_item: &mut ItemId,
+    depth: f32,
+    item: ItemId,
+) -> bool {
     if depth > *stored_depth || (depth == *stored_depth && item < *stored_item) {
         *stored_depth = depth;
         *stored_item = item;

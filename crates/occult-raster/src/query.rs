@@ -36,7 +36,11 @@ pub fn query_rect(frame: &Frame, rect: PixelRect, nearest: f32) -> u64 {
     if rect.x0 >= x1 || rect.y0 >= y1 {
         return 0;
     }
-    let nearest = if nearest.is_nan() { f32::INFINITY } else { nearest };
+    let nearest = if nearest.is_nan() {
+        f32::INFINITY
+    } else {
+        nearest
+    };
     let w = frame.width() as usize;
     let mut count = 0;
     for y in rect.y0..y1 {
@@ -58,7 +62,16 @@ pub fn query_box(frame: &Frame, view: &View, clip_from_object: &Mat4, aabb: &Aab
     let (w, h) = (frame.width() as f64, frame.height() as f64);
     let clip = aabb.corners().map(|c| *clip_from_object * c.extend(1.0));
     if clip.iter().any(|c| !c.is_finite()) {
-        return query_rect(frame, PixelRect { x0: 0, y0: 0, x1: frame.width(), y1: frame.height() }, f32::INFINITY);
+        return query_rect(
+            frame,
+            PixelRect {
+                x0: 0,
+                y0: 0,
+                x1: frame.width(),
+                y1: frame.height(),
+            },
+            f32::INFINITY,
+        );
     }
     // Outside one side plane entirely (with a margin for snapping): nothing can be drawn.
     let m = 1.0 + 4.0 / w.min(h) as f32;
@@ -72,7 +85,16 @@ pub fn query_box(frame: &Frame, view: &View, clip_from_object: &Mat4, aabb: &Aab
     }
     let near_margin = 1.0 + 1e-5;
     if clip.iter().any(|c| c.z * near_margin > c.w) {
-        return query_rect(frame, PixelRect { x0: 0, y0: 0, x1: frame.width(), y1: frame.height() }, f32::INFINITY);
+        return query_rect(
+            frame,
+            PixelRect {
+                x0: 0,
+                y0: 0,
+                x1: frame.width(),
+                y1: frame.height(),
+            },
+            f32::INFINITY,
+        );
     }
     let nearest = clip.iter().map(|c| c.z / c.w).fold(0.0f32, f32::max) * (1.0 + 1e-5);
     if nearest < view.far_depth() * (1.0 - 1e-5) {
@@ -87,7 +109,12 @@ pub fn query_box(frame: &Frame, view: &View, clip_from_object: &Mat4, aabb: &Aab
         .collect();
     let hull = convex_hull(pts);
     let margin = 1.0 / 64.0;
-    let (mut minx, mut maxx, mut miny, mut maxy) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    let (mut minx, mut maxx, mut miny, mut maxy) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
     for &(x, y) in &hull {
         minx = minx.min(x);
         maxx = maxx.max(x);
@@ -123,7 +150,9 @@ pub fn query_box(frame: &Frame, view: &View, clip_from_object: &Mat4, aabb: &Aab
         let cy = y as f64 + 0.5;
         for x in px0..px1 as u32 {
             let cx = x as f64 + 0.5;
-            if edges.iter().all(|&(a, b, c)| a * cx + b * cy + c >= 0.0) && frame.depth()[y as usize * fw + x as usize] <= nearest {
+            if edges.iter().all(|&(a, b, c)| a * cx + b * cy + c >= 0.0)
+                && frame.depth()[y as usize * fw + x as usize] <= nearest
+            {
                 count += 1;
             }
         }
@@ -139,13 +168,21 @@ fn convex_hull(mut p: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
     if p.len() < 3 {
         return p;
     }
-    let cross = |o: (f64, f64), a: (f64, f64), b: (f64, f64)| (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0);
+    let cross = |o: (f64, f64), a: (f64, f64), b: (f64, f64)| {
+        (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0)
+    };
     let mut hull: Vec<(f64, f64)> = Vec::with_capacity(2 * p.len());
     for pass in 0..2 {
         let start = hull.len();
-        let iter: Box<dyn Iterator<Item = &(f64, f64)>> = if pass == 0 { Box::new(p.iter()) } else { Box::new(p.iter().rev()) };
+        let iter: Box<dyn Iterator<Item = &(f64, f64)>> = if pass == 0 {
+            Box::new(p.iter())
+        } else {
+            Box::new(p.iter().rev())
+        };
         for &q in iter {
-            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0 {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0
+            {
                 hull.pop();
             }
             hull.push(q);
@@ -161,7 +198,13 @@ mod tests {
 
     #[test]
     fn hull_orientation_puts_interior_on_positive_side() {
-        let h = convex_hull(vec![(0.0, 0.0), (4.0, 0.0), (4.0, 4.0), (0.0, 4.0), (2.0, 2.0)]);
+        let h = convex_hull(vec![
+            (0.0, 0.0),
+            (4.0, 0.0),
+            (4.0, 4.0),
+            (0.0, 4.0),
+            (2.0, 2.0),
+        ]);
         assert_eq!(h.len(), 4);
         for i in 0..h.len() {
             let (a, b) = (h[i], h[(i + 1) % h.len()]);
@@ -173,10 +216,70 @@ mod tests {
     #[test]
     fn rect_query_edge_cases() {
         let f = Frame::new(8, 8).unwrap();
-        assert_eq!(query_rect(&f, PixelRect { x0: 0, y0: 0, x1: 8, y1: 8 }, 0.5), 64);
-        assert_eq!(query_rect(&f, PixelRect { x0: 5, y0: 5, x1: 2, y1: 2 }, 0.5), 0);
-        assert_eq!(query_rect(&f, PixelRect { x0: 6, y0: 6, x1: 100, y1: 100 }, 0.5), 4);
-        assert_eq!(query_rect(&f, PixelRect { x0: 100, y0: 100, x1: 200, y1: 200 }, 0.5), 0);
-        assert_eq!(query_rect(&f, PixelRect { x0: 0, y0: 0, x1: 8, y1: 8 }, f32::NAN), 64);
+        assert_eq!(
+            query_rect(
+                &f,
+                PixelRect {
+                    x0: 0,
+                    y0: 0,
+                    x1: 8,
+                    y1: 8
+                },
+                0.5
+            ),
+            64
+        );
+        assert_eq!(
+            query_rect(
+                &f,
+                PixelRect {
+                    x0: 5,
+                    y0: 5,
+                    x1: 2,
+                    y1: 2
+                },
+                0.5
+            ),
+            0
+        );
+        assert_eq!(
+            query_rect(
+                &f,
+                PixelRect {
+                    x0: 6,
+                    y0: 6,
+                    x1: 100,
+                    y1: 100
+                },
+                0.5
+            ),
+            4
+        );
+        assert_eq!(
+            query_rect(
+                &f,
+                PixelRect {
+                    x0: 100,
+                    y0: 100,
+                    x1: 200,
+                    y1: 200
+                },
+                0.5
+            ),
+            0
+        );
+        assert_eq!(
+            query_rect(
+                &f,
+                PixelRect {
+                    x0: 0,
+                    y0: 0,
+                    x1: 8,
+                    y1: 8
+                },
+                f32::NAN
+            ),
+            64
+        );
     }
 }

@@ -19,15 +19,19 @@ pub fn shade(frame: &mut Frame, scene: &Scene, view: &View) {
     let light = (-forward * 0.55 + up * 0.7 + right * 0.45).normalize();
     let width = frame.width() as usize;
     let items = frame.items.clone();
-    frame.color.par_chunks_mut(width).zip(items.par_chunks(width)).for_each(|(colors, items)| {
-        let mut last: (ItemId, [u8; 4]) = (NO_ITEM, BACKGROUND);
-        for (c, &item) in colors.iter_mut().zip(items) {
-            if item != last.0 {
-                last = (item, item_color(scene, item, light));
+    frame
+        .color
+        .par_chunks_mut(width)
+        .zip(items.par_chunks(width))
+        .for_each(|(colors, items)| {
+            let mut last: (ItemId, [u8; 4]) = (NO_ITEM, BACKGROUND);
+            for (c, &item) in colors.iter_mut().zip(items) {
+                if item != last.0 {
+                    last = (item, item_color(scene, item, light));
+                }
+                *c = last.1;
             }
-            *c = last.1;
-        }
-    });
+        });
 }
 
 fn item_color(scene: &Scene, item: ItemId, light: Vec3) -> [u8; 4] {
@@ -37,11 +41,20 @@ fn item_color(scene: &Scene, item: ItemId, light: Vec3) -> [u8; 4] {
     let Some(mesh) = scene.node(loc.mesh_node).mesh() else {
         return BACKGROUND;
     };
-    let p = mesh.triangle_positions(loc.triangle_index as usize).map(|p| loc.world_from_object.transform_point3(p));
+    let p = mesh
+        .triangle_positions(loc.triangle_index as usize)
+        .map(|p| loc.world_from_object.transform_point3(p));
     let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
-    let base = mesh.triangle_color(loc.triangle_index as usize).unwrap_or_else(|| hashed_color(loc.instance_base));
+    let base = mesh
+        .triangle_color(loc.triangle_index as usize)
+        .unwrap_or_else(|| hashed_color(loc.instance_base));
     let k = 0.3 + 0.7 * n.dot(light).abs();
-    [(base[0] as f32 * k) as u8, (base[1] as f32 * k) as u8, (base[2] as f32 * k) as u8, 255]
+    [
+        (base[0] as f32 * k) as u8,
+        (base[1] as f32 * k) as u8,
+        (base[2] as f32 * k) as u8,
+        255,
+    ]
 }
 
 /// A pleasant, stable color for an object without one.

@@ -8,12 +8,22 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
 fn raster(threads: usize, tile: u32) -> Rasterizer {
-    Rasterizer::new(RasterConfig { threads, tile_size: tile, cull_backfaces: false }).unwrap()
+    Rasterizer::new(RasterConfig {
+        threads,
+        tile_size: tile,
+        ..RasterConfig::default()
+    })
+    .unwrap()
 }
 
 fn draw_all(r: &mut Rasterizer, view: &View, mesh: &Mesh) -> Frame {
     let mut f = Frame::new(view.width(), view.height()).unwrap();
-    let d = Draw { mesh, triangles: DrawTriangles::All, clip_from_object: view.clip_from_object(&Affine3A::IDENTITY), first_item: 0 };
+    let d = Draw {
+        mesh,
+        triangles: DrawTriangles::All,
+        clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
+        first_item: 0,
+    };
     r.draw(view, &mut f, &[d], RasterMode::Full);
     f
 }
@@ -64,7 +74,12 @@ fn watertight_grid_covers_each_pixel_exactly_once() {
         for t in 0..mesh.triangle_count() as u32 {
             let mut f = Frame::new(64, 64).unwrap();
             let list = [t];
-            let d = Draw { mesh: &mesh, triangles: DrawTriangles::List(&list), clip_from_object: view.clip_from_object(&Affine3A::IDENTITY), first_item: 0 };
+            let d = Draw {
+                mesh: &mesh,
+                triangles: DrawTriangles::List(&list),
+                clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
+                first_item: 0,
+            };
             r.draw(&view, &mut f, &[d], RasterMode::Full);
             for (c, &i) in coverage.iter_mut().zip(f.items()) {
                 *c += (i != NO_ITEM) as u32;
@@ -72,8 +87,14 @@ fn watertight_grid_covers_each_pixel_exactly_once() {
         }
         // The grid spans beyond the screen: every pixel is covered once, none twice.
         let mut histogram = [0; 4];
-        coverage.iter().for_each(|&c| histogram[(c as usize).min(3)] += 1);
-        assert_eq!(histogram, [0, 64 * 64, 0, 0], "seed {seed}: pixels covered 0, 1, 2, 3+ times");
+        coverage
+            .iter()
+            .for_each(|&c| histogram[(c as usize).min(3)] += 1);
+        assert_eq!(
+            histogram,
+            [0, 64 * 64, 0, 0],
+            "seed {seed}: pixels covered 0, 1, 2, 3+ times"
+        );
     }
 }
 
@@ -85,7 +106,11 @@ fn closed_sphere_front_faces_cover_once_with_backface_culling() {
         let th = std::f32::consts::PI * i as f32 / n as f32;
         for j in 0..m {
             let ph = 2.0 * std::f32::consts::PI * j as f32 / m as f32;
-            p.push(Vec3::new(th.sin() * ph.cos(), th.cos(), -th.sin() * ph.sin()));
+            p.push(Vec3::new(
+                th.sin() * ph.cos(),
+                th.cos(),
+                -th.sin() * ph.sin(),
+            ));
         }
     }
     p.push(-Vec3::Y);
@@ -102,13 +127,27 @@ fn closed_sphere_front_faces_cover_once_with_backface_culling() {
         }
     }
     let mesh = Mesh::new(p, t).unwrap();
-    let view = View::new(Camera::look_at(Vec3::new(0.3, 0.4, 3.0), Vec3::ZERO), 64, 64).unwrap();
-    let mut culled = Rasterizer::new(RasterConfig { cull_backfaces: true, ..RasterConfig::default() }).unwrap();
+    let view = View::new(
+        Camera::look_at(Vec3::new(0.3, 0.4, 3.0), Vec3::ZERO),
+        64,
+        64,
+    )
+    .unwrap();
+    let mut culled = Rasterizer::new(RasterConfig {
+        cull_backfaces: true,
+        ..RasterConfig::default()
+    })
+    .unwrap();
     let mut coverage = vec![0u32; 64 * 64];
     for tri in 0..mesh.triangle_count() as u32 {
         let mut f = Frame::new(64, 64).unwrap();
         let list = [tri];
-        let d = Draw { mesh: &mesh, triangles: DrawTriangles::List(&list), clip_from_object: view.clip_from_object(&Affine3A::IDENTITY), first_item: 0 };
+        let d = Draw {
+            mesh: &mesh,
+            triangles: DrawTriangles::List(&list),
+            clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
+            first_item: 0,
+        };
         culled.draw(&view, &mut f, &[d], RasterMode::Full);
         for (c, &i) in coverage.iter_mut().zip(f.items()) {
             *c += (i != NO_ITEM) as u32;
@@ -125,20 +164,40 @@ fn soup(seed: u64, count: usize) -> Mesh {
     let mut rng = Pcg64Mcg::seed_from_u64(seed);
     let mut p = Vec::new();
     for _ in 0..count {
-        let c = Vec3::new(rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0));
+        let c = Vec3::new(
+            rng.random_range(-3.0..3.0),
+            rng.random_range(-3.0..3.0),
+            rng.random_range(-3.0..3.0),
+        );
         let s = rng.random_range(0.01f32..2.0).powi(2);
         for _ in 0..3 {
-            p.push(c + Vec3::new(rng.random_range(-s..s), rng.random_range(-s..s), rng.random_range(-s..s)));
+            p.push(
+                c + Vec3::new(
+                    rng.random_range(-s..s),
+                    rng.random_range(-s..s),
+                    rng.random_range(-s..s),
+                ),
+            );
         }
     }
-    let t = (0..count as u32).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+    let t = (0..count as u32)
+        .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
+        .collect();
     Mesh::new(p, t).unwrap()
 }
 
 fn random_view(rng: &mut Pcg64Mcg, w: u32, h: u32) -> View {
     loop {
-        let eye = Vec3::new(rng.random_range(-6.0..6.0), rng.random_range(-6.0..6.0), rng.random_range(-6.0..6.0));
-        let target = Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+        let eye = Vec3::new(
+            rng.random_range(-6.0..6.0),
+            rng.random_range(-6.0..6.0),
+            rng.random_range(-6.0..6.0),
+        );
+        let target = Vec3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        );
         let mut cam = Camera::look_at(eye, target);
         cam.fov_y_deg = rng.random_range(20.0..100.0);
         cam.near = rng.random_range(0.01..1.0);
@@ -158,16 +217,36 @@ fn frames_independent_of_order_threads_and_tiles() {
         let reference = draw_all(&mut raster(1, 64), &view, &mesh);
         let mut order: Vec<u32> = (0..mesh.triangle_count() as u32).collect();
         order.shuffle(&mut rng);
-        for (threads, tile) in [(1, 8), (2, 16), (3, 64), (2, 1024)] {
-            let mut r = raster(threads, tile);
+        for (threads, tile, simd) in [
+            (1, 8, true),
+            (2, 16, false),
+            (3, 64, true),
+            (2, 1024, false),
+            (1, 64, false),
+        ] {
+            let mut r = Rasterizer::new(RasterConfig {
+                threads,
+                tile_size: tile,
+                simd,
+                ..RasterConfig::default()
+            })
+            .unwrap();
             let mut f = Frame::new(173, 97).unwrap();
             let m = view.clip_from_object(&Affine3A::IDENTITY);
             let draws: Vec<Draw> = order
                 .chunks(517)
-                .map(|c| Draw { mesh: &mesh, triangles: DrawTriangles::List(c), clip_from_object: m, first_item: 0 })
+                .map(|c| Draw {
+                    mesh: &mesh,
+                    triangles: DrawTriangles::List(c),
+                    clip_from_object: m,
+                    first_item: 0,
+                })
                 .collect();
             r.draw(&view, &mut f, &draws, RasterMode::Full);
-            assert!(f.same_visibility(&reference), "seed {seed}, {threads} threads, tile {tile}");
+            assert!(
+                f.same_visibility(&reference),
+                "seed {seed}, {threads} threads, tile {tile}, simd {simd}"
+            );
         }
     }
 }
@@ -179,16 +258,30 @@ fn depth_only_matches_full_depth() {
     let view = random_view(&mut rng, 80, 60);
     let full = draw_all(&mut raster(0, 32), &view, &mesh);
     let mut f = Frame::new(80, 60).unwrap();
-    let d = Draw { mesh: &mesh, triangles: DrawTriangles::All, clip_from_object: view.clip_from_object(&Affine3A::IDENTITY), first_item: 0 };
+    let d = Draw {
+        mesh: &mesh,
+        triangles: DrawTriangles::All,
+        clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
+        first_item: 0,
+    };
     raster(0, 32).draw(&view, &mut f, &[d], RasterMode::DepthOnly);
-    assert!(f.depth().iter().zip(full.depth()).all(|(a, b)| a.to_bits() == b.to_bits()));
+    assert!(f
+        .depth()
+        .iter()
+        .zip(full.depth())
+        .all(|(a, b)| a.to_bits() == b.to_bits()));
 }
 
 #[test]
 fn huge_ground_plane_crossing_near_plane_has_no_cracks() {
     let s = 1e6;
     let mesh = Mesh::new(
-        vec![Vec3::new(-s, 0.0, -s), Vec3::new(s, 0.0, -s), Vec3::new(s, 0.0, s), Vec3::new(-s, 0.0, s)],
+        vec![
+            Vec3::new(-s, 0.0, -s),
+            Vec3::new(s, 0.0, -s),
+            Vec3::new(s, 0.0, s),
+            Vec3::new(-s, 0.0, s),
+        ],
         vec![[0, 2, 1], [0, 3, 2]],
     )
     .unwrap();
@@ -209,20 +302,40 @@ fn behind_camera_and_beyond_far_draw_nothing() {
     let mesh = soup(1, 500);
     let cam = Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::new(0.0, 0.0, 20.0));
     let view = View::new(cam, 64, 64).unwrap();
-    assert_eq!(draw_all(&mut raster(1, 64), &view, &mesh).covered_pixel_count(), 0);
+    assert_eq!(
+        draw_all(&mut raster(1, 64), &view, &mesh).covered_pixel_count(),
+        0
+    );
     let mut cam = Camera::look_at(Vec3::new(0.0, 0.0, 100.0), Vec3::ZERO);
     cam.far = 50.0;
     let view = View::new(cam, 64, 64).unwrap();
-    assert_eq!(draw_all(&mut raster(1, 64), &view, &mesh).covered_pixel_count(), 0);
+    assert_eq!(
+        draw_all(&mut raster(1, 64), &view, &mesh).covered_pixel_count(),
+        0
+    );
 }
 
 #[test]
 fn degenerate_triangles_draw_nothing() {
-    let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::X * 2.0, Vec3::Y], vec![[0, 1, 2], [3, 3, 3], [0, 0, 1]]).unwrap();
-    let view = View::new(Camera::look_at(Vec3::new(0.5, 0.5, 2.0), Vec3::new(0.5, 0.5, 0.0)), 32, 32).unwrap();
+    let mesh = Mesh::new(
+        vec![Vec3::ZERO, Vec3::X, Vec3::X * 2.0, Vec3::Y],
+        vec![[0, 1, 2], [3, 3, 3], [0, 0, 1]],
+    )
+    .unwrap();
+    let view = View::new(
+        Camera::look_at(Vec3::new(0.5, 0.5, 2.0), Vec3::new(0.5, 0.5, 0.0)),
+        32,
+        32,
+    )
+    .unwrap();
     let mut r = raster(1, 8);
     let mut f = Frame::new(32, 32).unwrap();
-    let d = Draw { mesh: &mesh, triangles: DrawTriangles::All, clip_from_object: view.clip_from_object(&Affine3A::IDENTITY), first_item: 0 };
+    let d = Draw {
+        mesh: &mesh,
+        triangles: DrawTriangles::All,
+        clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
+        first_item: 0,
+    };
     let c = r.draw(&view, &mut f, &[d], RasterMode::Full);
     assert_eq!(c.triangles_rasterized, 0);
     assert_eq!(f.covered_pixel_count(), 0);
@@ -237,25 +350,53 @@ fn query_box_is_conservative() {
         let view = random_view(&mut rng, 96, 64);
         let base = draw_all(&mut raster(1, 32), &view, &occluders);
         for _ in 0..20 {
-            let c = Vec3::new(rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0));
-            let e = Vec3::new(rng.random_range(0.01..1.0), rng.random_range(0.01..1.0), rng.random_range(0.01..1.0));
+            let c = Vec3::new(
+                rng.random_range(-3.0..3.0),
+                rng.random_range(-3.0..3.0),
+                rng.random_range(-3.0..3.0),
+            );
+            let e = Vec3::new(
+                rng.random_range(0.01..1.0),
+                rng.random_range(0.01..1.0),
+                rng.random_range(0.01..1.0),
+            );
             let b = Aabb::new(c - e, c + e);
             // Random triangles inside the box, some with corners on its faces.
             let mut p = Vec::new();
             for _ in 0..30 {
-                let mut q = Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+                let mut q = Vec3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                );
                 if rng.random_bool(0.3) {
                     q[rng.random_range(0..3)] = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
                 }
                 p.push(c + e * q);
             }
-            let inner = Mesh::new(p, (0..10).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect()).unwrap();
+            let inner =
+                Mesh::new(p, (0..10).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect()).unwrap();
             let mut f = base.clone();
-            let d = Draw { mesh: &inner, triangles: DrawTriangles::All, clip_from_object: view.clip_from_object(&Affine3A::IDENTITY), first_item: 1_000_000 };
-            let written = raster(1, 32).draw(&view, &mut f, &[d], RasterMode::Full).fragments_written;
-            let samples = query_box(&base, &view, &view.clip_from_object(&Affine3A::IDENTITY), &b);
+            let d = Draw {
+                mesh: &inner,
+                triangles: DrawTriangles::All,
+                clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
+                first_item: 1_000_000,
+            };
+            let written = raster(1, 32)
+                .draw(&view, &mut f, &[d], RasterMode::Full)
+                .fragments_written;
+            let samples = query_box(
+                &base,
+                &view,
+                &view.clip_from_object(&Affine3A::IDENTITY),
+                &b,
+            );
             if written > 0 {
-                assert!(samples > 0, "box {b:?} reported hidden but {written} fragments were written");
+                assert!(
+                    samples > 0,
+                    "box {b:?} reported hidden but {written} fragments were written"
+                );
                 checked += 1;
             }
         }
