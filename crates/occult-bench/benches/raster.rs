@@ -32,7 +32,7 @@ fn draw_all(
         format!("{name}/threads={threads}/{}", raster.isa_name()),
         |b| {
             b.iter(|| {
-                frame.clear();
+                raster.clear(&mut frame);
                 raster.draw(
                     view,
                     &mut frame,

@@ -1,1 +1,171 @@
-fn main() {}
+//! # occult
+//!
+//! The command-line tool: parses arguments, validates them into a configuration, and calls the
+//! libraries (`occult-scenes` for scenes and camera paths, `occult-render` for renderers and the
+//! comparison harness). Everything it knows of algorithms is their names.
+//!
+//! | command | does |
+//! | --- | --- |
+//! | `occult render` | one frame to PNG (color, optional depth), its statistics |
+//! | `occult walk` | a camera path with one renderer: per-frame statistics, optional PNGs |
+//! | `occult compare` | several renderers on the same scenes and path: table, JSON, CSV, plots |
+//! | `occult info` | what a scene file or spec holds |
+//! | `occult scenes` | the built-in generators and their parameters |
+//!
+//! Default sizes: 1920x1080 for `render` (a picture to look at), 640x480 for `walk` and
+//! `compare` (many frames, several renderers; brute force must stay bearable).
+//!
+//! Errors: one line on stderr, `error: ` and the cause chain joined by `: `; exit status 1, or 2
+//! for usage errors (clap's convention). Never a panic trace for bad input.
+
+#[macro_use]
+mod output;
+mod args;
+mod commands;
+mod plot;
+mod progress;
+mod scene;
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+use crate::args::{Cli, Command};
+
+fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return usage_error(e),
+    };
+    install_panic_hook();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        // The reader of our stdout went away (`occult compare ... | head`): not an error.
+        Err(e) if is_broken_pipe(&e) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", one_line(&e));
+            ExitCode::from(1)
+        }
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    if let Some(threads) = cli.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build_global()
+            .map_err(|e| anyhow::anyhow!("cannot start {threads} worker threads: {e}"))?;
+    }
+    match cli.command {
+        Command::Render(a) => commands::render::run(a),
+        Command::Walk(a) => commands::walk::run(a),
+        Command::Compare(a) => commands::compare::run(a),
+        Command::Info(a) => commands::info::run(a),
+        Command::Scenes(a) => commands::scenes::run(a),
+    }
+}
+
+fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
+
+/// A panic is a bug, never the answer to bad input; should one happen, say so on one line
+/// (with its location) instead of a trace, unless RUST_BACKTRACE asks for the trace.
+fn install_panic_hook() {
+    if std::env::var_os("RUST_BACKTRACE").is_some_and(|v| v != "0") {
+        return;
+    }
+    std::panic::set_hook(Box::new(|info| {
+        let message = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown cause".into());
+        let location = info
+            .location()
+            .map_or(String::new(), |l| format!(" at {}:{}", l.file(), l.line()));
+        let message = message.split_whitespace().collect::<Vec<_>>().join(" ");
+        eprintln!("error: internal error (a bug in occult, please report it): {message}{location}");
+    }));
+}
+
+/// Help and version go to stdout as clap writes them; a usage error becomes one line on stderr
+/// (clap's first line, which names the argument and the problem) and exit status 2.
+fn usage_error(e: clap::Error) -> ExitCode {
+    use clap::error::ErrorKind;
+    if matches!(
+        e.kind(),
+        ErrorKind::DisplayHelp | ErrorKind::DisplayVersion | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+    ) {
+        let _ = e.print();
+        return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
+    }
+    // Clap's first paragraph says what is wrong (a missing argument is on its second line);
+    // the tips and the usage follow after a blank line.
+    let text = e.to_string();
+    let first: Vec<&str> = text.lines().map(str::trim).take_while(|l| !l.is_empty()).collect();
+    let mut message = first.join(" ");
+    if message.is_empty() {
+        message = "error: bad arguments".into();
+    } else if !message.starts_with("error:") {
+        message = format!("error: {message}");
+    }
+    eprintln!("{message} (see 'occult --help')");
+    ExitCode::from(2)
+}
+
+/// The error and its causes on one line, joined by `: `. A cause whose text its parent already
+/// ends with (errors that print their source inline) is not repeated.
+fn one_line(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        let text = text.split_whitespace().collect::<Vec<_>>().join(" ");
+        if text.is_empty() || line.ends_with(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chains_join_without_repeats() {
+        #[derive(Debug)]
+        struct Inner;
+        impl std::fmt::Display for Inner {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                write!(f, "degenerate camera: eye and target coincide")
+            }
+        }
+        impl std::error::Error for Inner {}
+        #[derive(Debug)]
+        struct Outer(Inner);
+        impl std::fmt::Display for Outer {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                write!(f, "view 3: {}", self.0)
+            }
+        }
+        impl std::error::Error for Outer {
+            fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+                Some(&self.0)
+            }
+        }
+        let e = anyhow::Error::new(Outer(Inner)).context("compare\nfailed");
+        assert_eq!(
+            one_line(&e),
+            "compare failed: view 3: degenerate camera: eye and target coincide"
+        );
+    }
+}

@@ -140,7 +140,6 @@ impl std::ops::AddAssign for RasterCounts {
 /// A vertex in clip space with its snapped screen position.
 #[derive(Clone, Copy, Debug, Default)]
 struct ProjVertex {
-    clip: Vec4,
     x: i32,
     y: i32,
     z: f32,
@@ -206,7 +205,7 @@ impl Viewport {
 
     #[inline(always)]
     fn project(&self, clip_from_object: &Mat4, p: Vec3) -> ProjVertex {
-        self.project_clip(*clip_from_object * p.extend(1.0))
+        self.project_clip(to_clip(clip_from_object, p))
     }
 
     /// Outcodes and, when no clipping is needed, the snapped screen position and depth.
@@ -215,7 +214,6 @@ impl Viewport {
         let mut code = 0;
         if !c.is_finite() {
             return ProjVertex {
-                clip: c,
                 x: 0,
                 y: 0,
                 z: 0.0,
@@ -232,7 +230,6 @@ impl Viewport {
         }
         if code & NEEDS_CLIP != 0 {
             return ProjVertex {
-                clip: c,
                 x: 0,
                 y: 0,
                 z: 0.0,
@@ -243,13 +240,19 @@ impl Viewport {
         let sx = (c.x * inv_w * 0.5 + 0.5) * self.fwidth;
         let sy = (0.5 - c.y * inv_w * 0.5) * self.fheight;
         ProjVertex {
-            clip: c,
             x: snap(sx),
             y: snap(sy),
             z: c.z * inv_w,
             code,
         }
     }
+}
+
+/// Object to clip space: the one expression every path uses, so that a vertex recomputed for
+/// clipping has the same bits as when it was first projected.
+#[inline(always)]
+fn to_clip(clip_from_object: &Mat4, p: Vec3) -> Vec4 {
+    *clip_from_object * p.extend(1.0)
 }
 
 /// Rounds a screen coordinate to the fixed-point grid (to nearest, ties to even), without
@@ -352,6 +355,15 @@ impl Rasterizer {
             Some(p) => p.install(f),
             None => f(),
         }
+    }
+
+    /// Clears `frame`'s depth and items, in parallel on this rasterizer's threads.
+    pub fn clear(&self, frame: &mut Frame) {
+        let (depth, items) = frame.buffers_mut();
+        self.install(|| {
+            depth.par_chunks_mut(1 << 16).for_each(|c| c.fill(crate::CLEAR_DEPTH));
+            items.par_chunks_mut(1 << 15).for_each(|c| c.fill(occult_core::NO_ITEM));
+        });
     }
 
     /// Rasterizes `draws` into `frame` (not cleared first).
@@ -668,7 +680,8 @@ fn setup_range(
                 for j in (t - draw_starts[d])..(end - draw_starts[d]) {
                     let [i0, i1, i2] = tris[j];
                     let v = [verts[i0 as usize], verts[i1 as usize], verts[i2 as usize]];
-                    setup_triangle(vp, v, draw.first_item + j as u64, out);
+                    let clip = || [i0, i1, i2].map(|i| to_clip(&draw.clip_from_object, mesh.positions()[i as usize]));
+                    setup_triangle(vp, v, clip, draw.first_item + j as u64, out);
                 }
             }
             sel => {
@@ -682,7 +695,8 @@ fn setup_range(
                         vp.project(m, pos[i1 as usize]),
                         vp.project(m, pos[i2 as usize]),
                     ];
-                    setup_triangle(vp, v, draw.first_item + ti as u64, out);
+                    let clip = || [i0, i1, i2].map(|i| to_clip(m, pos[i as usize]));
+                    setup_triangle(vp, v, clip, draw.first_item + ti as u64, out);
                 }
             }
         }
@@ -691,13 +705,13 @@ fn setup_range(
 }
 
 #[inline(always)]
-fn setup_triangle(vp: &Viewport, v: [ProjVertex; 3], item: ItemId, out: &mut ChunkBins) {
+fn setup_triangle(vp: &Viewport, v: [ProjVertex; 3], clip: impl FnOnce() -> [Vec4; 3], item: ItemId, out: &mut ChunkBins) {
     let or = v[0].code | v[1].code | v[2].code;
     if v[0].code & v[1].code & v[2].code & OUT_OF_VIEW != 0 || or & NOT_FINITE != 0 {
         return;
     }
     if or & NEEDS_CLIP != 0 {
-        clip_and_setup(vp, [v[0].clip, v[1].clip, v[2].clip], item, out);
+        clip_and_setup(vp, clip(), item, out);
         return;
     }
     setup_snapped(
@@ -749,37 +763,24 @@ fn clip_and_setup(vp: &Viewport, c: [Vec4; 3], item: ItemId, out: &mut ChunkBins
             return;
         }
     }
-    let p: Vec<ProjVertex> = poly
+    if poly.iter().any(|c| !(c.w > 0.0)) {
+        return;
+    }
+    // Clipped vertices lie on or inside every clip plane up to rounding: project them directly.
+    let p: Vec<(i32, i32, f32)> = poly
         .iter()
         .map(|&c| {
-            // Clipped vertices lie on or inside every clip plane up to rounding; project them
-            // directly (their code may still flag the guard band by an ulp).
             let inv_w = 1.0 / c.w;
             let sx = (c.x * inv_w * 0.5 + 0.5) * vp.fwidth;
             let sy = (0.5 - c.y * inv_w * 0.5) * vp.fheight;
-            ProjVertex {
-                clip: c,
-                x: snap(sx),
-                y: snap(sy),
-                z: c.z * inv_w,
-                code: 0,
-            }
+            (snap(sx), snap(sy), c.z * inv_w)
         })
         .collect();
-    if p.iter().any(|v| !(v.clip.w > 0.0) || !v.z.is_finite()) {
+    if p.iter().any(|v| !v.2.is_finite()) {
         return;
     }
     for i in 1..p.len() - 1 {
-        setup_snapped(
-            vp,
-            [
-                (p[0].x, p[0].y, p[0].z),
-                (p[i].x, p[i].y, p[i].z),
-                (p[i + 1].x, p[i + 1].y, p[i + 1].z),
-            ],
-            item,
-            out,
-        );
+        setup_snapped(vp, [p[0], p[i], p[i + 1]], item, out);
     }
 }
 

@@ -1,1 +1,1012 @@
-//! Comparison harness (in progress).
+//! The comparison harness: several renderers, one scene, one camera path, one process.
+//!
+//! [`compare`] builds each requested renderer (timing its preprocessing), then renders every
+//! view with every renderer **interleaved frame by frame** (view 0 with all renderers, then
+//! view 1, ...; the order of the renderers rotates from frame to frame), so that machine noise,
+//! thermal state and cache warmth hit all of them alike. Each frame of each renderer is compared
+//! with the reference renderer's frame of the same view:
+//!
+//! - **reference**: `zbuffer` whenever the scene has at most
+//!   [`MAX_BRUTE_FORCE_ITEMS`](crate::zbuffer::MAX_BRUTE_FORCE_ITEMS) triangle instances,
+//!   otherwise `frustum` (the conservative renderer that scales). The reference is always
+//!   rendered and reported, requested or not ([`RendererReport::requested`] says which), so a
+//!   report always holds the renderer its numbers are relative to.
+//! - **identical**: depth (bit for bit) and item ids equal to the reference's
+//!   ([`Frame::same_visibility`]); DESIGN invariant 2 demands it of conservative renderers.
+//! - **error** of a frame that is not identical: share of covered pixels (covered in either
+//!   frame) whose item differs, and the PSNR of the shaded colors (DESIGN invariant 3).
+//! - **oracle** (DESIGN, "Measurement"): the time to clear a frame and rasterize exactly the
+//!   triangles visible in the reference frame (its item buffer), as mesh-instance draws of
+//!   triangle lists. It is the lower bound a culling renderer could reach with a perfect
+//!   visibility oracle; each renderer's mean time is reported as a ratio to it
+//!   ([`RendererReport::vs_oracle`]). The oracle's frame is checked against the reference too:
+//!   rasterizing only the winners of every pixel must reproduce the frame exactly.
+//!
+//! Times are wall-clock times of whole [`Renderer::render`] calls (clearing included), in
+//! milliseconds. Nothing here reads or writes files or prints, except that the process's peak
+//! resident set size is read from `/proc/self/status` where it exists (Linux); the CLI writes
+//! the report out.
+//!
+//! Cost: every renderer's frames plus one shading pass per non-identical frame; one frame
+//! buffer (16 bytes a pixel) per renderer plus two.
+//!
+//! ```
+//! use std::sync::Arc;
+//! use occult_core::{Camera, Mesh, Scene, Vec3};
+//! use occult_render::compare::{compare, CompareConfig};
+//! use occult_render::Algorithm;
+//! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).unwrap();
+//! let scene = Arc::new(Scene::from_mesh("tri", mesh).unwrap());
+//! let cameras = [Camera::look_at(Vec3::new(0.3, 0.3, 2.0), Vec3::new(0.3, 0.3, 0.0))];
+//! let config = CompareConfig::new(vec![Algorithm::Frustum], 32, 32);
+//! let report = compare(scene, &cameras, &config, &mut |_| {}).unwrap();
+//! assert_eq!(report.reference, "zbuffer"); // rendered although not requested
+//! assert_eq!(report.renderer("frustum").unwrap().frames_identical, 1);
+//! assert_eq!(report.oracle.triangles_visible, [1]);
+//! ```
+//!
+//! Deviation from the harness first sketched (`views: &[View]`): it takes cameras and one
+//! resolution ([`CompareConfig::width`], [`CompareConfig::height`]), since every frame of a
+//! comparison must have the same size and camera paths yield cameras.
+
+use std::collections::HashSet;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use occult_core::{Camera, CoreError, ItemId, NodeId, Scene, View, NO_ITEM};
+use occult_raster::{shade, Draw, DrawTriangles, Frame, RasterError, RasterMode, Rasterizer};
+use serde::Serialize;
+use thiserror::Error;
+
+use crate::zbuffer::MAX_BRUTE_FORCE_ITEMS;
+use crate::{Algorithm, FrameStats, Phase, RenderError, RenderOptions, Renderer};
+
+/// Errors of [`compare`].
+#[derive(Debug, Error)]
+pub enum CompareError {
+    /// No camera to render.
+    #[error("the camera path is empty")]
+    NoViews,
+    /// No algorithm requested.
+    #[error("no algorithm to compare")]
+    NoAlgorithms,
+    /// A camera of the path (numbered from 0) cannot form a view at the requested size.
+    #[error("view {view_index}: {source}")]
+    BadView {
+        /// Position of the camera in the path.
+        view_index: usize,
+        /// Why.
+        source: CoreError,
+    },
+    /// A renderer could not be built.
+    #[error("building {algorithm}: {source}")]
+    Build {
+        /// The renderer's name.
+        algorithm: &'static str,
+        /// Why.
+        source: RenderError,
+    },
+    /// A renderer failed on a frame.
+    #[error("{algorithm}, frame {view_index}: {source}")]
+    Render {
+        /// The renderer's name.
+        algorithm: &'static str,
+        /// The frame.
+        view_index: usize,
+        /// Why.
+        source: RenderError,
+    },
+    /// Frames or the oracle's rasterizer could not be made.
+    #[error(transparent)]
+    Raster(#[from] RasterError),
+}
+
+/// Result with [`CompareError`].
+pub type Result<T, E = CompareError> = std::result::Result<T, E>;
+
+/// What to compare and how.
+#[derive(Clone, Debug)]
+pub struct CompareConfig {
+    /// Renderers to compare, in report order (duplicates are ignored). The reference is added
+    /// when missing (see the module doc).
+    pub algorithms: Vec<Algorithm>,
+    /// Options every renderer is built with (the same for all, as comparisons require).
+    pub options: RenderOptions,
+    /// Frame width in pixels.
+    pub width: u32,
+    /// Frame height in pixels.
+    pub height: u32,
+}
+
+impl CompareConfig {
+    /// Compares `algorithms` at `width × height` with default options.
+    pub fn new(algorithms: Vec<Algorithm>, width: u32, height: u32) -> Self {
+        Self {
+            algorithms,
+            options: RenderOptions::default(),
+            width,
+            height,
+        }
+    }
+}
+
+/// Progress events, for progress bars.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CompareProgress {
+    /// About to build renderer `index` of `count`.
+    Building {
+        /// The renderer.
+        algorithm: Algorithm,
+        /// Its position, from 0.
+        index: usize,
+        /// Renderers to build.
+        count: usize,
+    },
+    /// A renderer was built, in `prepare_ms` milliseconds.
+    Built {
+        /// The renderer.
+        algorithm: Algorithm,
+        /// Its preprocessing time.
+        prepare_ms: f64,
+    },
+    /// View `index` of `count` was rendered by every renderer and compared.
+    Frame {
+        /// The view, from 0.
+        index: usize,
+        /// Views in all.
+        count: usize,
+    },
+}
+
+/// One frame of one renderer.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct FrameRecord {
+    /// Wall time of the render call, ms.
+    pub time_ms: f64,
+    /// Triangle instances handed to the rasterizer.
+    pub triangles_submitted: u64,
+    /// Triangles rasterized (see [`FrameStats::triangles_rasterized`]).
+    pub triangles_rasterized: u64,
+    /// Bit-identical to the reference frame (depth and items).
+    pub identical: bool,
+    /// When not identical: share of pixels covered in either frame whose item differs, in
+    /// `[0, 1]`. `None` when identical.
+    pub item_error: Option<f64>,
+    /// When not identical: PSNR of the shaded color against the reference's, dB (`None` when
+    /// identical, i.e. infinite).
+    pub psnr_db: Option<f64>,
+}
+
+/// Mean of a time phase over the frames.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PhaseMean {
+    /// The phase.
+    pub phase: Phase,
+    /// Mean time per frame, ms (frames where the phase did not occur count as 0).
+    pub mean_ms: f64,
+}
+
+/// The [`FrameStats`] counters, averaged over frames.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct MeanStats {
+    /// Mean triangles submitted.
+    pub triangles_submitted: f64,
+    /// Mean triangles rasterized.
+    pub triangles_rasterized: f64,
+    /// Mean fragments written.
+    pub fragments_written: f64,
+    /// Mean hierarchy nodes visited.
+    pub nodes_visited: f64,
+    /// Mean boxes tested.
+    pub boxes_tested: f64,
+    /// Mean boxes culled.
+    pub boxes_culled: f64,
+    /// Mean rectangles tested.
+    pub rects_tested: f64,
+    /// Mean rectangles culled.
+    pub rects_culled: f64,
+    /// Mean rays cast.
+    pub rays_cast: f64,
+    /// Mean samples drawn.
+    pub samples_drawn: f64,
+    /// Mean of the renderer's own `FrameStats::total`, ms.
+    pub total_ms: f64,
+}
+
+/// Summary of a series of frame times.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct TimeSummary {
+    /// Mean, ms.
+    pub mean_ms: f64,
+    /// Median, ms.
+    pub median_ms: f64,
+    /// 95th percentile (nearest rank), ms.
+    pub p95_ms: f64,
+    /// Fastest frame, ms.
+    pub min_ms: f64,
+    /// Slowest frame, ms.
+    pub max_ms: f64,
+}
+
+impl TimeSummary {
+    /// Summarises `times_ms` (all zero when empty).
+    pub fn of(times_ms: &[f64]) -> Self {
+        if times_ms.is_empty() {
+            return Self::default();
+        }
+        let mut sorted = times_ms.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        let n = sorted.len();
+        let rank = |q: f64| sorted[((q * n as f64).ceil() as usize).clamp(1, n) - 1];
+        Self {
+            mean_ms: sorted.iter().sum::<f64>() / n as f64,
+            median_ms: rank(0.5),
+            p95_ms: rank(0.95),
+            min_ms: sorted[0],
+            max_ms: sorted[n - 1],
+        }
+    }
+}
+
+/// The measurements of one renderer.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RendererReport {
+    /// Command-line name.
+    pub name: &'static str,
+    /// True for the reference renderer.
+    pub is_reference: bool,
+    /// False when it was rendered only because it is the reference.
+    pub requested: bool,
+    /// [`Renderer::is_conservative`]: its frames must be identical to the reference's.
+    pub conservative: bool,
+    /// Frames rendered.
+    pub frames: usize,
+    /// Frames bit-identical to the reference's.
+    pub frames_identical: usize,
+    /// Mean frame time, ms.
+    pub mean_ms: f64,
+    /// 95th percentile frame time, ms.
+    pub p95_ms: f64,
+    /// Median, min and max too.
+    pub time: TimeSummary,
+    /// `zbuffer`'s mean time over this renderer's, measured in the same run (> 1: faster);
+    /// `None` when `zbuffer` is not in the report.
+    pub speedup_vs_zbuffer: Option<f64>,
+    /// This renderer's mean time over the oracle's (>= 1 in practice; the lower the better);
+    /// `None` when the oracle's mean time is zero.
+    pub vs_oracle: Option<f64>,
+    /// Mean triangles rasterized per frame.
+    pub triangles_rasterized: f64,
+    /// Triangles rasterized over all frames.
+    pub triangles_rasterized_total: u64,
+    /// Mean exactly visible triangles per frame (from the reference's item buffer; the same
+    /// for every renderer, repeated here to read beside `triangles_rasterized`).
+    pub triangles_visible: f64,
+    /// Exactly visible triangles summed over frames.
+    pub triangles_visible_total: u64,
+    /// Preprocessing ([`Algorithm::build`]) time, ms.
+    pub prepare_ms: f64,
+    /// [`Renderer::memory_bytes`] after the last frame (its own structures, not the scene's).
+    pub memory_bytes: usize,
+    /// [`Renderer::memory_bytes`] right after it was built.
+    pub memory_bytes_after_build: usize,
+    /// Mean share of differing covered pixels over all frames (0 for identical frames).
+    pub mean_item_error: f64,
+    /// Largest per-frame share of differing covered pixels.
+    pub max_item_error: f64,
+    /// Lowest per-frame color PSNR, dB; `None` when every frame is identical.
+    pub min_psnr_db: Option<f64>,
+    /// Mean time per phase, ms, in the order the renderer reports phases.
+    pub phases: Vec<PhaseMean>,
+    /// Mean counters.
+    pub stats: MeanStats,
+    /// Every frame, in path order.
+    pub per_frame: Vec<FrameRecord>,
+}
+
+/// The oracle: rasterizing exactly the visible triangles.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct OracleReport {
+    /// Mean time, ms.
+    pub mean_ms: f64,
+    /// 95th percentile, ms.
+    pub p95_ms: f64,
+    /// Median, min and max too.
+    pub time: TimeSummary,
+    /// Frames whose oracle frame equals the reference's (should be all).
+    pub frames_identical: usize,
+    /// Time per frame, ms.
+    pub per_frame_ms: Vec<f64>,
+    /// Exactly visible triangles per frame.
+    pub triangles_visible: Vec<u64>,
+}
+
+/// A renderer that was requested but could not take part, and why.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Skipped {
+    /// Its name.
+    pub name: &'static str,
+    /// Why.
+    pub reason: String,
+}
+
+/// Everything [`compare`] measured. Serializes to JSON (see the CLI's `compare --json`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CompareReport {
+    /// Frame width, pixels.
+    pub width: u32,
+    /// Frame height, pixels.
+    pub height: u32,
+    /// Views rendered by each renderer.
+    pub frames: usize,
+    /// Triangle instances in the scene.
+    pub scene_triangles: u64,
+    /// Bytes held by the scene ([`Scene::memory_bytes`]).
+    pub scene_memory_bytes: usize,
+    /// Rasterizer worker threads.
+    pub threads: usize,
+    /// Name of the reference renderer.
+    pub reference: &'static str,
+    /// Why that one.
+    pub reference_note: String,
+    /// The oracle.
+    pub oracle: OracleReport,
+    /// The renderers, requested order, the reference first when it was not requested.
+    pub renderers: Vec<RendererReport>,
+    /// Requested renderers left out (zbuffer on a scene too large for brute force).
+    pub skipped: Vec<Skipped>,
+    /// Peak resident set size of the whole process (VmHWM), bytes: process-wide, covering the
+    /// scene, every renderer and everything else the process did; `None` where unavailable.
+    pub process_peak_rss_bytes: Option<u64>,
+}
+
+impl CompareReport {
+    /// The report of the renderer called `name`.
+    pub fn renderer(&self, name: &str) -> Option<&RendererReport> {
+        self.renderers.iter().find(|r| r.name == name)
+    }
+}
+
+/// Per-renderer state during the run.
+struct Contestant {
+    algorithm: Algorithm,
+    requested: bool,
+    renderer: Box<dyn Renderer>,
+    frame: Frame,
+    prepare_ms: f64,
+    memory_bytes_after_build: usize,
+    records: Vec<FrameRecord>,
+    stats: Vec<FrameStats>,
+}
+
+/// Runs every renderer of `config` over `cameras` on `scene` and measures them (module doc).
+/// `progress` is called as renderers are built and frames are done.
+///
+/// # Errors
+/// [`CompareError::NoViews`], [`CompareError::NoAlgorithms`], [`CompareError::BadView`] for a
+/// degenerate camera or a bad resolution, [`CompareError::Build`] and
+/// [`CompareError::Render`] when a renderer fails (a requested `zbuffer` on a scene above
+/// [`MAX_BRUTE_FORCE_ITEMS`] is skipped and listed in [`CompareReport::skipped`] instead).
+pub fn compare(
+    scene: Arc<Scene>,
+    cameras: &[Camera],
+    config: &CompareConfig,
+    progress: &mut dyn FnMut(CompareProgress),
+) -> Result<CompareReport> {
+    if cameras.is_empty() {
+        return Err(CompareError::NoViews);
+    }
+    if config.algorithms.is_empty() {
+        return Err(CompareError::NoAlgorithms);
+    }
+    let views = cameras
+        .iter()
+        .enumerate()
+        .map(|(view_index, c)| {
+            View::new(*c, config.width, config.height).map_err(|source| CompareError::BadView { view_index, source })
+        })
+        .collect::<Result<Vec<_>>>()?;
+
+    // Choose the reference and the line-up.
+    let brute_force_ok = scene.item_count() <= MAX_BRUTE_FORCE_ITEMS;
+    let (reference, reference_note) = if brute_force_ok {
+        let note = if config.algorithms.contains(&Algorithm::Zbuffer) {
+            "zbuffer: brute force, the ground truth"
+        } else {
+            "zbuffer: brute force, the ground truth (not requested; rendered as the reference)"
+        };
+        (Algorithm::Zbuffer, note.to_string())
+    } else {
+        let note = format!(
+            "frustum: the scene has {} triangle instances, more than zbuffer accepts ({MAX_BRUTE_FORCE_ITEMS}); \
+             frustum culling removes only what lies outside the view, so its frames equal zbuffer's",
+            scene.item_count()
+        );
+        (Algorithm::Frustum, note)
+    };
+    let mut skipped = Vec::new();
+    let mut lineup: Vec<(Algorithm, bool)> = Vec::new();
+    if !config.algorithms.contains(&reference) {
+        lineup.push((reference, false));
+    }
+    let mut seen = HashSet::new();
+    for &a in &config.algorithms {
+        if !seen.insert(a) {
+            continue;
+        }
+        if a == Algorithm::Zbuffer && !brute_force_ok {
+            skipped.push(Skipped {
+                name: a.name(),
+                reason: format!(
+                    "the scene has {} triangle instances, more than brute force accepts ({MAX_BRUTE_FORCE_ITEMS})",
+                    scene.item_count()
+                ),
+            });
+            continue;
+        }
+        lineup.push((a, true));
+    }
+
+    // Build (preprocessing, timed).
+    let mut contestants = Vec::with_capacity(lineup.len());
+    for (index, &(algorithm, requested)) in lineup.iter().enumerate() {
+        progress(CompareProgress::Building {
+            algorithm,
+            index,
+            count: lineup.len(),
+        });
+        let t = Instant::now();
+        let renderer = algorithm
+            .build(Arc::clone(&scene), &config.options)
+            .map_err(|source| CompareError::Build {
+                algorithm: algorithm.name(),
+                source,
+            })?;
+        let prepare_ms = ms(t.elapsed());
+        progress(CompareProgress::Built { algorithm, prepare_ms });
+        contestants.push(Contestant {
+            algorithm,
+            requested,
+            memory_bytes_after_build: renderer.memory_bytes(),
+            renderer,
+            frame: Frame::new(config.width, config.height)?,
+            prepare_ms,
+            records: Vec::with_capacity(views.len()),
+            stats: Vec::with_capacity(views.len()),
+        });
+    }
+    let reference_index = contestants
+        .iter()
+        .position(|c| c.algorithm == reference)
+        .expect("the reference is always in the line-up");
+
+    // Render, interleaved.
+    let mut oracle = Oracle::new(&config.options)?;
+    let mut oracle_frame = Frame::new(config.width, config.height)?;
+    let mut shaded_reference = Frame::new(config.width, config.height)?;
+    let mut oracle_times = Vec::with_capacity(views.len());
+    let mut oracle_identical = 0;
+    let mut visible_counts = Vec::with_capacity(views.len());
+    let n = contestants.len();
+    for (view_index, view) in views.iter().enumerate() {
+        for k in 0..n {
+            // Rotate the order so that no renderer always runs first (or right after another).
+            let c = &mut contestants[(k + view_index) % n];
+            let t = Instant::now();
+            let stats = c
+                .renderer
+                .render(view, &mut c.frame)
+                .map_err(|source| CompareError::Render {
+                    algorithm: c.algorithm.name(),
+                    view_index,
+                    source,
+                })?;
+            let time_ms = ms(t.elapsed());
+            c.records.push(FrameRecord {
+                time_ms,
+                triangles_submitted: stats.triangles_submitted,
+                triangles_rasterized: stats.triangles_rasterized,
+                ..FrameRecord::default()
+            });
+            c.stats.push(stats);
+        }
+
+        // Compare with the reference.
+        let (before, rest) = contestants.split_at_mut(reference_index);
+        let (reference_c, after) = rest.split_first_mut().expect("reference_index is in range");
+        let reference_frame = &reference_c.frame;
+        let mut reference_shaded = false;
+        for c in before.iter_mut().chain(after.iter_mut()) {
+            let record = c.records.last_mut().expect("a record was just pushed");
+            if c.frame.same_visibility(reference_frame) {
+                record.identical = true;
+                continue;
+            }
+            record.item_error = Some(item_error(&c.frame, reference_frame));
+            if !reference_shaded {
+                shaded_reference.clone_from(reference_frame);
+                shade(&mut shaded_reference, &scene, view);
+                reference_shaded = true;
+            }
+            shade(&mut c.frame, &scene, view);
+            let psnr = c.frame.color_psnr(&shaded_reference);
+            record.psnr_db = psnr.is_finite().then_some(psnr);
+        }
+        reference_c
+            .records
+            .last_mut()
+            .expect("a record was just pushed")
+            .identical = true;
+
+        // The oracle, from the reference's item buffer.
+        let visible = reference_frame.visible_items();
+        visible_counts.push(visible.len() as u64);
+        let time_ms = oracle.render(&scene, view, &visible, &mut oracle_frame);
+        oracle_times.push(time_ms);
+        if oracle_frame.same_visibility(reference_frame) {
+            oracle_identical += 1;
+        }
+        progress(CompareProgress::Frame {
+            index: view_index,
+            count: views.len(),
+        });
+    }
+
+    // Summarise.
+    let oracle_time = TimeSummary::of(&oracle_times);
+    let zbuffer_mean = contestants
+        .iter()
+        .find(|c| c.algorithm == Algorithm::Zbuffer)
+        .map(|c| TimeSummary::of(&c.records.iter().map(|r| r.time_ms).collect::<Vec<_>>()).mean_ms);
+    let visible_total: u64 = visible_counts.iter().sum();
+    let frames = views.len();
+    let renderers = contestants
+        .into_iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let times: Vec<f64> = c.records.iter().map(|r| r.time_ms).collect();
+            let time = TimeSummary::of(&times);
+            let ratio = |num: f64, den: f64| (den > 0.0 && num.is_finite()).then(|| num / den);
+            let errors: Vec<f64> = c.records.iter().map(|r| r.item_error.unwrap_or(0.0)).collect();
+            RendererReport {
+                name: c.algorithm.name(),
+                is_reference: i == reference_index,
+                requested: c.requested,
+                conservative: c.renderer.is_conservative(),
+                frames,
+                frames_identical: c.records.iter().filter(|r| r.identical).count(),
+                mean_ms: time.mean_ms,
+                p95_ms: time.p95_ms,
+                speedup_vs_zbuffer: zbuffer_mean.and_then(|z| ratio(z, time.mean_ms)),
+                vs_oracle: ratio(time.mean_ms, oracle_time.mean_ms),
+                triangles_rasterized: mean(c.records.iter().map(|r| r.triangles_rasterized as f64), frames),
+                triangles_rasterized_total: c.records.iter().map(|r| r.triangles_rasterized).sum(),
+                triangles_visible: visible_total as f64 / frames as f64,
+                triangles_visible_total: visible_total,
+                prepare_ms: c.prepare_ms,
+                memory_bytes: c.renderer.memory_bytes(),
+                memory_bytes_after_build: c.memory_bytes_after_build,
+                mean_item_error: mean(errors.iter().copied(), frames),
+                max_item_error: errors.iter().copied().fold(0.0, f64::max),
+                min_psnr_db: c.records.iter().filter_map(|r| r.psnr_db).reduce(f64::min),
+                phases: phase_means(&c.stats),
+                stats: mean_stats(&c.stats),
+                time,
+                per_frame: c.records,
+            }
+        })
+        .collect();
+    Ok(CompareReport {
+        width: config.width,
+        height: config.height,
+        frames,
+        scene_triangles: scene.item_count(),
+        scene_memory_bytes: scene.memory_bytes(),
+        threads: match config.options.raster.threads {
+            0 => rayon::current_num_threads(),
+            n => n,
+        },
+        reference: reference.name(),
+        reference_note,
+        oracle: OracleReport {
+            mean_ms: oracle_time.mean_ms,
+            p95_ms: oracle_time.p95_ms,
+            time: oracle_time,
+            frames_identical: oracle_identical,
+            per_frame_ms: oracle_times,
+            triangles_visible: visible_counts,
+        },
+        renderers,
+        skipped,
+        process_peak_rss_bytes: process_peak_rss_bytes(),
+    })
+}
+
+/// Rasterizes exactly a given set of items: the lower bound of any culling renderer.
+struct Oracle {
+    raster: Rasterizer,
+}
+
+/// The visible triangles of one mesh instance.
+struct InstanceTriangles {
+    mesh_node: NodeId,
+    instance_base: ItemId,
+    clip_from_object: occult_core::Mat4,
+    triangle_indices: Vec<u32>,
+}
+
+impl Oracle {
+    fn new(options: &RenderOptions) -> Result<Self> {
+        Ok(Self {
+            raster: Rasterizer::new(options.raster.clone())?,
+        })
+    }
+
+    /// Clears `frame` and rasterizes the items `visible` (sorted, as
+    /// [`Frame::visible_items`] returns them); returns the time of the clear and the draw, ms.
+    /// Resolving items into draws is the oracle's knowledge and is not timed.
+    fn render(&mut self, scene: &Scene, view: &View, visible: &[ItemId], frame: &mut Frame) -> f64 {
+        // Items of one mesh instance are consecutive ids, so sorted items group by instance.
+        let mut groups: Vec<InstanceTriangles> = Vec::new();
+        for &item in visible {
+            let Some(loc) = scene.resolve_item(item) else {
+                continue; // Not an item of this scene (cannot happen for frames of this scene).
+            };
+            match groups.last_mut() {
+                Some(g) if g.instance_base == loc.instance_base && g.mesh_node == loc.mesh_node => {
+                    g.triangle_indices.push(loc.triangle_index)
+                }
+                _ => groups.push(InstanceTriangles {
+                    mesh_node: loc.mesh_node,
+                    instance_base: loc.instance_base,
+                    clip_from_object: view.clip_from_object(&loc.world_from_object),
+                    triangle_indices: vec![loc.triangle_index],
+                }),
+            }
+        }
+        let draws: Vec<Draw<'_>> = groups
+            .iter()
+            .filter_map(|g| {
+                Some(Draw {
+                    mesh: scene.node(g.mesh_node).mesh()?,
+                    triangles: DrawTriangles::List(&g.triangle_indices),
+                    clip_from_object: g.clip_from_object,
+                    first_item: g.instance_base,
+                })
+            })
+            .collect();
+        let t = Instant::now();
+        frame.clear();
+        self.raster.draw(view, frame, &draws, RasterMode::Full);
+        ms(t.elapsed())
+    }
+}
+
+/// Share of pixels covered in either frame whose item differs (0 when neither covers any).
+fn item_error(frame: &Frame, reference: &Frame) -> f64 {
+    let covered = frame
+        .items()
+        .iter()
+        .zip(reference.items())
+        .filter(|(&a, &b)| a != NO_ITEM || b != NO_ITEM)
+        .count();
+    if covered == 0 {
+        return 0.0;
+    }
+    frame.differing_item_count(reference) as f64 / covered as f64
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+fn mean(values: impl Iterator<Item = f64>, count: usize) -> f64 {
+    if count == 0 {
+        0.0
+    } else {
+        values.sum::<f64>() / count as f64
+    }
+}
+
+fn phase_means(stats: &[FrameStats]) -> Vec<PhaseMean> {
+    let mut phases: Vec<Phase> = Vec::new();
+    for s in stats {
+        for &(p, _) in &s.phases.0 {
+            if !phases.contains(&p) {
+                phases.push(p);
+            }
+        }
+    }
+    phases
+        .into_iter()
+        .map(|phase| PhaseMean {
+            phase,
+            mean_ms: mean(stats.iter().map(|s| ms(s.phases.get(phase))), stats.len()),
+        })
+        .collect()
+}
+
+fn mean_stats(stats: &[FrameStats]) -> MeanStats {
+    let n = stats.len();
+    let m = |f: fn(&FrameStats) -> u64| mean(stats.iter().map(|s| f(s) as f64), n);
+    MeanStats {
+        triangles_submitted: m(|s| s.triangles_submitted),
+        triangles_rasterized: m(|s| s.triangles_rasterized),
+        fragments_written: m(|s| s.fragments_written),
+        nodes_visited: m(|s| s.nodes_visited),
+        boxes_tested: m(|s| s.boxes_tested),
+        boxes_culled: m(|s| s.boxes_culled),
+        rects_tested: m(|s| s.rects_tested),
+        rects_culled: m(|s| s.rects_culled),
+        rays_cast: m(|s| s.rays_cast),
+        samples_drawn: m(|s| s.samples_drawn),
+        total_ms: mean(stats.iter().map(|s| ms(s.total)), n),
+    }
+}
+
+/// Peak resident set size of this process (`VmHWM` of `/proc/self/status`), bytes; `None`
+/// where the file does not exist (not Linux) or lacks the line.
+pub fn process_peak_rss_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: u64 = line
+        .trim_start_matches("VmHWM:")
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    Some(kib * 1024)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use occult_core::{Affine3A, Instance, Mesh, SceneBuilder, Vec3};
+
+    /// A 6×6 grid of unit cubes (instanced) on a ground quad: cubes hide each other and the
+    /// ground from most views.
+    fn cubes() -> Arc<Scene> {
+        let p = [
+            Vec3::new(-0.5, -0.5, -0.5),
+            Vec3::new(0.5, -0.5, -0.5),
+            Vec3::new(0.5, 0.5, -0.5),
+            Vec3::new(-0.5, 0.5, -0.5),
+            Vec3::new(-0.5, -0.5, 0.5),
+            Vec3::new(0.5, -0.5, 0.5),
+            Vec3::new(0.5, 0.5, 0.5),
+            Vec3::new(-0.5, 0.5, 0.5),
+        ];
+        let t = vec![
+            [0, 2, 1],
+            [0, 3, 2],
+            [4, 5, 6],
+            [4, 6, 7],
+            [0, 1, 5],
+            [0, 5, 4],
+            [3, 7, 6],
+            [3, 6, 2],
+            [0, 4, 7],
+            [0, 7, 3],
+            [1, 2, 6],
+            [1, 6, 5],
+        ];
+        let mut b = SceneBuilder::new();
+        let cube = b.add_mesh("cube", Mesh::new(p.to_vec(), t).unwrap()).unwrap();
+        let ground = Mesh::new(
+            vec![
+                Vec3::new(-8.0, -0.5, -8.0),
+                Vec3::new(8.0, -0.5, -8.0),
+                Vec3::new(8.0, -0.5, 8.0),
+                Vec3::new(-8.0, -0.5, 8.0),
+            ],
+            vec![[0, 2, 1], [0, 3, 2]],
+        )
+        .unwrap();
+        let ground = b.add_mesh("ground", ground).unwrap();
+        let mut instances = vec![Instance {
+            parent_from_child: Affine3A::IDENTITY,
+            child: ground,
+        }];
+        for i in 0..6 {
+            for j in 0..6 {
+                let at = Vec3::new(i as f32 * 2.0 - 5.0, 0.0, j as f32 * 2.0 - 5.0);
+                instances.push(Instance {
+                    parent_from_child: Affine3A::from_translation(at),
+                    child: cube,
+                });
+            }
+        }
+        let root = b.add_group("grid", instances).unwrap();
+        Arc::new(b.build(root).unwrap())
+    }
+
+    fn circle(n: usize) -> Vec<Camera> {
+        (0..n)
+            .map(|i| {
+                let a = i as f32 / n as f32 * std::f32::consts::TAU;
+                Camera::look_at(Vec3::new(9.0 * a.cos(), 2.0, 9.0 * a.sin()), Vec3::new(0.0, 0.0, 0.0))
+            })
+            .collect()
+    }
+
+    fn run(algorithms: Vec<Algorithm>, cameras: &[Camera]) -> Result<CompareReport> {
+        let mut config = CompareConfig::new(algorithms, 96, 64);
+        config.options.raster.threads = 2;
+        compare(cubes(), cameras, &config, &mut |_| {})
+    }
+
+    #[test]
+    fn frustum_is_identical_to_zbuffer_on_every_frame() {
+        let cameras = circle(6);
+        let report = run(vec![Algorithm::Zbuffer, Algorithm::Frustum], &cameras).unwrap();
+        assert_eq!(report.reference, "zbuffer");
+        assert_eq!(report.frames, 6);
+        for r in &report.renderers {
+            assert_eq!(r.frames, 6);
+            assert_eq!(r.frames_identical, 6, "{} differs from the reference", r.name);
+            assert!(r
+                .per_frame
+                .iter()
+                .all(|f| f.identical && f.item_error.is_none() && f.psnr_db.is_none()));
+            assert_eq!(r.mean_item_error, 0.0);
+            assert!(r.min_psnr_db.is_none());
+        }
+        assert_eq!(
+            report.oracle.frames_identical, 6,
+            "rasterizing the visible set must reproduce the frame"
+        );
+    }
+
+    #[test]
+    fn report_numbers_are_consistent() {
+        let cameras = circle(5);
+        let report = run(
+            vec![Algorithm::Frustum, Algorithm::Zbuffer, Algorithm::Frustum],
+            &cameras,
+        )
+        .unwrap();
+        let names: Vec<_> = report.renderers.iter().map(|r| r.name).collect();
+        assert_eq!(names, ["frustum", "zbuffer"], "requested order, duplicates dropped");
+        assert_eq!(report.scene_triangles, 2 + 36 * 12);
+        let z = report.renderer("zbuffer").unwrap();
+        let f = report.renderer("frustum").unwrap();
+        assert!(z.is_reference && !f.is_reference && z.requested && f.requested);
+        assert_eq!(z.speedup_vs_zbuffer, Some(1.0));
+        assert!((f.speedup_vs_zbuffer.unwrap() - z.mean_ms / f.mean_ms).abs() < 1e-9);
+        // zbuffer submits everything; frustum never more.
+        assert_eq!(z.stats.triangles_submitted, report.scene_triangles as f64);
+        for r in [z, f] {
+            assert_eq!(r.per_frame.len(), 5);
+            let total: u64 = r.per_frame.iter().map(|p| p.triangles_rasterized).sum();
+            assert_eq!(r.triangles_rasterized_total, total);
+            assert!((r.triangles_rasterized - total as f64 / 5.0).abs() < 1e-9);
+            assert_eq!(r.stats.triangles_rasterized, r.triangles_rasterized);
+            let mean_ms = r.per_frame.iter().map(|p| p.time_ms).sum::<f64>() / 5.0;
+            assert!((r.mean_ms - mean_ms).abs() < 1e-9);
+            assert!(r.time.min_ms <= r.time.median_ms && r.time.median_ms <= r.p95_ms && r.p95_ms <= r.time.max_ms);
+            assert!(r.vs_oracle.unwrap() > 0.0);
+            assert!(r.prepare_ms >= 0.0);
+            assert!(!r.phases.is_empty());
+        }
+        assert!(f.stats.triangles_submitted <= z.stats.triangles_submitted);
+        // Visible triangles: from the item buffer, never more than rasterized.
+        assert_eq!(report.oracle.triangles_visible.len(), 5);
+        let visible: u64 = report.oracle.triangles_visible.iter().sum();
+        assert_eq!(z.triangles_visible_total, visible);
+        assert!(visible > 0);
+        for (i, &v) in report.oracle.triangles_visible.iter().enumerate() {
+            assert!(v <= z.per_frame[i].triangles_rasterized && v < report.scene_triangles);
+        }
+        assert!(report.process_peak_rss_bytes.is_none_or(|b| b > 0));
+    }
+
+    #[test]
+    fn reference_is_added_when_not_requested() {
+        let report = run(vec![Algorithm::Frustum], &circle(2)).unwrap();
+        let z = &report.renderers[0];
+        assert_eq!((z.name, z.is_reference, z.requested), ("zbuffer", true, false));
+        assert!(report.reference_note.contains("not requested"));
+        assert_eq!(report.renderers[1].frames_identical, 2);
+    }
+
+    #[test]
+    fn scenes_too_large_for_brute_force_use_frustum_as_reference() {
+        // 10^10 triangle instances along +x, ten times farther apart at each level; the camera
+        // sees only the first few.
+        let mut b = SceneBuilder::new();
+        let tri = Mesh::new(
+            vec![Vec3::ZERO, Vec3::new(0.8, 0.0, 0.0), Vec3::new(0.0, 0.8, 0.0)],
+            vec![[0, 1, 2]],
+        )
+        .unwrap();
+        let mut id = b.add_mesh("tri", tri).unwrap();
+        for level in 0..10 {
+            let pitch = 10f32.powi(level);
+            let row: Vec<_> = (0..10)
+                .map(|i| Instance {
+                    parent_from_child: Affine3A::from_translation(Vec3::X * pitch * i as f32),
+                    child: id,
+                })
+                .collect();
+            id = b.add_group(format!("level{level}"), row).unwrap();
+        }
+        let scene = Arc::new(b.build(id).unwrap());
+        assert!(scene.item_count() > MAX_BRUTE_FORCE_ITEMS);
+        let mut camera = Camera::look_at(Vec3::new(4.0, 0.5, 6.0), Vec3::new(4.0, 0.5, 0.0));
+        camera.far = 30.0;
+        let config = CompareConfig::new(vec![Algorithm::Zbuffer, Algorithm::Frustum], 64, 48);
+        let report = compare(scene, &[camera, camera], &config, &mut |_| {}).unwrap();
+        assert_eq!(report.reference, "frustum");
+        assert!(
+            report.reference_note.contains("more than zbuffer accepts"),
+            "{}",
+            report.reference_note
+        );
+        assert_eq!(report.skipped.len(), 1);
+        assert_eq!(report.skipped[0].name, "zbuffer");
+        assert_eq!(report.renderers.len(), 1);
+        let f = &report.renderers[0];
+        assert!(f.is_reference && f.requested && f.speedup_vs_zbuffer.is_none());
+        assert_eq!(f.frames_identical, 2);
+        assert!(report.oracle.triangles_visible[0] > 0);
+        assert_eq!(report.oracle.frames_identical, 2);
+    }
+
+    #[test]
+    fn empty_inputs_are_errors() {
+        assert!(matches!(run(vec![Algorithm::Frustum], &[]), Err(CompareError::NoViews)));
+        assert!(matches!(run(vec![], &circle(1)), Err(CompareError::NoAlgorithms)));
+    }
+
+    #[test]
+    fn degenerate_camera_and_bad_size_are_errors() {
+        let mut cameras = circle(3);
+        cameras[1].target = cameras[1].eye;
+        assert!(matches!(
+            run(vec![Algorithm::Frustum], &cameras),
+            Err(CompareError::BadView { view_index: 1, .. })
+        ));
+        let config = CompareConfig::new(vec![Algorithm::Frustum], 0, 64);
+        assert!(matches!(
+            compare(cubes(), &circle(1), &config, &mut |_| {}),
+            Err(CompareError::BadView { .. })
+        ));
+    }
+
+    #[test]
+    fn views_that_see_nothing_are_fine() {
+        let away = Camera::look_at(Vec3::new(0.0, 50.0, 0.0), Vec3::new(0.0, 100.0, 1.0));
+        let report = run(vec![Algorithm::Zbuffer, Algorithm::Frustum], &[away]).unwrap();
+        assert_eq!(report.oracle.triangles_visible, vec![0]);
+        assert!(report.renderers.iter().all(|r| r.frames_identical == 1));
+    }
+
+    #[test]
+    fn differing_frames_are_measured() {
+        let scene = cubes();
+        let view = View::new(circle(1)[0], 32, 24).unwrap();
+        let mut a = Frame::new(32, 24).unwrap();
+        let mut r = Algorithm::Zbuffer
+            .build(Arc::clone(&scene), &RenderOptions::default())
+            .unwrap();
+        r.render(&view, &mut a).unwrap();
+        let mut b = a.clone();
+        assert_eq!(item_error(&a, &b), 0.0);
+        b.clear();
+        assert_eq!(item_error(&b, &a), 1.0, "all covered pixels lost");
+        assert_eq!(item_error(&b, &b), 0.0);
+    }
+
+    #[test]
+    fn time_summary_uses_nearest_rank() {
+        let t: Vec<f64> = (1..=20).map(f64::from).collect();
+        let s = TimeSummary::of(&t);
+        assert_eq!(
+            (s.mean_ms, s.median_ms, s.p95_ms, s.min_ms, s.max_ms),
+            (10.5, 10.0, 19.0, 1.0, 20.0)
+        );
+        assert_eq!(TimeSummary::of(&[3.0]).p95_ms, 3.0);
+        assert_eq!(TimeSummary::of(&[]), TimeSummary::default());
+    }
+}

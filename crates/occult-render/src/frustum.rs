@@ -193,7 +193,7 @@ impl Renderer for FrustumCulling {
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
         check_frame(view, frame)?;
         let start = Instant::now();
-        frame.clear();
+        self.raster.clear(frame);
         let clear = start.elapsed();
         let t = Instant::now();
         let mut walk = Walk { scene: &self.scene, hierarchies: &self.hierarchies, view, draws: Vec::new(), stats: FrameStats::default() };

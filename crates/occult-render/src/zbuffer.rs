@@ -48,7 +48,7 @@ impl Renderer for ZBuffer {
         check_frame(view, frame)?;
         let start = Instant::now();
         let mut stats = FrameStats::default();
-        frame.clear();
+        self.raster.clear(frame);
         stats.phases.add(Phase::Clear, start.elapsed());
         let t = Instant::now();
         let mut draws = Vec::new();

@@ -1,0 +1,294 @@
+//! The command line: clap definitions and the value parsers that turn text into checked values.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+use occult_core::Vec3;
+use occult_render::Algorithm;
+
+/// Render, walk and compare visibility algorithms on huge triangle scenes.
+#[derive(Debug, Parser)]
+#[command(name = "occult", version, about, long_about = None, propagate_version = true)]
+pub struct Cli {
+    /// Worker threads for everything (scene building and rasterizing); default: all cores.
+    #[arg(long, global = true, value_name = "N", value_parser = parse_threads)]
+    pub threads: Option<usize>,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Render one frame to PNG and print its statistics.
+    Render(RenderArgs),
+    /// Fly a camera path with one renderer: per-frame statistics, optional PNG per frame.
+    Walk(WalkArgs),
+    /// Run several renderers on the same scene(s) and path, and measure them against each other.
+    Compare(CompareArgs),
+    /// Describe a scene file or spec: triangles, nodes, instances, bounds, memory.
+    Info(InfoArgs),
+    /// List the built-in scene generators and their parameters.
+    Scenes(ScenesArgs),
+}
+
+/// A frame size.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Size {
+    /// Pixels.
+    pub width: u32,
+    /// Pixels.
+    pub height: u32,
+}
+
+/// `occult render`.
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    /// Scene: a generator spec (`city:blocks=8`, see `occult scenes`) or a file (.obj, .ply,
+    /// .gltf, .glb).
+    #[arg(long, value_name = "SPEC")]
+    pub scene: String,
+    /// Camera: `default` (the scene's), or camera `i` of a path, as `PATH:i` (`circle:8:3`); a
+    /// path without index gives its first camera.
+    #[arg(long, value_name = "VIEW", default_value = "default")]
+    pub view: String,
+    #[command(flatten)]
+    pub camera: CameraOverrides,
+    /// Renderer (see the list in the error for an unknown one).
+    #[arg(long, value_name = "NAME", default_value = "frustum", value_parser = parse_algorithm)]
+    pub algo: Algorithm,
+    /// Frame size, WxH pixels.
+    #[arg(long, value_name = "WxH", default_value = "1920x1080", value_parser = parse_size)]
+    pub size: Size,
+    /// Color image out (PNG).
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+    /// Depth visualisation out (PNG, grey: near white, far dark).
+    #[arg(long, value_name = "FILE")]
+    pub depth_out: Option<PathBuf>,
+    /// Frame statistics out (JSON).
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+}
+
+/// Camera fields that override the chosen view's.
+#[derive(Debug, Args, Clone, Default)]
+pub struct CameraOverrides {
+    /// Eye position, world units, `x,y,z`.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub eye: Option<Vec3>,
+    /// Point looked at, `x,y,z`.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub target: Option<Vec3>,
+    /// Up direction, `x,y,z`.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub up: Option<Vec3>,
+    /// Vertical field of view, degrees.
+    #[arg(long, value_name = "DEG", value_parser = parse_finite)]
+    pub fov: Option<f32>,
+    /// Near plane distance.
+    #[arg(long, value_name = "DIST", value_parser = parse_finite)]
+    pub near: Option<f32>,
+    /// Far plane distance.
+    #[arg(long, value_name = "DIST", value_parser = parse_finite)]
+    pub far: Option<f32>,
+}
+
+/// `occult walk`.
+#[derive(Debug, Args)]
+pub struct WalkArgs {
+    /// Scene spec or file (see `occult render --help`).
+    #[arg(long, value_name = "SPEC")]
+    pub scene: String,
+    /// Camera path: `circle:N`, `street:N`, `flyover:N`, `default`, or a JSON file of cameras.
+    #[arg(long, value_name = "PATH", default_value = "circle:16")]
+    pub path: String,
+    /// Renderer.
+    #[arg(long, value_name = "NAME", default_value = "frustum", value_parser = parse_algorithm)]
+    pub algo: Algorithm,
+    /// Frame size, WxH pixels.
+    #[arg(long, value_name = "WxH", default_value = "640x480", value_parser = parse_size)]
+    pub size: Size,
+    /// Write each frame as DIR/frame_00000.png (created if missing).
+    #[arg(long, value_name = "DIR")]
+    pub frames_out: Option<PathBuf>,
+    /// Per-frame statistics out (JSON).
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+    /// Per-frame statistics out (CSV, one row per frame).
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
+}
+
+/// `occult compare`.
+#[derive(Debug, Args)]
+pub struct CompareArgs {
+    /// Scene spec or file; repeat for several scenes (for example growing sizes, with
+    /// `--plot-scaling`).
+    #[arg(long, value_name = "SPEC", required = true)]
+    pub scene: Vec<String>,
+    /// Camera path: `circle:N`, `street:N`, `flyover:N`, `default`, or a JSON file of cameras.
+    #[arg(long, value_name = "PATH", default_value = "circle:16")]
+    pub path: String,
+    /// Renderers, comma-separated, or `all`. The reference (zbuffer, or frustum on scenes too
+    /// large for brute force) is always rendered and reported.
+    #[arg(long, value_name = "A,B,..", default_value = "all", value_parser = parse_algorithms)]
+    pub algos: AlgorithmList,
+    /// Frame size, WxH pixels.
+    #[arg(long, value_name = "WxH", default_value = "640x480", value_parser = parse_size)]
+    pub size: Size,
+    /// Full report out (JSON: per renderer summary and per-frame records).
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+    /// Per-frame records out (CSV: one row per scene, renderer and frame; the oracle as
+    /// renderer `oracle`).
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
+    /// Plot of frame time per frame, per renderer (PNG; one panel per scene).
+    #[arg(long, value_name = "FILE")]
+    pub plot: Option<PathBuf>,
+    /// Plot of mean frame time against scene size (PNG; needs two or more --scene).
+    #[arg(long, value_name = "FILE")]
+    pub plot_scaling: Option<PathBuf>,
+}
+
+/// A parsed `--algos` list (a newtype, because clap treats `Vec` as "many values").
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct AlgorithmList(pub Vec<Algorithm>);
+
+/// `occult info`.
+#[derive(Debug, Args)]
+pub struct InfoArgs {
+    /// Scene file or generator spec.
+    #[arg(value_name = "FILE|SPEC")]
+    pub scene: String,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `occult scenes`.
+#[derive(Debug, Args)]
+pub struct ScenesArgs {
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `WxH`, checked against the engine's resolution limits.
+pub fn parse_size(s: &str) -> Result<Size, String> {
+    let bad = || format!("expected WxH in pixels, like 1920x1080, not '{s}'");
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let width: u32 = w.trim().parse().map_err(|_| bad())?;
+    let height: u32 = h.trim().parse().map_err(|_| bad())?;
+    occult_core::check_resolution(width, height).map_err(|e| e.to_string())?;
+    Ok(Size { width, height })
+}
+
+/// `x,y,z`, finite.
+pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let bad = || format!("expected three comma-separated numbers x,y,z, not '{s}'");
+    if parts.len() != 3 {
+        return Err(bad());
+    }
+    let mut v = [0.0f32; 3];
+    for (slot, p) in v.iter_mut().zip(&parts) {
+        *slot = p.parse().map_err(|_| bad())?;
+        if !slot.is_finite() {
+            return Err(format!("'{p}' is not a finite number"));
+        }
+    }
+    Ok(Vec3::from_array(v))
+}
+
+/// A finite number.
+pub fn parse_finite(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        _ => Err(format!("expected a finite number, not '{s}'")),
+    }
+}
+
+/// A thread count in 1..=1024.
+pub fn parse_threads(s: &str) -> Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(n @ 1..=1024) => Ok(n),
+        _ => Err(format!("expected a thread count from 1 to 1024, not '{s}'")),
+    }
+}
+
+/// One algorithm name.
+pub fn parse_algorithm(s: &str) -> Result<Algorithm, String> {
+    Algorithm::parse(s.trim()).map_err(|e| e.to_string())
+}
+
+/// Comma-separated algorithm names, or `all`.
+pub fn parse_algorithms(s: &str) -> Result<AlgorithmList, String> {
+    if s.trim() == "all" {
+        return Ok(AlgorithmList(Algorithm::ALL.to_vec()));
+    }
+    let mut list = Vec::new();
+    for name in s.split(',').map(str::trim) {
+        if name.is_empty() {
+            return Err(format!(
+                "empty name in algorithm list '{s}' (known: {})",
+                Algorithm::NAMES.join(", ")
+            ));
+        }
+        let a = parse_algorithm(name)?;
+        if !list.contains(&a) {
+            list.push(a);
+        }
+    }
+    Ok(AlgorithmList(list))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes() {
+        assert_eq!(
+            parse_size("640x480"),
+            Ok(Size {
+                width: 640,
+                height: 480
+            })
+        );
+        assert_eq!(parse_size("64X48"), Ok(Size { width: 64, height: 48 }));
+        for bad in ["0x0", "99999x99999", "abc", "640", "640x", "x480", "-1x5", "1.5x2", ""] {
+            assert!(parse_size(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn vectors_and_numbers() {
+        assert_eq!(parse_vec3("1,-2, 3.5"), Ok(Vec3::new(1.0, -2.0, 3.5)));
+        for bad in ["1,2", "1,2,3,4", "a,b,c", "nan,0,0", "inf,0,0", ""] {
+            assert!(parse_vec3(bad).is_err(), "{bad}");
+        }
+        assert!(parse_finite("NaN").is_err());
+        assert!(parse_threads("0").is_err());
+        assert_eq!(parse_threads("2"), Ok(2));
+    }
+
+    #[test]
+    fn algorithm_lists() {
+        assert_eq!(parse_algorithms("all").unwrap().0, Algorithm::ALL);
+        assert_eq!(
+            parse_algorithms("frustum, zbuffer,frustum").unwrap().0,
+            [Algorithm::Frustum, Algorithm::Zbuffer]
+        );
+        let e = parse_algorithms("zbuffer,warp").unwrap_err();
+        assert!(e.contains("warp") && e.contains("frustum"), "{e}");
+        assert!(parse_algorithms("zbuffer,,frustum").is_err());
+    }
+
+    #[test]
+    fn cli_definition_is_consistent() {
+        use clap::CommandFactory;
+        Cli::command().debug_assert();
+    }
+}

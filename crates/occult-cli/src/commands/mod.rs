@@ -1,0 +1,8 @@
+//! One module per subcommand: each turns its validated arguments into library calls and
+//! writes what they return.
+
+pub mod compare;
+pub mod info;
+pub mod render;
+pub mod scenes;
+pub mod walk;

@@ -1,0 +1,337 @@
+//! Files out (PNG, JSON, CSV) and the number formats of the text output.
+
+/// `println!` that returns an error instead of panicking when stdout is closed (`| head`).
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        writeln!(std::io::stdout().lock(), $($arg)*)?;
+    }};
+}
+
+/// `print!` that returns an error instead of panicking when stdout is closed.
+macro_rules! say_raw {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        write!(std::io::stdout().lock(), $($arg)*)?;
+    }};
+}
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use occult_raster::Frame;
+use occult_render::FrameStats;
+use serde::Serialize;
+
+/// Checks, before any long work, that `path` can be created: its directory exists and it is
+/// not a directory itself.
+///
+/// # Errors
+/// A missing parent directory or a path that is a directory.
+pub fn check_output(path: &Path) -> Result<()> {
+    if path.is_dir() {
+        bail!("cannot write '{}': it is a directory", path.display());
+    }
+    let parent = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    if !parent.is_dir() {
+        bail!(
+            "cannot write '{}': directory '{}' does not exist",
+            path.display(),
+            parent.display()
+        );
+    }
+    Ok(())
+}
+
+/// Checks every path of `paths` with [`check_output`].
+///
+/// # Errors
+/// As [`check_output`].
+pub fn check_outputs<'a>(paths: impl IntoIterator<Item = &'a Option<PathBuf>>) -> Result<()> {
+    paths.into_iter().flatten().try_for_each(|p| check_output(p))
+}
+
+/// Writes the frame's color (after shading) as PNG.
+///
+/// # Errors
+/// I/O and encoding errors, naming the file.
+pub fn write_color_png(frame: &Frame, path: &Path) -> Result<()> {
+    frame
+        .color_image()
+        .save_with_format(path, image::ImageFormat::Png)
+        .with_context(|| format!("cannot write '{}'", path.display()))
+}
+
+/// Writes the frame's depth visualisation as PNG.
+///
+/// # Errors
+/// I/O and encoding errors, naming the file.
+pub fn write_depth_png(frame: &Frame, path: &Path) -> Result<()> {
+    frame
+        .depth_image()
+        .save_with_format(path, image::ImageFormat::Png)
+        .with_context(|| format!("cannot write '{}'", path.display()))
+}
+
+/// Writes `value` as pretty JSON.
+///
+/// # Errors
+/// I/O errors, naming the file.
+pub fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
+    let mut text = serde_json::to_string_pretty(value).context("cannot serialize the report")?;
+    text.push('\n');
+    std::fs::write(path, text).with_context(|| format!("cannot write '{}'", path.display()))
+}
+
+/// Writes a CSV file from a header and rows of already formatted fields.
+///
+/// # Errors
+/// I/O errors, naming the file.
+pub fn write_csv(path: &Path, header: &[&str], rows: &[Vec<String>]) -> Result<()> {
+    let mut text = header.join(",");
+    text.push('\n');
+    for row in rows {
+        let fields: Vec<String> = row.iter().map(|f| csv_field(f)).collect();
+        text.push_str(&fields.join(","));
+        text.push('\n');
+    }
+    std::fs::write(path, text).with_context(|| format!("cannot write '{}'", path.display()))
+}
+
+/// Quotes a CSV field when it needs it.
+fn csv_field(f: &str) -> String {
+    if f.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", f.replace('"', "\"\""))
+    } else {
+        f.to_string()
+    }
+}
+
+/// An optional number as a CSV field (empty when absent).
+pub fn opt_field(v: Option<f64>) -> String {
+    v.map_or_else(String::new, |v| format!("{v}"))
+}
+
+/// [`FrameStats`] with times in milliseconds and phases by name, for JSON.
+#[derive(Clone, Debug, Serialize)]
+pub struct StatsOut {
+    /// Triangle instances handed to the rasterizer.
+    pub triangles_submitted: u64,
+    /// Triangles rasterized.
+    pub triangles_rasterized: u64,
+    /// Fragments that passed the depth test.
+    pub fragments_written: u64,
+    /// Hierarchy nodes visited.
+    pub nodes_visited: u64,
+    /// Bounding volumes tested.
+    pub boxes_tested: u64,
+    /// Bounding volumes culled.
+    pub boxes_culled: u64,
+    /// Screen rectangles tested.
+    pub rects_tested: u64,
+    /// Rectangles culled.
+    pub rects_culled: u64,
+    /// Rays cast.
+    pub rays_cast: u64,
+    /// Point samples drawn.
+    pub samples_drawn: u64,
+    /// The renderer's own frame time, ms.
+    pub total_ms: f64,
+    /// Time per phase, ms.
+    pub phases_ms: BTreeMap<String, f64>,
+}
+
+impl StatsOut {
+    /// Converts.
+    pub fn new(s: &FrameStats) -> Self {
+        Self {
+            triangles_submitted: s.triangles_submitted,
+            triangles_rasterized: s.triangles_rasterized,
+            fragments_written: s.fragments_written,
+            nodes_visited: s.nodes_visited,
+            boxes_tested: s.boxes_tested,
+            boxes_culled: s.boxes_culled,
+            rects_tested: s.rects_tested,
+            rects_culled: s.rects_culled,
+            rays_cast: s.rays_cast,
+            samples_drawn: s.samples_drawn,
+            total_ms: s.total.as_secs_f64() * 1e3,
+            phases_ms: s
+                .phases
+                .0
+                .iter()
+                .map(|(p, d)| (phase_name(p), d.as_secs_f64() * 1e3))
+                .collect(),
+        }
+    }
+
+    /// The counters as (name, value), in display order.
+    pub fn counters(&self) -> [(&'static str, u64); 10] {
+        [
+            ("triangles submitted", self.triangles_submitted),
+            ("triangles rasterized", self.triangles_rasterized),
+            ("fragments written", self.fragments_written),
+            ("nodes visited", self.nodes_visited),
+            ("boxes tested", self.boxes_tested),
+            ("boxes culled", self.boxes_culled),
+            ("rects tested", self.rects_tested),
+            ("rects culled", self.rects_culled),
+            ("rays cast", self.rays_cast),
+            ("samples drawn", self.samples_drawn),
+        ]
+    }
+}
+
+/// A phase's name as it serializes (`depth_structure`).
+pub fn phase_name(p: &impl Serialize) -> String {
+    match serde_json::to_value(p) {
+        Ok(serde_json::Value::String(s)) => s,
+        _ => "other".to_string(),
+    }
+}
+
+/// Frame statistics as text lines: nonzero counters, then the phases.
+pub fn stats_text(s: &StatsOut) -> String {
+    let mut out = String::new();
+    for (name, v) in s.counters() {
+        if v > 0 || name.starts_with("triangles") {
+            let _ = writeln!(out, "  {name:<22} {}", count(v as f64));
+        }
+    }
+    let phases: Vec<String> = s.phases_ms.iter().map(|(p, ms)| format!("{p} {ms:.2}")).collect();
+    let _ = writeln!(
+        out,
+        "  {:<22} {:.2} ms ({})",
+        "frame time",
+        s.total_ms,
+        phases.join(", ")
+    );
+    out
+}
+
+/// A count with thousands separators (`1,234,567`); fractional counts keep one decimal below
+/// 100.
+pub fn count(v: f64) -> String {
+    if !v.is_finite() {
+        return "-".into();
+    }
+    if v.fract() != 0.0 && v.abs() < 100.0 {
+        return format!("{v:.1}");
+    }
+    let digits = format!("{:.0}", v.abs());
+    let mut out = String::new();
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i) % 3 == 0 {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    if v < 0.0 {
+        out.insert(0, '-');
+    }
+    out
+}
+
+/// Bytes in binary units (`12.3 MiB`).
+pub fn bytes(b: u64) -> String {
+    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
+    let mut v = b as f64;
+    let mut unit = 0;
+    while v >= 1024.0 && unit + 1 < UNITS.len() {
+        v /= 1024.0;
+        unit += 1;
+    }
+    if unit == 0 {
+        format!("{b} B")
+    } else {
+        format!("{v:.1} {}", UNITS[unit])
+    }
+}
+
+/// Milliseconds with precision that suits the magnitude.
+pub fn millis(ms: f64) -> String {
+    if ms >= 100.0 {
+        format!("{ms:.0}")
+    } else if ms >= 10.0 {
+        format!("{ms:.1}")
+    } else if ms >= 0.1 {
+        format!("{ms:.2}")
+    } else {
+        format!("{ms:.3}")
+    }
+}
+
+/// A plain text table: left-aligned first column, right-aligned others.
+pub fn table(header: &[&str], rows: &[Vec<String>]) -> String {
+    let cols = header.len();
+    let mut widths: Vec<usize> = header.iter().map(|h| h.chars().count()).collect();
+    for row in rows {
+        for (w, cell) in widths.iter_mut().zip(row) {
+            *w = (*w).max(cell.chars().count());
+        }
+    }
+    let line = |cells: &mut dyn Iterator<Item = &str>| {
+        let mut s = String::new();
+        for (i, cell) in cells.enumerate().take(cols) {
+            let pad = widths[i].saturating_sub(cell.chars().count());
+            if i == 0 {
+                s.push_str(cell);
+                s.push_str(&" ".repeat(pad));
+            } else {
+                s.push_str("  ");
+                s.push_str(&" ".repeat(pad));
+                s.push_str(cell);
+            }
+        }
+        s.trim_end().to_string()
+    };
+    let mut out = line(&mut header.iter().copied());
+    out.push('\n');
+    for row in rows {
+        out.push_str(&line(&mut row.iter().map(String::as_str)));
+        out.push('\n');
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn number_formats() {
+        assert_eq!(count(1234567.0), "1,234,567");
+        assert_eq!(count(999.0), "999");
+        assert_eq!(count(12.5), "12.5");
+        assert_eq!(count(0.0), "0");
+        assert_eq!(bytes(512), "512 B");
+        assert_eq!(bytes(3 << 20), "3.0 MiB");
+        assert_eq!(millis(0.1234), "0.12");
+        assert_eq!(millis(123.4), "123");
+    }
+
+    #[test]
+    fn tables_align() {
+        let t = table(&["a", "bb"], &[vec!["long".into(), "1".into()]]);
+        assert_eq!(t, "a     bb\nlong   1\n");
+    }
+
+    #[test]
+    fn csv_quotes_when_needed() {
+        assert_eq!(csv_field("city:blocks=8"), "city:blocks=8");
+        assert_eq!(csv_field("a,b"), "\"a,b\"");
+        assert_eq!(csv_field("say \"x\""), "\"say \"\"x\"\"\"");
+    }
+
+    #[test]
+    fn output_checks() {
+        assert!(check_output(Path::new("/no/such/dir/x.png")).is_err());
+        assert!(check_output(Path::new("/")).is_err());
+        assert!(check_output(Path::new("x.png")).is_ok());
+    }
+}

@@ -1,0 +1,167 @@
+//! Scenes and cameras from command-line text, through `occult-scenes`.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{bail, Result};
+use occult_core::{Camera, Scene};
+
+use crate::args::CameraOverrides;
+use crate::progress::Progress;
+
+/// A scene built from a spec, with what the CLI reports about it.
+pub struct LoadedScene {
+    /// The spec as given.
+    pub spec: String,
+    /// The scene's name (generator or file name).
+    pub name: String,
+    /// The scene.
+    pub scene: Arc<Scene>,
+    /// The generator's (or loader's) framing camera.
+    pub default_camera: Camera,
+    /// What the loader skipped.
+    pub warnings: Vec<String>,
+    /// Time to parse and build (generate or load), ms.
+    pub build_ms: f64,
+}
+
+/// Parses and builds the scene `spec` (a generator spec or a file), with a spinner while it
+/// takes long.
+///
+/// # Errors
+/// Bad specs, unknown generators, unreadable or malformed files, generator limits.
+pub fn load(spec: &str) -> Result<LoadedScene> {
+    let start = Instant::now();
+    let parsed = occult_scenes::spec::parse_spec(spec).map_err(|e| naming(e, "scene", spec))?;
+    let progress = Progress::spinner(format!("building scene {spec}"));
+    let built = parsed.build().map_err(|e| naming(e, "scene", spec))?;
+    drop(progress);
+    let build_ms = start.elapsed().as_secs_f64() * 1e3;
+    Ok(LoadedScene {
+        spec: spec.to_string(),
+        name: built.name,
+        scene: Arc::new(built.scene),
+        default_camera: built.default_camera,
+        warnings: built.warnings,
+        build_ms,
+    })
+}
+
+/// The cameras of path `spec` through `scene`.
+///
+/// # Errors
+/// Bad path specs, unreadable camera files, empty paths.
+pub fn path(spec: &str, scene: &LoadedScene) -> Result<Vec<Camera>> {
+    let cameras = occult_scenes::path::parse_path(spec, &scene.scene, &scene.default_camera)
+        .map_err(|e| naming(e, "camera path", spec))?;
+    if cameras.is_empty() {
+        bail!("camera path '{spec}' holds no camera");
+    }
+    Ok(cameras)
+}
+
+/// The camera named by `view` (`default`, a path, or `PATH:i`) with `overrides` applied.
+///
+/// # Errors
+/// Bad path specs, an index past the path's end, a degenerate camera.
+pub fn camera(view: &str, overrides: &CameraOverrides, scene: &LoadedScene) -> Result<Camera> {
+    let mut camera = if view == "default" {
+        scene.default_camera
+    } else {
+        path_camera(view, scene)?
+    };
+    let o = overrides;
+    camera.eye = o.eye.unwrap_or(camera.eye);
+    camera.target = o.target.unwrap_or(camera.target);
+    camera.up = o.up.unwrap_or(camera.up);
+    camera.fov_y_deg = o.fov.unwrap_or(camera.fov_y_deg);
+    camera.near = o.near.unwrap_or(camera.near);
+    camera.far = o.far.unwrap_or(camera.far);
+    camera.validate()?;
+    Ok(camera)
+}
+
+/// `error` with `what 'spec'` as context, unless its message already quotes the spec.
+fn naming<E: std::error::Error + Send + Sync + 'static>(error: E, what: &str, spec: &str) -> anyhow::Error {
+    if error.to_string().contains(&format!("'{spec}'")) {
+        anyhow::Error::new(error)
+    } else {
+        anyhow::Error::new(error).context(format!("{what} '{spec}'"))
+    }
+}
+
+/// `PATH` (its first camera) or `PATH:i`.
+fn path_camera(view: &str, scene: &LoadedScene) -> Result<Camera> {
+    let whole = path(view, scene);
+    let (prefix, index) = match view.rsplit_once(':').map(|(p, i)| (p, i.parse::<usize>())) {
+        Some((prefix, Ok(index))) if whole.is_err() => (prefix, index),
+        _ => return Ok(whole?[0]),
+    };
+    let cameras = path(prefix, scene)?;
+    match cameras.get(index) {
+        Some(c) => Ok(*c),
+        None => bail!(
+            "view '{view}': index {index} is past the end of path '{prefix}', which has {} cameras",
+            cameras.len()
+        ),
+    }
+}
+
+/// What reports say about a scene.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SceneSummary {
+    /// The spec as given.
+    pub spec: String,
+    /// The scene's name.
+    pub name: String,
+    /// Triangle instances (the item id space).
+    pub triangles: u64,
+    /// Triangles stored (each mesh once).
+    pub unique_triangles: u64,
+    /// Nodes of the DAG.
+    pub nodes: usize,
+    /// Instances stored in groups.
+    pub instances: u64,
+    /// Approximate bytes held by the scene.
+    pub memory_bytes: usize,
+    /// World bounds, minimum corner.
+    pub bounds_min: [f32; 3],
+    /// World bounds, maximum corner.
+    pub bounds_max: [f32; 3],
+    /// Time to parse and build, ms.
+    pub build_ms: f64,
+    /// Loader warnings.
+    pub warnings: Vec<String>,
+}
+
+impl SceneSummary {
+    /// `spec`, with the scene's name when it says something more (`model.obj (model)`).
+    pub fn label(&self) -> String {
+        if self.name == self.spec {
+            self.spec.clone()
+        } else {
+            format!("{} ({})", self.spec, self.name)
+        }
+    }
+}
+
+impl LoadedScene {
+    /// The summary.
+    pub fn summary(&self) -> SceneSummary {
+        let s = &self.scene;
+        let b = s.bounds();
+        SceneSummary {
+            spec: self.spec.clone(),
+            name: self.name.clone(),
+            triangles: s.item_count(),
+            unique_triangles: s.unique_triangle_count(),
+            nodes: s.nodes().len(),
+            instances: s.instance_count(),
+            memory_bytes: s.memory_bytes(),
+            bounds_min: b.min.to_array(),
+            bounds_max: b.max.to_array(),
+            build_ms: self.build_ms,
+            warnings: self.warnings.clone(),
+        }
+    }
+}

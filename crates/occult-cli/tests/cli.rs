@@ -1,0 +1,356 @@
+//! End-to-end tests of the `occult` binary: small generated scenes, small frames, and bad input
+//! that must end in one line on stderr and a non-zero status, never a panic.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+/// Small scenes: fast on two cores in CI.
+const TERRAIN: &str = "terrain:g=24";
+const CITY: &str = "city:blocks=1,detail=1,variants=2";
+
+fn occult(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_occult"))
+        .args(args)
+        .output()
+        .expect("the occult binary runs")
+}
+
+/// A fresh directory for one test's files.
+fn scratch(test: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join("occult-cli-tests")
+        .join(test);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn path_arg(p: &std::path::Path) -> &str {
+    p.to_str().expect("test paths are UTF-8")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// Asserts success and returns stdout.
+fn ok(args: &[&str]) -> String {
+    let out = occult(args);
+    assert!(out.status.success(), "occult {args:?} failed: {}", text(&out.stderr));
+    text(&out.stdout)
+}
+
+fn read_json(p: &std::path::Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+}
+
+#[test]
+fn render_writes_color_and_depth_pngs_of_the_requested_size() {
+    let dir = scratch("render");
+    let (color, depth, json) = (dir.join("frame.png"), dir.join("depth.png"), dir.join("stats.json"));
+    let stdout = ok(&[
+        "render",
+        "--scene",
+        TERRAIN,
+        "--algo",
+        "zbuffer",
+        "--size",
+        "96x64",
+        "--out",
+        path_arg(&color),
+        "--depth-out",
+        path_arg(&depth),
+        "--json",
+        path_arg(&json),
+    ]);
+    assert!(stdout.contains("triangles rasterized"), "{stdout}");
+    let img = image::open(&color).unwrap();
+    assert_eq!((img.width(), img.height()), (96, 64));
+    let rgba = img.to_rgba8();
+    let background = rgba.get_pixel(0, 0).0;
+    assert!(
+        rgba.pixels().any(|p| p.0 != background),
+        "the terrain is visible from its default camera"
+    );
+    let d = image::open(&depth).unwrap();
+    assert_eq!((d.width(), d.height()), (96, 64));
+    let stats = read_json(&json);
+    assert_eq!(stats["algorithm"], "zbuffer");
+    assert_eq!(stats["scene"]["triangles"], 2 * 24 * 24);
+    assert_eq!(stats["stats"]["triangles_submitted"], 2 * 24 * 24);
+    assert!(stats["triangles_visible"].as_u64().unwrap() > 0);
+}
+
+#[test]
+fn render_takes_a_path_view_and_camera_overrides() {
+    let dir = scratch("render_view");
+    let out = dir.join("v.png");
+    ok(&[
+        "render",
+        "--scene",
+        CITY,
+        "--view",
+        "circle:4:2",
+        "--size",
+        "48x32",
+        "--out",
+        path_arg(&out),
+    ]);
+    assert!(out.exists());
+    ok(&[
+        "render",
+        "--scene",
+        TERRAIN,
+        "--eye",
+        "0,40,-120",
+        "--target",
+        "0,0,0",
+        "--fov",
+        "50",
+        "--size",
+        "32x32",
+        "--out",
+        path_arg(&out),
+    ]);
+    assert_eq!(image::open(&out).unwrap().width(), 32);
+}
+
+#[test]
+fn compare_reports_frustum_identical_to_zbuffer() {
+    let dir = scratch("compare");
+    let (json, csv, plot) = (dir.join("c.json"), dir.join("c.csv"), dir.join("c.png"));
+    let stdout = ok(&[
+        "--threads",
+        "2",
+        "compare",
+        "--scene",
+        CITY,
+        "--path",
+        "circle:4",
+        "--algos",
+        "zbuffer,frustum",
+        "--size",
+        "80x60",
+        "--json",
+        path_arg(&json),
+        "--csv",
+        path_arg(&csv),
+        "--plot",
+        path_arg(&plot),
+    ]);
+    assert!(stdout.contains("oracle") && stdout.contains("4/4"), "{stdout}");
+    let report = read_json(&json);
+    let run = &report["runs"][0];
+    assert_eq!(run["scene"]["spec"], CITY);
+    assert_eq!(run["reference"], "zbuffer");
+    assert_eq!(run["frames"], 4);
+    assert_eq!(run["width"], 80);
+    let renderers = run["renderers"].as_array().unwrap();
+    assert_eq!(renderers.len(), 2);
+    for r in renderers {
+        for field in [
+            "name",
+            "mean_ms",
+            "p95_ms",
+            "speedup_vs_zbuffer",
+            "vs_oracle",
+            "triangles_rasterized",
+            "triangles_visible",
+            "frames_identical",
+            "frames",
+            "prepare_ms",
+            "memory_bytes",
+            "per_frame",
+        ] {
+            assert!(r.get(field).is_some(), "{field} missing in {r}");
+        }
+        assert_eq!(r["frames"], 4);
+        assert_eq!(
+            r["frames_identical"], r["frames"],
+            "{} must be identical to zbuffer",
+            r["name"]
+        );
+        assert_eq!(r["per_frame"].as_array().unwrap().len(), 4);
+    }
+    let frustum = renderers.iter().find(|r| r["name"] == "frustum").unwrap();
+    assert!(frustum["speedup_vs_zbuffer"].as_f64().unwrap() > 0.0);
+    assert_eq!(run["oracle"]["frames_identical"], 4);
+    let csv = std::fs::read_to_string(&csv).unwrap();
+    assert!(csv.starts_with("scene,triangles,renderer,frame,time_ms"));
+    assert_eq!(
+        csv.lines().count(),
+        1 + 3 * 4,
+        "a row per renderer (and oracle) and frame"
+    );
+    assert_eq!(image::open(&plot).unwrap().width(), 1100);
+}
+
+#[test]
+fn compare_over_several_scenes_plots_scaling() {
+    let dir = scratch("scaling");
+    let (json, scaling) = (dir.join("s.json"), dir.join("s.png"));
+    ok(&[
+        "compare",
+        "--scene",
+        "terrain:g=8",
+        "--scene",
+        "terrain:g=16",
+        "--path",
+        "circle:2",
+        "--algos",
+        "frustum",
+        "--size",
+        "48x32",
+        "--json",
+        path_arg(&json),
+        "--plot-scaling",
+        path_arg(&scaling),
+    ]);
+    let report = read_json(&json);
+    let runs = report["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 2);
+    assert_eq!(runs[1]["scene"]["triangles"], 512);
+    // zbuffer was not requested but is the reference: rendered and reported as such.
+    let z = &runs[0]["renderers"][0];
+    assert_eq!(
+        (z["name"].as_str(), z["requested"].as_bool()),
+        (Some("zbuffer"), Some(false))
+    );
+    assert!(image::open(&scaling).is_ok());
+}
+
+#[test]
+fn walk_writes_frames_and_per_frame_stats() {
+    let dir = scratch("walk");
+    let (frames, csv, json) = (dir.join("frames"), dir.join("w.csv"), dir.join("w.json"));
+    ok(&[
+        "walk",
+        "--scene",
+        TERRAIN,
+        "--path",
+        "circle:3",
+        "--size",
+        "40x30",
+        "--frames-out",
+        path_arg(&frames),
+        "--csv",
+        path_arg(&csv),
+        "--json",
+        path_arg(&json),
+    ]);
+    for i in 0..3 {
+        let img = image::open(frames.join(format!("frame_{i:05}.png"))).unwrap();
+        assert_eq!((img.width(), img.height()), (40, 30));
+    }
+    assert_eq!(std::fs::read_to_string(&csv).unwrap().lines().count(), 4);
+    let report = read_json(&json);
+    assert_eq!(report["frames"].as_array().unwrap().len(), 3);
+    assert_eq!(report["algorithm"], "frustum");
+}
+
+#[test]
+fn info_describes_a_scene() {
+    let out = ok(&["info", TERRAIN, "--json"]);
+    let info: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(info["triangles"], 2 * 24 * 24);
+    assert_eq!(info["unique_triangles"], 2 * 24 * 24);
+    assert!(info["memory_bytes"].as_u64().unwrap() > 0);
+    assert!(info["bounds_min"].as_array().unwrap().len() == 3);
+    let text = ok(&["info", CITY]);
+    assert!(text.contains("triangles") && text.contains("instances"), "{text}");
+}
+
+#[test]
+fn scenes_lists_generators_and_parameters() {
+    let out = ok(&["scenes"]);
+    for name in ["terrain", "city", "g=", "blocks="] {
+        assert!(out.contains(name), "{name} missing from:\n{out}");
+    }
+    let list: Value = serde_json::from_str(&ok(&["scenes", "--json"])).unwrap();
+    assert!(list
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|g| g["name"] == "city" && !g["parameters"].as_array().unwrap().is_empty()));
+}
+
+#[test]
+fn bad_input_is_one_line_and_a_nonzero_status() {
+    let dir = scratch("bad");
+    let out = dir.join("x.png");
+    let out = path_arg(&out);
+    let missing_obj = dir.join("missing.obj");
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["render", "--scene", TERRAIN, "--out", out, "--size", "0x0"], "0x0"),
+        (
+            vec!["render", "--scene", TERRAIN, "--out", out, "--size", "99999x99999"],
+            "99999",
+        ),
+        (vec!["render", "--scene", TERRAIN, "--out", out, "--size", "abc"], "WxH"),
+        (
+            vec!["render", "--scene", TERRAIN, "--out", out, "--algo", "warp"],
+            "zbuffer",
+        ),
+        (vec!["compare", "--scene", TERRAIN, "--algos", "zbuffer,warp"], "warp"),
+        (vec!["render", "--scene", "nosuchscene", "--out", out], "terrain"),
+        (
+            vec!["render", "--scene", path_arg(&missing_obj), "--out", out],
+            "missing.obj",
+        ),
+        (vec!["info", path_arg(&missing_obj)], "missing.obj"),
+        (vec!["compare", "--scene", TERRAIN, "--path", "wobble:3"], "wobble"),
+        (vec!["walk", "--scene", TERRAIN, "--path", "circle:0"], "circle:0"),
+        (
+            vec!["render", "--scene", TERRAIN, "--out", out, "--view", "circle:4:9"],
+            "index 9",
+        ),
+        (
+            vec![
+                "render", "--scene", TERRAIN, "--out", out, "--eye", "1,2,3", "--target", "1,2,3",
+            ],
+            "camera",
+        ),
+        (
+            vec!["render", "--scene", TERRAIN, "--out", out, "--eye", "nan,0,0"],
+            "finite",
+        ),
+        (vec!["render", "--scene", "terrain:g=0", "--out", out], "g"),
+        (
+            vec!["render", "--scene", TERRAIN, "--out", "/no/such/dir/x.png"],
+            "does not exist",
+        ),
+        (
+            vec!["compare", "--scene", TERRAIN, "--plot-scaling", out],
+            "two or more",
+        ),
+        (vec!["--threads", "0", "scenes"], "thread"),
+        (vec!["render", "--scene", TERRAIN], "--out"),
+        (vec!["frobnicate"], "frobnicate"),
+    ];
+    for (args, needle) in cases {
+        let o = occult(&args);
+        let stderr = text(&o.stderr);
+        let code = o.status.code();
+        assert!(
+            matches!(code, Some(1) | Some(2)),
+            "occult {args:?}: status {code:?}, stderr:\n{stderr}"
+        );
+        assert!(!stderr.contains("panicked"), "occult {args:?} panicked:\n{stderr}");
+        let lines: Vec<&str> = stderr.lines().filter(|l| !l.trim().is_empty()).collect();
+        assert_eq!(lines.len(), 1, "occult {args:?}: expected one line, got:\n{stderr}");
+        assert!(lines[0].starts_with("error: "), "{stderr}");
+        assert!(
+            lines[0].contains(needle),
+            "occult {args:?}: '{needle}' not in: {stderr}"
+        );
+    }
+}
+
+#[test]
+fn help_and_version_succeed() {
+    assert!(ok(&["--help"]).contains("compare"));
+    assert!(ok(&["compare", "--help"]).contains("--plot-scaling"));
+    assert!(ok(&["--version"]).contains("occult"));
+}
