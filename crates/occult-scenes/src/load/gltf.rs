@@ -83,10 +83,16 @@ fn check_glb_header(path: &Path, data: &[u8]) -> Result<(), LoadError> {
     if !data.starts_with(b"glTF") {
         return Ok(());
     }
-    let truncated =
-        |message: String| LoadError::Truncated { path: path.to_path_buf(), location: Location::File, message };
+    let truncated = |message: String| LoadError::Truncated {
+        path: path.to_path_buf(),
+        location: Location::File,
+        message,
+    };
     let Some(length) = data.get(8..12) else {
-        return Err(truncated(format!("the GLB header needs 12 bytes, the file has {}", data.len())));
+        return Err(truncated(format!(
+            "the GLB header needs 12 bytes, the file has {}",
+            data.len()
+        )));
     };
     let declared = u32::from_le_bytes([length[0], length[1], length[2], length[3]]) as usize;
     if declared < 12 {
@@ -97,7 +103,10 @@ fn check_glb_header(path: &Path, data: &[u8]) -> Result<(), LoadError> {
         });
     }
     if declared > data.len() {
-        return Err(truncated(format!("the GLB header declares {declared} bytes, the file has {}", data.len())));
+        return Err(truncated(format!(
+            "the GLB header declares {declared} bytes, the file has {}",
+            data.len()
+        )));
     }
     Ok(())
 }
@@ -107,7 +116,9 @@ fn check_glb_header(path: &Path, data: &[u8]) -> Result<(), LoadError> {
 fn check_position_references(path: &Path, json: &::gltf::json::Root) -> Result<(), LoadError> {
     for (mesh_index, mesh) in json.meshes.iter().enumerate() {
         for (primitive_index, primitive) in mesh.primitives.iter().enumerate() {
-            let position = primitive.attributes.get(&::gltf::json::validation::Checked::Valid(Semantic::Positions));
+            let position = primitive
+                .attributes
+                .get(&::gltf::json::validation::Checked::Valid(Semantic::Positions));
             if let Some(accessor) = position.filter(|a| a.value() >= json.accessors.len()) {
                 return Err(LoadError::Parse {
                     path: path.to_path_buf(),
@@ -132,27 +143,49 @@ fn document_error(path: &Path, error: ::gltf::Error) -> LoadError {
             let location = Location::Line(json.line() as u64);
             let message = format!("bad JSON: {json}");
             if json.is_eof() {
-                LoadError::Truncated { path, location, message }
+                LoadError::Truncated {
+                    path,
+                    location,
+                    message,
+                }
             } else {
-                LoadError::Parse { path, location, message }
+                LoadError::Parse {
+                    path,
+                    location,
+                    message,
+                }
             }
         }
         ::gltf::Error::Validation(errors) => {
             let listed: Vec<String> = errors.iter().take(5).map(|(p, e)| format!("{p}: {e}")).collect();
-            let more = if errors.len() > 5 { format!(" and {} more", errors.len() - 5) } else { String::new() };
+            let more = if errors.len() > 5 {
+                format!(" and {} more", errors.len() - 5)
+            } else {
+                String::new()
+            };
             LoadError::Parse {
                 path,
                 location: Location::File,
                 message: format!("invalid glTF document: {}{more}", listed.join("; ")),
             }
         }
-        ::gltf::Error::Binary(GlbError::ChunkLength { .. } | GlbError::Length { .. }) => {
-            LoadError::Truncated { path, location: Location::File, message: error.to_string() }
-        }
+        ::gltf::Error::Binary(GlbError::ChunkLength { .. } | GlbError::Length { .. }) => LoadError::Truncated {
+            path,
+            location: Location::File,
+            message: error.to_string(),
+        },
         ::gltf::Error::Binary(GlbError::Io(io)) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
-            LoadError::Truncated { path, location: Location::File, message: "a GLB chunk header is cut off".into() }
+            LoadError::Truncated {
+                path,
+                location: Location::File,
+                message: "a GLB chunk header is cut off".into(),
+            }
         }
-        other => LoadError::Parse { path, location: Location::File, message: other.to_string() },
+        other => LoadError::Parse {
+            path,
+            location: Location::File,
+            message: other.to_string(),
+        },
     }
 }
 
@@ -170,7 +203,11 @@ fn load_buffers(path: &Path, document: &Document, mut blob: Option<Vec<u8>>) -> 
         let (uri, data) = match buffer.source() {
             Source::Bin => {
                 let uri = "<GLB BIN chunk>";
-                (uri, blob.take().ok_or_else(|| buffer_error(uri, "the file has no BIN chunk".into()))?)
+                (
+                    uri,
+                    blob.take()
+                        .ok_or_else(|| buffer_error(uri, "the file has no BIN chunk".into()))?,
+                )
             }
             Source::Uri(uri) if uri.starts_with("data:") => {
                 // Base64 decoding by the `gltf` crate; no file access for data URIs.
@@ -181,7 +218,10 @@ fn load_buffers(path: &Path, document: &Document, mut blob: Option<Vec<u8>>) -> 
             Source::Uri(uri) => {
                 let file = resolve_uri(folder, uri).map_err(|message| buffer_error(uri, message))?;
                 if !file.is_file() {
-                    return Err(buffer_error(uri, format!("{} is not a file that can be read", file.display())));
+                    return Err(buffer_error(
+                        uri,
+                        format!("{} is not a file that can be read", file.display()),
+                    ));
                 }
                 let data = std::fs::read(&file)
                     .map_err(|e| buffer_error(uri, format!("cannot read {}: {e}", file.display())))?;
@@ -191,7 +231,11 @@ fn load_buffers(path: &Path, document: &Document, mut blob: Option<Vec<u8>>) -> 
         if data.len() < buffer.length() {
             return Err(buffer_error(
                 uri,
-                format!("has {} bytes, the document declares {} (truncated?)", data.len(), buffer.length()),
+                format!(
+                    "has {} bytes, the document declares {} (truncated?)",
+                    data.len(),
+                    buffer.length()
+                ),
             ));
         }
         buffers.push(data);
@@ -207,7 +251,11 @@ fn resolve_uri(folder: &Path, uri: &str) -> Result<PathBuf, String> {
         None => (true, uri),
     };
     let decoded = percent_decode(rest).ok_or_else(|| "bad percent-encoding in URI".to_string())?;
-    Ok(if relative { folder.join(decoded) } else { PathBuf::from(decoded) })
+    Ok(if relative {
+        folder.join(decoded)
+    } else {
+        PathBuf::from(decoded)
+    })
 }
 
 /// `%20` to a space, and so on; `None` when the result is not UTF-8.
@@ -217,7 +265,11 @@ fn percent_decode(text: &str) -> Option<String> {
     let mut i = 0;
     while i < bytes.len() {
         let hex = |b: u8| (b as char).to_digit(16);
-        match (bytes[i], bytes.get(i + 1).copied().and_then(hex), bytes.get(i + 2).copied().and_then(hex)) {
+        match (
+            bytes[i],
+            bytes.get(i + 1).copied().and_then(hex),
+            bytes.get(i + 2).copied().and_then(hex),
+        ) {
             (b'%', Some(high), Some(low)) => {
                 out.push((high * 16 + low) as u8);
                 i += 3;
@@ -279,7 +331,11 @@ impl<'a> GltfLoader<'a> {
     }
 
     fn core_error(&self, part: String) -> impl FnOnce(occult_core::CoreError) -> LoadError + '_ {
-        move |source| LoadError::Core { path: self.path.to_path_buf(), part, source }
+        move |source| LoadError::Core {
+            path: self.path.to_path_buf(),
+            part,
+            source,
+        }
     }
 
     /// The root group of the scene to load.
@@ -296,7 +352,10 @@ impl<'a> GltfLoader<'a> {
                         scene.index()
                     ));
                 }
-                (scene.name().map_or_else(|| file_stem(self.path), str::to_string), scene.nodes().collect())
+                (
+                    scene.name().map_or_else(|| file_stem(self.path), str::to_string),
+                    scene.nodes().collect(),
+                )
             }
             None => {
                 let mut is_child = vec![false; document.nodes().len()];
@@ -305,14 +364,20 @@ impl<'a> GltfLoader<'a> {
                         is_child[child.index()] = true;
                     }
                 }
-                (file_stem(self.path), document.nodes().filter(|n| !is_child[n.index()]).collect())
+                (
+                    file_stem(self.path),
+                    document.nodes().filter(|n| !is_child[n.index()]).collect(),
+                )
             }
         };
         let mut instances = Vec::new();
         for node in roots {
             if let Some(child) = self.node(&node, 1)? {
                 if let Some(parent_from_child) = self.node_transform(&node)? {
-                    instances.push(Instance { parent_from_child, child });
+                    instances.push(Instance {
+                        parent_from_child,
+                        child,
+                    });
                 }
             }
         }
@@ -322,7 +387,9 @@ impl<'a> GltfLoader<'a> {
                 reason: "the scene has no node with a triangle mesh".into(),
             });
         }
-        self.builder.add_group(root_name.as_str(), instances).map_err(self.core_error(format!("scene '{root_name}'")))
+        self.builder
+            .add_group(root_name.as_str(), instances)
+            .map_err(self.core_error(format!("scene '{root_name}'")))
     }
 
     /// The content of a node in its own space (before its transform): its mesh, or a group of its
@@ -355,19 +422,31 @@ impl<'a> GltfLoader<'a> {
             Some(mesh) => self.mesh(&mesh)?,
             None => None,
         };
-        let mut instances: Vec<Instance> =
-            mesh.map(|child| Instance { parent_from_child: Affine3A::IDENTITY, child }).into_iter().collect();
+        let mut instances: Vec<Instance> = mesh
+            .map(|child| Instance {
+                parent_from_child: Affine3A::IDENTITY,
+                child,
+            })
+            .into_iter()
+            .collect();
         for child_node in node.children() {
             if let Some(child) = self.node(&child_node, depth + 1)? {
                 if let Some(parent_from_child) = self.node_transform(&child_node)? {
-                    instances.push(Instance { parent_from_child, child });
+                    instances.push(Instance {
+                        parent_from_child,
+                        child,
+                    });
                 }
             }
         }
         let id = match (mesh, node.children().len()) {
             (_, 0) => mesh,
             _ if instances.is_empty() => None,
-            _ => Some(self.builder.add_group(part(), instances).map_err(self.core_error(part()))?),
+            _ => Some(
+                self.builder
+                    .add_group(part(), instances)
+                    .map_err(self.core_error(part()))?,
+            ),
         };
         self.visits[node.index()] = Visit::Done(id);
         Ok(id)
@@ -422,12 +501,14 @@ impl<'a> GltfLoader<'a> {
             let part = format!("{mesh_part} primitive {}", primitive.index());
             let mode = primitive.mode();
             if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
-                self.warnings.push(format!("{}: {part}: {mode:?} primitive skipped", self.path.display()));
+                self.warnings
+                    .push(format!("{}: {part}: {mode:?} primitive skipped", self.path.display()));
                 continue;
             }
             let Some(position_accessor) = primitive.get(&Semantic::Positions) else {
                 // The `gltf` validation requires POSITION; stay safe all the same.
-                self.warnings.push(format!("{}: {part}: no POSITION, skipped", self.path.display()));
+                self.warnings
+                    .push(format!("{}: {part}: no POSITION, skipped", self.path.display()));
                 continue;
             };
             let vertex_count = position_accessor.count();
@@ -494,7 +575,12 @@ impl<'a> GltfLoader<'a> {
             }
             let color = primitive.material().index().map(|_| {
                 let [r, g, b, a] = primitive.material().pbr_metallic_roughness().base_color_factor();
-                [linear_to_srgb_u8(r), linear_to_srgb_u8(g), linear_to_srgb_u8(b), unit_to_u8(a)]
+                [
+                    linear_to_srgb_u8(r),
+                    linear_to_srgb_u8(g),
+                    linear_to_srgb_u8(b),
+                    unit_to_u8(a),
+                ]
             });
             color_runs.push((first_triangle, color));
         }
@@ -508,7 +594,11 @@ impl<'a> GltfLoader<'a> {
             if let Some(colors) = mesh_colors(&color_runs, triangles.len()) {
                 built = built.with_colors(colors).map_err(self.core_error(mesh_part.clone()))?;
             }
-            Some(self.builder.add_mesh(mesh_part.as_str(), built).map_err(self.core_error(mesh_part.clone()))?)
+            Some(
+                self.builder
+                    .add_mesh(mesh_part.as_str(), built)
+                    .map_err(self.core_error(mesh_part.clone()))?,
+            )
         };
         self.meshes[mesh.index()] = Some(id);
         Ok(id)
@@ -520,7 +610,11 @@ impl<'a> GltfLoader<'a> {
             return Err(LoadError::Unsupported {
                 path: self.path.to_path_buf(),
                 location: location(),
-                message: format!("positions of type {:?} {:?}", accessor.dimensions(), accessor.data_type()),
+                message: format!(
+                    "positions of type {:?} {:?}",
+                    accessor.dimensions(),
+                    accessor.data_type()
+                ),
             });
         }
         let data_type = accessor.data_type();
@@ -604,8 +698,15 @@ impl<'a> GltfLoader<'a> {
                 ::gltf::accessor::sparse::IndexType::U32 => 4,
             };
             let index_bytes = self.view_bytes(&indices.view(), location)?;
-            let index_elements =
-                self.strided(index_bytes, indices.offset(), sparse_count, index_size, index_size, &what, location)?;
+            let index_elements = self.strided(
+                index_bytes,
+                indices.offset(),
+                sparse_count,
+                index_size,
+                index_size,
+                &what,
+                location,
+            )?;
             let value_bytes = self.view_bytes(&sparse.values().view(), location)?;
             let value_elements = self.strided(
                 value_bytes,
@@ -638,8 +739,10 @@ impl<'a> GltfLoader<'a> {
         location: &impl Fn() -> Location,
     ) -> Result<&[u8], LoadError> {
         let buffer = &self.buffers[view.buffer().index()];
-        view.offset().checked_add(view.length()).and_then(|end| buffer.get(view.offset()..end)).ok_or_else(|| {
-            LoadError::CountMismatch {
+        view.offset()
+            .checked_add(view.length())
+            .and_then(|end| buffer.get(view.offset()..end))
+            .ok_or_else(|| LoadError::CountMismatch {
                 path: self.path.to_path_buf(),
                 location: location(),
                 message: format!(
@@ -650,8 +753,7 @@ impl<'a> GltfLoader<'a> {
                     view.buffer().index(),
                     buffer.len()
                 ),
-            }
-        })
+            })
     }
 
     /// `count` elements of `element_size` bytes, `stride` apart from `offset` in `bytes`.
@@ -793,8 +895,14 @@ mod tests {
 
     #[test]
     fn uris_resolve_relative_to_the_file() {
-        assert_eq!(resolve_uri(Path::new("m"), "x%20y.bin").unwrap(), Path::new("m/x y.bin"));
-        assert_eq!(resolve_uri(Path::new("m"), "file:///tmp/a.bin").unwrap(), Path::new("/tmp/a.bin"));
+        assert_eq!(
+            resolve_uri(Path::new("m"), "x%20y.bin").unwrap(),
+            Path::new("m/x y.bin")
+        );
+        assert_eq!(
+            resolve_uri(Path::new("m"), "file:///tmp/a.bin").unwrap(),
+            Path::new("/tmp/a.bin")
+        );
         assert!(resolve_uri(Path::new("m"), "https://example.com/a.bin").is_err());
     }
 
@@ -802,7 +910,10 @@ mod tests {
     fn colors_collapse_when_equal() {
         let red = Some([255, 0, 0, 255]);
         assert_eq!(mesh_colors(&[(0, None)], 3), None);
-        assert_eq!(mesh_colors(&[(0, red), (2, red)], 3), Some(MeshColors::PerMesh([255, 0, 0, 255])));
+        assert_eq!(
+            mesh_colors(&[(0, red), (2, red)], 3),
+            Some(MeshColors::PerMesh([255, 0, 0, 255]))
+        );
         assert_eq!(
             mesh_colors(&[(0, red), (1, None)], 3),
             Some(MeshColors::PerTriangle(vec![[255, 0, 0, 255], [255; 4], [255; 4]]))
@@ -820,9 +931,18 @@ mod tests {
     #[test]
     fn glb_header_checks() {
         let p = Path::new("x.glb");
-        assert!(matches!(check_glb_header(p, b"glTF\x02\0\0\0"), Err(LoadError::Truncated { .. })));
-        assert!(matches!(check_glb_header(p, b"glTF\x02\0\0\0\x04\0\0\0"), Err(LoadError::Parse { .. })));
-        assert!(matches!(check_glb_header(p, b"glTF\x02\0\0\0\xff\0\0\0"), Err(LoadError::Truncated { .. })));
+        assert!(matches!(
+            check_glb_header(p, b"glTF\x02\0\0\0"),
+            Err(LoadError::Truncated { .. })
+        ));
+        assert!(matches!(
+            check_glb_header(p, b"glTF\x02\0\0\0\x04\0\0\0"),
+            Err(LoadError::Parse { .. })
+        ));
+        assert!(matches!(
+            check_glb_header(p, b"glTF\x02\0\0\0\xff\0\0\0"),
+            Err(LoadError::Truncated { .. })
+        ));
         assert!(check_glb_header(p, b"{}").is_ok());
     }
 }

@@ -93,7 +93,9 @@ pub fn load_bytes(path: &Path, bytes: &[u8]) -> Result<LoadedScene, LoadError> {
         Some(Format::Obj) => obj::obj_from_bytes(path, bytes),
         Some(Format::Ply) => ply::ply_from_bytes(path, bytes),
         Some(Format::Gltf) => self::gltf::gltf_from_bytes(path, bytes),
-        None => Err(LoadError::UnsupportedExtension { path: path.to_path_buf() }),
+        None => Err(LoadError::UnsupportedExtension {
+            path: path.to_path_buf(),
+        }),
     }
 }
 
@@ -135,7 +137,9 @@ pub fn load_file(path: &Path) -> Result<LoadedScene, LoadError> {
         Some(Format::Obj) => load_obj(path),
         Some(Format::Ply) => load_ply(path),
         Some(Format::Gltf) => load_gltf(path),
-        None => Err(LoadError::UnsupportedExtension { path: path.to_path_buf() }),
+        None => Err(LoadError::UnsupportedExtension {
+            path: path.to_path_buf(),
+        }),
     }
 }
 
@@ -170,7 +174,10 @@ pub enum Location {
 impl Location {
     /// Element `index` of `kind`.
     pub fn element(kind: impl Into<String>, index: u64) -> Self {
-        Location::Element { kind: kind.into(), index }
+        Location::Element {
+            kind: kind.into(),
+            index,
+        }
     }
 }
 
@@ -334,7 +341,10 @@ impl LoadError {
 
 /// Reads a whole file.
 fn read_bytes(path: &Path) -> Result<Vec<u8>, LoadError> {
-    std::fs::read(path).map_err(|source| LoadError::Io { path: path.to_path_buf(), source })
+    std::fs::read(path).map_err(|source| LoadError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// Appends the fan triangulation of a polygon: `(p0, p1, p2), (p0, p2, p3), ...`. Polygons of
@@ -356,7 +366,11 @@ fn unit_to_u8(value: f32) -> u8 {
 /// The sRGB encoding of a linear channel in `0..=1`, as 8 bits.
 fn linear_to_srgb_u8(linear: f32) -> u8 {
     let c = linear.clamp(0.0, 1.0);
-    let encoded = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
+    let encoded = if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    };
     unit_to_u8(encoded)
 }
 
@@ -398,13 +412,19 @@ fn scene_of_meshes(path: &Path, root_name: &str, meshes: Vec<(String, Mesh)>) ->
     };
     let meshes: Vec<_> = meshes.into_iter().filter(|(_, m)| m.triangle_count() > 0).collect();
     if meshes.is_empty() {
-        return Err(LoadError::Empty { path: path.to_path_buf(), reason: "the file has no faces".into() });
+        return Err(LoadError::Empty {
+            path: path.to_path_buf(),
+            reason: "the file has no faces".into(),
+        });
     }
     let mut builder = SceneBuilder::new();
     let mut instances = Vec::with_capacity(meshes.len());
     for (name, mesh) in meshes {
         let child = builder.add_mesh(name.as_str(), mesh).map_err(core(&name))?;
-        instances.push(Instance { parent_from_child: occult_core::Affine3A::IDENTITY, child });
+        instances.push(Instance {
+            parent_from_child: occult_core::Affine3A::IDENTITY,
+            child,
+        });
     }
     let root: NodeId = if instances.len() == 1 {
         instances[0].child
@@ -416,7 +436,8 @@ fn scene_of_meshes(path: &Path, root_name: &str, meshes: Vec<(String, Mesh)>) ->
 
 /// The file stem as a node name.
 fn file_stem(path: &Path) -> String {
-    path.file_stem().map_or_else(|| "model".to_string(), |s| s.to_string_lossy().into_owned())
+    path.file_stem()
+        .map_or_else(|| "model".to_string(), |s| s.to_string_lossy().into_owned())
 }
 
 #[cfg(test)]
@@ -462,7 +483,10 @@ mod tests {
         let positions: Vec<Vec3> = (0..6).map(|i| Vec3::splat(i as f32)).collect();
         let mut remap = vec![u32::MAX; positions.len()];
         let mesh = compact_mesh(&positions, &[[5, 3, 4]], &mut remap).unwrap();
-        assert_eq!(mesh.positions(), &[Vec3::splat(5.0), Vec3::splat(3.0), Vec3::splat(4.0)]);
+        assert_eq!(
+            mesh.positions(),
+            &[Vec3::splat(5.0), Vec3::splat(3.0), Vec3::splat(4.0)]
+        );
         assert_eq!(mesh.triangles(), &[[0, 1, 2]]);
         assert!(remap.iter().all(|&r| r == u32::MAX));
     }

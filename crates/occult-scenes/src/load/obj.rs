@@ -112,7 +112,11 @@ impl<'p> ObjReader<'p> {
     }
 
     fn parse_error(&self, line: u64, message: String) -> LoadError {
-        LoadError::Parse { path: self.path.to_path_buf(), location: Location::Line(line), message }
+        LoadError::Parse {
+            path: self.path.to_path_buf(),
+            location: Location::Line(line),
+            message,
+        }
     }
 
     fn parse(&mut self, data: &[u8]) -> Result<(), LoadError> {
@@ -166,9 +170,10 @@ impl<'p> ObjReader<'p> {
             };
             let parsed = std::str::from_utf8(token).ok().and_then(|s| s.parse::<f32>().ok());
             let Some(parsed) = parsed else {
-                return Err(
-                    self.parse_error(line, format!("bad vertex coordinate '{}'", String::from_utf8_lossy(token)))
-                );
+                return Err(self.parse_error(
+                    line,
+                    format!("bad vertex coordinate '{}'", String::from_utf8_lossy(token)),
+                ));
             };
             if !parsed.is_finite() {
                 return Err(LoadError::NonFinite {
@@ -196,7 +201,10 @@ impl<'p> ObjReader<'p> {
         if self.corners.len() < 3 {
             return Err(self.parse_error(
                 line,
-                format!("a face needs at least three corners, this one has {}", self.corners.len()),
+                format!(
+                    "a face needs at least three corners, this one has {}",
+                    self.corners.len()
+                ),
             ));
         }
         let chunk_index = self.current_chunk();
@@ -236,7 +244,11 @@ impl<'p> ObjReader<'p> {
         let next_index = self.chunks.len();
         let index = *self.chunk_by_key.entry(key).or_insert(next_index);
         if index == next_index {
-            self.chunks.push(Chunk { object_index: key.0, material_index: key.1, triangles: Vec::new() });
+            self.chunks.push(Chunk {
+                object_index: key.0,
+                material_index: key.1,
+                triangles: Vec::new(),
+            });
         }
         self.chunk_index = Some(index);
         index
@@ -260,7 +272,10 @@ impl<'p> ObjReader<'p> {
             } else {
                 "the file has no faces"
             };
-            return Err(LoadError::Empty { path: path.to_path_buf(), reason: reason.into() });
+            return Err(LoadError::Empty {
+                path: path.to_path_buf(),
+                reason: reason.into(),
+            });
         }
 
         let mut warnings = Vec::new();
@@ -287,8 +302,11 @@ impl<'p> ObjReader<'p> {
                 }
                 _ => object.clone(),
             };
-            let core_error =
-                |source| LoadError::Core { path: path.to_path_buf(), part: format!("object '{name}'"), source };
+            let core_error = |source| LoadError::Core {
+                path: path.to_path_buf(),
+                part: format!("object '{name}'"),
+                source,
+            };
             let mut mesh = compact_mesh(&self.positions, &chunk.triangles, &mut remap).map_err(core_error)?;
             if let Some(color) = chunk.material_index.and_then(|m| colors[m]) {
                 mesh = mesh.with_colors(MeshColors::PerMesh(color)).map_err(core_error)?;
@@ -320,10 +338,17 @@ impl<'p> ObjReader<'p> {
                 }
             }
         }
-        let colors: Vec<Option<Rgba8>> =
-            self.material_names.iter().map(|name| library.get(name).copied().flatten()).collect();
-        let undefined: Vec<&str> =
-            self.material_names.iter().filter(|name| !library.contains_key(*name)).map(String::as_str).collect();
+        let colors: Vec<Option<Rgba8>> = self
+            .material_names
+            .iter()
+            .map(|name| library.get(name).copied().flatten())
+            .collect();
+        let undefined: Vec<&str> = self
+            .material_names
+            .iter()
+            .filter(|name| !library.contains_key(*name))
+            .map(String::as_str)
+            .collect();
         if all_libraries_read && !undefined.is_empty() {
             warnings.push(format!(
                 "{}: materials used but not defined in any material library: {}",
@@ -352,7 +377,10 @@ fn library_paths(folder: &Path, names: &str) -> Vec<PathBuf> {
     if whole.is_file() || !names.contains(char::is_whitespace) {
         return vec![whole];
     }
-    names.split_whitespace().map(|name| folder.join(name.replace('\\', "/"))).collect()
+    names
+        .split_whitespace()
+        .map(|name| folder.join(name.replace('\\', "/")))
+        .collect()
 }
 
 /// Reads the diffuse colors of an `.mtl` file into `library` and warns about texture files that
@@ -376,8 +404,9 @@ fn parse_mtl(mtl_path: &Path, data: &[u8], library: &mut HashMap<String, Option<
                 current = Some(name);
             }
             b"Kd" => {
-                let values: Vec<Option<f32>> =
-                    tokens.map(|t| std::str::from_utf8(t).ok().and_then(|s| s.parse::<f32>().ok())).collect();
+                let values: Vec<Option<f32>> = tokens
+                    .map(|t| std::str::from_utf8(t).ok().and_then(|s| s.parse::<f32>().ok()))
+                    .collect();
                 // `Kd r` alone means gray (MTL spec); `Kd spectral ...` and `Kd xyz ...` are not read.
                 let rgb = match values.as_slice() {
                     [Some(v)] => Some([*v; 3]),
@@ -429,7 +458,12 @@ fn is_texture_statement(keyword: &[u8]) -> bool {
 
 /// `a, b, c, d, e and 7 more`.
 fn list_names(names: &[&str]) -> String {
-    let mut text = names.iter().take(LISTED_NAMES_MAX).copied().collect::<Vec<_>>().join(", ");
+    let mut text = names
+        .iter()
+        .take(LISTED_NAMES_MAX)
+        .copied()
+        .collect::<Vec<_>>()
+        .join(", ");
     if names.len() > LISTED_NAMES_MAX {
         text.push_str(&format!(" and {} more", names.len() - LISTED_NAMES_MAX));
     }
@@ -475,7 +509,9 @@ mod tests {
     fn relative_and_forward_references() {
         let path = Path::new("t.obj");
         let mut reader = ObjReader::new(path);
-        reader.parse(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\nf 1 2 4\nv 1 1 0\n").unwrap();
+        reader
+            .parse(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\nf 1 2 4\nv 1 1 0\n")
+            .unwrap();
         assert_eq!(reader.chunks[0].triangles, vec![[0, 1, 2], [0, 1, 3]]);
         let loaded = reader.finish().unwrap();
         assert_eq!(loaded.scene.item_count(), 2);
@@ -494,13 +530,19 @@ mod tests {
         for face in ["f 0 1 2", "f -4 1 2"] {
             let mut reader = ObjReader::new(Path::new("t.obj"));
             let text = format!("v 0 0 0\nv 1 0 0\nv 0 1 0\n{face}\n");
-            assert!(matches!(reader.parse(text.as_bytes()), Err(LoadError::IndexOutOfRange { .. })), "{face}");
+            assert!(
+                matches!(reader.parse(text.as_bytes()), Err(LoadError::IndexOutOfRange { .. })),
+                "{face}"
+            );
         }
     }
 
     #[test]
     fn names_are_listed_with_a_tail() {
         assert_eq!(list_names(&["a", "b"]), "a, b");
-        assert_eq!(list_names(&["a", "b", "c", "d", "e", "f", "g"]), "a, b, c, d, e and 2 more");
+        assert_eq!(
+            list_names(&["a", "b", "c", "d", "e", "f", "g"]),
+            "a, b, c, d, e and 2 more"
+        );
     }
 }

@@ -50,7 +50,9 @@ pub(super) fn ply_from_bytes(path: &Path, data: &[u8]) -> Result<LoadedScene, Lo
     let mut reader = Reader::new(Cursor::new(data));
     let header = parser.read_header(&mut reader).map_err(|e| header_error(path, e))?;
     // The cursor stops right after `end_header\n`: `read_header` reads line by line.
-    let header_len = usize::try_from(reader.get_ref().position()).unwrap_or(data.len()).min(data.len());
+    let header_len = usize::try_from(reader.get_ref().position())
+        .unwrap_or(data.len())
+        .min(data.len());
     let payload = &data[header_len..];
     let layout = Layout::of(path, &header)?;
     check_declared_counts(path, &header, payload.len())?;
@@ -75,7 +77,11 @@ pub(super) fn ply_from_bytes(path: &Path, data: &[u8]) -> Result<LoadedScene, Lo
 
     let mut warnings = Vec::new();
     if sink.short_face_count > 0 {
-        warnings.push(format!("{}: {} faces with fewer than 3 corners skipped", path.display(), sink.short_face_count));
+        warnings.push(format!(
+            "{}: {} faces with fewer than 3 corners skipped",
+            path.display(),
+            sink.short_face_count
+        ));
     }
     let name = file_stem(path);
     let mesh = occult_core::Mesh::new(sink.positions, sink.triangles).map_err(|source| LoadError::Core {
@@ -145,8 +151,10 @@ impl Layout {
                 }
             }
         }
-        let has_polygons =
-            polygons.as_ref().and_then(|(name, _)| header.elements.get(name)).is_some_and(|e| e.count > 0);
+        let has_polygons = polygons
+            .as_ref()
+            .and_then(|(name, _)| header.elements.get(name))
+            .is_some_and(|e| e.count > 0);
         if !has_polygons {
             return Err(LoadError::Empty {
                 path: path.to_path_buf(),
@@ -272,7 +280,11 @@ impl<'p> MeshSink<'p> {
     fn vertex(&mut self, xyz: [f64; 3], location: impl Fn() -> Location) -> Result<(), LoadError> {
         let p = Vec3::new(xyz[0] as f32, xyz[1] as f32, xyz[2] as f32);
         if let Some(&value) = p.to_array().iter().find(|v| !v.is_finite()) {
-            return Err(LoadError::NonFinite { path: self.path.to_path_buf(), location: location(), value });
+            return Err(LoadError::NonFinite {
+                path: self.path.to_path_buf(),
+                location: location(),
+                value,
+            });
         }
         self.positions.push(p);
         Ok(())
@@ -318,7 +330,11 @@ impl<'p> MeshSink<'p> {
         self.take_corners(indices, true, &location)?;
         for strip in self.corners.split(|&i| i == u32::MAX) {
             for (k, w) in strip.windows(3).enumerate() {
-                let t = if k % 2 == 0 { [w[0], w[1], w[2]] } else { [w[1], w[0], w[2]] };
+                let t = if k % 2 == 0 {
+                    [w[0], w[1], w[2]]
+                } else {
+                    [w[1], w[0], w[2]]
+                };
                 if t[0] != t[1] && t[1] != t[2] && t[0] != t[2] {
                     self.triangles.push(t);
                 }
@@ -421,14 +437,25 @@ fn header_error(path: &Path, error: ParseError) -> LoadError {
     let text = error.to_string();
     // `ParseError` displays as "Line N: message"; the location already says the line.
     let message = match error.line() {
-        Some(line) => text.strip_prefix(&format!("Line {line}: ")).unwrap_or(&text).to_string(),
+        Some(line) => text
+            .strip_prefix(&format!("Line {line}: "))
+            .unwrap_or(&text)
+            .to_string(),
         None => text,
     };
     let message = message.replace("\n\t", "; ").replace('\n', " ");
     if error.kind() == std::io::ErrorKind::UnexpectedEof {
-        LoadError::Truncated { path: path.to_path_buf(), location, message }
+        LoadError::Truncated {
+            path: path.to_path_buf(),
+            location,
+            message,
+        }
     } else {
-        LoadError::Parse { path: path.to_path_buf(), location, message: format!("bad header: {message}") }
+        LoadError::Parse {
+            path: path.to_path_buf(),
+            location,
+            message: format!("bad header: {message}"),
+        }
     }
 }
 
@@ -506,8 +533,11 @@ fn read_ascii(
                     break line;
                 }
             };
-            let location =
-                || Location::ElementAtLine { kind: name.to_string(), index: index as u64, line: line_number };
+            let location = || Location::ElementAtLine {
+                kind: name.to_string(),
+                index: index as u64,
+                line: line_number,
+            };
             parse_ascii_element(path, element, role, line, &mut record, &location)?;
             sink.record(role, &record, location)?;
         }
@@ -535,19 +565,32 @@ fn parse_ascii_element(
     record: &mut PlyRecord,
     location: &impl Fn() -> Location,
 ) -> Result<(), LoadError> {
-    let parse_error = |message: String| LoadError::Parse { path: path.to_path_buf(), location: location(), message };
-    let mismatch =
-        |message: String| LoadError::CountMismatch { path: path.to_path_buf(), location: location(), message };
+    let parse_error = |message: String| LoadError::Parse {
+        path: path.to_path_buf(),
+        location: location(),
+        message,
+    };
+    let mismatch = |message: String| LoadError::CountMismatch {
+        path: path.to_path_buf(),
+        location: location(),
+        message,
+    };
     let mut tokens = line.split(|b| b.is_ascii_whitespace()).filter(|t| !t.is_empty());
-    let mut next_value =
-        |property: &str| tokens.next().ok_or_else(|| mismatch(format!("the line ends before property '{property}'")));
+    let mut next_value = |property: &str| {
+        tokens
+            .next()
+            .ok_or_else(|| mismatch(format!("the line ends before property '{property}'")))
+    };
     record.indices.clear();
     for (property, def) in &element.properties {
         match &def.data_type {
             PropertyType::Scalar(_) => {
                 let token = next_value(property)?;
                 let value = parse_f64(token).ok_or_else(|| {
-                    parse_error(format!("bad value '{}' for property '{property}'", String::from_utf8_lossy(token)))
+                    parse_error(format!(
+                        "bad value '{}' for property '{property}'",
+                        String::from_utf8_lossy(token)
+                    ))
                 })?;
                 if role == Role::Vertex {
                     record.scalar(property, value);
@@ -555,21 +598,28 @@ fn parse_ascii_element(
             }
             PropertyType::List(..) => {
                 let token = next_value(property)?;
-                let count = std::str::from_utf8(token).ok().and_then(|s| s.parse::<u32>().ok()).ok_or_else(|| {
-                    parse_error(format!(
-                        "bad list length '{}' for property '{property}'",
-                        String::from_utf8_lossy(token)
-                    ))
-                })?;
+                let count = std::str::from_utf8(token)
+                    .ok()
+                    .and_then(|s| s.parse::<u32>().ok())
+                    .ok_or_else(|| {
+                        parse_error(format!(
+                            "bad list length '{}' for property '{property}'",
+                            String::from_utf8_lossy(token)
+                        ))
+                    })?;
                 let is_index_list =
                     matches!(role, Role::Faces | Role::Strips) && INDEX_LIST_NAMES.contains(&property.as_str());
                 for item in 0..count {
                     let token = next_value(property).map_err(|_| {
-                        mismatch(format!("list '{property}' declares {count} values, the line has {item}"))
+                        mismatch(format!(
+                            "list '{property}' declares {count} values, the line has {item}"
+                        ))
                     })?;
                     if is_index_list {
-                        let index =
-                            std::str::from_utf8(token).ok().and_then(|s| s.parse::<i64>().ok()).ok_or_else(|| {
+                        let index = std::str::from_utf8(token)
+                            .ok()
+                            .and_then(|s| s.parse::<i64>().ok())
+                            .ok_or_else(|| {
                                 parse_error(format!("bad vertex index '{}'", String::from_utf8_lossy(token)))
                             })?;
                         record.indices.push(index);
@@ -605,7 +655,9 @@ mod tests {
         let mut vertex = ElementDef::new("vertex".into());
         vertex.count = vertex_count;
         for axis in ["x", "y", "z"] {
-            vertex.properties.add(PropertyDef::new(axis.into(), PropertyType::Scalar(ScalarType::Float)));
+            vertex
+                .properties
+                .add(PropertyDef::new(axis.into(), PropertyType::Scalar(ScalarType::Float)));
         }
         let mut header = Header::new();
         header.encoding = encoding;
@@ -636,18 +688,30 @@ mod tests {
 
     #[test]
     fn strips_restart_flip_and_drop_degenerates() {
-        let layout = Layout { vertex_count: 5, polygons: None };
+        let layout = Layout {
+            vertex_count: 5,
+            polygons: None,
+        };
         let mut sink = MeshSink::new(Path::new("t.ply"), &layout);
         sink.strips(&[0, 1, 2, 3, -1, 4, 4, 1, 2], || Location::File).unwrap();
         // The second strip starts with a swap (4 4 1, dropped), so 4 1 2 is odd: flipped.
         assert_eq!(sink.triangles, vec![[0, 1, 2], [2, 1, 3], [1, 4, 2]]);
-        assert!(matches!(sink.strips(&[0, 1, 5], || Location::File), Err(LoadError::IndexOutOfRange { index: 5, .. })));
-        assert!(matches!(sink.face(&[0, -1, 2], || Location::File), Err(LoadError::IndexOutOfRange { index: -1, .. })));
+        assert!(matches!(
+            sink.strips(&[0, 1, 5], || Location::File),
+            Err(LoadError::IndexOutOfRange { index: 5, .. })
+        ));
+        assert!(matches!(
+            sink.face(&[0, -1, 2], || Location::File),
+            Err(LoadError::IndexOutOfRange { index: -1, .. })
+        ));
     }
 
     #[test]
     fn faces_of_fewer_than_three_corners_are_counted_not_drawn() {
-        let layout = Layout { vertex_count: 3, polygons: None };
+        let layout = Layout {
+            vertex_count: 3,
+            polygons: None,
+        };
         let mut sink = MeshSink::new(Path::new("t.ply"), &layout);
         sink.face(&[0, 1], || Location::File).unwrap();
         sink.face(&[], || Location::File).unwrap();
@@ -657,10 +721,16 @@ mod tests {
 
     #[test]
     fn non_finite_and_overflowing_coordinates_are_errors() {
-        let layout = Layout { vertex_count: 1, polygons: None };
+        let layout = Layout {
+            vertex_count: 1,
+            polygons: None,
+        };
         let mut sink = MeshSink::new(Path::new("t.ply"), &layout);
         let at = || Location::element("vertex", 0);
-        assert!(matches!(sink.vertex([0.0, f64::NAN, 0.0], at), Err(LoadError::NonFinite { .. })));
+        assert!(matches!(
+            sink.vertex([0.0, f64::NAN, 0.0], at),
+            Err(LoadError::NonFinite { .. })
+        ));
         assert!(
             matches!(sink.vertex([1e300, 0.0, 0.0], at), Err(LoadError::NonFinite { value, .. }) if value == f32::INFINITY)
         );
