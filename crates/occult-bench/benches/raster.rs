@@ -6,13 +6,7 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use occult_core::glam::Affine3A;
 use occult_raster::{Draw, DrawTriangles, Frame, RasterConfig, RasterMode, Rasterizer};
 
-fn draw_all(
-    c: &mut Criterion,
-    name: &str,
-    mesh: &occult_core::Mesh,
-    view: &occult_core::View,
-    threads: usize,
-) {
+fn draw_all(c: &mut Criterion, name: &str, mesh: &occult_core::Mesh, view: &occult_core::View, threads: usize) {
     let mut raster = Rasterizer::new(RasterConfig {
         threads,
         ..RasterConfig::default()
@@ -28,20 +22,12 @@ fn draw_all(
     let mut group = c.benchmark_group("raster");
     group.throughput(Throughput::Elements(mesh.triangle_count() as u64));
     group.sample_size(20);
-    group.bench_function(
-        format!("{name}/threads={threads}/{}", raster.isa_name()),
-        |b| {
-            b.iter(|| {
-                raster.clear(&mut frame);
-                raster.draw(
-                    view,
-                    &mut frame,
-                    std::slice::from_ref(&draw),
-                    RasterMode::Full,
-                )
-            })
-        },
-    );
+    group.bench_function(format!("{name}/threads={threads}/{}", raster.isa_name()), |b| {
+        b.iter(|| {
+            raster.clear(&mut frame);
+            raster.draw(view, &mut frame, std::slice::from_ref(&draw), RasterMode::Full)
+        })
+    });
     group.finish();
 }
 

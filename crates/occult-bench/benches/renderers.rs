@@ -10,8 +10,7 @@ use occult_render::{Algorithm, RenderOptions};
 
 fn city(c: &mut Criterion) {
     let w = occult_bench::workload("city");
-    let cameras = occult_scenes::path::parse_path("street:8", &w.scene, &w.camera)
-        .expect("street path on city");
+    let cameras = occult_scenes::path::parse_path("street:8", &w.scene, &w.camera).expect("street path on city");
     let views: Vec<View> = cameras
         .iter()
         .map(|c| View::new(*c, 640, 480).expect("valid view"))

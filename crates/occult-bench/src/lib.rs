@@ -60,20 +60,9 @@ pub fn random_triangles(count: usize, size_px: f32, seed: u64) -> (Mesh, View) {
             rng.random_range(-1.0..1.0),
         );
         for _ in 0..3 {
-            p.push(
-                c + Vec3::new(
-                    rng.random_range(-0.5..0.5),
-                    rng.random_range(-0.5..0.5),
-                    0.0,
-                ) * (size_px * px * 1.5),
-            );
+            p.push(c + Vec3::new(rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5), 0.0) * (size_px * px * 1.5));
         }
     }
-    let t = (0..count as u32)
-        .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
-        .collect();
-    (
-        Mesh::new(p, t).expect("finite positions, valid indices"),
-        view,
-    )
+    let t = (0..count as u32).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+    (Mesh::new(p, t).expect("finite positions, valid indices"), view)
 }

@@ -99,12 +99,8 @@ fn frustum_is_identical_to_zbuffer_single_threaded() {
 #[test]
 fn default_views_and_paths_are_identical() {
     for spec in ["city:blocks=3,detail=2", "terrain:g=64"] {
-        let built = occult_scenes::spec::parse_spec(spec)
-            .and_then(|s| s.build())
-            .unwrap();
-        let cams =
-            occult_scenes::path::parse_path("circle:12", &built.scene, &built.default_camera)
-                .unwrap();
+        let built = occult_scenes::spec::parse_spec(spec).and_then(|s| s.build()).unwrap();
+        let cams = occult_scenes::path::parse_path("circle:12", &built.scene, &built.default_camera).unwrap();
         let scene = Arc::new(built.scene);
         let mut z = Algorithm::Zbuffer
             .build(scene.clone(), &RenderOptions::default())
@@ -118,10 +114,7 @@ fn default_views_and_paths_are_identical() {
             let sa = z.render(&view, &mut a).unwrap();
             let sb = f.render(&view, &mut b).unwrap();
             assert!(a.same_visibility(&b), "{spec}: {cam:?}");
-            assert!(
-                a.covered_pixel_count() > 0,
-                "{spec}: path view sees nothing: {cam:?}"
-            );
+            assert!(a.covered_pixel_count() > 0, "{spec}: path view sees nothing: {cam:?}");
             assert!(sb.triangles_submitted <= sa.triangles_submitted);
         }
     }

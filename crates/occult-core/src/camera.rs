@@ -51,10 +51,7 @@ impl Camera {
             return bad("eye, target or up is not finite");
         }
         if !(self.fov_y_deg > 0.0 && self.fov_y_deg < 180.0) {
-            return bad(&format!(
-                "vertical fov {}° is not in (0°, 180°)",
-                self.fov_y_deg
-            ));
+            return bad(&format!("vertical fov {}° is not in (0°, 180°)", self.fov_y_deg));
         }
         if !(self.near > 0.0 && self.near.is_finite()) {
             return bad(&format!("near plane {} is not positive", self.near));
@@ -69,12 +66,7 @@ impl Camera {
         if dir.length_squared() <= f32::MIN_POSITIVE || !dir.length_squared().is_finite() {
             return bad("eye and target coincide");
         }
-        if dir
-            .normalize()
-            .cross(self.up.normalize_or_zero())
-            .length_squared()
-            < 1e-10
-        {
+        if dir.normalize().cross(self.up.normalize_or_zero()).length_squared() < 1e-10 {
             return bad("up is parallel to the view direction (or zero)");
         }
         Ok(())
@@ -109,13 +101,10 @@ impl View {
         check_resolution(width, height)?;
         let view_from_world = look_at(camera.eye, camera.target, camera.up);
         let aspect = width as f32 / height as f32;
-        let clip_from_view =
-            reversed_z_infinite(camera.fov_y_deg.to_radians(), aspect, camera.near);
+        let clip_from_view = reversed_z_infinite(camera.fov_y_deg.to_radians(), aspect, camera.near);
         let clip_from_world = clip_from_view * view_from_world;
         if !clip_from_world.is_finite() {
-            return Err(CoreError::DegenerateCamera(
-                "view matrix is not finite".into(),
-            ));
+            return Err(CoreError::DegenerateCamera("view matrix is not finite".into()));
         }
         Ok(Self {
             camera,
@@ -176,12 +165,7 @@ impl View {
     /// rasterizer's snapping and rounding.
     pub fn frustum(&self, world_from_object: &Affine3A) -> Frustum {
         let margin = Vec2::new(4.0 / self.width as f32, 4.0 / self.height as f32);
-        Frustum::from_reversed_z(
-            &self.clip_from_object(world_from_object),
-            self.camera.far,
-            margin,
-            1e-3,
-        )
+        Frustum::from_reversed_z(&self.clip_from_object(world_from_object), self.camera.far, margin, 1e-3)
     }
 }
 
@@ -216,13 +200,7 @@ fn reversed_z_infinite(fov_y: f32, aspect: f32, near: f32) -> Mat4 {
 /// [`CoreError::BadResolution`] for a zero side, a side over [`MAX_RESOLUTION`], or more than
 /// [`MAX_PIXEL_COUNT`] pixels.
 pub fn check_resolution(width: u32, height: u32) -> Result<()> {
-    let bad = |reason: String| {
-        Err(CoreError::BadResolution {
-            width,
-            height,
-            reason,
-        })
-    };
+    let bad = |reason: String| Err(CoreError::BadResolution { width, height, reason });
     if width == 0 || height == 0 {
         return bad("zero width or height".into());
     }

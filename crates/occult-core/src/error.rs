@@ -41,9 +41,7 @@ pub enum CoreError {
     #[error("scene is empty: {0}")]
     EmptyScene(String),
     /// An instance refers to a node that does not exist (yet).
-    #[error(
-        "instance {instance_index} of group '{group}' refers to node {child}, which does not exist"
-    )]
+    #[error("instance {instance_index} of group '{group}' refers to node {child}, which does not exist")]
     UnknownNode {
         /// Group being built.
         group: String,

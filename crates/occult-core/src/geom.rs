@@ -119,11 +119,7 @@ impl Aabb {
         if self.is_empty() {
             return *self;
         }
-        Aabb::from_points(
-            self.corners()
-                .into_iter()
-                .map(|c| dst_from_src.transform_point3(c)),
-        )
+        Aabb::from_points(self.corners().into_iter().map(|c| dst_from_src.transform_point3(c)))
     }
 }
 
@@ -186,12 +182,7 @@ impl Frustum {
     /// `= near`, `w` = view distance), cut at view distance `far`, in object space.
     /// `margin_ndc` widens the side planes (in NDC units, `2/width` is one pixel) and
     /// `depth_margin` moves near and far outwards by that fraction.
-    pub fn from_reversed_z(
-        clip_from_object: &Mat4,
-        far: f32,
-        margin_ndc: glam::Vec2,
-        depth_margin: f32,
-    ) -> Self {
+    pub fn from_reversed_z(clip_from_object: &Mat4, far: f32, margin_ndc: glam::Vec2, depth_margin: f32) -> Self {
         let m = clip_from_object.transpose(); // rows of clip_from_object as columns
         let (r0, r1, r2, r3) = (m.x_axis, m.y_axis, m.z_axis, m.w_axis);
         let sx = 1.0 + margin_ndc.x;

@@ -153,10 +153,7 @@ mod tests {
     fn rejects_nan_and_out_of_range() {
         assert!(matches!(
             Mesh::new(vec![Vec3::new(f32::NAN, 0.0, 0.0)], vec![]),
-            Err(CoreError::NonFiniteVertex {
-                vertex_index: 0,
-                ..
-            })
+            Err(CoreError::NonFiniteVertex { vertex_index: 0, .. })
         ));
         assert!(matches!(
             Mesh::new(vec![Vec3::ZERO; 3], vec![[0, 1, 3]]),

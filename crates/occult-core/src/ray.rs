@@ -89,9 +89,7 @@ pub fn intersect_ray_triangle(ray: &Ray, p0: Vec3, p1: Vec3, p2: Vec3) -> Option
     let mut w = bx * ay - by * ax;
     // Woop §3: recompute in double precision when an edge function rounds to zero.
     if u == 0.0 || v == 0.0 || w == 0.0 {
-        let (ax, ay, bx, by, cx, cy) = (
-            ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64,
-        );
+        let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
         u = (cx * by - cy * bx) as f32;
         v = (ax * cy - ay * cx) as f32;
         w = (bx * ay - by * ax) as f32;
@@ -139,8 +137,7 @@ mod tests {
         for i in 0..1000 {
             let s = i as f32 / 1000.0;
             let r = Ray::new(Vec3::new(s, s, 1.0), Vec3::new(0.0, 0.0, -1.0));
-            let hit = intersect_ray_triangle(&r, a, b, c).is_some()
-                || intersect_ray_triangle(&r, a, c, d).is_some();
+            let hit = intersect_ray_triangle(&r, a, b, c).is_some() || intersect_ray_triangle(&r, a, c, d).is_some();
             assert!(hit, "ray at {s} fell through the shared edge");
         }
     }

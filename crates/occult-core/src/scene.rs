@@ -167,25 +167,21 @@ impl SceneBuilder {
     /// [`CoreError::UnknownNode`] for a child not yet added, [`CoreError::BadTransform`] for a
     /// non-finite or singular transform, [`CoreError::ItemOverflow`] past 2^64 items, and
     /// [`CoreError::EmptyScene`] if the chain below is deeper than 64 nodes.
-    pub fn add_group(
-        &mut self,
-        name: impl Into<String>,
-        instances: Vec<Instance>,
-    ) -> Result<NodeId> {
+    pub fn add_group(&mut self, name: impl Into<String>, instances: Vec<Instance>) -> Result<NodeId> {
         let name = name.into();
         let mut bounds = Aabb::EMPTY;
         let mut item_count = 0u64;
         let mut item_offsets = Vec::with_capacity(instances.len());
         let mut depth = 1;
         for (instance_index, inst) in instances.iter().enumerate() {
-            let child =
-                self.nodes
-                    .get(inst.child.index())
-                    .ok_or_else(|| CoreError::UnknownNode {
-                        group: name.clone(),
-                        instance_index,
-                        child: inst.child.0,
-                    })?;
+            let child = self
+                .nodes
+                .get(inst.child.index())
+                .ok_or_else(|| CoreError::UnknownNode {
+                    group: name.clone(),
+                    instance_index,
+                    child: inst.child.0,
+                })?;
             let t = &inst.parent_from_child;
             if !t.is_finite() || t.matrix3.determinant() == 0.0 {
                 return Err(CoreError::BadTransform {
@@ -243,10 +239,7 @@ impl SceneBuilder {
             });
         };
         if r.item_count == 0 {
-            return Err(CoreError::EmptyScene(format!(
-                "root '{}' holds no triangle",
-                r.name
-            )));
+            return Err(CoreError::EmptyScene(format!("root '{}' holds no triangle", r.name)));
         }
         Ok(Scene {
             nodes: self.nodes,
@@ -325,10 +318,7 @@ impl Scene {
 
     /// Calls `f(world_from_object, mesh_node, mesh, first_item)` for every mesh instance, in
     /// item order. Visits every instance: use only where brute force is meant.
-    pub fn for_each_mesh_instance<'s>(
-        &'s self,
-        mut f: impl FnMut(&Affine3A, NodeId, &'s Mesh, ItemId),
-    ) {
+    pub fn for_each_mesh_instance<'s>(&'s self, mut f: impl FnMut(&Affine3A, NodeId, &'s Mesh, ItemId)) {
         self.walk(self.root, &Affine3A::IDENTITY, 0, &mut f);
     }
 
@@ -345,12 +335,7 @@ impl Scene {
             NodeKind::Group(instances) => {
                 for (i, inst) in instances.iter().enumerate() {
                     let world_from_child = compose(world_from_node, &inst.parent_from_child);
-                    self.walk(
-                        inst.child,
-                        &world_from_child,
-                        base + node.item_offsets[i],
-                        f,
-                    );
+                    self.walk(inst.child, &world_from_child, base + node.item_offsets[i], f);
                 }
             }
         }
@@ -379,9 +364,7 @@ impl Scene {
                 NodeKind::Group(instances) => {
                     // The last instance whose range starts at or before `local` and is non-empty.
                     let i = node.item_offsets.partition_point(|&o| o <= local) - 1;
-                    let i = (0..=i)
-                        .rev()
-                        .find(|&j| self.node(instances[j].child).item_count > 0)?;
+                    let i = (0..=i).rev().find(|&j| self.node(instances[j].child).item_count > 0)?;
                     local -= node.item_offsets[i];
                     base += node.item_offsets[i];
                     world = compose(&world, &instances[i].parent_from_child);
@@ -399,10 +382,7 @@ impl Scene {
     pub fn flatten(&self, limit: u64) -> Result<Mesh> {
         let triangle_count = self.item_count();
         if triangle_count > limit {
-            return Err(CoreError::TooLargeToFlatten {
-                triangle_count,
-                limit,
-            });
+            return Err(CoreError::TooLargeToFlatten { triangle_count, limit });
         }
         let any_color = self
             .nodes
@@ -413,17 +393,11 @@ impl Scene {
         let mut colors = Vec::new();
         self.for_each_mesh_instance(|world_from_object, _, mesh, _| {
             let first = positions.len() as u32;
-            positions.extend(
-                mesh.positions()
-                    .iter()
-                    .map(|&p| world_from_object.transform_point3(p)),
-            );
+            positions.extend(mesh.positions().iter().map(|&p| world_from_object.transform_point3(p)));
             triangles.extend(mesh.triangles().iter().map(|t| t.map(|i| i + first)));
             if any_color {
-                colors.extend(
-                    (0..mesh.triangle_count())
-                        .map(|i| mesh.triangle_color(i).unwrap_or([200, 200, 200, 255])),
-                );
+                colors
+                    .extend((0..mesh.triangle_count()).map(|i| mesh.triangle_color(i).unwrap_or([200, 200, 200, 255])));
             }
         });
         let mesh = Mesh::new(positions, triangles)?;
@@ -494,9 +468,7 @@ mod tests {
     #[test]
     fn empty_and_bad_scenes_are_errors() {
         let mut b = SceneBuilder::new();
-        let m = b
-            .add_mesh("empty", Mesh::new(vec![], vec![]).unwrap())
-            .unwrap();
+        let m = b.add_mesh("empty", Mesh::new(vec![], vec![]).unwrap()).unwrap();
         assert!(matches!(b.build(m), Err(CoreError::EmptyScene(_))));
         let mut b = SceneBuilder::new();
         assert!(matches!(

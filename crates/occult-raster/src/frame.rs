@@ -41,6 +41,8 @@ impl Frame {
         color
             .try_reserve_exact(n)
             .map_err(|_| RasterError::OutOfMemory(bytes))?;
+        advise_huge_pages(depth.as_mut_ptr() as *mut u8, n * 4);
+        advise_huge_pages(items.as_mut_ptr() as *mut u8, n * 8);
         depth.resize(n, CLEAR_DEPTH);
         items.resize(n, NO_ITEM);
         color.resize(n, [0, 0, 0, 0]);
@@ -89,12 +91,7 @@ impl Frame {
     }
     /// The distinct items visible in the frame, sorted: the exactly visible set.
     pub fn visible_items(&self) -> Vec<ItemId> {
-        let mut v: Vec<ItemId> = self
-            .items
-            .iter()
-            .copied()
-            .filter(|&i| i != NO_ITEM)
-            .collect();
+        let mut v: Vec<ItemId> = self.items.iter().copied().filter(|&i| i != NO_ITEM).collect();
         v.sort_unstable();
         v.dedup();
         v
@@ -120,11 +117,7 @@ impl Frame {
             (other.width, other.height),
             "frame sizes differ"
         );
-        self.items
-            .iter()
-            .zip(&other.items)
-            .filter(|(a, b)| a != b)
-            .count() as u64
+        self.items.iter().zip(&other.items).filter(|(a, b)| a != b).count() as u64
     }
     /// Peak signal-to-noise ratio of this frame's color against `reference`'s, in dB over RGB;
     /// infinite when identical.
@@ -166,12 +159,7 @@ impl Frame {
     /// Depth visualised as grey levels: near white, far dark, cleared pixels black. Depth is
     /// mapped logarithmically between the frame's nearest and farthest drawn depth.
     pub fn depth_image(&self) -> image::GrayImage {
-        let drawn = || {
-            self.depth
-                .iter()
-                .copied()
-                .filter(|&d| d > CLEAR_DEPTH && d.is_finite())
-        };
+        let drawn = || self.depth.iter().copied().filter(|&d| d > CLEAR_DEPTH && d.is_finite());
         let lo = drawn().fold(f32::INFINITY, f32::min).max(1e-12);
         let hi = drawn().fold(0.0f32, f32::max).max(lo);
         let (llo, lhi) = (lo.ln(), hi.ln());
@@ -205,15 +193,30 @@ impl Frame {
     }
 }
 
+/// Asks the kernel to back a large buffer with huge pages: a tile of a row-major frame spans
+/// 64 rows, each in another 4 KiB page, and the page walks would otherwise dominate the scan.
+fn advise_huge_pages(ptr: *mut u8, len: usize) {
+    #[cfg(target_os = "linux")]
+    {
+        const HUGE: usize = 2 << 20;
+        let start = (ptr as usize).div_ceil(HUGE) * HUGE;
+        let end = (ptr as usize + len) / HUGE * HUGE;
+        if end > start {
+            // SAFETY: the range lies inside an allocation this frame owns; MADV_HUGEPAGE only
+            // changes how the kernel backs it, never its contents, and failure is harmless.
+            unsafe {
+                libc::madvise(start as *mut libc::c_void, end - start, libc::MADV_HUGEPAGE);
+            }
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = (ptr, len);
+}
+
 /// DESIGN invariant 1: a pixel keeps the fragment nearest by depth, ties broken by the smaller
 /// item id, so the result does not depend on submission order or thread count.
 #[inline(always)]
-pub fn keep_fragment(
-    stored_depth: &mut f32,
-    stored_item: &mut ItemId,
-    depth: f32,
-    item: ItemId,
-) -> bool {
+pub fn keep_fragment(stored_depth: &mut f32, stored_item: &mut ItemId, depth: f32, item: ItemId) -> bool {
     if depth > *stored_depth || (depth == *stored_depth && item < *stored_item) {
         *stored_depth = depth;
         *stored_item = item;

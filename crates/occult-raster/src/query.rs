@@ -36,11 +36,7 @@ pub fn query_rect(frame: &Frame, rect: PixelRect, nearest: f32) -> u64 {
     if rect.x0 >= x1 || rect.y0 >= y1 {
         return 0;
     }
-    let nearest = if nearest.is_nan() {
-        f32::INFINITY
-    } else {
-        nearest
-    };
+    let nearest = if nearest.is_nan() { f32::INFINITY } else { nearest };
     let w = frame.width() as usize;
     let mut count = 0;
     for y in rect.y0..y1 {
@@ -109,12 +105,7 @@ pub fn query_box(frame: &Frame, view: &View, clip_from_object: &Mat4, aabb: &Aab
         .collect();
     let hull = convex_hull(pts);
     let margin = 1.0 / 64.0;
-    let (mut minx, mut maxx, mut miny, mut maxy) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-    );
+    let (mut minx, mut maxx, mut miny, mut maxy) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
     for &(x, y) in &hull {
         minx = minx.min(x);
         maxx = maxx.max(x);
@@ -168,9 +159,7 @@ fn convex_hull(mut p: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
     if p.len() < 3 {
         return p;
     }
-    let cross = |o: (f64, f64), a: (f64, f64), b: (f64, f64)| {
-        (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0)
-    };
+    let cross = |o: (f64, f64), a: (f64, f64), b: (f64, f64)| (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0);
     let mut hull: Vec<(f64, f64)> = Vec::with_capacity(2 * p.len());
     for pass in 0..2 {
         let start = hull.len();
@@ -180,9 +169,7 @@ fn convex_hull(mut p: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
             Box::new(p.iter().rev())
         };
         for &q in iter {
-            while hull.len() >= start + 2
-                && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0
-            {
+            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0 {
                 hull.pop();
             }
             hull.push(q);
@@ -198,13 +185,7 @@ mod tests {
 
     #[test]
     fn hull_orientation_puts_interior_on_positive_side() {
-        let h = convex_hull(vec![
-            (0.0, 0.0),
-            (4.0, 0.0),
-            (4.0, 4.0),
-            (0.0, 4.0),
-            (2.0, 2.0),
-        ]);
+        let h = convex_hull(vec![(0.0, 0.0), (4.0, 0.0), (4.0, 4.0), (0.0, 4.0), (2.0, 2.0)]);
         assert_eq!(h.len(), 4);
         for i in 0..h.len() {
             let (a, b) = (h[i], h[(i + 1) % h.len()]);

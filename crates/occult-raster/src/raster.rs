@@ -29,7 +29,7 @@ const HALF: i64 = SUB / 2;
 /// stay below 2^24 and edge products below 2^50.
 const GUARD_PIXELS: f32 = 32768.0;
 /// Triangles per setup chunk: a chunk's setup records (~100 B each) stay in L2/L3.
-pub const CHUNK_TRIANGLES: usize = 8 * 1024;
+pub const CHUNK_TRIANGLES: usize = 2 * 1024;
 
 const OUT_LEFT: u32 = 1;
 const OUT_RIGHT: u32 = 2;
@@ -45,7 +45,8 @@ const NOT_FINITE: u32 = 64;
 pub struct RasterConfig {
     /// Worker threads; 0 uses rayon's global pool (all cores).
     pub threads: usize,
-    /// Tile side in pixels (8..=1024): smaller balances load better, larger bins less.
+    /// Tile side in pixels, a power of two in 8..=1024: smaller balances load better, larger
+    /// bins less.
     pub tile_size: u32,
     /// Skip back faces (clockwise on screen). Off by default: open meshes stay visible from
     /// behind. Every renderer compared against another must use the same setting.
@@ -179,6 +180,7 @@ struct Viewport {
     guard_y: f32,
     far_depth: f32,
     tile_size: u32,
+    tile_shift: u32,
     tiles_x: u32,
     tiles_y: u32,
     cull_backfaces: bool,
@@ -197,6 +199,7 @@ impl Viewport {
             guard_y: 2.0 * GUARD_PIXELS / height as f32 - 1.0,
             far_depth: view.far_depth(),
             tile_size,
+            tile_shift: tile_size.trailing_zeros(),
             tiles_x: width.div_ceil(tile_size),
             tiles_y: height.div_ceil(tile_size),
             cull_backfaces: config.cull_backfaces,
@@ -292,12 +295,12 @@ impl Rasterizer {
     /// A rasterizer with its own pool of `config.threads` threads (or rayon's global pool).
     ///
     /// # Errors
-    /// [`crate::RasterError::BadConfig`] for a tile size outside 8..=1024 or a thread pool
+    /// [`crate::RasterError::BadConfig`] for a tile size that is not a power of two in 8..=1024, or a thread pool
     /// that cannot be started.
     pub fn new(config: RasterConfig) -> Result<Self, crate::RasterError> {
-        if !(8..=1024).contains(&config.tile_size) {
+        if !(8..=1024).contains(&config.tile_size) || !config.tile_size.is_power_of_two() {
             return Err(crate::RasterError::BadConfig(format!(
-                "tile size {} is not in 8..=1024",
+                "tile size {} is not a power of two in 8..=1024",
                 config.tile_size
             )));
         }
@@ -370,13 +373,7 @@ impl Rasterizer {
     ///
     /// # Panics
     /// If the frame's size differs from the view's (a programmer error).
-    pub fn draw(
-        &mut self,
-        view: &View,
-        frame: &mut Frame,
-        draws: &[Draw<'_>],
-        mode: RasterMode,
-    ) -> RasterCounts {
+    pub fn draw(&mut self, view: &View, frame: &mut Frame, draws: &[Draw<'_>], mode: RasterMode) -> RasterCounts {
         assert_eq!(
             (frame.width(), frame.height()),
             (view.width(), view.height()),
@@ -392,13 +389,7 @@ impl Rasterizer {
         counts
     }
 
-    fn draw_in_pool(
-        &mut self,
-        vp: &Viewport,
-        frame: &mut Frame,
-        draws: &[Draw<'_>],
-        mode: RasterMode,
-    ) -> RasterCounts {
+    fn draw_in_pool(&mut self, vp: &Viewport, frame: &mut Frame, draws: &[Draw<'_>], mode: RasterMode) -> RasterCounts {
         let mut counts = RasterCounts::default();
         // Pre-transform the vertices of whole-mesh draws, in parallel.
         let mut vertex_offsets = Vec::with_capacity(draws.len());
@@ -414,10 +405,7 @@ impl Rasterizer {
         {
             let mut rest = &mut self.vertices[..];
             let mut jobs = Vec::new();
-            for d in draws
-                .iter()
-                .filter(|d| matches!(d.triangles, DrawTriangles::All))
-            {
+            for d in draws.iter().filter(|d| matches!(d.triangles, DrawTriangles::All)) {
                 let (head, tail) = rest.split_at_mut(d.mesh.positions().len());
                 rest = tail;
                 jobs.push((d, head));
@@ -442,10 +430,9 @@ impl Rasterizer {
         counts.triangles_submitted = total as u64;
 
         let tile_count = (vp.tiles_x * vp.tiles_y) as usize;
-        let chunks_per_round = rayon::current_num_threads().max(1) * 2;
+        let chunks_per_round = rayon::current_num_threads().max(1) * 32;
         if self.chunks.len() < chunks_per_round {
-            self.chunks
-                .resize_with(chunks_per_round, ChunkBins::default);
+            self.chunks.resize_with(chunks_per_round, ChunkBins::default);
         }
         for ch in &mut self.chunks {
             ch.bins.resize_with(tile_count, Vec::new);
@@ -458,31 +445,17 @@ impl Rasterizer {
             let round_end = (start + chunks_per_round * CHUNK_TRIANGLES).min(total);
             let used = (round_end - start).div_ceil(CHUNK_TRIANGLES);
             // Phase 1: setup and binning.
-            self.chunks[..used]
-                .par_iter_mut()
-                .enumerate()
-                .for_each(|(ci, ch)| {
-                    let lo = start + ci * CHUNK_TRIANGLES;
-                    let hi = (lo + CHUNK_TRIANGLES).min(round_end);
-                    ch.records.clear();
-                    for b in &mut ch.bins {
-                        b.clear();
-                    }
-                    ch.rasterized = 0;
-                    isa.setup_range(
-                        vp,
-                        draws,
-                        &draw_starts,
-                        &vertex_offsets,
-                        vertices,
-                        lo..hi,
-                        ch,
-                    );
-                });
-            counts.triangles_rasterized += self.chunks[..used]
-                .iter()
-                .map(|c| c.rasterized)
-                .sum::<u64>();
+            self.chunks[..used].par_iter_mut().enumerate().for_each(|(ci, ch)| {
+                let lo = start + ci * CHUNK_TRIANGLES;
+                let hi = (lo + CHUNK_TRIANGLES).min(round_end);
+                ch.records.clear();
+                for b in &mut ch.bins {
+                    b.clear();
+                }
+                ch.rasterized = 0;
+                isa.setup_range(vp, draws, &draw_starts, &vertex_offsets, vertices, lo..hi, ch);
+            });
+            counts.triangles_rasterized += self.chunks[..used].iter().map(|c| c.rasterized).sum::<u64>();
             // Phase 2: rasterize tile by tile.
             let chunks = &self.chunks[..used];
             let target = &target;
@@ -567,14 +540,10 @@ impl Isa {
         out: &mut ChunkBins,
     ) {
         match self {
-            Isa::Baseline => {
-                setup_range(vp, draws, draw_starts, vertex_offsets, vertices, range, out)
-            }
+            Isa::Baseline => setup_range(vp, draws, draw_starts, vertex_offsets, vertices, range, out),
             // SAFETY: `select` checked that the processor has these features.
             #[cfg(target_arch = "x86_64")]
-            Isa::Avx2 => unsafe {
-                setup_range_avx2(vp, draws, draw_starts, vertex_offsets, vertices, range, out)
-            },
+            Isa::Avx2 => unsafe { setup_range_avx2(vp, draws, draw_starts, vertex_offsets, vertices, range, out) },
         }
     }
 
@@ -645,8 +614,7 @@ unsafe fn scan_tile<const AVX2: bool>(
     for ch in chunks {
         for &r in &ch.bins[tile] {
             // SAFETY: forwarded.
-            written +=
-                unsafe { scan_triangle::<AVX2>(vp, &ch.records[r as usize], rect, target, mode) };
+            written += unsafe { scan_triangle::<AVX2>(vp, &ch.records[r as usize], rect, target, mode) };
         }
     }
     written
@@ -675,8 +643,7 @@ fn setup_range(
         let tris = mesh.triangles();
         match &draw.triangles {
             DrawTriangles::All => {
-                let verts =
-                    &vertices[vertex_offsets[d]..vertex_offsets[d] + mesh.positions().len()];
+                let verts = &vertices[vertex_offsets[d]..vertex_offsets[d] + mesh.positions().len()];
                 for j in (t - draw_starts[d])..(end - draw_starts[d]) {
                     let [i0, i1, i2] = tris[j];
                     let v = [verts[i0 as usize], verts[i1 as usize], verts[i2 as usize]];
@@ -705,7 +672,13 @@ fn setup_range(
 }
 
 #[inline(always)]
-fn setup_triangle(vp: &Viewport, v: [ProjVertex; 3], clip: impl FnOnce() -> [Vec4; 3], item: ItemId, out: &mut ChunkBins) {
+fn setup_triangle(
+    vp: &Viewport,
+    v: [ProjVertex; 3],
+    clip: impl FnOnce() -> [Vec4; 3],
+    item: ItemId,
+    out: &mut ChunkBins,
+) {
     let or = v[0].code | v[1].code | v[2].code;
     if v[0].code & v[1].code & v[2].code & OUT_OF_VIEW != 0 || or & NOT_FINITE != 0 {
         return;
@@ -867,8 +840,8 @@ fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut
         zmax,
         item,
     });
-    let ts = vp.tile_size as i64;
-    let (tx0, tx1, ty0, ty1) = (px0 / ts, px1 / ts, py0 / ts, py1 / ts);
+    let sh = vp.tile_shift;
+    let (tx0, tx1, ty0, ty1) = (px0 >> sh, px1 >> sh, py0 >> sh, py1 >> sh);
     if tx0 == tx1 && ty0 == ty1 {
         out.bins[(ty0 * vp.tiles_x as i64 + tx0) as usize].push(r);
         return;
@@ -882,6 +855,8 @@ fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut
 
 /// Side of the block scanned without branches for small triangles.
 const SMALL: u32 = 8;
+/// Largest box side whose edge functions fit i32 lanes: |E| <= (64·√2·256)² < 2^31.
+const MASKED: u32 = 64;
 
 /// Scans a box of at most `SMALL × SMALL` pixels: the inside mask of each row is formed
 /// without branches in 32-bit lanes (tiny triangles make per-pixel branches mispredict), then
@@ -980,20 +955,62 @@ mod simd {
 /// Writes a covered fragment under the visibility rule, without branching on the outcome.
 #[inline(always)]
 fn write_fragment(d: &mut f32, it: &mut ItemId, z: f32, item: ItemId, mode: RasterMode) -> bool {
+    let stored = *d;
+    // Same rule as `keep_fragment`. The stored item is read only on a depth tie (rare and
+    // predictable), and the writes go to a scratch slot when the fragment loses, so neither
+    // an unpredictable branch nor a load of the item buffer (a cache miss on first touch)
+    // stands in the way.
+    let keep = if z == stored {
+        mode == RasterMode::Full && item < *it
+    } else {
+        z > stored
+    };
+    let mut scratch_depth = 0.0f32;
+    let mut scratch_item: ItemId = 0;
+    let d_out: &mut f32 = if keep { d } else { &mut scratch_depth };
+    *d_out = z;
+    if mode == RasterMode::Full {
+        let it_out: &mut ItemId = if keep { it } else { &mut scratch_item };
+        *it_out = item;
+    }
+    std::hint::black_box((scratch_depth, scratch_item));
+    keep
+}
+
+/// Writes the covered pixels `xa..xa + depth.len()` of one row: no coverage test left, so
+/// the loop is branch-free and the compiler vectorizes it (8 lanes where AVX2 is enabled).
+#[inline(always)]
+fn write_span(
+    vp: &Viewport,
+    t: &TriSetup,
+    row_depth: f32,
+    xa: u32,
+    depth: &mut [f32],
+    items: &mut [ItemId],
+    mode: RasterMode,
+) -> u64 {
+    let mut written = 0u32;
+    let far = vp.far_depth;
     match mode {
         RasterMode::Full => {
-            // Same rule as `keep_fragment`, as a select: the depth test is unpredictable.
-            let keep = (z > *d) | ((z == *d) & (item < *it));
-            *d = if keep { z } else { *d };
-            *it = if keep { item } else { *it };
-            keep
+            for (i, (d, it)) in depth.iter_mut().zip(items.iter_mut()).enumerate() {
+                let z = depth_at(t, row_depth, xa + i as u32);
+                let keep = (z >= far) & ((z > *d) | ((z == *d) & (t.item < *it)));
+                *d = if keep { z } else { *d };
+                *it = if keep { t.item } else { *it };
+                written += keep as u32;
+            }
         }
         RasterMode::DepthOnly => {
-            let keep = z > *d;
-            *d = if keep { z } else { *d };
-            keep
+            for (i, d) in depth.iter_mut().enumerate() {
+                let z = depth_at(t, row_depth, xa + i as u32);
+                let keep = (z >= far) & (z > *d);
+                *d = if keep { z } else { *d };
+                written += keep as u32;
+            }
         }
     }
+    written as u64
 }
 
 /// Depth of a triangle at the centre of pixel `(x, y)`: the one formula every path uses.
@@ -1029,50 +1046,82 @@ unsafe fn scan_triangle<const AVX2: bool>(
     }
     let dx = (x0 - t.px0 as u32) as i64;
     let dy = (y0 - t.py0 as u32) as i64;
-    let step_x = [
-        t.a[0] as i64 * SUB,
-        t.a[1] as i64 * SUB,
-        t.a[2] as i64 * SUB,
-    ];
-    let step_y = [
-        t.b[0] as i64 * SUB,
-        t.b[1] as i64 * SUB,
-        t.b[2] as i64 * SUB,
-    ];
+    let step_x = [t.a[0] as i64 * SUB, t.a[1] as i64 * SUB, t.a[2] as i64 * SUB];
+    let step_y = [t.b[0] as i64 * SUB, t.b[1] as i64 * SUB, t.b[2] as i64 * SUB];
     let mut row = [
         t.e[0] + step_x[0] * dx + step_y[0] * dy,
         t.e[1] + step_x[1] * dx + step_y[1] * dy,
         t.e[2] + step_x[2] * dx + step_y[2] * dy,
     ];
-    if x1 - x0 < SMALL
-        && y1 - y0 < SMALL
-        && t.px1 - t.px0 < SMALL as u16
-        && t.py1 - t.py0 < SMALL as u16
-    {
+    if x1 - x0 < SMALL && y1 - y0 < SMALL && t.px1 - t.px0 < SMALL as u16 && t.py1 - t.py0 < SMALL as u16 {
         // SAFETY: forwarded from the caller.
-        return unsafe {
-            scan_small::<AVX2>(vp, t, [x0, y0, x1, y1], row, step_x, step_y, target, mode)
-        };
+        return unsafe { scan_small::<AVX2>(vp, t, [x0, y0, x1, y1], row, step_x, step_y, target, mode) };
     }
     let mut written = 0;
+    let width = x1 - x0 + 1;
+    // Boxes up to MASKED pixels keep edge functions within i32 (see `scan_small`): find each
+    // row's span from 8-pixel inside masks. Larger ones solve for the span with divisions,
+    // which only pay off on long rows.
+    let masked = t.px1 - t.px0 < MASKED as u16 && t.py1 - t.py0 < MASKED as u16;
+    let sx = [step_x[0] as i32, step_x[1] as i32, step_x[2] as i32];
     for y in y0..=y1 {
-        let row_depth = t.z0 + t.dzdy * ((y as f32 + 0.5) - t.y0);
-        let mut e = row;
-        let base = y as usize * target.width;
-        for x in x0..=x1 {
-            if (e[0] | e[1] | e[2]) >= 0 {
-                let z = depth_at(t, row_depth, x);
-                if z >= vp.far_depth {
-                    let i = base + x as usize;
-                    // SAFETY: (x, y) lies in `rect`, inside the frame, owned by this task.
-                    let (d, it) = unsafe { (&mut *target.depth.add(i), &mut *target.items.add(i)) };
-                    let kept = write_fragment(d, it, z, t.item, mode);
-                    written += kept as u64;
+        let (mut lo, mut hi) = (0i64, width as i64 - 1);
+        if masked {
+            // The covered pixels of a row of a triangle are contiguous.
+            let (mut first, mut last) = (i64::MAX, -1i64);
+            let mut base = 0u32;
+            while base < width {
+                let r = [
+                    row[0] as i32 + sx[0] * base as i32,
+                    row[1] as i32 + sx[1] * base as i32,
+                    row[2] as i32 + sx[2] * base as i32,
+                ];
+                let bits = if AVX2 {
+                    // SAFETY: the AVX2 instantiation only runs where `Isa::select` found AVX2.
+                    unsafe { simd::row_mask_avx2(r, sx) }
+                } else {
+                    row_mask(r, sx)
+                };
+                let bits = bits
+                    & if width - base >= SMALL {
+                        0xff
+                    } else {
+                        (1u64 << (width - base)) - 1
+                    };
+                if bits != 0 {
+                    first = first.min(base as i64 + bits.trailing_zeros() as i64);
+                    last = base as i64 + 63 - bits.leading_zeros() as i64;
+                } else if last >= 0 {
+                    break;
+                }
+                base += SMALL;
+            }
+            lo = first;
+            hi = last;
+        } else {
+            for k in 0..3 {
+                let (e, s) = (row[k], step_x[k]);
+                if s > 0 {
+                    lo = lo.max(if e >= 0 { 0 } else { (-e + s - 1) / s });
+                } else if s < 0 {
+                    hi = hi.min(if e < 0 { -1 } else { e / -s });
+                } else if e < 0 {
+                    hi = -1;
                 }
             }
-            e[0] += step_x[0];
-            e[1] += step_x[1];
-            e[2] += step_x[2];
+        }
+        if lo <= hi {
+            let row_depth = t.z0 + t.dzdy * ((y as f32 + 0.5) - t.y0);
+            let (xa, xb) = (x0 + lo as u32, x0 + hi as u32);
+            let base = y as usize * target.width;
+            // SAFETY: the span lies in `rect` (inside the frame), owned by this task.
+            let (depth, items) = unsafe {
+                (
+                    std::slice::from_raw_parts_mut(target.depth.add(base + xa as usize), (xb - xa + 1) as usize),
+                    std::slice::from_raw_parts_mut(target.items.add(base + xa as usize), (xb - xa + 1) as usize),
+                )
+            };
+            written += write_span(vp, t, row_depth, xa, depth, items, mode);
         }
         row[0] += step_y[0];
         row[1] += step_y[1];

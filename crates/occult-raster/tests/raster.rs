@@ -87,9 +87,7 @@ fn watertight_grid_covers_each_pixel_exactly_once() {
         }
         // The grid spans beyond the screen: every pixel is covered once, none twice.
         let mut histogram = [0; 4];
-        coverage
-            .iter()
-            .for_each(|&c| histogram[(c as usize).min(3)] += 1);
+        coverage.iter().for_each(|&c| histogram[(c as usize).min(3)] += 1);
         assert_eq!(
             histogram,
             [0, 64 * 64, 0, 0],
@@ -106,11 +104,7 @@ fn closed_sphere_front_faces_cover_once_with_backface_culling() {
         let th = std::f32::consts::PI * i as f32 / n as f32;
         for j in 0..m {
             let ph = 2.0 * std::f32::consts::PI * j as f32 / m as f32;
-            p.push(Vec3::new(
-                th.sin() * ph.cos(),
-                th.cos(),
-                -th.sin() * ph.sin(),
-            ));
+            p.push(Vec3::new(th.sin() * ph.cos(), th.cos(), -th.sin() * ph.sin()));
         }
     }
     p.push(-Vec3::Y);
@@ -127,12 +121,7 @@ fn closed_sphere_front_faces_cover_once_with_backface_culling() {
         }
     }
     let mesh = Mesh::new(p, t).unwrap();
-    let view = View::new(
-        Camera::look_at(Vec3::new(0.3, 0.4, 3.0), Vec3::ZERO),
-        64,
-        64,
-    )
-    .unwrap();
+    let view = View::new(Camera::look_at(Vec3::new(0.3, 0.4, 3.0), Vec3::ZERO), 64, 64).unwrap();
     let mut culled = Rasterizer::new(RasterConfig {
         cull_backfaces: true,
         ..RasterConfig::default()
@@ -180,9 +169,7 @@ fn soup(seed: u64, count: usize) -> Mesh {
             );
         }
     }
-    let t = (0..count as u32)
-        .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
-        .collect();
+    let t = (0..count as u32).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
     Mesh::new(p, t).unwrap()
 }
 
@@ -302,17 +289,11 @@ fn behind_camera_and_beyond_far_draw_nothing() {
     let mesh = soup(1, 500);
     let cam = Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::new(0.0, 0.0, 20.0));
     let view = View::new(cam, 64, 64).unwrap();
-    assert_eq!(
-        draw_all(&mut raster(1, 64), &view, &mesh).covered_pixel_count(),
-        0
-    );
+    assert_eq!(draw_all(&mut raster(1, 64), &view, &mesh).covered_pixel_count(), 0);
     let mut cam = Camera::look_at(Vec3::new(0.0, 0.0, 100.0), Vec3::ZERO);
     cam.far = 50.0;
     let view = View::new(cam, 64, 64).unwrap();
-    assert_eq!(
-        draw_all(&mut raster(1, 64), &view, &mesh).covered_pixel_count(),
-        0
-    );
+    assert_eq!(draw_all(&mut raster(1, 64), &view, &mesh).covered_pixel_count(), 0);
 }
 
 #[test]
@@ -374,8 +355,7 @@ fn query_box_is_conservative() {
                 }
                 p.push(c + e * q);
             }
-            let inner =
-                Mesh::new(p, (0..10).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect()).unwrap();
+            let inner = Mesh::new(p, (0..10).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect()).unwrap();
             let mut f = base.clone();
             let d = Draw {
                 mesh: &inner,
@@ -386,12 +366,7 @@ fn query_box_is_conservative() {
             let written = raster(1, 32)
                 .draw(&view, &mut f, &[d], RasterMode::Full)
                 .fragments_written;
-            let samples = query_box(
-                &base,
-                &view,
-                &view.clip_from_object(&Affine3A::IDENTITY),
-                &b,
-            );
+            let samples = query_box(&base, &view, &view.clip_from_object(&Affine3A::IDENTITY), &b);
             if written > 0 {
                 assert!(
                     samples > 0,

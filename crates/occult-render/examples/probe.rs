@@ -5,7 +5,9 @@ use std::sync::Arc;
 use std::time::Instant;
 
 fn terrain(g: u32) -> Mesh {
-    let h = |x: f32, z: f32| 6.0 * (0.07 * x).sin() * (0.05 * z).cos() + 2.0 * (0.31 * x + 0.17 * z).sin() + 0.7 * (1.3 * x - 0.9 * z).cos();
+    let h = |x: f32, z: f32| {
+        6.0 * (0.07 * x).sin() * (0.05 * z).cos() + 2.0 * (0.31 * x + 0.17 * z).sin() + 0.7 * (1.3 * x - 0.9 * z).cos()
+    };
     let mut p = Vec::new();
     for j in 0..=g {
         for i in 0..=g {
@@ -33,16 +35,30 @@ fn main() {
     let scene = Arc::new(Scene::from_mesh("terrain", mesh).unwrap());
     let cam = Camera::look_at(Vec3::new(0.0, 25.0, -110.0), Vec3::ZERO);
     let view = View::new(cam, 1920, 1080).unwrap();
-    let opts = RenderOptions { raster: RasterConfig { threads, ..Default::default() } };
+    let opts = RenderOptions {
+        raster: RasterConfig {
+            threads,
+            ..Default::default()
+        },
+    };
     let mut r = Algorithm::Zbuffer.build(scene.clone(), &opts).unwrap();
     let mut f = Frame::new(1920, 1080).unwrap();
     let s = r.render(&view, &mut f).unwrap();
-    println!("covered {:.1}% rasterized {} frags {}", f.covered_pixel_count() as f64 / (1920.0 * 1080.0) * 100.0, s.triangles_rasterized, s.fragments_written);
+    println!(
+        "covered {:.1}% rasterized {} frags {}",
+        f.covered_pixel_count() as f64 / (1920.0 * 1080.0) * 100.0,
+        s.triangles_rasterized,
+        s.fragments_written
+    );
     let mut best = f64::MAX;
     for _ in 0..iters {
         let t = Instant::now();
         r.render(&view, &mut f).unwrap();
         best = best.min(t.elapsed().as_secs_f64());
     }
-    println!("threads {threads}: best {:.2} ms, {:.1} Mtri/s", best * 1e3, 1048352.0 / best / 1e6);
+    println!(
+        "threads {threads}: best {:.2} ms, {:.1} Mtri/s",
+        best * 1e3,
+        1048352.0 / best / 1e6
+    );
 }

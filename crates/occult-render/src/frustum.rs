@@ -31,7 +31,10 @@ pub struct FrustumOptions {
 
 impl Default for FrustumOptions {
     fn default() -> Self {
-        Self { mesh_leaf_size: 256, group_leaf_size: 4 }
+        Self {
+            mesh_leaf_size: 256,
+            group_leaf_size: 4,
+        }
     }
 }
 
@@ -58,7 +61,9 @@ impl FrustumCulling {
     /// [`RenderError::BadParameter`] for a zero leaf size; raster configuration errors.
     pub fn with_options(scene: Arc<Scene>, options: &RenderOptions, fo: &FrustumOptions) -> Result<Self> {
         if fo.mesh_leaf_size == 0 || fo.group_leaf_size == 0 {
-            return Err(RenderError::BadParameter("frustum: leaf sizes must be at least 1".into()));
+            return Err(RenderError::BadParameter(
+                "frustum: leaf sizes must be at least 1".into(),
+            ));
         }
         let raster = Rasterizer::new(options.raster.clone())?;
         let hierarchies = raster.install(|| {
@@ -84,7 +89,11 @@ impl FrustumCulling {
                 })
                 .collect()
         });
-        Ok(Self { scene, raster, hierarchies })
+        Ok(Self {
+            scene,
+            raster,
+            hierarchies,
+        })
     }
 }
 
@@ -104,7 +113,11 @@ impl<'a> Walk<'a> {
         let frustum = self.view.frustum(world_from_node);
         let test = |stats: &mut FrameStats, b: &occult_core::Aabb| -> Containment {
             stats.boxes_tested += 1;
-            let c = if b.is_empty() { Containment::Outside } else { frustum.classify_aabb(b) };
+            let c = if b.is_empty() {
+                Containment::Outside
+            } else {
+                frustum.classify_aabb(b)
+            };
             if c == Containment::Outside {
                 stats.boxes_culled += 1;
             }
@@ -126,7 +139,12 @@ impl<'a> Walk<'a> {
                 let bvh = match (&self.hierarchies[id.index()], inside) {
                     (Some(bvh), false) => bvh,
                     _ => {
-                        self.draws.push(Draw { mesh, triangles: DrawTriangles::All, clip_from_object, first_item });
+                        self.draws.push(Draw {
+                            mesh,
+                            triangles: DrawTriangles::All,
+                            clip_from_object,
+                            first_item,
+                        });
                         return;
                     }
                 };
@@ -141,7 +159,12 @@ impl<'a> Walk<'a> {
                         };
                     if inside || bn.is_leaf() {
                         let list = &bvh.primitive_indices()[bn.range()];
-                        self.draws.push(Draw { mesh, triangles: DrawTriangles::List(list), clip_from_object, first_item });
+                        self.draws.push(Draw {
+                            mesh,
+                            triangles: DrawTriangles::List(list),
+                            clip_from_object,
+                            first_item,
+                        });
                     } else {
                         stack.push((bn.second_child, false));
                         stack.push((n + 1, false));
@@ -196,7 +219,13 @@ impl Renderer for FrustumCulling {
         self.raster.clear(frame);
         let clear = start.elapsed();
         let t = Instant::now();
-        let mut walk = Walk { scene: &self.scene, hierarchies: &self.hierarchies, view, draws: Vec::new(), stats: FrameStats::default() };
+        let mut walk = Walk {
+            scene: &self.scene,
+            hierarchies: &self.hierarchies,
+            view,
+            draws: Vec::new(),
+            stats: FrameStats::default(),
+        };
         walk.node(self.scene.root(), &Affine3A::IDENTITY, 0, false);
         let Walk { draws, mut stats, .. } = walk;
         stats.phases.add(Phase::Clear, clear);

@@ -41,7 +41,10 @@ impl PhaseTimes {
     }
     /// Time of `phase` (zero if never added).
     pub fn get(&self, phase: Phase) -> Duration {
-        self.0.iter().find(|(p, _)| *p == phase).map_or(Duration::ZERO, |(_, t)| *t)
+        self.0
+            .iter()
+            .find(|(p, _)| *p == phase)
+            .map_or(Duration::ZERO, |(_, t)| *t)
     }
     /// Adds every phase of `other`.
     pub fn merge(&mut self, other: &PhaseTimes) {

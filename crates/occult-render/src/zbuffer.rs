@@ -35,7 +35,10 @@ impl ZBuffer {
                 scene.item_count()
             )));
         }
-        Ok(Self { scene, raster: Rasterizer::new(options.raster.clone())? })
+        Ok(Self {
+            scene,
+            raster: Rasterizer::new(options.raster.clone())?,
+        })
     }
 }
 
@@ -52,16 +55,17 @@ impl Renderer for ZBuffer {
         stats.phases.add(Phase::Clear, start.elapsed());
         let t = Instant::now();
         let mut draws = Vec::new();
-        self.scene.for_each_mesh_instance(|world_from_object, _, mesh, first_item| {
-            if mesh.triangle_count() > 0 {
-                draws.push(Draw {
-                    mesh,
-                    triangles: DrawTriangles::All,
-                    clip_from_object: view.clip_from_object(world_from_object),
-                    first_item,
-                });
-            }
-        });
+        self.scene
+            .for_each_mesh_instance(|world_from_object, _, mesh, first_item| {
+                if mesh.triangle_count() > 0 {
+                    draws.push(Draw {
+                        mesh,
+                        triangles: DrawTriangles::All,
+                        clip_from_object: view.clip_from_object(world_from_object),
+                        first_item,
+                    });
+                }
+            });
         stats.phases.add(Phase::Other, t.elapsed());
         let t = Instant::now();
         let counts = self.raster.draw(view, frame, &draws, RasterMode::Full);

@@ -16,7 +16,9 @@ use occult_scenes::load::{load_bytes, load_file, LoadError, LoadedScene, Locatio
 
 /// A fresh, empty scratch folder for one test.
 fn scratch(test_name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("occult-loaders").join(test_name);
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("occult-loaders")
+        .join(test_name);
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("create scratch folder");
     dir
@@ -35,7 +37,11 @@ fn load_ok(path: &Path) -> LoadedScene {
 /// Loads a file that must fail; checks that the message names the file, returns the error.
 fn load_err(path: &Path) -> LoadError {
     match load_file(path) {
-        Ok(loaded) => panic!("{} should fail but loaded {} triangles", path.display(), loaded.scene.item_count()),
+        Ok(loaded) => panic!(
+            "{} should fail but loaded {} triangles",
+            path.display(),
+            loaded.scene.item_count()
+        ),
         Err(e) => {
             let name = path.file_name().expect("file name").to_string_lossy().into_owned();
             assert!(e.to_string().contains(&name), "error '{e}' does not name {name}");
@@ -52,7 +58,11 @@ fn world_triangles(scene: &Scene) -> Vec<[Vec3; 3]> {
 }
 
 fn mesh_count(scene: &Scene) -> usize {
-    scene.nodes().iter().filter(|n| matches!(n.kind(), NodeKind::Mesh(_))).count()
+    scene
+        .nodes()
+        .iter()
+        .filter(|n| matches!(n.kind(), NodeKind::Mesh(_)))
+        .count()
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -145,13 +155,19 @@ fn obj_materials_give_per_mesh_colors() {
     let scene = &loaded.scene;
     assert_eq!(scene.item_count(), 4);
     assert_eq!(mesh_count(scene), 3);
-    let mut colors: Vec<(String, Option<MeshColors>)> =
-        scene.nodes().iter().filter_map(|n| n.mesh().map(|m| (n.name().to_string(), m.colors().cloned()))).collect();
+    let mut colors: Vec<(String, Option<MeshColors>)> = scene
+        .nodes()
+        .iter()
+        .filter_map(|n| n.mesh().map(|m| (n.name().to_string(), m.colors().cloned())))
+        .collect();
     colors.sort_by(|a, b| a.0.cmp(&b.0));
     assert_eq!(
         colors,
         vec![
-            ("floor [gray]".to_string(), Some(MeshColors::PerMesh([128, 128, 128, 255]))),
+            (
+                "floor [gray]".to_string(),
+                Some(MeshColors::PerMesh([128, 128, 128, 255]))
+            ),
             ("floor [red]".to_string(), Some(MeshColors::PerMesh([255, 0, 0, 255]))),
             ("wall".to_string(), Some(MeshColors::PerMesh([255, 0, 0, 255]))),
         ]
@@ -159,7 +175,12 @@ fn obj_materials_give_per_mesh_colors() {
     // Each mesh keeps only the vertices it uses.
     for node in scene.nodes() {
         if let Some(mesh) = node.mesh() {
-            assert_eq!(mesh.positions().len(), if node.name() == "wall" { 4 } else { 3 }, "{}", node.name());
+            assert_eq!(
+                mesh.positions().len(),
+                if node.name() == "wall" { 4 } else { 3 },
+                "{}",
+                node.name()
+            );
         }
     }
 }
@@ -171,7 +192,12 @@ fn obj_missing_mtl_and_missing_texture_are_warnings() {
     assert_eq!(loaded.scene.item_count(), 4);
     assert_eq!(loaded.warnings.len(), 1, "{:?}", loaded.warnings);
     assert!(loaded.warnings[0].contains("colors.mtl"), "{}", loaded.warnings[0]);
-    assert!(loaded.scene.nodes().iter().filter_map(|n| n.mesh()).all(|m| m.colors().is_none()));
+    assert!(loaded
+        .scene
+        .nodes()
+        .iter()
+        .filter_map(|n| n.mesh())
+        .all(|m| m.colors().is_none()));
 
     write(&dir, "colors.mtl", MTL_TWO_COLORS);
     let loaded = load_ok(&dir.join("no_library.obj"));
@@ -183,15 +209,27 @@ fn obj_missing_mtl_and_missing_texture_are_warnings() {
 // PLY round trips
 
 fn push_f32(bytes: &mut Vec<u8>, value: f32, big_endian: bool) {
-    bytes.extend(if big_endian { value.to_be_bytes() } else { value.to_le_bytes() });
+    bytes.extend(if big_endian {
+        value.to_be_bytes()
+    } else {
+        value.to_le_bytes()
+    });
 }
 
 fn push_u32(bytes: &mut Vec<u8>, value: u32, big_endian: bool) {
-    bytes.extend(if big_endian { value.to_be_bytes() } else { value.to_le_bytes() });
+    bytes.extend(if big_endian {
+        value.to_be_bytes()
+    } else {
+        value.to_le_bytes()
+    });
 }
 
 fn push_u16(bytes: &mut Vec<u8>, value: u16, big_endian: bool) {
-    bytes.extend(if big_endian { value.to_be_bytes() } else { value.to_le_bytes() });
+    bytes.extend(if big_endian {
+        value.to_be_bytes()
+    } else {
+        value.to_le_bytes()
+    });
 }
 
 /// Corners of the PLY test meshes: a unit square and a point above it.
@@ -237,7 +275,11 @@ fn ply_ascii_with_extra_vertex_properties() {
 /// A binary PLY with properties before and after x, y, z, a property on the face before the
 /// list, an ignored element between vertex and face, and the index list type given.
 fn ply_binary(big_endian: bool, index_list: &str) -> Vec<u8> {
-    let format = if big_endian { "binary_big_endian" } else { "binary_little_endian" };
+    let format = if big_endian {
+        "binary_big_endian"
+    } else {
+        "binary_little_endian"
+    };
     let mut bytes = format!(
         "ply\nformat {format} 1.0\nelement vertex 5\nproperty uchar flags\nproperty float x\nproperty float y\n\
          property float z\nproperty float confidence\nproperty float intensity\nelement edge 1\n\
@@ -284,17 +326,29 @@ fn check_ply_binary_scene(loaded: &LoadedScene) {
 #[test]
 fn ply_binary_little_endian_with_extra_properties() {
     let dir = scratch("ply_binary_little_endian_with_extra_properties");
-    let loaded = load_ok(&write(&dir, "le.ply", ply_binary(false, "list uchar int vertex_indices")));
+    let loaded = load_ok(&write(
+        &dir,
+        "le.ply",
+        ply_binary(false, "list uchar int vertex_indices"),
+    ));
     check_ply_binary_scene(&loaded);
 }
 
 #[test]
 fn ply_binary_big_endian_with_extra_properties() {
     let dir = scratch("ply_binary_big_endian_with_extra_properties");
-    let loaded = load_ok(&write(&dir, "be.ply", ply_binary(true, "list uchar uint vertex_indices")));
+    let loaded = load_ok(&write(
+        &dir,
+        "be.ply",
+        ply_binary(true, "list uchar uint vertex_indices"),
+    ));
     check_ply_binary_scene(&loaded);
     // Other index widths and the `vertex_index` spelling.
-    let loaded = load_ok(&write(&dir, "be16.ply", ply_binary(true, "list uint8 ushort vertex_index")));
+    let loaded = load_ok(&write(
+        &dir,
+        "be16.ply",
+        ply_binary(true, "list uint8 ushort vertex_index"),
+    ));
     check_ply_binary_scene(&loaded);
 }
 
@@ -397,15 +451,33 @@ fn check_quad_scene(loaded: &LoadedScene) {
     assert_eq!(mesh.colors(), Some(&MeshColors::PerMesh([255, 0, 0, 255])));
     let triangles = world_triangles(scene);
     assert_eq!(triangles[0], [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0)]);
-    assert_eq!(triangles[2], [Vec3::new(2.0, 0.0, 0.0), Vec3::new(3.0, 0.0, 0.0), Vec3::new(3.0, 1.0, 0.0)]);
-    assert_eq!(triangles[5], [Vec3::new(0.0, 3.0, 0.0), Vec3::new(2.0, 5.0, 0.0), Vec3::new(0.0, 5.0, 0.0)]);
+    assert_eq!(
+        triangles[2],
+        [
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(3.0, 0.0, 0.0),
+            Vec3::new(3.0, 1.0, 0.0)
+        ]
+    );
+    assert_eq!(
+        triangles[5],
+        [
+            Vec3::new(0.0, 3.0, 0.0),
+            Vec3::new(2.0, 5.0, 0.0),
+            Vec3::new(0.0, 5.0, 0.0)
+        ]
+    );
 }
 
 #[test]
 fn gltf_with_external_bin_keeps_instancing() {
     let dir = scratch("gltf_with_external_bin_keeps_instancing");
     write(&dir, "quad data.bin", quad_buffer());
-    let path = write(&dir, "quads.gltf", quad_gltf(r#"{"uri": "quad%20data.bin", "byteLength": 60}"#));
+    let path = write(
+        &dir,
+        "quads.gltf",
+        quad_gltf(r#"{"uri": "quad%20data.bin", "byteLength": 60}"#),
+    );
     check_quad_scene(&load_ok(&path));
 }
 
@@ -437,7 +509,11 @@ fn base64(bytes: &[u8]) -> String {
 fn gltf_with_data_uri_buffer() {
     let dir = scratch("gltf_with_data_uri_buffer");
     let uri = format!("data:application/octet-stream;base64,{}", base64(&quad_buffer()));
-    let path = write(&dir, "embedded.gltf", quad_gltf(&format!(r#"{{"uri": "{uri}", "byteLength": 60}}"#)));
+    let path = write(
+        &dir,
+        "embedded.gltf",
+        quad_gltf(&format!(r#"{{"uri": "{uri}", "byteLength": 60}}"#)),
+    );
     check_quad_scene(&load_ok(&path));
 }
 
@@ -483,8 +559,14 @@ fn gltf_strips_fans_and_skipped_modes() {
 #[test]
 fn unknown_extension_and_missing_files() {
     let dir = scratch("unknown_extension_and_missing_files");
-    assert!(matches!(load_err(&write(&dir, "model.stl", "solid")), LoadError::UnsupportedExtension { .. }));
-    assert!(matches!(load_err(&write(&dir, "no_extension", "v 0 0 0")), LoadError::UnsupportedExtension { .. }));
+    assert!(matches!(
+        load_err(&write(&dir, "model.stl", "solid")),
+        LoadError::UnsupportedExtension { .. }
+    ));
+    assert!(matches!(
+        load_err(&write(&dir, "no_extension", "v 0 0 0")),
+        LoadError::UnsupportedExtension { .. }
+    ));
     for name in ["absent.obj", "absent.ply", "absent.gltf", "absent.glb"] {
         assert!(matches!(load_err(&dir.join(name)), LoadError::Io { .. }), "{name}");
     }
@@ -499,30 +581,83 @@ fn obj_bad_input_names_file_and_line() {
     let case = |name: &str, text: &str| load_err(&write(&dir, name, text));
 
     let e = case("range.obj", &format!("{tri}f 1 2 3\nf 1 2 900\n"));
-    assert!(matches!(e, LoadError::IndexOutOfRange { index: 900, vertex_count: 3, .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            LoadError::IndexOutOfRange {
+                index: 900,
+                vertex_count: 3,
+                ..
+            }
+        ),
+        "{e}"
+    );
     assert!(e.to_string().contains("range.obj line 5"), "{e}");
-    assert!(matches!(case("zero.obj", &format!("{tri}f 0 1 2\n")), LoadError::IndexOutOfRange { index: 0, .. }));
-    assert!(matches!(case("negative.obj", &format!("{tri}f -4 1 2\n")), LoadError::IndexOutOfRange { .. }));
+    assert!(matches!(
+        case("zero.obj", &format!("{tri}f 0 1 2\n")),
+        LoadError::IndexOutOfRange { index: 0, .. }
+    ));
+    assert!(matches!(
+        case("negative.obj", &format!("{tri}f -4 1 2\n")),
+        LoadError::IndexOutOfRange { .. }
+    ));
 
     let e = case("nan.obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n");
-    assert!(matches!(e, LoadError::NonFinite { location: Location::Line(2), .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            LoadError::NonFinite {
+                location: Location::Line(2),
+                ..
+            }
+        ),
+        "{e}"
+    );
     assert!(e.to_string().contains("coordinate is NaN"), "{e}");
-    assert!(matches!(case("inf.obj", "v 0 0 0\nv 1 -inf 0\n"), LoadError::NonFinite { .. }));
-    assert!(matches!(case("overflow.obj", "v 0 0 1e39\n"), LoadError::NonFinite { .. }));
+    assert!(matches!(
+        case("inf.obj", "v 0 0 0\nv 1 -inf 0\n"),
+        LoadError::NonFinite { .. }
+    ));
+    assert!(matches!(
+        case("overflow.obj", "v 0 0 1e39\n"),
+        LoadError::NonFinite { .. }
+    ));
 
     // What a cut file looks like: a face or vertex statement missing its tail.
-    assert!(matches!(case("short_face.obj", &format!("{tri}f 1 2\n")), LoadError::Parse { .. }));
-    assert!(matches!(case("short_vertex.obj", "v 0 0 0\nv 1 0\n"), LoadError::Parse { .. }));
-    assert!(matches!(case("lone_sign.obj", &format!("{tri}f 1 2 -\n")), LoadError::Parse { .. }));
-    assert!(matches!(case("bad_number.obj", "v 0 0 zero\n"), LoadError::Parse { location: Location::Line(1), .. }));
+    assert!(matches!(
+        case("short_face.obj", &format!("{tri}f 1 2\n")),
+        LoadError::Parse { .. }
+    ));
+    assert!(matches!(
+        case("short_vertex.obj", "v 0 0 0\nv 1 0\n"),
+        LoadError::Parse { .. }
+    ));
+    assert!(matches!(
+        case("lone_sign.obj", &format!("{tri}f 1 2 -\n")),
+        LoadError::Parse { .. }
+    ));
+    assert!(matches!(
+        case("bad_number.obj", "v 0 0 zero\n"),
+        LoadError::Parse {
+            location: Location::Line(1),
+            ..
+        }
+    ));
 
     assert!(matches!(case("empty.obj", ""), LoadError::Empty { .. }));
     assert!(matches!(case("vertices_only.obj", tri), LoadError::Empty { .. }));
-    assert!(matches!(case("lines_only.obj", &format!("{tri}l 1 2\n")), LoadError::Empty { .. }));
-    let garbage: Vec<u8> = (0u32..4096).map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8).collect();
-    let _ = load_file(&write(&dir, "garbage.obj", &garbage)).map(|_| ()).map_err(|e| {
-        assert!(e.to_string().contains("garbage.obj"), "{e}");
-    });
+    assert!(matches!(
+        case("lines_only.obj", &format!("{tri}l 1 2\n")),
+        LoadError::Empty { .. }
+    ));
+    let garbage: Vec<u8> = (0u32..4096)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
+        .collect();
+    let _ = load_file(&write(&dir, "garbage.obj", &garbage))
+        .map(|_| ())
+        .map_err(|e| {
+            assert!(e.to_string().contains("garbage.obj"), "{e}");
+        });
 }
 
 /// A minimal ascii PLY: `vertex_lines` after a header declaring `vertex_count` and `face_count`.
@@ -542,7 +677,10 @@ fn ply_bad_input_names_file_and_element() {
 
     // Truncated, each encoding.
     assert!(matches!(ascii("cut.ply", "3", "1", verts), LoadError::Truncated { .. }));
-    assert!(matches!(ascii("cut_vertices.ply", "3", "1", "0 0 0\n1 0 0\n"), LoadError::Truncated { .. }));
+    assert!(matches!(
+        ascii("cut_vertices.ply", "3", "1", "0 0 0\n1 0 0\n"),
+        LoadError::Truncated { .. }
+    ));
     for (name, big_endian) in [("cut_le.ply", false), ("cut_be.ply", true)] {
         let full = ply_binary(big_endian, "list uchar int vertex_indices");
         let e = case(name, &full[..full.len() - 3]);
@@ -556,7 +694,16 @@ fn ply_bad_input_names_file_and_element() {
 
     // Element counts that do not match the data.
     let e = ascii("extra_line.ply", "3", "1", &format!("{verts}3 0 1 2\n3 0 1 2\n"));
-    assert!(matches!(e, LoadError::CountMismatch { location: Location::Line(14), .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            LoadError::CountMismatch {
+                location: Location::Line(14),
+                ..
+            }
+        ),
+        "{e}"
+    );
     let e = ascii("extra_value.ply", "3", "1", "0 0 0\n1 0 0 7\n0 1 0\n3 0 1 2\n");
     assert!(matches!(e, LoadError::CountMismatch { .. }), "{e}");
     assert!(e.to_string().contains("line 11: vertex 1"), "{e}");
@@ -564,11 +711,24 @@ fn ply_bad_input_names_file_and_element() {
     assert!(matches!(e, LoadError::CountMismatch { .. }), "{e}");
     let mut trailing = ply_binary(false, "list uchar int vertex_indices");
     trailing.extend([0, 0, 0, 0]);
-    assert!(matches!(case("trailing.ply", &trailing), LoadError::CountMismatch { .. }));
+    assert!(matches!(
+        case("trailing.ply", &trailing),
+        LoadError::CountMismatch { .. }
+    ));
 
     // Indices and coordinates.
     let e = ascii("range.ply", "3", "1", &format!("{verts}3 0 1 900\n"));
-    assert!(matches!(e, LoadError::IndexOutOfRange { index: 900, vertex_count: 3, .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            LoadError::IndexOutOfRange {
+                index: 900,
+                vertex_count: 3,
+                ..
+            }
+        ),
+        "{e}"
+    );
     assert!(e.to_string().contains("face 0"), "{e}");
     assert!(matches!(
         ascii("negative.ply", "3", "1", &format!("{verts}3 0 -1 2\n")),
@@ -578,33 +738,64 @@ fn ply_bad_input_names_file_and_element() {
     assert!(matches!(e, LoadError::NonFinite { .. }), "{e}");
     assert!(e.to_string().contains("vertex 1: coordinate is NaN"), "{e}");
     let mut nan_binary = ply_binary(true, "list uchar int vertex_indices");
-    let header_len = nan_binary.windows(11).position(|w| w == b"end_header\n").expect("header") + 11;
+    let header_len = nan_binary
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .expect("header")
+        + 11;
     // Vertex 2's y: after vertices 0 and 1 (21 bytes each), the flags byte and x.
     let y = header_len + 2 * 21 + 1 + 4;
     nan_binary[y..y + 4].copy_from_slice(&f32::INFINITY.to_be_bytes());
     let e = case("inf_be.ply", &nan_binary);
     assert!(e.to_string().ends_with("vertex 2: coordinate is inf"), "{e}");
-    assert!(matches!(ascii("word.ply", "3", "1", "0 0 zero\n1 0 0\n0 1 0\n3 0 1 2\n"), LoadError::Parse { .. }));
+    assert!(matches!(
+        ascii("word.ply", "3", "1", "0 0 zero\n1 0 0\n0 1 0\n3 0 1 2\n"),
+        LoadError::Parse { .. }
+    ));
 
     // Absurd counts are refused before anything is allocated.
     let e = ascii("absurd.ply", "1000000000000", "1", &format!("{verts}3 0 1 2\n"));
-    assert!(matches!(e, LoadError::AbsurdCount { count: 1_000_000_000_000, .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            LoadError::AbsurdCount {
+                count: 1_000_000_000_000,
+                ..
+            }
+        ),
+        "{e}"
+    );
     let absurd_faces = ply_binary(false, "list uchar int vertex_indices");
     let text = String::from_utf8_lossy(&absurd_faces).replace("element face 3", "element face 4000000000");
     let e = case("absurd_faces.ply", text.as_bytes());
     assert!(matches!(e, LoadError::AbsurdCount { .. }), "{e}");
-    assert!(matches!(ascii("overflow_count.ply", "99999999999999999999999", "1", verts), LoadError::Parse { .. }));
+    assert!(matches!(
+        ascii("overflow_count.ply", "99999999999999999999999", "1", verts),
+        LoadError::Parse { .. }
+    ));
 
     // No triangles; wrong structure.
-    assert!(matches!(ascii("no_faces.ply", "3", "0", verts), LoadError::Empty { .. }));
+    assert!(matches!(
+        ascii("no_faces.ply", "3", "0", verts),
+        LoadError::Empty { .. }
+    ));
     let points = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n";
     assert!(matches!(case("points.ply", points.as_bytes()), LoadError::Empty { .. }));
     let no_y = ascii_ply("1", "1", "0 0\n3 0 0 0\n").replace("property float y\n", "");
     assert!(matches!(case("no_y.ply", no_y.as_bytes()), LoadError::Parse { .. }));
     let float_indices = ascii_ply("3", "1", "").replace("list uchar int", "list uchar float");
-    assert!(matches!(case("float_indices.ply", float_indices.as_bytes()), LoadError::Unsupported { .. }));
-    assert!(matches!(case("not_ply.ply", b"solid cube\nfacet normal 0 0 1\n"), LoadError::Parse { .. }));
-    assert!(matches!(case("empty.ply", b""), LoadError::Truncated { .. } | LoadError::Parse { .. }));
+    assert!(matches!(
+        case("float_indices.ply", float_indices.as_bytes()),
+        LoadError::Unsupported { .. }
+    ));
+    assert!(matches!(
+        case("not_ply.ply", b"solid cube\nfacet normal 0 0 1\n"),
+        LoadError::Parse { .. }
+    ));
+    assert!(matches!(
+        case("empty.ply", b""),
+        LoadError::Truncated { .. } | LoadError::Parse { .. }
+    ));
 }
 
 #[test]
@@ -615,11 +806,23 @@ fn gltf_bad_input_names_file_and_part() {
     let glb_with = |from: &str, to: &str| glb(&quad_gltf(r#"{"byteLength": 60}"#).replace(from, to), &quad_buffer());
 
     // Truncated GLB and JSON.
-    assert!(matches!(case("cut.glb", &good[..good.len() - 10]), LoadError::Truncated { .. }));
-    assert!(matches!(case("cut_header.glb", &good[..10]), LoadError::Truncated { .. }));
+    assert!(matches!(
+        case("cut.glb", &good[..good.len() - 10]),
+        LoadError::Truncated { .. }
+    ));
+    assert!(matches!(
+        case("cut_header.glb", &good[..10]),
+        LoadError::Truncated { .. }
+    ));
     let json = quad_gltf(r#"{"uri": "quad.bin", "byteLength": 60}"#);
-    assert!(matches!(case("cut.gltf", &json.as_bytes()[..json.len() / 2]), LoadError::Truncated { .. }));
-    assert!(matches!(case("empty.gltf", b""), LoadError::Truncated { .. } | LoadError::Parse { .. }));
+    assert!(matches!(
+        case("cut.gltf", &json.as_bytes()[..json.len() / 2]),
+        LoadError::Truncated { .. }
+    ));
+    assert!(matches!(
+        case("empty.gltf", b""),
+        LoadError::Truncated { .. } | LoadError::Parse { .. }
+    ));
 
     // Buffers: missing file (named with the document), too short, missing BIN chunk.
     let e = case("missing_bin.gltf", json.as_bytes());
@@ -627,22 +830,34 @@ fn gltf_bad_input_names_file_and_part() {
     assert!(e.to_string().contains("quad.bin"), "{e}");
     write(&dir, "short.bin", &quad_buffer()[..40]);
     let short = quad_gltf(r#"{"uri": "short.bin", "byteLength": 60}"#);
-    assert!(matches!(case("short_bin.gltf", short.as_bytes()), LoadError::Buffer { .. }));
+    assert!(matches!(
+        case("short_bin.gltf", short.as_bytes()),
+        LoadError::Buffer { .. }
+    ));
     let no_bin_chunk = glb(&quad_gltf(r#"{"byteLength": 60}"#), &[]);
     let no_bin_chunk = &no_bin_chunk[..no_bin_chunk.len() - 8];
     let mut no_bin_chunk = no_bin_chunk.to_vec();
     let total = no_bin_chunk.len() as u32;
     no_bin_chunk[8..12].copy_from_slice(&total.to_le_bytes());
-    assert!(matches!(case("no_bin_chunk.glb", &no_bin_chunk), LoadError::Buffer { .. }));
+    assert!(matches!(
+        case("no_bin_chunk.glb", &no_bin_chunk),
+        LoadError::Buffer { .. }
+    ));
     let bad_base64 = quad_gltf(r#"{"uri": "data:application/octet-stream;base64,@@@@", "byteLength": 60}"#);
-    assert!(matches!(case("bad_base64.gltf", bad_base64.as_bytes()), LoadError::Buffer { .. }));
+    assert!(matches!(
+        case("bad_base64.gltf", bad_base64.as_bytes()),
+        LoadError::Buffer { .. }
+    ));
 
     // Accessors past their views, views past their buffers, absurd counts.
     let e = case("long_accessor.glb", &glb_with(r#""count": 6"#, r#""count": 7"#));
     assert!(matches!(e, LoadError::CountMismatch { .. }), "{e}");
     assert!(e.to_string().contains("mesh 0 'quad' primitive 0"), "{e}");
     assert!(matches!(
-        case("long_view.glb", &glb_with(r#""byteLength": 12}"#, r#""byteLength": 16}"#)),
+        case(
+            "long_view.glb",
+            &glb_with(r#""byteLength": 12}"#, r#""byteLength": 16}"#)
+        ),
         LoadError::CountMismatch { .. }
     ));
     assert!(matches!(
@@ -655,9 +870,14 @@ fn gltf_bad_input_names_file_and_part() {
         r#""componentType": 5126, "count": 1000000000000, "type": "VEC3",
             "sparse": {"count": 1, "indices": {"bufferView": 1, "componentType": 5123}, "values": {"bufferView": 0}},"#,
     );
-    assert!(matches!(case("absurd_sparse.glb", &sparse_absurd), LoadError::AbsurdCount { .. }));
-    let no_view =
-        glb_with(r#""bufferView": 0, "componentType": 5126, "count": 4"#, r#""componentType": 5126, "count": 4"#);
+    assert!(matches!(
+        case("absurd_sparse.glb", &sparse_absurd),
+        LoadError::AbsurdCount { .. }
+    ));
+    let no_view = glb_with(
+        r#""bufferView": 0, "componentType": 5126, "count": 4"#,
+        r#""componentType": 5126, "count": 4"#,
+    );
     assert!(matches!(case("no_view.glb", &no_view), LoadError::Parse { .. }));
     let sparse_past = glb_with(
         r#""bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3","#,
@@ -667,8 +887,14 @@ fn gltf_bad_input_names_file_and_part() {
     let e = case("sparse_past.glb", &sparse_past);
     assert!(e.to_string().contains("sparse index 2"), "{e}");
     let missing_position = glb_with(r#""POSITION": 0"#, r#""POSITION": 90"#);
-    assert!(matches!(case("missing_position.glb", &missing_position), LoadError::Parse { .. }));
-    assert!(matches!(case("empty_accessor.glb", &glb_with(r#""count": 6"#, r#""count": 0"#)), LoadError::Empty { .. }));
+    assert!(matches!(
+        case("missing_position.glb", &missing_position),
+        LoadError::Parse { .. }
+    ));
+    assert!(matches!(
+        case("empty_accessor.glb", &glb_with(r#""count": 6"#, r#""count": 0"#)),
+        LoadError::Empty { .. }
+    ));
     assert!(matches!(
         case(
             "stride.glb",
@@ -680,7 +906,10 @@ fn gltf_bad_input_names_file_and_part() {
         LoadError::Parse { .. }
     ));
     assert!(matches!(
-        case("float_indices.glb", &glb_with(r#""componentType": 5123"#, r#""componentType": 5126"#)),
+        case(
+            "float_indices.glb",
+            &glb_with(r#""componentType": 5123"#, r#""componentType": 5126"#)
+        ),
         LoadError::Unsupported { .. }
     ));
 
@@ -688,7 +917,17 @@ fn gltf_bad_input_names_file_and_part() {
     let mut bad_index = quad_buffer();
     bad_index[48 + 10..48 + 12].copy_from_slice(&9u16.to_le_bytes());
     let e = case("range.glb", &glb(&quad_gltf(r#"{"byteLength": 60}"#), &bad_index));
-    assert!(matches!(e, LoadError::IndexOutOfRange { index: 9, vertex_count: 4, .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            LoadError::IndexOutOfRange {
+                index: 9,
+                vertex_count: 4,
+                ..
+            }
+        ),
+        "{e}"
+    );
     let mut nan = quad_buffer();
     nan[16..20].copy_from_slice(&f32::NAN.to_le_bytes());
     let e = case("nan.glb", &glb(&quad_gltf(r#"{"byteLength": 60}"#), &nan));
@@ -697,17 +936,35 @@ fn gltf_bad_input_names_file_and_part() {
 
     // Structure: invalid references, no mesh, cycles, singular transforms.
     assert!(matches!(
-        case("bad_ref.glb", &glb_with(r#""mesh": 0, "translation""#, r#""mesh": 5, "translation""#)),
+        case(
+            "bad_ref.glb",
+            &glb_with(r#""mesh": 0, "translation""#, r#""mesh": 5, "translation""#)
+        ),
         LoadError::Parse { .. }
     ));
-    assert!(matches!(case("no_nodes.glb", &glb_with(r#""nodes": [0]"#, r#""nodes": []"#)), LoadError::Empty { .. }));
-    let e = case("cycle.glb", &glb_with(r#"{"mesh": 0, "translation": [2, 0, 0]}"#, r#"{"mesh": 0, "children": [0]}"#));
+    assert!(matches!(
+        case("no_nodes.glb", &glb_with(r#""nodes": [0]"#, r#""nodes": []"#)),
+        LoadError::Empty { .. }
+    ));
+    let e = case(
+        "cycle.glb",
+        &glb_with(
+            r#"{"mesh": 0, "translation": [2, 0, 0]}"#,
+            r#"{"mesh": 0, "children": [0]}"#,
+        ),
+    );
     assert!(e.to_string().contains("cycle"), "{e}");
     let hidden = glb_with(r#""translation": [2, 0, 0]"#, r#""scale": [0, 0, 0]"#);
     let loaded = load_ok(&write(&dir, "hidden.glb", hidden));
     assert_eq!(loaded.scene.item_count(), 4);
     assert!(loaded.warnings[0].contains("singular"), "{:?}", loaded.warnings);
-    assert!(matches!(case("not_json.gltf", b"solid cube"), LoadError::Parse { location: Location::Line(1), .. }));
+    assert!(matches!(
+        case("not_json.gltf", b"solid cube"),
+        LoadError::Parse {
+            location: Location::Line(1),
+            ..
+        }
+    ));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -733,17 +990,32 @@ fn every_prefix_fails_cleanly() {
         // (name, bytes, whether every proper prefix must be an error)
         ("prefix.obj", OBJ_WITH_MATERIALS.as_bytes().to_vec(), false),
         ("prefix_ascii.ply", PLY_ASCII.as_bytes().to_vec(), false),
-        ("prefix_le.ply", ply_binary(false, "list uchar int vertex_indices"), true),
-        ("prefix_be.ply", ply_binary(true, "list uchar ushort vertex_indices"), true),
+        (
+            "prefix_le.ply",
+            ply_binary(false, "list uchar int vertex_indices"),
+            true,
+        ),
+        (
+            "prefix_be.ply",
+            ply_binary(true, "list uchar ushort vertex_indices"),
+            true,
+        ),
         ("prefix.glb", quad_glb(), true),
-        ("prefix.gltf", quad_gltf(r#"{"uri": "quad.bin", "byteLength": 60}"#).into_bytes(), true),
+        (
+            "prefix.gltf",
+            quad_gltf(r#"{"uri": "quad.bin", "byteLength": 60}"#).into_bytes(),
+            true,
+        ),
     ];
     for (name, bytes, strict) in samples {
         for len in 0..bytes.len() {
             let loaded = load_quietly(&dir, name, &bytes[..len]);
             assert!(!strict || loaded.is_none(), "{name}: a prefix of {len} bytes loaded");
         }
-        assert!(load_quietly(&dir, name, &bytes).is_some(), "{name}: the whole file must load");
+        assert!(
+            load_quietly(&dir, name, &bytes).is_some(),
+            "{name}: the whole file must load"
+        );
     }
 }
 

@@ -48,12 +48,20 @@ fn real_models_load_with_expected_triangle_counts() {
     };
     let folder = PathBuf::from(folder);
     let files = model_files(&folder);
-    assert!(!files.is_empty(), "no .obj/.ply/.gltf/.glb file under {}", folder.display());
+    assert!(
+        !files.is_empty(),
+        "no .obj/.ply/.gltf/.glb file under {}",
+        folder.display()
+    );
 
     let mut failures = Vec::new();
     let mut found = Vec::new();
     for file in &files {
-        let relative = file.strip_prefix(&folder).unwrap_or(file).to_string_lossy().replace('\\', "/");
+        let relative = file
+            .strip_prefix(&folder)
+            .unwrap_or(file)
+            .to_string_lossy()
+            .replace('\\', "/");
         let start = Instant::now();
         let loaded = match load_file(file) {
             Ok(loaded) => loaded,
@@ -77,13 +85,19 @@ fn real_models_load_with_expected_triangle_counts() {
         if let Some(&(_, expected)) = EXPECTED_ITEM_COUNTS.iter().find(|(name, _)| *name == relative) {
             found.push(relative.clone());
             if scene.item_count() != expected {
-                failures.push(format!("{relative}: {} triangles, expected {expected}", scene.item_count()));
+                failures.push(format!(
+                    "{relative}: {} triangles, expected {expected}",
+                    scene.item_count()
+                ));
             }
         }
     }
     for (name, _) in EXPECTED_ITEM_COUNTS {
         if !found.iter().any(|f| f == name) {
-            failures.push(format!("{name}: expected under {} but not found (or not loaded)", folder.display()));
+            failures.push(format!(
+                "{name}: expected under {} but not found (or not loaded)",
+                folder.display()
+            ));
         }
     }
     assert!(failures.is_empty(), "model failures:\n{}", failures.join("\n"));

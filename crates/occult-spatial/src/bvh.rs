@@ -54,7 +54,10 @@ impl Bvh {
         assert!(boxes.len() <= u32::MAX as usize, "too many primitives for a u32 BVH");
         let leaf_size = leaf_size.max(1);
         let mut indices: Vec<u32> = (0..boxes.len() as u32).collect();
-        let centroids: Vec<Vec3> = boxes.iter().map(|b| if b.is_empty() { Vec3::ZERO } else { b.center() }).collect();
+        let centroids: Vec<Vec3> = boxes
+            .iter()
+            .map(|b| if b.is_empty() { Vec3::ZERO } else { b.center() })
+            .collect();
         let mut nodes = Vec::with_capacity(2 * boxes.len() / leaf_size + 1);
         if !boxes.is_empty() {
             build_node(boxes, &centroids, &mut indices, 0, leaf_size, &mut nodes);
@@ -78,10 +81,22 @@ impl Bvh {
     }
 }
 
-fn build_node(boxes: &[Aabb], centroids: &[Vec3], indices: &mut [u32], first: u32, leaf_size: usize, nodes: &mut Vec<BvhNode>) {
+fn build_node(
+    boxes: &[Aabb],
+    centroids: &[Vec3],
+    indices: &mut [u32],
+    first: u32,
+    leaf_size: usize,
+    nodes: &mut Vec<BvhNode>,
+) {
     let bounds = indices.iter().fold(Aabb::EMPTY, |b, &i| b.union(boxes[i as usize]));
     let me = nodes.len();
-    nodes.push(BvhNode { bounds, first, count: indices.len() as u32, second_child: 0 });
+    nodes.push(BvhNode {
+        bounds,
+        first,
+        count: indices.len() as u32,
+        second_child: 0,
+    });
     if indices.len() <= leaf_size {
         return;
     }
@@ -89,7 +104,9 @@ fn build_node(boxes: &[Aabb], centroids: &[Vec3], indices: &mut [u32], first: u3
     let axis = cb.size().max_position();
     let mid = indices.len() / 2;
     indices.select_nth_unstable_by(mid, |&a, &b| {
-        centroids[a as usize][axis].total_cmp(&centroids[b as usize][axis]).then(a.cmp(&b))
+        centroids[a as usize][axis]
+            .total_cmp(&centroids[b as usize][axis])
+            .then(a.cmp(&b))
     });
     let (left, right) = indices.split_at_mut(mid);
     build_node(boxes, centroids, left, first, leaf_size, nodes);
