@@ -1,17 +1,25 @@
-//! The tile-binned, multi-threaded, exact triangle rasterizer.
+//! The exact triangle rasterizer: one triangle setup and one scan, driven three ways.
 //!
-//! Triangles flow through two phases per round of up to `threads × 2` chunks of
-//! [`CHUNK_TRIANGLES`] triangles:
-//! 1. **Setup and binning** (parallel over chunks): transform (or fetch pre-transformed)
-//!    vertices, trivially reject by outcodes, clip the rare triangle that crosses the near plane
-//!    or the guard band, snap to fixed point, reject empty bounding boxes and zero areas, build
-//!    edge functions and the depth plane, and append the triangle to the bin of each tile its
-//!    box touches.
-//! 2. **Rasterization** (parallel over tiles): each tile walks every chunk's bin for it and
-//!    scans each triangle's box within the tile.
+//! - **Direct** (one thread): each triangle is set up and scanned at once, in submission order;
+//!   consecutive triangles of a mesh touch neighbouring pixels, so the frame stays in cache.
+//! - **Sort-last** (several threads, draws of at least 200,000 triangles): thread `k` draws the
+//!   `k`-th part of the triangle stream directly into its own frame (thread 0 into the real one);
+//!   the other frames are merged under the (depth, item) rule over the pixel box each touched.
+//! - **Tile-binned** (several threads, smaller draws, whose cost must not grow with the frame as
+//!   a merge's does), in rounds of `threads × 2` chunks of [`CHUNK_TRIANGLES`] triangles:
+//!   1. *setup and binning* (parallel over chunks): each set-up triangle is appended to the bin
+//!      of each tile its box touches;
+//!   2. *rasterization* (parallel over tiles): each tile scans the triangles of its bins.
 //!
-//! The result cannot depend on the split: every fragment's depth is a function of the
-//! triangle and the pixel alone, and pixels keep the nearest `(depth, item)` (invariant 1).
+//! Setup, shared by all three: transform (or fetch pre-transformed) vertices, trivially reject by
+//! outcodes, clip the rare triangle that crosses the near plane or the guard band, snap to fixed
+//! point, reject empty boxes and zero areas, and fix the depth plane. The scan derives exact
+//! integer edge functions and finds covered pixels with branch-free 8-pixel masks (boxes up to
+//! 64 pixels) or per-row integer span solving (larger ones).
+//!
+//! The result cannot depend on the strategy, the split or the thread count: every fragment's
+//! depth is a function of the triangle and the pixel alone, and pixels keep the nearest
+//! `(depth, item)` (invariant 1; tested for every strategy).
 //!
 //! Cost: O(triangles + covered pixels of their boxes). For scenes where most triangles are
 //! hidden, that is what the culling renderers avoid.
@@ -28,7 +36,8 @@ const HALF: i64 = SUB / 2;
 /// Guard band half-width in pixels: vertices beyond it are clipped, so fixed-point coordinates
 /// stay below 2^24 and edge products below 2^50.
 const GUARD_PIXELS: f32 = 32768.0;
-/// Triangles per setup chunk: a chunk's setup records (~100 B each) stay in L2/L3.
+/// Triangles per setup chunk of the tile-binned strategy: a chunk's setup records (64 B each)
+/// stay in L2.
 pub const CHUNK_TRIANGLES: usize = 2 * 1024;
 
 const OUT_LEFT: u32 = 1;
@@ -147,27 +156,29 @@ struct ProjVertex {
     code: u32,
 }
 
-/// Edge functions and depth plane of a triangle ready to scan. `e` holds the three edge
-/// functions (top-left bias folded in) at the centre of pixel `(px0, py0)`; a centre is inside
-/// when all three are `>= 0`.
+/// A triangle ready to scan: its snapped corners (1/256 pixel, oriented so that the edge
+/// functions are non-negative inside), its pixel box, and its depth plane anchored at the centre
+/// of pixel `(px0, py0)`. One cache line: the scan re-derives the edge functions from the corners,
+/// which costs less than moving them through memory.
 #[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
 struct TriSetup {
-    e: [i64; 3],
-    a: [i32; 3],
-    b: [i32; 3],
+    x: [i32; 3],
+    y: [i32; 3],
     px0: u16,
     py0: u16,
     px1: u16,
     py1: u16,
-    z0: f32,
+    /// Depth at the centre of pixel `(px0, py0)`.
+    zc: f32,
     dzdx: f32,
     dzdy: f32,
-    x0: f32,
-    y0: f32,
     zmin: f32,
     zmax: f32,
     item: ItemId,
 }
+
+const _: () = assert!(std::mem::size_of::<TriSetup>() == 64);
 
 /// Per-frame constants.
 #[derive(Clone, Copy, Debug)]
@@ -280,6 +291,8 @@ pub struct Rasterizer {
     pool: Option<rayon::ThreadPool>,
     vertices: Vec<ProjVertex>,
     chunks: Vec<ChunkBins>,
+    /// Depth and item buffers of the extra workers of sort-last draws, kept cleared.
+    scratch: Vec<(Vec<f32>, Vec<ItemId>)>,
     isa: Isa,
 }
 
@@ -326,6 +339,7 @@ impl Rasterizer {
             pool,
             vertices: Vec::new(),
             chunks: Vec::new(),
+            scratch: Vec::new(),
             isa,
         })
     }
@@ -402,6 +416,7 @@ impl Rasterizer {
         }
         // Every entry is overwritten below; resizing only writes entries the buffer never had.
         self.vertices.resize(vertex_total, ProjVertex::default());
+        let isa = self.isa;
         {
             let mut rest = &mut self.vertices[..];
             let mut jobs = Vec::new();
@@ -412,10 +427,7 @@ impl Rasterizer {
             }
             jobs.into_par_iter().for_each(|(d, out)| {
                 out.par_chunks_mut(4096).enumerate().for_each(|(ci, out)| {
-                    let positions = &d.mesh.positions()[ci * 4096..];
-                    for (o, &p) in out.iter_mut().zip(positions) {
-                        *o = vp.project(&d.clip_from_object, p);
-                    }
+                    isa.project_all(vp, &d.clip_from_object, &d.mesh.positions()[ci * 4096..], out);
                 });
             });
         }
@@ -429,8 +441,35 @@ impl Rasterizer {
         draw_starts.push(total);
         counts.triangles_submitted = total as u64;
 
+        let threads = rayon::current_num_threads();
+        if threads == 1 {
+            let target = FrameTarget::new(frame);
+            // SAFETY: one thread: nothing else touches the frame while it is drawn.
+            let (rasterized, written, _) = unsafe {
+                self.isa.draw_direct(
+                    vp,
+                    draws,
+                    &draw_starts,
+                    &vertex_offsets,
+                    &self.vertices,
+                    0..total,
+                    &target,
+                    mode,
+                )
+            };
+            counts.triangles_rasterized = rasterized;
+            counts.fragments_written = written;
+            return counts;
+        }
+        if total >= SORT_LAST_MIN_TRIANGLES {
+            let (rasterized, written) =
+                self.draw_sort_last(vp, frame, draws, &draw_starts, &vertex_offsets, total, mode);
+            counts.triangles_rasterized = rasterized;
+            counts.fragments_written = written;
+            return counts;
+        }
         let tile_count = (vp.tiles_x * vp.tiles_y) as usize;
-        let chunks_per_round = rayon::current_num_threads().max(1) * 32;
+        let chunks_per_round = rayon::current_num_threads().max(1) * 2;
         if self.chunks.len() < chunks_per_round {
             self.chunks.resize_with(chunks_per_round, ChunkBins::default);
         }
@@ -438,7 +477,6 @@ impl Rasterizer {
             ch.bins.resize_with(tile_count, Vec::new);
         }
         let vertices = &self.vertices[..];
-        let isa = self.isa;
         let target = FrameTarget::new(frame);
         let mut start = 0;
         while start < total {
@@ -480,6 +518,87 @@ impl Rasterizer {
         counts
     }
 }
+
+impl Rasterizer {
+    /// Sort-last drawing for large draws on several threads: worker `k` draws the `k`-th part of
+    /// the triangle stream directly (no binning) into the frame (`k = 0`) or a private scratch
+    /// frame, and the scratch frames are then merged into the frame under the same (depth, item)
+    /// rule, over the box each worker touched only, and cleared there for the next draw.
+    #[allow(clippy::too_many_arguments)]
+    fn draw_sort_last(
+        &mut self,
+        vp: &Viewport,
+        frame: &mut Frame,
+        draws: &[Draw<'_>],
+        draw_starts: &[usize],
+        vertex_offsets: &[usize],
+        total: usize,
+        mode: RasterMode,
+    ) -> (u64, u64) {
+        let parts = rayon::current_num_threads() * SORT_LAST_PARTS_PER_THREAD;
+        let (w, h) = (vp.width as usize, vp.height as usize);
+        self.scratch.retain(|(d, _)| d.len() == w * h);
+        while self.scratch.len() < parts - 1 {
+            self.scratch
+                .push((vec![crate::CLEAR_DEPTH; w * h], vec![occult_core::NO_ITEM; w * h]));
+        }
+        let isa = self.isa;
+        let vertices = &self.vertices[..];
+        let mut targets: Vec<FrameTarget> = vec![FrameTarget::new(frame)];
+        for (d, i) in self.scratch.iter_mut().take(parts - 1) {
+            targets.push(FrameTarget {
+                depth: d.as_mut_ptr(),
+                items: i.as_mut_ptr(),
+                width: w,
+            });
+        }
+        let results: Vec<(u64, u64, [u32; 4])> = targets
+            .par_iter()
+            .enumerate()
+            .map(|(k, target)| {
+                let range = total * k / parts..total * (k + 1) / parts;
+                // SAFETY: each worker owns its own frame (the real one or a scratch one).
+                unsafe { isa.draw_direct(vp, draws, draw_starts, vertex_offsets, vertices, range, target, mode) }
+            })
+            .collect();
+        let (depth, items) = frame.buffers_mut();
+        for (k, &(_, _, dirty)) in results.iter().enumerate().skip(1) {
+            if dirty[0] > dirty[2] || dirty[1] > dirty[3] {
+                continue;
+            }
+            let (sd, si) = &mut self.scratch[k - 1];
+            let (x0, x1) = (dirty[0] as usize, dirty[2] as usize + 1);
+            let rows = dirty[1] as usize..dirty[3] as usize + 1;
+            depth[rows.start * w..rows.end * w]
+                .par_chunks_mut(w)
+                .zip(items[rows.start * w..rows.end * w].par_chunks_mut(w))
+                .zip(sd[rows.start * w..rows.end * w].par_chunks_mut(w))
+                .zip(si[rows.start * w..rows.end * w].par_chunks_mut(w))
+                .for_each(|(((d, it), sd), si)| {
+                    for x in x0..x1 {
+                        if mode == RasterMode::Full {
+                            crate::keep_fragment(&mut d[x], &mut it[x], sd[x], si[x]);
+                        } else if sd[x] > d[x] {
+                            d[x] = sd[x];
+                        }
+                    }
+                    sd[x0..x1].fill(crate::CLEAR_DEPTH);
+                    si[x0..x1].fill(occult_core::NO_ITEM);
+                });
+        }
+        results.iter().fold((0, 0), |(r, f), &(rr, ff, _)| (r + rr, f + ff))
+    }
+}
+
+/// Draws at least this large go sort-last on several threads (below it, the tile-binned path:
+/// its cost does not grow with the frame, the merge's does).
+const SORT_LAST_MIN_TRIANGLES: usize = 200_000;
+
+/// Parts per thread in sort-last draws: more balance the load, each adds a merge.
+const SORT_LAST_PARTS_PER_THREAD: usize = 1;
+
+/// An empty pixel box.
+const EMPTY_RECT: [u32; 4] = [u32::MAX, u32::MAX, 0, 0];
 
 /// Raw access to a frame's buffers, shared by tile tasks that write disjoint pixels.
 struct FrameTarget {
@@ -547,6 +666,55 @@ impl Isa {
         }
     }
 
+    /// Projects `positions` into `out` (as many as `out` holds).
+    fn project_all(self, vp: &Viewport, clip_from_object: &Mat4, positions: &[Vec3], out: &mut [ProjVertex]) {
+        match self {
+            Isa::Baseline => project_all(vp, clip_from_object, positions, out),
+            // SAFETY: `select` checked that the processor has these features.
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => unsafe { project_all_avx2(vp, clip_from_object, positions, out) },
+        }
+    }
+
+    /// Sets up and scans `range` of the triangle stream at once over the whole frame;
+    /// returns (triangles rasterized, fragments written, inclusive pixel box touched).
+    ///
+    /// # Safety
+    /// No other thread may access `target` during the call.
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn draw_direct(
+        self,
+        vp: &Viewport,
+        draws: &[Draw<'_>],
+        draw_starts: &[usize],
+        vertex_offsets: &[usize],
+        vertices: &[ProjVertex],
+        range: Range<usize>,
+        target: &FrameTarget,
+        mode: RasterMode,
+    ) -> (u64, u64, [u32; 4]) {
+        let rect = [0, 0, vp.width - 1, vp.height - 1];
+        match self {
+            Isa::Baseline => {
+                let mut sink = DirectSink::<false> {
+                    target,
+                    rect,
+                    mode,
+                    rasterized: 0,
+                    written: 0,
+                    dirty: EMPTY_RECT,
+                };
+                setup_range(vp, draws, draw_starts, vertex_offsets, vertices, range, &mut sink);
+                (sink.rasterized, sink.written, sink.dirty)
+            }
+            // SAFETY: forwarded; `select` checked the processor's features.
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => unsafe {
+                draw_direct_avx2(vp, draws, draw_starts, vertex_offsets, vertices, range, target, mode)
+            },
+        }
+    }
+
     /// # Safety
     /// As [`scan_tile`].
     unsafe fn scan_tile(
@@ -581,6 +749,45 @@ unsafe fn setup_range_avx2(
     out: &mut ChunkBins,
 ) {
     setup_range(vp, draws, draw_starts, vertex_offsets, vertices, range, out)
+}
+
+#[inline(always)]
+fn project_all(vp: &Viewport, clip_from_object: &Mat4, positions: &[Vec3], out: &mut [ProjVertex]) {
+    for (o, &p) in out.iter_mut().zip(positions) {
+        *o = vp.project(clip_from_object, p);
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,bmi1,bmi2,popcnt,lzcnt")]
+unsafe fn project_all_avx2(vp: &Viewport, clip_from_object: &Mat4, positions: &[Vec3], out: &mut [ProjVertex]) {
+    project_all(vp, clip_from_object, positions, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,bmi1,bmi2,popcnt,lzcnt")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn draw_direct_avx2(
+    vp: &Viewport,
+    draws: &[Draw<'_>],
+    draw_starts: &[usize],
+    vertex_offsets: &[usize],
+    vertices: &[ProjVertex],
+    range: Range<usize>,
+    target: &FrameTarget,
+    mode: RasterMode,
+) -> (u64, u64, [u32; 4]) {
+    let rect = [0, 0, vp.width - 1, vp.height - 1];
+    let mut sink = DirectSink::<true> {
+        target,
+        rect,
+        mode,
+        rasterized: 0,
+        written: 0,
+        dirty: EMPTY_RECT,
+    };
+    setup_range(vp, draws, draw_starts, vertex_offsets, vertices, range, &mut sink);
+    (sink.rasterized, sink.written, sink.dirty)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -629,7 +836,7 @@ fn setup_range(
     vertex_offsets: &[usize],
     vertices: &[ProjVertex],
     range: Range<usize>,
-    out: &mut ChunkBins,
+    out: &mut impl SetupSink,
 ) {
     let mut d = draw_starts.partition_point(|&s| s <= range.start) - 1;
     let mut t = range.start;
@@ -644,8 +851,12 @@ fn setup_range(
         match &draw.triangles {
             DrawTriangles::All => {
                 let verts = &vertices[vertex_offsets[d]..vertex_offsets[d] + mesh.positions().len()];
-                for j in (t - draw_starts[d])..(end - draw_starts[d]) {
-                    let [i0, i1, i2] = tris[j];
+                let first = t - draw_starts[d];
+                for (j, &[i0, i1, i2]) in tris[first..end - draw_starts[d]]
+                    .iter()
+                    .enumerate()
+                    .map(|(k, t)| (first + k, t))
+                {
                     let v = [verts[i0 as usize], verts[i1 as usize], verts[i2 as usize]];
                     let clip = || [i0, i1, i2].map(|i| to_clip(&draw.clip_from_object, mesh.positions()[i as usize]));
                     setup_triangle(vp, v, clip, draw.first_item + j as u64, out);
@@ -677,7 +888,7 @@ fn setup_triangle(
     v: [ProjVertex; 3],
     clip: impl FnOnce() -> [Vec4; 3],
     item: ItemId,
-    out: &mut ChunkBins,
+    out: &mut impl SetupSink,
 ) {
     let or = v[0].code | v[1].code | v[2].code;
     if v[0].code & v[1].code & v[2].code & OUT_OF_VIEW != 0 || or & NOT_FINITE != 0 {
@@ -702,7 +913,7 @@ fn setup_triangle(
 /// Clips a triangle against the near plane and the guard band in homogeneous space and sets up
 /// the fan of the resulting polygon.
 #[cold]
-fn clip_and_setup(vp: &Viewport, c: [Vec4; 3], item: ItemId, out: &mut ChunkBins) {
+fn clip_and_setup(vp: &Viewport, c: [Vec4; 3], item: ItemId, out: &mut impl SetupSink) {
     let planes = [
         Vec4::new(0.0, 0.0, -1.0, 1.0),        // near: w - z >= 0
         Vec4::new(-1.0, 0.0, 0.0, vp.guard_x), // guard: g·w - x >= 0
@@ -736,7 +947,8 @@ fn clip_and_setup(vp: &Viewport, c: [Vec4; 3], item: ItemId, out: &mut ChunkBins
             return;
         }
     }
-    if poly.iter().any(|c| !(c.w > 0.0)) {
+    // A NaN w also fails this test.
+    if !poly.iter().all(|c| c.w > 0.0) {
         return;
     }
     // Clipped vertices lie on or inside every clip plane up to rounding: project them directly.
@@ -759,7 +971,7 @@ fn clip_and_setup(vp: &Viewport, c: [Vec4; 3], item: ItemId, out: &mut ChunkBins
 
 /// Sets up a triangle from snapped vertices `(x, y, z)` and bins it.
 #[inline(always)]
-fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut ChunkBins) {
+fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut impl SetupSink) {
     let (x0, y0) = (v[0].0 as i64, v[0].1 as i64);
     let (mut x1, mut y1, mut z1) = (v[1].0 as i64, v[1].1 as i64, v[1].2);
     let (mut x2, mut y2, mut z2) = (v[2].0 as i64, v[2].1 as i64, v[2].2);
@@ -795,63 +1007,96 @@ fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut
     if zmax < vp.far_depth {
         return;
     }
-    // Edge i runs from corner i to corner i+1; E(p) = A·px + B·py + C >= 0 inside.
-    let xs = [x0, x1, x2];
-    let ys = [y0, y1, y2];
-    let cx = px0 * SUB + HALF;
-    let cy = py0 * SUB + HALF;
-    let mut e = [0i64; 3];
-    let mut a = [0i32; 3];
-    let mut b = [0i32; 3];
-    for i in 0..3 {
-        let j = (i + 1) % 3;
-        let ea = ys[i] - ys[j];
-        let eb = xs[j] - xs[i];
-        // Top-left rule: a centre on the edge counts only for left (A > 0) or top
-        // (A = 0, B > 0) edges; other edges need E > 0, i.e. E - 1 >= 0 in integers.
-        let bias = -(((ea < 0) | ((ea == 0) & (eb <= 0))) as i64);
-        e[i] = ea * (cx - xs[i]) + eb * (cy - ys[i]) + bias;
-        a[i] = ea as i32;
-        b[i] = eb as i32;
-    }
-    // Depth plane in pixel units, relative to corner 0, computed in f64 and stored in f32.
+    // Depth plane in pixel units, relative to corner 0, computed in f64; anchored at the centre
+    // of pixel (px0, py0) and stored in f32.
     let inv = 1.0 / (area as f64 / (SUB * SUB) as f64);
     let (fx1, fy1) = ((x1 - x0) as f64 / SUB as f64, (y1 - y0) as f64 / SUB as f64);
     let (fx2, fy2) = ((x2 - x0) as f64 / SUB as f64, (y2 - y0) as f64 / SUB as f64);
     let (dz1, dz2) = ((z1 - z0) as f64, (z2 - z0) as f64);
-    let dzdx = ((dz1 * fy2 - dz2 * fy1) * inv) as f32;
-    let dzdy = ((fx1 * dz2 - fx2 * dz1) * inv) as f32;
-    out.rasterized += 1;
-    let r = out.records.len() as u32;
-    out.records.push(TriSetup {
-        e,
-        a,
-        b,
-        px0: px0 as u16,
-        py0: py0 as u16,
-        px1: px1 as u16,
-        py1: py1 as u16,
-        z0,
-        dzdx,
-        dzdy,
-        x0: (x0 as f64 / SUB as f64) as f32,
-        y0: (y0 as f64 / SUB as f64) as f32,
-        zmin,
-        zmax,
-        item,
-    });
-    let sh = vp.tile_shift;
-    let (tx0, tx1, ty0, ty1) = (px0 >> sh, px1 >> sh, py0 >> sh, py1 >> sh);
-    if tx0 == tx1 && ty0 == ty1 {
-        out.bins[(ty0 * vp.tiles_x as i64 + tx0) as usize].push(r);
-        return;
-    }
-    for ty in ty0..=ty1 {
-        for tx in tx0..=tx1 {
-            out.bins[(ty * vp.tiles_x as i64 + tx) as usize].push(r);
+    let dzdx = (dz1 * fy2 - dz2 * fy1) * inv;
+    let dzdy = (fx1 * dz2 - fx2 * dz1) * inv;
+    let zc = z0 as f64
+        + dzdx * ((px0 as f64 + 0.5) - x0 as f64 / SUB as f64)
+        + dzdy * ((py0 as f64 + 0.5) - y0 as f64 / SUB as f64);
+    out.push(
+        vp,
+        TriSetup {
+            x: [x0 as i32, x1 as i32, x2 as i32],
+            y: [y0 as i32, y1 as i32, y2 as i32],
+            px0: px0 as u16,
+            py0: py0 as u16,
+            px1: px1 as u16,
+            py1: py1 as u16,
+            zc: zc as f32,
+            dzdx: dzdx as f32,
+            dzdy: dzdy as f32,
+            zmin,
+            zmax,
+            item,
+        },
+    );
+}
+
+/// Where set-up triangles go: bins for the tile pass, or straight to the scan.
+trait SetupSink {
+    fn push(&mut self, vp: &Viewport, t: TriSetup);
+}
+
+impl SetupSink for ChunkBins {
+    #[inline(always)]
+    fn push(&mut self, vp: &Viewport, t: TriSetup) {
+        self.rasterized += 1;
+        let r = self.records.len() as u32;
+        let sh = vp.tile_shift;
+        let (tx0, tx1, ty0, ty1) = (
+            t.px0 as u32 >> sh,
+            t.px1 as u32 >> sh,
+            t.py0 as u32 >> sh,
+            t.py1 as u32 >> sh,
+        );
+        self.records.push(t);
+        if tx0 == tx1 && ty0 == ty1 {
+            self.bins[(ty0 * vp.tiles_x + tx0) as usize].push(r);
+            return;
+        }
+        for ty in ty0..=ty1 {
+            for tx in tx0..=tx1 {
+                self.bins[(ty * vp.tiles_x + tx) as usize].push(r);
+            }
         }
     }
 }
+
+/// Scans each triangle as soon as it is set up, over the whole frame: the single-threaded path,
+/// where binning would only add work. Same scan, same results.
+struct DirectSink<'a, const AVX2: bool> {
+    target: &'a FrameTarget,
+    rect: [u32; 4],
+    mode: RasterMode,
+    rasterized: u64,
+    written: u64,
+    /// Inclusive pixel box of everything scanned (empty while `dirty[0] > dirty[2]`).
+    dirty: [u32; 4],
+}
+
+impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
+    #[inline(always)]
+    fn push(&mut self, vp: &Viewport, t: TriSetup) {
+        self.rasterized += 1;
+        self.dirty = [
+            self.dirty[0].min(t.px0 as u32),
+            self.dirty[1].min(t.py0 as u32),
+            self.dirty[2].max(t.px1 as u32),
+            self.dirty[3].max(t.py1 as u32),
+        ];
+        // SAFETY: a DirectSink is only made by `Isa::draw_direct`, whose caller guarantees that
+        // no other thread touches the frame during the draw.
+        self.written += unsafe { scan_triangle::<AVX2>(vp, &t, self.rect, self.target, self.mode) };
+    }
+}
+
+/// Spans shorter than this are written pixel by pixel; longer ones by the vectorized loop.
+const SHORT_SPAN: usize = 16;
 
 /// Side of the block scanned without branches for small triangles.
 const SMALL: u32 = 8;
@@ -902,7 +1147,7 @@ unsafe fn scan_small<const AVX2: bool>(
         let k = mask.trailing_zeros();
         mask &= mask - 1;
         let (x, y) = (x0 + k % SMALL, y0 + k / SMALL);
-        let row_depth = t.z0 + t.dzdy * ((y as f32 + 0.5) - t.y0);
+        let row_depth = row_depth(t, y);
         let z = depth_at(t, row_depth, x);
         if z >= vp.far_depth {
             let i = y as usize * target.width + x as usize;
@@ -991,6 +1236,16 @@ fn write_span(
 ) -> u64 {
     let mut written = 0u32;
     let far = vp.far_depth;
+    if depth.len() < SHORT_SPAN {
+        // Short spans: per pixel, without reading the item buffer (see `write_fragment`).
+        for (i, (d, it)) in depth.iter_mut().zip(items.iter_mut()).enumerate() {
+            let z = depth_at(t, row_depth, xa + i as u32);
+            if z >= far {
+                written += write_fragment(d, it, z, t.item, mode) as u32;
+            }
+        }
+        return written as u64;
+    }
     match mode {
         RasterMode::Full => {
             for (i, (d, it)) in depth.iter_mut().zip(items.iter_mut()).enumerate() {
@@ -1013,10 +1268,16 @@ fn write_span(
     written as u64
 }
 
+/// Depth of a triangle at the centre of pixel `(px0, y)`.
+#[inline(always)]
+fn row_depth(t: &TriSetup, y: u32) -> f32 {
+    t.zc + t.dzdy * (y - t.py0 as u32) as f32
+}
+
 /// Depth of a triangle at the centre of pixel `(x, y)`: the one formula every path uses.
 #[inline(always)]
 fn depth_at(t: &TriSetup, row_depth: f32, x: u32) -> f32 {
-    let z = row_depth + t.dzdx * ((x as f32 + 0.5) - t.x0);
+    let z = row_depth + t.dzdx * (x - t.px0 as u32) as f32;
     let z = if z < t.zmin { t.zmin } else { z };
     if z > t.zmax {
         t.zmax
@@ -1044,15 +1305,24 @@ unsafe fn scan_triangle<const AVX2: bool>(
     if x0 > x1 || y0 > y1 {
         return 0;
     }
-    let dx = (x0 - t.px0 as u32) as i64;
-    let dy = (y0 - t.py0 as u32) as i64;
-    let step_x = [t.a[0] as i64 * SUB, t.a[1] as i64 * SUB, t.a[2] as i64 * SUB];
-    let step_y = [t.b[0] as i64 * SUB, t.b[1] as i64 * SUB, t.b[2] as i64 * SUB];
-    let mut row = [
-        t.e[0] + step_x[0] * dx + step_y[0] * dy,
-        t.e[1] + step_x[1] * dx + step_y[1] * dy,
-        t.e[2] + step_x[2] * dx + step_y[2] * dy,
-    ];
+    // Edge i runs from corner i to corner i+1; E(p) = A·px + B·py + C >= 0 inside, evaluated
+    // exactly at the centre of pixel (x0, y0).
+    let (cx, cy) = (x0 as i64 * SUB + HALF, y0 as i64 * SUB + HALF);
+    let mut row = [0i64; 3];
+    let mut step_x = [0i64; 3];
+    let mut step_y = [0i64; 3];
+    for i in 0..3 {
+        let j = (i + 1) % 3;
+        let (xi, yi) = (t.x[i] as i64, t.y[i] as i64);
+        let ea = yi - t.y[j] as i64;
+        let eb = t.x[j] as i64 - xi;
+        // Top-left rule: a centre on the edge counts only for left (A > 0) or top
+        // (A = 0, B > 0) edges; other edges need E > 0, i.e. E - 1 >= 0 in integers.
+        let bias = -(((ea < 0) | ((ea == 0) & (eb <= 0))) as i64);
+        row[i] = ea * (cx - xi) + eb * (cy - yi) + bias;
+        step_x[i] = ea * SUB;
+        step_y[i] = eb * SUB;
+    }
     if x1 - x0 < SMALL && y1 - y0 < SMALL && t.px1 - t.px0 < SMALL as u16 && t.py1 - t.py0 < SMALL as u16 {
         // SAFETY: forwarded from the caller.
         return unsafe { scan_small::<AVX2>(vp, t, [x0, y0, x1, y1], row, step_x, step_y, target, mode) };
@@ -1111,7 +1381,7 @@ unsafe fn scan_triangle<const AVX2: bool>(
             }
         }
         if lo <= hi {
-            let row_depth = t.z0 + t.dzdy * ((y as f32 + 0.5) - t.y0);
+            let row_depth = row_depth(t, y);
             let (xa, xb) = (x0 + lo as u32, x0 + hi as u32);
             let base = y as usize * target.width;
             // SAFETY: the span lies in `rect` (inside the frame), owned by this task.
