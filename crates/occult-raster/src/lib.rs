@@ -44,7 +44,7 @@ mod shade;
 
 pub use frame::{keep_fragment, Frame, CLEAR_DEPTH};
 pub use query::{query_box, query_rect, PixelRect};
-pub use raster::{Draw, DrawTriangles, RasterConfig, RasterCounts, RasterMode, Rasterizer, SUBPIXEL_BITS};
+pub use raster::{Draw, DrawTriangles, RasterConfig, RasterCounts, RasterMode, Rasterizer, Strategy, SUBPIXEL_BITS};
 pub use shade::{shade, BACKGROUND};
 
 use thiserror::Error;

@@ -3,7 +3,8 @@
 //! - **Direct** (one thread): each triangle is set up and scanned at once, in submission order;
 //!   consecutive triangles of a mesh touch neighbouring pixels, so the frame stays in cache.
 //! - **Sort-last** (several threads, draws of at least 200,000 triangles): thread `k` draws the
-//!   `k`-th part of the triangle stream directly into its own frame (thread 0 into the real one);
+//!   blocks `k, k + threads, …` of the triangle stream directly into its own frame (thread 0
+//!   into the real one);
 //!   the other frames are merged under the (depth, item) rule over the pixel box each touched.
 //! - **Tile-binned** (several threads, smaller draws, whose cost must not grow with the frame as
 //!   a merge's does), in rounds of `threads × 2` chunks of [`CHUNK_TRIANGLES`] triangles:
@@ -63,6 +64,25 @@ pub struct RasterConfig {
     /// Use the widest instruction set the processor offers (chosen at run time); `false`
     /// forces the baseline path. Frames are bit-identical either way (tested).
     pub simd: bool,
+    /// How triangles are spread over threads (see the module doc). Frames are bit-identical
+    /// whichever is used (tested); only speed differs.
+    pub strategy: Strategy,
+}
+
+/// How a draw is spread over threads.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Strategy {
+    /// Direct on one thread; sort-last for draws of at least 200,000 triangles; tile-binned
+    /// otherwise.
+    #[default]
+    Auto,
+    /// Set up and scan each triangle at once, on the calling thread.
+    Direct,
+    /// Tile-binned setup and scan, on all threads.
+    Binned,
+    /// Direct workers into private frames, merged (falls back to tile-binned when the private
+    /// frames cannot be allocated).
+    SortLast,
 }
 
 impl Default for RasterConfig {
@@ -72,6 +92,7 @@ impl Default for RasterConfig {
             tile_size: 64,
             cull_backfaces: false,
             simd: true,
+            strategy: Strategy::Auto,
         }
     }
 }
@@ -175,10 +196,16 @@ struct TriSetup {
     dzdy: f32,
     zmin: f32,
     zmax: f32,
+    /// Larger side of the snapped corners' box, in whole pixels (saturating): decides whether
+    /// edge functions fit i32 lanes. The pixel box above is clamped to the frame and says nothing
+    /// about that: a triangle reaching into the guard band can show a tiny box on screen.
+    extent: u16,
     item: ItemId,
 }
 
 const _: () = assert!(std::mem::size_of::<TriSetup>() == 64);
+// Pixel boxes are stored in u16.
+const _: () = assert!(occult_core::MAX_RESOLUTION <= u16::MAX as u32);
 
 /// Per-frame constants.
 #[derive(Clone, Copy, Debug)]
@@ -238,7 +265,11 @@ impl Viewport {
         code |= if c.x > c.w { OUT_RIGHT } else { 0 };
         code |= if c.y < -c.w { OUT_BOTTOM } else { 0 };
         code |= if c.y > c.w { OUT_TOP } else { 0 };
-        code |= if c.z > c.w { OUT_NEAR | NEEDS_CLIP } else { 0 };
+        code |= if c.z > c.w || c.w <= 0.0 {
+            OUT_NEAR | NEEDS_CLIP
+        } else {
+            0
+        };
         if c.x.abs() > self.guard_x * c.w || c.y.abs() > self.guard_y * c.w {
             code |= NEEDS_CLIP;
         }
@@ -288,11 +319,13 @@ struct ChunkBins {
 /// The rasterizer: configuration, thread pool and reusable scratch memory.
 pub struct Rasterizer {
     config: RasterConfig,
-    pool: Option<rayon::ThreadPool>,
+    pool: Option<std::sync::Arc<rayon::ThreadPool>>,
     vertices: Vec<ProjVertex>,
     chunks: Vec<ChunkBins>,
     /// Depth and item buffers of the extra workers of sort-last draws, kept cleared.
     scratch: Vec<(Vec<f32>, Vec<ItemId>)>,
+    /// False while a sort-last draw is in flight (a panic there leaves the scratch drawn).
+    scratch_clean: bool,
     isa: Isa,
 }
 
@@ -328,6 +361,7 @@ impl Rasterizer {
                 rayon::ThreadPoolBuilder::new()
                     .num_threads(config.threads)
                     .build()
+                    .map(std::sync::Arc::new)
                     .map_err(|e| crate::RasterError::BadConfig(format!("thread pool: {e}")))?,
             )
         } else {
@@ -340,6 +374,7 @@ impl Rasterizer {
             vertices: Vec::new(),
             chunks: Vec::new(),
             scratch: Vec::new(),
+            scratch_clean: true,
             isa,
         })
     }
@@ -394,13 +429,11 @@ impl Rasterizer {
             "frame and view sizes differ"
         );
         let vp = Viewport::new(view, &self.config);
-        let pool = self.pool.take();
-        let counts = match &pool {
+        // A handle of our own: the pool stays in place even if the draw panics.
+        match self.pool.clone() {
             Some(p) => p.install(|| self.draw_in_pool(&vp, frame, draws, mode)),
             None => self.draw_in_pool(&vp, frame, draws, mode),
-        };
-        self.pool = pool;
-        counts
+        }
     }
 
     fn draw_in_pool(&mut self, vp: &Viewport, frame: &mut Frame, draws: &[Draw<'_>], mode: RasterMode) -> RasterCounts {
@@ -442,9 +475,16 @@ impl Rasterizer {
         counts.triangles_submitted = total as u64;
 
         let threads = rayon::current_num_threads();
-        if threads == 1 {
+        let strategy = match self.config.strategy {
+            Strategy::Auto if threads == 1 => Strategy::Direct,
+            Strategy::Auto if total >= SORT_LAST_MIN_TRIANGLES => Strategy::SortLast,
+            Strategy::Auto => Strategy::Binned,
+            Strategy::SortLast if threads == 1 => Strategy::Direct,
+            s => s,
+        };
+        if strategy == Strategy::Direct {
             let target = FrameTarget::new(frame);
-            // SAFETY: one thread: nothing else touches the frame while it is drawn.
+            // SAFETY: only this thread touches the frame while it is drawn.
             let (rasterized, written, _) = unsafe {
                 self.isa.draw_direct(
                     vp,
@@ -461,12 +501,14 @@ impl Rasterizer {
             counts.fragments_written = written;
             return counts;
         }
-        if total >= SORT_LAST_MIN_TRIANGLES {
-            let (rasterized, written) =
-                self.draw_sort_last(vp, frame, draws, &draw_starts, &vertex_offsets, total, mode);
-            counts.triangles_rasterized = rasterized;
-            counts.fragments_written = written;
-            return counts;
+        if strategy == Strategy::SortLast {
+            if let Some((rasterized, written)) =
+                self.draw_sort_last(vp, frame, draws, &draw_starts, &vertex_offsets, total, mode)
+            {
+                counts.triangles_rasterized = rasterized;
+                counts.fragments_written = written;
+                return counts;
+            }
         }
         let tile_count = (vp.tiles_x * vp.tiles_y) as usize;
         let chunks_per_round = rayon::current_num_threads().max(1) * 2;
@@ -534,14 +576,24 @@ impl Rasterizer {
         vertex_offsets: &[usize],
         total: usize,
         mode: RasterMode,
-    ) -> (u64, u64) {
+    ) -> Option<(u64, u64)> {
         let parts = rayon::current_num_threads() * SORT_LAST_PARTS_PER_THREAD;
         let (w, h) = (vp.width as usize, vp.height as usize);
+        // Private frames are kept cleared between draws; one a panic left drawn is dropped.
+        if !self.scratch_clean {
+            self.scratch.clear();
+        }
         self.scratch.retain(|(d, _)| d.len() == w * h);
         while self.scratch.len() < parts - 1 {
-            self.scratch
-                .push((vec![crate::CLEAR_DEPTH; w * h], vec![occult_core::NO_ITEM; w * h]));
+            let (mut d, mut i) = (Vec::new(), Vec::new());
+            if d.try_reserve_exact(w * h).is_err() || i.try_reserve_exact(w * h).is_err() {
+                return None;
+            }
+            d.resize(w * h, crate::CLEAR_DEPTH);
+            i.resize(w * h, occult_core::NO_ITEM);
+            self.scratch.push((d, i));
         }
+        self.scratch_clean = false;
         let isa = self.isa;
         let vertices = &self.vertices[..];
         let mut targets: Vec<FrameTarget> = vec![FrameTarget::new(frame)];
@@ -556,9 +608,27 @@ impl Rasterizer {
             .par_iter()
             .enumerate()
             .map(|(k, target)| {
-                let range = total * k / parts..total * (k + 1) / parts;
-                // SAFETY: each worker owns its own frame (the real one or a scratch one).
-                unsafe { isa.draw_direct(vp, draws, draw_starts, vertex_offsets, vertices, range, target, mode) }
+                // Worker k takes every parts-th block: each gets a share of near and far, large
+                // and small triangles, and a block is long enough to keep the frame in cache.
+                let mut acc = (0, 0, EMPTY_RECT);
+                for start in (k * SORT_LAST_BLOCK..total).step_by(parts * SORT_LAST_BLOCK) {
+                    let range = start..(start + SORT_LAST_BLOCK).min(total);
+                    // SAFETY: each worker owns its own frame (the real one or a scratch one).
+                    let (r, f, d) = unsafe {
+                        isa.draw_direct(vp, draws, draw_starts, vertex_offsets, vertices, range, target, mode)
+                    };
+                    acc = (
+                        acc.0 + r,
+                        acc.1 + f,
+                        [
+                            acc.2[0].min(d[0]),
+                            acc.2[1].min(d[1]),
+                            acc.2[2].max(d[2]),
+                            acc.2[3].max(d[3]),
+                        ],
+                    );
+                }
+                acc
             })
             .collect();
         let (depth, items) = frame.buffers_mut();
@@ -576,6 +646,9 @@ impl Rasterizer {
                 .zip(si[rows.start * w..rows.end * w].par_chunks_mut(w))
                 .for_each(|(((d, it), sd), si)| {
                     for x in x0..x1 {
+                        if sd[x] == crate::CLEAR_DEPTH {
+                            continue; // nothing drawn there
+                        }
                         if mode == RasterMode::Full {
                             crate::keep_fragment(&mut d[x], &mut it[x], sd[x], si[x]);
                         } else if sd[x] > d[x] {
@@ -586,7 +659,8 @@ impl Rasterizer {
                     si[x0..x1].fill(occult_core::NO_ITEM);
                 });
         }
-        results.iter().fold((0, 0), |(r, f), &(rr, ff, _)| (r + rr, f + ff))
+        self.scratch_clean = true;
+        Some(results.iter().fold((0, 0), |(r, f), &(rr, ff, _)| (r + rr, f + ff)))
     }
 }
 
@@ -596,6 +670,9 @@ const SORT_LAST_MIN_TRIANGLES: usize = 200_000;
 
 /// Parts per thread in sort-last draws: more balance the load, each adds a merge.
 const SORT_LAST_PARTS_PER_THREAD: usize = 1;
+
+/// Triangles per block handed round-robin to the workers of a sort-last draw.
+const SORT_LAST_BLOCK: usize = 16 * 1024;
 
 /// An empty pixel box.
 const EMPTY_RECT: [u32; 4] = [u32::MAX, u32::MAX, 0, 0];
@@ -640,6 +717,8 @@ impl Isa {
             && is_x86_feature_detected!("avx2")
             && is_x86_feature_detected!("bmi1")
             && is_x86_feature_detected!("bmi2")
+            && is_x86_feature_detected!("lzcnt")
+            && is_x86_feature_detected!("popcnt")
         {
             return Isa::Avx2;
         }
@@ -961,7 +1040,7 @@ fn clip_and_setup(vp: &Viewport, c: [Vec4; 3], item: ItemId, out: &mut impl Setu
             (snap(sx), snap(sy), c.z * inv_w)
         })
         .collect();
-    if p.iter().any(|v| !v.2.is_finite()) {
+    if p.iter().any(|v| !v.2.is_finite()) || poly.iter().any(|c| !c.is_finite()) {
         return;
     }
     for i in 1..p.len() - 1 {
@@ -1032,6 +1111,7 @@ fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut
             dzdy: dzdy as f32,
             zmin,
             zmax,
+            extent: (((maxx - minx).max(maxy - miny) >> SUBPIXEL_BITS) + 1).min(u16::MAX as i64) as u16,
             item,
         },
     );
@@ -1100,15 +1180,18 @@ const SHORT_SPAN: usize = 16;
 
 /// Side of the block scanned without branches for small triangles.
 const SMALL: u32 = 8;
-/// Largest box side whose edge functions fit i32 lanes: |E| <= (64·√2·256)² < 2^31.
-const MASKED: u32 = 64;
+/// Triangles whose snapped corners span fewer pixels than this (both axes) have their inside
+/// masks computed in i32 lanes. The lanes reach up to 8 pixels past the box, so every point
+/// evaluated lies within (56 + 8)·√2 pixels of a corner, and |E| <= (64·√2·256)² < 2^31.
+const MASKED: u32 = 56;
 
 /// Scans a box of at most `SMALL × SMALL` pixels: the inside mask of each row is formed
 /// without branches in 32-bit lanes (tiny triangles make per-pixel branches mispredict), then
 /// only the covered pixels are depth-tested. Bit-identical to the general scan.
 ///
-/// 32 bits suffice: for a centre `p` inside the triangle's box, `|E(p)| = |(v1 - v0) × (p - v0)|`
-/// is at most the square of the box diagonal, below 2^24 for an 8-pixel box in 1/256 units.
+/// 32 bits suffice: the caller checked that the snapped corners span fewer than 8 pixels, and
+/// for a centre `p` of the 8 × 8 block, `|E(p)| = |(v1 - v0) × (p - v0)|` is at most
+/// (16·√2·256)² < 2^24 in 1/256 units.
 ///
 /// # Safety
 /// As [`scan_triangle`].
@@ -1323,7 +1406,7 @@ unsafe fn scan_triangle<const AVX2: bool>(
         step_x[i] = ea * SUB;
         step_y[i] = eb * SUB;
     }
-    if x1 - x0 < SMALL && y1 - y0 < SMALL && t.px1 - t.px0 < SMALL as u16 && t.py1 - t.py0 < SMALL as u16 {
+    if (t.extent as u32) < SMALL && x1 - x0 < SMALL && y1 - y0 < SMALL {
         // SAFETY: forwarded from the caller.
         return unsafe { scan_small::<AVX2>(vp, t, [x0, y0, x1, y1], row, step_x, step_y, target, mode) };
     }
@@ -1332,7 +1415,7 @@ unsafe fn scan_triangle<const AVX2: bool>(
     // Boxes up to MASKED pixels keep edge functions within i32 (see `scan_small`): find each
     // row's span from 8-pixel inside masks. Larger ones solve for the span with divisions,
     // which only pay off on long rows.
-    let masked = t.px1 - t.px0 < MASKED as u16 && t.py1 - t.py0 < MASKED as u16;
+    let masked = (t.extent as u32) < MASKED;
     let sx = [step_x[0] as i32, step_x[1] as i32, step_x[2] as i32];
     for y in y0..=y1 {
         let (mut lo, mut hi) = (0i64, width as i64 - 1);

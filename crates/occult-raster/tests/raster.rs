@@ -1,8 +1,9 @@
 //! Rasterizer invariants: watertightness, order/thread/tile independence, clipping, queries.
 
 use occult_core::glam::Affine3A;
+use occult_core::glam::{Mat4, Vec4};
 use occult_core::{Aabb, Camera, Mesh, Vec3, View, NO_ITEM};
-use occult_raster::{query_box, Draw, DrawTriangles, Frame, RasterConfig, RasterMode, Rasterizer};
+use occult_raster::{query_box, Draw, DrawTriangles, Frame, RasterConfig, RasterMode, Rasterizer, Strategy};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -312,12 +313,21 @@ fn huge_ground_plane_crossing_near_plane_has_no_cracks() {
     .unwrap();
     let mut cam = Camera::look_at(Vec3::new(0.0, 1.0, 0.0), Vec3::new(0.0, 0.8, -10.0));
     cam.far = 1e7;
-    let view = View::new(cam, 128, 96).unwrap();
-    let f = draw_all(&mut raster(2, 32), &view, &mesh);
-    // Every pixel of the bottom half sees the ground.
-    for y in 48..96 {
-        for x in 0..128 {
-            assert_ne!(f.items()[y * 128 + x], NO_ITEM, "crack at {x},{y}");
+    // Small frames too: a triangle reaching far into the guard band shows a tiny box there.
+    for (w, h) in [(128u32, 96u32), (64, 48), (32, 32), (8, 8), (5, 3)] {
+        let view = View::new(cam, w, h).unwrap();
+        for threads in [1, 2] {
+            let f = draw_all(&mut raster(threads, 32), &view, &mesh);
+            // Every pixel of the bottom half sees the ground.
+            for y in h.div_ceil(2)..h {
+                for x in 0..w {
+                    assert_ne!(
+                        f.items()[(y * w + x) as usize],
+                        NO_ITEM,
+                        "{w}x{h}, {threads} threads: crack at {x},{y}"
+                    );
+                }
+            }
         }
     }
 }
@@ -415,4 +425,172 @@ fn query_box_is_conservative() {
         }
     }
     assert!(checked > 50, "too few visible boxes exercised: {checked}");
+}
+
+/// Maps object `(px, py, 0)` to the screen position `(px, py)` of a `w × h` frame (powers of two
+/// keep it exact), at depth 0.5.
+fn screen_from_pixels(w: u32, h: u32) -> Mat4 {
+    Mat4::from_cols(
+        Vec4::new(2.0 / w as f32, 0.0, 0.0, 0.0),
+        Vec4::new(0.0, -2.0 / h as f32, 0.0, 0.0),
+        Vec4::ZERO,
+        Vec4::new(-1.0, 1.0, 0.5, 1.0),
+    )
+}
+
+/// Exact coverage of a triangle given in pixels (multiples of 1/256): i128 edge functions at
+/// pixel centres with the top-left rule.
+fn reference_coverage(v: [(f64, f64); 3], w: u32, h: u32) -> Vec<bool> {
+    let fx = |p: (f64, f64)| ((p.0 * 256.0) as i128, (p.1 * 256.0) as i128);
+    let (mut a, mut b, mut c) = (fx(v[0]), fx(v[1]), fx(v[2]));
+    let area = (b.0 - a.0) * (c.1 - a.1) - (c.0 - a.0) * (b.1 - a.1);
+    if area < 0 {
+        std::mem::swap(&mut b, &mut c);
+    }
+    let _ = &mut a;
+    let corners = [a, b, c];
+    let mut out = vec![false; (w * h) as usize];
+    if area == 0 {
+        return out;
+    }
+    for y in 0..h {
+        for x in 0..w {
+            let p = (x as i128 * 256 + 128, y as i128 * 256 + 128);
+            out[(y * w + x) as usize] = (0..3).all(|i| {
+                let (s, e) = (corners[i], corners[(i + 1) % 3]);
+                let (ea, eb) = (s.1 - e.1, e.0 - s.0);
+                let value = ea * (p.0 - s.0) + eb * (p.1 - s.1);
+                value > 0 || (value == 0 && (ea > 0 || (ea == 0 && eb > 0)))
+            });
+        }
+    }
+    out
+}
+
+fn strategies() -> Vec<RasterConfig> {
+    let mut v = vec![];
+    for simd in [true, false] {
+        v.push(RasterConfig {
+            threads: 1,
+            simd,
+            strategy: Strategy::Direct,
+            ..RasterConfig::default()
+        });
+        for tile in [8, 16, 64] {
+            v.push(RasterConfig {
+                threads: 2,
+                tile_size: tile,
+                simd,
+                strategy: Strategy::Binned,
+                ..RasterConfig::default()
+            });
+        }
+        v.push(RasterConfig {
+            threads: 2,
+            simd,
+            strategy: Strategy::SortLast,
+            ..RasterConfig::default()
+        });
+        v.push(RasterConfig {
+            threads: 3,
+            simd,
+            strategy: Strategy::SortLast,
+            ..RasterConfig::default()
+        });
+    }
+    v
+}
+
+fn draw_pixels(config: &RasterConfig, tris: &[[(f64, f64); 3]], w: u32, h: u32) -> Frame {
+    let p: Vec<Vec3> = tris
+        .iter()
+        .flatten()
+        .map(|&(x, y)| Vec3::new(x as f32, y as f32, 0.0))
+        .collect();
+    let t = (0..tris.len() as u32).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+    let mesh = Mesh::new(p, t).unwrap();
+    let view = View::new(Camera::look_at(Vec3::Z, Vec3::ZERO), w, h).unwrap();
+    let mut f = Frame::new(w, h).unwrap();
+    let d = Draw {
+        mesh: &mesh,
+        triangles: DrawTriangles::All,
+        clip_from_object: screen_from_pixels(w, h),
+        first_item: 0,
+    };
+    Rasterizer::new(config.clone())
+        .unwrap()
+        .draw(&view, &mut f, &[d], RasterMode::Full);
+    f
+}
+
+#[test]
+fn coverage_matches_exact_reference_including_guard_band_triangles() {
+    let mut cases: Vec<([(f64, f64); 3], u32, u32)> = vec![
+        // Whole-frame triangles far into the guard band, on tiny frames.
+        ([(-2000.0, -2000.0), (4000.0, -2000.0), (-2000.0, 4000.0)], 64, 64),
+        ([(-2000.0, -2000.0), (4000.0, -2000.0), (-2000.0, 4000.0)], 8, 8),
+        ([(-2000.0, -2000.0), (4000.0, -2000.0), (-2000.0, 4000.0)], 4, 4),
+        // A corner of a large frame: a long triangle whose on-screen box is small.
+        ([(22.0, -2212.0), (-2702.0, 22.0), (22.0, 22.0)], 1024, 512),
+        ([(41.0, 2212.0), (2702.0, 37.0), (41.0, 37.0)], 128, 64),
+    ];
+    let mut rng = Pcg64Mcg::seed_from_u64(5);
+    for _ in 0..150 {
+        let (w, h) = (
+            [4u32, 16, 64, 128][rng.random_range(0..4)],
+            [4u32, 32, 64][rng.random_range(0..3)],
+        );
+        let big = rng.random_bool(0.5);
+        let r = if big { 30000.0 } else { 40.0 };
+        let q = |rng: &mut Pcg64Mcg| (rng.random_range(-r..r + w as f64) * 4.0).round() / 4.0;
+        let mut tri = [(0.0, 0.0); 3];
+        for c in &mut tri {
+            *c = (q(&mut rng), q(&mut rng));
+        }
+        // Axis-aligned edges through pixel centres now and then.
+        if rng.random_bool(0.3) {
+            tri[1].1 = tri[0].1;
+        }
+        cases.push((tri, w, h));
+    }
+    for (tri, w, h) in cases {
+        let expected = reference_coverage(tri, w, h);
+        for config in strategies() {
+            let f = draw_pixels(&config, &[tri], w, h);
+            let got: Vec<bool> = f.items().iter().map(|&i| i != NO_ITEM).collect();
+            let (e, g) = (
+                expected.iter().filter(|&&c| c).count(),
+                got.iter().filter(|&&c| c).count(),
+            );
+            assert!(
+                got == expected,
+                "{tri:?} on {w}x{h} with {config:?}: {g} pixels covered, exactly {e}"
+            );
+        }
+    }
+}
+
+#[test]
+fn every_strategy_draws_the_same_frame() {
+    let mut rng = Pcg64Mcg::seed_from_u64(17);
+    for _ in 0..4 {
+        let (w, h) = (96, 64);
+        let mut tris = vec![[(41.0, 2212.0), (2702.0, 37.0), (41.0, 37.0)]];
+        for _ in 0..3000 {
+            let c = (rng.random_range(-20.0..116.0), rng.random_range(-20.0..84.0));
+            let s = rng.random_range(0.2f64..30.0);
+            let mut t = [(0.0, 0.0); 3];
+            for p in &mut t {
+                *p = (
+                    ((c.0 + rng.random_range(-s..s)) * 16.0).round() / 16.0,
+                    ((c.1 + rng.random_range(-s..s)) * 16.0).round() / 16.0,
+                );
+            }
+            tris.push(t);
+        }
+        let frames: Vec<Frame> = strategies().iter().map(|c| draw_pixels(c, &tris, w, h)).collect();
+        for f in &frames[1..] {
+            assert!(f.same_visibility(&frames[0]));
+        }
+    }
 }
