@@ -525,7 +525,8 @@ fn draw_pixels(config: &RasterConfig, tris: &[[(f64, f64); 3]], w: u32, h: u32) 
 
 #[test]
 fn coverage_matches_exact_reference_including_guard_band_triangles() {
-    let mut cases: Vec<([(f64, f64); 3], u32, u32)> = vec![
+    type Case = ([(f64, f64); 3], u32, u32);
+    let mut cases: Vec<Case> = vec![
         // Whole-frame triangles far into the guard band, on tiny frames.
         ([(-2000.0, -2000.0), (4000.0, -2000.0), (-2000.0, 4000.0)], 64, 64),
         ([(-2000.0, -2000.0), (4000.0, -2000.0), (-2000.0, 4000.0)], 8, 8),
