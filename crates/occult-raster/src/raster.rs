@@ -1189,9 +1189,9 @@ const MASKED: u32 = 56;
 /// without branches in 32-bit lanes (tiny triangles make per-pixel branches mispredict), then
 /// only the covered pixels are depth-tested. Bit-identical to the general scan.
 ///
-/// 32 bits suffice: the caller checked that the snapped corners span fewer than 8 pixels, and
-/// for a centre `p` of the 8 × 8 block, `|E(p)| = |(v1 - v0) × (p - v0)|` is at most
-/// (16·√2·256)² < 2^24 in 1/256 units.
+/// 32 bits suffice: the caller checked that the snapped corners span fewer than [`MASKED`]
+/// pixels, and every centre `p` of the 8 × 8 block lies within 8 pixels of the triangle's box,
+/// so `|E(p)| = |(v1 - v0) × (p - v0)| <= (64·√2·256)² < 2^31` in 1/256 units.
 ///
 /// # Safety
 /// As [`scan_triangle`].
@@ -1406,7 +1406,7 @@ unsafe fn scan_triangle<const AVX2: bool>(
         step_x[i] = ea * SUB;
         step_y[i] = eb * SUB;
     }
-    if (t.extent as u32) < SMALL && x1 - x0 < SMALL && y1 - y0 < SMALL {
+    if (t.extent as u32) < MASKED && x1 - x0 < SMALL && y1 - y0 < SMALL {
         // SAFETY: forwarded from the caller.
         return unsafe { scan_small::<AVX2>(vp, t, [x0, y0, x1, y1], row, step_x, step_y, target, mode) };
     }
