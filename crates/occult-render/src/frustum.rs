@@ -148,6 +148,8 @@ impl<'a> Walk<'a> {
                         return;
                     }
                 };
+                let first_draw = self.draws.len();
+                let mut kept = 0usize;
                 let mut stack = vec![(0u32, false)];
                 while let Some((n, inside)) = stack.pop() {
                     let bn = &bvh.nodes()[n as usize];
@@ -159,6 +161,7 @@ impl<'a> Walk<'a> {
                         };
                     if inside || bn.is_leaf() {
                         let list = &bvh.primitive_indices()[bn.range()];
+                        kept += list.len();
                         self.draws.push(Draw {
                             mesh,
                             triangles: DrawTriangles::List(list),
@@ -169,6 +172,18 @@ impl<'a> Walk<'a> {
                         stack.push((bn.second_child, false));
                         stack.push((n + 1, false));
                     }
+                }
+                // Index lists transform each corner once per triangle; a whole mesh shares its
+                // vertices. When most of the mesh survived, drawing it whole is cheaper (the
+                // rasterizer's outcode test drops the rest at a few ns each).
+                if kept * 2 > mesh.triangle_count() {
+                    self.draws.truncate(first_draw);
+                    self.draws.push(Draw {
+                        mesh,
+                        triangles: DrawTriangles::All,
+                        clip_from_object,
+                        first_item,
+                    });
                 }
             }
             NodeKind::Group(instances) => {
