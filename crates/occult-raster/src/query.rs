@@ -21,6 +21,16 @@ pub struct PixelRect {
 }
 
 impl PixelRect {
+    /// The whole of `frame`.
+    pub fn whole(frame: &Frame) -> Self {
+        Self {
+            x0: 0,
+            y0: 0,
+            x1: frame.width(),
+            y1: frame.height(),
+        }
+    }
+
     /// Pixels in the rectangle (0 when empty).
     pub fn area(&self) -> u64 {
         self.x1.saturating_sub(self.x0) as u64 * self.y1.saturating_sub(self.y0) as u64
@@ -57,17 +67,10 @@ pub fn query_box(frame: &Frame, view: &View, clip_from_object: &Mat4, aabb: &Aab
     }
     let (w, h) = (frame.width() as f64, frame.height() as f64);
     let clip = aabb.corners().map(|c| *clip_from_object * c.extend(1.0));
+    // A box that may cover anything: every pixel where anything could still be drawn.
+    let everywhere = || query_rect(frame, PixelRect::whole(frame), f32::INFINITY);
     if clip.iter().any(|c| !c.is_finite()) {
-        return query_rect(
-            frame,
-            PixelRect {
-                x0: 0,
-                y0: 0,
-                x1: frame.width(),
-                y1: frame.height(),
-            },
-            f32::INFINITY,
-        );
+        return everywhere();
     }
     // Outside one side plane entirely (with a margin for snapping): nothing can be drawn.
     let m = 1.0 + 4.0 / w.min(h) as f32;
@@ -81,16 +84,7 @@ pub fn query_box(frame: &Frame, view: &View, clip_from_object: &Mat4, aabb: &Aab
     }
     let near_margin = 1.0 + 1e-5;
     if clip.iter().any(|c| c.z * near_margin > c.w) {
-        return query_rect(
-            frame,
-            PixelRect {
-                x0: 0,
-                y0: 0,
-                x1: frame.width(),
-                y1: frame.height(),
-            },
-            f32::INFINITY,
-        );
+        return everywhere();
     }
     let nearest = clip.iter().map(|c| c.z / c.w).fold(0.0f32, f32::max) * (1.0 + 1e-5);
     if nearest < view.far_depth() * (1.0 - 1e-5) {

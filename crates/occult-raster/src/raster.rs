@@ -772,20 +772,11 @@ impl Isa {
         target: &FrameTarget,
         mode: RasterMode,
     ) -> (u64, u64, [u32; 4]) {
-        let rect = [0, 0, vp.width - 1, vp.height - 1];
         match self {
-            Isa::Baseline => {
-                let mut sink = DirectSink::<false> {
-                    target,
-                    rect,
-                    mode,
-                    rasterized: 0,
-                    written: 0,
-                    dirty: EMPTY_RECT,
-                };
-                setup_range(vp, draws, draw_starts, vertex_offsets, vertices, range, &mut sink);
-                (sink.rasterized, sink.written, sink.dirty)
-            }
+            // SAFETY: forwarded.
+            Isa::Baseline => unsafe {
+                draw_direct::<false>(vp, draws, draw_starts, vertex_offsets, vertices, range, target, mode)
+            },
             // SAFETY: forwarded; `select` checked the processor's features.
             #[cfg(target_arch = "x86_64")]
             Isa::Avx2 => unsafe {
@@ -856,8 +847,28 @@ unsafe fn draw_direct_avx2(
     target: &FrameTarget,
     mode: RasterMode,
 ) -> (u64, u64, [u32; 4]) {
+    // SAFETY: forwarded.
+    unsafe { draw_direct::<true>(vp, draws, draw_starts, vertex_offsets, vertices, range, target, mode) }
+}
+
+/// The body of [`Isa::draw_direct`], compiled once per instruction set.
+///
+/// # Safety
+/// No other thread may access `target` during the call.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+unsafe fn draw_direct<const AVX2: bool>(
+    vp: &Viewport,
+    draws: &[Draw<'_>],
+    draw_starts: &[usize],
+    vertex_offsets: &[usize],
+    vertices: &[ProjVertex],
+    range: Range<usize>,
+    target: &FrameTarget,
+    mode: RasterMode,
+) -> (u64, u64, [u32; 4]) {
     let rect = [0, 0, vp.width - 1, vp.height - 1];
-    let mut sink = DirectSink::<true> {
+    let mut sink = DirectSink::<AVX2> {
         target,
         rect,
         mode,

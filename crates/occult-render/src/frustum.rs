@@ -248,9 +248,7 @@ impl Renderer for FrustumCulling {
         let t = Instant::now();
         let counts = self.raster.draw(view, frame, &draws, RasterMode::Full);
         stats.phases.add(Phase::Raster, t.elapsed());
-        stats.triangles_submitted = counts.triangles_submitted;
-        stats.triangles_rasterized = counts.triangles_rasterized;
-        stats.fragments_written = counts.fragments_written;
+        stats.add_raster(counts);
         stats.total = start.elapsed();
         Ok(stats)
     }

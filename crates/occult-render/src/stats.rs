@@ -54,6 +54,15 @@ impl PhaseTimes {
     }
 }
 
+impl FrameStats {
+    /// Adds the counts of one rasterizer call.
+    pub fn add_raster(&mut self, counts: occult_raster::RasterCounts) {
+        self.triangles_submitted += counts.triangles_submitted;
+        self.triangles_rasterized += counts.triangles_rasterized;
+        self.fragments_written += counts.fragments_written;
+    }
+}
+
 /// What a renderer did for one frame. Every renderer fills what applies and leaves the rest 0.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct FrameStats {
