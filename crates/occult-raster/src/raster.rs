@@ -1078,6 +1078,7 @@ fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut
     if px0 > px1 || py0 > py1 {
         return;
     }
+    out.will_touch(px0 as u32, py0 as u32, py1 > py0);
     let mut area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
     if area == 0 {
         return;
@@ -1131,6 +1132,10 @@ fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut
 /// Where set-up triangles go: bins for the tile pass, or straight to the scan.
 trait SetupSink {
     fn push(&mut self, vp: &Viewport, t: TriSetup);
+    /// A triangle whose box starts at pixel `(x, y)` (and covers row `y + 1` if `two_rows`)
+    /// is being set up: a sink that scans at once may start fetching those pixels.
+    #[inline(always)]
+    fn will_touch(&mut self, _x: u32, _y: u32, _two_rows: bool) {}
 }
 
 impl SetupSink for ChunkBins {
@@ -1172,6 +1177,17 @@ struct DirectSink<'a, const AVX2: bool> {
 
 impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
     #[inline(always)]
+    fn will_touch(&mut self, x: u32, y: u32, two_rows: bool) {
+        // The rest of the setup (area, depth plane) overlaps with the fetch of pixels the scan
+        // is about to test: first touches of the frame are this loop's main stall.
+        let i = y as usize * self.target.width + x as usize;
+        prefetch(self.target, i);
+        if two_rows {
+            prefetch(self.target, i + self.target.width);
+        }
+    }
+
+    #[inline(always)]
     fn push(&mut self, vp: &Viewport, t: TriSetup) {
         self.rasterized += 1;
         self.dirty = [
@@ -1188,6 +1204,21 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
 
 /// Spans shorter than this are written pixel by pixel; longer ones by the vectorized loop.
 const SHORT_SPAN: usize = 16;
+
+/// Hints the processor to fetch the depth and item of pixel `i`; never faults, never changes
+/// results.
+#[inline(always)]
+fn prefetch(target: &FrameTarget, i: usize) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is a hint: it never faults, whatever the address.
+    unsafe {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        _mm_prefetch::<_MM_HINT_T0>(target.depth.wrapping_add(i) as *const i8);
+        _mm_prefetch::<_MM_HINT_T0>(target.items.wrapping_add(i) as *const i8);
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (target, i);
+}
 
 /// Side of the block scanned without branches for small triangles.
 const SMALL: u32 = 8;
