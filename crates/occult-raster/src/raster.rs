@@ -655,8 +655,10 @@ impl Rasterizer {
                             d[x] = sd[x];
                         }
                     }
+                    // Only depth is reset: a scratch item matters only where the scratch depth is
+                    // not clear (a fragment always beats a clear pixel, and ties need a
+                    // fragment drawn in the same draw), so stale items are never read.
                     sd[x0..x1].fill(crate::CLEAR_DEPTH);
-                    si[x0..x1].fill(occult_core::NO_ITEM);
                 });
         }
         self.scratch_clean = true;
