@@ -15,7 +15,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use occult_core::{compose, Affine3A, Containment, ItemId, NodeId, NodeKind, Scene, View};
-use occult_raster::{Draw, DrawTriangles, Frame, RasterMode, Rasterizer};
+use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 use occult_spatial::Bvh;
 
 use crate::{check_frame, FrameStats, Phase, RenderError, RenderOptions, Renderer, Result};
@@ -245,10 +245,7 @@ impl Renderer for FrustumCulling {
         let Walk { draws, mut stats, .. } = walk;
         stats.phases.add(Phase::Clear, clear);
         stats.phases.add(Phase::Cull, t.elapsed());
-        let t = Instant::now();
-        let counts = self.raster.draw(view, frame, &draws, RasterMode::Full);
-        stats.phases.add(Phase::Raster, t.elapsed());
-        stats.add_raster(counts);
+        crate::rasterize(&mut self.raster, view, frame, &draws, &mut stats);
         stats.total = start.elapsed();
         Ok(stats)
     }

@@ -143,6 +143,21 @@ impl Algorithm {
     }
 }
 
+/// Rasterizes `draws` into `frame`, adding the time to [`Phase::Raster`] and the counts to
+/// `stats`: the last step every renderer shares.
+pub(crate) fn rasterize(
+    raster: &mut occult_raster::Rasterizer,
+    view: &View,
+    frame: &mut Frame,
+    draws: &[occult_raster::Draw<'_>],
+    stats: &mut FrameStats,
+) {
+    let t = std::time::Instant::now();
+    let counts = raster.draw(view, frame, draws, occult_raster::RasterMode::Full);
+    stats.phases.add(Phase::Raster, t.elapsed());
+    stats.add_raster(counts);
+}
+
 /// Checks that `frame` matches `view`.
 pub(crate) fn check_frame(view: &View, frame: &Frame) -> Result<()> {
     if frame.width() != view.width() || frame.height() != view.height() {

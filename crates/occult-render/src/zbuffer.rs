@@ -9,7 +9,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use occult_core::{Scene, View};
-use occult_raster::{Draw, DrawTriangles, Frame, RasterMode, Rasterizer};
+use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 
 use crate::{check_frame, FrameStats, Phase, RenderError, RenderOptions, Renderer, Result};
 
@@ -67,10 +67,7 @@ impl Renderer for ZBuffer {
                 }
             });
         stats.phases.add(Phase::Other, t.elapsed());
-        let t = Instant::now();
-        let counts = self.raster.draw(view, frame, &draws, RasterMode::Full);
-        stats.phases.add(Phase::Raster, t.elapsed());
-        stats.add_raster(counts);
+        crate::rasterize(&mut self.raster, view, frame, &draws, &mut stats);
         stats.total = start.elapsed();
         Ok(stats)
     }
