@@ -186,7 +186,6 @@ pub fn run(a: SweepArgs) -> Result<()> {
         say!("wrote {}", p.display());
     }
     if let Some(p) = &a.csv {
-        let header: Vec<&str> = header.iter().map(|h| *h).collect();
         output::write_csv(p, &header, &rows)?;
         say!("wrote {}", p.display());
     }
