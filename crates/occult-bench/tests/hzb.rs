@@ -26,6 +26,9 @@ const CONFIGS: &[&str] = &[
     "hzb:recheck=7,area_sort=off,keep_culled=off",
     "hzb:order=count,batch=100000",
     "hzb:occlusion=off",
+    "hzb:parallel=structure,workers=3",
+    "hzb:parallel=primitive",
+    "hzb:parallel=hybrid,workers=4,recheck=3",
 ];
 
 #[test]
@@ -127,6 +130,26 @@ fn hzb_bad_parameters_are_errors() {
         }
     }
     assert!(AlgoSpec::parse("hzb:leef=3").is_err());
+}
+
+#[test]
+fn hzb_distributions_report_worker_idle_time() {
+    let built = occult_scenes::spec::parse_spec("city:blocks=3,detail=2")
+        .and_then(|s| s.build())
+        .unwrap();
+    let scene = Arc::new(built.scene);
+    for d in ["structure", "primitive", "hybrid"] {
+        let s = spec(&format!("hzb:parallel={d},workers=3"));
+        let mut h = s.build(scene.clone(), &RenderOptions::default()).unwrap();
+        let view = View::new(built.default_camera, 96, 64).unwrap();
+        let stats = h.render(&view, &mut Frame::new(96, 64).unwrap()).unwrap();
+        let idle: Vec<u64> = (0..3)
+            .map(|k| stats.counters.get(&format!("worker{k}_idle_us")))
+            .collect();
+        assert!(idle.contains(&0), "{d}: the slowest worker waits for nobody: {idle:?}");
+        assert!(stats.counters.0.iter().any(|(k, _)| *k == "worker2_busy_us"));
+        assert!(stats.triangles_submitted > 0);
+    }
 }
 
 #[test]

@@ -81,6 +81,24 @@ pub enum ChildOrder {
     Count,
 }
 
+/// §4.1: how the scene is spread over worker threads, each with its own depth buffer,
+/// z-pyramid and visible list; their frames are merged by depth compositing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Distribution {
+    /// One walk; parallelism is the rasterizer's own.
+    Off,
+    /// Distribute by structure: the root's primitives (whole subtrees) round robin.
+    Structure,
+    /// Distribute by primitive: every worker walks every node and draws a round-robin share of
+    /// each node's primitives.
+    Primitive,
+    /// The hybrid: structures kept whole, but fine (octree nodes), spread over the workers.
+    Hybrid,
+}
+
+/// Most workers of a distribution.
+pub const MAX_WORKERS: usize = 8;
+
 /// Tunables of [`Hzb`]; every part can be switched off to measure it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct HzbOptions {
@@ -104,6 +122,10 @@ pub struct HzbOptions {
     pub keep_culled: bool,
     /// Sibling order.
     pub order: ChildOrder,
+    /// Parallel distribution (§4.1).
+    pub distribution: Distribution,
+    /// Workers of the distribution (1 ..= [`MAX_WORKERS`]); each rasterizes on one thread.
+    pub workers: usize,
 }
 
 impl Default for HzbOptions {
@@ -123,6 +145,8 @@ impl Default for HzbOptions {
             area_sort: true,
             keep_culled: true,
             order: ChildOrder::FrontToBack,
+            distribution: Distribution::Off,
+            workers: 2,
         }
     }
 }
@@ -163,7 +187,18 @@ impl HzbOptions {
                 "recheck={recheck}: the visible list is rechecked every N frames, N in 1..=1000000"
             ));
         }
+        let workers: usize = p.get("workers", d.workers)?;
+        if workers == 0 || workers > MAX_WORKERS {
+            return bad(format!("workers={workers}: workers must be in 1..={MAX_WORKERS}"));
+        }
         Ok(Self {
+            distribution: match p.choice("parallel", &["off", "structure", "primitive", "hybrid"], "off")? {
+                "structure" => Distribution::Structure,
+                "primitive" => Distribution::Primitive,
+                "hybrid" => Distribution::Hybrid,
+                _ => Distribution::Off,
+            },
+            workers,
             octree: OctreeConfig {
                 leaf_size,
                 max_depth,
@@ -251,6 +286,16 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             default: "front",
             help: "sibling order: front (front to back) or count (ascending primitive count, §4.2/§5.1)",
         },
+        ParamDoc {
+            key: "parallel",
+            default: "off",
+            help: "distribution over workers with own depth buffers, merged by depth compositing: off, structure, primitive, hybrid (§4.1)",
+        },
+        ParamDoc {
+            key: "workers",
+            default: "2",
+            help: "workers of the distribution, 1..=8 (each rasterizes on one thread)",
+        },
     ],
     conservative: true,
     build: |scene, options, params| Ok(Box::new(Hzb::new(scene, options, &HzbOptions::from_params(params)?)?)),
@@ -265,16 +310,69 @@ struct VisEntry {
     world_from_node: Affine3A,
 }
 
+/// What one walker keeps across frames: its rasterizer, pyramid and visible list (and, for a
+/// worker of a distribution, its own frame).
+struct Worker {
+    raster: Rasterizer,
+    frame: Option<Frame>,
+    pyramid: Option<ZPyramid>,
+    visible: Vec<VisEntry>,
+}
+
+impl Worker {
+    fn memory_bytes(&self) -> usize {
+        self.pyramid.as_ref().map_or(0, ZPyramid::memory_bytes)
+            + self.frame.as_ref().map_or(0, Frame::memory_bytes)
+            + self.visible.capacity() * std::mem::size_of::<VisEntry>()
+    }
+}
+
 /// The hzb renderer.
 pub struct Hzb {
     scene: Arc<Scene>,
-    raster: Rasterizer,
     options: HzbOptions,
     /// Per DAG node: its octree (groups, and meshes over the leaf size).
     octrees: Vec<Option<HybridOctree>>,
-    pyramid: Option<ZPyramid>,
-    visible: Vec<VisEntry>,
+    /// One walker, or one per worker of the distribution.
+    workers: Vec<Worker>,
     frames_since_recheck: u32,
+}
+
+/// Counter names per worker (counters are named by static strings).
+const BUSY: [&str; MAX_WORKERS] = [
+    "worker0_busy_us",
+    "worker1_busy_us",
+    "worker2_busy_us",
+    "worker3_busy_us",
+    "worker4_busy_us",
+    "worker5_busy_us",
+    "worker6_busy_us",
+    "worker7_busy_us",
+];
+const IDLE: [&str; MAX_WORKERS] = [
+    "worker0_idle_us",
+    "worker1_idle_us",
+    "worker2_idle_us",
+    "worker3_idle_us",
+    "worker4_idle_us",
+    "worker5_idle_us",
+    "worker6_idle_us",
+    "worker7_idle_us",
+];
+
+/// Ensures `slot` holds a pyramid of the frame's size, cleared.
+fn ready_pyramid(slot: &mut Option<ZPyramid>, width: u32, height: u32) -> Result<&mut ZPyramid> {
+    if matches!(slot, Some(p) if p.width() == width && p.height() == height) {
+        if let Some(p) = slot.as_mut() {
+            p.clear();
+        }
+    } else {
+        *slot = Some(ZPyramid::new(width, height)?);
+    }
+    match slot {
+        Some(p) => Ok(p),
+        None => unreachable!("set just above"),
+    }
 }
 
 impl Hzb {
@@ -322,16 +420,169 @@ impl Hzb {
                 })
                 .collect()
         });
+        let workers = if hzb.distribution == Distribution::Off {
+            vec![Worker {
+                raster,
+                frame: None,
+                pyramid: None,
+                visible: Vec::new(),
+            }]
+        } else {
+            let one = occult_raster::RasterConfig {
+                threads: 1,
+                ..options.raster.clone()
+            };
+            (0..hzb.workers)
+                .map(|_| {
+                    Ok(Worker {
+                        raster: Rasterizer::new(one.clone())?,
+                        frame: None,
+                        pyramid: None,
+                        visible: Vec::new(),
+                    })
+                })
+                .collect::<Result<Vec<_>>>()?
+        };
         Ok(Self {
             scene,
-            raster,
             options: hzb.clone(),
             octrees,
-            pyramid: None,
-            visible: Vec::new(),
+            workers,
             frames_since_recheck: 0,
         })
     }
+}
+
+/// One walk over (the share of) the scene: visible list, tested traversal, recheck.
+#[allow(clippy::too_many_arguments)]
+fn walk_frame(
+    scene: &Scene,
+    octrees: &[Option<HybridOctree>],
+    options: &HzbOptions,
+    view: &View,
+    raster: &mut Rasterizer,
+    frame: &mut Frame,
+    pyramid: &mut ZPyramid,
+    visible: &mut Vec<VisEntry>,
+    share: walk::Share,
+    recheck: bool,
+) -> FrameStats {
+    let old_visible = std::mem::take(visible);
+    let mut w = walk::Walk::new(scene, octrees, options, view, raster, frame, pyramid, share);
+    if options.temporal {
+        w.draw_visible_list(old_visible);
+    }
+    w.traverse();
+    if recheck {
+        w.recheck();
+    }
+    let (list, stats) = w.finish();
+    *visible = list;
+    stats
+}
+
+impl Hzb {
+    /// §4.1: every worker walks its share into its own frame (own depth buffer, pyramid and
+    /// lists, one rasterizer thread); the frames are then merged by depth compositing under the
+    /// frame's (depth, item) rule, which makes the result that of one frame holding everything.
+    /// Each worker's busy time is recorded, and its idle time: how long it waits for the
+    /// slowest before the merge (the load balance the paper discusses).
+    fn render_distributed(&mut self, view: &View, frame: &mut Frame, recheck: bool) -> Result<FrameStats> {
+        let (scene, octrees, options) = (&*self.scene, &self.octrees[..], &self.options);
+        let (width, height) = (frame.width(), frame.height());
+        for w in &mut self.workers {
+            if !matches!(&w.frame, Some(f) if f.width() == width && f.height() == height) {
+                w.frame = Some(Frame::new(width, height)?);
+            }
+            ready_pyramid(&mut w.pyramid, width, height)?;
+        }
+        let n = self.workers.len() as u32;
+        let results: Vec<(FrameStats, std::time::Duration)> = std::thread::scope(|s| {
+            let handles: Vec<_> = self
+                .workers
+                .iter_mut()
+                .enumerate()
+                .map(|(k, w)| {
+                    s.spawn(move || {
+                        let t = Instant::now();
+                        let (Some(f), Some(p)) = (w.frame.as_mut(), w.pyramid.as_mut()) else {
+                            unreachable!("frames and pyramids were made above");
+                        };
+                        w.raster.clear(f);
+                        let share = walk::Share {
+                            distribution: options.distribution,
+                            workers: n,
+                            index: k as u32,
+                        };
+                        let stats = walk_frame(
+                            scene,
+                            octrees,
+                            options,
+                            view,
+                            &mut w.raster,
+                            f,
+                            p,
+                            &mut w.visible,
+                            share,
+                            recheck,
+                        );
+                        (stats, t.elapsed())
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                .collect()
+        });
+        let t = Instant::now();
+        composite(frame, self.workers.iter().filter_map(|w| w.frame.as_ref()));
+        let merge = t.elapsed();
+        let slowest = results.iter().map(|r| r.1).max().unwrap_or_default();
+        let mut stats = FrameStats::default();
+        for (k, (s, busy)) in results.iter().enumerate() {
+            stats.triangles_submitted += s.triangles_submitted;
+            stats.triangles_rasterized += s.triangles_rasterized;
+            stats.fragments_written += s.fragments_written;
+            stats.nodes_visited += s.nodes_visited;
+            stats.boxes_tested += s.boxes_tested;
+            stats.boxes_culled += s.boxes_culled;
+            stats.counters.merge(&s.counters);
+            stats.counters.add(BUSY[k], busy.as_micros() as u64);
+            stats.counters.add(IDLE[k], (slowest - *busy).as_micros() as u64);
+            if *busy == slowest {
+                // Phases of the critical path: the slowest worker's.
+                stats.phases = s.phases.clone();
+            }
+        }
+        stats.phases.add(Phase::Other, merge);
+        Ok(stats)
+    }
+}
+
+/// Depth compositing: every pixel of `out` takes the nearest fragment (ties to the smaller
+/// item) of the `parts`, in row bands over the available threads.
+fn composite<'f>(out: &mut Frame, parts: impl Iterator<Item = &'f Frame>) {
+    let parts: Vec<&Frame> = parts.collect();
+    let width = out.width() as usize;
+    let (depth, items) = out.buffers_mut();
+    depth.fill(occult_raster::CLEAR_DEPTH);
+    items.fill(occult_core::NO_ITEM);
+    use rayon::prelude::*;
+    let rows = 16 * width;
+    depth
+        .par_chunks_mut(rows)
+        .zip(items.par_chunks_mut(rows))
+        .enumerate()
+        .for_each(|(band, (d, it))| {
+            let base = band * rows;
+            for part in &parts {
+                let (pd, pi) = (&part.depth()[base..base + d.len()], &part.items()[base..base + d.len()]);
+                for j in 0..d.len() {
+                    occult_raster::keep_fragment(&mut d[j], &mut it[j], pd[j], pi[j]);
+                }
+            }
+        });
 }
 
 impl Renderer for Hzb {
@@ -342,43 +593,38 @@ impl Renderer for Hzb {
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
         check_frame(view, frame)?;
         let start = Instant::now();
-        self.raster.clear(frame);
-        let clear = start.elapsed();
-        let pyramid = match &mut self.pyramid {
-            Some(p) if p.width() == frame.width() && p.height() == frame.height() => {
-                p.clear();
-                p
-            }
-            slot => slot.insert(ZPyramid::new(frame.width(), frame.height())?),
-        };
         self.frames_since_recheck += 1;
         let recheck = self.options.temporal && self.frames_since_recheck >= self.options.recheck_every;
         if recheck {
             self.frames_since_recheck = 0;
         }
-        let old_visible = std::mem::take(&mut self.visible);
-        let mut w = walk::Walk::new(
-            &self.scene,
-            &self.octrees,
-            &self.options,
-            view,
-            &mut self.raster,
-            frame,
-            pyramid,
-        );
-        if self.options.temporal {
-            w.draw_visible_list(old_visible);
-        }
-        w.traverse();
-        if recheck {
-            w.recheck();
-        }
-        let (visible, mut stats) = w.finish();
-        self.visible = visible;
-        stats.phases.add(Phase::Clear, clear);
+        let (scene, octrees, options) = (&*self.scene, &self.octrees[..], &self.options);
+        let mut stats = if options.distribution == Distribution::Off {
+            let w = &mut self.workers[0];
+            let t = Instant::now();
+            w.raster.clear(frame);
+            let clear = t.elapsed();
+            let pyramid = ready_pyramid(&mut w.pyramid, frame.width(), frame.height())?;
+            let mut stats = walk_frame(
+                scene,
+                octrees,
+                options,
+                view,
+                &mut w.raster,
+                frame,
+                pyramid,
+                &mut w.visible,
+                walk::Share::ALL,
+                recheck,
+            );
+            stats.phases.add(Phase::Clear, clear);
+            stats
+        } else {
+            self.render_distributed(view, frame, recheck)?
+        };
         stats.total = start.elapsed();
-        let accounted =
-            stats.phases.get(Phase::Clear) + stats.phases.get(Phase::Raster) + stats.phases.get(Phase::DepthStructure);
+        let p = &stats.phases;
+        let accounted = p.get(Phase::Clear) + p.get(Phase::Raster) + p.get(Phase::DepthStructure) + p.get(Phase::Other);
         stats.phases.add(Phase::Cull, stats.total.saturating_sub(accounted));
         Ok(stats)
     }
@@ -389,11 +635,9 @@ impl Renderer for Hzb {
             .flatten()
             .map(HybridOctree::memory_bytes)
             .sum::<usize>()
-            + self.pyramid.as_ref().map_or(0, ZPyramid::memory_bytes)
-            + self.visible.capacity() * std::mem::size_of::<VisEntry>()
+            + self.workers.iter().map(Worker::memory_bytes).sum::<usize>()
     }
 }
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -9,7 +9,7 @@ use occult_raster::{Draw, DrawTriangles, Frame, PixelRect, PyramidCounts, Pyrami
 use occult_spatial::{octree_hybrid::NO_CHILD, HybridOctree};
 
 use super::boxtest::{screen_rect, Occlusion};
-use super::{ChildOrder, HzbOptions, VisEntry};
+use super::{ChildOrder, Distribution, HzbOptions, VisEntry};
 use crate::{FrameStats, Phase};
 
 /// A small multiplicative hasher for the frame's stamp sets (keys are ids, not attacker data).
@@ -41,6 +41,57 @@ type NodeKey = (u32, u32, u64);
 /// Marks the stamp of a triangle (its item id names it) as opposed to an instance primitive.
 const TRIANGLE_STAMP: u32 = u32::MAX;
 
+/// Which part of the scene one worker of a §4.1 distribution owns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Share {
+    pub distribution: Distribution,
+    pub workers: u32,
+    pub index: u32,
+}
+
+impl Share {
+    /// The whole scene (no distribution).
+    pub const ALL: Share = Share {
+        distribution: Distribution::Off,
+        workers: 1,
+        index: 0,
+    };
+
+    fn mix(key: NodeKey) -> u64 {
+        let mut h = IdHasher::default();
+        h.write_u32(key.0);
+        h.write_u32(key.1);
+        h.write_u64(key.2);
+        h.finish() >> 32
+    }
+
+    /// Whether this worker draws the own primitives of node `key` at all (hybrid: fine
+    /// structures, kept whole, spread over the workers).
+    fn owns_node(&self, key: NodeKey) -> bool {
+        match self.distribution {
+            Distribution::Hybrid => Self::mix(key) % self.workers as u64 == self.index as u64,
+            _ => true,
+        }
+    }
+
+    /// Whether this worker handles primitive `p` of node `key` of DAG node `id` (`root`:
+    /// the scene's root). By structure: the root's primitives (whole subtrees) round robin;
+    /// by primitive: every node's primitives round robin.
+    fn owns_primitive(&self, id: NodeId, root: NodeId, key: NodeKey, p: u32) -> bool {
+        match self.distribution {
+            Distribution::Structure => id != root || p % self.workers == self.index,
+            Distribution::Primitive => (Self::mix(key) + p as u64) % self.workers as u64 == self.index as u64,
+            _ => true,
+        }
+    }
+
+    /// Whether this worker enters the subtree of instance primitive `p` (by structure, only
+    /// its own structures; otherwise every worker walks every octree).
+    fn enters(&self, id: NodeId, root: NodeId, p: u32) -> bool {
+        self.distribution != Distribution::Structure || id != root || p % self.workers == self.index
+    }
+}
+
 /// Geometry gathered for the next rasterizer call.
 struct Pending<'a> {
     mesh: &'a Mesh,
@@ -70,6 +121,7 @@ pub(super) struct Walk<'a> {
     frame: &'a mut Frame,
     pyramid: &'a mut ZPyramid,
     how: PyramidTest,
+    share: Share,
     pending: Vec<Pending<'a>>,
     scratch: Vec<u32>,
     pending_triangles: usize,
@@ -101,6 +153,7 @@ impl<'a> Walk<'a> {
         raster: &'a mut Rasterizer,
         frame: &'a mut Frame,
         pyramid: &'a mut ZPyramid,
+        share: Share,
     ) -> Self {
         Self {
             scene,
@@ -114,6 +167,7 @@ impl<'a> Walk<'a> {
                 global: options.global,
                 hierarchical: options.pyramid,
             },
+            share,
             pending: Vec::new(),
             scratch: Vec::new(),
             pending_triangles: 0,
@@ -163,7 +217,8 @@ impl<'a> Walk<'a> {
             }
             let clip = self.view.clip_from_object(&e.world_from_node);
             self.list_drawn += 1;
-            self.draw_own(e.dag_node, e.octree_node, &e.world_from_node, e.first_item, clip, &own);
+            // A flush may empty the batch; the entry stays listed either way.
+            let _ = self.draw_own(e.dag_node, e.octree_node, &e.world_from_node, e.first_item, clip, &own);
             self.drawn_nodes.insert(key);
             self.list(e);
             self.maybe_flush();
@@ -272,8 +327,8 @@ impl<'a> Walk<'a> {
                 let NodeKind::Mesh(mesh) = node.kind() else {
                     return; // an empty group
                 };
-                if mesh.triangle_count() == 0 {
-                    return;
+                if mesh.triangle_count() == 0 || (id == scene.root() && self.share.index != 0) {
+                    return; // a small mesh as the whole scene: the first worker draws it
                 }
                 let b = node.bounds();
                 self.stats.nodes_visited += 1;
@@ -336,7 +391,7 @@ impl<'a> Walk<'a> {
                 NodeKind::Mesh(_) => {
                     if !self.drawn_nodes.contains(&key) {
                         let own = node.own_bounds;
-                        self.draw_own(
+                        let drew = self.draw_own(
                             inst.id,
                             n,
                             &inst.world_from_node,
@@ -344,7 +399,7 @@ impl<'a> Walk<'a> {
                             inst.clip_from_object,
                             &own,
                         );
-                        if self.options.temporal {
+                        if drew && self.options.temporal {
                             self.list_new(inst, n);
                         }
                     }
@@ -352,14 +407,19 @@ impl<'a> Walk<'a> {
                 NodeKind::Group(instances) => {
                     let drawn = self.drawn_nodes.contains(&key);
                     let mut direct = false;
+                    let root = scene.root();
                     for &p in inst.octree.node_primitives(n) {
                         let i = &instances[p as usize];
+                        if !self.share.enters(inst.id, root, p) {
+                            continue;
+                        }
                         let child_first = inst.first_item + scene.node(inst.id).item_offset(p as usize);
                         let has_octree = self.octrees[i.child.index()].is_some();
                         if !has_octree {
                             direct = true;
-                            if drawn {
-                                continue; // the visible list drew it
+                            if drawn || !self.share.owns_node(key) || !self.share.owns_primitive(inst.id, root, key, p)
+                            {
+                                continue; // the visible list drew it, or another worker does
                             }
                         }
                         if inst.octree.is_shared(p) && !self.drawn_shared.insert((child_first, i.child.0)) {
@@ -405,7 +465,8 @@ impl<'a> Walk<'a> {
 
     /// Adds the own primitives of octree node `n` of an instance of `id` that can be drawn
     /// directly: a mesh's triangles, or a group's instances of small meshes (those of nodes with
-    /// octrees are visited by the traversal, or listed themselves).
+    /// octrees are visited by the traversal, or listed themselves). Returns whether anything
+    /// was queued.
     fn draw_own(
         &mut self,
         id: NodeId,
@@ -414,16 +475,25 @@ impl<'a> Walk<'a> {
         first_item: u64,
         clip: Mat4,
         own: &occult_core::Aabb,
-    ) {
+    ) -> bool {
         let scene: &'a Scene = self.scene;
         let octrees: &'a [Option<HybridOctree>] = self.octrees;
         let Some(octree) = &octrees[id.index()] else {
-            return;
+            return false;
         };
+        let key = (id.0, n, first_item);
+        if !self.share.owns_node(key) {
+            return false;
+        }
+        let queued = self.pending.len();
+        let (share, root) = (self.share, scene.root());
         match scene.node(id).kind() {
             NodeKind::Mesh(mesh) => {
                 let start = self.scratch.len() as u32;
                 for &p in octree.node_primitives(n) {
+                    if !share.owns_primitive(id, root, key, p) {
+                        continue;
+                    }
                     // §3.1: a shared primitive is drawn once per frame.
                     if octree.is_shared(p) && !self.drawn_shared.insert((first_item + p as u64, TRIANGLE_STAMP)) {
                         continue;
@@ -438,7 +508,7 @@ impl<'a> Walk<'a> {
             NodeKind::Group(instances) => {
                 for &p in octree.node_primitives(n) {
                     let i = &instances[p as usize];
-                    if octrees[i.child.index()].is_some() {
+                    if octrees[i.child.index()].is_some() || !share.owns_primitive(id, root, key, p) {
                         continue;
                     }
                     let NodeKind::Mesh(mesh) = scene.node(i.child).kind() else {
@@ -455,6 +525,7 @@ impl<'a> Walk<'a> {
                 }
             }
         }
+        self.pending.len() > queued
     }
 
     /// Queues triangles whose object-space bounds are `b` (for the pyramid's dirty region).
