@@ -145,6 +145,7 @@ pub(super) struct Walk<'a> {
 }
 
 impl<'a> Walk<'a> {
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         scene: &'a Scene,
         octrees: &'a [Option<HybridOctree>],
