@@ -390,7 +390,14 @@ impl<'a> Walk<'a> {
             let scene: &'a Scene = self.scene;
             match scene.node(inst.id).kind() {
                 NodeKind::Mesh(_) => {
-                    if !self.drawn_nodes.contains(&key) {
+                    // An inner node's own primitives (its straddlers) get their own, tighter box
+                    // test: the subtree's box passing says little about them.
+                    let own_hidden = |w: &mut Self| {
+                        w.options.occlusion
+                            && !node.is_leaf()
+                            && w.hidden(&inst.clip_from_object, &node.own_bounds, inst.eye)
+                    };
+                    if !self.drawn_nodes.contains(&key) && !own_hidden(self) {
                         let own = node.own_bounds;
                         let drew = self.draw_own(
                             inst.id,
@@ -409,7 +416,22 @@ impl<'a> Walk<'a> {
                     let drawn = self.drawn_nodes.contains(&key);
                     let mut direct = false;
                     let root = scene.root();
-                    for &p in inst.octree.node_primitives(n) {
+                    // Front to back among the node's instances too (nearest centre first), so
+                    // that a near instance is drawn before the far ones are tested.
+                    let mut prims: Vec<(f32, u32)> = inst
+                        .octree
+                        .node_primitives(n)
+                        .iter()
+                        .map(|&p| {
+                            let i = &instances[p as usize];
+                            let c = i
+                                .parent_from_child
+                                .transform_point3(scene.node(i.child).bounds().center());
+                            (c.distance_squared(inst.eye), p)
+                        })
+                        .collect();
+                    prims.sort_by(|a, b| a.0.total_cmp(&b.0));
+                    for &(_, p) in &prims {
                         let i = &instances[p as usize];
                         if !self.share.enters(inst.id, root, p) {
                             continue;
