@@ -37,13 +37,31 @@
 //!   `order=count` visits siblings in ascending primitive count instead of front to back
 //!   (§4.2/§5.1's invisible list; see the deviations).
 //! - **Global farthest-depth reject (§5.3)**, `global`: the pyramid's top sample, compared first.
+//! - **Parallel distributions (§4.1)**, `parallel=structure|primitive|hybrid`, `workers=N`:
+//!   each worker thread walks its share of the scene with its own frame (depth buffer), pyramid,
+//!   visible list and single-threaded rasterizer; the frames are merged by depth compositing
+//!   under the (depth, item) rule. *By structure*: the root's primitives (whole subtrees)
+//!   round robin; *by primitive*: every worker walks every node and draws a round-robin share
+//!   of each node's primitives (and pays every box test); *hybrid*: structures kept whole but
+//!   fine (octree nodes of every instance) spread over the workers by a hash. Each worker's busy
+//!   time and its idle time (waiting for the slowest before the merge) are reported as the
+//!   counters `worker<k>_busy_us` / `worker<k>_idle_us`; the phases are the slowest worker's,
+//!   the merge is `other`.
 //!
 //! Every part has a switch so its effect can be measured (`occult algos` lists them).
 //!
 //! # Deviations from the paper
-//! - The paper's §4 parallel distribution strategies (by structure, by primitive, hybrid, with
-//!   per-processor depth buffers) are not implemented here; parallelism is the rasterizer's
-//!   (tile-parallel within each batch).
+//! - §4's processors are threads of one machine sharing memory: the distributions are
+//!   per-frame filters over the shared octrees rather than copies of the data, and every
+//!   worker of `structure`/`hybrid` still walks (and tests) the shared upper octree levels.
+//!   With `parallel=off` (the default) parallelism is the rasterizer's own, tile-parallel
+//!   within each batch.
+//! - Two additions beyond the paper, both conservative: an inner octree node's own primitives
+//!   (its large straddlers) are tested against their own box before they are drawn, and the
+//!   instances held by one node of a group's octree are visited nearest first (the octants
+//!   give the order between nodes, not within one).
+//! - By structure over a scene whose root is a mesh degenerates to by primitive (the root's
+//!   primitives are then triangles).
 //! - The invisible list of §4.2/§5.1 is flat in the paper (structures sorted by primitive count
 //!   as a preprocess). Here the not-yet-visible part of the scene is the octree itself, walked
 //!   from the root; `order=count` applies the heuristic where an order is chosen: among the

@@ -390,8 +390,8 @@ impl<'a> Walk<'a> {
             let scene: &'a Scene = self.scene;
             match scene.node(inst.id).kind() {
                 NodeKind::Mesh(_) => {
-                    // An inner node's own primitives (its straddlers) get their own, tighter box
-                    // test: the subtree's box passing says little about them.
+                    // Deviation: an inner node's own primitives (its straddlers) get their own,
+                    // tighter box test: the subtree's box passing says little about them.
                     let own_hidden = |w: &mut Self| {
                         w.options.occlusion
                             && !node.is_leaf()
@@ -416,8 +416,8 @@ impl<'a> Walk<'a> {
                     let drawn = self.drawn_nodes.contains(&key);
                     let mut direct = false;
                     let root = scene.root();
-                    // Front to back among the node's instances too (nearest centre first), so
-                    // that a near instance is drawn before the far ones are tested.
+                    // Deviation: front to back among the node's instances too (nearest centre
+                    // first), so that a near instance is drawn before the far ones are tested.
                     let mut prims: Vec<(f32, u32)> = inst
                         .octree
                         .node_primitives(n)
@@ -460,6 +460,7 @@ impl<'a> Walk<'a> {
         }
         let (order, count) = match self.options.order {
             ChildOrder::FrontToBack => inst.octree.children_front_to_back(n, inst.eye),
+            // Deviation: §4.2/§5.1's invisible-list order applied to siblings (see the module doc).
             ChildOrder::Count => {
                 let mut c = node.children;
                 c.sort_by_key(|&c| {
