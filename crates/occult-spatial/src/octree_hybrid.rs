@@ -184,6 +184,11 @@ impl HybridOctree {
         self.shared[primitive_index as usize]
     }
 
+    /// Number of primitives it was built over.
+    pub fn primitive_count(&self) -> usize {
+        self.shared.len()
+    }
+
     /// Number of primitives held by several nodes.
     pub fn shared_count(&self) -> usize {
         self.shared.iter().filter(|&&s| s).count()

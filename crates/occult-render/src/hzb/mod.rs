@@ -124,7 +124,7 @@ pub struct HzbOptions {
     pub octree: OctreeConfig,
     /// Triangles gathered before rasterizing and updating the pyramid (≥ 1).
     pub batch_triangles: usize,
-    /// Occlusion tests at all (off: octree frustum culling only).
+    /// Occlusion tests at all (off: octree frustum culling only, and no visible list).
     pub occlusion: bool,
     /// Hierarchical pyramid test (§3.2); off: a full-resolution scan of each face's rectangle.
     pub pyramid: bool,
@@ -205,6 +205,7 @@ impl HzbOptions {
                 "recheck={recheck}: the visible list is rechecked every N frames, N in 1..=1000000"
             ));
         }
+        let occlusion = p.flag("occlusion", d.occlusion)?;
         let workers: usize = p.get("workers", d.workers)?;
         if workers == 0 || workers > MAX_WORKERS {
             return bad(format!("workers={workers}: workers must be in 1..={MAX_WORKERS}"));
@@ -223,10 +224,11 @@ impl HzbOptions {
                 small_fraction,
             },
             batch_triangles,
-            occlusion: p.flag("occlusion", d.occlusion)?,
+            occlusion,
             pyramid: p.flag("pyramid", d.pyramid)?,
             global: p.flag("global", d.global)?,
-            temporal: p.flag("temporal", d.temporal)?,
+            // Without occlusion tests the order of drawing changes nothing: no visible list.
+            temporal: occlusion && p.flag("temporal", d.temporal)?,
             recheck_every: recheck as u32,
             area_sort: p.flag("area_sort", d.area_sort)?,
             keep_culled: p.flag("keep_culled", d.keep_culled)?,
@@ -267,7 +269,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc {
             key: "occlusion",
             default: "on",
-            help: "occlusion tests at all (off: octree frustum culling only)",
+            help: "occlusion tests at all (off: octree frustum culling only, no visible list)",
         },
         ParamDoc {
             key: "pyramid",
@@ -332,6 +334,8 @@ struct VisEntry {
 /// worker of a distribution, its own frame).
 struct Worker {
     raster: Rasterizer,
+    stamps: walk::Stamps,
+    frame_number: u64,
     frame: Option<Frame>,
     pyramid: Option<ZPyramid>,
     visible: Vec<VisEntry>,
@@ -342,6 +346,7 @@ impl Worker {
         self.pyramid.as_ref().map_or(0, ZPyramid::memory_bytes)
             + self.frame.as_ref().map_or(0, Frame::memory_bytes)
             + self.visible.capacity() * std::mem::size_of::<VisEntry>()
+            + self.stamps.iter().map(|s| s.capacity() * 16).sum::<usize>()
     }
 }
 
@@ -415,7 +420,7 @@ impl Hzb {
             ));
         }
         let raster = Rasterizer::new(options.raster.clone())?;
-        let octrees = raster.install(|| {
+        let octrees: Vec<Option<HybridOctree>> = raster.install(|| {
             use rayon::prelude::*;
             scene
                 .nodes()
@@ -444,6 +449,8 @@ impl Hzb {
                 frame: None,
                 pyramid: None,
                 visible: Vec::new(),
+                stamps: walk::new_stamps(&octrees),
+                frame_number: 0,
             }]
         } else {
             let one = occult_raster::RasterConfig {
@@ -457,13 +464,17 @@ impl Hzb {
                         frame: None,
                         pyramid: None,
                         visible: Vec::new(),
+                        stamps: walk::new_stamps(&octrees),
+                        frame_number: 0,
                     })
                 })
                 .collect::<Result<Vec<_>>>()?
         };
+        let mut hzb = hzb.clone();
+        hzb.temporal &= hzb.occlusion; // without tests a visible list changes nothing
         Ok(Self {
             scene,
-            options: hzb.clone(),
+            options: hzb,
             octrees,
             workers,
             frames_since_recheck: 0,
@@ -484,9 +495,22 @@ fn walk_frame(
     visible: &mut Vec<VisEntry>,
     share: walk::Share,
     recheck: bool,
+    stamps: &mut walk::Stamps,
+    frame_number: u64,
 ) -> FrameStats {
     let old_visible = std::mem::take(visible);
-    let mut w = walk::Walk::new(scene, octrees, options, view, raster, frame, pyramid, share);
+    let mut w = walk::Walk::new(
+        scene,
+        octrees,
+        options,
+        view,
+        raster,
+        frame,
+        pyramid,
+        share,
+        stamps,
+        frame_number,
+    );
     if options.temporal {
         w.draw_visible_list(old_visible);
     }
@@ -523,6 +547,7 @@ impl Hzb {
                 .map(|(k, w)| {
                     s.spawn(move || {
                         let t = Instant::now();
+                        w.frame_number += 1;
                         let (Some(f), Some(p)) = (w.frame.as_mut(), w.pyramid.as_mut()) else {
                             unreachable!("frames and pyramids were made above");
                         };
@@ -543,6 +568,8 @@ impl Hzb {
                             &mut w.visible,
                             share,
                             recheck,
+                            &mut w.stamps,
+                            w.frame_number,
                         );
                         (stats, t.elapsed())
                     })
@@ -619,6 +646,7 @@ impl Renderer for Hzb {
         let (scene, octrees, options) = (&*self.scene, &self.octrees[..], &self.options);
         let mut stats = if options.distribution == Distribution::Off {
             let w = &mut self.workers[0];
+            w.frame_number += 1;
             let t = Instant::now();
             w.raster.clear(frame);
             let clear = t.elapsed();
@@ -634,6 +662,8 @@ impl Renderer for Hzb {
                 &mut w.visible,
                 walk::Share::ALL,
                 recheck,
+                &mut w.stamps,
+                w.frame_number,
             );
             stats.phases.add(Phase::Clear, clear);
             stats

@@ -38,8 +38,21 @@ type IdSet<K> = HashSet<K, BuildHasherDefault<IdHasher>>;
 /// Names one octree node of one instance of a DAG node: (DAG node, octree node, first item).
 type NodeKey = (u32, u32, u64);
 
-/// Marks the stamp of a triangle (its item id names it) as opposed to an instance primitive.
-const TRIANGLE_STAMP: u32 = u32::MAX;
+/// §3.1's frame stamps of shared primitives, per DAG node and primitive: the (frame, instance
+/// first item) that last drew it. Exact, so a primitive is never skipped wrongly; a primitive
+/// drawn by several instances in one frame keeps the displaced stamps in a set.
+pub(super) type Stamps = Vec<Vec<(u64, u64)>>;
+
+/// Stamp arrays for the shared primitives of `octrees` (empty where nothing is shared).
+pub(super) fn new_stamps(octrees: &[Option<HybridOctree>]) -> Stamps {
+    octrees
+        .iter()
+        .map(|o| match o {
+            Some(o) if o.shared_count() > 0 => vec![(u64::MAX, u64::MAX); o.primitive_count()],
+            _ => Vec::new(),
+        })
+        .collect()
+}
 
 /// Which part of the scene one worker of a §4.1 distribution owns.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -92,6 +105,14 @@ impl Share {
     }
 }
 
+/// An instance's frustum, matrix and eye, computed once per frame for the visible list.
+#[derive(Clone, Copy)]
+struct Placement {
+    frustum: Frustum,
+    clip_from_object: Mat4,
+    eye: Vec3,
+}
+
 /// Geometry gathered for the next rasterizer call.
 struct Pending<'a> {
     mesh: &'a Mesh,
@@ -128,11 +149,15 @@ pub(super) struct Walk<'a> {
     dirty: Option<PixelRect>,
     /// Nodes whose own primitives the visible list drew this frame.
     drawn_nodes: IdSet<NodeKey>,
-    /// Shared primitives drawn this frame (§3.1's frame stamp): (item or first item, kind).
-    drawn_shared: IdSet<(u64, u32)>,
+    /// Shared primitives drawn (§3.1's frame stamp).
+    stamps: &'a mut Stamps,
+    frame_number: u64,
+    /// Stamps of this frame displaced by another instance's: (DAG node, primitive, first item).
+    displaced: IdSet<(u32, u32, u64)>,
     /// The next visible list, and its keys.
     visible: Vec<VisEntry>,
     listed: IdSet<NodeKey>,
+    placements: std::collections::HashMap<(u32, u64), Placement, BuildHasherDefault<IdHasher>>,
     stats: FrameStats,
     pc: PyramidCounts,
     occlusion_tests: u64,
@@ -155,6 +180,8 @@ impl<'a> Walk<'a> {
         frame: &'a mut Frame,
         pyramid: &'a mut ZPyramid,
         share: Share,
+        stamps: &'a mut Stamps,
+        frame_number: u64,
     ) -> Self {
         Self {
             scene,
@@ -174,9 +201,12 @@ impl<'a> Walk<'a> {
             pending_triangles: 0,
             dirty: None,
             drawn_nodes: IdSet::default(),
-            drawn_shared: IdSet::default(),
+            stamps,
+            frame_number,
+            displaced: IdSet::default(),
             visible: Vec::new(),
             listed: IdSet::default(),
+            placements: Default::default(),
             stats: FrameStats::default(),
             pc: PyramidCounts::default(),
             occlusion_tests: 0,
@@ -198,7 +228,7 @@ impl<'a> Walk<'a> {
                 .into_iter()
                 .map(|e| {
                     let b = self.node_of(&e).own_bounds;
-                    let clip = self.view.clip_from_object(&e.world_from_node);
+                    let clip = self.placement(&e).clip_from_object;
                     (screen_rect(&clip, &b, w, h).map_or(0, |r| r.area()), e)
                 })
                 .collect();
@@ -207,19 +237,25 @@ impl<'a> Walk<'a> {
         }
         for e in list {
             let own = self.node_of(&e).own_bounds;
-            let frustum = self.view.frustum(&e.world_from_node);
+            let pl = self.placement(&e);
             let key = (e.dag_node.0, e.octree_node, e.first_item);
-            if frustum.classify_aabb(&own) == Containment::Outside {
+            if pl.frustum.classify_aabb(&own) == Containment::Outside {
                 self.list_culled += 1;
                 if self.options.keep_culled {
                     self.list(e);
                 }
                 continue;
             }
-            let clip = self.view.clip_from_object(&e.world_from_node);
             self.list_drawn += 1;
             // A flush may empty the batch; the entry stays listed either way.
-            let _ = self.draw_own(e.dag_node, e.octree_node, &e.world_from_node, e.first_item, clip, &own);
+            let _ = self.draw_own(
+                e.dag_node,
+                e.octree_node,
+                &e.world_from_node,
+                e.first_item,
+                pl.clip_from_object,
+                &own,
+            );
             self.drawn_nodes.insert(key);
             self.list(e);
             self.maybe_flush();
@@ -244,14 +280,12 @@ impl<'a> Walk<'a> {
         let mut kept = Vec::with_capacity(list.len());
         for e in list {
             let own = self.node_of(&e).own_bounds;
-            let frustum = self.view.frustum(&e.world_from_node);
-            let keep = if frustum.classify_aabb(&own) == Containment::Outside {
+            let pl = self.placement(&e);
+            let keep = if pl.frustum.classify_aabb(&own) == Containment::Outside {
                 self.options.keep_culled
             } else {
-                let clip = self.view.clip_from_object(&e.world_from_node);
-                let eye = e.world_from_node.inverse().transform_point3(self.view.camera().eye);
                 let mut pc = self.pc;
-                let hidden = self.occlusion().box_hidden(&clip, &own, eye, &mut pc);
+                let hidden = self.occlusion().box_hidden(&pl.clip_from_object, &own, pl.eye, &mut pc);
                 self.pc = pc;
                 !hidden
             };
@@ -282,6 +316,19 @@ impl<'a> Walk<'a> {
         (self.visible, self.stats)
     }
 
+    /// The placement of a visible-list entry's instance (cached: many entries share one).
+    fn placement(&mut self, e: &VisEntry) -> Placement {
+        let view = self.view;
+        *self
+            .placements
+            .entry((e.dag_node.0, e.first_item))
+            .or_insert_with(|| Placement {
+                frustum: view.frustum(&e.world_from_node),
+                clip_from_object: view.clip_from_object(&e.world_from_node),
+                eye: e.world_from_node.inverse().transform_point3(view.camera().eye),
+            })
+    }
+
     fn node_of(&self, e: &VisEntry) -> &'a occult_spatial::OctreeNode {
         let octrees: &'a [Option<HybridOctree>] = self.octrees;
         match &octrees[e.dag_node.index()] {
@@ -297,6 +344,25 @@ impl<'a> Walk<'a> {
             how: self.how,
             far_depth: self.view.far_depth(),
         }
+    }
+
+    /// Stamps shared primitive `p` of the instance of `id` at `first_item`; false when it
+    /// was already drawn this frame.
+    fn stamp(&mut self, id: NodeId, p: u32, first_item: u64) -> bool {
+        let now = (self.frame_number, first_item);
+        let held = self.stamps[id.index()][p as usize];
+        if held == now {
+            return false;
+        }
+        if held.0 == self.frame_number {
+            // Another instance drew it this frame: the displaced stamps live in a set.
+            if self.displaced.contains(&(id.0, p, first_item)) {
+                return false;
+            }
+            self.displaced.insert((id.0, p, held.1));
+        }
+        self.stamps[id.index()][p as usize] = now;
+        true
     }
 
     fn list(&mut self, e: VisEntry) {
@@ -382,6 +448,12 @@ impl<'a> Walk<'a> {
                 c => c == Containment::Inside,
             }
         };
+        if node.is_leaf()
+            && matches!(self.scene.node(inst.id).kind(), NodeKind::Mesh(_))
+            && self.drawn_nodes.contains(&(inst.id.0, n, inst.first_item))
+        {
+            return; // a leaf the visible list drew: nothing left to test for
+        }
         if self.options.occlusion && self.hidden(&inst.clip_from_object, &node.bounds, inst.eye) {
             return;
         }
@@ -445,7 +517,7 @@ impl<'a> Walk<'a> {
                                 continue; // the visible list drew it, or another worker does
                             }
                         }
-                        if inst.octree.is_shared(p) && !self.drawn_shared.insert((child_first, i.child.0)) {
+                        if inst.octree.is_shared(p) && !self.stamp(inst.id, p, inst.first_item) {
                             continue;
                         }
                         let world_from_child = compose(&inst.world_from_node, &i.parent_from_child);
@@ -519,7 +591,7 @@ impl<'a> Walk<'a> {
                         continue;
                     }
                     // §3.1: a shared primitive is drawn once per frame.
-                    if octree.is_shared(p) && !self.drawn_shared.insert((first_item + p as u64, TRIANGLE_STAMP)) {
+                    if octree.is_shared(p) && !self.stamp(id, p, first_item) {
                         continue;
                     }
                     self.scratch.push(p);
@@ -539,7 +611,7 @@ impl<'a> Walk<'a> {
                         continue;
                     };
                     let child_first = first_item + scene.node(id).item_offset(p as usize);
-                    if octree.is_shared(p) && !self.drawn_shared.insert((child_first, i.child.0)) {
+                    if octree.is_shared(p) && !self.stamp(id, p, first_item) {
                         continue;
                     }
                     let world_from_child = compose(world_from_node, &i.parent_from_child);
