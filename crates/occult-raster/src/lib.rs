@@ -41,11 +41,13 @@ mod frame;
 mod query;
 mod raster;
 mod shade;
+pub mod zpyramid;
 
 pub use frame::{keep_fragment, Frame, CLEAR_DEPTH};
 pub use query::{query_box, query_rect, PixelRect};
 pub use raster::{Draw, DrawTriangles, RasterConfig, RasterCounts, RasterMode, Rasterizer, Strategy, SUBPIXEL_BITS};
 pub use shade::{shade, BACKGROUND};
+pub use zpyramid::{PyramidCounts, PyramidTest, ZPyramid};
 
 use thiserror::Error;
 

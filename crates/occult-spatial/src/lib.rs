@@ -16,5 +16,7 @@
 #![deny(missing_docs)]
 
 mod bvh;
+pub mod octree_hybrid;
 
 pub use bvh::{Bvh, BvhNode};
+pub use octree_hybrid::{HybridOctree, OctreeConfig, OctreeNode};

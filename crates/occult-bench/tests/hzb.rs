@@ -1,0 +1,178 @@
+//! DESIGN invariant 2 for `hzb`: frames bit-identical to `zbuffer` over every generator (50
+//! random views each, one renderer object per scene so the visible list carries over between
+//! unrelated views) and over whole camera paths (temporal coherence must never leak a stale
+//! result), for every configuration that claims to be conservative.
+
+use std::sync::Arc;
+
+use occult_bench::invariants::{assert_identical_on_every_generator, assert_identical_on_path};
+use occult_core::{Camera, Vec3, View};
+use occult_raster::Frame;
+use occult_render::{AlgoSpec, Algorithm, RenderError, RenderOptions};
+
+fn spec(s: &str) -> AlgoSpec {
+    AlgoSpec::parse(s).unwrap_or_else(|e| panic!("{s}: {e}"))
+}
+
+/// Configurations: defaults, each part switched off, extreme octrees and batches.
+const CONFIGS: &[&str] = &[
+    "hzb",
+    "hzb:temporal=off",
+    "hzb:pyramid=off,global=off",
+    "hzb:global=off",
+    "hzb:small=0",
+    "hzb:small=1,leaf=1,depth=32",
+    "hzb:leaf=4,depth=3,batch=1",
+    "hzb:recheck=7,area_sort=off,keep_culled=off",
+    "hzb:order=count,batch=100000",
+    "hzb:occlusion=off",
+    "hzb:parallel=structure,workers=3",
+    "hzb:parallel=primitive",
+    "hzb:parallel=hybrid,workers=4,recheck=3",
+];
+
+#[test]
+fn hzb_default_is_identical_on_every_generator() {
+    assert_identical_on_every_generator(&spec("hzb"), 0);
+}
+
+#[test]
+fn hzb_single_threaded_is_identical_on_every_generator() {
+    assert_identical_on_every_generator(&spec("hzb"), 1);
+}
+
+#[test]
+fn hzb_configurations_are_identical_on_every_generator() {
+    for c in &CONFIGS[1..] {
+        assert_identical_on_every_generator(&spec(c), 0);
+    }
+}
+
+#[test]
+fn hzb_configurations_are_identical_on_paths() {
+    for c in CONFIGS {
+        let s = spec(c);
+        assert_identical_on_path(&s, "city:blocks=3,detail=2", "street:24", 160, 90);
+        assert_identical_on_path(&s, "plant:units=1,floors=2,pipes=6,sides=6", "circle:16", 128, 96);
+    }
+}
+
+#[test]
+fn hzb_is_identical_on_paths_of_every_generator() {
+    for scene in [
+        "terrain:g=48",
+        "forest:trees=2,patches=2,levels=1",
+        "chessboard:n=40",
+        "occluder:objects=3",
+        "city:blocks=4,detail=3",
+    ] {
+        for path in ["circle:20", "flyover:20", "street:20"] {
+            assert_identical_on_path(&spec("hzb:recheck=5"), scene, path, 128, 80);
+        }
+    }
+}
+
+#[test]
+fn hzb_culls_on_a_city_street_and_keeps_a_visible_list() {
+    let built = occult_scenes::spec::parse_spec("city:blocks=6,detail=2")
+        .and_then(|s| s.build())
+        .unwrap();
+    let cams = occult_scenes::path::parse_path("street:6", &built.scene, &built.default_camera).unwrap();
+    let scene = Arc::new(built.scene);
+    let mut h = Algorithm::parse("hzb")
+        .unwrap()
+        .build(scene.clone(), &RenderOptions::default())
+        .unwrap();
+    let mut f = Algorithm::FRUSTUM.build(scene, &RenderOptions::default()).unwrap();
+    let (mut fh, mut ff) = (Frame::new(160, 90).unwrap(), Frame::new(160, 90).unwrap());
+    let (mut th, mut tf) = (0, 0);
+    let (mut tests, mut samples, mut drawn) = (0, 0, 0);
+    for (i, cam) in cams.iter().enumerate() {
+        let view = View::new(*cam, 160, 90).unwrap();
+        let sh = h.render(&view, &mut fh).unwrap();
+        let sf = f.render(&view, &mut ff).unwrap();
+        assert!(fh.same_visibility(&ff));
+        th += sh.triangles_submitted;
+        tf += sf.triangles_submitted;
+        tests += sh.counters.get("occlusion_tests");
+        samples += sh.counters.get("pyramid_tests");
+        assert!(sh.counters.get("visible_list") > 0);
+        if i > 0 {
+            drawn += sh.counters.get("visible_list_drawn");
+        }
+    }
+    assert!(tests > 0 && samples > 0 && drawn > 0);
+    assert!(th < tf, "hzb submitted {th} triangles, frustum {tf}");
+}
+
+#[test]
+fn hzb_bad_parameters_are_errors() {
+    let scene = Arc::new(
+        occult_scenes::spec::parse_spec("chessboard:n=4")
+            .and_then(|s| s.build())
+            .unwrap()
+            .scene,
+    );
+    for bad in [
+        "hzb:leaf=0",
+        "hzb:depth=0",
+        "hzb:recheck=-3",
+        "hzb:recheck=0",
+        "hzb:small=2",
+        "hzb:batch=0",
+        "hzb:order=x",
+    ] {
+        let s = spec(bad);
+        match s.build(scene.clone(), &RenderOptions::default()) {
+            Err(RenderError::BadParameter(m)) => assert!(m.contains("hzb"), "{bad}: {m}"),
+            Err(e) => panic!("{bad}: wrong error {e}"),
+            Ok(_) => panic!("{bad}: accepted"),
+        }
+    }
+    assert!(AlgoSpec::parse("hzb:leef=3").is_err());
+}
+
+#[test]
+fn hzb_distributions_report_worker_idle_time() {
+    let built = occult_scenes::spec::parse_spec("city:blocks=3,detail=2")
+        .and_then(|s| s.build())
+        .unwrap();
+    let scene = Arc::new(built.scene);
+    for d in ["structure", "primitive", "hybrid"] {
+        let s = spec(&format!("hzb:parallel={d},workers=3"));
+        let mut h = s.build(scene.clone(), &RenderOptions::default()).unwrap();
+        let view = View::new(built.default_camera, 96, 64).unwrap();
+        let stats = h.render(&view, &mut Frame::new(96, 64).unwrap()).unwrap();
+        let idle: Vec<u64> = (0..3)
+            .map(|k| stats.counters.get(&format!("worker{k}_idle_us")))
+            .collect();
+        assert!(idle.contains(&0), "{d}: the slowest worker waits for nobody: {idle:?}");
+        assert!(stats.counters.0.iter().any(|(k, _)| *k == "worker2_busy_us"));
+        assert!(stats.triangles_submitted > 0);
+    }
+}
+
+#[test]
+fn hzb_frame_size_changes_and_mismatches() {
+    let scene = Arc::new(
+        occult_scenes::spec::parse_spec("occluder:objects=3")
+            .and_then(|s| s.build())
+            .unwrap()
+            .scene,
+    );
+    let mut h = Algorithm::parse("hzb")
+        .unwrap()
+        .build(scene.clone(), &RenderOptions::default())
+        .unwrap();
+    let mut z = Algorithm::ZBUFFER.build(scene, &RenderOptions::default()).unwrap();
+    let cam = Camera::look_at(Vec3::new(0.0, 3.0, 30.0), Vec3::ZERO);
+    for (w, hh) in [(64, 48), (7, 3), (1, 1), (96, 64)] {
+        let view = View::new(cam, w, hh).unwrap();
+        let (mut a, mut b) = (Frame::new(w, hh).unwrap(), Frame::new(w, hh).unwrap());
+        h.render(&view, &mut a).unwrap();
+        z.render(&view, &mut b).unwrap();
+        assert!(a.same_visibility(&b), "{w}x{hh}");
+    }
+    let view = View::new(cam, 64, 48).unwrap();
+    assert!(h.render(&view, &mut Frame::new(32, 32).unwrap()).is_err());
+}

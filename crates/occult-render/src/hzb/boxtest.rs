@@ -1,0 +1,190 @@
+//! The hierarchical box-face occlusion test of §3.2, and screen rectangles of boxes.
+//!
+//! Margins are those of [`occult_raster::query_box`], which the rasterizer's own tests hold
+//! conservative: depth ×(1 + 1e-5) for rounding, 1/64 pixel for vertex snapping (1/256 px), and
+//! any corner at or in front of the near plane (within 1e-5) makes a box untestable (visible).
+
+use occult_core::{Aabb, Mat4, Vec3, Vec4};
+use occult_raster::{Frame, PixelRect, PyramidCounts, PyramidTest, ZPyramid};
+
+/// Pixel margin for vertex snapping.
+const SNAP_MARGIN: f64 = 1.0 / 64.0;
+/// Relative depth margin for the rasterizer's rounding.
+const DEPTH_MARGIN: f32 = 1e-5;
+
+/// The 8 clip-space corners of `b` (corner `i` takes `max` on axis `a` when bit `a` is set), or
+/// None when one is not finite or reaches the near plane: such a box may cover anything.
+#[inline]
+fn clip_corners(clip_from_object: &Mat4, b: &Aabb) -> Option<[Vec4; 8]> {
+    let c = b.corners().map(|p| *clip_from_object * p.extend(1.0));
+    for v in &c {
+        if !v.is_finite() || v.z * (1.0 + DEPTH_MARGIN) > v.w {
+            return None;
+        }
+    }
+    Some(c)
+}
+
+/// The pixels whose centres the projection of the given corners may reach (empty rectangle
+/// when none), for a `width × height` frame.
+#[inline]
+fn rect_of(c: &[Vec4; 8], corners: impl Iterator<Item = usize>, width: u32, height: u32) -> PixelRect {
+    let (w, h) = (width as f64, height as f64);
+    let (mut minx, mut maxx, mut miny, mut maxy) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    for i in corners {
+        let v = c[i];
+        let cw = v.w as f64;
+        let x = (v.x as f64 / cw * 0.5 + 0.5) * w;
+        let y = (0.5 - v.y as f64 / cw * 0.5) * h;
+        minx = minx.min(x);
+        maxx = maxx.max(x);
+        miny = miny.min(y);
+        maxy = maxy.max(y);
+    }
+    let x0 = (minx - SNAP_MARGIN - 0.5).ceil().clamp(0.0, w) as u32;
+    let y0 = (miny - SNAP_MARGIN - 0.5).ceil().clamp(0.0, h) as u32;
+    let x1 = ((maxx + SNAP_MARGIN - 0.5).floor() + 1.0).clamp(0.0, w) as u32;
+    let y1 = ((maxy + SNAP_MARGIN - 0.5).floor() + 1.0).clamp(0.0, h) as u32;
+    PixelRect { x0, y0, x1, y1 }
+}
+
+/// The screen rectangle `b` may draw into (the whole frame when it reaches the near plane);
+/// None for an empty box or an empty rectangle.
+pub(super) fn screen_rect(clip_from_object: &Mat4, b: &Aabb, width: u32, height: u32) -> Option<PixelRect> {
+    if b.is_empty() {
+        return None;
+    }
+    let r = match clip_corners(clip_from_object, b) {
+        None => PixelRect {
+            x0: 0,
+            y0: 0,
+            x1: width,
+            y1: height,
+        },
+        Some(c) => rect_of(&c, 0..8, width, height),
+    };
+    (r.x0 < r.x1 && r.y0 < r.y1).then_some(r)
+}
+
+/// Where the test is run and what it counts.
+pub(super) struct Occlusion<'a> {
+    pub frame: &'a Frame,
+    pub pyramid: &'a ZPyramid,
+    pub how: PyramidTest,
+    pub far_depth: f32,
+}
+
+impl Occlusion<'_> {
+    /// §3.2: true when the box `b` (object space, placed by `clip_from_object`, the eye at `eye`
+    /// in object space) is hidden behind what is drawn: every front face of the box is hidden
+    /// over its screen box, compared at the face's nearest corner. An empty box is hidden; a box
+    /// holding the eye or reaching the near plane is not.
+    pub fn box_hidden(&self, clip_from_object: &Mat4, b: &Aabb, eye: Vec3, counts: &mut PyramidCounts) -> bool {
+        if b.is_empty() {
+            return true;
+        }
+        // An eye inside (or on, up to rounding) the box sees it from within.
+        let slack = b.size() * 1e-4 + Vec3::splat(1e-6);
+        if (eye.cmpge(b.min - slack) & eye.cmple(b.max + slack)).all() {
+            return false;
+        }
+        let Some(c) = clip_corners(clip_from_object, b) else {
+            return false;
+        };
+        let (w, h) = (self.frame.width(), self.frame.height());
+        // Front faces: the eye is strictly outside the face's plane. Their projections cover the
+        // box's silhouette, and every point of the box lies behind a point of one of them.
+        for axis in 0..3 {
+            for high in [false, true] {
+                let front = if high {
+                    eye[axis] > b.max[axis]
+                } else {
+                    eye[axis] < b.min[axis]
+                };
+                if !front {
+                    continue;
+                }
+                let bit = 1usize << axis;
+                let face = (0..8).filter(move |i| (i & bit != 0) == high);
+                let nearest = face.clone().map(|i| c[i].z / c[i].w).fold(0.0f32, f32::max) * (1.0 + DEPTH_MARGIN);
+                if nearest < self.far_depth * (1.0 - DEPTH_MARGIN) {
+                    continue; // beyond the far plane: draws nothing
+                }
+                let r = rect_of(&c, face, w, h);
+                if !self.pyramid.occludes(self.frame, r, nearest, self.how, counts) {
+                    return false;
+                }
+            }
+        }
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use occult_core::{Affine3A, Camera, View};
+
+    #[test]
+    fn rect_covers_query_box_pixels() {
+        let view = View::new(Camera::look_at(Vec3::new(0.3, 0.2, 5.0), Vec3::ZERO), 64, 48).unwrap();
+        let clip = view.clip_from_object(&Affine3A::IDENTITY);
+        let frame = Frame::new(64, 48).unwrap();
+        for b in [
+            Aabb::new(Vec3::splat(-1.0), Vec3::splat(1.0)),
+            Aabb::new(Vec3::new(2.0, 1.0, -3.0), Vec3::new(2.5, 1.2, -2.0)),
+        ] {
+            let r = screen_rect(&clip, &b, 64, 48).unwrap();
+            let all = occult_raster::query_box(&frame, &view, &clip, &b);
+            assert_eq!(occult_raster::query_rect(&frame, r, 1.0), r.area());
+            assert!(all <= r.area());
+        }
+        // Near-crossing: the whole frame; empty box: nothing.
+        let b = Aabb::new(Vec3::new(0.0, 0.0, 4.95), Vec3::new(1.0, 1.0, 6.0));
+        assert_eq!(screen_rect(&clip, &b, 64, 48).unwrap().area(), 64 * 48);
+        assert!(screen_rect(&clip, &Aabb::EMPTY, 64, 48).is_none());
+    }
+
+    #[test]
+    fn hidden_only_behind_a_full_wall() {
+        let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO), 32, 32).unwrap();
+        let clip = view.clip_from_object(&Affine3A::IDENTITY);
+        let mut frame = Frame::new(32, 32).unwrap();
+        let mut pyramid = ZPyramid::new(32, 32).unwrap();
+        let eye = Vec3::new(0.0, 0.0, 5.0);
+        let b = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
+        let mut counts = PyramidCounts::default();
+        let how = PyramidTest {
+            global: true,
+            hierarchical: true,
+        };
+        let test = |frame: &Frame, pyramid: &ZPyramid, eye: Vec3, counts: &mut PyramidCounts| {
+            Occlusion {
+                frame,
+                pyramid,
+                how,
+                far_depth: view.far_depth(),
+            }
+            .box_hidden(&clip, &b, eye, counts)
+        };
+        assert!(!test(&frame, &pyramid, eye, &mut counts));
+        // A wall at distance 1 (depth 0.1) in front of the box (nearest depth 0.1/4.5).
+        for y in 0..32 {
+            for x in 0..32 {
+                frame.write_fragment(x, y, 0.1, 7);
+            }
+        }
+        pyramid.rebuild(&frame);
+        assert!(test(&frame, &pyramid, eye, &mut counts));
+        // The eye inside the box: never hidden.
+        assert!(!test(&frame, &pyramid, Vec3::ZERO, &mut counts));
+        // An empty box: hidden.
+        let o = Occlusion {
+            frame: &frame,
+            pyramid: &pyramid,
+            how,
+            far_depth: view.far_depth(),
+        };
+        assert!(o.box_hidden(&clip, &Aabb::EMPTY, eye, &mut counts));
+    }
+}

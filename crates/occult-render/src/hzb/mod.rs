@@ -1,0 +1,729 @@
+//! Hierarchical z-buffer obscuration culling with temporal coherence.
+//!
+//! # References
+//! - C. Georges, *Obscuration Culling on Parallel Graphics Architectures*, UNC TR95-017 (1995)
+//!   (`papers/obscuration-culling-georges-1995.txt`), after N. Greene, M. Kass, G. Miller,
+//!   *Hierarchical Z-Buffer Visibility* (SIGGRAPH 1993).
+//!
+//! # What it does, part by part
+//! - **Octree with hybrid redistribution (§3.1)**, [`occult_spatial::HybridOctree`]: one per
+//!   node of the scene DAG that needs one: every group (its primitives are its instances, each
+//!   a box placed by the instance transform) and every mesh of more than `leaf` triangles (its
+//!   primitives are triangles). An instance whose prototype has an octree is a primitive with a
+//!   transform: reaching it continues in the prototype's octree; an instance of a small mesh is
+//!   drawn whole. Shared primitives (small straddlers held by several children) are drawn once
+//!   per frame: a frame stamp set keyed by the primitive's instance.
+//! - **Max z-pyramid and the box-face test (§3.2)**, [`occult_raster::ZPyramid`] and
+//!   `boxtest`: each front face of a node's box is tested at the finest pyramid level whose one
+//!   sample covers the face's screen box, descending where the comparison fails down to the
+//!   frame's own depth. Our depth is reversed, so the paper's max pyramid is a min pyramid over
+//!   stored depth (see the pyramid's doc).
+//! - **Pyramid updates: per batch.** Visible geometry is gathered into batches of about `batch`
+//!   triangles; a full batch is rasterized (multi-threaded) and the pyramid is then recomputed
+//!   over the union of the batch's screen boxes. Per triangle would cost more than the triangle;
+//!   per batch amortizes the update and keeps the rasterizer's batches large. Correctness does
+//!   not depend on the schedule: depth only grows during a frame, so a stale pyramid can only
+//!   fail to reject (the test's last level reads the frame itself).
+//! - **Front-to-back traversal**: children of an octree node in the order of the octants seen
+//!   from the eye; a node's box is tested (frustum, then occlusion) before its own primitives
+//!   are drawn and its children visited.
+//! - **Temporal coherence (§3.3)**: the nodes whose primitives were drawn last frame (the
+//!   *visible list*) are drawn first, without tests, to make the depth buffer "almost
+//!   complete"; then the whole hierarchy is traversed with tests (skipping what the list drew).
+//!   At frame end the list is rechecked against the final depth and pruned; `recheck=N` does
+//!   that only every N frames (§4.2, §5.1). Nodes first drawn this frame join the list.
+//! - **Ordering heuristics**: the visible list in descending projected screen area (§4.2,
+//!   `area_sort`); frustum-culled list entries keep their visible status (§5.1, `keep_culled`);
+//!   `order=count` visits siblings in ascending primitive count instead of front to back
+//!   (§4.2/§5.1's invisible list; see the deviations).
+//! - **Global farthest-depth reject (§5.3)**, `global`: the pyramid's top sample, compared first.
+//! - **Parallel distributions (§4.1)**, `parallel=structure|primitive|hybrid`, `workers=N`:
+//!   each worker thread walks its share of the scene with its own frame (depth buffer), pyramid,
+//!   visible list and single-threaded rasterizer; the frames are merged by depth compositing
+//!   under the (depth, item) rule. *By structure*: the root's primitives (whole subtrees)
+//!   round robin; *by primitive*: every worker walks every node and draws a round-robin share
+//!   of each node's primitives (and pays every box test); *hybrid*: structures kept whole but
+//!   fine (octree nodes of every instance) spread over the workers by a hash. Each worker's busy
+//!   time and its idle time (waiting for the slowest before the merge) are reported as the
+//!   counters `worker<k>_busy_us` / `worker<k>_idle_us`; the phases are the slowest worker's,
+//!   the merge is `other`.
+//!
+//! Every part has a switch so its effect can be measured (`occult algos` lists them).
+//!
+//! # Deviations from the paper
+//! - §4's processors are threads of one machine sharing memory: the distributions are
+//!   per-frame filters over the shared octrees rather than copies of the data, and every
+//!   worker of `structure`/`hybrid` still walks (and tests) the shared upper octree levels.
+//!   With `parallel=off` (the default) parallelism is the rasterizer's own, tile-parallel
+//!   within each batch.
+//! - Two additions beyond the paper, both conservative: an inner octree node's own primitives
+//!   (its large straddlers) are tested against their own box before they are drawn, and the
+//!   instances held by one node of a group's octree are visited nearest first (the octants
+//!   give the order between nodes, not within one).
+//! - By structure over a scene whose root is a mesh degenerates to by primitive (the root's
+//!   primitives are then triangles).
+//! - The invisible list of §4.2/§5.1 is flat in the paper (structures sorted by primitive count
+//!   as a preprocess). Here the not-yet-visible part of the scene is the octree itself, walked
+//!   from the root; `order=count` applies the heuristic where an order is chosen: among the
+//!   children of a node (ascending subtree primitive count).
+//! - The visible list holds octree nodes (per instance of their DAG node), not the paper's flat
+//!   structures; a listed node's own primitives are drawn, its children are handled by their
+//!   own entries.
+//! - The box test reads the frame's depth (conservatively) rather than rasterizing the faces;
+//!   a face is compared over its screen bounding box, as the paper's Fig. 2 starts.
+//!
+//! Cost per frame: O(visible list + visited nodes × test + pyramid updates over drawn regions)
+//! plus rasterizing what survives. It pays off on scenes of high depth complexity (cities,
+//! plants); on open terrain almost everything is visible and the tests are pure overhead.
+
+mod boxtest;
+mod walk;
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use occult_core::{Aabb, Affine3A, NodeId, NodeKind, Scene, View};
+use occult_raster::{Frame, Rasterizer, ZPyramid};
+use occult_spatial::{octree_hybrid::MAX_OCTREE_DEPTH, HybridOctree, OctreeConfig};
+
+use crate::{
+    check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result,
+};
+
+/// Order of siblings in the traversal.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ChildOrder {
+    /// Octants nearest the eye first (Greene et al.).
+    FrontToBack,
+    /// Ascending primitive count: postpone the expensive subtrees (§4.2, §5.1).
+    Count,
+}
+
+/// §4.1: how the scene is spread over worker threads, each with its own depth buffer,
+/// z-pyramid and visible list; their frames are merged by depth compositing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Distribution {
+    /// One walk; parallelism is the rasterizer's own.
+    Off,
+    /// Distribute by structure: the root's primitives (whole subtrees) round robin.
+    Structure,
+    /// Distribute by primitive: every worker walks every node and draws a round-robin share of
+    /// each node's primitives.
+    Primitive,
+    /// The hybrid: structures kept whole, but fine (octree nodes), spread over the workers.
+    Hybrid,
+}
+
+/// Most workers of a distribution.
+pub const MAX_WORKERS: usize = 8;
+
+/// Tunables of [`Hzb`]; every part can be switched off to measure it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HzbOptions {
+    /// Octree build (§3.1): leaf size (triangles or instances), depth, small-straddler fraction.
+    pub octree: OctreeConfig,
+    /// Triangles gathered before rasterizing and updating the pyramid (≥ 1).
+    pub batch_triangles: usize,
+    /// Occlusion tests at all (off: octree frustum culling only, and no visible list).
+    pub occlusion: bool,
+    /// Hierarchical pyramid test (§3.2); off: a full-resolution scan of each face's rectangle.
+    pub pyramid: bool,
+    /// Global farthest-depth early reject (§5.3).
+    pub global: bool,
+    /// Temporal coherence visible list (§3.3).
+    pub temporal: bool,
+    /// Recheck the visible list every this many frames (≥ 1) (§4.2, §5.1).
+    pub recheck_every: u32,
+    /// Draw the visible list in descending screen area (§4.2).
+    pub area_sort: bool,
+    /// Keep frustum-culled entries on the visible list (§5.1).
+    pub keep_culled: bool,
+    /// Sibling order.
+    pub order: ChildOrder,
+    /// Parallel distribution (§4.1).
+    pub distribution: Distribution,
+    /// Workers of the distribution (1 ..= [`MAX_WORKERS`]); each rasterizes on one thread.
+    pub workers: usize,
+}
+
+impl Default for HzbOptions {
+    fn default() -> Self {
+        Self {
+            octree: OctreeConfig {
+                leaf_size: 64,
+                max_depth: 10,
+                small_fraction: 0.25,
+            },
+            batch_triangles: 4096,
+            occlusion: true,
+            pyramid: true,
+            global: true,
+            temporal: true,
+            recheck_every: 1,
+            area_sort: true,
+            keep_culled: true,
+            order: ChildOrder::FrontToBack,
+            distribution: Distribution::Off,
+            workers: 2,
+        }
+    }
+}
+
+impl HzbOptions {
+    /// Reads and checks the settings of an `hzb:...` spec.
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] naming the key for an unparsable or out-of-range value.
+    pub fn from_params(p: &Params) -> Result<Self> {
+        let d = Self::default();
+        let bad = |m: String| Err(RenderError::BadParameter(format!("hzb: {m}")));
+        let leaf_size: usize = p.get("leaf", d.octree.leaf_size)?;
+        if leaf_size == 0 {
+            return bad("leaf=0: a leaf holds at least 1 primitive".into());
+        }
+        let max_depth: u32 = p.get("depth", d.octree.max_depth)?;
+        if max_depth == 0 || max_depth > MAX_OCTREE_DEPTH {
+            return bad(format!(
+                "depth={max_depth}: octree depth must be in 1..={MAX_OCTREE_DEPTH}"
+            ));
+        }
+        let small_fraction: f32 = p.get("small", d.octree.small_fraction)?;
+        if !(0.0..=1.0).contains(&small_fraction) {
+            return bad(format!(
+                "small={small_fraction}: the small-straddler fraction must be in [0, 1]"
+            ));
+        }
+        let batch_triangles: usize = p.get("batch", d.batch_triangles)?;
+        if batch_triangles == 0 || batch_triangles > 1 << 24 {
+            return bad(format!(
+                "batch={batch_triangles}: triangles per batch must be in 1..=16777216"
+            ));
+        }
+        let recheck: i64 = p.get("recheck", d.recheck_every as i64)?;
+        if !(1..=1_000_000).contains(&recheck) {
+            return bad(format!(
+                "recheck={recheck}: the visible list is rechecked every N frames, N in 1..=1000000"
+            ));
+        }
+        let occlusion = p.flag("occlusion", d.occlusion)?;
+        let workers: usize = p.get("workers", d.workers)?;
+        if workers == 0 || workers > MAX_WORKERS {
+            return bad(format!("workers={workers}: workers must be in 1..={MAX_WORKERS}"));
+        }
+        Ok(Self {
+            distribution: match p.choice("parallel", &["off", "structure", "primitive", "hybrid"], "off")? {
+                "structure" => Distribution::Structure,
+                "primitive" => Distribution::Primitive,
+                "hybrid" => Distribution::Hybrid,
+                _ => Distribution::Off,
+            },
+            workers,
+            octree: OctreeConfig {
+                leaf_size,
+                max_depth,
+                small_fraction,
+            },
+            batch_triangles,
+            occlusion,
+            pyramid: p.flag("pyramid", d.pyramid)?,
+            global: p.flag("global", d.global)?,
+            // Without occlusion tests the order of drawing changes nothing: no visible list.
+            temporal: occlusion && p.flag("temporal", d.temporal)?,
+            recheck_every: recheck as u32,
+            area_sort: p.flag("area_sort", d.area_sort)?,
+            keep_culled: p.flag("keep_culled", d.keep_culled)?,
+            order: match p.choice("order", &["front", "count"], "front")? {
+                "count" => ChildOrder::Count,
+                _ => ChildOrder::FrontToBack,
+            },
+        })
+    }
+}
+
+/// Registry entry of [`Hzb`].
+pub static INFO: AlgorithmInfo = AlgorithmInfo {
+    name: "hzb",
+    summary: "hierarchical z-buffer obscuration culling: octree, max z-pyramid, temporal coherence (Georges 1995)",
+    params: &[
+        ParamDoc {
+            key: "leaf",
+            default: "64",
+            help: "octree leaf size in primitives (triangles or instances), >= 1 (§3.1)",
+        },
+        ParamDoc {
+            key: "depth",
+            default: "10",
+            help: "octree depth limit in levels, 1..=32 (§3.1)",
+        },
+        ParamDoc {
+            key: "small",
+            default: "0.25",
+            help:
+                "hybrid redistribution: straddlers at most this fraction of the cell go to every child, 0 = off (§3.1)",
+        },
+        ParamDoc {
+            key: "batch",
+            default: "4096",
+            help: "triangles rasterized per batch, after which the z-pyramid is updated (§3.2)",
+        },
+        ParamDoc {
+            key: "occlusion",
+            default: "on",
+            help: "occlusion tests at all (off: octree frustum culling only, no visible list)",
+        },
+        ParamDoc {
+            key: "pyramid",
+            default: "on",
+            help: "hierarchical z-pyramid test (§3.2); off: full-resolution scan of each face's rectangle",
+        },
+        ParamDoc {
+            key: "global",
+            default: "on",
+            help: "early reject against the frame's farthest depth (§5.3)",
+        },
+        ParamDoc {
+            key: "temporal",
+            default: "on",
+            help: "draw last frame's visible list first (§3.3)",
+        },
+        ParamDoc {
+            key: "recheck",
+            default: "1",
+            help: "prune the visible list against the final depth every N frames, N >= 1 (§3.3, §5.1)",
+        },
+        ParamDoc {
+            key: "area_sort",
+            default: "on",
+            help: "draw the visible list in descending projected screen area (§4.2)",
+        },
+        ParamDoc {
+            key: "keep_culled",
+            default: "on",
+            help: "frustum-culled nodes keep their visible status (§5.1)",
+        },
+        ParamDoc {
+            key: "order",
+            default: "front",
+            help: "sibling order: front (front to back) or count (ascending primitive count, §4.2/§5.1)",
+        },
+        ParamDoc {
+            key: "parallel",
+            default: "off",
+            help: "distribution over workers with own depth buffers, merged by depth compositing: off, structure, primitive, hybrid (§4.1)",
+        },
+        ParamDoc {
+            key: "workers",
+            default: "2",
+            help: "workers of the distribution, 1..=8 (each rasterizes on one thread)",
+        },
+    ],
+    conservative: true,
+    build: |scene, options, params| Ok(Box::new(Hzb::new(scene, options, &HzbOptions::from_params(params)?)?)),
+};
+
+/// An entry of the visible list: one octree node of one instance of a DAG node.
+#[derive(Clone, Copy, Debug)]
+struct VisEntry {
+    dag_node: NodeId,
+    octree_node: u32,
+    first_item: u64,
+    world_from_node: Affine3A,
+}
+
+/// What one walker keeps across frames: its rasterizer, pyramid and visible list (and, for a
+/// worker of a distribution, its own frame).
+struct Worker {
+    raster: Rasterizer,
+    stamps: walk::Stamps,
+    frame_number: u64,
+    frame: Option<Frame>,
+    pyramid: Option<ZPyramid>,
+    visible: Vec<VisEntry>,
+}
+
+impl Worker {
+    fn memory_bytes(&self) -> usize {
+        self.pyramid.as_ref().map_or(0, ZPyramid::memory_bytes)
+            + self.frame.as_ref().map_or(0, Frame::memory_bytes)
+            + self.visible.capacity() * std::mem::size_of::<VisEntry>()
+            + self.stamps.iter().map(|s| s.capacity() * 16).sum::<usize>()
+    }
+}
+
+/// The hzb renderer.
+pub struct Hzb {
+    scene: Arc<Scene>,
+    options: HzbOptions,
+    /// Per DAG node: its octree (groups, and meshes over the leaf size).
+    octrees: Vec<Option<HybridOctree>>,
+    /// One walker, or one per worker of the distribution.
+    workers: Vec<Worker>,
+    frames_since_recheck: u32,
+}
+
+/// Counter names per worker (counters are named by static strings).
+const BUSY: [&str; MAX_WORKERS] = [
+    "worker0_busy_us",
+    "worker1_busy_us",
+    "worker2_busy_us",
+    "worker3_busy_us",
+    "worker4_busy_us",
+    "worker5_busy_us",
+    "worker6_busy_us",
+    "worker7_busy_us",
+];
+const IDLE: [&str; MAX_WORKERS] = [
+    "worker0_idle_us",
+    "worker1_idle_us",
+    "worker2_idle_us",
+    "worker3_idle_us",
+    "worker4_idle_us",
+    "worker5_idle_us",
+    "worker6_idle_us",
+    "worker7_idle_us",
+];
+
+/// Ensures `slot` holds a pyramid of the frame's size, cleared.
+fn ready_pyramid(slot: &mut Option<ZPyramid>, width: u32, height: u32) -> Result<&mut ZPyramid> {
+    if matches!(slot, Some(p) if p.width() == width && p.height() == height) {
+        if let Some(p) = slot.as_mut() {
+            p.clear();
+        }
+    } else {
+        *slot = Some(ZPyramid::new(width, height)?);
+    }
+    match slot {
+        Some(p) => Ok(p),
+        None => unreachable!("set just above"),
+    }
+}
+
+impl Hzb {
+    /// Builds the octrees of `scene`.
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] for out-of-range options; raster configuration errors.
+    pub fn new(scene: Arc<Scene>, options: &RenderOptions, hzb: &HzbOptions) -> Result<Self> {
+        let o = &hzb.octree;
+        if o.leaf_size == 0
+            || o.max_depth == 0
+            || o.max_depth > MAX_OCTREE_DEPTH
+            || !(0.0..=1.0).contains(&o.small_fraction)
+        {
+            return Err(RenderError::BadParameter(format!(
+                "hzb: bad octree configuration {o:?}"
+            )));
+        }
+        if hzb.batch_triangles == 0 || hzb.recheck_every == 0 {
+            return Err(RenderError::BadParameter(
+                "hzb: batch and recheck must be at least 1".into(),
+            ));
+        }
+        let raster = Rasterizer::new(options.raster.clone())?;
+        let octrees: Vec<Option<HybridOctree>> = raster.install(|| {
+            use rayon::prelude::*;
+            scene
+                .nodes()
+                .par_iter()
+                .map(|node| match node.kind() {
+                    NodeKind::Mesh(m) if m.triangle_count() > o.leaf_size => {
+                        let boxes: Vec<Aabb> = (0..m.triangle_count())
+                            .map(|t| Aabb::from_points(m.triangle_positions(t)))
+                            .collect();
+                        Some(HybridOctree::build(&boxes, o))
+                    }
+                    NodeKind::Group(g) if !g.is_empty() => {
+                        let boxes: Vec<Aabb> = g
+                            .iter()
+                            .map(|i| scene.node(i.child).bounds().transformed(&i.parent_from_child))
+                            .collect();
+                        Some(HybridOctree::build(&boxes, o))
+                    }
+                    _ => None,
+                })
+                .collect()
+        });
+        let workers = if hzb.distribution == Distribution::Off {
+            vec![Worker {
+                raster,
+                frame: None,
+                pyramid: None,
+                visible: Vec::new(),
+                stamps: walk::new_stamps(&octrees),
+                frame_number: 0,
+            }]
+        } else {
+            let one = occult_raster::RasterConfig {
+                threads: 1,
+                ..options.raster.clone()
+            };
+            (0..hzb.workers)
+                .map(|_| {
+                    Ok(Worker {
+                        raster: Rasterizer::new(one.clone())?,
+                        frame: None,
+                        pyramid: None,
+                        visible: Vec::new(),
+                        stamps: walk::new_stamps(&octrees),
+                        frame_number: 0,
+                    })
+                })
+                .collect::<Result<Vec<_>>>()?
+        };
+        let mut hzb = hzb.clone();
+        hzb.temporal &= hzb.occlusion; // without tests a visible list changes nothing
+        Ok(Self {
+            scene,
+            options: hzb,
+            octrees,
+            workers,
+            frames_since_recheck: 0,
+        })
+    }
+}
+
+/// One walk over (the share of) the scene: visible list, tested traversal, recheck.
+#[allow(clippy::too_many_arguments)]
+fn walk_frame(
+    scene: &Scene,
+    octrees: &[Option<HybridOctree>],
+    options: &HzbOptions,
+    view: &View,
+    raster: &mut Rasterizer,
+    frame: &mut Frame,
+    pyramid: &mut ZPyramid,
+    visible: &mut Vec<VisEntry>,
+    share: walk::Share,
+    recheck: bool,
+    stamps: &mut walk::Stamps,
+    frame_number: u64,
+) -> FrameStats {
+    let old_visible = std::mem::take(visible);
+    let mut w = walk::Walk::new(
+        scene,
+        octrees,
+        options,
+        view,
+        raster,
+        frame,
+        pyramid,
+        share,
+        stamps,
+        frame_number,
+    );
+    if options.temporal {
+        w.draw_visible_list(old_visible);
+    }
+    w.traverse();
+    if recheck {
+        w.recheck();
+    }
+    let (list, stats) = w.finish();
+    *visible = list;
+    stats
+}
+
+impl Hzb {
+    /// §4.1: every worker walks its share into its own frame (own depth buffer, pyramid and
+    /// lists, one rasterizer thread); the frames are then merged by depth compositing under the
+    /// frame's (depth, item) rule, which makes the result that of one frame holding everything.
+    /// Each worker's busy time is recorded, and its idle time: how long it waits for the
+    /// slowest before the merge (the load balance the paper discusses).
+    fn render_distributed(&mut self, view: &View, frame: &mut Frame, recheck: bool) -> Result<FrameStats> {
+        let (scene, octrees, options) = (&*self.scene, &self.octrees[..], &self.options);
+        let (width, height) = (frame.width(), frame.height());
+        for w in &mut self.workers {
+            if !matches!(&w.frame, Some(f) if f.width() == width && f.height() == height) {
+                w.frame = Some(Frame::new(width, height)?);
+            }
+            ready_pyramid(&mut w.pyramid, width, height)?;
+        }
+        let n = self.workers.len() as u32;
+        let results: Vec<(FrameStats, std::time::Duration)> = std::thread::scope(|s| {
+            let handles: Vec<_> = self
+                .workers
+                .iter_mut()
+                .enumerate()
+                .map(|(k, w)| {
+                    s.spawn(move || {
+                        let t = Instant::now();
+                        w.frame_number += 1;
+                        let (Some(f), Some(p)) = (w.frame.as_mut(), w.pyramid.as_mut()) else {
+                            unreachable!("frames and pyramids were made above");
+                        };
+                        w.raster.clear(f);
+                        let share = walk::Share {
+                            distribution: options.distribution,
+                            workers: n,
+                            index: k as u32,
+                        };
+                        let stats = walk_frame(
+                            scene,
+                            octrees,
+                            options,
+                            view,
+                            &mut w.raster,
+                            f,
+                            p,
+                            &mut w.visible,
+                            share,
+                            recheck,
+                            &mut w.stamps,
+                            w.frame_number,
+                        );
+                        (stats, t.elapsed())
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                .collect()
+        });
+        let t = Instant::now();
+        composite(frame, self.workers.iter().filter_map(|w| w.frame.as_ref()));
+        let merge = t.elapsed();
+        let slowest = results.iter().map(|r| r.1).max().unwrap_or_default();
+        let mut stats = FrameStats::default();
+        for (k, (s, busy)) in results.iter().enumerate() {
+            stats.triangles_submitted += s.triangles_submitted;
+            stats.triangles_rasterized += s.triangles_rasterized;
+            stats.fragments_written += s.fragments_written;
+            stats.nodes_visited += s.nodes_visited;
+            stats.boxes_tested += s.boxes_tested;
+            stats.boxes_culled += s.boxes_culled;
+            stats.counters.merge(&s.counters);
+            stats.counters.add(BUSY[k], busy.as_micros() as u64);
+            stats.counters.add(IDLE[k], (slowest - *busy).as_micros() as u64);
+            if *busy == slowest {
+                // Phases of the critical path: the slowest worker's.
+                stats.phases = s.phases.clone();
+            }
+        }
+        stats.phases.add(Phase::Other, merge);
+        Ok(stats)
+    }
+}
+
+/// Depth compositing: every pixel of `out` takes the nearest fragment (ties to the smaller
+/// item) of the `parts`, in row bands over the available threads.
+fn composite<'f>(out: &mut Frame, parts: impl Iterator<Item = &'f Frame>) {
+    let parts: Vec<&Frame> = parts.collect();
+    let width = out.width() as usize;
+    let (depth, items) = out.buffers_mut();
+    depth.fill(occult_raster::CLEAR_DEPTH);
+    items.fill(occult_core::NO_ITEM);
+    use rayon::prelude::*;
+    let rows = 16 * width;
+    depth
+        .par_chunks_mut(rows)
+        .zip(items.par_chunks_mut(rows))
+        .enumerate()
+        .for_each(|(band, (d, it))| {
+            let base = band * rows;
+            for part in &parts {
+                let (pd, pi) = (&part.depth()[base..base + d.len()], &part.items()[base..base + d.len()]);
+                for j in 0..d.len() {
+                    occult_raster::keep_fragment(&mut d[j], &mut it[j], pd[j], pi[j]);
+                }
+            }
+        });
+}
+
+impl Renderer for Hzb {
+    fn name(&self) -> &'static str {
+        "hzb"
+    }
+
+    fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
+        check_frame(view, frame)?;
+        let start = Instant::now();
+        self.frames_since_recheck += 1;
+        let recheck = self.options.temporal && self.frames_since_recheck >= self.options.recheck_every;
+        if recheck {
+            self.frames_since_recheck = 0;
+        }
+        let (scene, octrees, options) = (&*self.scene, &self.octrees[..], &self.options);
+        let mut stats = if options.distribution == Distribution::Off {
+            let w = &mut self.workers[0];
+            w.frame_number += 1;
+            let t = Instant::now();
+            w.raster.clear(frame);
+            let clear = t.elapsed();
+            let pyramid = ready_pyramid(&mut w.pyramid, frame.width(), frame.height())?;
+            let mut stats = walk_frame(
+                scene,
+                octrees,
+                options,
+                view,
+                &mut w.raster,
+                frame,
+                pyramid,
+                &mut w.visible,
+                walk::Share::ALL,
+                recheck,
+                &mut w.stamps,
+                w.frame_number,
+            );
+            stats.phases.add(Phase::Clear, clear);
+            stats
+        } else {
+            self.render_distributed(view, frame, recheck)?
+        };
+        stats.total = start.elapsed();
+        let p = &stats.phases;
+        let accounted = p.get(Phase::Clear) + p.get(Phase::Raster) + p.get(Phase::DepthStructure) + p.get(Phase::Other);
+        stats.phases.add(Phase::Cull, stats.total.saturating_sub(accounted));
+        Ok(stats)
+    }
+
+    fn memory_bytes(&self) -> usize {
+        self.octrees
+            .iter()
+            .flatten()
+            .map(HybridOctree::memory_bytes)
+            .sum::<usize>()
+            + self.workers.iter().map(Worker::memory_bytes).sum::<usize>()
+    }
+}
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn build(p: Params) -> Result<HzbOptions> {
+        HzbOptions::from_params(&p)
+    }
+
+    #[test]
+    fn bad_parameters_are_named_errors() {
+        for (k, v) in [
+            ("leaf", "0"),
+            ("depth", "0"),
+            ("depth", "33"),
+            ("recheck", "-1"),
+            ("recheck", "0"),
+            ("small", "-0.1"),
+            ("small", "1.5"),
+            ("small", "nan"),
+            ("batch", "0"),
+            ("leaf", "many"),
+            ("temporal", "maybe"),
+            ("order", "random"),
+        ] {
+            match build(Params::new("hzb").with(k, v)) {
+                Err(RenderError::BadParameter(m)) => assert!(m.contains(k) && m.contains("hzb"), "{m}"),
+                other => panic!("{k}={v}: {other:?}"),
+            }
+        }
+        let o = build(
+            Params::new("hzb")
+                .with("recheck", "30")
+                .with("order", "count")
+                .with("temporal", "off"),
+        )
+        .unwrap();
+        assert_eq!(o.recheck_every, 30);
+        assert_eq!(o.order, ChildOrder::Count);
+        assert!(!o.temporal);
+    }
+}

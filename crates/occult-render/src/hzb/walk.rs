@@ -1,0 +1,687 @@
+//! One frame of [`super::Hzb`]: the visible list, the tested traversal, batches, the recheck.
+
+use std::collections::HashSet;
+use std::hash::{BuildHasherDefault, Hasher};
+use std::time::Instant;
+
+use occult_core::{compose, Affine3A, Containment, Frustum, Mat4, Mesh, NodeId, NodeKind, Scene, Vec3, View};
+use occult_raster::{Draw, DrawTriangles, Frame, PixelRect, PyramidCounts, PyramidTest, Rasterizer, ZPyramid};
+use occult_spatial::{octree_hybrid::NO_CHILD, HybridOctree};
+
+use super::boxtest::{screen_rect, Occlusion};
+use super::{ChildOrder, Distribution, HzbOptions, VisEntry};
+use crate::{FrameStats, Phase};
+
+/// A small multiplicative hasher for the frame's stamp sets (keys are ids, not attacker data).
+#[derive(Default)]
+struct IdHasher(u64);
+
+impl Hasher for IdHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(b as u64);
+        }
+    }
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+    fn write_u32(&mut self, v: u32) {
+        self.write_u64(v as u64);
+    }
+}
+
+type IdSet<K> = HashSet<K, BuildHasherDefault<IdHasher>>;
+
+/// Names one octree node of one instance of a DAG node: (DAG node, octree node, first item).
+type NodeKey = (u32, u32, u64);
+
+/// §3.1's frame stamps of shared primitives, per DAG node and primitive: the (frame, instance
+/// first item) that last drew it. Exact, so a primitive is never skipped wrongly; a primitive
+/// drawn by several instances in one frame keeps the displaced stamps in a set.
+pub(super) type Stamps = Vec<Vec<(u64, u64)>>;
+
+/// Stamp arrays for the shared primitives of `octrees` (empty where nothing is shared).
+pub(super) fn new_stamps(octrees: &[Option<HybridOctree>]) -> Stamps {
+    octrees
+        .iter()
+        .map(|o| match o {
+            Some(o) if o.shared_count() > 0 => vec![(u64::MAX, u64::MAX); o.primitive_count()],
+            _ => Vec::new(),
+        })
+        .collect()
+}
+
+/// Which part of the scene one worker of a §4.1 distribution owns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Share {
+    pub distribution: Distribution,
+    pub workers: u32,
+    pub index: u32,
+}
+
+impl Share {
+    /// The whole scene (no distribution).
+    pub const ALL: Share = Share {
+        distribution: Distribution::Off,
+        workers: 1,
+        index: 0,
+    };
+
+    fn mix(key: NodeKey) -> u64 {
+        let mut h = IdHasher::default();
+        h.write_u32(key.0);
+        h.write_u32(key.1);
+        h.write_u64(key.2);
+        h.finish() >> 32
+    }
+
+    /// Whether this worker draws the own primitives of node `key` at all (hybrid: fine
+    /// structures, kept whole, spread over the workers).
+    fn owns_node(&self, key: NodeKey) -> bool {
+        match self.distribution {
+            Distribution::Hybrid => Self::mix(key) % self.workers as u64 == self.index as u64,
+            _ => true,
+        }
+    }
+
+    /// Whether this worker handles primitive `p` of node `key` of DAG node `id` (`root`:
+    /// the scene's root). By structure: the root's primitives (whole subtrees) round robin;
+    /// by primitive: every node's primitives round robin.
+    fn owns_primitive(&self, id: NodeId, root: NodeId, key: NodeKey, p: u32) -> bool {
+        match self.distribution {
+            Distribution::Structure => id != root || p % self.workers == self.index,
+            Distribution::Primitive => (Self::mix(key) + p as u64) % self.workers as u64 == self.index as u64,
+            _ => true,
+        }
+    }
+
+    /// Whether this worker enters the subtree of instance primitive `p` (by structure, only
+    /// its own structures; otherwise every worker walks every octree).
+    fn enters(&self, id: NodeId, root: NodeId, p: u32) -> bool {
+        self.distribution != Distribution::Structure || id != root || p % self.workers == self.index
+    }
+}
+
+/// An instance's frustum, matrix and eye, computed once per frame for the visible list.
+#[derive(Clone, Copy)]
+struct Placement {
+    frustum: Frustum,
+    clip_from_object: Mat4,
+    eye: Vec3,
+}
+
+/// Geometry gathered for the next rasterizer call.
+struct Pending<'a> {
+    mesh: &'a Mesh,
+    /// Range of `scratch` holding the triangle list; None for the whole mesh.
+    list: Option<(u32, u32)>,
+    clip_from_object: Mat4,
+    first_item: u64,
+}
+
+/// The DAG instance whose octree is being walked.
+struct Instance<'a> {
+    id: NodeId,
+    octree: &'a HybridOctree,
+    world_from_node: Affine3A,
+    first_item: u64,
+    frustum: Frustum,
+    clip_from_object: Mat4,
+    eye: Vec3,
+}
+
+pub(super) struct Walk<'a> {
+    scene: &'a Scene,
+    octrees: &'a [Option<HybridOctree>],
+    options: &'a HzbOptions,
+    view: &'a View,
+    raster: &'a mut Rasterizer,
+    frame: &'a mut Frame,
+    pyramid: &'a mut ZPyramid,
+    how: PyramidTest,
+    share: Share,
+    pending: Vec<Pending<'a>>,
+    scratch: Vec<u32>,
+    pending_triangles: usize,
+    dirty: Option<PixelRect>,
+    /// Nodes whose own primitives the visible list drew this frame.
+    drawn_nodes: IdSet<NodeKey>,
+    /// Shared primitives drawn (§3.1's frame stamp).
+    stamps: &'a mut Stamps,
+    frame_number: u64,
+    /// Stamps of this frame displaced by another instance's: (DAG node, primitive, first item).
+    displaced: IdSet<(u32, u32, u64)>,
+    /// The next visible list, and its keys.
+    visible: Vec<VisEntry>,
+    listed: IdSet<NodeKey>,
+    placements: std::collections::HashMap<(u32, u64), Placement, BuildHasherDefault<IdHasher>>,
+    stats: FrameStats,
+    pc: PyramidCounts,
+    occlusion_tests: u64,
+    occlusion_culled: u64,
+    frustum_culled: u64,
+    list_drawn: u64,
+    list_culled: u64,
+    recheck_dropped: u64,
+    batches: u64,
+}
+
+impl<'a> Walk<'a> {
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        scene: &'a Scene,
+        octrees: &'a [Option<HybridOctree>],
+        options: &'a HzbOptions,
+        view: &'a View,
+        raster: &'a mut Rasterizer,
+        frame: &'a mut Frame,
+        pyramid: &'a mut ZPyramid,
+        share: Share,
+        stamps: &'a mut Stamps,
+        frame_number: u64,
+    ) -> Self {
+        Self {
+            scene,
+            octrees,
+            options,
+            view,
+            raster,
+            frame,
+            pyramid,
+            how: PyramidTest {
+                global: options.global,
+                hierarchical: options.pyramid,
+            },
+            share,
+            pending: Vec::new(),
+            scratch: Vec::new(),
+            pending_triangles: 0,
+            dirty: None,
+            drawn_nodes: IdSet::default(),
+            stamps,
+            frame_number,
+            displaced: IdSet::default(),
+            visible: Vec::new(),
+            listed: IdSet::default(),
+            placements: Default::default(),
+            stats: FrameStats::default(),
+            pc: PyramidCounts::default(),
+            occlusion_tests: 0,
+            occlusion_culled: 0,
+            frustum_culled: 0,
+            list_drawn: 0,
+            list_culled: 0,
+            recheck_dropped: 0,
+            batches: 0,
+        }
+    }
+
+    /// §3.3: draws last frame's visible list first (in descending screen area, §4.2), untested
+    /// except against the frustum; entries outside it stay listed when `keep_culled` (§5.1).
+    pub fn draw_visible_list(&mut self, mut list: Vec<VisEntry>) {
+        let (w, h) = (self.frame.width(), self.frame.height());
+        if self.options.area_sort {
+            let mut keyed: Vec<(u64, VisEntry)> = list
+                .into_iter()
+                .map(|e| {
+                    let b = self.node_of(&e).own_bounds;
+                    let clip = self.placement(&e).clip_from_object;
+                    (screen_rect(&clip, &b, w, h).map_or(0, |r| r.area()), e)
+                })
+                .collect();
+            keyed.sort_by_key(|k| std::cmp::Reverse(k.0));
+            list = keyed.into_iter().map(|(_, e)| e).collect();
+        }
+        for e in list {
+            let own = self.node_of(&e).own_bounds;
+            let pl = self.placement(&e);
+            let key = (e.dag_node.0, e.octree_node, e.first_item);
+            if pl.frustum.classify_aabb(&own) == Containment::Outside {
+                self.list_culled += 1;
+                if self.options.keep_culled {
+                    self.list(e);
+                }
+                continue;
+            }
+            self.list_drawn += 1;
+            // A flush may empty the batch; the entry stays listed either way.
+            let _ = self.draw_own(
+                e.dag_node,
+                e.octree_node,
+                &e.world_from_node,
+                e.first_item,
+                pl.clip_from_object,
+                &own,
+            );
+            self.drawn_nodes.insert(key);
+            self.list(e);
+            self.maybe_flush();
+        }
+        self.flush();
+    }
+
+    /// The tested front-to-back traversal of the whole scene (§3.2).
+    pub fn traverse(&mut self) {
+        let root = self.scene.root();
+        self.instance(root, &Affine3A::IDENTITY, 0, false);
+        self.flush();
+    }
+
+    /// §3.3: removes from the visible list the nodes whose own primitives are hidden in the
+    /// final frame (frustum-culled ones stay when `keep_culled`, §5.1).
+    pub fn recheck(&mut self) {
+        let t = Instant::now();
+        self.pyramid.rebuild(self.frame);
+        self.stats.phases.add(Phase::DepthStructure, t.elapsed());
+        let list = std::mem::take(&mut self.visible);
+        let mut kept = Vec::with_capacity(list.len());
+        for e in list {
+            let own = self.node_of(&e).own_bounds;
+            let pl = self.placement(&e);
+            let keep = if pl.frustum.classify_aabb(&own) == Containment::Outside {
+                self.options.keep_culled
+            } else {
+                let mut pc = self.pc;
+                let hidden = self.occlusion().box_hidden(&pl.clip_from_object, &own, pl.eye, &mut pc);
+                self.pc = pc;
+                !hidden
+            };
+            if keep {
+                kept.push(e);
+            } else {
+                self.recheck_dropped += 1;
+                self.listed.remove(&(e.dag_node.0, e.octree_node, e.first_item));
+            }
+        }
+        self.visible = kept;
+    }
+
+    /// The next visible list and the frame's statistics.
+    pub fn finish(mut self) -> (Vec<VisEntry>, FrameStats) {
+        let c = &mut self.stats.counters;
+        c.add("occlusion_tests", self.occlusion_tests);
+        c.add("occlusion_culled", self.occlusion_culled);
+        c.add("frustum_culled", self.frustum_culled);
+        c.add("pyramid_tests", self.pc.samples_tested);
+        c.add("pyramid_descents", self.pc.descents);
+        c.add("global_rejects", self.pc.global_rejects);
+        c.add("visible_list", self.visible.len() as u64);
+        c.add("visible_list_drawn", self.list_drawn);
+        c.add("visible_list_frustum_culled", self.list_culled);
+        c.add("recheck_dropped", self.recheck_dropped);
+        c.add("batches", self.batches);
+        (self.visible, self.stats)
+    }
+
+    /// The placement of a visible-list entry's instance (cached: many entries share one).
+    fn placement(&mut self, e: &VisEntry) -> Placement {
+        let view = self.view;
+        *self
+            .placements
+            .entry((e.dag_node.0, e.first_item))
+            .or_insert_with(|| Placement {
+                frustum: view.frustum(&e.world_from_node),
+                clip_from_object: view.clip_from_object(&e.world_from_node),
+                eye: e.world_from_node.inverse().transform_point3(view.camera().eye),
+            })
+    }
+
+    fn node_of(&self, e: &VisEntry) -> &'a occult_spatial::OctreeNode {
+        let octrees: &'a [Option<HybridOctree>] = self.octrees;
+        match &octrees[e.dag_node.index()] {
+            Some(o) => &o.nodes()[e.octree_node as usize],
+            None => unreachable!("visible-list entries name octree nodes"),
+        }
+    }
+
+    fn occlusion(&self) -> Occlusion<'_> {
+        Occlusion {
+            frame: self.frame,
+            pyramid: self.pyramid,
+            how: self.how,
+            far_depth: self.view.far_depth(),
+        }
+    }
+
+    /// Stamps shared primitive `p` of the instance of `id` at `first_item`; false when it
+    /// was already drawn this frame.
+    fn stamp(&mut self, id: NodeId, p: u32, first_item: u64) -> bool {
+        let now = (self.frame_number, first_item);
+        let held = self.stamps[id.index()][p as usize];
+        if held == now {
+            return false;
+        }
+        if held.0 == self.frame_number {
+            // Another instance drew it this frame: the displaced stamps live in a set.
+            if self.displaced.contains(&(id.0, p, first_item)) {
+                return false;
+            }
+            self.displaced.insert((id.0, p, held.1));
+        }
+        self.stamps[id.index()][p as usize] = now;
+        true
+    }
+
+    fn list(&mut self, e: VisEntry) {
+        if self.listed.insert((e.dag_node.0, e.octree_node, e.first_item)) {
+            self.visible.push(e);
+        }
+    }
+
+    /// Visits an instance of DAG node `id`: through its octree, or as one box (a small mesh).
+    fn instance(&mut self, id: NodeId, world_from_node: &Affine3A, first_item: u64, inside: bool) {
+        let octrees: &'a [Option<HybridOctree>] = self.octrees;
+        match &octrees[id.index()] {
+            Some(octree) if !octree.nodes().is_empty() => {
+                let inst = Instance {
+                    id,
+                    octree,
+                    world_from_node: *world_from_node,
+                    first_item,
+                    frustum: self.view.frustum(world_from_node),
+                    clip_from_object: self.view.clip_from_object(world_from_node),
+                    eye: world_from_node.inverse().transform_point3(self.view.camera().eye),
+                };
+                self.octree_node(&inst, 0, inside);
+            }
+            Some(_) => {}
+            None => {
+                let scene: &'a Scene = self.scene;
+                let node = scene.node(id);
+                let NodeKind::Mesh(mesh) = node.kind() else {
+                    return; // an empty group
+                };
+                if mesh.triangle_count() == 0 || (id == scene.root() && self.share.index != 0) {
+                    return; // a small mesh as the whole scene: the first worker draws it
+                }
+                let b = node.bounds();
+                self.stats.nodes_visited += 1;
+                if !inside {
+                    self.stats.boxes_tested += 1;
+                    if self.view.frustum(world_from_node).classify_aabb(&b) == Containment::Outside {
+                        self.stats.boxes_culled += 1;
+                        self.frustum_culled += 1;
+                        return;
+                    }
+                }
+                let clip = self.view.clip_from_object(world_from_node);
+                if self.options.occlusion {
+                    let eye = world_from_node.inverse().transform_point3(self.view.camera().eye);
+                    if self.hidden(&clip, &b, eye) {
+                        return;
+                    }
+                }
+                self.push(mesh, None, clip, first_item, &b);
+            }
+        }
+    }
+
+    /// The occlusion test of one box, counted.
+    fn hidden(&mut self, clip: &Mat4, b: &occult_core::Aabb, eye: Vec3) -> bool {
+        self.stats.boxes_tested += 1;
+        self.occlusion_tests += 1;
+        let mut pc = self.pc;
+        let hidden = self.occlusion().box_hidden(clip, b, eye, &mut pc);
+        self.pc = pc;
+        if hidden {
+            self.stats.boxes_culled += 1;
+            self.occlusion_culled += 1;
+        }
+        hidden
+    }
+
+    /// §3.2: test the node's box, draw its own primitives, then its children front to back.
+    fn octree_node(&mut self, inst: &Instance<'a>, n: u32, inside: bool) {
+        let node = &inst.octree.nodes()[n as usize];
+        self.stats.nodes_visited += 1;
+        let inside = inside || {
+            self.stats.boxes_tested += 1;
+            match inst.frustum.classify_aabb(&node.bounds) {
+                Containment::Outside => {
+                    self.stats.boxes_culled += 1;
+                    self.frustum_culled += 1;
+                    return;
+                }
+                c => c == Containment::Inside,
+            }
+        };
+        if node.is_leaf()
+            && matches!(self.scene.node(inst.id).kind(), NodeKind::Mesh(_))
+            && self.drawn_nodes.contains(&(inst.id.0, n, inst.first_item))
+        {
+            return; // a leaf the visible list drew: nothing left to test for
+        }
+        if self.options.occlusion && self.hidden(&inst.clip_from_object, &node.bounds, inst.eye) {
+            return;
+        }
+        if node.count > 0 {
+            let key = (inst.id.0, n, inst.first_item);
+            let scene: &'a Scene = self.scene;
+            match scene.node(inst.id).kind() {
+                NodeKind::Mesh(_) => {
+                    // Deviation: an inner node's own primitives (its straddlers) get their own,
+                    // tighter box test: the subtree's box passing says little about them.
+                    let own_hidden = |w: &mut Self| {
+                        w.options.occlusion
+                            && !node.is_leaf()
+                            && w.hidden(&inst.clip_from_object, &node.own_bounds, inst.eye)
+                    };
+                    if !self.drawn_nodes.contains(&key) && !own_hidden(self) {
+                        let own = node.own_bounds;
+                        let drew = self.draw_own(
+                            inst.id,
+                            n,
+                            &inst.world_from_node,
+                            inst.first_item,
+                            inst.clip_from_object,
+                            &own,
+                        );
+                        if drew && self.options.temporal {
+                            self.list_new(inst, n);
+                        }
+                    }
+                }
+                NodeKind::Group(instances) => {
+                    let drawn = self.drawn_nodes.contains(&key);
+                    let mut direct = false;
+                    let root = scene.root();
+                    // Deviation: front to back among the node's instances too (nearest centre
+                    // first), so that a near instance is drawn before the far ones are tested.
+                    let mut prims: Vec<(f32, u32)> = inst
+                        .octree
+                        .node_primitives(n)
+                        .iter()
+                        .map(|&p| {
+                            let i = &instances[p as usize];
+                            let c = i
+                                .parent_from_child
+                                .transform_point3(scene.node(i.child).bounds().center());
+                            (c.distance_squared(inst.eye), p)
+                        })
+                        .collect();
+                    prims.sort_by(|a, b| a.0.total_cmp(&b.0));
+                    for &(_, p) in &prims {
+                        let i = &instances[p as usize];
+                        if !self.share.enters(inst.id, root, p) {
+                            continue;
+                        }
+                        let child_first = inst.first_item + scene.node(inst.id).item_offset(p as usize);
+                        let has_octree = self.octrees[i.child.index()].is_some();
+                        if !has_octree {
+                            direct = true;
+                            if drawn || !self.share.owns_node(key) || !self.share.owns_primitive(inst.id, root, key, p)
+                            {
+                                continue; // the visible list drew it, or another worker does
+                            }
+                        }
+                        if inst.octree.is_shared(p) && !self.stamp(inst.id, p, inst.first_item) {
+                            continue;
+                        }
+                        let world_from_child = compose(&inst.world_from_node, &i.parent_from_child);
+                        self.instance(i.child, &world_from_child, child_first, inside);
+                    }
+                    if direct && !drawn && self.options.temporal {
+                        self.list_new(inst, n);
+                    }
+                }
+            }
+            self.maybe_flush();
+        }
+        let (order, count) = match self.options.order {
+            ChildOrder::FrontToBack => inst.octree.children_front_to_back(n, inst.eye),
+            // Deviation: §4.2/§5.1's invisible-list order applied to siblings (see the module doc).
+            ChildOrder::Count => {
+                let mut c = node.children;
+                c.sort_by_key(|&c| {
+                    if c == NO_CHILD {
+                        u32::MAX
+                    } else {
+                        inst.octree.nodes()[c as usize].subtree_count
+                    }
+                });
+                (c, node.children.iter().filter(|&&c| c != NO_CHILD).count())
+            }
+        };
+        for &c in &order[..count] {
+            self.octree_node(inst, c, inside);
+        }
+    }
+
+    fn list_new(&mut self, inst: &Instance<'a>, n: u32) {
+        self.list(VisEntry {
+            dag_node: inst.id,
+            octree_node: n,
+            first_item: inst.first_item,
+            world_from_node: inst.world_from_node,
+        });
+    }
+
+    /// Adds the own primitives of octree node `n` of an instance of `id` that can be drawn
+    /// directly: a mesh's triangles, or a group's instances of small meshes (those of nodes with
+    /// octrees are visited by the traversal, or listed themselves). Returns whether anything
+    /// was queued.
+    fn draw_own(
+        &mut self,
+        id: NodeId,
+        n: u32,
+        world_from_node: &Affine3A,
+        first_item: u64,
+        clip: Mat4,
+        own: &occult_core::Aabb,
+    ) -> bool {
+        let scene: &'a Scene = self.scene;
+        let octrees: &'a [Option<HybridOctree>] = self.octrees;
+        let Some(octree) = &octrees[id.index()] else {
+            return false;
+        };
+        let key = (id.0, n, first_item);
+        if !self.share.owns_node(key) {
+            return false;
+        }
+        let queued = self.pending.len();
+        let (share, root) = (self.share, scene.root());
+        match scene.node(id).kind() {
+            NodeKind::Mesh(mesh) => {
+                let start = self.scratch.len() as u32;
+                for &p in octree.node_primitives(n) {
+                    if !share.owns_primitive(id, root, key, p) {
+                        continue;
+                    }
+                    // §3.1: a shared primitive is drawn once per frame.
+                    if octree.is_shared(p) && !self.stamp(id, p, first_item) {
+                        continue;
+                    }
+                    self.scratch.push(p);
+                }
+                let end = self.scratch.len() as u32;
+                if end > start {
+                    self.push(mesh, Some((start, end)), clip, first_item, own);
+                }
+            }
+            NodeKind::Group(instances) => {
+                for &p in octree.node_primitives(n) {
+                    let i = &instances[p as usize];
+                    if octrees[i.child.index()].is_some() || !share.owns_primitive(id, root, key, p) {
+                        continue;
+                    }
+                    let NodeKind::Mesh(mesh) = scene.node(i.child).kind() else {
+                        continue;
+                    };
+                    let child_first = first_item + scene.node(id).item_offset(p as usize);
+                    if octree.is_shared(p) && !self.stamp(id, p, first_item) {
+                        continue;
+                    }
+                    let world_from_child = compose(world_from_node, &i.parent_from_child);
+                    let clip = self.view.clip_from_object(&world_from_child);
+                    let b = scene.node(i.child).bounds();
+                    self.push(mesh, None, clip, child_first, &b);
+                }
+            }
+        }
+        self.pending.len() > queued
+    }
+
+    /// Queues triangles whose object-space bounds are `b` (for the pyramid's dirty region).
+    fn push(&mut self, mesh: &'a Mesh, list: Option<(u32, u32)>, clip: Mat4, first_item: u64, b: &occult_core::Aabb) {
+        self.pending_triangles += list.map_or(mesh.triangle_count(), |(s, e)| (e - s) as usize);
+        if let Some(r) = screen_rect(&clip, b, self.frame.width(), self.frame.height()) {
+            self.dirty = Some(match self.dirty {
+                None => r,
+                Some(d) => PixelRect {
+                    x0: d.x0.min(r.x0),
+                    y0: d.y0.min(r.y0),
+                    x1: d.x1.max(r.x1),
+                    y1: d.y1.max(r.y1),
+                },
+            });
+        }
+        self.pending.push(Pending {
+            mesh,
+            list,
+            clip_from_object: clip,
+            first_item,
+        });
+    }
+
+    fn maybe_flush(&mut self) {
+        if self.pending_triangles >= self.options.batch_triangles {
+            self.flush();
+        }
+    }
+
+    /// Rasterizes the batch, then brings the pyramid up to date over the batch's region.
+    fn flush(&mut self) {
+        if self.pending.is_empty() {
+            return;
+        }
+        let draws: Vec<Draw<'_>> = self
+            .pending
+            .iter()
+            .map(|p| Draw {
+                mesh: p.mesh,
+                triangles: match p.list {
+                    None => DrawTriangles::All,
+                    Some((s, e)) => DrawTriangles::List(&self.scratch[s as usize..e as usize]),
+                },
+                clip_from_object: p.clip_from_object,
+                first_item: p.first_item,
+            })
+            .collect();
+        crate::rasterize(self.raster, self.view, self.frame, &draws, &mut self.stats);
+        drop(draws);
+        self.batches += 1;
+        if let Some(d) = self.dirty.take() {
+            if self.options.occlusion {
+                let t = Instant::now();
+                self.pyramid.update(self.frame, d);
+                self.stats.phases.add(Phase::DepthStructure, t.elapsed());
+            }
+        }
+        self.pending.clear();
+        self.scratch.clear();
+        self.pending_triangles = 0;
+    }
+}
