@@ -28,6 +28,7 @@
 
 pub mod compare;
 pub mod frustum;
+pub mod oqgrid;
 mod stats;
 pub mod zbuffer;
 
