@@ -71,7 +71,74 @@ use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 pub use occult_spatial::grid::Resolution;
 use occult_spatial::grid::{GridCell, GridConfig, GridError, MeshTriangles, NestedGrid, WeightedBoxes, NO_CHILD};
 
-use crate::{check_frame, FrameStats, Phase, RenderError, RenderOptions, Renderer, Result};
+use crate::{check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
+
+/// Registry entry: every [`OqGridOptions`] field is a parameter.
+pub static INFO: AlgorithmInfo = AlgorithmInfo {
+    name: "oqgrid",
+    summary: "progressive occlusion culling with depth queries over uniform/nested grids, front-to-back slabs, batched queries (Hillesland et al. 2002)",
+    params: &[
+        ParamDoc {
+            key: "grid",
+            default: "nested",
+            help: "uniform (one level per node, §3.1) or nested (full cells split, §3.2)",
+        },
+        ParamDoc {
+            key: "resolution",
+            default: "auto",
+            help: "cells along the longest axis of each node's grid (>= 1), or auto (~100 elements per cell)",
+        },
+        ParamDoc {
+            key: "branching",
+            default: "4",
+            help: "nested: subcells per axis of a split cell (>= 2)",
+        },
+        ParamDoc {
+            key: "split",
+            default: "10000",
+            help: "nested: cells with more triangles than this are split (>= 1)",
+        },
+        ParamDoc {
+            key: "depth",
+            default: "3",
+            help: "nested: most levels below the top (0..=16)",
+        },
+        ParamDoc {
+            key: "batch",
+            default: "8",
+            help: "queries in flight: a slab's next n cells queried together, in parallel (>= 1)",
+        },
+        ParamDoc {
+            key: "threshold",
+            default: "1",
+            help: "cells with fewer triangles are drawn without a query (>= 1; 1 queries every cell)",
+        },
+        ParamDoc {
+            key: "queries",
+            default: "on",
+            help: "off: draw every cell in the frustum (grid frustum culling only, the §4.2 baseline)",
+        },
+        ParamDoc {
+            key: "order",
+            default: "slabs",
+            help: "slabs (front to back, §3.3) or none (storage order)",
+        },
+        ParamDoc {
+            key: "stamps",
+            default: "on",
+            help: "draw a triangle shared by several visible cells once per frame (§3.1)",
+        },
+        ParamDoc {
+            key: "memory",
+            default: "4096",
+            help: "bound on all grids, MiB, checked before allocating (>= 1)",
+        },
+    ],
+    conservative: true,
+    build: |scene, options, params| {
+        Ok(Box::new(OqGrid::with_options(scene, options, &OqGridOptions::from_params(params)?)?))
+    },
+};
 
 /// Uniform (§3.1) or nested (§3.2) grids.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -138,6 +205,48 @@ impl Default for OqGridOptions {
 }
 
 impl OqGridOptions {
+    /// The options set by `params` (absent keys keep their defaults), validated.
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] naming the key and value.
+    pub fn from_params(params: &Params) -> Result<Self> {
+        let d = Self::default();
+        let resolution = match params.raw("resolution").map(str::trim) {
+            None => d.resolution,
+            Some(v) if v.eq_ignore_ascii_case("auto") => Resolution::Auto,
+            Some(v) => Resolution::Cells(v.parse().map_err(|_| {
+                RenderError::BadParameter(format!("oqgrid: resolution={v}: expected auto or a number of cells"))
+            })?),
+        };
+        let memory_mib: usize = params.get("memory", d.max_memory_bytes >> 20)?;
+        if memory_mib == 0 || memory_mib > (1 << 30) {
+            return Err(RenderError::BadParameter(format!(
+                "oqgrid: memory={memory_mib}: expected 1..=1073741824 MiB"
+            )));
+        }
+        let o = Self {
+            grid: match params.choice("grid", &["uniform", "nested"], "nested")? {
+                "uniform" => GridKind::Uniform,
+                _ => GridKind::Nested,
+            },
+            resolution,
+            branching: params.get("branching", d.branching)?,
+            split_threshold: params.get("split", d.split_threshold)?,
+            max_depth: params.get("depth", d.max_depth)?,
+            batch: params.get("batch", d.batch)?,
+            query_threshold: params.get("threshold", d.query_threshold)?,
+            queries: params.flag("queries", d.queries)?,
+            order: match params.choice("order", &["slabs", "none"], "slabs")? {
+                "none" => Order::Unordered,
+                _ => Order::Slabs,
+            },
+            stamps: params.flag("stamps", d.stamps)?,
+            max_memory_bytes: memory_mib << 20,
+        };
+        o.validate()?;
+        Ok(o)
+    }
+
     /// Checks the ranges.
     ///
     /// # Errors
@@ -543,6 +652,14 @@ impl Renderer for OqGrid {
             .add(Phase::Cull, walked.saturating_sub(query_time + raster_time));
         stats.boxes_tested += counts.queries;
         stats.boxes_culled += counts.queries_hidden;
+        let c = &mut stats.counters;
+        c.add("cells_visited", counts.cells_visited);
+        c.add("cells_in_frustum", counts.cells_in_frustum);
+        c.add("queries", counts.queries);
+        c.add("queries_hidden", counts.queries_hidden);
+        c.add("queries_skipped", counts.queries_skipped);
+        c.add("cells_visible", counts.cells_visible);
+        c.add("node_occurrences", counts.node_occurrences);
         stats.total = start.elapsed();
         self.last_counts = counts;
         Ok(stats)
