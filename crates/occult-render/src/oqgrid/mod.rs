@@ -71,7 +71,9 @@ use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 pub use occult_spatial::grid::Resolution;
 use occult_spatial::grid::{GridCell, GridConfig, GridError, MeshTriangles, NestedGrid, WeightedBoxes, NO_CHILD};
 
-use crate::{check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
+use crate::{
+    check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result,
+};
 
 /// Registry entry: every [`OqGridOptions`] field is a parameter.
 pub static INFO: AlgorithmInfo = AlgorithmInfo {
@@ -256,6 +258,14 @@ impl OqGridOptions {
         if self.resolution == Resolution::Cells(0) {
             return bad("resolution=0: a grid needs at least 1 cell along its longest axis".into());
         }
+        if let Resolution::Cells(n) = self.resolution {
+            if n as u64 > occult_spatial::grid::MAX_AXIS_CELLS {
+                return bad(format!(
+                    "resolution={n}: at most {} cells along an axis",
+                    occult_spatial::grid::MAX_AXIS_CELLS
+                ));
+            }
+        }
         if self.branching < 2 {
             return bad(format!("branching={}: must be at least 2", self.branching));
         }
@@ -293,6 +303,8 @@ impl OqGridOptions {
 pub struct OqGrid {
     scene: Arc<Scene>,
     raster: Rasterizer,
+    /// The same configuration on [`occult_raster::Strategy::Direct`], for small batches.
+    direct: Rasterizer,
     options: OqGridOptions,
     /// Per node of the scene: its grid, in the node's space.
     grids: Vec<NestedGrid>,
@@ -319,6 +331,13 @@ impl OqGrid {
     pub fn with_options(scene: Arc<Scene>, options: &RenderOptions, oq: &OqGridOptions) -> Result<Self> {
         oq.validate()?;
         let raster = Rasterizer::new(options.raster.clone())?;
+        let direct = Rasterizer::new(occult_raster::RasterConfig {
+            strategy: occult_raster::Strategy::Direct,
+            // No pool of its own: a direct draw runs on the calling thread (a pool would hand
+            // every small draw to another thread and back).
+            threads: 0,
+            ..options.raster.clone()
+        })?;
         let mut left = oq.max_memory_bytes;
         let mut grids = Vec::with_capacity(scene.nodes().len());
         let mut stamps = Vec::with_capacity(scene.nodes().len());
@@ -359,6 +378,7 @@ impl OqGrid {
         Ok(Self {
             scene,
             raster,
+            direct,
             options: oq.clone(),
             grids,
             stamps,
@@ -381,6 +401,33 @@ impl OqGrid {
     pub fn grid(&self, id: NodeId) -> &NestedGrid {
         &self.grids[id.index()]
     }
+}
+
+/// Screen pixels below which a batch's queries are evaluated on the calling thread.
+const PARALLEL_QUERY_MIN_PIXELS: f32 = 131_072.0;
+
+/// Triangles below which a batch is drawn on the calling thread (`Strategy::Direct`): tile
+/// binning on all threads costs more than it saves for small draws. Frames do not depend on it.
+const DIRECT_DRAW_MAX_TRIANGLES: usize = 4096;
+
+/// Area in pixels of the screen rectangle of `aabb`'s corners (the whole screen when a corner
+/// is behind the eye): an estimate of a query's work.
+fn screen_area_estimate(clip_from_object: &Mat4, aabb: &occult_core::Aabb, w: f32, h: f32) -> f32 {
+    let (mut x0, mut x1, mut y0, mut y1) = (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY);
+    for c in aabb.corners() {
+        let p = *clip_from_object * c.extend(1.0);
+        if !(p.w > 0.0) {
+            return w * h;
+        }
+        let (x, y) = (p.x / p.w, p.y / p.w);
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    let dx = (x1.min(1.0) - x0.max(-1.0)).max(0.0) * 0.5 * w;
+    let dy = (y1.min(1.0) - y0.max(-1.0)).max(0.0) * 0.5 * h;
+    dx * dy
 }
 
 /// Counts of one frame (also reported as named counters).
@@ -424,6 +471,7 @@ struct Walk<'a> {
     stamps: &'a mut [Vec<u32>],
     epoch: &'a mut u32,
     raster: &'a mut Rasterizer,
+    direct: &'a mut Rasterizer,
     options: &'a OqGridOptions,
     view: &'a View,
     frame: &'a mut Frame,
@@ -516,7 +564,18 @@ impl<'a> Walk<'a> {
             !needs_query(c) || any_sample_passes(self.frame, self.view, &occ.clip_from_object, &c.tight)
         };
         let queried = batch.iter().filter(|(_, i)| needs_query(&cells[*i as usize])).count() as u64;
-        let visible: Vec<bool> = if queried > 1 {
+        // Deviation (§3.4): a batch's queries run in parallel only when their screen area makes
+        // it pay; small queries cost less than handing them to other threads.
+        let parallel = queried > 1 && {
+            let (w, h) = (self.view.width() as f32, self.view.height() as f32);
+            let area: f32 = batch
+                .iter()
+                .filter(|(_, i)| needs_query(&cells[*i as usize]))
+                .map(|(_, i)| screen_area_estimate(&occ.clip_from_object, &cells[*i as usize].tight, w, h))
+                .sum();
+            area >= PARALLEL_QUERY_MIN_PIXELS
+        };
+        let visible: Vec<bool> = if parallel {
             use rayon::prelude::*;
             self.raster
                 .install(|| batch.par_iter().map(|(_, i)| query(&cells[*i as usize])).collect())
@@ -571,7 +630,12 @@ impl<'a> Walk<'a> {
                         first_item: occ.first_item,
                     };
                     let t = Instant::now();
-                    crate::rasterize(self.raster, self.view, self.frame, &[draw], &mut self.stats);
+                    let raster = if self.list.len() <= DIRECT_DRAW_MAX_TRIANGLES {
+                        &mut *self.direct
+                    } else {
+                        &mut *self.raster
+                    };
+                    crate::rasterize(raster, self.view, self.frame, &[draw], &mut self.stats);
                     self.raster_time += t.elapsed();
                 }
                 for (&(_, i), _) in batch.iter().zip(&visible).filter(|(_, v)| **v) {
@@ -627,6 +691,7 @@ impl Renderer for OqGrid {
             stamps: &mut self.stamps,
             epoch: &mut self.epoch,
             raster: &mut self.raster,
+            direct: &mut self.direct,
             options: &self.options,
             view,
             frame,
