@@ -107,7 +107,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         },
         ParamDoc {
             key: "batch",
-            default: "8",
+            default: "4",
             help: "queries in flight: a slab's next n cells queried together, in parallel (>= 1)",
         },
         ParamDoc {
@@ -196,7 +196,7 @@ impl Default for OqGridOptions {
             branching: 4,
             split_threshold: 10_000,
             max_depth: 3,
-            batch: 8,
+            batch: 4,
             query_threshold: 1,
             queries: true,
             order: Order::Slabs,
