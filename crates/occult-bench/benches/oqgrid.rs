@@ -58,7 +58,10 @@ fn query(c: &mut Criterion) {
         .expect("render");
     let clip = view.clip_from_object(&Affine3A::IDENTITY);
     // A building-sized box behind the first row of the street: mostly hidden.
-    let hidden = Aabb::new(occult_core::Vec3::new(-10.0, 0.0, 40.0), occult_core::Vec3::new(10.0, 20.0, 60.0));
+    let hidden = Aabb::new(
+        occult_core::Vec3::new(-10.0, 0.0, 40.0),
+        occult_core::Vec3::new(10.0, 20.0, 60.0),
+    );
     c.bench_function("oqgrid_query_box_city", |b| {
         b.iter(|| any_sample_passes(&frame, &view, &clip, std::hint::black_box(&hidden)))
     });

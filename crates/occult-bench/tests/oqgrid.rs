@@ -177,3 +177,29 @@ fn view_away_from_the_scene_draws_nothing() {
     assert_eq!(s.counters.get("queries"), 0);
     assert_eq!(frame.covered_pixel_count(), 0);
 }
+
+/// Batches whose queries cover enough of the screen are evaluated in parallel: frames stay
+/// identical (the 96 x 64 views of the other tests are too small to take that path).
+#[test]
+fn parallel_query_batches_are_identical() {
+    let built = occult_scenes::spec::parse_spec("plant:units=2,floors=2,pipes=10")
+        .and_then(|s| s.build())
+        .unwrap();
+    let cams = occult_scenes::path::parse_path("street:6", &built.scene, &built.default_camera).unwrap();
+    let scene = Arc::new(built.scene);
+    let opts = RenderOptions::default();
+    let mut z = Algorithm::ZBUFFER.build(scene.clone(), &opts).unwrap();
+    let mut r = spec("oqgrid:grid=uniform,resolution=2,batch=8")
+        .build(scene, &opts)
+        .unwrap();
+    let (mut a, mut b) = (Frame::new(640, 480).unwrap(), Frame::new(640, 480).unwrap());
+    let mut parallel = 0;
+    for cam in &cams {
+        let view = View::new(*cam, 640, 480).unwrap();
+        z.render(&view, &mut a).unwrap();
+        let s = r.render(&view, &mut b).unwrap();
+        parallel += s.counters.get("parallel_batches");
+        assert!(a.same_visibility(&b), "differs from zbuffer: {cam:?}");
+    }
+    assert!(parallel > 0, "no batch took the parallel path");
+}

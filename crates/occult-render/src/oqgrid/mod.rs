@@ -39,9 +39,14 @@
 //!   GPU occlusion query: [`occult_raster::query_box`]'s test in an early-out, span-scanning
 //!   form (`query.rs`, an "any samples passed" query). A hardware query's cost is mostly latency
 //!   and fill; ours is the pixels scanned until the first passing one.
-//! - Deviation: "in flight" means evaluated in parallel (rayon) against the same depth state;
-//!   there is no pipeline to keep full, but the culling lost to a batch (cells of a batch do not
-//!   see each other's geometry) is the same as in §3.4.
+//! - Deviation: "in flight" means evaluated in parallel (rayon) against the same depth state,
+//!   when the batch's queries cover at least [`PARALLEL_QUERY_MIN_PIXELS`] (below that, handing
+//!   them to other threads cost more than the queries, measured); there is no pipeline to keep
+//!   full, but the culling lost to a batch (cells of a batch do not see each other's geometry)
+//!   is the same as in §3.4.
+//! - A batch's visible triangles are one draw; draws of at most [`DIRECT_DRAW_MAX_TRIANGLES`]
+//!   run on the calling thread (`Strategy::Direct`), larger ones on the rasterizer's threads.
+//!   Frames do not depend on it.
 //! - Deviation: cells are queried with their *tight* box (cell ∩ bounds of its contents), never
 //!   larger than the cube of the paper, so at least as much is culled.
 //! - Deviation: slabs are bands of the cell centres' distance along the view direction, one
@@ -404,11 +409,11 @@ impl OqGrid {
 }
 
 /// Screen pixels below which a batch's queries are evaluated on the calling thread.
-const PARALLEL_QUERY_MIN_PIXELS: f32 = 131_072.0;
+pub const PARALLEL_QUERY_MIN_PIXELS: f32 = 131_072.0;
 
 /// Triangles below which a batch is drawn on the calling thread (`Strategy::Direct`): tile
 /// binning on all threads costs more than it saves for small draws. Frames do not depend on it.
-const DIRECT_DRAW_MAX_TRIANGLES: usize = 4096;
+pub const DIRECT_DRAW_MAX_TRIANGLES: usize = 4096;
 
 /// Area in pixels of the screen rectangle of `aabb`'s corners (the whole screen when a corner
 /// is behind the eye): an estimate of a query's work.
@@ -448,6 +453,8 @@ pub struct OqGridCounts {
     pub cells_visible: u64,
     /// Node occurrences entered (DAG nodes in the frustum).
     pub node_occurrences: u64,
+    /// Batches whose queries were evaluated in parallel.
+    pub parallel_batches: u64,
 }
 
 /// A node occurrence being traversed.
@@ -577,6 +584,7 @@ impl<'a> Walk<'a> {
         };
         let visible: Vec<bool> = if parallel {
             use rayon::prelude::*;
+            self.counts.parallel_batches += 1;
             self.raster
                 .install(|| batch.par_iter().map(|(_, i)| query(&cells[*i as usize])).collect())
         } else {
@@ -725,6 +733,7 @@ impl Renderer for OqGrid {
         c.add("queries_skipped", counts.queries_skipped);
         c.add("cells_visible", counts.cells_visible);
         c.add("node_occurrences", counts.node_occurrences);
+        c.add("parallel_batches", counts.parallel_batches);
         stats.total = start.elapsed();
         self.last_counts = counts;
         Ok(stats)
