@@ -438,7 +438,7 @@ impl NestedGrid {
 fn top_dims(bounds: Aabb, element_count: usize, config: &GridConfig) -> [u64; 3] {
     let size = bounds.size().max(Vec3::ZERO);
     let longest = size.max_element();
-    if !(longest > 0.0) || !longest.is_finite() {
+    if longest.is_nan() || longest <= 0.0 || !longest.is_finite() {
         return [1, 1, 1];
     }
     let rel = size / longest;

@@ -421,7 +421,7 @@ fn screen_area_estimate(clip_from_object: &Mat4, aabb: &occult_core::Aabb, w: f3
     let (mut x0, mut x1, mut y0, mut y1) = (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY);
     for c in aabb.corners() {
         let p = *clip_from_object * c.extend(1.0);
-        if !(p.w > 0.0) {
+        if p.w.is_nan() || p.w <= 0.0 {
             return w * h;
         }
         let (x, y) = (p.x / p.w, p.y / p.w);
