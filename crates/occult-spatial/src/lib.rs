@@ -17,6 +17,7 @@
 
 mod bvh;
 pub mod octree_hybrid;
+pub mod grid;
 
 pub use bvh::{Bvh, BvhNode};
 pub use octree_hybrid::{HybridOctree, OctreeConfig, OctreeNode};

@@ -1,0 +1,205 @@
+//! oqgrid (Hillesland et al. 2002): frames bit-identical to `zbuffer` (DESIGN invariant 2) over
+//! every generator with 50 random views and over whole camera paths, in every configuration
+//! that changes what is queried or drawn; bad parameters are errors.
+
+use std::sync::Arc;
+
+use occult_bench::invariants::{assert_identical_on_every_generator, assert_identical_on_path};
+use occult_core::{Camera, Vec3, View};
+use occult_raster::Frame;
+use occult_render::{AlgoSpec, Algorithm, RenderError, RenderOptions};
+
+fn spec(s: &str) -> AlgoSpec {
+    AlgoSpec::parse(s).unwrap_or_else(|e| panic!("{s}: {e}"))
+}
+
+#[test]
+fn nested_default_is_identical_on_every_generator() {
+    assert_identical_on_every_generator(&spec("oqgrid"), 0);
+}
+
+#[test]
+fn uniform_batch_1_is_identical_on_every_generator() {
+    assert_identical_on_every_generator(&spec("oqgrid:grid=uniform,batch=1,resolution=16"), 0);
+}
+
+#[test]
+fn uniform_batch_8_fine_grid_is_identical_on_every_generator() {
+    assert_identical_on_every_generator(&spec("oqgrid:grid=uniform,batch=8,resolution=40"), 2);
+}
+
+#[test]
+fn nested_deep_small_split_is_identical_on_every_generator() {
+    // Small split threshold and coarse top level: most cells have subgrids (§3.2 recursion).
+    assert_identical_on_every_generator(
+        &spec("oqgrid:grid=nested,resolution=3,split=8,branching=2,depth=4,batch=8"),
+        0,
+    );
+}
+
+#[test]
+fn threshold_and_switches_are_identical_on_every_generator() {
+    // Cells under 64 triangles drawn unqueried; no stamps (shared triangles drawn per cell);
+    // storage order; one thread.
+    assert_identical_on_every_generator(&spec("oqgrid:threshold=64,stamps=off,order=none,batch=3"), 1);
+    assert_identical_on_every_generator(&spec("oqgrid:queries=off"), 0);
+}
+
+#[test]
+fn identical_on_paths() {
+    for (algo, scene, path) in [
+        ("oqgrid", "plant:units=2,floors=2,pipes=10", "street:12"),
+        ("oqgrid:grid=uniform,batch=1", "city:blocks=3,detail=3", "street:12"),
+        (
+            "oqgrid:grid=nested,split=50,resolution=4,batch=8",
+            "city:blocks=3,detail=3",
+            "flyover:10",
+        ),
+        (
+            "oqgrid:threshold=200,batch=8",
+            "forest:trees=3,patches=2,levels=1",
+            "circle:10",
+        ),
+        (
+            "oqgrid:grid=nested,split=100,resolution=8",
+            "occluder:objects=4",
+            "circle:10",
+        ),
+    ] {
+        assert_identical_on_path(&spec(algo), scene, path, 160, 120);
+    }
+}
+
+fn build_err(s: &str) -> String {
+    build_err_on("city:blocks=1,detail=1", s)
+}
+
+fn build_err_on(scene_spec: &str, s: &str) -> String {
+    let scene = Arc::new(
+        occult_scenes::spec::parse_spec(scene_spec)
+            .and_then(|s| s.build())
+            .unwrap()
+            .scene,
+    );
+    match spec(s).build(scene, &RenderOptions::default()) {
+        Err(RenderError::BadParameter(m)) => m,
+        Err(e) => panic!("{s}: expected BadParameter, got {e}"),
+        Ok(_) => panic!("{s}: accepted"),
+    }
+}
+
+#[test]
+fn bad_parameters_are_clear_errors() {
+    for (s, key) in [
+        ("oqgrid:resolution=0", "resolution=0"),
+        ("oqgrid:resolution=-3", "resolution=-3"),
+        ("oqgrid:resolution=lots", "resolution=lots"),
+        ("oqgrid:branching=1", "branching=1"),
+        ("oqgrid:branching=0", "branching=0"),
+        ("oqgrid:threshold=0", "threshold=0"),
+        ("oqgrid:batch=0", "batch=0"),
+        ("oqgrid:split=0", "split=0"),
+        ("oqgrid:depth=99", "depth=99"),
+        ("oqgrid:memory=0", "memory=0"),
+        ("oqgrid:grid=octree", "grid=octree"),
+        ("oqgrid:order=random", "order=random"),
+        ("oqgrid:stamps=maybe", "stamps=maybe"),
+    ] {
+        let m = build_err(s);
+        assert!(
+            m.contains("oqgrid") && m.contains(key),
+            "{s}: message '{m}' does not name it"
+        );
+    }
+}
+
+#[test]
+fn absurd_resolution_is_refused_before_allocating() {
+    // 4 billion cells along the longest axis: refused by counting, not by running out of memory.
+    let m = build_err("oqgrid:resolution=4000000000");
+    assert!(m.contains("resolution=4000000000") && m.contains("at most"), "{m}");
+    // A resolution that fits in general, under a memory bound smaller than the grid (a
+    // 140,000-triangle plant unit needs more than 1 MiB of cell lists).
+    let m = build_err_on("plant:units=1", "oqgrid:resolution=200,memory=1");
+    assert!(m.contains("bound"), "{m}");
+}
+
+/// The counters add up, and a wall in front of a hidden object culls the object's cells.
+#[test]
+fn counters_account_for_every_cell() {
+    let built = occult_scenes::spec::parse_spec("occluder:objects=3,tessellation=16")
+        .and_then(|s| s.build())
+        .unwrap();
+    let scene = Arc::new(built.scene);
+    let opts = RenderOptions::default();
+    let view = View::new(built.default_camera, 160, 120).unwrap();
+    let mut frame = Frame::new(160, 120).unwrap();
+    let mut z = Algorithm::ZBUFFER.build(scene.clone(), &opts).unwrap();
+    let zs = z.render(&view, &mut frame).unwrap();
+    let mut r = spec("oqgrid:threshold=1").build(scene.clone(), &opts).unwrap();
+    let s = r.render(&view, &mut frame).unwrap();
+    let c = |k: &str| s.counters.get(k);
+    assert!(c("cells_visited") >= c("cells_in_frustum"));
+    assert_eq!(c("cells_in_frustum"), c("queries") + c("queries_skipped"));
+    assert_eq!(c("queries"), s.boxes_tested);
+    assert_eq!(c("queries_hidden"), s.boxes_culled);
+    assert_eq!(c("cells_visible"), c("cells_in_frustum") - c("queries_hidden"));
+    assert_eq!(c("queries_skipped"), 0, "threshold 1 queries every cell");
+    assert!(c("queries_hidden") > 0, "the wall hides the spheres");
+    assert!(s.triangles_submitted < zs.triangles_submitted);
+    assert!(s.phases.get(occult_render::Phase::Query) > std::time::Duration::ZERO);
+    // A huge threshold skips every query; queries=off issues none.
+    for algo in ["oqgrid:threshold=1000000000", "oqgrid:queries=off"] {
+        let mut r = spec(algo).build(scene.clone(), &opts).unwrap();
+        let s = r.render(&view, &mut frame).unwrap();
+        assert_eq!(s.counters.get("queries"), 0, "{algo}");
+        assert_eq!(
+            s.counters.get("cells_visible"),
+            s.counters.get("cells_in_frustum"),
+            "{algo}"
+        );
+    }
+}
+
+/// A view from far behind everything, looking away: nothing is queried or drawn.
+#[test]
+fn view_away_from_the_scene_draws_nothing() {
+    let built = occult_scenes::spec::parse_spec("city:blocks=1,detail=1")
+        .and_then(|s| s.build())
+        .unwrap();
+    let scene = Arc::new(built.scene);
+    let cam = Camera::look_at(Vec3::new(0.0, 10.0, 5000.0), Vec3::new(0.0, 10.0, 10000.0));
+    let view = View::new(cam, 64, 48).unwrap();
+    let mut frame = Frame::new(64, 48).unwrap();
+    let mut r = spec("oqgrid").build(scene, &RenderOptions::default()).unwrap();
+    let s = r.render(&view, &mut frame).unwrap();
+    assert_eq!(s.triangles_submitted, 0);
+    assert_eq!(s.counters.get("queries"), 0);
+    assert_eq!(frame.covered_pixel_count(), 0);
+}
+
+/// Batches whose queries cover enough of the screen are evaluated in parallel: frames stay
+/// identical (the 96 x 64 views of the other tests are too small to take that path).
+#[test]
+fn parallel_query_batches_are_identical() {
+    let built = occult_scenes::spec::parse_spec("plant:units=2,floors=2,pipes=10")
+        .and_then(|s| s.build())
+        .unwrap();
+    let cams = occult_scenes::path::parse_path("street:6", &built.scene, &built.default_camera).unwrap();
+    let scene = Arc::new(built.scene);
+    let opts = RenderOptions::default();
+    let mut z = Algorithm::ZBUFFER.build(scene.clone(), &opts).unwrap();
+    let mut r = spec("oqgrid:grid=uniform,resolution=2,batch=8")
+        .build(scene, &opts)
+        .unwrap();
+    let (mut a, mut b) = (Frame::new(640, 480).unwrap(), Frame::new(640, 480).unwrap());
+    let mut parallel = 0;
+    for cam in &cams {
+        let view = View::new(*cam, 640, 480).unwrap();
+        z.render(&view, &mut a).unwrap();
+        let s = r.render(&view, &mut b).unwrap();
+        parallel += s.counters.get("parallel_batches");
+        assert!(a.same_visibility(&b), "differs from zbuffer: {cam:?}");
+    }
+    assert!(parallel > 0, "no batch took the parallel path");
+}

@@ -1,0 +1,746 @@
+//! Progressive occlusion culling with depth queries over uniform and nested grids.
+//!
+//! # References
+//! Hillesland, Salomon, Lastra, Manocha, "Fast and Simple Occlusion Culling using
+//! Hardware-Based Depth Queries", 2002 (`papers/occlusion-queries-hillesland-2002.txt`):
+//! - §3.1 uniform grid: every triangle assigned to every cell it intersects (exact tri–box
+//!   test, [`occult_spatial::grid`]); cells traversed front to back; each cell's box queried
+//!   against the current depth before its triangles are drawn; a per-frame stamp so that a
+//!   triangle shared by several cells is drawn once ([`OqGridOptions::stamps`]).
+//! - §3.2 nested grid: cells with more than a split threshold of triangles subdivided by a
+//!   branching factor per axis, to a maximum depth; a visible cell with a subgrid is traversed
+//!   recursively ([`GridKind::Nested`]; defaults from §4.1: branching 4, threshold 10,000).
+//! - §3.3 traversal in slabs roughly orthogonal to the view direction; all visible geometry of
+//!   slab *i* is drawn before slab *i + 1* is queried ([`Order::Slabs`]).
+//! - §3.4 batched queries: the next *n* cells of a slab are queried together against the same
+//!   depth state, then the visible ones are drawn ([`OqGridOptions::batch`]). The queries of a
+//!   batch run in parallel on the rasterizer's threads.
+//! - §4.1 the triangle threshold below which a cell is drawn without a query
+//!   ([`OqGridOptions::query_threshold`]; the paper used 1, i.e. every cell is queried) and
+//!   the grid resolution in cells along the longest axis, user-set or automatic
+//!   ([`Resolution::Auto`], ~100 elements per cell, which is ~50 cells on the paper's model).
+//! - §4.2 "with and without queries": `queries=off` keeps the grid traversal and frustum test
+//!   and draws every cell in the frustum, the paper's throughput baseline.
+//!
+//! # Instanced scenes
+//! The scene DAG is not flattened. A grid is built per *unique* node, in the node's own space:
+//! a mesh node's grid holds triangle indices, a group node's grid holds instance indices
+//! (assigned by their placed bounds). A frame walks the DAG from the root composing transforms
+//! exactly as `frustum` does (so item ids and transforms are the same as `zbuffer`'s); at each
+//! node occurrence it traverses that node's grid with the cells placed by `clip_from_object`.
+//! A visible cell of a group grid visits its instances (each once per occurrence of the group,
+//! by stamp), recursing into their grids. Memory is the sum over unique nodes: linear in the
+//! unique triangles and stored instances, whatever the number of triangle instances. Stamps are
+//! per unique node too: an epoch is drawn per node *occurrence* (a node is never re-entered
+//! while its own occurrence is being traversed, as the DAG has no cycles).
+//!
+//! # Deviations from the paper
+//! - Deviation: the occlusion query is a software depth query on our rasterizer's frame, not a
+//!   GPU occlusion query: [`occult_raster::query_box`]'s test in an early-out, span-scanning
+//!   form (`query.rs`, an "any samples passed" query). A hardware query's cost is mostly latency
+//!   and fill; ours is the pixels scanned until the first passing one.
+//! - Deviation: "in flight" means evaluated in parallel (rayon) against the same depth state,
+//!   when the batch's queries cover at least [`PARALLEL_QUERY_MIN_PIXELS`] (below that, handing
+//!   them to other threads cost more than the queries, measured); there is no pipeline to keep
+//!   full, but the culling lost to a batch (cells of a batch do not see each other's geometry)
+//!   is the same as in §3.4.
+//! - A batch's visible triangles are one draw; draws of at most [`DIRECT_DRAW_MAX_TRIANGLES`]
+//!   run on the calling thread (`Strategy::Direct`), larger ones on the rasterizer's threads.
+//!   Frames do not depend on it.
+//! - Deviation: cells are queried with their *tight* box (cell ∩ bounds of its contents), never
+//!   larger than the cube of the paper, so at least as much is culled.
+//! - Deviation: slabs are bands of the cell centres' distance along the view direction, one
+//!   cell extent (along that direction) thick, rather than rasterized planes through the grid
+//!   index space; both order cells approximately front to back by planes orthogonal to the view.
+//! - Deviation: a grid per unique DAG node (see above) instead of one world grid, so that
+//!   instanced scenes stay instanced; occlusion between instances is still found because group
+//!   grids are traversed front to back and their instances recursed into in that order.
+//! - Deviation: a level never has more cells than elements
+//!   ([`occult_spatial::grid::GridConfig::cells_per_element`] 1), so the resolution applies in
+//!   full to large meshes and small groups get small grids.
+//!
+//! Cost per frame: the non-empty cells of every grid visited (frustum test each), one query per
+//! cell in the frustum with at least `threshold` triangles, plus rasterizing the cells found
+//! visible. It pays when the depth complexity is high; with little occlusion the queries are
+//! pure overhead (§1).
+
+mod query;
+
+pub use query::any_sample_passes;
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use occult_core::{compose, Affine3A, Containment, Frustum, ItemId, Mat4, NodeId, NodeKind, Scene, Vec3, View};
+use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
+pub use occult_spatial::grid::Resolution;
+use occult_spatial::grid::{GridCell, GridConfig, GridError, MeshTriangles, NestedGrid, WeightedBoxes, NO_CHILD};
+
+use crate::{
+    check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result,
+};
+
+/// Registry entry: every [`OqGridOptions`] field is a parameter.
+pub static INFO: AlgorithmInfo = AlgorithmInfo {
+    name: "oqgrid",
+    summary: "progressive occlusion culling with depth queries over uniform/nested grids, front-to-back slabs, batched queries (Hillesland et al. 2002)",
+    params: &[
+        ParamDoc {
+            key: "grid",
+            default: "nested",
+            help: "uniform (one level per node, §3.1) or nested (full cells split, §3.2)",
+        },
+        ParamDoc {
+            key: "resolution",
+            default: "auto",
+            help: "cells along the longest axis of each node's grid (>= 1), or auto (~100 elements per cell)",
+        },
+        ParamDoc {
+            key: "branching",
+            default: "4",
+            help: "nested: subcells per axis of a split cell (>= 2)",
+        },
+        ParamDoc {
+            key: "split",
+            default: "10000",
+            help: "nested: cells with more triangles than this are split (>= 1)",
+        },
+        ParamDoc {
+            key: "depth",
+            default: "3",
+            help: "nested: most levels below the top (0..=16)",
+        },
+        ParamDoc {
+            key: "batch",
+            default: "4",
+            help: "queries in flight: a slab's next n cells queried together, in parallel (>= 1)",
+        },
+        ParamDoc {
+            key: "threshold",
+            default: "1",
+            help: "cells with fewer triangles are drawn without a query (>= 1; 1 queries every cell)",
+        },
+        ParamDoc {
+            key: "queries",
+            default: "on",
+            help: "off: draw every cell in the frustum (grid frustum culling only, the §4.2 baseline)",
+        },
+        ParamDoc {
+            key: "order",
+            default: "slabs",
+            help: "slabs (front to back, §3.3) or none (storage order)",
+        },
+        ParamDoc {
+            key: "stamps",
+            default: "on",
+            help: "draw a triangle shared by several visible cells once per frame (§3.1)",
+        },
+        ParamDoc {
+            key: "memory",
+            default: "4096",
+            help: "bound on all grids, MiB, checked before allocating (>= 1)",
+        },
+    ],
+    conservative: true,
+    build: |scene, options, params| {
+        Ok(Box::new(OqGrid::with_options(scene, options, &OqGridOptions::from_params(params)?)?))
+    },
+};
+
+/// Uniform (§3.1) or nested (§3.2) grids.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GridKind {
+    /// One level per node.
+    Uniform,
+    /// Cells over the split threshold subdivided, to the maximum depth.
+    Nested,
+}
+
+/// Order in which a grid's cells are queried.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Order {
+    /// §3.3: slabs orthogonal to the view direction, front to back.
+    Slabs,
+    /// Storage order (for measuring what the ordering buys; still conservative).
+    Unordered,
+}
+
+/// Tunables of [`OqGrid`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct OqGridOptions {
+    /// Uniform or nested grids.
+    pub grid: GridKind,
+    /// Cells along the longest axis of each node's top-level grid.
+    pub resolution: Resolution,
+    /// Subcells per axis of a split cell (nested only; ≥ 2).
+    pub branching: u32,
+    /// Cells with more elements than this are split (nested only; ≥ 1).
+    pub split_threshold: usize,
+    /// Most levels below the top (nested only).
+    pub max_depth: u32,
+    /// Queries in flight per batch (§3.4; ≥ 1).
+    pub batch: usize,
+    /// Cells with fewer triangles than this are drawn without a query (§4.1; ≥ 1, 1 queries
+    /// every cell).
+    pub query_threshold: u64,
+    /// Query cells at all (`false`: frustum culling over the grid only, §4.2's baseline).
+    pub queries: bool,
+    /// Cell order.
+    pub order: Order,
+    /// Draw a triangle shared by several visible cells once (§3.1), or once per cell.
+    pub stamps: bool,
+    /// Bound on all grids' bytes, checked before allocating.
+    pub max_memory_bytes: usize,
+}
+
+impl Default for OqGridOptions {
+    fn default() -> Self {
+        Self {
+            grid: GridKind::Nested,
+            resolution: Resolution::Auto,
+            branching: 4,
+            split_threshold: 10_000,
+            max_depth: 3,
+            batch: 4,
+            query_threshold: 1,
+            queries: true,
+            order: Order::Slabs,
+            stamps: true,
+            max_memory_bytes: 4 << 30,
+        }
+    }
+}
+
+impl OqGridOptions {
+    /// The options set by `params` (absent keys keep their defaults), validated.
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] naming the key and value.
+    pub fn from_params(params: &Params) -> Result<Self> {
+        let d = Self::default();
+        let resolution = match params.raw("resolution").map(str::trim) {
+            None => d.resolution,
+            Some(v) if v.eq_ignore_ascii_case("auto") => Resolution::Auto,
+            Some(v) => Resolution::Cells(v.parse().map_err(|_| {
+                RenderError::BadParameter(format!("oqgrid: resolution={v}: expected auto or a number of cells"))
+            })?),
+        };
+        let memory_mib: usize = params.get("memory", d.max_memory_bytes >> 20)?;
+        if memory_mib == 0 || memory_mib > (1 << 30) {
+            return Err(RenderError::BadParameter(format!(
+                "oqgrid: memory={memory_mib}: expected 1..=1073741824 MiB"
+            )));
+        }
+        let o = Self {
+            grid: match params.choice("grid", &["uniform", "nested"], "nested")? {
+                "uniform" => GridKind::Uniform,
+                _ => GridKind::Nested,
+            },
+            resolution,
+            branching: params.get("branching", d.branching)?,
+            split_threshold: params.get("split", d.split_threshold)?,
+            max_depth: params.get("depth", d.max_depth)?,
+            batch: params.get("batch", d.batch)?,
+            query_threshold: params.get("threshold", d.query_threshold)?,
+            queries: params.flag("queries", d.queries)?,
+            order: match params.choice("order", &["slabs", "none"], "slabs")? {
+                "none" => Order::Unordered,
+                _ => Order::Slabs,
+            },
+            stamps: params.flag("stamps", d.stamps)?,
+            max_memory_bytes: memory_mib << 20,
+        };
+        o.validate()?;
+        Ok(o)
+    }
+
+    /// Checks the ranges.
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] naming the value.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(RenderError::BadParameter(format!("oqgrid: {m}")));
+        if self.resolution == Resolution::Cells(0) {
+            return bad("resolution=0: a grid needs at least 1 cell along its longest axis".into());
+        }
+        if let Resolution::Cells(n) = self.resolution {
+            if n as u64 > occult_spatial::grid::MAX_AXIS_CELLS {
+                return bad(format!(
+                    "resolution={n}: at most {} cells along an axis",
+                    occult_spatial::grid::MAX_AXIS_CELLS
+                ));
+            }
+        }
+        if self.branching < 2 {
+            return bad(format!("branching={}: must be at least 2", self.branching));
+        }
+        if self.split_threshold == 0 {
+            return bad("split=0: the split threshold must be at least 1".into());
+        }
+        if self.batch == 0 {
+            return bad("batch=0: at least 1 query must be in flight".into());
+        }
+        if self.query_threshold == 0 {
+            return bad("threshold=0: must be at least 1 (1 queries every cell)".into());
+        }
+        if self.max_depth > 16 {
+            return bad(format!("depth={}: at most 16 nested levels", self.max_depth));
+        }
+        Ok(())
+    }
+
+    fn grid_config(&self, max_bytes: usize) -> GridConfig {
+        GridConfig {
+            resolution: self.resolution,
+            branching: self.branching,
+            split_threshold: self.split_threshold,
+            max_depth: match self.grid {
+                GridKind::Uniform => 0,
+                GridKind::Nested => self.max_depth,
+            },
+            max_bytes,
+            cells_per_element: 1.0,
+        }
+    }
+}
+
+/// The occlusion-query grid renderer.
+pub struct OqGrid {
+    scene: Arc<Scene>,
+    raster: Rasterizer,
+    /// The same configuration on [`occult_raster::Strategy::Direct`], for small batches.
+    direct: Rasterizer,
+    options: OqGridOptions,
+    /// Per node of the scene: its grid, in the node's space.
+    grids: Vec<NestedGrid>,
+    /// Per node: the epoch at which each element (triangle or instance) was last drawn.
+    stamps: Vec<Vec<u32>>,
+    epoch: u32,
+    last_counts: OqGridCounts,
+}
+
+impl OqGrid {
+    /// Builds the grids of `scene` with default [`OqGridOptions`].
+    ///
+    /// # Errors
+    /// As [`OqGrid::with_options`].
+    pub fn new(scene: Arc<Scene>, options: &RenderOptions) -> Result<Self> {
+        Self::with_options(scene, options, &OqGridOptions::default())
+    }
+
+    /// Builds the grids of `scene` (one per unique node).
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] for out-of-range options, or grids that would exceed the
+    /// memory bound (refused before allocating); raster configuration errors.
+    pub fn with_options(scene: Arc<Scene>, options: &RenderOptions, oq: &OqGridOptions) -> Result<Self> {
+        oq.validate()?;
+        let raster = Rasterizer::new(options.raster.clone())?;
+        let direct = Rasterizer::new(occult_raster::RasterConfig {
+            strategy: occult_raster::Strategy::Direct,
+            // No pool of its own: a direct draw runs on the calling thread (a pool would hand
+            // every small draw to another thread and back).
+            threads: 0,
+            ..options.raster.clone()
+        })?;
+        let mut left = oq.max_memory_bytes;
+        let mut grids = Vec::with_capacity(scene.nodes().len());
+        let mut stamps = Vec::with_capacity(scene.nodes().len());
+        for node in scene.nodes() {
+            let config = oq.grid_config(left);
+            let built = raster.install(|| match node.kind() {
+                NodeKind::Mesh(m) => NestedGrid::build(&MeshTriangles(m), m.bounds(), &config),
+                NodeKind::Group(g) => {
+                    let boxes = WeightedBoxes {
+                        boxes: g
+                            .iter()
+                            .map(|i| scene.node(i.child).bounds().transformed(&i.parent_from_child))
+                            .collect(),
+                        weights: g.iter().map(|i| scene.node(i.child).item_count()).collect(),
+                    };
+                    NestedGrid::build(&boxes, node.bounds(), &config)
+                }
+            });
+            let grid = built.map_err(|e| match e {
+                GridError::BadConfig(m) => RenderError::BadParameter(format!("oqgrid: {m}")),
+                e @ GridError::TooLarge { .. } => RenderError::BadParameter(format!(
+                    "oqgrid: resolution={}: grid of node '{}' refused: {e}",
+                    match oq.resolution {
+                        Resolution::Auto => "auto".to_string(),
+                        Resolution::Cells(n) => n.to_string(),
+                    },
+                    node.name()
+                )),
+            })?;
+            left = left.saturating_sub(grid.memory_bytes());
+            let elements = match node.kind() {
+                NodeKind::Mesh(m) => m.triangle_count(),
+                NodeKind::Group(g) => g.len(),
+            };
+            grids.push(grid);
+            stamps.push(vec![0u32; if oq.stamps { elements } else { 0 }]);
+        }
+        Ok(Self {
+            scene,
+            raster,
+            direct,
+            options: oq.clone(),
+            grids,
+            stamps,
+            epoch: 0,
+            last_counts: OqGridCounts::default(),
+        })
+    }
+
+    /// The options it was built with.
+    pub fn options(&self) -> &OqGridOptions {
+        &self.options
+    }
+
+    /// The counts of the last frame rendered.
+    pub fn last_counts(&self) -> OqGridCounts {
+        self.last_counts
+    }
+
+    /// The grid of node `id`.
+    pub fn grid(&self, id: NodeId) -> &NestedGrid {
+        &self.grids[id.index()]
+    }
+}
+
+/// Screen pixels below which a batch's queries are evaluated on the calling thread.
+pub const PARALLEL_QUERY_MIN_PIXELS: f32 = 131_072.0;
+
+/// Triangles below which a batch is drawn on the calling thread (`Strategy::Direct`): tile
+/// binning on all threads costs more than it saves for small draws. Frames do not depend on it.
+pub const DIRECT_DRAW_MAX_TRIANGLES: usize = 4096;
+
+/// Area in pixels of the screen rectangle of `aabb`'s corners (the whole screen when a corner
+/// is behind the eye): an estimate of a query's work.
+fn screen_area_estimate(clip_from_object: &Mat4, aabb: &occult_core::Aabb, w: f32, h: f32) -> f32 {
+    let (mut x0, mut x1, mut y0, mut y1) = (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY);
+    for c in aabb.corners() {
+        let p = *clip_from_object * c.extend(1.0);
+        if p.w.is_nan() || p.w <= 0.0 {
+            return w * h;
+        }
+        let (x, y) = (p.x / p.w, p.y / p.w);
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    let dx = (x1.min(1.0) - x0.max(-1.0)).max(0.0) * 0.5 * w;
+    let dy = (y1.min(1.0) - y0.max(-1.0)).max(0.0) * 0.5 * h;
+    dx * dy
+}
+
+/// Counts of one frame (also reported as named counters).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct OqGridCounts {
+    /// Non-empty cells visited (frustum-tested).
+    pub cells_visited: u64,
+    /// Cells inside the frustum.
+    pub cells_in_frustum: u64,
+    /// Occlusion queries issued.
+    pub queries: u64,
+    /// Queries that found the cell hidden.
+    pub queries_hidden: u64,
+    /// Cells in the frustum drawn without a query because they hold fewer triangles than the
+    /// threshold.
+    pub queries_skipped: u64,
+    /// Cells found visible (by query, or drawn unqueried).
+    pub cells_visible: u64,
+    /// Node occurrences entered (DAG nodes in the frustum).
+    pub node_occurrences: u64,
+    /// Batches whose queries were evaluated in parallel.
+    pub parallel_batches: u64,
+}
+
+/// A node occurrence being traversed.
+struct Occurrence<'a> {
+    id: NodeId,
+    world_from_node: Affine3A,
+    clip_from_object: Mat4,
+    frustum: Frustum,
+    /// The camera in the node's space, for slab keys.
+    eye: Vec3,
+    dir: Vec3,
+    first_item: ItemId,
+    epoch: u32,
+    grid: &'a NestedGrid,
+}
+
+/// Per-frame traversal state.
+struct Walk<'a> {
+    scene: &'a Scene,
+    grids: &'a [NestedGrid],
+    stamps: &'a mut [Vec<u32>],
+    epoch: &'a mut u32,
+    raster: &'a mut Rasterizer,
+    direct: &'a mut Rasterizer,
+    options: &'a OqGridOptions,
+    view: &'a View,
+    frame: &'a mut Frame,
+    stats: FrameStats,
+    counts: OqGridCounts,
+    query_time: Duration,
+    raster_time: Duration,
+    /// Triangle indices of the batch being drawn.
+    list: Vec<u32>,
+}
+
+impl<'a> Walk<'a> {
+    /// Visits the occurrence of node `id` placed by `world_from_node`.
+    fn node(&mut self, id: NodeId, world_from_node: Affine3A, first_item: ItemId) {
+        let node = self.scene.node(id);
+        let frustum = self.view.frustum(&world_from_node);
+        self.stats.nodes_visited += 1;
+        if node.bounds().is_empty() || frustum.classify_aabb(&node.bounds()) == Containment::Outside {
+            return;
+        }
+        self.counts.node_occurrences += 1;
+        *self.epoch = self.epoch.wrapping_add(1);
+        if *self.epoch == 0 {
+            // After 2^32 occurrences: forget every stamp once, so old epochs cannot match.
+            self.stamps.iter_mut().for_each(|s| s.fill(0));
+            *self.epoch = 1;
+        }
+        let node_from_world = world_from_node.inverse();
+        let camera = self.view.camera();
+        let occ = Occurrence {
+            id,
+            world_from_node,
+            clip_from_object: self.view.clip_from_object(&world_from_node),
+            frustum,
+            eye: node_from_world.transform_point3(camera.eye),
+            dir: node_from_world.transform_vector3(camera.direction()),
+            first_item,
+            epoch: *self.epoch,
+            grid: &self.grids[id.index()],
+        };
+        self.level(&occ, 0);
+    }
+
+    /// Traverses level `level_index` of the occurrence's grid: §3.3 slabs, §3.4 batches.
+    fn level(&mut self, occ: &Occurrence<'a>, level_index: u32) {
+        let level = &occ.grid.levels()[level_index as usize];
+        let thickness = occ.dir.abs().dot(level.cell_size);
+        let thickness = if thickness.is_finite() && thickness > 0.0 {
+            thickness
+        } else {
+            1.0
+        };
+        let mut order: Vec<(i64, u32)> = Vec::with_capacity(level.cells.len());
+        for (i, cell) in level.cells.iter().enumerate() {
+            self.counts.cells_visited += 1;
+            if occ.frustum.classify_aabb(&cell.tight) == Containment::Outside {
+                continue;
+            }
+            let key = match self.options.order {
+                // §3.3: the slab of the cell's centre along the view direction.
+                Order::Slabs => ((cell.tight.center() - occ.eye).dot(occ.dir) / thickness).floor() as i64,
+                Order::Unordered => 0,
+            };
+            order.push((key, i as u32));
+        }
+        self.counts.cells_in_frustum += order.len() as u64;
+        if self.options.order == Order::Slabs {
+            order.sort_unstable();
+        }
+        let mut start = 0;
+        while start < order.len() {
+            let slab = order[start].0;
+            let end = start + order[start..].iter().take_while(|(k, _)| *k == slab).count();
+            // §3.4: the slab's cells n at a time; each batch drawn before the next is queried,
+            // and the whole slab before the next slab.
+            for batch in order[start..end].chunks(self.options.batch) {
+                self.batch(occ, &level.cells, batch);
+            }
+            start = end;
+        }
+    }
+
+    /// Queries the cells of one batch against the same depth state, then draws the visible
+    /// ones (§3.4) and recurses into the visible ones' subgrids (§3.2) and instances.
+    fn batch(&mut self, occ: &Occurrence<'a>, cells: &'a [GridCell], batch: &[(i64, u32)]) {
+        let options = self.options;
+        let needs_query = |c: &GridCell| options.queries && c.weight >= options.query_threshold;
+        let t = Instant::now();
+        let query = |c: &GridCell| -> bool {
+            !needs_query(c) || any_sample_passes(self.frame, self.view, &occ.clip_from_object, &c.tight)
+        };
+        let queried = batch.iter().filter(|(_, i)| needs_query(&cells[*i as usize])).count() as u64;
+        // Deviation (§3.4): a batch's queries run in parallel only when their screen area makes
+        // it pay; small queries cost less than handing them to other threads.
+        let parallel = queried > 1 && {
+            let (w, h) = (self.view.width() as f32, self.view.height() as f32);
+            let area: f32 = batch
+                .iter()
+                .filter(|(_, i)| needs_query(&cells[*i as usize]))
+                .map(|(_, i)| screen_area_estimate(&occ.clip_from_object, &cells[*i as usize].tight, w, h))
+                .sum();
+            area >= PARALLEL_QUERY_MIN_PIXELS
+        };
+        let visible: Vec<bool> = if parallel {
+            use rayon::prelude::*;
+            self.counts.parallel_batches += 1;
+            self.raster
+                .install(|| batch.par_iter().map(|(_, i)| query(&cells[*i as usize])).collect())
+        } else {
+            batch.iter().map(|(_, i)| query(&cells[*i as usize])).collect()
+        };
+        if queried > 0 {
+            self.query_time += t.elapsed();
+        }
+        let visible_count = visible.iter().filter(|&&v| v).count() as u64;
+        let hidden = batch
+            .iter()
+            .zip(&visible)
+            .filter(|((_, i), v)| !**v && needs_query(&cells[*i as usize]))
+            .count() as u64;
+        self.counts.queries += queried;
+        self.counts.queries_hidden += hidden;
+        self.counts.queries_skipped += batch.len() as u64 - queried;
+        self.counts.cells_visible += visible_count;
+        if visible_count == 0 {
+            return;
+        }
+        let node = self.scene.node(occ.id);
+        let elements = occ.grid.elements();
+        match node.kind() {
+            NodeKind::Mesh(mesh) => {
+                // The visible leaf cells' triangles, each once per occurrence (§3.1 stamps).
+                self.list.clear();
+                for (&(_, i), _) in batch.iter().zip(&visible).filter(|(_, v)| **v) {
+                    let cell = &cells[i as usize];
+                    if cell.child != NO_CHILD {
+                        continue;
+                    }
+                    let tris = &elements[cell.range()];
+                    if options.stamps {
+                        let stamps = &mut self.stamps[occ.id.index()];
+                        for &t in tris {
+                            if stamps[t as usize] != occ.epoch {
+                                stamps[t as usize] = occ.epoch;
+                                self.list.push(t);
+                            }
+                        }
+                    } else {
+                        self.list.extend_from_slice(tris);
+                    }
+                }
+                if !self.list.is_empty() {
+                    let draw = Draw {
+                        mesh,
+                        triangles: DrawTriangles::List(&self.list),
+                        clip_from_object: occ.clip_from_object,
+                        first_item: occ.first_item,
+                    };
+                    let t = Instant::now();
+                    let raster = if self.list.len() <= DIRECT_DRAW_MAX_TRIANGLES {
+                        &mut *self.direct
+                    } else {
+                        &mut *self.raster
+                    };
+                    crate::rasterize(raster, self.view, self.frame, &[draw], &mut self.stats);
+                    self.raster_time += t.elapsed();
+                }
+                for (&(_, i), _) in batch.iter().zip(&visible).filter(|(_, v)| **v) {
+                    let child = cells[i as usize].child;
+                    if child != NO_CHILD {
+                        self.level(occ, child);
+                    }
+                }
+            }
+            NodeKind::Group(instances) => {
+                for (&(_, i), _) in batch.iter().zip(&visible).filter(|(_, v)| **v) {
+                    let cell = &cells[i as usize];
+                    if cell.child != NO_CHILD {
+                        self.level(occ, cell.child);
+                        continue;
+                    }
+                    for &e in &elements[cell.range()] {
+                        if options.stamps {
+                            let s = &mut self.stamps[occ.id.index()][e as usize];
+                            if *s == occ.epoch {
+                                continue;
+                            }
+                            *s = occ.epoch;
+                        }
+                        let inst = &instances[e as usize];
+                        let world_from_child = compose(&occ.world_from_node, &inst.parent_from_child);
+                        self.node(
+                            inst.child,
+                            world_from_child,
+                            occ.first_item + node.item_offset(e as usize),
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+impl Renderer for OqGrid {
+    fn name(&self) -> &'static str {
+        "oqgrid"
+    }
+
+    fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
+        check_frame(view, frame)?;
+        let start = Instant::now();
+        self.raster.clear(frame);
+        let clear = start.elapsed();
+        let t = Instant::now();
+        let mut walk = Walk {
+            scene: &self.scene,
+            grids: &self.grids,
+            stamps: &mut self.stamps,
+            epoch: &mut self.epoch,
+            raster: &mut self.raster,
+            direct: &mut self.direct,
+            options: &self.options,
+            view,
+            frame,
+            stats: FrameStats::default(),
+            counts: OqGridCounts::default(),
+            query_time: Duration::ZERO,
+            raster_time: Duration::ZERO,
+            list: Vec::new(),
+        };
+        walk.node(self.scene.root(), Affine3A::IDENTITY, 0);
+        let walked = t.elapsed();
+        let Walk {
+            mut stats,
+            counts,
+            query_time,
+            raster_time,
+            ..
+        } = walk;
+        stats.phases.add(Phase::Clear, clear);
+        stats.phases.add(Phase::Query, query_time);
+        stats
+            .phases
+            .add(Phase::Cull, walked.saturating_sub(query_time + raster_time));
+        stats.boxes_tested += counts.queries;
+        stats.boxes_culled += counts.queries_hidden;
+        let c = &mut stats.counters;
+        c.add("cells_visited", counts.cells_visited);
+        c.add("cells_in_frustum", counts.cells_in_frustum);
+        c.add("queries", counts.queries);
+        c.add("queries_hidden", counts.queries_hidden);
+        c.add("queries_skipped", counts.queries_skipped);
+        c.add("cells_visible", counts.cells_visible);
+        c.add("node_occurrences", counts.node_occurrences);
+        c.add("parallel_batches", counts.parallel_batches);
+        stats.total = start.elapsed();
+        self.last_counts = counts;
+        Ok(stats)
+    }
+
+    fn memory_bytes(&self) -> usize {
+        self.grids.iter().map(NestedGrid::memory_bytes).sum::<usize>()
+            + self.stamps.iter().map(|s| s.len() * 4).sum::<usize>()
+    }
+}

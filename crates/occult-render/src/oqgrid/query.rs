@@ -1,0 +1,260 @@
+//! The occlusion query of a cell: "would any fragment of this box pass the depth test now?"
+//!
+//! The same test as [`occult_raster::query_box`] (projected convex hull of the box's corners,
+//! widened by 1/64 pixel, against the box's nearest corner depth with the same margins), with
+//! two changes that make it cheap, which matters because the number of queries a frame can
+//! afford decides how much the algorithm culls (§3.4):
+//! - it answers *any sample passed* (the `GL_ANY_SAMPLES_PASSED` form of a hardware query)
+//!   and stops at the first passing pixel instead of counting them all;
+//! - it scans each row of the hull as one span (its ends from the hull's edges, widened by a
+//!   hair so the span holds every pixel `query_box` would test) with a branch-free compare over
+//!   the depth row, instead of testing every edge at every pixel.
+//!
+//! It is never `false` where `query_box` counts a sample (tested on random boxes), so it is as
+//! conservative as `query_box`.
+
+use occult_core::{Aabb, Mat4, Vec4, View};
+use occult_raster::Frame;
+
+/// True when some pixel inside the box's projected silhouette has a stored depth not nearer
+/// than the box's nearest point (a fragment of the box could pass); see the module doc.
+pub fn any_sample_passes(frame: &Frame, view: &View, clip_from_object: &Mat4, aabb: &Aabb) -> bool {
+    if aabb.is_empty() {
+        return false;
+    }
+    let (w, h) = (frame.width() as f64, frame.height() as f64);
+    let clip: [Vec4; 8] = aabb.corners().map(|c| *clip_from_object * c.extend(1.0));
+    // A box that may cover anything passes (every stored depth is finite).
+    if clip.iter().any(|c| !c.is_finite()) {
+        return true;
+    }
+    let m = 1.0 + 4.0 / w.min(h) as f32;
+    if clip.iter().all(|c| c.x < -c.w * m)
+        || clip.iter().all(|c| c.x > c.w * m)
+        || clip.iter().all(|c| c.y < -c.w * m)
+        || clip.iter().all(|c| c.y > c.w * m)
+    {
+        return false;
+    }
+    let near_margin = 1.0 + 1e-5;
+    if clip.iter().any(|c| c.z * near_margin > c.w) {
+        return true;
+    }
+    let nearest = clip.iter().map(|c| c.z / c.w).fold(0.0f32, f32::max) * (1.0 + 1e-5);
+    if nearest < view.far_depth() * (1.0 - 1e-5) {
+        return false;
+    }
+    let mut pts = [(0.0f64, 0.0f64); 8];
+    for (p, c) in pts.iter_mut().zip(&clip) {
+        let (x, y, cw) = (c.x as f64, c.y as f64, c.w as f64);
+        *p = ((x / cw * 0.5 + 0.5) * w, (0.5 - y / cw * 0.5) * h);
+    }
+    let mut hull = [(0.0f64, 0.0f64); 16];
+    let n = convex_hull(&mut pts, &mut hull);
+    let hull = &hull[..n];
+    let margin = 1.0 / 64.0;
+    let (mut minx, mut maxx, mut miny, mut maxy) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    for &(x, y) in hull {
+        minx = minx.min(x);
+        maxx = maxx.max(x);
+        miny = miny.min(y);
+        maxy = maxy.max(y);
+    }
+    let px0 = ((minx - margin - 0.5).ceil().max(0.0)) as i64;
+    let py0 = ((miny - margin - 0.5).ceil().max(0.0)) as i64;
+    let px1 = ((maxx + margin - 0.5).floor().min(w - 1.0)).max(-1.0) as i64 + 1;
+    let py1 = ((maxy + margin - 0.5).floor().min(h - 1.0)).max(-1.0) as i64 + 1;
+    if px1 <= px0 || py1 <= py0 {
+        return false;
+    }
+    // Edge half-planes a·x + b·y + c ≥ 0 (interior side), widened by `margin`, as query_box.
+    let mut edges = [(0.0f64, 0.0f64, 0.0f64); 16];
+    let edge_count = if n < 3 { 0 } else { n };
+    for i in 0..edge_count {
+        let (ax, ay) = hull[i];
+        let (bx, by) = hull[(i + 1) % n];
+        let (nx, ny) = (ay - by, bx - ax);
+        let len = (nx * nx + ny * ny).sqrt().max(1e-300);
+        edges[i] = (nx / len, ny / len, -(nx * ax + ny * ay) / len + margin);
+    }
+    let edges = &edges[..edge_count];
+    // Widening of each span end, in pixels: covers the rounding of the division below.
+    const SPAN_SLACK: f64 = 1e-6;
+    let fw = frame.width() as usize;
+    let depth = frame.depth();
+    for y in py0..py1 {
+        let cy = y as f64 + 0.5;
+        let (mut lo, mut hi) = (px0 as f64, (px1 - 1) as f64);
+        for &(a, b, c) in edges {
+            let t = -(b * cy + c);
+            if a > 0.0 {
+                lo = lo.max((t / a - 0.5 - SPAN_SLACK).ceil());
+            } else if a < 0.0 {
+                hi = hi.min((t / a - 0.5 + SPAN_SLACK).floor());
+            } else if t > 0.0 {
+                lo = f64::INFINITY; // b·cy + c < 0: the row is outside this edge
+            }
+        }
+        if lo > hi {
+            continue;
+        }
+        let row = &depth[y as usize * fw..y as usize * fw + fw];
+        if span_has_far_sample(&row[lo as usize..=hi as usize], nearest) {
+            return true;
+        }
+    }
+    false
+}
+
+/// True when some depth in `span` is not nearer than `nearest`; compares 16 at a time without
+/// branches so the loop vectorizes.
+#[inline]
+fn span_has_far_sample(span: &[f32], nearest: f32) -> bool {
+    let mut chunks = span.chunks_exact(16);
+    for c in &mut chunks {
+        let mut any = false;
+        for &d in c {
+            any |= d <= nearest;
+        }
+        if any {
+            return true;
+        }
+    }
+    chunks.remainder().iter().any(|&d| d <= nearest)
+}
+
+/// Convex hull (Andrew's monotone chain) of `p` into `out`, in the orientation of
+/// `occult_raster::query_box` (`(ay - by, bx - ax)` points inwards); returns its length.
+fn convex_hull(p: &mut [(f64, f64); 8], out: &mut [(f64, f64); 16]) -> usize {
+    p.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
+    let mut uniq = [(0.0, 0.0); 8];
+    let mut m = 0;
+    for &q in p.iter() {
+        if m == 0 || uniq[m - 1] != q {
+            uniq[m] = q;
+            m += 1;
+        }
+    }
+    if m < 3 {
+        out[..m].copy_from_slice(&uniq[..m]);
+        return m;
+    }
+    let cross = |o: (f64, f64), a: (f64, f64), b: (f64, f64)| (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0);
+    let mut k = 0;
+    for pass in 0..2 {
+        let start = k;
+        for j in 0..m {
+            let q = if pass == 0 { uniq[j] } else { uniq[m - 1 - j] };
+            while k >= start + 2 && cross(out[k - 2], out[k - 1], q) <= 0.0 {
+                k -= 1;
+            }
+            out[k] = q;
+            k += 1;
+        }
+        k -= 1;
+    }
+    k
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use occult_core::{Affine3A, Camera, Mesh, Vec3};
+    use occult_raster::{query_box, Draw, DrawTriangles, RasterConfig, RasterMode, Rasterizer};
+
+    /// A small deterministic generator (xorshift), uniform in `lo..hi`.
+    struct Rng(u64);
+    impl Rng {
+        fn random_range(&mut self, r: std::ops::Range<f32>) -> f32 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            r.start + (r.end - r.start) * ((self.0 >> 40) as f32 / (1u64 << 24) as f32)
+        }
+    }
+
+    /// Wherever `query_box` counts a sample, the early-out query passes too; and it agrees
+    /// with it almost everywhere (it may only pass more, by its hair-wide span slack).
+    #[test]
+    fn never_stricter_than_query_box() {
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+        let mut p = Vec::new();
+        let mut t = Vec::new();
+        for i in 0..200u32 {
+            let c = Vec3::new(
+                rng.random_range(-4.0..4.0),
+                rng.random_range(-3.0..3.0),
+                rng.random_range(-4.0..4.0),
+            );
+            for _ in 0..3 {
+                p.push(
+                    c + Vec3::new(
+                        rng.random_range(-1.0..1.0),
+                        rng.random_range(-1.0..1.0),
+                        rng.random_range(-1.0..1.0),
+                    ),
+                );
+            }
+            t.push([3 * i, 3 * i + 1, 3 * i + 2]);
+        }
+        let mesh = Mesh::new(p, t).unwrap();
+        let mut raster = Rasterizer::new(RasterConfig::default()).unwrap();
+        let mut disagreements = 0;
+        let mut total = 0;
+        for v in 0..8 {
+            let eye = Vec3::new(rng.random_range(-9.0..9.0), rng.random_range(-3.0..3.0), 9.0 + v as f32);
+            let view = occult_core::View::new(Camera::look_at(eye, Vec3::ZERO), 96, 64).unwrap();
+            let mut frame = Frame::new(96, 64).unwrap();
+            let clip = view.clip_from_object(&Affine3A::IDENTITY);
+            let draw = Draw {
+                mesh: &mesh,
+                triangles: DrawTriangles::All,
+                clip_from_object: clip,
+                first_item: 0,
+            };
+            raster.draw(&view, &mut frame, &[draw], RasterMode::Full);
+            for _ in 0..500 {
+                let c = Vec3::new(
+                    rng.random_range(-12.0..12.0),
+                    rng.random_range(-6.0..6.0),
+                    rng.random_range(-12.0..12.0),
+                );
+                let e = Vec3::new(
+                    rng.random_range(0.0..2.0),
+                    rng.random_range(0.0..2.0),
+                    rng.random_range(0.0..2.0),
+                );
+                let b = Aabb::new(c - e, c + e);
+                let count = query_box(&frame, &view, &clip, &b);
+                let any = any_sample_passes(&frame, &view, &clip, &b);
+                assert!(
+                    count == 0 || any,
+                    "box {b:?} has {count} samples but the query says none"
+                );
+                total += 1;
+                disagreements += (any != (count > 0)) as u32;
+            }
+        }
+        assert!(disagreements * 100 < total, "{disagreements} of {total} differ");
+    }
+
+    #[test]
+    fn empty_and_behind_boxes() {
+        let view = occult_core::View::new(Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO), 32, 32).unwrap();
+        let frame = Frame::new(32, 32).unwrap();
+        let clip = view.clip_from_object(&Affine3A::IDENTITY);
+        assert!(!any_sample_passes(&frame, &view, &clip, &Aabb::EMPTY));
+        // Behind the camera.
+        let behind = Aabb::new(Vec3::new(-1.0, -1.0, 8.0), Vec3::new(1.0, 1.0, 9.0));
+        assert!(!any_sample_passes(&frame, &view, &clip, &behind));
+        // Around the eye: may cover anything.
+        let around = Aabb::new(Vec3::splat(-10.0), Vec3::splat(10.0));
+        assert!(any_sample_passes(&frame, &view, &clip, &around));
+        // In front, on a cleared frame.
+        let front = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
+        assert!(any_sample_passes(&frame, &view, &clip, &front));
+        // NaN corners pass (conservative).
+        let nan = Aabb::new(Vec3::splat(f32::NAN), Vec3::splat(1.0));
+        let _ = any_sample_passes(&frame, &view, &clip, &nan);
+    }
+}
