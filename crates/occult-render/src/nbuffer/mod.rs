@@ -124,6 +124,8 @@ struct Object {
     mesh: NodeId,
     /// Node index of the leaf in the mesh's BVH, or `u32::MAX` for the whole mesh.
     leaf_node: u32,
+    /// Rank of its mesh instance in item order.
+    instance: u32,
 }
 
 /// A mesh instance's item range and its objects.
@@ -248,6 +250,7 @@ impl NBufferCulling {
             if mesh.triangle_count() == 0 {
                 return;
             }
+            let instance = instances.len() as u32;
             instances.push(InstanceRecord {
                 first_item,
                 end_item: first_item + mesh.triangle_count() as u64,
@@ -261,6 +264,7 @@ impl NBufferCulling {
                     first_item,
                     mesh: mesh_id,
                     leaf_node,
+                    instance,
                 })
             };
             match (&mesh_bvhs[mesh_id.index()], &leaves[mesh_id.index()]) {
@@ -324,29 +328,54 @@ impl NBufferCulling {
     }
 }
 
-/// The draw of object `index`.
-fn draw_of<'a>(
+/// The draws of objects `indices` (sorted here). A mesh instance split into chunks is drawn
+/// whole when more than half of its triangles are asked for: index lists transform each
+/// corner once per triangle, a whole mesh shares its vertices (as `frustum` does).
+fn draws_of<'a>(
     scene: &'a Scene,
     objects: &[Object],
     mesh_bvhs: &'a [Option<Bvh>],
     view: &View,
-    index: usize,
-) -> Draw<'a> {
-    let o = &objects[index];
-    let mesh = scene.node(o.mesh).mesh().expect("objects are meshes");
-    let triangles = if o.leaf_node == u32::MAX {
-        DrawTriangles::All
-    } else {
-        // Objects with a leaf node come from a mesh with a BVH.
-        let bvh = mesh_bvhs[o.mesh.index()].as_ref().expect("split meshes have a BVH");
-        DrawTriangles::List(&bvh.primitive_indices()[bvh.nodes()[o.leaf_node as usize].range()])
-    };
-    Draw {
-        mesh,
-        triangles,
-        clip_from_object: view.clip_from_object(&o.world_from_object),
-        first_item: o.first_item,
+    indices: &mut [usize],
+) -> Vec<Draw<'a>> {
+    indices.sort_unstable();
+    let mut draws = Vec::with_capacity(indices.len());
+    let mut k = 0;
+    while k < indices.len() {
+        let o = &objects[indices[k]];
+        let mesh = scene.node(o.mesh).mesh().expect("objects are meshes");
+        let clip_from_object = view.clip_from_object(&o.world_from_object);
+        let whole = |triangles| Draw {
+            mesh,
+            triangles,
+            clip_from_object,
+            first_item: o.first_item,
+        };
+        let bvh = match (&mesh_bvhs[o.mesh.index()], o.leaf_node) {
+            (Some(bvh), leaf) if leaf != u32::MAX => bvh,
+            _ => {
+                draws.push(whole(DrawTriangles::All));
+                k += 1;
+                continue;
+            }
+        };
+        // The run of chunks of this same instance (objects of an instance are contiguous).
+        let mut end = k + 1;
+        while end < indices.len() && objects[indices[end]].instance == o.instance {
+            end += 1;
+        }
+        let leaf_range = |i: usize| bvh.nodes()[objects[i].leaf_node as usize].range();
+        let asked: usize = indices[k..end].iter().map(|&i| leaf_range(i).len()).sum();
+        if asked * 2 > mesh.triangle_count() {
+            draws.push(whole(DrawTriangles::All));
+        } else {
+            for &i in &indices[k..end] {
+                draws.push(whole(DrawTriangles::List(&bvh.primitive_indices()[leaf_range(i)])));
+            }
+        }
+        k = end;
     }
+    draws
 }
 
 /// Widens a world box by a relative 1e-5 of its coordinates, so that rounding in the
@@ -447,10 +476,7 @@ impl Renderer for NBufferCulling {
                 occluders.push(i);
             }
         }
-        let draws: Vec<Draw<'_>> = occluders
-            .iter()
-            .map(|&i| draw_of(&self.scene, &self.objects, &self.mesh_bvhs, view, i))
-            .collect();
+        let draws = draws_of(&self.scene, &self.objects, &self.mesh_bvhs, view, &mut occluders);
         stats.phases.add(Phase::Cull, t.elapsed());
         crate::rasterize(&mut self.raster, view, frame, &draws, &mut stats);
         drop(draws);
@@ -541,10 +567,7 @@ impl Renderer for NBufferCulling {
         }
         stats.counters.add("nbuffer_lookups", lookups);
         stats.counters.add("survivors_drawn", survivors.len() as u64);
-        let draws: Vec<Draw<'_>> = survivors
-            .iter()
-            .map(|&i| draw_of(&self.scene, &self.objects, &self.mesh_bvhs, view, i))
-            .collect();
+        let draws = draws_of(&self.scene, &self.objects, &self.mesh_bvhs, view, &mut survivors);
         stats.phases.add(Phase::Cull, t.elapsed());
         crate::rasterize(&mut self.raster, view, frame, &draws, &mut stats);
         drop(draws);
