@@ -85,26 +85,59 @@ impl Extremum {
             Self::Min => f32::NEG_INFINITY,
         }
     }
+    /// The key of the empty set: below (max) or above (min) every stored key.
     #[inline(always)]
-    fn pick(self, a: f32, b: f32) -> f32 {
-        // Written as a compare-select so the passes compile to packed max/min (no NaN reaches
-        // here: level 0 is sanitised).
+    fn key_identity(self) -> Key {
         match self {
-            Self::Max => {
-                if a > b {
-                    a
-                } else {
-                    b
-                }
-            }
-            Self::Min => {
-                if a < b {
-                    a
-                } else {
-                    b
-                }
-            }
+            Self::Max => 0,
+            Self::Min => Key::MAX,
         }
+    }
+    /// The storage key of a non-NaN depth, rounded in the safe direction: down for min (the
+    /// decoded value is never above `depth`), up for max (never below).
+    #[inline(always)]
+    fn key_of(self, depth: f32) -> Key {
+        let o = order_bits(depth);
+        match self {
+            Self::Min => (o >> 16) as Key,
+            Self::Max => (o.saturating_add(0xffff) >> 16) as Key,
+        }
+    }
+    #[inline(always)]
+    fn pick(self, a: Key, b: Key) -> Key {
+        match self {
+            Self::Max => a.max(b),
+            Self::Min => a.min(b),
+        }
+    }
+}
+
+/// A stored depth: the upper 16 bits of the depth's order-preserving bit pattern (sign,
+/// exponent and 7 bits of mantissa: a relative precision of 2^-7).
+pub type Key = u16;
+
+/// The bits of `f` as an unsigned integer that sorts like `f` (NaN excluded).
+#[inline(always)]
+fn order_bits(f: f32) -> u32 {
+    let b = f.to_bits();
+    if b & 0x8000_0000 != 0 {
+        !b
+    } else {
+        b | 0x8000_0000
+    }
+}
+
+/// The depth a key stands for: exact for keys of depths with 7 mantissa bits or fewer; keys
+/// at or below that of `-inf` read `-inf`, at or above that of `+inf` read `+inf`.
+#[inline]
+pub fn decode_key(key: Key) -> f32 {
+    if key <= 0x007f {
+        f32::NEG_INFINITY
+    } else if key >= 0xff80 {
+        f32::INFINITY
+    } else {
+        let o = u32::from(key) << 16;
+        f32::from_bits(if o & 0x8000_0000 != 0 { o & 0x7fff_ffff } else { !o })
     }
 }
 
@@ -157,9 +190,9 @@ pub struct NBuffer {
     height: u32,
     level_count: u32,
     /// Levels one after the other, each `width × height`, row-major.
-    data: Vec<f32>,
+    data: Vec<Key>,
     /// The extremum of the whole map.
-    whole: f32,
+    whole: Key,
 }
 
 impl NBuffer {
@@ -203,7 +236,7 @@ impl NBuffer {
             height: 0,
             level_count: 0,
             data: Vec::new(),
-            whole: extremum.identity(),
+            whole: extremum.key_identity(),
         };
         nb.rebuild(depth, width, height, level_count)?;
         Ok(nb)
@@ -218,7 +251,7 @@ impl NBuffer {
         self.width = 0;
         self.height = 0;
         self.level_count = 0;
-        self.whole = self.extremum.identity();
+        self.whole = self.extremum.key_identity();
         if width == 0 || height == 0 {
             return Err(RasterError::BadConfig(format!(
                 "N-buffer of zero size {width}x{height}"
@@ -239,29 +272,30 @@ impl NBuffer {
         }
         let total = n
             .checked_mul(level_count as usize)
-            .filter(|&t| t.checked_mul(4).is_some_and(|b| b <= MAX_NBUFFER_BYTES))
+            .filter(|&t| t.checked_mul(2).is_some_and(|b| b <= MAX_NBUFFER_BYTES))
             .ok_or(RasterError::OutOfMemory(
-                n.saturating_mul(level_count as usize).saturating_mul(4),
+                n.saturating_mul(level_count as usize).saturating_mul(2),
             ))?;
         if self.data.len() < total {
             self.data.clear();
             self.data
                 .try_reserve_exact(total)
-                .map_err(|_| RasterError::OutOfMemory(total * 4))?;
-            self.data.resize(total, 0.0);
+                .map_err(|_| RasterError::OutOfMemory(total * 2))?;
+            crate::frame::advise_huge_pages(self.data.as_mut_ptr() as *mut u8, total * 2);
+            self.data.resize(total, 0);
         }
         self.width = width;
         self.height = height;
         self.level_count = level_count;
         let ext = self.extremum;
-        let unknown = ext.unknown();
+        let unknown = ext.key_of(ext.unknown());
         // Level 0: the depth map, NaN read as the variant's worst case.
         self.data[..n]
             .par_chunks_mut(BAND_ROWS * width as usize)
             .zip(depth.par_chunks(BAND_ROWS * width as usize))
             .for_each(|(dst, src)| {
                 for (d, &s) in dst.iter_mut().zip(src) {
-                    *d = if s.is_nan() { unknown } else { s };
+                    *d = if s.is_nan() { unknown } else { ext.key_of(s) };
                 }
             });
         for level in 1..level_count {
@@ -297,10 +331,10 @@ impl NBuffer {
 
     /// The extremum of the whole map from the top level (four lookups when the top level's
     /// square is at least half the map, else a scan of the top level at its square's stride).
-    fn compute_whole(&self) -> f32 {
+    fn compute_whole(&self) -> Key {
         let top = self.level_count - 1;
         let s = 1u32 << top;
-        let mut acc = self.extremum.identity();
+        let mut acc = self.extremum.key_identity();
         let mut y = 0;
         loop {
             let mut x = 0;
@@ -340,11 +374,11 @@ impl NBuffer {
             return Ok(());
         }
         let ext = self.extremum;
-        let unknown = ext.unknown();
+        let unknown = ext.key_of(ext.unknown());
         for y in y0..y1 {
             for x in x0..x1 {
                 let s = depth[y * w + x];
-                self.data[y * w + x] = if s.is_nan() { unknown } else { s };
+                self.data[y * w + x] = if s.is_nan() { unknown } else { ext.key_of(s) };
             }
         }
         let n = w * h;
@@ -407,29 +441,28 @@ impl NBuffer {
     /// The extremum of the whole map.
     #[inline]
     pub fn whole(&self) -> f32 {
-        self.whole
+        decode_key(self.whole)
     }
     /// Bytes held.
     pub fn memory_bytes(&self) -> usize {
-        self.data.capacity() * 4
+        self.data.capacity() * 2
     }
-    /// Level `level` as a row-major slice.
+    /// Level `level` as a row-major slice of keys ([`decode_key`] reads them).
     ///
     /// # Panics
     /// If `level >= level_count()`.
-    pub fn level(&self, level: u32) -> &[f32] {
+    pub fn level(&self, level: u32) -> &[Key] {
         assert!(level < self.level_count, "level {level} of {}", self.level_count);
         let n = self.width as usize * self.height as usize;
         &self.data[level as usize * n..(level as usize + 1) * n]
     }
 
     #[inline(always)]
-    fn at(&self, level: u32, x: u32, y: u32) -> f32 {
+    fn at(&self, level: u32, x: u32, y: u32) -> Key {
         let n = self.width as usize * self.height as usize;
         let i = level as usize * n + y as usize * self.width as usize + x as usize;
-        debug_assert!(i < self.data.len());
-        // Every caller clamps (x, y) into the map and the level below `level_count`.
-        unsafe_free_get(&self.data, i)
+        debug_assert!(x < self.width && y < self.height && level < self.level_count);
+        self.data[i]
     }
 
     /// Clips `rect` to the map; `None` when nothing is left.
@@ -455,12 +488,15 @@ impl NBuffer {
         };
         let span = (x1 - x0).max(y1 - y0);
         let level = ceil_log2(span);
-        let depth = if level < self.level_count {
+        let key = if level < self.level_count {
             self.at(level, x0, y0)
         } else {
             self.whole
         };
-        Query { depth, lookups: 1 }
+        Query {
+            depth: decode_key(key),
+            lookups: 1,
+        }
     }
 
     /// Which cover of Fig. 3 [`NBuffer::query_four`] takes for `rect`.
@@ -503,10 +539,11 @@ impl NBuffer {
         }
     }
 
-    /// The four lookups of the cover of `rect`: `(level, [(x, y); 4])`, or `None` for an
-    /// empty rectangle (or a whole-map answer).
+    /// The four lookups of the cover of `rect`, case by case as Fig. 3 draws them: the
+    /// reference that [`NBuffer::four_keys`] is tested against.
     #[inline(always)]
-    fn cover_points(&self, rect: PixelRect) -> (Cover, u32, [(u32, u32); 4]) {
+    #[cfg_attr(not(test), allow(dead_code))]
+    fn cover_points_by_case(&self, rect: PixelRect) -> (Cover, u32, [(u32, u32); 4]) {
         let Some((x0, y0, x1, y1)) = self.clip(rect) else {
             return (Cover::Empty, 0, [(0, 0); 4]);
         };
@@ -542,66 +579,81 @@ impl NBuffer {
         }
     }
 
+    /// The four keys of the Fig. 3 cover of `rect` and the lookups it stands for (1 for a
+    /// pixel, 4 otherwise), or `None` when `rect` is empty. The five cases are selected
+    /// arithmetically (one cover formula with selects, no branch per case): the 2×2 corners at
+    /// level `n - 1` (whose lower pair falls on the upper one in the middle cases, and which
+    /// for a pixel all fall on it), or a row / column of four at level `n - 2`.
+    #[inline(always)]
+    fn four_keys(&self, rect: PixelRect) -> Option<([Key; 4], u32)> {
+        let (x0, y0, x1, y1) = self.clip(rect)?;
+        let (dx, dy) = (x1 - x0, y1 - y0);
+        let n = ceil_log2(dx.max(dy));
+        let half = (1u32 << n) >> 1;
+        let quarter = half >> 1;
+        let row4 = dx > half && dy <= quarter;
+        let col4 = dy > half && dx <= quarter;
+        let level = n.saturating_sub(1) - u32::from(row4 | col4);
+        if level >= self.level_count {
+            return Some(([self.whole; 4], 1));
+        }
+        let s = 1u32 << level;
+        let xr = x0.max(x1.saturating_sub(s));
+        let yb = y0.max(y1.saturating_sub(s));
+        // Row of four: x0, x0 + s, x0 + 2s, x1 - s on row y0; column: the same turned.
+        let xs = if row4 {
+            [x0, x0 + s, x0 + 2 * s, xr]
+        } else if col4 {
+            [x0; 4]
+        } else {
+            [x0, xr, x0, xr]
+        };
+        let ys = if col4 {
+            [y0, y0 + s, y0 + 2 * s, yb]
+        } else if row4 {
+            [y0; 4]
+        } else {
+            [y0, y0, yb, yb]
+        };
+        let keys = std::array::from_fn(|k| self.at(level, xs[k], ys[k]));
+        Some((keys, if n == 0 { 1 } else { 4 }))
+    }
+
     /// §2 "Query", four-square form (Fig. 3): the extremum over `rect` from four lookups (one
     /// for a single pixel, none for an empty rectangle).
     pub fn query_four(&self, rect: PixelRect) -> Query {
-        let (cover, level, p) = self.cover_points(rect);
         let ext = self.extremum;
-        match cover {
-            Cover::Empty => Query {
+        match self.four_keys(rect) {
+            None => Query {
                 depth: ext.identity(),
                 lookups: 0,
             },
-            Cover::Whole => Query {
-                depth: self.whole,
-                lookups: 1,
+            Some(([a, b, c, d], lookups)) => Query {
+                depth: decode_key(ext.pick(ext.pick(a, b), ext.pick(c, d))),
+                lookups,
             },
-            Cover::Pixel => Query {
-                depth: self.at(0, p[0].0, p[0].1),
-                lookups: 1,
-            },
-            _ => {
-                let a = ext.pick(self.at(level, p[0].0, p[0].1), self.at(level, p[1].0, p[1].1));
-                let b = ext.pick(self.at(level, p[2].0, p[2].1), self.at(level, p[3].0, p[3].1));
-                Query {
-                    depth: ext.pick(a, b),
-                    lookups: 4,
-                }
-            }
         }
     }
 
     /// §3.1 occlusion test on a [`Extremum::Min`] N-buffer: true when every pixel of `rect`
     /// holds a depth strictly nearer than `nearest` (the nearest depth any fragment of the
     /// tested object can have), so nothing of the object can be kept (ties are not hidden: a
-    /// tie can win on item id). Stops at the first lookup that cannot hide the object.
-    /// Returns `(hidden, lookups)`. An empty rectangle is hidden (it draws nothing); a NaN
+    /// tie can win on item id). Returns `(hidden, lookups)`: the four lookups of
+    /// [`NBuffer::query_four`]. An empty rectangle is hidden (it draws nothing); a NaN
     /// `nearest` is never hidden. On a [`Extremum::Max`] N-buffer it answers `false` (a max
     /// bound cannot prove occlusion).
     #[inline]
     pub fn occludes(&self, rect: PixelRect, nearest: f32) -> (bool, u32) {
-        if self.extremum != Extremum::Min {
+        if self.extremum != Extremum::Min || nearest.is_nan() {
             return (false, 0);
         }
-        let (cover, level, p) = self.cover_points(rect);
-        match cover {
-            Cover::Empty => (true, 0),
-            Cover::Whole => (nearest < self.whole, 1),
-            Cover::Pixel => (nearest < self.at(0, p[0].0, p[0].1), 1),
-            Cover::Row2 | Cover::Column2 => {
-                // The duplicate lookups of these covers are skipped here: the answer is the same.
-                if !(nearest < self.at(level, p[0].0, p[0].1)) {
-                    return (false, 1);
-                }
-                (nearest < self.at(level, p[1].0, p[1].1), 2)
-            }
-            _ => {
-                for (k, &(x, y)) in p.iter().enumerate() {
-                    if !(nearest < self.at(level, x, y)) {
-                        return (false, k as u32 + 1);
-                    }
-                }
-                (true, 4)
+        match self.four_keys(rect) {
+            None => (true, 0),
+            Some(([a, b, c, d], lookups)) => {
+                // nearest < decode(k)  <=>  order_bits(nearest) < k << 16 (keys are truncated
+                // bits), so the test never decodes.
+                let farthest = a.min(b).min(c.min(d));
+                (order_bits(nearest) < u32::from(farthest) << 16, lookups)
             }
         }
     }
@@ -617,27 +669,20 @@ fn ceil_log2(v: u32) -> u32 {
     }
 }
 
-/// Bounds-checked in debug, plain index in release through the slice (kept as one function so
-/// a later switch to unchecked reads has one place to go).
-#[inline(always)]
-fn unsafe_free_get(data: &[f32], i: usize) -> f32 {
-    data[i]
-}
-
 /// One output row from rows `a` (y) and `b` (y + step): the horizontal extremum at offset
 /// `step` of each, then their vertical extremum.
 #[inline]
-fn combine_rows(ext: Extremum, out: &mut [f32], a: &[f32], b: &[f32], step: usize) {
+fn combine_rows(ext: Extremum, out: &mut [Key], a: &[Key], b: &[Key], step: usize) {
     let w = out.len();
     let inner = w.saturating_sub(step);
     match ext {
-        Extremum::Max => combine_rows_with(out, a, b, step, inner, |x, y| if x > y { x } else { y }),
-        Extremum::Min => combine_rows_with(out, a, b, step, inner, |x, y| if x < y { x } else { y }),
+        Extremum::Max => combine_rows_with(out, a, b, step, inner, Key::max),
+        Extremum::Min => combine_rows_with(out, a, b, step, inner, Key::min),
     }
 }
 
 #[inline(always)]
-fn combine_rows_with(out: &mut [f32], a: &[f32], b: &[f32], step: usize, inner: usize, f: impl Fn(f32, f32) -> f32) {
+fn combine_rows_with(out: &mut [Key], a: &[Key], b: &[Key], step: usize, inner: usize, f: impl Fn(Key, Key) -> Key) {
     let (out_in, out_edge) = out.split_at_mut(inner);
     let (a_in, a_edge) = a.split_at(inner);
     let (b_in, b_edge) = b.split_at(inner);
@@ -653,7 +698,7 @@ fn combine_rows_with(out: &mut [f32], a: &[f32], b: &[f32], step: usize, inner: 
 
 /// A last row (no row `y + step` in the map): the horizontal extremum only.
 #[inline]
-fn combine_row(ext: Extremum, out: &mut [f32], a: &[f32], step: usize) {
+fn combine_row(ext: Extremum, out: &mut [Key], a: &[Key], step: usize) {
     let w = out.len();
     let inner = w.saturating_sub(step);
     for i in 0..w {
@@ -673,7 +718,10 @@ mod tests {
             for x in r.x0..r.x1.min(w) {
                 let d = depth[(y * w + x) as usize];
                 let d = if d.is_nan() { ext.unknown() } else { d };
-                acc = ext.pick(acc, d);
+                acc = match ext {
+                    Extremum::Max => acc.max(d),
+                    Extremum::Min => acc.min(d),
+                };
             }
         }
         acc
@@ -681,6 +729,67 @@ mod tests {
 
     fn rect(x0: u32, y0: u32, x1: u32, y1: u32) -> PixelRect {
         PixelRect { x0, y0, x1, y1 }
+    }
+
+    #[test]
+    fn keys_round_in_the_safe_direction() {
+        let mut rng = Pcg64::seed_from_u64(4);
+        let special = [
+            0.0f32,
+            -0.0,
+            1.0,
+            -1.0,
+            f32::MIN_POSITIVE,
+            f32::MAX,
+            f32::MIN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            1e-30,
+            3.3e-7,
+        ];
+        let randoms = (0..100_000)
+            .map(|_| f32::from_bits(rng.random::<u32>()))
+            .filter(|v| !v.is_nan());
+        for v in special.into_iter().chain(randoms) {
+            let lo = decode_key(Extremum::Min.key_of(v));
+            let hi = decode_key(Extremum::Max.key_of(v));
+            assert!(lo <= v && v <= hi, "{v}: {lo} {hi}");
+            if v.is_finite() && v.abs() > 1e-30 && v.abs() < 1e30 {
+                assert!((hi - lo).abs() <= v.abs() / 64.0, "{v}: {lo} {hi}");
+            }
+        }
+    }
+
+    #[test]
+    fn arithmetic_cover_matches_the_five_cases() {
+        let mut rng = Pcg64::seed_from_u64(5);
+        for _ in 0..20 {
+            let (w, h) = (rng.random_range(1..300u32), rng.random_range(1..300u32));
+            let depth: Vec<f32> = (0..w * h).map(|_| rng.random::<f32>()).collect();
+            let levels = rng.random_range(1..=NBuffer::full_level_count(w, h));
+            let nb = NBuffer::with_levels(Extremum::Min, &depth, w, h, levels).unwrap();
+            for _ in 0..2000 {
+                let (x0, y0) = (rng.random_range(0..w + 4), rng.random_range(0..h + 4));
+                let r = rect(x0, y0, x0 + rng.random_range(0..w + 8), y0 + rng.random_range(0..h + 8));
+                let (cover, level, p) = nb.cover_points_by_case(r);
+                let fast = nb.four_keys(r);
+                match cover {
+                    Cover::Empty => assert!(fast.is_none()),
+                    Cover::Whole => assert_eq!(fast, Some(([nb.whole; 4], 1))),
+                    _ => {
+                        let (keys, lookups) = fast.unwrap();
+                        let mut want: Vec<Key> = p.iter().map(|&(x, y)| nb.at(level, x, y)).collect();
+                        let mut got = keys.to_vec();
+                        want.sort_unstable();
+                        want.dedup();
+                        got.sort_unstable();
+                        got.dedup();
+                        assert_eq!(got, want, "{w}x{h} {r:?} {cover:?}");
+                        assert_eq!(lookups, if cover == Cover::Pixel { 1 } else { 4 });
+                    }
+                }
+            }
+        }
     }
 
     #[test]
@@ -703,7 +812,7 @@ mod tests {
                     let s = 1 << l;
                     for y in 0..h {
                         for x in 0..w {
-                            let want = brute(&depth, w, ext, rect(x, y, x + s, y + s), h);
+                            let want = ext.key_of(brute(&depth, w, ext, rect(x, y, x + s, y + s), h));
                             assert_eq!(nb.level(l)[(y * w + x) as usize], want, "{w}x{h} level {l} at {x},{y}");
                         }
                     }
@@ -744,6 +853,12 @@ mod tests {
                         };
                         assert!(ok, "seed {seed} {w}x{h} {ext:?} {r:?}: {} vs {truth}", q.depth);
                         assert!(q.lookups <= 4);
+                    }
+                    if ext == Extremum::Min {
+                        let z: f32 = rng.random();
+                        let (hidden, lookups) = nb.occludes(r, z);
+                        assert!(!hidden || z < truth, "seed {seed} {r:?}: {z} hidden behind {truth}");
+                        assert!(lookups <= 4);
                     }
                 }
             }
@@ -809,8 +924,9 @@ mod tests {
     fn occludes_is_strict_and_counts_lookups() {
         let nb = NBuffer::new(Extremum::Min, &vec![0.5; 32 * 32], 32, 32).unwrap();
         assert_eq!(nb.occludes(rect(1, 1, 20, 20), 0.4), (true, 4));
-        assert_eq!(nb.occludes(rect(1, 1, 20, 20), 0.5), (false, 1));
-        assert_eq!(nb.occludes(rect(1, 1, 20, 11), 0.4), (true, 2));
+        assert_eq!(nb.occludes(rect(1, 1, 20, 20), 0.5), (false, 4));
+        assert_eq!(nb.occludes(rect(1, 1, 20, 11), 0.4), (true, 4));
+        assert_eq!(nb.occludes(rect(1, 1, 2, 2), 0.4), (true, 1));
         let max = NBuffer::new(Extremum::Max, &vec![0.5; 32 * 32], 32, 32).unwrap();
         assert_eq!(max.occludes(rect(1, 1, 20, 20), 0.1), (false, 0));
     }
