@@ -126,3 +126,65 @@ fn resolution_change_and_frame_mismatch() {
         Err(RenderError::FrameSizeMismatch { .. })
     ));
 }
+
+/// §3.2: sprites culled with the N-buffer give the same frame as sprites all drawn.
+#[test]
+fn particle_frames_are_identical_with_and_without_culling() {
+    use occult_raster::{Extremum, NBuffer, RasterConfig, Rasterizer};
+    use occult_render::nbuffer::particles::{draw_particles, Particles};
+    for (scene_spec, path) in [
+        ("city:blocks=2,detail=2", "street:4"),
+        ("forest:trees=3,patches=2,levels=1", "circle:4"),
+    ] {
+        let built = occult_scenes::spec::parse_spec(scene_spec)
+            .and_then(|s| s.build())
+            .unwrap();
+        let cams = occult_scenes::path::parse_path(path, &built.scene, &built.default_camera).unwrap();
+        let scene = Arc::new(built.scene);
+        let mut z = Algorithm::ZBUFFER
+            .build(scene.clone(), &RenderOptions::default())
+            .unwrap();
+        let mut raster = Rasterizer::new(RasterConfig::default()).unwrap();
+        let (w, h) = (160, 120);
+        let (mut culled_total, mut single) = (0, 0);
+        for (pow2, seed) in [(false, 1), (true, 2)] {
+            let particles = Particles::scatter(&scene.bounds(), 20_000, 64, pow2, 0.5, seed).unwrap();
+            for cam in &cams {
+                let view = View::new(*cam, w, h).unwrap();
+                let (mut a, mut b) = (Frame::new(w, h).unwrap(), Frame::new(w, h).unwrap());
+                z.render(&view, &mut a).unwrap();
+                z.render(&view, &mut b).unwrap();
+                let nb = NBuffer::with_levels(Extremum::Min, b.depth(), w, h, particles.levels_needed()).unwrap();
+                let first = scene.item_count();
+                let all = draw_particles(&mut raster, &view, &mut a, &particles, first, None).unwrap();
+                let cut = draw_particles(&mut raster, &view, &mut b, &particles, first, Some(&nb)).unwrap();
+                assert!(a.same_visibility(&b), "{scene_spec}: culled sprites changed the frame");
+                assert_eq!(all.sprites_culled, 0);
+                assert_eq!(all.sprites_in_view, cut.sprites_in_view);
+                assert!(cut.lookups <= 4 * cut.sprites_in_view);
+                culled_total += cut.sprites_culled;
+                single += cut.single_lookup_tests;
+                // Only power-of-two sprites take the single lookup.
+                assert!(cut.single_lookup_tests <= cut.sprites_in_view);
+            }
+        }
+        assert!(culled_total > 0, "{scene_spec}: no sprite culled");
+        assert!(single > 0, "{scene_spec}: no single-lookup test");
+    }
+}
+
+#[test]
+fn bad_particle_parameters_are_errors() {
+    use occult_core::{Aabb, Vec3};
+    use occult_render::nbuffer::particles::Particles;
+    let b = Aabb::new(Vec3::ZERO, Vec3::ONE);
+    assert!(Particles::scatter(&b, 10, 0, false, 0.5, 1).is_err());
+    assert!(Particles::scatter(&b, 10, 65, false, 0.5, 1).is_err());
+    assert!(Particles::scatter(&b, 10, 8, false, 0.0, 1).is_err());
+    assert!(Particles::scatter(&b, 10, 8, false, f32::NAN, 1).is_err());
+    assert!(Particles::scatter(&b, usize::MAX, 8, false, 0.5, 1).is_err());
+    assert!(Particles::scatter(&Aabb::EMPTY, 10, 8, false, 0.5, 1).is_err());
+    let p = Particles::scatter(&b, 1000, 64, true, 0.5, 1).unwrap();
+    assert!(p.sizes.iter().all(|s| s.is_power_of_two() && *s <= 64));
+    assert_eq!(p.levels_needed(), 7);
+}

@@ -657,6 +657,26 @@ impl NBuffer {
             }
         }
     }
+
+    /// The occlusion test of [`NBuffer::occludes`] with the one-square query: a single
+    /// lookup, exact when `rect` is a power-of-two square (§3.2: sprites of power-of-two
+    /// sizes need a single depth comparison).
+    #[inline]
+    pub fn occludes_one(&self, rect: PixelRect, nearest: f32) -> (bool, u32) {
+        if self.extremum != Extremum::Min || nearest.is_nan() {
+            return (false, 0);
+        }
+        let Some((x0, y0, x1, y1)) = self.clip(rect) else {
+            return (true, 0);
+        };
+        let level = ceil_log2((x1 - x0).max(y1 - y0));
+        let key = if level < self.level_count {
+            self.at(level, x0, y0)
+        } else {
+            self.whole
+        };
+        (order_bits(nearest) < u32::from(key) << 16, 1)
+    }
 }
 
 /// `⌈log2 v⌉` for `v ≥ 1`.
@@ -859,6 +879,12 @@ mod tests {
                         let (hidden, lookups) = nb.occludes(r, z);
                         assert!(!hidden || z < truth, "seed {seed} {r:?}: {z} hidden behind {truth}");
                         assert!(lookups <= 4);
+                        let (hidden, lookups) = nb.occludes_one(r, z);
+                        assert!(
+                            !hidden || z < truth,
+                            "seed {seed} {r:?}: {z} hidden behind {truth} (one)"
+                        );
+                        assert!(lookups <= 1);
                     }
                 }
             }
@@ -927,6 +953,9 @@ mod tests {
         assert_eq!(nb.occludes(rect(1, 1, 20, 20), 0.5), (false, 4));
         assert_eq!(nb.occludes(rect(1, 1, 20, 11), 0.4), (true, 4));
         assert_eq!(nb.occludes(rect(1, 1, 2, 2), 0.4), (true, 1));
+        assert_eq!(nb.occludes_one(rect(1, 1, 17, 17), 0.4), (true, 1));
+        assert_eq!(nb.occludes_one(rect(1, 1, 17, 17), 0.5), (false, 1));
+        assert_eq!(nb.occludes_one(rect(40, 1, 47, 17), 0.5), (true, 0));
         let max = NBuffer::new(Extremum::Max, &vec![0.5; 32 * 32], 32, 32).unwrap();
         assert_eq!(max.occludes(rect(1, 1, 20, 20), 0.1), (false, 0));
     }

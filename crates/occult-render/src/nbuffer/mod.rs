@@ -39,6 +39,8 @@
 //! per tested box (or fewer: the test stops at the first lookup that cannot hide the box), and
 //! a pass over the item buffer. Not worth it when nearly everything is visible.
 
+pub mod particles;
+
 use std::sync::Arc;
 use std::time::Instant;
 
