@@ -112,5 +112,51 @@ fn queries(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, build, queries);
+/// §3.2 / §4.3: 10^6 sprites (sides 1–64 px) among the `city` seen from its default camera at
+/// 640×480: drawing them all against drawing the survivors of the N-buffer test (the N-buffer
+/// build from the scene's depth included). The scene itself is drawn once, outside the timing.
+fn particles(c: &mut Criterion) {
+    use occult_render::nbuffer::particles::{draw_particles, Particles};
+    use std::sync::Arc;
+    let w = occult_bench::workload("city");
+    let scene = Arc::new(w.scene);
+    let view = occult_core::View::new(w.camera, 640, 480).expect("valid view");
+    let mut z = occult_render::Algorithm::ZBUFFER
+        .build(scene.clone(), &occult_render::RenderOptions::default())
+        .expect("zbuffer");
+    let mut base = occult_raster::Frame::new(640, 480).expect("valid size");
+    z.render(&view, &mut base).expect("render");
+    let mut raster = Rasterizer::new(RasterConfig::default()).expect("valid config");
+    let mut group = c.benchmark_group("nbuffer_particles");
+    group.sample_size(10);
+    for pow2 in [false, true] {
+        let p = Particles::scatter(&scene.bounds(), 1_000_000, 64, pow2, 0.3, 9).expect("particles");
+        let sizes = if pow2 { "pow2" } else { "any" };
+        for cull in [false, true] {
+            let name = format!("1M_sprites/{sizes}/{}", if cull { "nbuffer_cull" } else { "draw_all" });
+            group.bench_function(name, |b| {
+                b.iter_batched_ref(
+                    || base.clone(),
+                    |frame| {
+                        let nb = cull.then(|| {
+                            raster.install(|| {
+                                NBuffer::with_levels(Extremum::Min, frame.depth(), 640, 480, p.levels_needed())
+                                    .expect("valid size")
+                            })
+                        });
+                        draw_particles(&mut raster, &view, frame, &p, scene.item_count(), nb.as_ref()).expect("draw")
+                    },
+                    criterion::BatchSize::LargeInput,
+                )
+            });
+        }
+        let mut frame = base.clone();
+        let nb = NBuffer::with_levels(Extremum::Min, base.depth(), 640, 480, p.levels_needed()).expect("valid size");
+        let counts = draw_particles(&mut raster, &view, &mut frame, &p, scene.item_count(), Some(&nb)).expect("draw");
+        eprintln!("particles {sizes}: {counts:?}");
+    }
+    group.finish();
+}
+
+criterion_group!(benches, build, queries, particles);
 criterion_main!(benches);
