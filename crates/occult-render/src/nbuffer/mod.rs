@@ -70,7 +70,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         },
         ParamDoc {
             key: "leaf",
-            default: "512",
+            default: "4096",
             help: "triangles per object: meshes above this are split into BVH leaves (>= 1)",
         },
         ParamDoc {
@@ -110,7 +110,7 @@ impl Default for NBufferOptions {
         Self {
             hierarchy: true,
             four_square: true,
-            leaf_size: 512,
+            leaf_size: 4096,
             group_leaf_size: 4,
         }
     }
