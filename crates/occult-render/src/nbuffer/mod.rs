@@ -6,6 +6,7 @@
 //!   an N-buffer is built from the depth buffer (§2, [`occult_raster::NBuffer`], min variant
 //!   = farthest depth in our reversed-Z), every object's screen box and nearest depth is
 //!   tested with four lookups (Fig. 3 cover), and the survivors not drawn yet are drawn.
+//! - §3.2: particle culling, [`particles`].
 //! - §4.2 / Table 2: the same test over a hierarchy of bounding volumes (`hierarchy=bvh`) or
 //!   over every object (`hierarchy=flat`): testing a node costs the same four lookups as
 //!   testing one object, so a culled node saves all its objects' tests.
@@ -36,7 +37,7 @@
 //!
 //! # Cost
 //! Per frame: drawing last frame's visible set, one N-buffer build (resolution only), 4 loads
-//! per tested box (or fewer: the test stops at the first lookup that cannot hide the box), and
+//! per tested box (one when its rectangle is a single pixel, none when it covers no pixel centre), and
 //! a pass over the item buffer. Not worth it when nearly everything is visible.
 
 pub mod particles;

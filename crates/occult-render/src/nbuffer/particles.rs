@@ -248,6 +248,6 @@ impl SplitMix64 {
     }
     /// Uniform in 0..n (n >= 1).
     fn below(&mut self, n: u32) -> u32 {
-        ((self.next() >> 32) * u64::from(n) >> 32) as u32
+        (((self.next() >> 32) * u64::from(n)) >> 32) as u32
     }
 }
