@@ -32,6 +32,9 @@ pub enum Command {
     Scenes(ScenesArgs),
     /// List the renderers and their parameters (set as `name:key=value,key=value`).
     Algos(AlgosArgs),
+    /// Vary one renderer parameter over a list of values: a comparison per value, with mean
+    /// frame time and counters plotted against it.
+    Sweep(SweepArgs),
 }
 
 /// A frame size.
@@ -177,6 +180,44 @@ pub struct ScenesArgs {
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
+}
+
+/// `occult sweep`.
+#[derive(Debug, Args)]
+pub struct SweepArgs {
+    /// Scene spec or file.
+    #[arg(long, value_name = "SPEC")]
+    pub scene: String,
+    /// Camera path: `circle:N`, `street:N`, `flyover:N`, `default`, or a JSON file of cameras.
+    #[arg(long, value_name = "PATH", default_value = "circle:16")]
+    pub path: String,
+    /// Renderers compared at every value (as `occult compare --algos`); the varied one must be
+    /// among them.
+    #[arg(long, value_name = "A,B,..", value_parser = parse_algorithms)]
+    pub algos: AlgorithmList,
+    /// The parameter and its values: `ALGO.KEY=V1,V2,...` (numbers), set on every spec of ALGO
+    /// in --algos.
+    #[arg(long, value_name = "ALGO.KEY=V1,V2,..", value_parser = crate::commands::sweep::parse_vary)]
+    pub vary: crate::commands::sweep::Vary,
+    /// Frame size, WxH pixels.
+    #[arg(long, value_name = "WxH", default_value = "640x480", value_parser = parse_size)]
+    pub size: Size,
+    /// A renderer counter (see `occult compare` output) to tabulate and plot against the value;
+    /// repeat for several.
+    #[arg(long, value_name = "NAME")]
+    pub counter: Vec<String>,
+    /// Logarithmic x axis in the plot.
+    #[arg(long)]
+    pub log_x: bool,
+    /// Every comparison out (JSON).
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+    /// The table out (CSV).
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
+    /// Mean frame time (and each --counter) against the value (PNG).
+    #[arg(long, value_name = "FILE")]
+    pub plot: Option<PathBuf>,
 }
 
 /// `occult algos`.

@@ -63,6 +63,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Info(a) => commands::info::run(a),
         Command::Scenes(a) => commands::scenes::run(a),
         Command::Algos(a) => commands::algos::run(a),
+        Command::Sweep(a) => commands::sweep::run(a),
     }
 }
 

@@ -354,3 +354,98 @@ fn help_and_version_succeed() {
     assert!(ok(&["compare", "--help"]).contains("--plot-scaling"));
     assert!(ok(&["--version"]).contains("occult"));
 }
+
+#[test]
+fn algos_lists_every_renderer_with_its_parameters() {
+    let stdout = ok(&["algos"]);
+    assert!(
+        stdout.contains("zbuffer") && stdout.contains("group_leaf=4"),
+        "{stdout}"
+    );
+    let json: Value = serde_json::from_str(&ok(&["algos", "--json"])).unwrap();
+    let names: Vec<&str> = json
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a["name"].as_str().unwrap())
+        .collect();
+    assert!(names.contains(&"zbuffer") && names.contains(&"frustum"), "{names:?}");
+}
+
+#[test]
+fn compare_takes_several_configurations_of_one_renderer() {
+    let dir = scratch("compare-specs");
+    let json = dir.join("c.json");
+    ok(&[
+        "compare",
+        "--scene",
+        CITY,
+        "--path",
+        "street:3",
+        "--size",
+        "64x48",
+        "--algos",
+        "frustum,frustum:leaf=8,group_leaf=1",
+        "--json",
+        path_arg(&json),
+    ]);
+    let v = read_json(&json);
+    let names: Vec<&str> = v["runs"][0]["renderers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["zbuffer", "frustum", "frustum:leaf=8,group_leaf=1"]);
+    for r in v["runs"][0]["renderers"].as_array().unwrap() {
+        assert_eq!(r["frames_identical"], 3, "{}", r["name"]);
+    }
+}
+
+#[test]
+fn sweep_varies_a_parameter_and_plots_it() {
+    let dir = scratch("sweep");
+    let (csv, plot, json) = (dir.join("s.csv"), dir.join("s.png"), dir.join("s.json"));
+    ok(&[
+        "sweep",
+        "--scene",
+        CITY,
+        "--path",
+        "street:2",
+        "--size",
+        "64x48",
+        "--algos",
+        "zbuffer,frustum:group_leaf=2",
+        "--vary",
+        "frustum.leaf=4,64",
+        "--csv",
+        path_arg(&csv),
+        "--plot",
+        path_arg(&plot),
+        "--json",
+        path_arg(&json),
+    ]);
+    let rows = std::fs::read_to_string(&csv).unwrap();
+    assert_eq!(rows.lines().count(), 1 + 2 * 2, "{rows}");
+    assert!(rows.contains("frustum:group_leaf=2,leaf=64"), "{rows}");
+    assert!(image::open(&plot).is_ok());
+    assert_eq!(read_json(&json)["points"].as_array().unwrap().len(), 2);
+    for bad in [
+        &["--vary", "frustum.leaf=0,8"][..],
+        &["--vary", "hzb.leaf=8"],
+        &["--vary", "frustum.leaves=8"],
+        &["--vary", "frustum.leaf=a"],
+    ] {
+        let mut args = vec![
+            "sweep", "--scene", CITY, "--path", "street:2", "--size", "64x48", "--algos", "frustum",
+        ];
+        args.extend_from_slice(bad);
+        let out = occult(&args);
+        assert!(!out.status.success(), "{bad:?} succeeded");
+        let err = text(&out.stderr);
+        assert!(
+            !err.contains("panicked") && err.trim().lines().count() == 1,
+            "{bad:?}: {err}"
+        );
+    }
+}

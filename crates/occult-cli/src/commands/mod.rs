@@ -6,4 +6,5 @@ pub mod compare;
 pub mod info;
 pub mod render;
 pub mod scenes;
+pub mod sweep;
 pub mod walk;

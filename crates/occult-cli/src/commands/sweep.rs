@@ -1,0 +1,297 @@
+//! `occult sweep`: one renderer parameter varied over a list of values, a full comparison per
+//! value (same scene, path and frame size), and the mean frame time and chosen counters plotted
+//! against the value: the figures of the papers that put a parameter on the x axis (grid
+//! resolution, depth accuracy ε, leaf size...).
+
+use anyhow::{bail, Context, Result};
+use occult_render::compare::{compare, CompareConfig, CompareProgress, CompareReport};
+use occult_render::{AlgoSpec, RenderOptions};
+use serde::Serialize;
+
+use crate::args::SweepArgs;
+use crate::output;
+use crate::plot::{self, Panel, Series};
+use crate::progress::Progress;
+use crate::scene::{self, SceneSummary};
+
+/// `--vary ALGO.KEY=V1,V2,...` parsed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Vary {
+    /// Algorithm name whose specs get the key.
+    pub algorithm: String,
+    /// Parameter key.
+    pub key: String,
+    /// Values, in order (numbers, for the x axis).
+    pub values: Vec<String>,
+}
+
+/// Parses `algo.key=v1,v2,...`; every value must be a finite number (it is the x axis).
+pub fn parse_vary(s: &str) -> Result<Vary, String> {
+    let bad = || format!("expected ALGO.KEY=V1,V2,... (for example oqgrid.res=10,20,40), not '{s}'");
+    let (target, values) = s.split_once('=').ok_or_else(bad)?;
+    let (algorithm, key) = target.trim().split_once('.').ok_or_else(bad)?;
+    let values: Vec<String> = values.split(',').map(|v| v.trim().to_string()).collect();
+    if algorithm.is_empty() || key.is_empty() || values.iter().any(String::is_empty) {
+        return Err(bad());
+    }
+    for v in &values {
+        if !v.parse::<f64>().is_ok_and(f64::is_finite) {
+            return Err(format!(
+                "--vary values are plotted on the x axis and must be numbers, not '{v}'"
+            ));
+        }
+    }
+    Ok(Vary {
+        algorithm: algorithm.to_string(),
+        key: key.to_string(),
+        values,
+    })
+}
+
+#[derive(Serialize)]
+struct SweepOut<'a> {
+    tool: &'static str,
+    version: &'static str,
+    scene: SceneSummary,
+    path: &'a str,
+    vary: String,
+    points: Vec<PointOut<'a>>,
+}
+
+#[derive(Serialize)]
+struct PointOut<'a> {
+    value: &'a str,
+    #[serde(flatten)]
+    report: &'a CompareReport,
+}
+
+/// Runs the command.
+pub fn run(a: SweepArgs) -> Result<()> {
+    output::check_outputs([&a.json, &a.csv, &a.plot])?;
+    let vary = &a.vary;
+    if !a.algos.0.iter().any(|s| s.algorithm.name() == vary.algorithm) {
+        bail!(
+            "--vary names '{}', which is not in --algos ({})",
+            vary.algorithm,
+            a.algos.0.iter().map(AlgoSpec::label).collect::<Vec<_>>().join(", ")
+        );
+    }
+    let scene = scene::load(&a.scene)?;
+    let cameras = scene::path(&a.path, &scene)?;
+    // One line-up per value; the varied algorithm's specs get key=value.
+    let lineups: Vec<Vec<AlgoSpec>> = vary
+        .values
+        .iter()
+        .map(|v| {
+            a.algos
+                .0
+                .iter()
+                .map(|s| {
+                    let mut s = s.clone();
+                    if s.algorithm.name() == vary.algorithm {
+                        s.params.set(&vary.key, v);
+                        s.check_keys()?;
+                    }
+                    Ok(s)
+                })
+                .collect::<Result<Vec<_>, occult_render::RenderError>>()
+        })
+        .collect::<Result<_, _>>()?;
+    let total = (cameras.len() * lineups.len()) as u64;
+    let progress = Progress::bar(total, format!("{}: preparing", a.scene));
+    let mut reports = Vec::with_capacity(lineups.len());
+    for (value, algorithms) in vary.values.iter().zip(lineups) {
+        let config = CompareConfig {
+            algorithms,
+            options: RenderOptions::default(),
+            width: a.size.width,
+            height: a.size.height,
+        };
+        let report = compare(scene.scene.clone(), &cameras, &config, &mut |event| match event {
+            CompareProgress::Building { label, .. } => {
+                progress.set_message(format!("{}={value}: preparing {label}", vary.key))
+            }
+            CompareProgress::Built { .. } => progress.set_message(format!("{}={value}: rendering", vary.key)),
+            CompareProgress::Frame { .. } => progress.inc(),
+        })
+        .with_context(|| format!("sweeping {}.{}={value}", vary.algorithm, vary.key))?;
+        reports.push(report);
+    }
+    drop(progress);
+    let summary = scene.summary();
+    let vary_text = format!("{}.{}", vary.algorithm, vary.key);
+
+    // The table: one row per value and renderer.
+    let mut header = vec![
+        vary_text.as_str(),
+        "renderer",
+        "mean ms",
+        "p95 ms",
+        "vs zbuffer",
+        "rasterized/frame",
+        "visible/frame",
+        "identical",
+        "prepare ms",
+    ];
+    header.extend(a.counter.iter().map(String::as_str));
+    let mut rows = Vec::new();
+    for (value, r) in vary.values.iter().zip(&reports) {
+        for x in &r.renderers {
+            let mut row = vec![
+                value.clone(),
+                x.name.clone(),
+                output::millis(x.mean_ms),
+                output::millis(x.p95_ms),
+                x.speedup_vs_zbuffer.map_or("-".into(), |s| format!("{s:.2}x")),
+                output::count(x.triangles_rasterized),
+                output::count(x.triangles_visible),
+                format!("{}/{}", x.frames_identical, x.frames),
+                output::millis(x.prepare_ms),
+            ];
+            row.extend(a.counter.iter().map(|c| {
+                x.stats
+                    .counters
+                    .get(c.as_str())
+                    .map_or("-".into(), |v| output::count(*v))
+            }));
+            rows.push(row);
+        }
+    }
+    say_raw!(
+        "\nscene {}: {} triangles; path {}: {} frames at {}x{}; varying {vary_text}\n\n{}",
+        summary.label(),
+        output::count(summary.triangles as f64),
+        a.path,
+        cameras.len(),
+        a.size.width,
+        a.size.height,
+        output::table(&header, &rows)
+    );
+
+    if let Some(p) = &a.json {
+        let out = SweepOut {
+            tool: "occult",
+            version: env!("CARGO_PKG_VERSION"),
+            scene: summary.clone(),
+            path: &a.path,
+            vary: vary_text.clone(),
+            points: vary
+                .values
+                .iter()
+                .zip(&reports)
+                .map(|(value, report)| PointOut { value, report })
+                .collect(),
+        };
+        output::write_json(p, &out)?;
+        say!("wrote {}", p.display());
+    }
+    if let Some(p) = &a.csv {
+        output::write_csv(p, &header, &rows)?;
+        say!("wrote {}", p.display());
+    }
+    if let Some(p) = &a.plot {
+        let xs: Vec<f64> = vary.values.iter().map(|v| v.parse().unwrap_or(f64::NAN)).collect();
+        let series_of = |y: &dyn Fn(&occult_render::compare::RendererReport) -> Option<f64>| -> Vec<Series> {
+            let mut names: Vec<String> = Vec::new();
+            for r in &reports {
+                for x in &r.renderers {
+                    // A renderer's points across values are one line.
+                    let name = base_label(&x.name, vary);
+                    if !names.contains(&name) {
+                        names.push(name);
+                    }
+                }
+            }
+            names
+                .iter()
+                .map(|name| Series {
+                    name: name.clone(),
+                    points: xs
+                        .iter()
+                        .zip(&reports)
+                        .filter_map(|(&x, r)| {
+                            r.renderers
+                                .iter()
+                                .find(|c| base_label(&c.name, vary) == *name)
+                                .and_then(y)
+                                .map(|y| (x, y))
+                        })
+                        .collect(),
+                    dashed: false,
+                })
+                .filter(|s| !s.points.is_empty())
+                .collect()
+        };
+        let title = format!("{} — {}, {} frames", summary.label(), a.path, cameras.len());
+        let mut panels = vec![Panel {
+            title: title.clone(),
+            x_label: vary_text.clone(),
+            y_label: "mean frame time (ms, log)".into(),
+            log_x: a.log_x,
+            series: series_of(&|x| Some(x.mean_ms)),
+        }];
+        for c in &a.counter {
+            panels.push(Panel {
+                title: format!("{c} per frame"),
+                x_label: vary_text.clone(),
+                y_label: format!("{c} (log)"),
+                log_x: a.log_x,
+                series: series_of(&|x| x.stats.counters.get(c.as_str()).copied()),
+            });
+        }
+        plot::draw(p, &panels)?;
+        say!("wrote {}", p.display());
+    }
+    Ok(())
+}
+
+/// `label` without the varied setting (`oqgrid:res=20,batch=4` → `oqgrid:batch=4`), so that one
+/// renderer's points across values form one line.
+fn base_label(label: &str, vary: &Vary) -> String {
+    let Some((name, settings)) = label.split_once(':') else {
+        return label.to_string();
+    };
+    if name != vary.algorithm {
+        return label.to_string();
+    }
+    let kept: Vec<&str> = settings
+        .split(',')
+        .filter(|s| s.split_once('=').map(|(k, _)| k) != Some(vary.key.as_str()))
+        .collect();
+    if kept.is_empty() {
+        name.to_string()
+    } else {
+        format!("{name}:{}", kept.join(","))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn vary_parses_and_refuses() {
+        let v = parse_vary("oqgrid.res=10, 20,40").unwrap();
+        assert_eq!((v.algorithm.as_str(), v.key.as_str()), ("oqgrid", "res"));
+        assert_eq!(v.values, ["10", "20", "40"]);
+        for bad in [
+            "oqgrid.res",
+            "res=1,2",
+            "oqgrid.res=1,,2",
+            "oqgrid.res=a,b",
+            ".res=1",
+            "oqgrid.=1",
+        ] {
+            assert!(parse_vary(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn lines_are_named_without_the_varied_value() {
+        let v = parse_vary("frustum.leaf=8,16").unwrap();
+        assert_eq!(base_label("frustum:leaf=8", &v), "frustum");
+        assert_eq!(base_label("frustum:group_leaf=2,leaf=8", &v), "frustum:group_leaf=2");
+        assert_eq!(base_label("zbuffer", &v), "zbuffer");
+        assert_eq!(base_label("frustum:group_leaf=2", &v), "frustum:group_leaf=2");
+    }
+}
