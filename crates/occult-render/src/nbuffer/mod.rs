@@ -391,6 +391,13 @@ fn widen(b: Aabb) -> Aabb {
     Aabb::new(b.min - Vec3::splat(pad), b.max + Vec3::splat(pad))
 }
 
+/// Lookups and rectangle pixels of a frame's tests.
+#[derive(Default)]
+struct Tally {
+    lookups: u64,
+    rect_pixels: u64,
+}
+
 /// The screen test of a world box against the N-buffer: `Some(culled)` when it could be
 /// tested, with the lookups in `lookups`.
 struct BoxTest<'a> {
@@ -402,8 +409,9 @@ struct BoxTest<'a> {
 }
 
 impl BoxTest<'_> {
-    /// True when the box is hidden behind the N-buffer's depth; adds the lookups made.
-    fn hidden(&self, b: &Aabb, lookups: &mut u64) -> bool {
+    /// True when the box is hidden behind the N-buffer's depth; adds the lookups made and
+    /// the pixels of the tested rectangle to `tally`.
+    fn hidden(&self, b: &Aabb, tally: &mut Tally) -> bool {
         if b.is_empty() {
             return true;
         }
@@ -435,13 +443,14 @@ impl BoxTest<'_> {
             x1: hi(maxx, self.width),
             y1: hi(maxy, self.height),
         };
+        tally.rect_pixels += rect.area();
         if self.four_square {
             let (hidden, n) = self.nbuffer.occludes(rect, nearest);
-            *lookups += u64::from(n);
+            tally.lookups += u64::from(n);
             hidden
         } else {
             let q = self.nbuffer.query_one(rect);
-            *lookups += u64::from(q.lookups);
+            tally.lookups += u64::from(q.lookups);
             q.lookups == 0 || nearest < q.depth
         }
     }
@@ -508,11 +517,11 @@ impl Renderer for NBufferCulling {
             height: f64::from(h),
             four_square: self.options.four_square,
         };
-        let mut lookups = 0u64;
+        let mut tally = Tally::default();
         let mut survivors = Vec::new();
         let objects = &self.objects;
         let drawn = &self.drawn;
-        let mut test_object = |i: usize, inside: bool, stats: &mut FrameStats, lookups: &mut u64| {
+        let mut test_object = |i: usize, inside: bool, stats: &mut FrameStats, tally: &mut Tally| {
             if drawn[i] {
                 return;
             }
@@ -525,7 +534,7 @@ impl Renderer for NBufferCulling {
                 }
             }
             stats.rects_tested += 1;
-            if test.hidden(b, lookups) {
+            if test.hidden(b, tally) {
                 stats.rects_culled += 1;
             } else {
                 survivors.push(i);
@@ -549,12 +558,12 @@ impl Renderer for NBufferCulling {
                     };
                     if node.is_leaf() {
                         for &i in &bvh.primitive_indices()[node.range()] {
-                            test_object(i as usize, inside, &mut stats, &mut lookups);
+                            test_object(i as usize, inside, &mut stats, &mut tally);
                         }
                         continue;
                     }
                     stats.rects_tested += 1;
-                    if test.hidden(&node.bounds, &mut lookups) {
+                    if test.hidden(&node.bounds, &mut tally) {
                         stats.rects_culled += 1;
                         continue;
                     }
@@ -564,11 +573,14 @@ impl Renderer for NBufferCulling {
             }
             _ => {
                 for i in 0..objects.len() {
-                    test_object(i, false, &mut stats, &mut lookups);
+                    test_object(i, false, &mut stats, &mut tally);
                 }
             }
         }
-        stats.counters.add("nbuffer_lookups", lookups);
+        stats.counters.add("nbuffer_lookups", tally.lookups);
+        // Table 2's comparison: the depth tests a per-pixel test of the same rectangles
+        // (`query_rect`, an occlusion query of the box's screen rectangle) would make.
+        stats.counters.add("rect_pixels", tally.rect_pixels);
         stats.counters.add("survivors_drawn", survivors.len() as u64);
         let draws = draws_of(&self.scene, &self.objects, &self.mesh_bvhs, view, &mut survivors);
         stats.phases.add(Phase::Cull, t.elapsed());
