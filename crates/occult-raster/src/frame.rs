@@ -195,7 +195,7 @@ impl Frame {
 
 /// Asks the kernel to back a large buffer with huge pages: a tile of a row-major frame spans
 /// 64 rows, each in another 4 KiB page, and the page walks would otherwise dominate the scan.
-fn advise_huge_pages(ptr: *mut u8, len: usize) {
+pub(crate) fn advise_huge_pages(ptr: *mut u8, len: usize) {
     #[cfg(target_os = "linux")]
     {
         const HUGE: usize = 2 << 20;

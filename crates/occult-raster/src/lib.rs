@@ -38,12 +38,14 @@
 #![deny(missing_docs)]
 
 mod frame;
+pub mod nbuffer;
 mod query;
 mod raster;
 mod shade;
 pub mod zpyramid;
 
 pub use frame::{keep_fragment, Frame, CLEAR_DEPTH};
+pub use nbuffer::{Extremum, NBuffer};
 pub use query::{query_box, query_rect, PixelRect};
 pub use raster::{Draw, DrawTriangles, RasterConfig, RasterCounts, RasterMode, Rasterizer, Strategy, SUBPIXEL_BITS};
 pub use shade::{shade, BACKGROUND};

@@ -31,6 +31,7 @@ pub mod compare;
 pub mod frustum;
 pub mod hzb;
 pub mod oqgrid;
+pub mod nbuffer;
 pub mod params;
 mod stats;
 pub mod zbuffer;
@@ -119,7 +120,7 @@ pub struct AlgorithmInfo {
 }
 
 /// Every renderer, in the order `all` lists them.
-pub static ALGORITHMS: &[&AlgorithmInfo] = &[&zbuffer::INFO, &frustum::INFO, &hzb::INFO, &oqgrid::INFO];
+pub static ALGORITHMS: &[&AlgorithmInfo] = &[&zbuffer::INFO, &frustum::INFO, &hzb::INFO, &oqgrid::INFO, &nbuffer::INFO];
 
 /// A renderer, chosen at run time by name: a handle on its [`AlgorithmInfo`].
 #[derive(Clone, Copy)]

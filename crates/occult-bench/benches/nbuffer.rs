@@ -1,0 +1,162 @@
+//! N-buffer (Décoret 2005): build time per resolution (the paper's Table 1: 256², 512²,
+//! 640×480, 1024²) on 1 and 2 threads, and rectangle queries per second on one core
+//! (against Intel MOC's `TestRect`, 43–46 M/s per core here).
+//!
+//! The depth map is a synthetic reversed-Z map (a tilted plane with boxes, some pixels
+//! empty); build time depends only on resolution and level count. Query workloads are
+//! 1 M precomputed rectangles, sides 1–128 px at uniform random positions (`random`), or the
+//! same sizes on a random walk (`coherent`: each rectangle near the previous one, as the
+//! objects of a hierarchy are tested).
+
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use occult_raster::{Extremum, NBuffer, PixelRect, RasterConfig, Rasterizer};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+
+fn depth_map(w: u32, h: u32) -> Vec<f32> {
+    let mut rng = Pcg64Mcg::seed_from_u64(7);
+    let mut d: Vec<f32> = (0..w * h)
+        .map(|i| {
+            let (x, y) = ((i % w) as f32, (i / w) as f32);
+            0.01 + 0.5 * y / h as f32 + 0.1 * x / w as f32
+        })
+        .collect();
+    for _ in 0..200 {
+        let (x0, y0) = (rng.random_range(0..w), rng.random_range(0..h));
+        let (bw, bh) = (rng.random_range(1..64), rng.random_range(1..64));
+        let z: f32 = rng.random_range(0.0..1.0);
+        for y in y0..(y0 + bh).min(h) {
+            for x in x0..(x0 + bw).min(w) {
+                d[(y * w + x) as usize] = z;
+            }
+        }
+    }
+    d
+}
+
+fn build(c: &mut Criterion) {
+    let mut group = c.benchmark_group("nbuffer_build");
+    group.sample_size(30);
+    for (w, h) in [(256u32, 256u32), (512, 512), (640, 480), (1024, 1024)] {
+        let depth = depth_map(w, h);
+        let levels = NBuffer::default_level_count(w, h);
+        for threads in [1, 2] {
+            let raster = Rasterizer::new(RasterConfig {
+                threads,
+                ..RasterConfig::default()
+            })
+            .expect("valid config");
+            let mut nb = NBuffer::new(Extremum::Min, &depth, w, h).expect("valid size");
+            group.throughput(Throughput::Elements(u64::from(w * h)));
+            group.bench_function(format!("{w}x{h}/levels={levels}/threads={threads}"), |b| {
+                b.iter(|| raster.install(|| nb.rebuild(&depth, w, h, levels).expect("valid size")))
+            });
+        }
+    }
+    group.finish();
+}
+
+fn rects(w: u32, h: u32, coherent: bool) -> Vec<(PixelRect, f32)> {
+    let mut rng = Pcg64Mcg::seed_from_u64(11);
+    let (mut cx, mut cy) = (w / 2, h / 2);
+    (0..1_000_000)
+        .map(|_| {
+            let (rw, rh) = (rng.random_range(1..=128u32), rng.random_range(1..=128u32));
+            if coherent {
+                cx = (cx as i64 + rng.random_range(-16..=16)).clamp(0, w as i64 - 1) as u32;
+                cy = (cy as i64 + rng.random_range(-16..=16)).clamp(0, h as i64 - 1) as u32;
+            } else {
+                cx = rng.random_range(0..w);
+                cy = rng.random_range(0..h);
+            }
+            let r = PixelRect {
+                x0: cx,
+                y0: cy,
+                x1: cx + rw,
+                y1: cy + rh,
+            };
+            (r, rng.random_range(0.0..1.0f32))
+        })
+        .collect()
+}
+
+fn queries(c: &mut Criterion) {
+    let mut group = c.benchmark_group("nbuffer_query");
+    group.sample_size(20);
+    for (w, h) in [(640u32, 480u32), (1024, 1024)] {
+        let depth = depth_map(w, h);
+        let nb = NBuffer::new(Extremum::Min, &depth, w, h).expect("valid size");
+        for coherent in [false, true] {
+            let rs = rects(w, h, coherent);
+            let kind = if coherent { "coherent" } else { "random" };
+            group.throughput(Throughput::Elements(rs.len() as u64));
+            group.bench_function(format!("{w}x{h}/{kind}/query_four"), |b| {
+                b.iter(|| {
+                    rs.iter()
+                        .map(|&(r, _)| nb.query_four(r).depth)
+                        .fold(0.0f32, |a, d| a + d)
+                })
+            });
+            group.bench_function(format!("{w}x{h}/{kind}/query_one"), |b| {
+                b.iter(|| {
+                    rs.iter()
+                        .map(|&(r, _)| nb.query_one(r).depth)
+                        .fold(0.0f32, |a, d| a + d)
+                })
+            });
+            group.bench_function(format!("{w}x{h}/{kind}/occludes"), |b| {
+                b.iter(|| rs.iter().map(|&(r, z)| usize::from(nb.occludes(r, z).0)).sum::<usize>())
+            });
+        }
+    }
+    group.finish();
+}
+
+/// §3.2 / §4.3: 10^6 sprites (sides 1–64 px) among the `city` seen from its default camera at
+/// 640×480: drawing them all against drawing the survivors of the N-buffer test (the N-buffer
+/// build from the scene's depth included). The scene itself is drawn once, outside the timing.
+fn particles(c: &mut Criterion) {
+    use occult_render::nbuffer::particles::{draw_particles, Particles};
+    use std::sync::Arc;
+    let w = occult_bench::workload("city");
+    let scene = Arc::new(w.scene);
+    let view = occult_core::View::new(w.camera, 640, 480).expect("valid view");
+    let mut z = occult_render::Algorithm::ZBUFFER
+        .build(scene.clone(), &occult_render::RenderOptions::default())
+        .expect("zbuffer");
+    let mut base = occult_raster::Frame::new(640, 480).expect("valid size");
+    z.render(&view, &mut base).expect("render");
+    let mut raster = Rasterizer::new(RasterConfig::default()).expect("valid config");
+    let mut group = c.benchmark_group("nbuffer_particles");
+    group.sample_size(10);
+    for pow2 in [false, true] {
+        let p = Particles::scatter(&scene.bounds(), 1_000_000, 64, pow2, 0.3, 9).expect("particles");
+        let sizes = if pow2 { "pow2" } else { "any" };
+        for cull in [false, true] {
+            let name = format!("1M_sprites/{sizes}/{}", if cull { "nbuffer_cull" } else { "draw_all" });
+            group.bench_function(name, |b| {
+                b.iter_batched_ref(
+                    || base.clone(),
+                    |frame| {
+                        let nb = cull.then(|| {
+                            raster.install(|| {
+                                NBuffer::with_levels(Extremum::Min, frame.depth(), 640, 480, p.levels_needed())
+                                    .expect("valid size")
+                            })
+                        });
+                        draw_particles(&mut raster, &view, frame, &p, scene.item_count(), nb.as_ref()).expect("draw")
+                    },
+                    criterion::BatchSize::LargeInput,
+                )
+            });
+        }
+        let mut frame = base.clone();
+        let nb = NBuffer::with_levels(Extremum::Min, base.depth(), 640, 480, p.levels_needed()).expect("valid size");
+        let counts = draw_particles(&mut raster, &view, &mut frame, &p, scene.item_count(), Some(&nb)).expect("draw");
+        eprintln!("particles {sizes}: {counts:?}");
+    }
+    group.finish();
+}
+
+criterion_group!(benches, build, queries, particles);
+criterion_main!(benches);

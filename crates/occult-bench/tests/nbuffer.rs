@@ -1,0 +1,190 @@
+//! `nbuffer` (Décoret 2005 §3.1): frames bit-identical to `zbuffer` (DESIGN invariant 2) over
+//! every generator with random views and over whole camera paths, in every configuration;
+//! bad parameters are errors; the counters add up and the culling culls.
+
+use std::sync::Arc;
+
+use occult_bench::invariants::{assert_identical_on_every_generator, assert_identical_on_path};
+use occult_core::View;
+use occult_raster::Frame;
+use occult_render::{AlgoSpec, Algorithm, RenderError, RenderOptions};
+
+const CONFIGS: &[&str] = &[
+    "nbuffer",
+    "nbuffer:hierarchy=flat",
+    "nbuffer:cover=one",
+    "nbuffer:hierarchy=flat,cover=one",
+    "nbuffer:leaf=7,group_leaf=1",
+];
+
+#[test]
+fn every_configuration_is_identical_to_zbuffer_on_every_generator() {
+    for spec in CONFIGS {
+        assert_identical_on_every_generator(&AlgoSpec::parse(spec).unwrap(), 0);
+    }
+}
+
+#[test]
+fn single_threaded_is_identical_to_zbuffer() {
+    assert_identical_on_every_generator(&AlgoSpec::parse("nbuffer").unwrap(), 1);
+}
+
+#[test]
+fn paths_are_identical_to_zbuffer() {
+    for spec in CONFIGS {
+        let spec = AlgoSpec::parse(spec).unwrap();
+        assert_identical_on_path(&spec, "city:blocks=3,detail=2", "street:12", 160, 90);
+        assert_identical_on_path(&spec, "terrain:g=64,tiles=2", "flyover:8", 128, 96);
+        assert_identical_on_path(&spec, "forest:trees=3,patches=2,levels=1", "circle:8", 120, 80);
+        assert_identical_on_path(&spec, "occluder:objects=4", "circle:8", 101, 77);
+    }
+}
+
+#[test]
+fn bad_parameters_are_errors() {
+    let built = occult_scenes::spec::parse_spec("city:blocks=1,detail=1")
+        .and_then(|s| s.build())
+        .unwrap();
+    let scene = Arc::new(built.scene);
+    for bad in [
+        "nbuffer:leaf=0",
+        "nbuffer:group_leaf=0",
+        "nbuffer:hierarchy=octree",
+        "nbuffer:cover=two",
+        "nbuffer:leaf=-3",
+        "nbuffer:leaf=many",
+    ] {
+        let spec = AlgoSpec::parse(bad).unwrap();
+        match spec.build(scene.clone(), &RenderOptions::default()) {
+            Err(RenderError::BadParameter(msg)) => assert!(msg.contains("nbuffer"), "{bad}: {msg}"),
+            Err(e) => panic!("{bad}: not a bad-parameter error: {e}"),
+            Ok(_) => panic!("{bad} was accepted"),
+        }
+    }
+    assert!(AlgoSpec::parse("nbuffer:levels=3")
+        .and_then(|s| s.build(scene.clone(), &RenderOptions::default()).map(|_| ()))
+        .is_err());
+}
+
+#[test]
+fn street_walk_culls_with_at_most_four_lookups_per_rectangle() {
+    let built = occult_scenes::spec::parse_spec("city:blocks=4,detail=2")
+        .and_then(|s| s.build())
+        .unwrap();
+    let cams = occult_scenes::path::parse_path("street:10", &built.scene, &built.default_camera).unwrap();
+    let scene = Arc::new(built.scene);
+    for spec in ["nbuffer", "nbuffer:hierarchy=flat"] {
+        let mut r = AlgoSpec::parse(spec)
+            .unwrap()
+            .build(scene.clone(), &RenderOptions::default())
+            .unwrap();
+        let mut frame = Frame::new(160, 90).unwrap();
+        let (mut culled, mut occluders) = (0, 0);
+        for (i, cam) in cams.iter().enumerate() {
+            let view = View::new(*cam, 160, 90).unwrap();
+            let s = r.render(&view, &mut frame).unwrap();
+            let lookups = s.counters.get("nbuffer_lookups");
+            assert!(
+                lookups <= 4 * s.rects_tested,
+                "{spec} frame {i}: {lookups} lookups for {} rects",
+                s.rects_tested
+            );
+            assert!(s.rects_culled <= s.rects_tested);
+            if i == 0 {
+                assert_eq!(s.counters.get("occluders_drawn"), 0, "no occluders on the first frame");
+            }
+            culled += s.rects_culled;
+            occluders += s.counters.get("occluders_drawn");
+        }
+        assert!(culled > 0, "{spec}: nothing culled along a street");
+        assert!(occluders > 0, "{spec}: no occluders after the first frame");
+    }
+}
+
+#[test]
+fn resolution_change_and_frame_mismatch() {
+    let built = occult_scenes::spec::parse_spec("city:blocks=2,detail=1")
+        .and_then(|s| s.build())
+        .unwrap();
+    let scene = Arc::new(built.scene);
+    let mut r = Algorithm::parse("nbuffer")
+        .unwrap()
+        .build(scene.clone(), &RenderOptions::default())
+        .unwrap();
+    let mut z = Algorithm::ZBUFFER.build(scene, &RenderOptions::default()).unwrap();
+    for (w, h) in [(64, 48), (33, 97), (64, 48)] {
+        let view = View::new(built.default_camera, w, h).unwrap();
+        let (mut a, mut b) = (Frame::new(w, h).unwrap(), Frame::new(w, h).unwrap());
+        z.render(&view, &mut a).unwrap();
+        r.render(&view, &mut b).unwrap();
+        assert!(a.same_visibility(&b), "{w}x{h}");
+    }
+    let view = View::new(built.default_camera, 64, 48).unwrap();
+    let mut wrong = Frame::new(48, 64).unwrap();
+    assert!(matches!(
+        r.render(&view, &mut wrong),
+        Err(RenderError::FrameSizeMismatch { .. })
+    ));
+}
+
+/// §3.2: sprites culled with the N-buffer give the same frame as sprites all drawn.
+#[test]
+fn particle_frames_are_identical_with_and_without_culling() {
+    use occult_raster::{Extremum, NBuffer, RasterConfig, Rasterizer};
+    use occult_render::nbuffer::particles::{draw_particles, Particles};
+    for (scene_spec, path) in [
+        ("city:blocks=2,detail=2", "street:4"),
+        ("forest:trees=3,patches=2,levels=1", "circle:4"),
+    ] {
+        let built = occult_scenes::spec::parse_spec(scene_spec)
+            .and_then(|s| s.build())
+            .unwrap();
+        let cams = occult_scenes::path::parse_path(path, &built.scene, &built.default_camera).unwrap();
+        let scene = Arc::new(built.scene);
+        let mut z = Algorithm::ZBUFFER
+            .build(scene.clone(), &RenderOptions::default())
+            .unwrap();
+        let mut raster = Rasterizer::new(RasterConfig::default()).unwrap();
+        let (w, h) = (160, 120);
+        let (mut culled_total, mut single) = (0, 0);
+        for (pow2, seed) in [(false, 1), (true, 2)] {
+            let particles = Particles::scatter(&scene.bounds(), 20_000, 64, pow2, 0.5, seed).unwrap();
+            for cam in &cams {
+                let view = View::new(*cam, w, h).unwrap();
+                let (mut a, mut b) = (Frame::new(w, h).unwrap(), Frame::new(w, h).unwrap());
+                z.render(&view, &mut a).unwrap();
+                z.render(&view, &mut b).unwrap();
+                let nb = NBuffer::with_levels(Extremum::Min, b.depth(), w, h, particles.levels_needed()).unwrap();
+                let first = scene.item_count();
+                let all = draw_particles(&mut raster, &view, &mut a, &particles, first, None).unwrap();
+                let cut = draw_particles(&mut raster, &view, &mut b, &particles, first, Some(&nb)).unwrap();
+                assert!(a.same_visibility(&b), "{scene_spec}: culled sprites changed the frame");
+                assert_eq!(all.sprites_culled, 0);
+                assert_eq!(all.sprites_in_view, cut.sprites_in_view);
+                assert!(cut.lookups <= 4 * cut.sprites_in_view);
+                culled_total += cut.sprites_culled;
+                single += cut.single_lookup_tests;
+                // Only power-of-two sprites take the single lookup.
+                assert!(cut.single_lookup_tests <= cut.sprites_in_view);
+            }
+        }
+        assert!(culled_total > 0, "{scene_spec}: no sprite culled");
+        assert!(single > 0, "{scene_spec}: no single-lookup test");
+    }
+}
+
+#[test]
+fn bad_particle_parameters_are_errors() {
+    use occult_core::{Aabb, Vec3};
+    use occult_render::nbuffer::particles::Particles;
+    let b = Aabb::new(Vec3::ZERO, Vec3::ONE);
+    assert!(Particles::scatter(&b, 10, 0, false, 0.5, 1).is_err());
+    assert!(Particles::scatter(&b, 10, 65, false, 0.5, 1).is_err());
+    assert!(Particles::scatter(&b, 10, 8, false, 0.0, 1).is_err());
+    assert!(Particles::scatter(&b, 10, 8, false, f32::NAN, 1).is_err());
+    assert!(Particles::scatter(&b, usize::MAX, 8, false, 0.5, 1).is_err());
+    assert!(Particles::scatter(&Aabb::EMPTY, 10, 8, false, 0.5, 1).is_err());
+    let p = Particles::scatter(&b, 1000, 64, true, 0.5, 1).unwrap();
+    assert!(p.sizes.iter().all(|s| s.is_power_of_two() && *s <= 64));
+    assert_eq!(p.levels_needed(), 7);
+}
