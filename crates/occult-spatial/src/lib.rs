@@ -16,5 +16,9 @@
 #![deny(missing_docs)]
 
 mod bvh;
+pub mod octree;
+pub mod raycast;
 
 pub use bvh::{Bvh, BvhNode};
+pub use octree::{Octree, OctreeConfig, OctreeError, OctreeNode};
+pub use raycast::{traverse, FatRay, TraversalCounters};
