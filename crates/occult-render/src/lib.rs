@@ -29,6 +29,7 @@
 
 pub mod compare;
 pub mod frustum;
+pub mod lzb;
 pub mod params;
 mod stats;
 pub mod zbuffer;
@@ -117,7 +118,7 @@ pub struct AlgorithmInfo {
 }
 
 /// Every renderer, in the order `all` lists them.
-pub static ALGORITHMS: &[&AlgorithmInfo] = &[&zbuffer::INFO, &frustum::INFO];
+pub static ALGORITHMS: &[&AlgorithmInfo] = &[&zbuffer::INFO, &frustum::INFO, &lzb::INFO];
 
 /// A renderer, chosen at run time by name: a handle on its [`AlgorithmInfo`].
 #[derive(Clone, Copy)]

@@ -9,7 +9,7 @@
 //!
 //! A primitive is referenced by every leaf it overlaps (no splitting), so a leaf's list is
 //! complete: every point of a primitive lies in some leaf that references it (the overlap test
-//! counts touching). Each node box is the octant of its parent (the root box is the primitives'
+//! counts touching, and runs on the octant grown by a relative 10⁻⁵ against rounding). Each node box is the octant of its parent (the root box is the primitives'
 //! bounds, not made cubic). A node stops splitting at the maximum depth, at or below the leaf
 //! size, or when splitting would not shrink any child's list (primitives that all meet in a point).
 //!
@@ -277,7 +277,13 @@ impl<F: Fn(u32, &Aabb) -> bool> Builder<'_, F> {
         };
         let lists: Vec<Vec<u32>> = (0..8)
             .map(|i| {
+                // The overlap test runs on the octant grown by a relative 1e-5: the separating
+                // axis test rounds, and would drop triangles lying on the octant's face (a roof
+                // at the mesh's top, a floor on a split plane) from every leaf.
                 let cb = child_box(i);
+                let grow =
+                    Vec3::splat(b.size().max_element() * 1e-5 + b.min.abs().max(b.max.abs()).max_element() * 1e-6);
+                let cb = Aabb::new(cb.min - grow, cb.max + grow);
                 list.iter()
                     .copied()
                     .filter(|&p| self.boxes[p as usize].overlaps(&cb) && (self.overlaps)(p, &cb))
@@ -342,7 +348,9 @@ mod tests {
             if n.is_leaf() {
                 for &q in o.leaf_primitives(i as u32) {
                     seen[q as usize] = true;
-                    assert!(tri_box_overlap(&n.bounds, t[q as usize].map(|v| p[v as usize])));
+                    let g = Vec3::splat(1e-3);
+                    let grown = Aabb::new(n.bounds.min - g, n.bounds.max + g);
+                    assert!(tri_box_overlap(&grown, t[q as usize].map(|v| p[v as usize])));
                 }
                 assert!(n.count as usize <= cfg.max_leaf_size || o.depth() == cfg.max_depth);
             }
@@ -386,6 +394,44 @@ mod tests {
         // A zero-area (collinear) triangle still lands somewhere.
         let o = Octree::build_triangles(&[Vec3::ZERO, Vec3::X, Vec3::X * 2.0], &[[0, 1, 2]], cfg).unwrap();
         assert_eq!(o.primitives(), &[0]);
+    }
+
+    /// A roof on the top face of the bounds, at a coordinate where the centre/half-extent form
+    /// of the separating axis test rounds past the face: it must still be in a leaf that holds
+    /// its points.
+    #[test]
+    fn triangles_on_faces_of_the_bounds_are_kept() {
+        let mut p = vec![
+            Vec3::new(-3.75, 47.8, 4.25),
+            Vec3::new(3.75, 47.8, -4.25),
+            Vec3::new(-3.75, 47.8, -4.25),
+        ];
+        let mut t = vec![[0, 1, 2]];
+        for i in 0..200u32 {
+            let x = (i % 20) as f32 - 10.0;
+            let z = (i / 20) as f32 - 5.0;
+            p.extend([
+                Vec3::new(x, 0.0, z),
+                Vec3::new(x + 0.5, 0.0, z),
+                Vec3::new(x, 0.3, z + 0.5),
+            ]);
+            t.push([3 * i + 3, 3 * i + 4, 3 * i + 5]);
+        }
+        let o = Octree::build_triangles(
+            &p,
+            &t,
+            OctreeConfig {
+                max_depth: 8,
+                max_leaf_size: 4,
+            },
+        )
+        .unwrap();
+        let centroid = (p[0] + p[1] + p[2]) / 3.0;
+        let holds =
+            o.nodes().iter().enumerate().any(|(i, n)| {
+                n.is_leaf() && n.bounds.contains_point(centroid) && o.leaf_primitives(i as u32).contains(&0)
+            });
+        assert!(holds);
     }
 
     #[test]
