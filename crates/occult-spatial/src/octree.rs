@@ -10,8 +10,10 @@
 //! A primitive is referenced by every leaf it overlaps (no splitting), so a leaf's list is
 //! complete: every point of a primitive lies in some leaf that references it (the overlap test
 //! counts touching, and runs on the octant grown by a relative 10⁻⁵ against rounding). Each node box is the octant of its parent (the root box is the primitives'
-//! bounds, not made cubic). A node stops splitting at the maximum depth, at or below the leaf
-//! size, or when splitting would not shrink any child's list (primitives that all meet in a point).
+//! bounds, not made cubic; an axis along which a node is flat is not split). A node stops
+//! splitting at the maximum depth, at or below the leaf size, or when splitting would not
+//! separate its primitives (every child would hold them all, or they would be referenced more
+//! than 4 times each on average).
 //!
 //! Cost: O(references · depth) overlap tests to build; memory 32 bytes per node plus 4 bytes per
 //! reference. Building refuses to exceed [`MAX_REFERENCES`] references in one tree.
@@ -268,8 +270,22 @@ impl<F: Fn(u32, &Aabb) -> bool> Builder<'_, F> {
         }
         let b = self.tree.nodes[node].bounds;
         let mid = b.center();
+        // An axis along which the node is flat (a planar mesh) is not split: its upper children
+        // are empty, instead of two copies of everything.
+        let flat = (b.size() - Vec3::splat(b.size().max_element() * 1e-3)).cmple(Vec3::ZERO);
         let child_box = |i: usize| {
-            let pick = |a: usize, lo: f32, m: f32, hi: f32| if i & (1 << a) != 0 { (m, hi) } else { (lo, m) };
+            if (0..3).any(|a| i & (1 << a) != 0 && flat.test(a)) {
+                return Aabb::EMPTY;
+            }
+            let pick = |a: usize, lo: f32, m: f32, hi: f32| {
+                if flat.test(a) {
+                    (lo, hi)
+                } else if i & (1 << a) != 0 {
+                    (m, hi)
+                } else {
+                    (lo, m)
+                }
+            };
             let (x0, x1) = pick(0, b.min.x, mid.x, b.max.x);
             let (y0, y1) = pick(1, b.min.y, mid.y, b.max.y);
             let (z0, z1) = pick(2, b.min.z, mid.z, b.max.z);
@@ -281,6 +297,9 @@ impl<F: Fn(u32, &Aabb) -> bool> Builder<'_, F> {
                 // axis test rounds, and would drop triangles lying on the octant's face (a roof
                 // at the mesh's top, a floor on a split plane) from every leaf.
                 let cb = child_box(i);
+                if cb.is_empty() {
+                    return Vec::new();
+                }
                 let grow =
                     Vec3::splat(b.size().max_element() * 1e-5 + b.min.abs().max(b.max.abs()).max_element() * 1e-6);
                 let cb = Aabb::new(cb.min - grow, cb.max + grow);
@@ -290,8 +309,12 @@ impl<F: Fn(u32, &Aabb) -> bool> Builder<'_, F> {
                     .collect()
             })
             .collect();
-        // No progress: every child would hold the whole list (primitives meeting in a point).
-        if lists.iter().all(|l| l.len() == list.len()) {
+        // No progress: every child would hold the whole list (primitives meeting in a point),
+        // or primitives are large against the node (each in more than 4 of the 8 children on
+        // average: overlapping boxes, big triangles), so splitting multiplies references
+        // without separating them.
+        let references: usize = lists.iter().map(Vec::len).sum();
+        if lists.iter().all(|l| l.len() == list.len()) || references > 4 * list.len() {
             return self.make_leaf(node, &list);
         }
         drop(list);
@@ -382,15 +405,34 @@ mod tests {
         };
         let o = Octree::build_triangles(&p, &t, cfg).unwrap();
         assert!(o.leaf_count() >= 1);
-        // The same split to depth 20: references explode (4 per level), refused quickly.
+        // The same split to depth 20: stopped early or refused by the reference budget, never
+        // an unbounded build.
         let deep = OctreeConfig {
             max_depth: 20,
             max_leaf_size: 1,
         };
-        assert!(matches!(
-            Octree::build_triangles(&p, &t, deep),
-            Err(OctreeError::TooLarge(_))
-        ));
+        match Octree::build_triangles(&p, &t, deep) {
+            Ok(o) => assert!(o.primitives().len() <= 4 * REFERENCES_PER_PRIMITIVE + REFERENCE_SLACK),
+            Err(e) => assert!(matches!(e, OctreeError::TooLarge(_))),
+        }
+        // A flat mesh is not split along its flat axis.
+        let (gp, gt) = grid_mesh(30);
+        let flat: Vec<Vec3> = gp.iter().map(|v| Vec3::new(v.x, 0.0, v.z)).collect();
+        let o = Octree::build_triangles(
+            &flat,
+            &gt,
+            OctreeConfig {
+                max_depth: 8,
+                max_leaf_size: 4,
+            },
+        )
+        .unwrap();
+        for n in o.nodes().iter().filter(|n| !n.is_leaf()) {
+            for c in n.children().filter(|c| (c - n.first) & 2 != 0) {
+                let child = &o.nodes()[c as usize];
+                assert!(child.is_leaf() && child.count == 0);
+            }
+        }
         // A zero-area (collinear) triangle still lands somewhere.
         let o = Octree::build_triangles(&[Vec3::ZERO, Vec3::X, Vec3::X * 2.0], &[[0, 1, 2]], cfg).unwrap();
         assert_eq!(o.primitives(), &[0]);
