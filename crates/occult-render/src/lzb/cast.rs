@@ -71,6 +71,8 @@ pub(super) struct Caster<'a> {
     pub rays: u64,
     pub tri_tests: u64,
     pub coherent_starts: u64,
+    /// Rays that ended at a robust hit (the others ran to the far plane or out of the scene).
+    pub resolved: u64,
     visited: Vec<(u32, u32)>,
     serial: u32,
     last: Option<LastHit>,
@@ -93,6 +95,7 @@ impl<'a> Caster<'a> {
             rays: 0,
             tri_tests: 0,
             coherent_starts: 0,
+            resolved: 0,
             visited: Vec::new(),
             serial: 0,
             last: None,
@@ -141,6 +144,7 @@ impl<'a> Caster<'a> {
             &mut t_limit,
         );
         self.last = self.found;
+        self.resolved += self.found.is_some() as u64;
         self.best
     }
 
@@ -162,6 +166,7 @@ impl<'a> Caster<'a> {
             octree,
             normals,
             leaf_base,
+            ..
         } = &lzb.accel[node.index()]
         else {
             return None;
@@ -273,16 +278,21 @@ impl<'a> Caster<'a> {
         let mut counters = TraversalCounters::default();
         match &lzb.accel[id.index()] {
             Accel::Empty => {}
-            Accel::Mesh { octree, .. } => {
+            Accel::Mesh { octree, tight, .. } => {
                 let ray = FatRay::new(o, d, spread, if self.naive { 0.0 } else { margin(&octree.bounds()) });
                 let clip = self.ctx.view.clip_from_object(world_from_node);
                 let w_row = row_w(&clip);
                 let record = !self.naive && lzb.opts.mode == Mode::Lazy;
                 let mut recorded = false;
                 traverse(octree, &ray, t_limit, &mut counters, |leaf, _, _, t_limit| {
+                    // Deviation: the leaf's tight box, not its octant, must meet the cone.
+                    let tb = &tight[leaf as usize];
+                    if !ray.enter(tb).is_some_and(|(e, _)| e <= *t_limit) {
+                        return;
+                    }
                     // §III.A: every leaf on the path up to (and past, by the margin) the hit is
                     // recorded; near leaves are drawn already (step 3).
-                    if record && !self.ctx.is_near(w_row, &octree.nodes()[leaf as usize].bounds) {
+                    if record && !self.ctx.is_near(w_row, tb) {
                         self.pvl.insert((base, leaf));
                         recorded = true;
                     }

@@ -292,6 +292,10 @@ pub(crate) enum Accel {
         normals: Vec<Vec3>,
         /// Per octree node (leaves only meaningful): base visibility `base_cos × mean area`.
         leaf_base: Vec<f32>,
+        /// Per octree node (leaves only meaningful): the leaf's triangles' bounds clipped to
+        /// the leaf (grown as the overlap test grows it). Every point of a triangle inside the
+        /// leaf lies in it, so it stands for the leaf in every test (near/far, rays, OOR).
+        tight: Vec<Aabb>,
     },
     /// A group: octree over its instances' boxes.
     Group {
@@ -313,7 +317,8 @@ impl Accel {
                 octree,
                 normals,
                 leaf_base,
-            } => octree.memory_bytes() + normals.capacity() * 12 + leaf_base.capacity() * 4,
+                tight,
+            } => octree.memory_bytes() + normals.capacity() * 12 + leaf_base.capacity() * 4 + tight.capacity() * 24,
             Accel::Group {
                 octree,
                 bounds,
@@ -468,10 +473,31 @@ impl Lzb {
                                     base_cos * sum / list.len() as f32
                                 })
                                 .collect();
+                            let tight = octree
+                                .nodes()
+                                .iter()
+                                .map(|n| {
+                                    if !n.is_leaf() {
+                                        return n.bounds;
+                                    }
+                                    let list = &octree.primitives()[n.range()];
+                                    let b = n.bounds;
+                                    let grow = Vec3::splat(
+                                        b.size().max_element() * 2e-5
+                                            + b.min.abs().max(b.max.abs()).max_element() * 2e-6,
+                                    );
+                                    list.iter()
+                                        .fold(Aabb::EMPTY, |a, &t| {
+                                            a.union(Aabb::from_points(m.triangle_positions(t as usize)))
+                                        })
+                                        .intersection(Aabb::new(b.min - grow, b.max + grow))
+                                })
+                                .collect();
                             Accel::Mesh {
                                 octree,
                                 normals,
                                 leaf_base,
+                                tight,
                             }
                         }
                         NodeKind::Group(instances) => {
@@ -693,7 +719,7 @@ impl Walk<'_> {
             };
         match &self.lzb.accel[id.index()] {
             Accel::Empty => {}
-            Accel::Mesh { octree, .. } => {
+            Accel::Mesh { octree, tight, .. } => {
                 let clip = self.ctx.view.clip_from_object(world_from_node);
                 let w_row = row_w(&clip);
                 let inst = self.instances.len() as u32;
@@ -712,7 +738,7 @@ impl Walk<'_> {
                         };
                     if on.is_leaf() {
                         any = true;
-                        if self.ctx.is_near(w_row, &on.bounds) {
+                        if self.ctx.is_near(w_row, &tight[n as usize]) {
                             self.near.push((inst, n));
                         } else {
                             self.far.push((inst, n));
@@ -869,10 +895,10 @@ impl Renderer for Lzb {
             let mut polygons = 0u64;
             for &(inst, leaf) in &far {
                 let (rec, _, clip) = &instances[inst as usize];
-                let Accel::Mesh { octree, .. } = &self.accel[rec.node.index()] else {
+                let Accel::Mesh { tight, .. } = &self.accel[rec.node.index()] else {
                     continue;
                 };
-                let b = octree.nodes()[leaf as usize].bounds;
+                let b = tight[leaf as usize];
                 match oor::project_box(clip, &b, w, h, ctx.near) {
                     oor::Projection::Nothing => {}
                     oor::Projection::Screen => {
@@ -920,11 +946,12 @@ impl Renderer for Lzb {
         let mut pairs: Vec<(ItemId, u32)> = Vec::new();
         let mut recs = std::collections::HashMap::<ItemId, InstanceRec, cast::FxBuild>::default();
         let mut hits = Vec::new();
-        let (mut rays, mut tests, mut coherent, mut leaves) = (0, 0, 0, 0);
+        let (mut rays, mut tests, mut coherent, mut leaves, mut resolved) = (0, 0, 0, 0, 0);
         for c in results {
             rays += c.rays;
             tests += c.tri_tests;
             coherent += c.coherent_starts;
+            resolved += c.resolved;
             stats.nodes_visited += c.counters.nodes_visited;
             leaves += c.counters.leaves_visited;
             pairs.extend(c.pvl.iter().copied());
@@ -937,6 +964,7 @@ impl Renderer for Lzb {
         stats.counters.add("ray_tri_tests", tests);
         stats.counters.add("ray_leaves_visited", leaves);
         stats.counters.add("coherent_starts", coherent);
+        stats.counters.add("rays_resolved", resolved);
         stats.phases.add(Phase::Rays, t.elapsed());
 
         if naive {
