@@ -55,8 +55,16 @@ fn city_circle(c: &mut Criterion) {
     group.sample_size(10);
     let lzb = AlgoSpec::parse("lzb").expect("valid spec");
     for (name, mut r) in [
-        ("zbuffer", Algorithm::ZBUFFER.build(scene.clone(), &RenderOptions::default()).expect("builds")),
-        ("lzb", lzb.build(scene.clone(), &RenderOptions::default()).expect("builds")),
+        (
+            "zbuffer",
+            Algorithm::ZBUFFER
+                .build(scene.clone(), &RenderOptions::default())
+                .expect("builds"),
+        ),
+        (
+            "lzb",
+            lzb.build(scene.clone(), &RenderOptions::default()).expect("builds"),
+        ),
     ] {
         let mut frame = Frame::new(512, 512).expect("valid size");
         group.bench_function(name, |b| {

@@ -56,12 +56,19 @@ impl FatRay {
     /// box's far side; `None` when the cone misses it.
     #[inline]
     pub fn enter(&self, b: &Aabb) -> Option<(f32, f32)> {
-        let c = b.center();
-        let h = b.half_extent();
-        let far_t = ((c - self.origin).length() + h.length()) * self.inv_length;
-        let grow = Vec3::splat(self.spread * far_t + self.margin);
-        let t0 = (b.min - grow - self.origin) * self.inv_direction;
-        let t1 = (b.max + grow - self.origin) * self.inv_direction;
+        let (lo, hi) = if self.spread == 0.0 && self.margin == 0.0 {
+            (b.min, b.max)
+        } else {
+            // The farthest point of the box is at most |c - o| + |h| away; the 1-norms bound
+            // the Euclidean ones from above without a square root.
+            let c = b.center();
+            let h = b.half_extent();
+            let far_t = ((c - self.origin).abs().element_sum() + h.element_sum()) * self.inv_length;
+            let grow = Vec3::splat(self.spread * far_t + self.margin);
+            (b.min - grow, b.max + grow)
+        };
+        let t0 = (lo - self.origin) * self.inv_direction;
+        let t1 = (hi - self.origin) * self.inv_direction;
         // NaN (0 · ∞) only when the origin lies on a slab plane of a zero direction component:
         // f32::min/max then ignore it, which keeps the test conservative.
         let near = t0.min(t1).max_element().max(0.0);

@@ -946,13 +946,14 @@ impl Renderer for Lzb {
         let mut pairs: Vec<(ItemId, u32)> = Vec::new();
         let mut recs = std::collections::HashMap::<ItemId, InstanceRec, cast::FxBuild>::default();
         let mut hits = Vec::new();
-        let (mut rays, mut tests, mut coherent, mut leaves, mut resolved) = (0, 0, 0, 0, 0);
+        let (mut rays, mut tests, mut coherent, mut leaves, mut resolved, mut ray_nodes) = (0, 0, 0, 0, 0, 0);
         for c in results {
             rays += c.rays;
             tests += c.tri_tests;
             coherent += c.coherent_starts;
             resolved += c.resolved;
             stats.nodes_visited += c.counters.nodes_visited;
+            ray_nodes += c.counters.nodes_visited;
             leaves += c.counters.leaves_visited;
             pairs.extend(c.pvl.iter().copied());
             recs.extend(c.instances.iter().map(|(k, v)| (*k, *v)));
@@ -963,6 +964,7 @@ impl Renderer for Lzb {
         stats.counters.add("rays", rays);
         stats.counters.add("ray_tri_tests", tests);
         stats.counters.add("ray_leaves_visited", leaves);
+        stats.counters.add("ray_nodes_visited", ray_nodes);
         stats.counters.add("coherent_starts", coherent);
         stats.counters.add("rays_resolved", resolved);
         stats.phases.add(Phase::Rays, t.elapsed());
