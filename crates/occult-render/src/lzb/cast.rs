@@ -81,6 +81,8 @@ pub(super) struct Caster<'a> {
     pixel: (f32, f32),
     best: Option<(f32, ItemId)>,
     naive: bool,
+    /// Second pass: record leaves, test nothing.
+    recording: bool,
 }
 
 impl<'a> Caster<'a> {
@@ -103,6 +105,7 @@ impl<'a> Caster<'a> {
             pixel: (0.0, 0.0),
             best: None,
             naive,
+            recording: false,
         }
     }
 
@@ -133,8 +136,14 @@ impl<'a> Caster<'a> {
                 }
             }
         }
+        // Pass 1 finds the bound (the first robust hit); pass 2 records the path up to it.
+        // Deviation: one pass that records as it goes would record, in an instance met early
+        // whose box starts near, everything up to that instance's own hit, before an instance
+        // met later (a wall) lowers the bound.
+        self.recording = false;
+        let root = self.lzb.scene.root();
         self.visit(
-            self.lzb.scene.root(),
+            root,
             origin,
             dir,
             spread,
@@ -143,6 +152,20 @@ impl<'a> Caster<'a> {
             0,
             &mut t_limit,
         );
+        if !self.naive && self.lzb.opts.mode == Mode::Lazy {
+            self.recording = true;
+            self.visited.clear();
+            self.visit(
+                root,
+                origin,
+                dir,
+                spread,
+                &Affine3A::IDENTITY,
+                &Affine3A::IDENTITY,
+                0,
+                &mut t_limit,
+            );
+        }
         self.last = self.found;
         self.resolved += self.found.is_some() as u64;
         self.best
@@ -282,7 +305,7 @@ impl<'a> Caster<'a> {
                 let ray = FatRay::new(o, d, spread, if self.naive { 0.0 } else { margin(&octree.bounds()) });
                 let clip = self.ctx.view.clip_from_object(world_from_node);
                 let w_row = row_w(&clip);
-                let record = !self.naive && lzb.opts.mode == Mode::Lazy;
+                let record = self.recording;
                 let mut recorded = false;
                 traverse(octree, &ray, t_limit, &mut counters, |leaf, _, _, t_limit| {
                     // Deviation: the leaf's tight box, not its octant, must meet the cone.
@@ -292,9 +315,12 @@ impl<'a> Caster<'a> {
                     }
                     // §III.A: every leaf on the path up to (and past, by the margin) the hit is
                     // recorded; near leaves are drawn already (step 3).
-                    if record && !self.ctx.is_near(w_row, tb) {
-                        self.pvl.insert((base, leaf));
-                        recorded = true;
+                    if record {
+                        if !self.ctx.is_near(w_row, tb) {
+                            self.pvl.insert((base, leaf));
+                            recorded = true;
+                        }
+                        return;
                     }
                     if let Some(t) = self.test_leaf(id, leaf, o, d, &clip, *t_limit, base) {
                         if self.naive {
