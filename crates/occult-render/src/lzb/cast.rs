@@ -249,13 +249,13 @@ impl<'a> Caster<'a> {
     /// back faces are culled, and the hit nearer than the far plane.
     fn robust(&self, clip_from_object: &Mat4, tri: [Vec3; 3], t: f32) -> bool {
         let ctx = self.ctx;
-        if !(t * (1.0 + DEPTH_EPS) < ctx.far) {
+        if t.is_nan() || t * (1.0 + DEPTH_EPS) >= ctx.far {
             return false;
         }
         let mut s = [(0f64, 0f64); 3];
         for (k, p) in tri.iter().enumerate() {
             let c: Vec4 = *clip_from_object * p.extend(1.0);
-            if !(c.w > ctx.near * 1.01) || !c.is_finite() {
+            if !c.is_finite() || c.w <= ctx.near * 1.01 {
                 return false;
             }
             let x = (c.x / c.w * 0.5 + 0.5) as f64 * ctx.width;

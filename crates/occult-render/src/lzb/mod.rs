@@ -884,7 +884,7 @@ impl Renderer for Lzb {
         let t = Instant::now();
         let (w, h) = (view.width(), view.height());
         let d_clip = ctx.near / z_clip;
-        let mut cast_mask: Vec<bool> = frame.depth().iter().map(|&d| !(d > d_clip)).collect();
+        let mut cast_mask: Vec<bool> = frame.depth().iter().map(|&d| d.is_nan() || d <= d_clip).collect();
         stats
             .counters
             .add("unfinished_pixels", cast_mask.iter().filter(|&&u| u).count() as u64);

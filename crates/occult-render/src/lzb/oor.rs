@@ -41,7 +41,7 @@ pub(super) fn project_box(clip_from_object: &Mat4, b: &Aabb, width: u32, height:
             c += ez;
         }
         // A corner near or behind the eye: the projection is unbounded.
-        if !(c.w > near * 0.5) || !c.is_finite() {
+        if !c.is_finite() || c.w <= near * 0.5 {
             return Projection::Screen;
         }
         *p = Vec2::new(
