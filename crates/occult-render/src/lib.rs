@@ -32,6 +32,7 @@ pub mod frustum;
 pub mod hzb;
 pub mod oqgrid;
 pub mod nbuffer;
+pub mod lzb;
 pub mod params;
 mod stats;
 pub mod zbuffer;
@@ -120,7 +121,7 @@ pub struct AlgorithmInfo {
 }
 
 /// Every renderer, in the order `all` lists them.
-pub static ALGORITHMS: &[&AlgorithmInfo] = &[&zbuffer::INFO, &frustum::INFO, &hzb::INFO, &oqgrid::INFO, &nbuffer::INFO];
+pub static ALGORITHMS: &[&AlgorithmInfo] = &[&zbuffer::INFO, &frustum::INFO, &hzb::INFO, &oqgrid::INFO, &nbuffer::INFO, &lzb::INFO];
 
 /// A renderer, chosen at run time by name: a handle on its [`AlgorithmInfo`].
 #[derive(Clone, Copy)]

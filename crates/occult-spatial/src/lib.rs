@@ -16,8 +16,12 @@
 #![deny(missing_docs)]
 
 mod bvh;
-pub mod octree_hybrid;
 pub mod grid;
+pub mod octree;
+pub mod octree_hybrid;
+pub mod raycast;
 
 pub use bvh::{Bvh, BvhNode};
-pub use octree_hybrid::{HybridOctree, OctreeConfig, OctreeNode};
+pub use octree_hybrid::HybridOctree;
+pub use octree::{Octree, OctreeConfig, OctreeError, OctreeNode};
+pub use raycast::{traverse, FatRay, TraversalCounters};

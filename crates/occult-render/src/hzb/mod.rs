@@ -84,7 +84,8 @@ use std::time::Instant;
 
 use occult_core::{Aabb, Affine3A, NodeId, NodeKind, Scene, View};
 use occult_raster::{Frame, Rasterizer, ZPyramid};
-use occult_spatial::{octree_hybrid::MAX_OCTREE_DEPTH, HybridOctree, OctreeConfig};
+use occult_spatial::octree_hybrid::{OctreeConfig, MAX_OCTREE_DEPTH};
+use occult_spatial::HybridOctree;
 
 use crate::{
     check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result,

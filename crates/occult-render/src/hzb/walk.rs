@@ -329,7 +329,7 @@ impl<'a> Walk<'a> {
             })
     }
 
-    fn node_of(&self, e: &VisEntry) -> &'a occult_spatial::OctreeNode {
+    fn node_of(&self, e: &VisEntry) -> &'a occult_spatial::octree_hybrid::OctreeNode {
         let octrees: &'a [Option<HybridOctree>] = self.octrees;
         match &octrees[e.dag_node.index()] {
             Some(o) => &o.nodes()[e.octree_node as usize],

@@ -1,0 +1,314 @@
+//! `lzb` (local z-buffering, Han & Zeiger) against `zbuffer`: every conservative configuration
+//! bit-identical over every generator (50 random views each) and over whole camera paths, and on
+//! the cases where rays and the rasterizer disagree (pixel centres on shared edges, coplanar and
+//! near-coplanar triangles); the naive ray-casting mode measured, not held identical; bad
+//! parameters refused.
+
+use std::sync::Arc;
+
+use occult_bench::invariants::{assert_identical_on_every_generator, assert_identical_on_path};
+use occult_core::{Affine3A, Camera, Instance, Mesh, Scene, SceneBuilder, Vec3, View};
+use occult_raster::Frame;
+use occult_render::{AlgoSpec, Algorithm, RenderError, RenderOptions};
+
+fn spec(s: &str) -> AlgoSpec {
+    AlgoSpec::parse(s).unwrap()
+}
+
+#[test]
+fn default_is_identical_on_every_generator() {
+    assert_identical_on_every_generator(&spec("lzb"), 1);
+}
+
+#[test]
+fn lazy_all_triangles_static_plane_is_identical_on_every_generator() {
+    assert_identical_on_every_generator(&spec("lzb:select=all,plane=static,plane_fraction=0.15,oor=off"), 2);
+}
+
+#[test]
+fn static_occluders_small_leaves_is_identical_on_every_generator() {
+    assert_identical_on_every_generator(&spec("lzb:select=static,k=1,leaf=8,depth=6,coherence=off"), 0);
+}
+
+#[test]
+fn dynamic_selection_every_frame_plane_is_identical_on_every_generator() {
+    assert_identical_on_every_generator(
+        &spec("lzb:select=dynamic,base_cos=0.9,plane_reuse=1,coarse_rays=16,group_leaf=1"),
+        1,
+    );
+}
+
+#[test]
+fn hybrid_everything_behind_the_plane_is_identical_on_every_generator() {
+    // A tiny plane: almost nothing near, almost every pixel goes to the rays.
+    assert_identical_on_every_generator(&spec("lzb:plane=static,plane_fraction=0.0001,leaf=32"), 2);
+}
+
+#[test]
+fn identical_on_paths() {
+    for algo in [
+        "lzb",
+        "lzb:select=all,oor=off",
+        "lzb:plane=static,plane_fraction=0.3,select=static",
+    ] {
+        assert_identical_on_path(&spec(algo), "city:blocks=3,detail=1", "circle:12", 128, 96);
+        assert_identical_on_path(&spec(algo), "forest:trees=2,patches=2", "flyover:8", 96, 64);
+        assert_identical_on_path(
+            &spec(algo),
+            "plant:units=1,floors=2,pipes=8,sides=6",
+            "street:8",
+            96,
+            64,
+        );
+    }
+}
+
+/// A camera looking down `-z` at the plane `z = 0` from `z = 10`, 96×64 pixels, and the world
+/// size of one pixel on that plane.
+fn straight_view() -> (View, f32) {
+    let cam = Camera {
+        near: 0.5,
+        far: 100.0,
+        ..Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO)
+    };
+    let px = 2.0 * 10.0 * (30f32).to_radians().tan() / 64.0;
+    (View::new(cam, 96, 64).unwrap(), px)
+}
+
+/// A grid of `n × n` quads (2 triangles each) on `z = z`, whose vertices project exactly onto
+/// pixel centres (every pixel centre on a row or column of vertices lies on a shared edge), the
+/// diagonals through pixel centres too.
+fn edge_grid(n: u32, px: f32, z: f32, offset: Vec3) -> Mesh {
+    let mut p = Vec::new();
+    let mut t = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            // Pixel centres lie at half-pixel positions from the centre of an even-sized view.
+            let x = (i as f32 - n as f32 / 2.0 + 0.5) * px * 2.0;
+            let y = (j as f32 - n as f32 / 2.0 + 0.5) * px * 2.0;
+            p.push(Vec3::new(x, y, z) + offset);
+        }
+    }
+    let w = n + 1;
+    for j in 0..n {
+        for i in 0..n {
+            let a = j * w + i;
+            t.push([a, a + 1, a + w + 1]);
+            t.push([a, a + w + 1, a + w]);
+        }
+    }
+    Mesh::new(p, t).unwrap()
+}
+
+fn check_scene(scene: Scene, views: &[View], algos: &[&str]) {
+    let scene = Arc::new(scene);
+    let mut rays = 0;
+    let o = RenderOptions::default();
+    let mut z = Algorithm::ZBUFFER.build(scene.clone(), &o).unwrap();
+    for algo in algos {
+        let mut r = spec(algo).build(scene.clone(), &o).unwrap();
+        for (k, view) in views.iter().enumerate() {
+            let (mut a, mut b) = (
+                Frame::new(view.width(), view.height()).unwrap(),
+                Frame::new(view.width(), view.height()).unwrap(),
+            );
+            z.render(view, &mut a).unwrap();
+            let stats = r.render(view, &mut b).unwrap();
+            assert!(a.covered_pixel_count() > 0);
+            assert!(
+                a.same_visibility(&b),
+                "{algo}, view {k}: {} pixels differ",
+                a.differing_item_count(&b)
+            );
+            rays += stats.rays_cast;
+        }
+    }
+    // The cases are about rays: they must have been cast.
+    assert!(rays > 0);
+}
+
+/// Configurations that send (nearly) everything to the rays.
+const RAY_HEAVY: &[&str] = &[
+    "lzb:plane=static,plane_fraction=0.0001",
+    "lzb:plane=static,plane_fraction=0.0001,select=all,oor=off,leaf=1,depth=8",
+    "lzb:plane=static,plane_fraction=0.0001,select=static,k=1,leaf=4",
+    "lzb:plane=dynamic,select=dynamic,base_cos=1,leaf=2",
+];
+
+#[test]
+fn pixel_centres_on_shared_edges() {
+    let (view, px) = straight_view();
+    let mut b = SceneBuilder::new();
+    // Front layer with holes (every other quad removed), a full layer behind it.
+    let front = edge_grid(20, px, 1.0 - 1e-3, Vec3::ZERO);
+    let tris: Vec<[u32; 3]> = front
+        .triangles()
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| (i / 2) % 3 != 1)
+        .map(|(_, t)| *t)
+        .collect();
+    let front = Mesh::new(front.positions().to_vec(), tris).unwrap();
+    let back = edge_grid(24, px, 0.0, Vec3::ZERO);
+    let f = b.add_mesh("front", front).unwrap();
+    let k = b.add_mesh("back", back).unwrap();
+    let root = b
+        .add_group(
+            "both",
+            vec![
+                Instance {
+                    parent_from_child: Affine3A::IDENTITY,
+                    child: f,
+                },
+                Instance {
+                    parent_from_child: Affine3A::IDENTITY,
+                    child: k,
+                },
+            ],
+        )
+        .unwrap();
+    // Views shifted by fractions of a pixel, so centres fall on, next to, and between edges.
+    let views: Vec<View> = [0.0, 0.5, 0.25, 1e-4]
+        .iter()
+        .map(|&s| {
+            let mut c = *view.camera();
+            c.eye.x += s * px;
+            c.target.x += s * px;
+            View::new(c, 96, 64).unwrap()
+        })
+        .collect();
+    check_scene(b.build(root).unwrap(), &views, RAY_HEAVY);
+}
+
+#[test]
+fn coplanar_and_near_coplanar_layers() {
+    let (view, px) = straight_view();
+    let mut b = SceneBuilder::new();
+    let grid = b.add_mesh("grid", edge_grid(16, px * 1.37, 0.0, Vec3::ZERO)).unwrap();
+    // The same grid three times: exactly coplanar (ties broken by item id), and shifted by a
+    // depth below the rays' resolution, in front and behind, and slid sideways by a fraction
+    // of a pixel (edges crossing).
+    let place = |t: Vec3| Instance {
+        parent_from_child: Affine3A::from_translation(t),
+        child: grid,
+    };
+    let root = b
+        .add_group(
+            "layers",
+            vec![
+                place(Vec3::ZERO),
+                place(Vec3::ZERO),
+                place(Vec3::new(0.0, 0.0, 1e-6)),
+                place(Vec3::new(0.0, 0.0, -1e-6)),
+                place(Vec3::new(px * 0.3, px * 0.1, 2e-6)),
+            ],
+        )
+        .unwrap();
+    let mut tilted = *view.camera();
+    tilted.eye = Vec3::new(3.0, -2.0, 9.0);
+    let views = [view, View::new(tilted, 96, 64).unwrap()];
+    check_scene(b.build(root).unwrap(), &views, RAY_HEAVY);
+}
+
+#[test]
+fn naive_mode_is_approximate_and_measured() {
+    let built = occult_scenes::spec::parse_spec("city:blocks=2,detail=2")
+        .unwrap()
+        .build()
+        .unwrap();
+    let scene = Arc::new(built.scene);
+    let o = RenderOptions::default();
+    let mut z = Algorithm::ZBUFFER.build(scene.clone(), &o).unwrap();
+    let mut r = spec("lzb:mode=naive").build(scene.clone(), &o).unwrap();
+    assert!(!r.is_conservative());
+    assert!(spec("lzb").build(scene.clone(), &o).unwrap().is_conservative());
+    let view = View::new(built.default_camera, 128, 96).unwrap();
+    let (mut a, mut b) = (Frame::new(128, 96).unwrap(), Frame::new(128, 96).unwrap());
+    z.render(&view, &mut a).unwrap();
+    let stats = r.render(&view, &mut b).unwrap();
+    assert!(stats.rays_cast > 0);
+    let differing = a.differing_item_count(&b);
+    // First hits name the right triangle almost everywhere (edges and depth rounding aside).
+    assert!(
+        differing * 20 < a.covered_pixel_count(),
+        "{differing} of {} pixels",
+        a.covered_pixel_count()
+    );
+}
+
+#[test]
+fn bad_parameters_are_errors() {
+    let scene = Arc::new(
+        occult_scenes::spec::parse_spec("terrain:g=8")
+            .unwrap()
+            .build()
+            .unwrap()
+            .scene,
+    );
+    let o = RenderOptions::default();
+    for (bad, names) in [
+        ("lzb:leaf=0", "leaf"),
+        ("lzb:k=0", "k"),
+        ("lzb:plane_fraction=0", "plane_fraction"),
+        ("lzb:plane_fraction=1.5", "plane_fraction"),
+        ("lzb:plane_fraction=-0.2", "plane_fraction"),
+        ("lzb:coarse_rays=0", "coarse_rays"),
+        ("lzb:depth=25", "depth"),
+        ("lzb:group_leaf=0", "group_leaf"),
+        ("lzb:base_cos=2", "base_cos"),
+        ("lzb:plane_reuse=0", "plane_reuse"),
+        ("lzb:select=some", "select"),
+        ("lzb:mode=fast", "mode"),
+        ("lzb:leaf=many", "leaf"),
+    ] {
+        match spec(bad).build(scene.clone(), &o) {
+            Err(RenderError::BadParameter(m)) => assert!(m.contains(names), "{bad}: {m}"),
+            Err(e) => panic!("{bad}: unexpected {e}"),
+            Ok(_) => panic!("{bad} accepted"),
+        }
+    }
+    // An octree that would explode (tiny leaves, deep) is refused, not built.
+    let big = Arc::new(
+        occult_scenes::spec::parse_spec("terrain:g=64")
+            .unwrap()
+            .build()
+            .unwrap()
+            .scene,
+    );
+    assert!(matches!(
+        spec("lzb:leaf=1,depth=24").build(big, &o),
+        Err(RenderError::BadParameter(_))
+    ));
+}
+
+#[test]
+fn counters_and_multithreaded_pvl_match_single_threaded() {
+    let built = occult_scenes::spec::parse_spec("city:blocks=3,detail=2")
+        .unwrap()
+        .build()
+        .unwrap();
+    let scene = Arc::new(built.scene);
+    let view = View::new(built.default_camera, 160, 120).unwrap();
+    let mut counts = Vec::new();
+    for threads in [1, 3] {
+        let o = RenderOptions {
+            raster: occult_raster::RasterConfig {
+                threads,
+                ..Default::default()
+            },
+        };
+        let mut r = spec("lzb:coherence=off").build(scene.clone(), &o).unwrap();
+        let mut f = Frame::new(160, 120).unwrap();
+        let s = r.render(&view, &mut f).unwrap();
+        assert_eq!(s.rays_cast, s.counters.get("rays"));
+        assert!(s.counters.get("ray_tri_tests") > 0 && s.nodes_visited > 0);
+        assert!(s.phases.get(occult_render::Phase::Rays) > std::time::Duration::ZERO);
+        counts.push((
+            s.counters.get("pvl_triangles"),
+            s.counters.get("pvl_leaves"),
+            s.rays_cast,
+        ));
+    }
+    // Without coherence each ray's path is independent of the split: the merged PVL is the same.
+    assert_eq!(counts[0], counts[1]);
+}

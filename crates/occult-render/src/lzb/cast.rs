@@ -1,0 +1,394 @@
+//! The ray caster of local z-buffering: lazy (§III.A) and selective (§III.B) ray casting that
+//! records ray paths into the PVL, naive ray casting (§II) that finds first hits, and the
+//! coherence start (§III.D).
+
+use std::collections::{HashMap, HashSet};
+use std::hash::BuildHasherDefault;
+
+use occult_core::{compose, intersect_ray_triangle, Affine3A, ItemId, Mat4, NodeId, Ray, Vec3, Vec4};
+use occult_spatial::{traverse, FatRay, TraversalCounters};
+
+use super::{Accel, FrameCtx, Lzb, Mode, Selection};
+
+/// A fast hasher for integer keys (Fx, as in rustc).
+#[derive(Default, Clone, Copy)]
+pub(super) struct FxHasher(u64);
+
+impl std::hash::Hasher for FxHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(b as u64);
+        }
+    }
+    fn write_u32(&mut self, i: u32) {
+        self.write_u64(i as u64);
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+}
+
+pub(super) type FxBuild = BuildHasherDefault<FxHasher>;
+
+/// A mesh instance met during a frame: names its triangles' items and places them.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct InstanceRec {
+    pub node: NodeId,
+    pub world_from_object: Affine3A,
+}
+
+/// Relative depth margin past a robust hit (§III.A's "current leaf", made conservative): the
+/// rasterizer's winner at the pixel may lie slightly behind the ray's hit by rounding.
+pub(super) const DEPTH_EPS: f32 = 2e-3;
+/// A robust hit covers the pixel centre by at least this many pixels on every edge.
+const EDGE_MARGIN_PX: f64 = 1.0 / 32.0;
+/// Absolute margin of a fat ray, relative to the magnitude of the coordinates.
+const ABS_EPS: f32 = 1e-5;
+
+/// What a ray's terminating hit was, for the next ray's coherence start (§III.D).
+#[derive(Clone, Copy)]
+struct LastHit {
+    node: NodeId,
+    leaf: u32,
+    object_from_world: Affine3A,
+    clip_from_object: Mat4,
+}
+
+/// Per-thread state of the ray caster.
+pub(super) struct Caster<'a> {
+    lzb: &'a Lzb,
+    ctx: &'a FrameCtx,
+    /// PVL entries `(instance first item, leaf)`, without duplicates.
+    pub pvl: HashSet<(ItemId, u32), FxBuild>,
+    /// The instances the PVL names.
+    pub instances: HashMap<ItemId, InstanceRec, FxBuild>,
+    /// First hits of naive rays `(pixel index, depth, item)`.
+    pub hits: Vec<(u32, f32, ItemId)>,
+    pub counters: TraversalCounters,
+    pub rays: u64,
+    pub tri_tests: u64,
+    pub coherent_starts: u64,
+    /// Rays that ended at a robust hit (the others ran to the far plane or out of the scene).
+    pub resolved: u64,
+    visited: Vec<(u32, u32)>,
+    serial: u32,
+    last: Option<LastHit>,
+    /// The hit that ended the current ray.
+    found: Option<LastHit>,
+    pixel: (f32, f32),
+    best: Option<(f32, ItemId)>,
+    naive: bool,
+    /// Second pass: record leaves, test nothing.
+    recording: bool,
+}
+
+impl<'a> Caster<'a> {
+    pub fn new(lzb: &'a Lzb, ctx: &'a FrameCtx, naive: bool) -> Self {
+        Self {
+            lzb,
+            ctx,
+            pvl: HashSet::default(),
+            instances: HashMap::default(),
+            hits: Vec::new(),
+            counters: TraversalCounters::default(),
+            rays: 0,
+            tri_tests: 0,
+            coherent_starts: 0,
+            resolved: 0,
+            visited: Vec::new(),
+            serial: 0,
+            last: None,
+            found: None,
+            pixel: (0.0, 0.0),
+            best: None,
+            naive,
+            recording: false,
+        }
+    }
+
+    /// Casts the ray of pixel `(x, y)`: lazy/selective rays record their path into the PVL
+    /// (§III.A/B); naive rays (§II) return their first hit `(ray parameter = view distance, item)`.
+    pub fn cast(&mut self, x: u32, y: u32) -> Option<(f32, ItemId)> {
+        self.rays += 1;
+        let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
+        self.pixel = (px, py);
+        let dir = self.ctx.pixel_direction(px, py);
+        let origin = self.ctx.eye;
+        self.visited.clear();
+        self.best = None;
+        self.found = None;
+        // Nothing beyond the far plane is drawn: the path stops there.
+        let mut t_limit = self.ctx.far * (1.0 + DEPTH_EPS);
+        let spread = if self.naive { 0.0 } else { self.ctx.spread };
+        if self.lzb.opts.coherence && !self.naive {
+            if let Some(h) = self.last {
+                // §III.D: start from the neighbour's result: its hit leaf, tested first, bounds
+                // the whole traversal that follows.
+                let o = h.object_from_world.transform_point3(origin);
+                let d = h.object_from_world.transform_vector3(dir);
+                if let Some(t) = self.test_leaf(h.node, h.leaf, o, d, &h.clip_from_object, t_limit, 0) {
+                    t_limit = t * (1.0 + DEPTH_EPS);
+                    self.found = Some(h);
+                    self.coherent_starts += 1;
+                }
+            }
+        }
+        // Pass 1 finds the bound (the first robust hit); pass 2 records the path up to it.
+        // Deviation: one pass that records as it goes would record, in an instance met early
+        // whose box starts near, everything up to that instance's own hit, before an instance
+        // met later (a wall) lowers the bound.
+        self.recording = false;
+        let root = self.lzb.scene.root();
+        self.visit(
+            root,
+            origin,
+            dir,
+            spread,
+            &Affine3A::IDENTITY,
+            &Affine3A::IDENTITY,
+            0,
+            &mut t_limit,
+        );
+        if !self.naive && self.lzb.opts.mode == Mode::Lazy {
+            self.recording = true;
+            self.visited.clear();
+            self.visit(
+                root,
+                origin,
+                dir,
+                spread,
+                &Affine3A::IDENTITY,
+                &Affine3A::IDENTITY,
+                0,
+                &mut t_limit,
+            );
+        }
+        self.last = self.found;
+        self.resolved += self.found.is_some() as u64;
+        self.best
+    }
+
+    /// Tests the candidate triangles of mesh leaf `leaf` (per the selection, §III.B) and returns
+    /// the nearest robust hit before `t_max` (lazy), or records the nearest hit (naive).
+    #[allow(clippy::too_many_arguments)]
+    fn test_leaf(
+        &mut self,
+        node: NodeId,
+        leaf: u32,
+        o: Vec3,
+        d: Vec3,
+        clip_from_object: &Mat4,
+        t_max: f32,
+        base: ItemId,
+    ) -> Option<f32> {
+        let lzb = self.lzb;
+        let Accel::Mesh {
+            octree,
+            normals,
+            leaf_base,
+            ..
+        } = &lzb.accel[node.index()]
+        else {
+            return None;
+        };
+        let mesh = lzb.scene.node(node).mesh()?;
+        let list = octree.leaf_primitives(leaf);
+        let (list, filter) = if self.naive {
+            (list, false)
+        } else {
+            match lzb.opts.selection {
+                Selection::All => (list, false),
+                // §III.B.1: the k largest triangles (the leaf list is sorted by area).
+                Selection::Static => (&list[..list.len().min(lzb.opts.k)], false),
+                // §III.B.2: visibility = -v·n·area against the leaf's base visibility.
+                Selection::Dynamic => (list, true),
+                // Hybrid: the pre-selected occluders, filtered by visibility.
+                Selection::Hybrid => (&list[..list.len().min(lzb.opts.k)], true),
+            }
+        };
+        let dn = d.normalize();
+        let base_vis = leaf_base[leaf as usize];
+        let ray = Ray {
+            origin: o,
+            direction: d,
+            t_min: 0.0,
+            t_max,
+        };
+        let mut best: Option<f32> = None;
+        for &t in list {
+            // Deviation: both faces are drawn unless back faces are culled, so |v·n| (not -v·n).
+            if filter && normals[t as usize].dot(dn).abs() <= base_vis {
+                continue;
+            }
+            self.tri_tests += 1;
+            let [a, b, c] = mesh.triangle_positions(t as usize);
+            let Some(hit) = intersect_ray_triangle(&ray, a, b, c) else {
+                continue;
+            };
+            if best.is_some_and(|bt| hit.t >= bt) {
+                continue;
+            }
+            if self.naive {
+                if self.best.is_none_or(|(bt, _)| hit.t < bt) {
+                    self.best = Some((hit.t, base + t as u64));
+                }
+                best = Some(hit.t);
+            } else if self.robust(clip_from_object, [a, b, c], hit.t) {
+                best = Some(hit.t);
+            }
+        }
+        best
+    }
+
+    /// True when the rasterizer surely draws this triangle at the current pixel centre: every
+    /// corner well in front of the near plane, the centre inside every projected edge by
+    /// [`EDGE_MARGIN_PX`] (vertex snapping moves edges by at most 1/256 pixel), facing right when
+    /// back faces are culled, and the hit nearer than the far plane.
+    fn robust(&self, clip_from_object: &Mat4, tri: [Vec3; 3], t: f32) -> bool {
+        let ctx = self.ctx;
+        if t.is_nan() || t * (1.0 + DEPTH_EPS) >= ctx.far {
+            return false;
+        }
+        let mut s = [(0f64, 0f64); 3];
+        for (k, p) in tri.iter().enumerate() {
+            let c: Vec4 = *clip_from_object * p.extend(1.0);
+            if !c.is_finite() || c.w <= ctx.near * 1.01 {
+                return false;
+            }
+            let x = (c.x / c.w * 0.5 + 0.5) as f64 * ctx.width;
+            let y = (0.5 - c.y / c.w * 0.5) as f64 * ctx.height;
+            if x.abs() > 16384.0 || y.abs() > 16384.0 {
+                return false;
+            }
+            s[k] = (x, y);
+        }
+        let (px, py) = (self.pixel.0 as f64, self.pixel.1 as f64);
+        let area = (s[1].0 - s[0].0) * (s[2].1 - s[0].1) - (s[2].0 - s[0].0) * (s[1].1 - s[0].1);
+        if area == 0.0 || !area.is_finite() {
+            return false;
+        }
+        // On screen (y down) a counter-clockwise front face has negative area.
+        if ctx.cull_backfaces && area > 0.0 {
+            return false;
+        }
+        (0..3).all(|k| {
+            let (a, b) = (s[k], s[(k + 1) % 3]);
+            let e = (b.0 - a.0) * (py - a.1) - (b.1 - a.1) * (px - a.0);
+            let len = ((b.0 - a.0).powi(2) + (b.1 - a.1).powi(2)).sqrt();
+            e * area.signum() / len >= EDGE_MARGIN_PX
+        })
+    }
+
+    /// Casts the ray `o + t·d` (node space) through node `id` placed by `world_from_node`.
+    #[allow(clippy::too_many_arguments)]
+    fn visit(
+        &mut self,
+        id: NodeId,
+        o: Vec3,
+        d: Vec3,
+        spread: f32,
+        world_from_node: &Affine3A,
+        node_from_world: &Affine3A,
+        base: ItemId,
+        t_limit: &mut f32,
+    ) {
+        let lzb = self.lzb;
+        let margin =
+            |b: &occult_core::Aabb| ABS_EPS * (b.min.abs().max(b.max.abs()).max_element() + o.abs().max_element());
+        let mut counters = TraversalCounters::default();
+        match &lzb.accel[id.index()] {
+            Accel::Empty => {}
+            Accel::Mesh { octree, tight, .. } => {
+                let ray = FatRay::new(o, d, spread, if self.naive { 0.0 } else { margin(&octree.bounds()) });
+                let clip = self.ctx.view.clip_from_object(world_from_node);
+                let w_row = row_w(&clip);
+                let record = self.recording;
+                let mut recorded = false;
+                traverse(octree, &ray, t_limit, &mut counters, |leaf, _, _, t_limit| {
+                    // Deviation: the leaf's tight box, not its octant, must meet the cone.
+                    let tb = &tight[leaf as usize];
+                    if !ray.enter(tb).is_some_and(|(e, _)| e <= *t_limit) {
+                        return;
+                    }
+                    // §III.A: every leaf on the path up to (and past, by the margin) the hit is
+                    // recorded; near leaves are drawn already (step 3).
+                    if record {
+                        if !self.ctx.is_near(w_row, tb) {
+                            self.pvl.insert((base, leaf));
+                            recorded = true;
+                        }
+                        return;
+                    }
+                    if let Some(t) = self.test_leaf(id, leaf, o, d, &clip, *t_limit, base) {
+                        if self.naive {
+                            *t_limit = t;
+                        } else if t * (1.0 + DEPTH_EPS) < *t_limit {
+                            *t_limit = t * (1.0 + DEPTH_EPS);
+                            self.found = Some(LastHit {
+                                node: id,
+                                leaf,
+                                object_from_world: *node_from_world,
+                                clip_from_object: clip,
+                            });
+                        }
+                    }
+                });
+                if recorded {
+                    self.instances.entry(base).or_insert(InstanceRec {
+                        node: id,
+                        world_from_object: *world_from_node,
+                    });
+                }
+            }
+            Accel::Group {
+                octree,
+                bounds,
+                child_from_parent,
+                stretch,
+            } => {
+                let node = lzb.scene.node(id);
+                let instances = node.instances();
+                self.serial += 1;
+                let serial = self.serial;
+                let ray = FatRay::new(o, d, spread, if self.naive { 0.0 } else { margin(&octree.bounds()) });
+                traverse(octree, &ray, t_limit, &mut counters, |leaf, _, _, t_limit| {
+                    for &i in octree.leaf_primitives(leaf) {
+                        // Mailbox: an instance spanning several leaves is cast once per ray.
+                        if self.visited.contains(&(serial, i)) {
+                            continue;
+                        }
+                        self.visited.push((serial, i));
+                        let i = i as usize;
+                        if !ray.enter(&bounds[i]).is_some_and(|(e, _)| e <= *t_limit) {
+                            continue;
+                        }
+                        let cfp = &child_from_parent[i];
+                        let world_from_child = compose(world_from_node, &instances[i].parent_from_child);
+                        let child_from_world = *cfp * *node_from_world;
+                        self.visit(
+                            instances[i].child,
+                            cfp.transform_point3(o),
+                            cfp.transform_vector3(d),
+                            spread * stretch[i],
+                            &world_from_child,
+                            &child_from_world,
+                            base + node.item_offset(i),
+                            t_limit,
+                        );
+                    }
+                });
+            }
+        }
+        self.counters.nodes_visited += counters.nodes_visited;
+        self.counters.leaves_visited += counters.leaves_visited;
+    }
+}
+
+/// The row of `clip_from_object` giving clip `w` (the view distance).
+#[inline]
+pub(super) fn row_w(m: &Mat4) -> Vec4 {
+    Vec4::new(m.x_axis.w, m.y_axis.w, m.z_axis.w, m.w_axis.w)
+}

@@ -1,0 +1,157 @@
+//! Object-oriented ray casting (§III.C): the screen polygon of a projected box, and the
+//! done-mask of pixels that get a ray.
+
+use occult_core::{Aabb, Mat4, Vec2, Vec4};
+
+/// Margin by which a polygon is grown, in pixels: the rasterizer snaps vertices to 1/256 pixel,
+/// and a triangle inside the box covers only pixel centres within that of the box's projection.
+const GROW_PX: f64 = 0.5;
+
+/// The screen projection of a box: a convex polygon of 4, 5 or 6 sides (the hull of the
+/// projected corners), or the whole screen when a corner lies near or behind the eye.
+pub(super) enum Projection {
+    /// Counter-clockwise (in y-down screen space, clockwise visually) hull and its bounding
+    /// pixel rectangle `[x0, x1] × [y0, y1]` (inclusive, clamped to the screen).
+    Polygon { hull: Vec<Vec2>, rect: [u32; 4] },
+    /// Covers everything.
+    Screen,
+    /// Off screen.
+    Nothing,
+}
+
+/// Projects `b` (object space) with `clip_from_object` onto a `width × height` screen.
+/// §III.C: the base corner is projected once and the other corners by adding the projected
+/// edge offset vectors (clip space is linear in the corner).
+pub(super) fn project_box(clip_from_object: &Mat4, b: &Aabb, width: u32, height: u32, near: f32) -> Projection {
+    let base = *clip_from_object * b.min.extend(1.0);
+    let s = b.size();
+    let ex = clip_from_object.x_axis * s.x;
+    let ey = clip_from_object.y_axis * s.y;
+    let ez = clip_from_object.z_axis * s.z;
+    let mut pts = [Vec2::ZERO; 8];
+    for (i, p) in pts.iter_mut().enumerate() {
+        let mut c: Vec4 = base;
+        if i & 1 != 0 {
+            c += ex;
+        }
+        if i & 2 != 0 {
+            c += ey;
+        }
+        if i & 4 != 0 {
+            c += ez;
+        }
+        // A corner near or behind the eye: the projection is unbounded.
+        if !c.is_finite() || c.w <= near * 0.5 {
+            return Projection::Screen;
+        }
+        *p = Vec2::new(
+            (c.x / c.w * 0.5 + 0.5) * width as f32,
+            (0.5 - c.y / c.w * 0.5) * height as f32,
+        );
+    }
+    let lo = pts.iter().fold(Vec2::splat(f32::INFINITY), |a, &p| a.min(p)) - GROW_PX as f32;
+    let hi = pts.iter().fold(Vec2::splat(f32::NEG_INFINITY), |a, &p| a.max(p)) + GROW_PX as f32;
+    // Pixel centres x + 0.5 in [lo, hi].
+    let x0 = (lo.x - 0.5).ceil().max(0.0);
+    let y0 = (lo.y - 0.5).ceil().max(0.0);
+    let x1 = (hi.x - 0.5).floor().min(width as f32 - 1.0);
+    let y1 = (hi.y - 0.5).floor().min(height as f32 - 1.0);
+    if x0 > x1 || y0 > y1 {
+        return Projection::Nothing;
+    }
+    Projection::Polygon {
+        hull: convex_hull(&mut pts),
+        rect: [x0 as u32, x1 as u32, y0 as u32, y1 as u32],
+    }
+}
+
+/// Andrew's monotone chain; collinear points dropped.
+fn convex_hull(pts: &mut [Vec2]) -> Vec<Vec2> {
+    pts.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    let cross =
+        |o: Vec2, a: Vec2, b: Vec2| (a.x - o.x) as f64 * (b.y - o.y) as f64 - (a.y - o.y) as f64 * (b.x - o.x) as f64;
+    let mut hull: Vec<Vec2> = Vec::with_capacity(16);
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &Vec2>> = if pass == 0 {
+            Box::new(pts.iter())
+        } else {
+            Box::new(pts.iter().rev())
+        };
+        for &p in iter {
+            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0 {
+                hull.pop();
+            }
+            hull.push(p);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+/// True when the point is inside the hull grown by [`GROW_PX`]. A degenerate hull (fewer than
+/// 3 points: a box seen edge-on) holds the points within the margin of its segment.
+pub(super) fn inside(hull: &[Vec2], x: f32, y: f32) -> bool {
+    let n = hull.len();
+    if n < 3 {
+        return match n {
+            0 => false,
+            1 => (hull[0] - Vec2::new(x, y)).length() as f64 <= GROW_PX,
+            _ => segment_distance(hull[0], hull[1], Vec2::new(x, y)) <= GROW_PX,
+        };
+    }
+    (0..n).all(|i| {
+        let a = hull[i];
+        let b = hull[(i + 1) % n];
+        let e = (b.x - a.x) as f64 * (y - a.y) as f64 - (b.y - a.y) as f64 * (x - a.x) as f64;
+        let len = ((b - a).length() as f64).max(1e-30);
+        // The hull runs counter-clockwise in (x, y) coordinates: inside is e >= 0.
+        e / len >= -GROW_PX
+    })
+}
+
+fn segment_distance(a: Vec2, b: Vec2, p: Vec2) -> f64 {
+    let ab = b - a;
+    let t = ((p - a).dot(ab) / ab.length_squared().max(1e-30)).clamp(0.0, 1.0);
+    (a + ab * t - p).length() as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use occult_core::{Affine3A, Camera, Vec3, View};
+
+    #[test]
+    fn projected_box_holds_its_projected_points() {
+        let view = View::new(Camera::look_at(Vec3::new(3.0, 2.0, 5.0), Vec3::ZERO), 64, 48).unwrap();
+        let m = view.clip_from_object(&Affine3A::IDENTITY);
+        let b = Aabb::new(Vec3::splat(-0.5), Vec3::new(0.5, 1.0, 0.25));
+        let Projection::Polygon { hull, rect } = project_box(&m, &b, 64, 48, view.camera().near) else {
+            panic!("box in view")
+        };
+        assert!((4..=6).contains(&hull.len()), "{} sides", hull.len());
+        for i in 0..=10 {
+            for j in 0..=10 {
+                for k in 0..=10 {
+                    let p = b.min + b.size() * Vec3::new(i as f32, j as f32, k as f32) / 10.0;
+                    let c = m * p.extend(1.0);
+                    let x = (c.x / c.w * 0.5 + 0.5) * 64.0;
+                    let y = (0.5 - c.y / c.w * 0.5) * 48.0;
+                    assert!(inside(&hull, x, y));
+                    assert!(x >= rect[0] as f32 - 0.5 && x <= rect[1] as f32 + 1.5);
+                }
+            }
+        }
+        assert!(!inside(&hull, -100.0, -100.0));
+    }
+
+    #[test]
+    fn box_around_the_eye_covers_the_screen_and_box_behind_covers_nothing_visible() {
+        let view = View::new(Camera::look_at(Vec3::ZERO, Vec3::new(0.0, 0.0, -1.0)), 64, 48).unwrap();
+        let m = view.clip_from_object(&Affine3A::IDENTITY);
+        let around = Aabb::new(Vec3::splat(-1.0), Vec3::splat(1.0));
+        assert!(matches!(project_box(&m, &around, 64, 48, 0.1), Projection::Screen));
+        let aside = Aabb::new(Vec3::new(100.0, 0.0, -2.0), Vec3::new(101.0, 1.0, -1.0));
+        assert!(matches!(project_box(&m, &aside, 64, 48, 0.1), Projection::Nothing));
+    }
+}
