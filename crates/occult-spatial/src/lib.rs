@@ -16,5 +16,6 @@
 #![deny(missing_docs)]
 
 mod bvh;
+pub mod sample_octree;
 
 pub use bvh::{Bvh, BvhNode};
