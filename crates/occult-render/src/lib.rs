@@ -28,6 +28,7 @@
 
 pub mod compare;
 pub mod frustum;
+pub mod rzb;
 mod stats;
 pub mod zbuffer;
 
