@@ -18,7 +18,7 @@ fn city(c: &mut Criterion) {
     let scene = Arc::new(w.scene);
     let mut group = c.benchmark_group("city_street8_640x480");
     group.sample_size(10);
-    for algo in [Algorithm::Zbuffer, Algorithm::Frustum] {
+    for algo in [Algorithm::ZBUFFER, Algorithm::FRUSTUM] {
         let mut r = algo
             .build(scene.clone(), &RenderOptions::default())
             .expect("renderer builds");

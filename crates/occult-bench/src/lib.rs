@@ -5,6 +5,8 @@
 //! of three sizes, and recorded camera paths on generated scenes.
 #![deny(missing_docs)]
 
+pub mod invariants;
+
 use occult_core::{Camera, Mesh, Scene, Vec3, View};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;

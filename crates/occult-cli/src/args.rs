@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 use occult_core::Vec3;
-use occult_render::Algorithm;
+use occult_render::{AlgoSpec, Algorithm};
 
 /// Render, walk and compare visibility algorithms on huge triangle scenes.
 #[derive(Debug, Parser)]
@@ -30,6 +30,8 @@ pub enum Command {
     Info(InfoArgs),
     /// List the built-in scene generators and their parameters.
     Scenes(ScenesArgs),
+    /// List the renderers and their parameters (set as `name:key=value,key=value`).
+    Algos(AlgosArgs),
 }
 
 /// A frame size.
@@ -54,9 +56,9 @@ pub struct RenderArgs {
     pub view: String,
     #[command(flatten)]
     pub camera: CameraOverrides,
-    /// Renderer (see the list in the error for an unknown one).
-    #[arg(long, value_name = "NAME", default_value = "frustum", value_parser = parse_algorithm)]
-    pub algo: Algorithm,
+    /// Renderer with its settings, `name` or `name:key=value,...` (see `occult algos`).
+    #[arg(long, value_name = "SPEC", default_value = "frustum", value_parser = parse_algorithm)]
+    pub algo: AlgoSpec,
     /// Frame size, WxH pixels.
     #[arg(long, value_name = "WxH", default_value = "1920x1080", value_parser = parse_size)]
     pub size: Size,
@@ -103,9 +105,9 @@ pub struct WalkArgs {
     /// Camera path: `circle:N`, `street:N`, `flyover:N`, `default`, or a JSON file of cameras.
     #[arg(long, value_name = "PATH", default_value = "circle:16")]
     pub path: String,
-    /// Renderer.
-    #[arg(long, value_name = "NAME", default_value = "frustum", value_parser = parse_algorithm)]
-    pub algo: Algorithm,
+    /// Renderer with its settings, `name` or `name:key=value,...` (see `occult algos`).
+    #[arg(long, value_name = "SPEC", default_value = "frustum", value_parser = parse_algorithm)]
+    pub algo: AlgoSpec,
     /// Frame size, WxH pixels.
     #[arg(long, value_name = "WxH", default_value = "640x480", value_parser = parse_size)]
     pub size: Size,
@@ -130,7 +132,9 @@ pub struct CompareArgs {
     /// Camera path: `circle:N`, `street:N`, `flyover:N`, `default`, or a JSON file of cameras.
     #[arg(long, value_name = "PATH", default_value = "circle:16")]
     pub path: String,
-    /// Renderers, comma-separated, or `all`. The reference (zbuffer, or frustum on scenes too
+    /// Renderers, comma-separated, each with its settings, or `all` (every renderer with default
+    /// settings). Settings follow their renderer: `zbuffer,hzb:leaf=64,temporal=off,hzb` is three
+    /// renderers, reported by these labels. The reference (zbuffer, or frustum on scenes too
     /// large for brute force) is always rendered and reported.
     #[arg(long, value_name = "A,B,..", default_value = "all", value_parser = parse_algorithms)]
     pub algos: AlgorithmList,
@@ -154,7 +158,7 @@ pub struct CompareArgs {
 
 /// A parsed `--algos` list (a newtype, because clap treats `Vec` as "many values").
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct AlgorithmList(pub Vec<Algorithm>);
+pub struct AlgorithmList(pub Vec<AlgoSpec>);
 
 /// `occult info`.
 #[derive(Debug, Args)]
@@ -170,6 +174,14 @@ pub struct InfoArgs {
 /// `occult scenes`.
 #[derive(Debug, Args)]
 pub struct ScenesArgs {
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `occult algos`.
+#[derive(Debug, Args)]
+pub struct AlgosArgs {
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
@@ -218,27 +230,22 @@ pub fn parse_threads(s: &str) -> Result<usize, String> {
     }
 }
 
-/// One algorithm name.
-pub fn parse_algorithm(s: &str) -> Result<Algorithm, String> {
-    Algorithm::parse(s.trim()).map_err(|e| e.to_string())
+/// One algorithm spec, `name` or `name:key=value,...`.
+pub fn parse_algorithm(s: &str) -> Result<AlgoSpec, String> {
+    AlgoSpec::parse(s).map_err(|e| e.to_string())
 }
 
-/// Comma-separated algorithm names, or `all`.
+/// Comma-separated algorithm specs (duplicates dropped), or `all`.
 pub fn parse_algorithms(s: &str) -> Result<AlgorithmList, String> {
     if s.trim() == "all" {
-        return Ok(AlgorithmList(Algorithm::ALL.to_vec()));
+        return Ok(AlgorithmList(
+            Algorithm::all().into_iter().map(AlgoSpec::from).collect(),
+        ));
     }
-    let mut list = Vec::new();
-    for name in s.split(',').map(str::trim) {
-        if name.is_empty() {
-            return Err(format!(
-                "empty name in algorithm list '{s}' (known: {})",
-                Algorithm::NAMES.join(", ")
-            ));
-        }
-        let a = parse_algorithm(name)?;
-        if !list.contains(&a) {
-            list.push(a);
+    let mut list: Vec<AlgoSpec> = Vec::new();
+    for spec in AlgoSpec::parse_list(s).map_err(|e| e.to_string())? {
+        if !list.iter().any(|a| a.label() == spec.label()) {
+            list.push(spec);
         }
     }
     Ok(AlgorithmList(list))
@@ -276,11 +283,16 @@ mod tests {
 
     #[test]
     fn algorithm_lists() {
-        assert_eq!(parse_algorithms("all").unwrap().0, Algorithm::ALL);
+        let all: Vec<Algorithm> = parse_algorithms("all").unwrap().0.iter().map(|s| s.algorithm).collect();
+        assert_eq!(all, Algorithm::all());
+        let labels = |s: &str| -> Vec<String> { parse_algorithms(s).unwrap().0.iter().map(|a| a.label()).collect() };
+        assert_eq!(labels("frustum, zbuffer,frustum"), ["frustum", "zbuffer"]);
         assert_eq!(
-            parse_algorithms("frustum, zbuffer,frustum").unwrap().0,
-            [Algorithm::Frustum, Algorithm::Zbuffer]
+            labels("frustum:leaf=8,group_leaf=2,frustum,frustum:leaf=8,group_leaf=2"),
+            ["frustum:leaf=8,group_leaf=2", "frustum"]
         );
+        let e = parse_algorithms("frustum:leaves=8").unwrap_err();
+        assert!(e.contains("leaves") && e.contains("group_leaf"), "{e}");
         let e = parse_algorithms("zbuffer,warp").unwrap_err();
         assert!(e.contains("warp") && e.contains("frustum"), "{e}");
         assert!(parse_algorithms("zbuffer,,frustum").is_err());

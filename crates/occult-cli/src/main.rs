@@ -62,6 +62,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Compare(a) => commands::compare::run(a),
         Command::Info(a) => commands::info::run(a),
         Command::Scenes(a) => commands::scenes::run(a),
+        Command::Algos(a) => commands::algos::run(a),
     }
 }
 

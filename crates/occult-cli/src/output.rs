@@ -144,6 +144,8 @@ pub struct StatsOut {
     pub total_ms: f64,
     /// Time per phase, ms.
     pub phases_ms: BTreeMap<String, f64>,
+    /// The renderer's own counters, by name.
+    pub counters: occult_render::Counters,
 }
 
 impl StatsOut {
@@ -167,11 +169,12 @@ impl StatsOut {
                 .iter()
                 .map(|(p, d)| (phase_name(p), d.as_secs_f64() * 1e3))
                 .collect(),
+            counters: s.counters.clone(),
         }
     }
 
     /// The counters as (name, value), in display order.
-    pub fn counters(&self) -> [(&'static str, u64); 10] {
+    pub fn fixed_counters(&self) -> [(&'static str, u64); 10] {
         [
             ("triangles submitted", self.triangles_submitted),
             ("triangles rasterized", self.triangles_rasterized),
@@ -198,10 +201,13 @@ pub fn phase_name(p: &impl Serialize) -> String {
 /// Frame statistics as text lines: nonzero counters, then the phases.
 pub fn stats_text(s: &StatsOut) -> String {
     let mut out = String::new();
-    for (name, v) in s.counters() {
+    for (name, v) in s.fixed_counters() {
         if v > 0 || name.starts_with("triangles") {
             let _ = writeln!(out, "  {name:<22} {}", count(v as f64));
         }
+    }
+    for &(name, v) in &s.counters.0 {
+        let _ = writeln!(out, "  {name:<22} {}", count(v as f64));
     }
     let phases: Vec<String> = s.phases_ms.iter().map(|(p, ms)| format!("{p} {ms:.2}")).collect();
     let _ = writeln!(

@@ -38,7 +38,7 @@
 //! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).unwrap();
 //! let scene = Arc::new(Scene::from_mesh("tri", mesh).unwrap());
 //! let cameras = [Camera::look_at(Vec3::new(0.3, 0.3, 2.0), Vec3::new(0.3, 0.3, 0.0))];
-//! let config = CompareConfig::new(vec![Algorithm::Frustum], 32, 32);
+//! let config = CompareConfig::new(vec![Algorithm::FRUSTUM], 32, 32);
 //! let report = compare(scene, &cameras, &config, &mut |_| {}).unwrap();
 //! assert_eq!(report.reference, "zbuffer"); // rendered although not requested
 //! assert_eq!(report.renderer("frustum").unwrap().frames_identical, 1);
@@ -59,7 +59,7 @@ use serde::Serialize;
 use thiserror::Error;
 
 use crate::zbuffer::MAX_BRUTE_FORCE_ITEMS;
-use crate::{Algorithm, FrameStats, Phase, RenderError, RenderOptions, Renderer};
+use crate::{AlgoSpec, Algorithm, Counters, FrameStats, Phase, RenderError, RenderOptions, Renderer};
 
 /// Errors of [`compare`].
 #[derive(Debug, Error)]
@@ -82,7 +82,7 @@ pub enum CompareError {
     #[error("building {algorithm}: {source}")]
     Build {
         /// The renderer's name.
-        algorithm: &'static str,
+        algorithm: String,
         /// Why.
         source: RenderError,
     },
@@ -90,7 +90,7 @@ pub enum CompareError {
     #[error("{algorithm}, frame {view_index}: {source}")]
     Render {
         /// The renderer's name.
-        algorithm: &'static str,
+        algorithm: String,
         /// The frame.
         view_index: usize,
         /// Why.
@@ -107,9 +107,10 @@ pub type Result<T, E = CompareError> = std::result::Result<T, E>;
 /// What to compare and how.
 #[derive(Clone, Debug)]
 pub struct CompareConfig {
-    /// Renderers to compare, in report order (duplicates are ignored). The reference is added
-    /// when missing (see the module doc).
-    pub algorithms: Vec<Algorithm>,
+    /// Renderers to compare, in report order (duplicate labels are ignored); several
+    /// configurations of one algorithm are distinct renderers, named by their
+    /// [`AlgoSpec::label`]. The reference is added when missing (see the module doc).
+    pub algorithms: Vec<AlgoSpec>,
     /// Options every renderer is built with (the same for all, as comparisons require).
     pub options: RenderOptions,
     /// Frame width in pixels.
@@ -119,10 +120,11 @@ pub struct CompareConfig {
 }
 
 impl CompareConfig {
-    /// Compares `algorithms` at `width × height` with default options.
-    pub fn new(algorithms: Vec<Algorithm>, width: u32, height: u32) -> Self {
+    /// Compares `algorithms` (plain [`Algorithm`]s or [`AlgoSpec`]s) at `width × height` with
+    /// default options.
+    pub fn new<A: Into<AlgoSpec>>(algorithms: impl IntoIterator<Item = A>, width: u32, height: u32) -> Self {
         Self {
-            algorithms,
+            algorithms: algorithms.into_iter().map(Into::into).collect(),
             options: RenderOptions::default(),
             width,
             height,
@@ -132,11 +134,11 @@ impl CompareConfig {
 
 /// Progress events, for progress bars.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum CompareProgress {
+pub enum CompareProgress<'a> {
     /// About to build renderer `index` of `count`.
     Building {
-        /// The renderer.
-        algorithm: Algorithm,
+        /// The renderer's label.
+        label: &'a str,
         /// Its position, from 0.
         index: usize,
         /// Renderers to build.
@@ -144,8 +146,8 @@ pub enum CompareProgress {
     },
     /// A renderer was built, in `prepare_ms` milliseconds.
     Built {
-        /// The renderer.
-        algorithm: Algorithm,
+        /// The renderer's label.
+        label: &'a str,
         /// Its preprocessing time.
         prepare_ms: f64,
     },
@@ -175,6 +177,8 @@ pub struct FrameRecord {
     /// When not identical: PSNR of the shaded color against the reference's, dB (`None` when
     /// identical, i.e. infinite).
     pub psnr_db: Option<f64>,
+    /// The renderer's own counters ([`FrameStats::counters`]).
+    pub counters: Counters,
 }
 
 /// Mean of a time phase over the frames.
@@ -209,6 +213,8 @@ pub struct MeanStats {
     pub rays_cast: f64,
     /// Mean samples drawn.
     pub samples_drawn: f64,
+    /// Mean of each of the renderer's own counters ([`FrameStats::counters`]), by name.
+    pub counters: std::collections::BTreeMap<&'static str, f64>,
     /// Mean of the renderer's own `FrameStats::total`, ms.
     pub total_ms: f64,
 }
@@ -252,7 +258,7 @@ impl TimeSummary {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct RendererReport {
     /// Command-line name.
-    pub name: &'static str,
+    pub name: String,
     /// True for the reference renderer.
     pub is_reference: bool,
     /// False when it was rendered only because it is the reference.
@@ -325,7 +331,7 @@ pub struct OracleReport {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Skipped {
     /// Its name.
-    pub name: &'static str,
+    pub name: String,
     /// Why.
     pub reason: String,
 }
@@ -346,7 +352,7 @@ pub struct CompareReport {
     /// Rasterizer worker threads.
     pub threads: usize,
     /// Name of the reference renderer.
-    pub reference: &'static str,
+    pub reference: String,
     /// Why that one.
     pub reference_note: String,
     /// The oracle.
@@ -369,7 +375,8 @@ impl CompareReport {
 
 /// Per-renderer state during the run.
 struct Contestant {
-    algorithm: Algorithm,
+    spec: AlgoSpec,
+    label: String,
     requested: bool,
     renderer: Box<dyn Renderer>,
     frame: Frame,
@@ -410,33 +417,34 @@ pub fn compare(
     // Choose the reference and the line-up.
     let brute_force_ok = scene.item_count() <= MAX_BRUTE_FORCE_ITEMS;
     let (reference, reference_note) = if brute_force_ok {
-        let note = if config.algorithms.contains(&Algorithm::Zbuffer) {
+        let note = if config.algorithms.iter().any(|s| s.label() == "zbuffer") {
             "zbuffer: brute force, the ground truth"
         } else {
             "zbuffer: brute force, the ground truth (not requested; rendered as the reference)"
         };
-        (Algorithm::Zbuffer, note.to_string())
+        (AlgoSpec::from(Algorithm::ZBUFFER), note.to_string())
     } else {
         let note = format!(
             "frustum: the scene has {} triangle instances, more than zbuffer accepts ({MAX_BRUTE_FORCE_ITEMS}); \
              frustum culling removes only what lies outside the view, so its frames equal zbuffer's",
             scene.item_count()
         );
-        (Algorithm::Frustum, note)
+        (AlgoSpec::from(Algorithm::FRUSTUM), note)
     };
+    let reference_label = reference.label();
     let mut skipped = Vec::new();
-    let mut lineup: Vec<(Algorithm, bool)> = Vec::new();
-    if !config.algorithms.contains(&reference) {
+    let mut lineup: Vec<(AlgoSpec, bool)> = Vec::new();
+    if !config.algorithms.iter().any(|s| s.label() == reference_label) {
         lineup.push((reference, false));
     }
     let mut seen = HashSet::new();
-    for &a in &config.algorithms {
-        if !seen.insert(a) {
+    for a in &config.algorithms {
+        if !seen.insert(a.label()) {
             continue;
         }
-        if a == Algorithm::Zbuffer && !brute_force_ok {
+        if a.algorithm == Algorithm::ZBUFFER && !brute_force_ok {
             skipped.push(Skipped {
-                name: a.name(),
+                name: a.label(),
                 reason: format!(
                     "the scene has {} triangle instances, more than brute force accepts ({MAX_BRUTE_FORCE_ITEMS})",
                     scene.item_count()
@@ -444,28 +452,34 @@ pub fn compare(
             });
             continue;
         }
-        lineup.push((a, true));
+        lineup.push((a.clone(), true));
     }
 
     // Build (preprocessing, timed).
     let mut contestants = Vec::with_capacity(lineup.len());
-    for (index, &(algorithm, requested)) in lineup.iter().enumerate() {
+    let count = lineup.len();
+    for (index, (spec, requested)) in lineup.into_iter().enumerate() {
+        let label = spec.label();
         progress(CompareProgress::Building {
-            algorithm,
+            label: &label,
             index,
-            count: lineup.len(),
+            count,
         });
         let t = Instant::now();
-        let renderer = algorithm
+        let renderer = spec
             .build(Arc::clone(&scene), &config.options)
             .map_err(|source| CompareError::Build {
-                algorithm: algorithm.name(),
+                algorithm: label.clone(),
                 source,
             })?;
         let prepare_ms = ms(t.elapsed());
-        progress(CompareProgress::Built { algorithm, prepare_ms });
+        progress(CompareProgress::Built {
+            label: &label,
+            prepare_ms,
+        });
         contestants.push(Contestant {
-            algorithm,
+            spec,
+            label,
             requested,
             memory_bytes_after_build: renderer.memory_bytes(),
             renderer,
@@ -477,7 +491,7 @@ pub fn compare(
     }
     let reference_index = contestants
         .iter()
-        .position(|c| c.algorithm == reference)
+        .position(|c| c.label == reference_label)
         .expect("the reference is always in the line-up");
 
     // Render, interleaved.
@@ -497,7 +511,7 @@ pub fn compare(
                 .renderer
                 .render(view, &mut c.frame)
                 .map_err(|source| CompareError::Render {
-                    algorithm: c.algorithm.name(),
+                    algorithm: c.label.clone(),
                     view_index,
                     source,
                 })?;
@@ -506,6 +520,7 @@ pub fn compare(
                 time_ms,
                 triangles_submitted: stats.triangles_submitted,
                 triangles_rasterized: stats.triangles_rasterized,
+                counters: stats.counters.clone(),
                 ..FrameRecord::default()
             });
             c.stats.push(stats);
@@ -556,7 +571,7 @@ pub fn compare(
     let oracle_time = TimeSummary::of(&oracle_times);
     let zbuffer_mean = contestants
         .iter()
-        .find(|c| c.algorithm == Algorithm::Zbuffer)
+        .find(|c| c.spec.algorithm == Algorithm::ZBUFFER)
         .map(|c| TimeSummary::of(&c.records.iter().map(|r| r.time_ms).collect::<Vec<_>>()).mean_ms);
     let visible_total: u64 = visible_counts.iter().sum();
     let frames = views.len();
@@ -569,7 +584,7 @@ pub fn compare(
             let ratio = |num: f64, den: f64| (den > 0.0 && num.is_finite()).then(|| num / den);
             let errors: Vec<f64> = c.records.iter().map(|r| r.item_error.unwrap_or(0.0)).collect();
             RendererReport {
-                name: c.algorithm.name(),
+                name: c.label,
                 is_reference: i == reference_index,
                 requested: c.requested,
                 conservative: c.renderer.is_conservative(),
@@ -606,7 +621,7 @@ pub fn compare(
             0 => rayon::current_num_threads(),
             n => n,
         },
-        reference: reference.name(),
+        reference: reference_label,
         reference_note,
         oracle: OracleReport {
             mean_ms: oracle_time.mean_ms,
@@ -740,6 +755,16 @@ fn mean_stats(stats: &[FrameStats]) -> MeanStats {
         rects_culled: m(|s| s.rects_culled),
         rays_cast: m(|s| s.rays_cast),
         samples_drawn: m(|s| s.samples_drawn),
+        counters: {
+            let mut sums = std::collections::BTreeMap::new();
+            for s in stats {
+                for &(k, v) in &s.counters.0 {
+                    *sums.entry(k).or_insert(0.0) += v as f64;
+                }
+            }
+            sums.values_mut().for_each(|v| *v /= n.max(1) as f64);
+            sums
+        },
         total_ms: mean(stats.iter().map(|s| ms(s.total)), n),
     }
 }
@@ -839,7 +864,7 @@ mod tests {
     #[test]
     fn frustum_is_identical_to_zbuffer_on_every_frame() {
         let cameras = circle(6);
-        let report = run(vec![Algorithm::Zbuffer, Algorithm::Frustum], &cameras).unwrap();
+        let report = run(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], &cameras).unwrap();
         assert_eq!(report.reference, "zbuffer");
         assert_eq!(report.frames, 6);
         for r in &report.renderers {
@@ -862,11 +887,11 @@ mod tests {
     fn report_numbers_are_consistent() {
         let cameras = circle(5);
         let report = run(
-            vec![Algorithm::Frustum, Algorithm::Zbuffer, Algorithm::Frustum],
+            vec![Algorithm::FRUSTUM, Algorithm::ZBUFFER, Algorithm::FRUSTUM],
             &cameras,
         )
         .unwrap();
-        let names: Vec<_> = report.renderers.iter().map(|r| r.name).collect();
+        let names: Vec<_> = report.renderers.iter().map(|r| r.name.as_str()).collect();
         assert_eq!(names, ["frustum", "zbuffer"], "requested order, duplicates dropped");
         assert_eq!(report.scene_triangles, 2 + 36 * 12);
         let z = report.renderer("zbuffer").unwrap();
@@ -903,9 +928,9 @@ mod tests {
 
     #[test]
     fn reference_is_added_when_not_requested() {
-        let report = run(vec![Algorithm::Frustum], &circle(2)).unwrap();
+        let report = run(vec![Algorithm::FRUSTUM], &circle(2)).unwrap();
         let z = &report.renderers[0];
-        assert_eq!((z.name, z.is_reference, z.requested), ("zbuffer", true, false));
+        assert_eq!((z.name.as_str(), z.is_reference, z.requested), ("zbuffer", true, false));
         assert!(report.reference_note.contains("not requested"));
         assert_eq!(report.renderers[1].frames_identical, 2);
     }
@@ -935,7 +960,7 @@ mod tests {
         assert!(scene.item_count() > MAX_BRUTE_FORCE_ITEMS);
         let mut camera = Camera::look_at(Vec3::new(4.0, 0.5, 6.0), Vec3::new(4.0, 0.5, 0.0));
         camera.far = 30.0;
-        let config = CompareConfig::new(vec![Algorithm::Zbuffer, Algorithm::Frustum], 64, 48);
+        let config = CompareConfig::new(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], 64, 48);
         let report = compare(scene, &[camera, camera], &config, &mut |_| {}).unwrap();
         assert_eq!(report.reference, "frustum");
         assert!(
@@ -955,7 +980,7 @@ mod tests {
 
     #[test]
     fn empty_inputs_are_errors() {
-        assert!(matches!(run(vec![Algorithm::Frustum], &[]), Err(CompareError::NoViews)));
+        assert!(matches!(run(vec![Algorithm::FRUSTUM], &[]), Err(CompareError::NoViews)));
         assert!(matches!(run(vec![], &circle(1)), Err(CompareError::NoAlgorithms)));
     }
 
@@ -964,10 +989,10 @@ mod tests {
         let mut cameras = circle(3);
         cameras[1].target = cameras[1].eye;
         assert!(matches!(
-            run(vec![Algorithm::Frustum], &cameras),
+            run(vec![Algorithm::FRUSTUM], &cameras),
             Err(CompareError::BadView { view_index: 1, .. })
         ));
-        let config = CompareConfig::new(vec![Algorithm::Frustum], 0, 64);
+        let config = CompareConfig::new(vec![Algorithm::FRUSTUM], 0, 64);
         assert!(matches!(
             compare(cubes(), &circle(1), &config, &mut |_| {}),
             Err(CompareError::BadView { .. })
@@ -977,7 +1002,7 @@ mod tests {
     #[test]
     fn views_that_see_nothing_are_fine() {
         let away = Camera::look_at(Vec3::new(0.0, 50.0, 0.0), Vec3::new(0.0, 100.0, 1.0));
-        let report = run(vec![Algorithm::Zbuffer, Algorithm::Frustum], &[away]).unwrap();
+        let report = run(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], &[away]).unwrap();
         assert_eq!(report.oracle.triangles_visible, vec![0]);
         assert!(report.renderers.iter().all(|r| r.frames_identical == 1));
     }
@@ -987,7 +1012,7 @@ mod tests {
         let scene = cubes();
         let view = View::new(circle(1)[0], 32, 24).unwrap();
         let mut a = Frame::new(32, 24).unwrap();
-        let mut r = Algorithm::Zbuffer
+        let mut r = Algorithm::ZBUFFER
             .build(Arc::clone(&scene), &RenderOptions::default())
             .unwrap();
         r.render(&view, &mut a).unwrap();

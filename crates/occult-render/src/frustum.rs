@@ -18,7 +18,7 @@ use occult_core::{compose, Affine3A, Containment, ItemId, NodeId, NodeKind, Scen
 use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 use occult_spatial::Bvh;
 
-use crate::{check_frame, FrameStats, Phase, RenderError, RenderOptions, Renderer, Result};
+use crate::{check_frame, AlgorithmInfo, FrameStats, ParamDoc, Phase, RenderError, RenderOptions, Renderer, Result};
 
 /// Tunables of [`FrustumCulling`].
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -37,6 +37,33 @@ impl Default for FrustumOptions {
         }
     }
 }
+
+/// Registry entry of [`FrustumCulling`].
+pub static INFO: AlgorithmInfo = AlgorithmInfo {
+    name: "frustum",
+    summary: "hierarchical view-frustum culling over a BVH per mesh and per group; the baseline",
+    params: &[
+        ParamDoc {
+            key: "leaf",
+            default: "256",
+            help: "triangles per BVH leaf of a mesh (>= 1)",
+        },
+        ParamDoc {
+            key: "group_leaf",
+            default: "4",
+            help: "instances per BVH leaf of a group (>= 1)",
+        },
+    ],
+    conservative: true,
+    build: |scene, options, params| {
+        let defaults = FrustumOptions::default();
+        let fo = FrustumOptions {
+            mesh_leaf_size: params.get("leaf", defaults.mesh_leaf_size)?,
+            group_leaf_size: params.get("group_leaf", defaults.group_leaf_size)?,
+        };
+        Ok(Box::new(FrustumCulling::with_options(scene, options, &fo)?))
+    },
+};
 
 /// The frustum-culling renderer.
 pub struct FrustumCulling {

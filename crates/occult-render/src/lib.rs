@@ -8,6 +8,7 @@
 //! | --- | --- |
 //! | [`zbuffer`] | brute force: every triangle instance rasterized; the reference |
 //! | [`frustum`] | hierarchical view-frustum culling only: the baseline the papers compare to |
+//! | [`params`] | algorithm specs (`name:key=value,...`) and their parameters |
 //! | [`compare`] | runs several renderers over one camera path and measures them against each other |
 //!
 //! ```
@@ -18,7 +19,7 @@
 //! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).unwrap();
 //! let scene = Arc::new(Scene::from_mesh("tri", mesh).unwrap());
 //! let view = View::new(Camera::look_at(Vec3::new(0.3, 0.3, 2.0), Vec3::new(0.3, 0.3, 0.0)), 32, 32).unwrap();
-//! let mut renderer = Algorithm::Frustum.build(scene, &RenderOptions::default()).unwrap();
+//! let mut renderer = Algorithm::FRUSTUM.build(scene, &RenderOptions::default()).unwrap();
 //! let mut frame = Frame::new(32, 32).unwrap();
 //! let stats = renderer.render(&view, &mut frame).unwrap();
 //! assert_eq!(stats.triangles_rasterized, 1);
@@ -28,6 +29,7 @@
 
 pub mod compare;
 pub mod frustum;
+pub mod params;
 pub mod rzb;
 mod stats;
 pub mod zbuffer;
@@ -36,7 +38,8 @@ use std::sync::Arc;
 
 use occult_core::{Scene, View};
 use occult_raster::{Frame, RasterConfig, RasterError};
-pub use stats::{FrameStats, Phase, PhaseTimes};
+pub use params::{AlgoSpec, ParamDoc, Params};
+pub use stats::{Counters, FrameStats, Phase, PhaseTimes};
 use thiserror::Error;
 
 /// Errors of renderers.
@@ -61,7 +64,7 @@ pub enum RenderError {
         view_height: u32,
     },
     /// Unknown algorithm name.
-    #[error("unknown algorithm '{0}' (known: {known})", known = Algorithm::NAMES.join(", "))]
+    #[error("unknown algorithm '{0}' (known: {known})", known = Algorithm::names().join(", "))]
     UnknownAlgorithm(String),
 }
 
@@ -96,51 +99,115 @@ pub struct RenderOptions {
     pub raster: RasterConfig,
 }
 
-/// The renderers, chosen at run time.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Algorithm {
-    /// [`zbuffer::ZBuffer`].
-    Zbuffer,
-    /// [`frustum::FrustumCulling`].
-    Frustum,
+/// Builds a renderer of a scene from options and its settings.
+pub type BuildFn = fn(Arc<Scene>, &RenderOptions, &Params) -> Result<Box<dyn Renderer>>;
+
+/// What the registry knows of one renderer: each module exports one as `INFO`.
+pub struct AlgorithmInfo {
+    /// Its command-line name.
+    pub name: &'static str,
+    /// One line: what it does and the paper it implements.
+    pub summary: &'static str,
+    /// Its settings, as `name:key=value` on the command line.
+    pub params: &'static [ParamDoc],
+    /// Whether its frames are bit-identical to `zbuffer`'s (DESIGN invariant 2) or approximate
+    /// (invariant 3).
+    pub conservative: bool,
+    /// Builds it (the settings' keys are checked first).
+    pub build: BuildFn,
+}
+
+/// Every renderer, in the order `all` lists them.
+pub static ALGORITHMS: &[&AlgorithmInfo] = &[&zbuffer::INFO, &frustum::INFO, &rzb::INFO];
+
+/// A renderer, chosen at run time by name: a handle on its [`AlgorithmInfo`].
+#[derive(Clone, Copy)]
+pub struct Algorithm(&'static AlgorithmInfo);
+
+impl PartialEq for Algorithm {
+    fn eq(&self, other: &Self) -> bool {
+        self.0.name == other.0.name
+    }
+}
+
+impl Eq for Algorithm {}
+
+impl std::hash::Hash for Algorithm {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        self.0.name.hash(state);
+    }
+}
+
+impl std::fmt::Debug for Algorithm {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Algorithm({})", self.0.name)
+    }
 }
 
 impl Algorithm {
-    /// Names accepted by [`Algorithm::parse`].
-    pub const NAMES: &'static [&'static str] = &["zbuffer", "frustum"];
+    /// [`zbuffer::ZBuffer`], the reference.
+    pub const ZBUFFER: Algorithm = Algorithm(&zbuffer::INFO);
+    /// [`frustum::FrustumCulling`], the baseline and the reference above brute-force sizes.
+    pub const FRUSTUM: Algorithm = Algorithm(&frustum::INFO);
 
-    /// All algorithms.
-    pub const ALL: &'static [Algorithm] = &[Algorithm::Zbuffer, Algorithm::Frustum];
+    /// Every registered algorithm.
+    pub fn all() -> Vec<Algorithm> {
+        ALGORITHMS.iter().map(|&i| Algorithm(i)).collect()
+    }
+
+    /// Names accepted by [`Algorithm::parse`].
+    pub fn names() -> Vec<&'static str> {
+        ALGORITHMS.iter().map(|i| i.name).collect()
+    }
 
     /// The algorithm called `name`.
     ///
     /// # Errors
     /// [`RenderError::UnknownAlgorithm`].
     pub fn parse(name: &str) -> Result<Self> {
-        match name {
-            "zbuffer" => Ok(Self::Zbuffer),
-            "frustum" => Ok(Self::Frustum),
-            other => Err(RenderError::UnknownAlgorithm(other.to_string())),
-        }
+        ALGORITHMS
+            .iter()
+            .find(|i| i.name == name)
+            .map(|&i| Algorithm(i))
+            .ok_or_else(|| RenderError::UnknownAlgorithm(name.to_string()))
     }
 
     /// Its command-line name.
     pub fn name(self) -> &'static str {
-        match self {
-            Self::Zbuffer => "zbuffer",
-            Self::Frustum => "frustum",
-        }
+        self.0.name
     }
 
-    /// Builds the renderer for `scene`, doing its preprocessing (time it from outside).
+    /// Its registry entry.
+    pub fn info(self) -> &'static AlgorithmInfo {
+        self.0
+    }
+
+    /// Its parameter keys, comma-separated, for messages (`none` when it has none).
+    pub fn keys(self) -> String {
+        if self.0.params.is_empty() {
+            return "none".into();
+        }
+        self.0.params.iter().map(|d| d.key).collect::<Vec<_>>().join(", ")
+    }
+
+    /// Builds the renderer for `scene` with default settings, doing its preprocessing (time
+    /// it from outside).
     ///
     /// # Errors
     /// Bad options; see each renderer.
     pub fn build(self, scene: Arc<Scene>, options: &RenderOptions) -> Result<Box<dyn Renderer>> {
-        Ok(match self {
-            Self::Zbuffer => Box::new(zbuffer::ZBuffer::new(scene, options)?),
-            Self::Frustum => Box::new(frustum::FrustumCulling::new(scene, options)?),
-        })
+        (self.0.build)(scene, options, &Params::new(self.0.name))
+    }
+}
+
+impl AlgoSpec {
+    /// Builds the renderer for `scene` with these settings.
+    ///
+    /// # Errors
+    /// Unknown keys, bad values; see each renderer.
+    pub fn build(&self, scene: Arc<Scene>, options: &RenderOptions) -> Result<Box<dyn Renderer>> {
+        self.check_keys()?;
+        (self.algorithm.0.build)(scene, options, &self.params)
     }
 }
 

@@ -54,6 +54,42 @@ impl PhaseTimes {
     }
 }
 
+/// Counters particular to one renderer (pyramid tests, queries, ray–triangle tests...), by
+/// name, in the order first added; serialized as a JSON object.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Counters(pub Vec<(&'static str, u64)>);
+
+impl Counters {
+    /// Adds `n` to counter `name` (created at 0).
+    pub fn add(&mut self, name: &'static str, n: u64) {
+        match self.0.iter_mut().find(|(k, _)| *k == name) {
+            Some((_, v)) => *v += n,
+            None => self.0.push((name, n)),
+        }
+    }
+    /// Value of counter `name` (0 if never added).
+    pub fn get(&self, name: &str) -> u64 {
+        self.0.iter().find(|(k, _)| *k == name).map_or(0, |(_, v)| *v)
+    }
+    /// Adds every counter of `other`.
+    pub fn merge(&mut self, other: &Counters) {
+        for &(k, v) in &other.0 {
+            self.add(k, v);
+        }
+    }
+}
+
+impl Serialize for Counters {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut map = serializer.serialize_map(Some(self.0.len()))?;
+        for (k, v) in &self.0 {
+            map.serialize_entry(k, v)?;
+        }
+        map.end()
+    }
+}
+
 impl FrameStats {
     /// Adds the counts of one rasterizer call.
     pub fn add_raster(&mut self, counts: occult_raster::RasterCounts) {
@@ -91,4 +127,6 @@ pub struct FrameStats {
     pub total: Duration,
     /// Wall time per phase.
     pub phases: PhaseTimes,
+    /// The renderer's own counters.
+    pub counters: Counters,
 }

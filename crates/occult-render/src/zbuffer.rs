@@ -11,10 +11,19 @@ use std::time::Instant;
 use occult_core::{Scene, View};
 use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 
-use crate::{check_frame, FrameStats, Phase, RenderError, RenderOptions, Renderer, Result};
+use crate::{check_frame, AlgorithmInfo, FrameStats, Phase, RenderError, RenderOptions, Renderer, Result};
 
 /// Largest scene (in triangle instances) the brute-force renderer accepts.
 pub const MAX_BRUTE_FORCE_ITEMS: u64 = 2_000_000_000;
+
+/// Registry entry of [`ZBuffer`] (no settings).
+pub static INFO: AlgorithmInfo = AlgorithmInfo {
+    name: "zbuffer",
+    summary: "brute force: every triangle instance sent to the rasterizer; the reference",
+    params: &[],
+    conservative: true,
+    build: |scene, options, _| Ok(Box::new(ZBuffer::new(scene, options)?)),
+};
 
 /// The brute-force renderer.
 pub struct ZBuffer {

@@ -18,7 +18,7 @@ struct CompareOut<'a> {
     tool: &'static str,
     version: &'static str,
     path: &'a str,
-    algorithms: Vec<&'static str>,
+    algorithms: Vec<String>,
     runs: Vec<RunOut<'a>>,
 }
 
@@ -62,9 +62,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
         let cameras = scene::path(&a.path, &scene)?;
         let progress = Progress::bar(cameras.len() as u64, format!("{spec}: preparing"));
         let report = compare(scene.scene.clone(), &cameras, &config, &mut |event| match event {
-            CompareProgress::Building { algorithm, .. } => {
-                progress.set_message(format!("{spec}: preparing {}", algorithm.name()))
-            }
+            CompareProgress::Building { label, .. } => progress.set_message(format!("{spec}: preparing {label}")),
             CompareProgress::Built { .. } => progress.set_message(format!("{spec}: rendering")),
             CompareProgress::Frame { .. } => progress.inc(),
         })
@@ -80,7 +78,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
             tool: "occult",
             version: env!("CARGO_PKG_VERSION"),
             path: &a.path,
-            algorithms: a.algos.0.iter().map(|a| a.name()).collect(),
+            algorithms: a.algos.0.iter().map(|a| a.label()).collect(),
             runs: runs
                 .iter()
                 .map(|(scene, report)| RunOut {
@@ -186,6 +184,7 @@ fn report_text(scene: &SceneSummary, path: &str, r: &CompareReport) -> String {
         "-".into(),
     ]);
     out += &output::table(&header, &rows);
+    let w = r.renderers.iter().map(|x| x.name.len()).max().unwrap_or(0);
     out += "\nmean time per phase (ms):\n";
     for x in &r.renderers {
         let phases: Vec<String> = x
@@ -193,7 +192,19 @@ fn report_text(scene: &SceneSummary, path: &str, r: &CompareReport) -> String {
             .iter()
             .map(|p| format!("{} {}", output::phase_name(&p.phase), output::millis(p.mean_ms)))
             .collect();
-        out += &format!("  {:<10} {}\n", x.name, phases.join(", "));
+        out += &format!("  {:<w$} {}\n", x.name, phases.join(", "));
+    }
+    if r.renderers.iter().any(|x| !x.stats.counters.is_empty()) {
+        out += "\nmean counters per frame:\n";
+        for x in r.renderers.iter().filter(|x| !x.stats.counters.is_empty()) {
+            let counters: Vec<String> = x
+                .stats
+                .counters
+                .iter()
+                .map(|(k, v)| format!("{k} {}", output::count(*v)))
+                .collect();
+            out += &format!("  {:<w$} {}\n", x.name, counters.join(", "));
+        }
     }
     for s in &r.skipped {
         out += &format!("skipped {}: {}\n", s.name, s.reason);
@@ -314,11 +325,11 @@ fn frame_time_panel(scene: &SceneSummary, path: &str, r: &CompareReport) -> Pane
 }
 
 fn scaling_panel(path: &str, runs: &[(SceneSummary, CompareReport)]) -> Panel {
-    let mut names: Vec<&'static str> = Vec::new();
+    let mut names: Vec<&str> = Vec::new();
     for (_, r) in runs {
         for x in &r.renderers {
-            if !names.contains(&x.name) {
-                names.push(x.name);
+            if !names.contains(&x.name.as_str()) {
+                names.push(&x.name);
             }
         }
     }

@@ -1,6 +1,7 @@
 //! One module per subcommand: each turns its validated arguments into library calls and
 //! writes what they return.
 
+pub mod algos;
 pub mod compare;
 pub mod info;
 pub mod render;

@@ -15,9 +15,9 @@ use crate::scene::{self, SceneSummary};
 
 /// What `--json` holds.
 #[derive(Serialize)]
-struct RenderOut {
+struct RenderOut<'a> {
     scene: SceneSummary,
-    algorithm: &'static str,
+    algorithm: &'a str,
     width: u32,
     height: u32,
     camera: Camera,
@@ -41,19 +41,19 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let camera = scene::camera(&a.view, &a.camera, &scene)?;
     let view = View::new(camera, a.size.width, a.size.height).context("view")?;
 
-    let progress = Progress::spinner(format!("preparing {}", a.algo.name()));
+    let progress = Progress::spinner(format!("preparing {}", a.algo.label()));
     let t = Instant::now();
     let mut renderer = a
         .algo
         .build(scene.scene.clone(), &RenderOptions::default())
-        .with_context(|| format!("building {}", a.algo.name()))?;
+        .with_context(|| format!("building {}", a.algo.label()))?;
     let prepare_ms = t.elapsed().as_secs_f64() * 1e3;
-    progress.set_message(format!("rendering with {}", a.algo.name()));
+    progress.set_message(format!("rendering with {}", a.algo.label()));
     let mut frame = Frame::new(a.size.width, a.size.height)?;
     let t = Instant::now();
     let stats = renderer
         .render(&view, &mut frame)
-        .with_context(|| format!("{} failed", a.algo.name()))?;
+        .with_context(|| format!("{} failed", a.algo.label()))?;
     let time_ms = t.elapsed().as_secs_f64() * 1e3;
     let triangles_visible = frame.visible_items().len() as u64;
     let covered_pixels = frame.covered_pixel_count();
@@ -77,7 +77,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     }
     say!(
         "{} at {}x{}: {} ms (prepared in {} ms, {} of its own structures)",
-        a.algo.name(),
+        a.algo.label(),
         a.size.width,
         a.size.height,
         output::millis(time_ms),
@@ -98,7 +98,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     if let Some(p) = &a.json {
         let out = RenderOut {
             scene: summary,
-            algorithm: a.algo.name(),
+            algorithm: &a.algo.label(),
             width: a.size.width,
             height: a.size.height,
             camera,

@@ -30,10 +30,10 @@ struct WalkFrame {
 
 /// What `--json` holds.
 #[derive(Serialize)]
-struct WalkOut {
+struct WalkOut<'a> {
     scene: SceneSummary,
     path: String,
-    algorithm: &'static str,
+    algorithm: &'a str,
     width: u32,
     height: u32,
     prepare_ms: f64,
@@ -76,23 +76,23 @@ pub fn run(a: WalkArgs) -> Result<()> {
         })
         .collect::<Result<Vec<_>>>()?;
 
-    let progress = Progress::spinner(format!("preparing {}", a.algo.name()));
+    let progress = Progress::spinner(format!("preparing {}", a.algo.label()));
     let t = Instant::now();
     let mut renderer = a
         .algo
         .build(scene.scene.clone(), &RenderOptions::default())
-        .with_context(|| format!("building {}", a.algo.name()))?;
+        .with_context(|| format!("building {}", a.algo.label()))?;
     let prepare_ms = t.elapsed().as_secs_f64() * 1e3;
     drop(progress);
 
-    let progress = Progress::bar(views.len() as u64, format!("{} on {}", a.algo.name(), a.path));
+    let progress = Progress::bar(views.len() as u64, format!("{} on {}", a.algo.label(), a.path));
     let mut frame = Frame::new(a.size.width, a.size.height)?;
     let mut frames = Vec::with_capacity(views.len());
     for (i, view) in views.iter().enumerate() {
         let t = Instant::now();
         let stats = renderer
             .render(view, &mut frame)
-            .with_context(|| format!("{} failed on frame {i}", a.algo.name()))?;
+            .with_context(|| format!("{} failed on frame {i}", a.algo.label()))?;
         let time_ms = t.elapsed().as_secs_f64() * 1e3;
         frames.push(WalkFrame {
             frame: i,
@@ -125,7 +125,7 @@ pub fn run(a: WalkArgs) -> Result<()> {
     );
     say!(
         "{}: mean {} ms, p95 {} ms, min {} ms, max {} ms; prepared in {} ms, {} of its own structures",
-        a.algo.name(),
+        a.algo.label(),
         output::millis(time.mean_ms),
         output::millis(time.p95_ms),
         output::millis(time.min_ms),
@@ -143,6 +143,15 @@ pub fn run(a: WalkArgs) -> Result<()> {
         say!("wrote {} frames to {}", frames.len(), dir.display());
     }
     if let Some(p) = &a.csv {
+        // The renderer's own counters follow the fixed columns, in the order first reported.
+        let mut own_counters: Vec<&'static str> = Vec::new();
+        for f in &frames {
+            for &(k, _) in &f.stats.counters.0 {
+                if !own_counters.contains(&k) {
+                    own_counters.push(k);
+                }
+            }
+        }
         let rows: Vec<Vec<String>> = frames
             .iter()
             .map(|f| {
@@ -158,19 +167,21 @@ pub fn run(a: WalkArgs) -> Result<()> {
                     .iter()
                     .map(u64::to_string),
                 );
-                row.extend(s.counters()[2..].iter().map(|(_, v)| v.to_string()));
+                row.extend(s.fixed_counters()[2..].iter().map(|(_, v)| v.to_string()));
                 row.push(format!("{}", s.total_ms));
+                row.extend(own_counters.iter().map(|k| s.counters.get(k).to_string()));
                 row
             })
             .collect();
-        output::write_csv(p, &CSV_HEADER, &rows)?;
+        let header: Vec<&str> = CSV_HEADER.iter().chain(&own_counters).copied().collect();
+        output::write_csv(p, &header, &rows)?;
         say!("wrote {}", p.display());
     }
     if let Some(p) = &a.json {
         let out = WalkOut {
             scene: summary,
             path: a.path.clone(),
-            algorithm: a.algo.name(),
+            algorithm: &a.algo.label(),
             width: a.size.width,
             height: a.size.height,
             prepare_ms,

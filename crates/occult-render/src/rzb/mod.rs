@@ -62,11 +62,35 @@ use occult_raster::{keep_fragment, Frame, Rasterizer};
 use occult_spatial::sample_octree::SampleOctreeConfig;
 use rayon::prelude::*;
 
-use crate::{check_frame, FrameStats, Phase, RenderError, RenderOptions, Renderer, Result};
+use crate::{check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
 use cache::{quantize, CachedSample, SampleCache};
 use sample::{box_rng, sample_count, SampleCounts, Sampler, Target};
 use select::Selection;
 use structure::Structure;
+
+/// Registry entry: `rzb:eps=1.5,d=2,cache=on,...`.
+pub static INFO: AlgorithmInfo = AlgorithmInfo {
+    name: "rzb",
+    summary: "randomized z-buffer (Wand et al. 2001): random surface samples from an octree of distribution lists; approximate",
+    params: &[
+        ParamDoc { key: "seed", default: "1", help: "random seed (frames are a function of seed, scene, view and cache history)" },
+        ParamDoc { key: "eps", default: "2", help: "depth accuracy (5.3.2): largest (z_max/z_min)^2 of a selected box, > 1, or auto (8.2 minimum search)" },
+        ParamDoc { key: "d", default: "1", help: "splat side in pixels (4.2), 1..=16; 1 is per-pixel reconstruction (4.1)" },
+        ParamDoc { key: "oversample", default: "1", help: "factor on the paper's sample count a*ln(v) (4.1.1), (0, 1000]" },
+        ParamDoc { key: "large", default: "on", help: "draw boxes of large triangles with the z-buffer (7.1)" },
+        ParamDoc { key: "threshold", default: "1", help: "samples per triangle above which a box is z-buffered (7.1, 8.3: projected area d^2/ln v)" },
+        ParamDoc { key: "area_ratio", default: "4", help: "largest area ratio within an area class (7.1), > 1" },
+        ParamDoc { key: "leaf", default: "32", help: "entries per octree leaf (5.3.1), >= 1" },
+        ParamDoc { key: "extension", default: "0.25", help: "extended boxes: growth per side as a fraction of the cell side (5.3.1), 0..=1" },
+        ParamDoc { key: "cache", default: "off", help: "sample caching per selected box, quantized, LRU (7.2)" },
+        ParamDoc { key: "cache_mib", default: "256", help: "sample cache budget in MiB (7.2)" },
+        ParamDoc { key: "cache_tolerance", default: "1.25", help: "distance factor within which a cached set is reused (7.2), (1, 16]" },
+        ParamDoc { key: "backface", default: "auto", help: "reject back-facing samples (5.3.3): auto follows the rasterizer's back-face culling, on, off" },
+        ParamDoc { key: "max_samples", default: "1e9", help: "most samples per frame; beyond, counts are scaled down (counter samples_capped)" },
+    ],
+    conservative: false,
+    build: |scene, options, params| Ok(Box::new(Rzb::with_options(scene, options, &RzbOptions::from_params(params)?)?)),
+};
 
 /// Depth accuracy ε (§5.3.2).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -145,6 +169,40 @@ impl Default for RzbOptions {
 }
 
 impl RzbOptions {
+    /// The options set by `params` (keys of [`INFO`]), checked.
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] for a value that does not parse or is out of range.
+    pub fn from_params(params: &Params) -> Result<Self> {
+        let d = Self::default();
+        let eps = match params.raw("eps") {
+            Some("auto") => Epsilon::Auto,
+            _ => Epsilon::Fixed(params.get("eps", 2.0f64)?),
+        };
+        let o = Self {
+            seed: params.get("seed", d.seed)?,
+            eps,
+            splat: params.get("d", d.splat)?,
+            oversample: params.get("oversample", d.oversample)?,
+            large: params.flag("large", d.large)?,
+            large_threshold: params.get("threshold", d.large_threshold)?,
+            area_ratio: params.get("area_ratio", d.area_ratio)?,
+            leaf_size: params.get("leaf", d.leaf_size)?,
+            extension: params.get("extension", d.extension)?,
+            cache: params.flag("cache", d.cache)?,
+            cache_mib: params.get("cache_mib", d.cache_mib)?,
+            cache_tolerance: params.get("cache_tolerance", d.cache_tolerance)?,
+            backface: match params.choice("backface", &["auto", "on", "off"], "auto")? {
+                "on" => Backface::On,
+                "off" => Backface::Off,
+                _ => Backface::Auto,
+            },
+            max_samples: params.get("max_samples", d.max_samples)?,
+        };
+        o.validate()?;
+        Ok(o)
+    }
+
     /// Checks ranges.
     ///
     /// # Errors
