@@ -62,9 +62,11 @@ use occult_raster::{keep_fragment, Frame, Rasterizer};
 use occult_spatial::sample_octree::SampleOctreeConfig;
 use rayon::prelude::*;
 
-use crate::{check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
+use crate::{
+    check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result,
+};
 use cache::{quantize, CachedSample, SampleCache};
-use sample::{box_rng, sample_count, SampleCounts, Sampler, Target};
+use sample::{box_rng, piece_rng, sample_count, SampleCounts, Sampler, Target};
 use select::Selection;
 use structure::Structure;
 
@@ -353,11 +355,27 @@ impl Rzb {
     }
 }
 
+/// Samples per work unit.
+const PIECE: u64 = 1 << 14;
+
+/// A run of samples of one box drawn by one thread.
+struct Unit {
+    job: usize,
+    piece: u64,
+    first: usize,
+    len: usize,
+}
+
+/// The cache key of a selected box.
+fn job_key(job: &select::Job) -> cache::BoxKey {
+    (job.structure, job.base, job.range.start, job.range.end)
+}
+
 /// Where a selected box's samples come from this frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Source {
-    /// Generated now, not cached (count).
-    Direct(u64),
+    /// Generated now, not cached.
+    Direct,
     /// A valid cached set.
     Hit,
     /// A set built now (index into the built sets).
@@ -430,10 +448,10 @@ impl Renderer for Rzb {
                         to_build.push(k);
                         Source::Built(to_build.len() - 1)
                     } else {
-                        Source::Direct(0)
+                        Source::Direct
                     }
                 }
-                None => Source::Direct(0),
+                None => Source::Direct,
             };
             sources.push(src);
         }
@@ -458,31 +476,35 @@ impl Renderer for Rzb {
                 })
                 .collect()
         });
-        // Direct boxes: their counts, from their own generators.
-        let mut rngs: Vec<Option<rand_pcg::Pcg64Mcg>> = Vec::with_capacity(sel.jobs.len());
-        for (job, src) in sel.jobs.iter().zip(sources.iter_mut()) {
-            if let Source::Direct(n) = src {
-                let mut rng = box_rng(sampler.seed, job);
-                *n = sample_count(job.samples * cap, &mut rng);
-                rngs.push(Some(rng));
-            } else {
-                rngs.push(None);
+        // Work units of at most PIECE samples: a direct box's pieces each have their own
+        // generator (seeded from the box and the piece index), so the frame does not depend on
+        // how units are spread over threads.
+        let mut units: Vec<Unit> = Vec::new();
+        for (k, (job, src)) in sel.jobs.iter().zip(&sources).enumerate() {
+            let n = match src {
+                Source::Direct => {
+                    let mut rng = box_rng(sampler.seed, job);
+                    sample_count(job.samples * cap, &mut rng)
+                }
+                Source::Hit => self.cache.as_ref().map_or(0, |c| c.samples(&job_key(job)).len() as u64),
+                Source::Built(b) => built[*b].0.len() as u64,
+            };
+            let mut first = 0u64;
+            let mut piece = 0u64;
+            while first < n {
+                let len = (n - first).min(PIECE);
+                units.push(Unit {
+                    job: k,
+                    piece,
+                    first: first as usize,
+                    len: len as usize,
+                });
+                first += len;
+                piece += 1;
             }
         }
-        let cost = |k: usize| -> u64 {
-            match sources[k] {
-                Source::Direct(n) => n,
-                Source::Hit => {
-                    let j = &sel.jobs[k];
-                    self.cache.as_ref().map_or(0, |c| {
-                        c.samples(&(j.structure, j.base, j.range.start, j.range.end)).len() as u64
-                    })
-                }
-                Source::Built(b) => built[b].0.len() as u64,
-            }
-        };
-        // Contiguous chunks of about equal work, one per thread; chunk 0 draws into the frame,
-        // the others into scratch buffers merged afterwards under the (depth, item) rule.
+        // Contiguous runs of units, one per thread; run 0 draws into the frame, the others into
+        // scratch buffers merged afterwards under the (depth, item) rule.
         let (width, height) = (frame.width(), frame.height());
         let pixels = width as usize * height as usize;
         let max_threads = (1usize << 30) / (pixels * 12).max(1);
@@ -490,18 +512,12 @@ impl Renderer for Rzb {
             .raster
             .thread_count()
             .clamp(1, max_threads.max(1))
-            .min(sel.jobs.len().max(1));
-        let total: u64 = (0..sel.jobs.len()).map(cost).sum();
-        let mut bounds = vec![0usize];
-        let mut acc = 0u64;
-        for k in 0..sel.jobs.len() {
-            acc += cost(k);
-            if acc * threads as u64 >= total * bounds.len() as u64 && bounds.len() < threads {
-                bounds.push(k + 1);
-            }
-        }
-        bounds.push(sel.jobs.len());
+            .min(units.len().max(1));
+        let mut bounds: Vec<usize> = (0..=threads).map(|t| t * units.len() / threads).collect();
         bounds.dedup();
+        if bounds.len() == 1 {
+            bounds.push(units.len());
+        }
         let chunk_count = bounds.len() - 1;
         self.scratch.truncate(chunk_count.saturating_sub(1));
         while self.scratch.len() + 1 < chunk_count {
@@ -528,44 +544,28 @@ impl Renderer for Rzb {
                 height,
             });
         }
-        let rng_cells: Vec<std::sync::Mutex<Option<rand_pcg::Pcg64Mcg>>> =
-            rngs.into_iter().map(std::sync::Mutex::new).collect();
         let counts: Vec<SampleCounts> = self.raster.install(|| {
             targets
                 .par_iter_mut()
                 .enumerate()
                 .map(|(c, target)| {
                     let mut counts = SampleCounts::default();
-                    for k in bounds[c]..bounds[c + 1] {
-                        let job = &sel.jobs[k];
-                        match sources[k] {
-                            Source::Direct(n) => {
-                                // Each box's generator is used by exactly one chunk.
-                                let mut guard = rng_cells[k].lock().unwrap_or_else(|e| e.into_inner());
-                                if let Some(rng) = guard.as_mut() {
-                                    sampler.draw_job(job, n, rng, target, &mut counts);
-                                }
+                    for u in &units[bounds[c]..bounds[c + 1]] {
+                        let job = &sel.jobs[u.job];
+                        match sources[u.job] {
+                            Source::Direct => {
+                                let mut rng = piece_rng(sampler.seed, job, u.piece);
+                                sampler.draw_job(job, u.len as u64, &mut rng, target, &mut counts);
                             }
                             Source::Hit => {
-                                let key = (job.structure, job.base, job.range.start, job.range.end);
                                 if let Some(c) = cache {
-                                    sampler.draw_cached(
-                                        &job.clip_from_structure,
-                                        job.base,
-                                        c.samples(&key),
-                                        target,
-                                        &mut counts,
-                                    );
+                                    let set = &c.samples(&job_key(job))[u.first..u.first + u.len];
+                                    sampler.draw_cached(&job.clip_from_structure, job.base, set, target, &mut counts);
                                 }
                             }
                             Source::Built(b) => {
-                                sampler.draw_cached(
-                                    &job.clip_from_structure,
-                                    job.base,
-                                    &built[b].0,
-                                    target,
-                                    &mut counts,
-                                );
+                                let set = &built[b].0[u.first..u.first + u.len];
+                                sampler.draw_cached(&job.clip_from_structure, job.base, set, target, &mut counts);
                             }
                         }
                     }
@@ -605,14 +605,20 @@ impl Renderer for Rzb {
             drawn: a.drawn + c.drawn,
         });
         stats.samples_drawn = sum.drawn;
-        let _ = (
-            sum.generated + built_samples,
-            sum.backfacing,
-            hits,
-            evictions,
-            sel.boxes_zbuffer,
-            sel.jobs.len(),
-        );
+        let c = &mut stats.counters;
+        c.add("boxes_selected", sel.jobs.len() as u64);
+        c.add("boxes_zbuffer", sel.boxes_zbuffer);
+        c.add("instances_visited", sel.instances_visited);
+        c.add("samples_generated", sum.generated + built_samples);
+        c.add("samples_backfacing", sum.backfacing);
+        c.add("samples_capped", (cap < 1.0) as u64);
+        if self.cache.is_some() {
+            c.add("cache_hits", hits);
+            c.add("cache_builds", to_build.len() as u64);
+            c.add("cache_evictions", evictions);
+            c.add("cache_kib", (self.cache_bytes() >> 10) as u64);
+        }
+        c.add("eps_milli", (eps * 1000.0).round() as u64);
         if let Some(a) = self.auto.as_mut() {
             a.record((select_time + samples_time).as_secs_f64());
         }

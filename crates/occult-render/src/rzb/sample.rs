@@ -72,6 +72,14 @@ pub fn box_rng(seed: u64, job: &Job) -> Pcg64Mcg {
     Pcg64Mcg::seed_from_u64(h)
 }
 
+/// The generator of piece `piece` of a box's samples.
+pub fn piece_rng(seed: u64, job: &Job, piece: u64) -> Pcg64Mcg {
+    let h =
+        mix(seed
+            ^ mix(job.structure as u64 ^ mix(job.base ^ mix(((job.range.start as u64) << 32) | job.range.end as u64))));
+    Pcg64Mcg::seed_from_u64(mix(h ^ mix(piece.wrapping_add(0x9e37_79b9_7f4a_7c15))))
+}
+
 /// `cof(m)`: maps a normal `e1 × e2` to `(m e1) × (m e2)`, for any linear map.
 #[inline]
 fn cofactor(m: &Mat3A) -> Mat3A {
