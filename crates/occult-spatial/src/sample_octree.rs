@@ -217,7 +217,15 @@ impl SampleOctree {
         let lo = self.prefix[range.start as usize];
         let hi = self.prefix[range.end as usize];
         debug_assert!(hi > lo, "sampling a section without area");
-        let target = lo + u * (hi - lo);
+        self.locate(range, lo + u * (hi - lo))
+    }
+
+    /// The list position in `range` whose area interval (measured from the list's start)
+    /// holds `target`; targets beyond the range's end give its last entry with area. Lets a
+    /// caller invert sorted targets over shrinking ranges.
+    #[inline]
+    pub fn locate(&self, range: std::ops::Range<u32>, target: f64) -> u32 {
+        let hi = self.prefix[range.end as usize];
         // First position p with prefix[p + 1] > target: the entry whose interval holds it.
         let s = &self.prefix[range.start as usize + 1..=range.end as usize];
         let mut k = s.partition_point(|&c| c <= target);
@@ -226,6 +234,12 @@ impl SampleOctree {
             k = s.partition_point(|&c| c < hi);
         }
         range.start + k as u32
+    }
+
+    /// Summed area before list position `pos`.
+    #[inline]
+    pub fn prefix(&self, pos: u32) -> f64 {
+        self.prefix[pos as usize]
     }
 
     /// Bytes held.

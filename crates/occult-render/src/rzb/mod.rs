@@ -467,11 +467,19 @@ impl Renderer for Rzb {
                     let z = job.z_min / tol;
                     let cell =
                         (consts.splat as f64 * z as f64 / consts.focal_px) as f32 / job.scale.max(f32::MIN_POSITIVE);
-                    let sampler = &sampler;
-                    let points = (0..n).map(|_| {
-                        let (p, _, item) = sampler.point(job.structure, job.range.clone(), &mut rng);
-                        (p, item)
-                    });
+                    let place = sample::Place::new(job, sampler.eye, false);
+                    let mut points = Vec::with_capacity(n.min(1 << 24) as usize);
+                    sampler.generate(
+                        job.structure,
+                        job.range.clone(),
+                        n,
+                        &place,
+                        &mut rng,
+                        &mut |pl, p, _, item| {
+                            points.push((pl.job_from_space.transform_point3(p), item - job.base));
+                        },
+                    );
+                    let points = points.into_iter();
                     (quantize(points, cell.max(f32::MIN_POSITIVE)), n)
                 })
                 .collect()
@@ -612,6 +620,7 @@ impl Renderer for Rzb {
         c.add("samples_generated", sum.generated + built_samples);
         c.add("samples_backfacing", sum.backfacing);
         c.add("samples_capped", (cap < 1.0) as u64);
+        c.add("samples_expected", expected.min(u64::MAX as f64) as u64);
         if self.cache.is_some() {
             c.add("cache_hits", hits);
             c.add("cache_builds", to_build.len() as u64);

@@ -1,7 +1,6 @@
 //! Sample generation (§5.2, §5.3.3, §7.3) and per-pixel / splatting reconstruction (§4.1,
 //! §4.2).
 
-use occult_core::glam::Mat3A;
 use occult_core::{Instance, ItemId, Mat4, NodeKind, Scene, Vec3};
 use occult_raster::keep_fragment;
 use rand::{Rng, SeedableRng};
@@ -10,9 +9,6 @@ use rand_pcg::Pcg64Mcg;
 use super::cache::CachedSample;
 use super::select::Job;
 use super::structure::Structure;
-
-/// Longest instance chain (the scene's nesting limit, 64 nodes).
-const MAX_CHAIN: usize = 64;
 
 /// Where samples are written: depth and item buffers of a `width × height` frame.
 pub struct Target<'f> {
@@ -55,6 +51,54 @@ pub struct Sampler<'a> {
     pub seed: u64,
 }
 
+/// A space samples are generated in: a structure or an instance below it.
+pub struct Place {
+    /// To clip space.
+    pub clip_from_space: Mat4,
+    /// To the selected box's structure space.
+    pub job_from_space: occult_core::Affine3A,
+    /// The eye in this space (when rejecting back faces).
+    pub eye: Vec3,
+    /// Sign of the determinant from this space to world space.
+    pub sign: f32,
+    /// Item id of the space's first triangle.
+    pub base: ItemId,
+}
+
+impl Place {
+    /// The space of `job`'s structure.
+    pub fn new(job: &Job, eye_world: Vec3, backface: bool) -> Self {
+        Self {
+            clip_from_space: job.clip_from_structure,
+            job_from_space: occult_core::Affine3A::IDENTITY,
+            eye: if backface {
+                job.world_from_structure.inverse().transform_point3(eye_world)
+            } else {
+                Vec3::ZERO
+            },
+            sign: job.world_from_structure.matrix3.determinant().signum(),
+            base: job.base,
+        }
+    }
+
+    /// The space of instance `inst` (whose items start `item_offset` after this space's).
+    #[inline]
+    pub fn enter(&self, inst: &Instance, item_offset: u64, backface: bool) -> Self {
+        let t = &inst.parent_from_child;
+        Self {
+            clip_from_space: self.clip_from_space * Mat4::from(*t),
+            job_from_space: self.job_from_space * *t,
+            eye: if backface {
+                t.inverse().transform_point3(self.eye)
+            } else {
+                Vec3::ZERO
+            },
+            sign: self.sign * t.matrix3.determinant().signum(),
+            base: self.base + item_offset,
+        }
+    }
+}
+
 /// SplitMix64 finaliser: decorrelates the per-box seeds.
 #[inline]
 fn mix(mut z: u64) -> u64 {
@@ -80,16 +124,6 @@ pub fn piece_rng(seed: u64, job: &Job, piece: u64) -> Pcg64Mcg {
     Pcg64Mcg::seed_from_u64(mix(h ^ mix(piece.wrapping_add(0x9e37_79b9_7f4a_7c15))))
 }
 
-/// `cof(m)`: maps a normal `e1 × e2` to `(m e1) × (m e2)`, for any linear map.
-#[inline]
-fn cofactor(m: &Mat3A) -> Mat3A {
-    Mat3A::from_cols(
-        m.y_axis.cross(m.z_axis),
-        m.z_axis.cross(m.x_axis),
-        m.x_axis.cross(m.y_axis),
-    )
-}
-
 /// Number of samples to draw for an expectation `n`: `floor(n)` plus one with probability
 /// `frac(n)`, so the expected total is exact (§4.1.1 "a · ln v").
 #[inline]
@@ -99,67 +133,105 @@ pub fn sample_count(n: f64, rng: &mut Pcg64Mcg) -> u64 {
 }
 
 impl Sampler<'_> {
-    /// §5.2 and §7.3: a random point of list positions `range` of `structure`, with probability
-    /// proportional to area, descending through instance entries (each choosing in the child's
-    /// whole list). Returns the point and the (unnormalised, winding) normal in the structure's
-    /// space, and the item id relative to the structure instance's first.
-    #[inline]
-    pub fn point(&self, structure: u32, range: std::ops::Range<u32>, rng: &mut Pcg64Mcg) -> (Vec3, Vec3, u64) {
-        let mut chain: [Option<&Instance>; MAX_CHAIN] = [None; MAX_CHAIN];
-        let mut depth = 0;
-        let mut sid = structure as usize;
-        let mut range = range;
-        let mut item = 0u64;
-        let (mut p, mut n) = loop {
-            let st = &self.structures[sid];
-            let pos = st.octree.pick(range, rng.random::<f64>());
-            let e = st.octree.entries()[pos as usize] as usize;
-            let node = self.scene.node(occult_core::NodeId(sid as u32));
-            match node.kind() {
-                NodeKind::Mesh(m) => {
-                    let [a, b, c] = m.triangle_positions(e);
-                    let (mut r1, mut r2) = (rng.random::<f32>(), rng.random::<f32>());
-                    if r1 + r2 > 1.0 {
-                        r1 = 1.0 - r1;
-                        r2 = 1.0 - r2;
+    /// §5.2 and §7.3: `n` points of list positions `range` of structure `sid`, each entry
+    /// chosen with probability proportional to its area, passed to `f` in the space of the
+    /// mesh they lie on (with that space's [`Place`]).
+    ///
+    /// The `n` choices are made at once as a multinomial split: `n` sorted uniform numbers
+    /// (descending order statistics, `X₍ₖ₎ = X₍ₖ₊₁₎ · U^(1/k)`) inverted by binary searches that
+    /// move monotonically through the list. This is the same distribution as `n` independent
+    /// inversions (§5.2), but the list is read in order, and an instance chosen `k` times is
+    /// entered once with `k` samples (its transform composed once), instead of once per
+    /// sample through the whole instance chain.
+    pub fn generate<F: FnMut(&Place, Vec3, Vec3, ItemId)>(
+        &self,
+        sid: u32,
+        range: std::ops::Range<u32>,
+        n: u64,
+        place: &Place,
+        rng: &mut Pcg64Mcg,
+        f: &mut F,
+    ) {
+        if n == 0 {
+            return;
+        }
+        let st = &self.structures[sid as usize];
+        let node = self.scene.node(occult_core::NodeId(sid));
+        let entries = st.octree.entries();
+        let mut hi = range.end; // one past the last position a smaller target can land on
+        let lo_area = st.octree.prefix(range.start);
+        let area = st.octree.prefix(range.end) - lo_area;
+        let mut x = 1.0f64;
+        let mut k = n;
+        let mut run: Option<(u32, u64)> = None;
+        loop {
+            let pick = if k > 0 {
+                x *= rng.random::<f64>().powf(1.0 / k as f64);
+                k -= 1;
+                let pos = st.octree.locate(range.start..hi, lo_area + x * area);
+                // Picks descend: the next one lies at or before this position.
+                hi = (pos + 1).min(range.end);
+                Some(pos)
+            } else {
+                None
+            };
+            match (run, pick) {
+                (Some((pos, c)), Some(p)) if p == pos => run = Some((pos, c + 1)),
+                (prev, next) => {
+                    if let Some((pos, count)) = prev {
+                        let e = entries[pos as usize] as usize;
+                        match node.kind() {
+                            NodeKind::Mesh(m) => {
+                                let [a, b, c] = m.triangle_positions(e);
+                                let normal = (b - a).cross(c - a);
+                                for _ in 0..count {
+                                    let (mut r1, mut r2) = (rng.random::<f32>(), rng.random::<f32>());
+                                    if r1 + r2 > 1.0 {
+                                        r1 = 1.0 - r1;
+                                        r2 = 1.0 - r2;
+                                    }
+                                    f(place, a + (b - a) * r1 + (c - a) * r2, normal, place.base + e as u64);
+                                }
+                            }
+                            NodeKind::Group(g) => {
+                                let inst = &g[e];
+                                let child = place.enter(inst, node.item_offset(e), self.backface);
+                                let cid = inst.child.0;
+                                let len = self.structures[cid as usize].octree.entries().len() as u32;
+                                self.generate(cid, 0..len, count, &child, rng, f);
+                            }
+                        }
                     }
-                    item += e as u64;
-                    break (a + (b - a) * r1 + (c - a) * r2, (b - a).cross(c - a));
+                    match next {
+                        Some(p) => run = Some((p, 1)),
+                        None => return,
+                    }
                 }
-                NodeKind::Group(g) => {
-                    let inst = &g[e];
-                    item += node.item_offset(e);
-                    chain[depth] = Some(inst);
-                    depth += 1;
-                    sid = inst.child.index();
-                    range = 0..self.structures[sid].octree.entries().len() as u32;
-                }
-            }
-        };
-        for inst in chain[..depth].iter().rev().flatten() {
-            p = inst.parent_from_child.transform_point3(p);
-            if self.backface {
-                n = cofactor(&inst.parent_from_child.matrix3) * n;
             }
         }
-        (p, n, item)
     }
 
-    /// Draws `job`'s samples, freshly generated, into `out`.
+    /// Draws `count` fresh samples of `job` into `out`.
     pub fn draw_job(&self, job: &Job, count: u64, rng: &mut Pcg64Mcg, out: &mut Target<'_>, counts: &mut SampleCounts) {
-        // Back faces are tested in the structure's space: the eye taken there, the sign of the
-        // placement's determinant restoring the winding (§5.3.3).
-        let eye = job.world_from_structure.inverse().transform_point3(self.eye);
-        let sign = job.world_from_structure.matrix3.determinant().signum();
-        for _ in 0..count {
-            let (p, n, item) = self.point(job.structure, job.range.clone(), rng);
-            counts.generated += 1;
-            if self.backface && sign * n.dot(eye - p) <= 0.0 {
-                counts.backfacing += 1;
-                continue;
-            }
-            self.splat(&job.clip_from_structure, p, job.base + item, out, counts);
-        }
+        let place = Place::new(job, self.eye, self.backface);
+        let backface = self.backface;
+        self.generate(
+            job.structure,
+            job.range.clone(),
+            count,
+            &place,
+            rng,
+            &mut |pl, p, n, item| {
+                counts.generated += 1;
+                // §5.3.3: the eye taken into the mesh's space, the determinant's sign restoring
+                // the winding.
+                if backface && pl.sign * n.dot(pl.eye - p) <= 0.0 {
+                    counts.backfacing += 1;
+                    return;
+                }
+                self.splat(&pl.clip_from_space, p, item, out, counts);
+            },
+        );
     }
 
     /// Draws cached samples (already quantized) of a box placed by `clip_from_structure`.
