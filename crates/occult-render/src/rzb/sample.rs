@@ -260,8 +260,9 @@ impl Sampler<'_> {
         counts: &mut SampleCounts,
     ) {
         let c = *clip_from_structure * p.extend(1.0);
-        // Reversed-Z: depth = near / w ≤ 1 in front of the near plane.
-        if !(c.w > 0.0) || c.z > c.w || c.x.abs() > c.w || c.y.abs() > c.w {
+        // Reversed-Z: depth = near / w ≤ 1 in front of the near plane; NaN fails `w > 0`.
+        let in_front = c.w > 0.0;
+        if !in_front || c.z > c.w || c.x.abs() > c.w || c.y.abs() > c.w {
             return;
         }
         let inv_w = 1.0 / c.w;
