@@ -30,10 +30,11 @@
 pub mod compare;
 pub mod frustum;
 pub mod hzb;
-pub mod oqgrid;
-pub mod nbuffer;
 pub mod lzb;
+pub mod nbuffer;
+pub mod oqgrid;
 pub mod params;
+pub mod rzb;
 mod stats;
 pub mod zbuffer;
 
@@ -121,7 +122,15 @@ pub struct AlgorithmInfo {
 }
 
 /// Every renderer, in the order `all` lists them.
-pub static ALGORITHMS: &[&AlgorithmInfo] = &[&zbuffer::INFO, &frustum::INFO, &hzb::INFO, &oqgrid::INFO, &nbuffer::INFO, &lzb::INFO];
+pub static ALGORITHMS: &[&AlgorithmInfo] = &[
+    &zbuffer::INFO,
+    &frustum::INFO,
+    &hzb::INFO,
+    &oqgrid::INFO,
+    &nbuffer::INFO,
+    &lzb::INFO,
+    &rzb::INFO,
+];
 
 /// A renderer, chosen at run time by name: a handle on its [`AlgorithmInfo`].
 #[derive(Clone, Copy)]

@@ -20,8 +20,9 @@ pub mod grid;
 pub mod octree;
 pub mod octree_hybrid;
 pub mod raycast;
+pub mod sample_octree;
 
 pub use bvh::{Bvh, BvhNode};
-pub use octree_hybrid::HybridOctree;
 pub use octree::{Octree, OctreeConfig, OctreeError, OctreeNode};
+pub use octree_hybrid::HybridOctree;
 pub use raycast::{traverse, FatRay, TraversalCounters};

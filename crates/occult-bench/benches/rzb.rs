@@ -1,0 +1,78 @@
+//! The randomized z-buffer: frame times on a recorded path (chessboard, sampling only and with
+//! the large-triangle fallback; forest with sample caching), and dynamic updates of the
+//! distribution tree (§5.4: insertion then removal of triangles, per triangle).
+
+use std::sync::Arc;
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use occult_core::{Aabb, Vec3, View};
+use occult_raster::Frame;
+use occult_render::{AlgoSpec, RenderOptions};
+use occult_spatial::sample_octree::{DistributionTree, SampleOctree, SampleOctreeConfig};
+use rand::{Rng, SeedableRng};
+
+fn path_bench(c: &mut Criterion, scene_spec: &str, path: &str, specs: &[&str]) {
+    let w = occult_bench::workload(scene_spec);
+    let cameras = occult_scenes::path::parse_path(path, &w.scene, &w.camera).expect("path");
+    let views: Vec<View> = cameras
+        .iter()
+        .map(|c| View::new(*c, 320, 240).expect("valid view"))
+        .collect();
+    let scene = Arc::new(w.scene);
+    let mut group = c.benchmark_group(format!("{scene_spec}_{path}_320x240"));
+    group.sample_size(10);
+    for spec in specs {
+        let spec = AlgoSpec::parse(spec).expect("spec");
+        let mut r = (spec.algorithm.info().build)(scene.clone(), &RenderOptions::default(), &spec.params)
+            .expect("renderer builds");
+        let mut frame = Frame::new(320, 240).expect("valid size");
+        group.bench_function(spec.label(), |b| {
+            b.iter(|| {
+                for v in &views {
+                    r.render(v, &mut frame).expect("render");
+                }
+            })
+        });
+    }
+    group.finish();
+}
+
+fn renderers(c: &mut Criterion) {
+    path_bench(c, "chessboard:n=1000", "circle:4", &["rzb:large=off", "rzb"]);
+    path_bench(c, "forest", "circle:8", &["rzb", "rzb:cache=on"]);
+}
+
+/// §5.4 / §8.4: insert 5,804 triangles into a distribution tree built over 1.2 M, then remove
+/// them (the paper: 98 µs per triangle).
+fn dynamic_updates(c: &mut Criterion) {
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(1);
+    let n = 1_200_000;
+    let extra = 5_804;
+    let mut boxes = Vec::with_capacity(n + extra);
+    let mut areas = Vec::with_capacity(n + extra);
+    for _ in 0..n + extra {
+        let p = Vec3::new(
+            rng.random::<f32>() * 1000.0,
+            rng.random::<f32>() * 20.0,
+            rng.random::<f32>() * 1000.0,
+        );
+        let s = rng.random::<f32>() + 0.1;
+        boxes.push(Aabb::new(p, p + Vec3::splat(s)));
+        areas.push((s * s) as f64);
+    }
+    let octree = SampleOctree::build(&boxes[..n], &areas[..n], &vec![0; n], 1, &SampleOctreeConfig::default());
+    let mut tree = DistributionTree::from_octree(&octree, octree.roots()[0].expect("root"), &boxes[..n], &areas[..n]);
+    c.bench_function("distribution_tree_insert_remove_5804", |b| {
+        b.iter(|| {
+            for i in n..n + extra {
+                tree.insert(i as u32, boxes[i], areas[i]).expect("insert");
+            }
+            for i in n..n + extra {
+                tree.remove(i as u32).expect("remove");
+            }
+        })
+    });
+}
+
+criterion_group!(benches, renderers, dynamic_updates);
+criterion_main!(benches);

@@ -1,0 +1,651 @@
+//! The randomized z-buffer: output-sensitive rendering from random surface samples.
+//!
+//! # References
+//! Wand, Fischer, Peter, Meyer auf der Heide, Straßer, *The Randomized z-Buffer Algorithm:
+//! Interactive Rendering of Highly Complex Scenes*, SIGGRAPH 2001
+//! (`papers/randomized-z-buffer-wand-2001.txt`):
+//! - §5.2 distribution lists and §5.3.1 octree with shortcuts and extended boxes, one global
+//!   list per structure: [`occult_spatial::sample_octree`]; §7.1 area classes (one octree per
+//!   class in the same list) and §7.3 instancing (one structure per DAG node, instances as
+//!   entries with their transform, recursively): [`structure`];
+//! - §5.3.2 box selection by depth accuracy ε, sample counts from area × maximum projection
+//!   factor (§5.1, including the `1/cos α` distortion bounded per box) × `ln v` (§4.1.1),
+//!   §7.1 large-triangle fallback (boxes whose triangles would get more than `large_threshold`
+//!   samples each, i.e. a projected area above `threshold · d²/ln v` pixels, §8.3, are drawn by
+//!   the rasterizer into the same frame): [`select`];
+//! - §5.2 area-proportional choice, uniform points on triangles, §5.3.3 back-face rejection,
+//!   §4.1 per-pixel reconstruction and §4.2 splatting with side `d`: [`sample`];
+//! - §7.2 sample caches per selected box, quantized to an object-space grid whose cells project
+//!   to at most one splat, reused while the box's distance stays within a factor, LRU under a
+//!   byte budget: [`cache`];
+//! - §8.2 automatic ε by a minimum search over the measured selection + reconstruction time
+//!   (`eps=auto`).
+//!
+//! The frame receives depth and item ids like every renderer: a sample of triangle `t` of a
+//! mesh instance writes item `first_item + t`, with transforms composed from the root exactly
+//! as `frustum.rs` does, so the fallback's triangles land bit-identical to `zbuffer`'s and
+//! sampled pixels name real triangle instances. It is approximate (DESIGN invariant 3):
+//! `compare` measures the share of pixels whose item differs from `zbuffer` and the PSNR.
+//! Deterministic for a seed: each box's generator is seeded from the seed and the box alone,
+//! and the per-thread buffers merge under the (depth, item) rule, so frames do not depend on
+//! thread count; with caching a frame depends on the cache's history (which view built each
+//! set), and with `eps=auto` on measured times.
+//!
+//! Cost: O(selected boxes + a · ln v / d² · log n) per frame, `a` the projected area in pixels
+//! including hidden surfaces; O(n) memory over unique geometry.
+//!
+//! # Deviations
+//! - Every group node gets its own structure (the paper merges singly referenced nodes into
+//!   the parent's octree): composing transforms from the root, which bit-identical fallback
+//!   draws need, requires the instance chain. One transform more per sample per level.
+//! - Samples are drawn on the CPU in parallel into per-thread buffers merged under the frame's
+//!   rule (the paper used OpenGL points).
+//! - Area scale of an instance is `|det|^(2/3)`, exact for the similarity transforms the
+//!   generators use; for non-uniform scales the child's own-space distribution is used.
+//! - Cached sets are built at the density needed at `z / tolerance`, so that they never fall
+//!   below the required density while valid; back faces are not rejected from cached sets (as
+//!   in the paper, so that validity depends on distance only).
+//! - Not built: Gaussian reconstruction (§4.2) and orientation classes (§5.3.4); the dynamic
+//!   distribution tree (§5.4) exists in `occult-spatial` but the renderer samples the static
+//!   lists.
+
+pub mod cache;
+pub mod sample;
+pub mod select;
+pub mod structure;
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use occult_core::{ItemId, Scene, View, NO_ITEM};
+use occult_raster::{keep_fragment, Frame, Rasterizer};
+use occult_spatial::sample_octree::SampleOctreeConfig;
+use rayon::prelude::*;
+
+use crate::{
+    check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result,
+};
+use cache::{quantize, CachedSample, SampleCache};
+use sample::{box_rng, piece_rng, sample_count, SampleCounts, Sampler, Target};
+use select::Selection;
+use structure::Structure;
+
+/// Registry entry: `rzb:eps=1.5,d=2,cache=on,...`.
+pub static INFO: AlgorithmInfo = AlgorithmInfo {
+    name: "rzb",
+    summary: "randomized z-buffer (Wand et al. 2001): random surface samples from an octree of distribution lists; approximate",
+    params: &[
+        ParamDoc { key: "seed", default: "1", help: "random seed (frames are a function of seed, scene, view and cache history)" },
+        ParamDoc { key: "eps", default: "2", help: "depth accuracy (5.3.2): largest (z_max/z_min)^2 of a selected box, > 1, or auto (8.2 minimum search)" },
+        ParamDoc { key: "d", default: "1", help: "splat side in pixels (4.2), 1..=16; 1 is per-pixel reconstruction (4.1)" },
+        ParamDoc { key: "oversample", default: "1", help: "factor on the paper's sample count a*ln(v) (4.1.1), (0, 1000]" },
+        ParamDoc { key: "large", default: "on", help: "draw boxes of large triangles with the z-buffer (7.1)" },
+        ParamDoc { key: "threshold", default: "1", help: "samples per triangle above which a box is z-buffered (7.1, 8.3: projected area d^2/ln v)" },
+        ParamDoc { key: "area_ratio", default: "4", help: "largest area ratio within an area class (7.1), > 1" },
+        ParamDoc { key: "leaf", default: "32", help: "entries per octree leaf (5.3.1), >= 1" },
+        ParamDoc { key: "extension", default: "0.25", help: "extended boxes: growth per side as a fraction of the cell side (5.3.1), 0..=1" },
+        ParamDoc { key: "cache", default: "off", help: "sample caching per selected box, quantized, LRU (7.2)" },
+        ParamDoc { key: "cache_mib", default: "256", help: "sample cache budget in MiB (7.2)" },
+        ParamDoc { key: "cache_tolerance", default: "1.25", help: "distance factor within which a cached set is reused (7.2), (1, 16]" },
+        ParamDoc { key: "backface", default: "auto", help: "reject back-facing samples (5.3.3): auto follows the rasterizer's back-face culling, on, off" },
+        ParamDoc { key: "max_samples", default: "1e9", help: "most samples per frame; beyond, counts are scaled down (counter samples_capped)" },
+    ],
+    conservative: false,
+    build: |scene, options, params| Ok(Box::new(Rzb::with_options(scene, options, &RzbOptions::from_params(params)?)?)),
+};
+
+/// Depth accuracy ε (§5.3.2).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Epsilon {
+    /// A fixed value > 1.
+    Fixed(f64),
+    /// §8.2: chosen per frame by a minimum search over measured time, starting at 2.
+    Auto,
+}
+
+/// Back-face rejection of samples (§5.3.3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Backface {
+    /// As the rasterizer's `cull_backfaces`, so that `rzb` and `zbuffer` show the same faces.
+    Auto,
+    /// Reject samples on triangles facing away.
+    On,
+    /// Keep them.
+    Off,
+}
+
+/// Tunables of [`Rzb`], with their units and what they trade.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RzbOptions {
+    /// Random seed: frames are a function of seed, scene, view (and cache history).
+    pub seed: u64,
+    /// Depth accuracy ε (> 1): largest `(z_max / z_min)²` of a selected box. Smaller selects
+    /// more boxes and overestimates the projected area less (§8.2).
+    pub eps: Epsilon,
+    /// Splat side `d` in pixels (1 = per-pixel reconstruction), 1..=16.
+    pub splat: u32,
+    /// Factor on the paper's sample count `a · ln v` (> 0): more fills more pixels, costs more.
+    pub oversample: f64,
+    /// §7.1: draw boxes of large triangles with the rasterizer.
+    pub large: bool,
+    /// Samples per triangle above which a box is drawn by the rasterizer (> 0).
+    pub large_threshold: f64,
+    /// Largest area ratio within an area class (> 1; §8.3: 2..64 behave alike).
+    pub area_ratio: f64,
+    /// Entries per octree leaf (≥ 1).
+    pub leaf_size: usize,
+    /// Extended boxes: growth per side as a fraction of the cell side (0..=1).
+    pub extension: f32,
+    /// §7.2 sample caching.
+    pub cache: bool,
+    /// Cache budget in MiB (≥ 1 when caching).
+    pub cache_mib: usize,
+    /// Distance factor within which a cached set is reused (> 1).
+    pub cache_tolerance: f32,
+    /// Back-face rejection.
+    pub backface: Backface,
+    /// Most samples per frame (≥ 1): beyond, every box's count is scaled down (counter
+    /// `samples_capped`), so that a box at the near plane cannot stall a frame.
+    pub max_samples: f64,
+}
+
+impl Default for RzbOptions {
+    fn default() -> Self {
+        Self {
+            seed: 1,
+            eps: Epsilon::Fixed(2.0),
+            splat: 1,
+            oversample: 1.0,
+            large: true,
+            large_threshold: 1.0,
+            area_ratio: 4.0,
+            leaf_size: 32,
+            extension: 0.25,
+            cache: false,
+            cache_mib: 256,
+            cache_tolerance: 1.25,
+            backface: Backface::Auto,
+            max_samples: 1e9,
+        }
+    }
+}
+
+impl RzbOptions {
+    /// The options set by `params` (keys of [`INFO`]), checked.
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] for a value that does not parse or is out of range.
+    pub fn from_params(params: &Params) -> Result<Self> {
+        let d = Self::default();
+        let eps = match params.raw("eps") {
+            Some("auto") => Epsilon::Auto,
+            _ => Epsilon::Fixed(params.get("eps", 2.0f64)?),
+        };
+        let o = Self {
+            seed: params.get("seed", d.seed)?,
+            eps,
+            splat: params.get("d", d.splat)?,
+            oversample: params.get("oversample", d.oversample)?,
+            large: params.flag("large", d.large)?,
+            large_threshold: params.get("threshold", d.large_threshold)?,
+            area_ratio: params.get("area_ratio", d.area_ratio)?,
+            leaf_size: params.get("leaf", d.leaf_size)?,
+            extension: params.get("extension", d.extension)?,
+            cache: params.flag("cache", d.cache)?,
+            cache_mib: params.get("cache_mib", d.cache_mib)?,
+            cache_tolerance: params.get("cache_tolerance", d.cache_tolerance)?,
+            backface: match params.choice("backface", &["auto", "on", "off"], "auto")? {
+                "on" => Backface::On,
+                "off" => Backface::Off,
+                _ => Backface::Auto,
+            },
+            max_samples: params.get("max_samples", d.max_samples)?,
+        };
+        o.validate()?;
+        Ok(o)
+    }
+
+    /// Checks ranges.
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] naming the parameter and value.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |k: &str, v: String, want: &str| {
+            Err(RenderError::BadParameter(format!(
+                "rzb: {k}={v} is out of range ({want})"
+            )))
+        };
+        if let Epsilon::Fixed(e) = self.eps {
+            if !(e > 1.0 && e <= 1e6) {
+                return bad("eps", e.to_string(), "a number in (1, 1e6] or auto");
+            }
+        }
+        if !(1..=16).contains(&self.splat) {
+            return bad("d", self.splat.to_string(), "1..=16");
+        }
+        if !(self.oversample > 0.0 && self.oversample <= 1e3) {
+            return bad("oversample", self.oversample.to_string(), "(0, 1000]");
+        }
+        if !(self.large_threshold > 0.0 && self.large_threshold.is_finite()) {
+            return bad("threshold", self.large_threshold.to_string(), "a positive number");
+        }
+        if !(self.area_ratio > 1.0 && self.area_ratio.is_finite()) {
+            return bad("area_ratio", self.area_ratio.to_string(), "a number > 1");
+        }
+        if !(1..=1 << 20).contains(&self.leaf_size) {
+            return bad("leaf", self.leaf_size.to_string(), "1..=1048576");
+        }
+        if !(0.0..=1.0).contains(&self.extension) {
+            return bad("extension", self.extension.to_string(), "0..=1");
+        }
+        if !(1..=1 << 20).contains(&self.cache_mib) {
+            return bad("cache_mib", self.cache_mib.to_string(), "1..=1048576");
+        }
+        if !(self.cache_tolerance > 1.0 && self.cache_tolerance <= 16.0) {
+            return bad("cache_tolerance", self.cache_tolerance.to_string(), "(1, 16]");
+        }
+        if !(self.max_samples >= 1.0 && self.max_samples <= 1e12) {
+            return bad("max_samples", self.max_samples.to_string(), "1..=1e12");
+        }
+        Ok(())
+    }
+}
+
+/// §8.2: pattern search on ε over frames: even frames measure the current ε, odd frames a
+/// neighbour `ε·step^±1`; the better one is kept, a failed direction reverses and halves the
+/// step (in log ε).
+#[derive(Clone, Debug)]
+struct AutoEps {
+    eps: f64,
+    log_step: f64,
+    dir: f64,
+    base_time: Option<f64>,
+}
+
+impl AutoEps {
+    const MIN: f64 = 1.02;
+    const MAX: f64 = 64.0;
+
+    fn new() -> Self {
+        Self {
+            eps: 2.0,
+            log_step: 0.5,
+            dir: -1.0,
+            base_time: None,
+        }
+    }
+
+    fn trial(&self) -> f64 {
+        (self.eps * (self.dir * self.log_step).exp()).clamp(Self::MIN, Self::MAX)
+    }
+
+    /// The ε for the next frame.
+    fn next(&self) -> f64 {
+        if self.base_time.is_some() {
+            self.trial()
+        } else {
+            self.eps
+        }
+    }
+
+    /// Records the time of the frame rendered with [`AutoEps::next`].
+    fn record(&mut self, seconds: f64) {
+        match self.base_time.take() {
+            None => self.base_time = Some(seconds),
+            Some(base) => {
+                if seconds < base {
+                    self.eps = self.trial();
+                } else {
+                    self.dir = -self.dir;
+                    self.log_step = (self.log_step * 0.5).max(0.02);
+                }
+            }
+        }
+    }
+}
+
+/// The randomized z-buffer renderer.
+pub struct Rzb {
+    scene: Arc<Scene>,
+    raster: Rasterizer,
+    opts: RzbOptions,
+    structures: Vec<Structure>,
+    cache: Option<SampleCache>,
+    auto: Option<AutoEps>,
+    frame_index: u64,
+    scratch: Vec<(Vec<f32>, Vec<ItemId>)>,
+}
+
+impl Rzb {
+    /// Builds the sampling structures of `scene` (§5.3.1, §7.1, §7.3).
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] for options out of range; raster configuration errors.
+    pub fn with_options(scene: Arc<Scene>, options: &RenderOptions, opts: &RzbOptions) -> Result<Self> {
+        opts.validate()?;
+        let raster = Rasterizer::new(options.raster.clone())?;
+        let config = SampleOctreeConfig {
+            leaf_size: opts.leaf_size,
+            extension: opts.extension,
+            ..SampleOctreeConfig::default()
+        };
+        let structures = raster.install(|| structure::build_all(&scene, &config, opts.area_ratio));
+        Ok(Self {
+            scene,
+            raster,
+            cache: opts
+                .cache
+                .then(|| SampleCache::new(opts.cache_mib << 20, opts.cache_tolerance)),
+            auto: (opts.eps == Epsilon::Auto).then(AutoEps::new),
+            opts: opts.clone(),
+            structures,
+            frame_index: 0,
+            scratch: Vec::new(),
+        })
+    }
+
+    /// The options.
+    pub fn options(&self) -> &RzbOptions {
+        &self.opts
+    }
+
+    /// Bytes held by the sample caches (never above the budget).
+    pub fn cache_bytes(&self) -> usize {
+        self.cache.as_ref().map_or(0, SampleCache::bytes)
+    }
+}
+
+/// Samples per work unit.
+const PIECE: u64 = 1 << 14;
+
+/// A run of samples of one box drawn by one thread.
+struct Unit {
+    job: usize,
+    piece: u64,
+    first: usize,
+    len: usize,
+}
+
+/// The cache key of a selected box.
+fn job_key(job: &select::Job) -> cache::BoxKey {
+    (job.structure, job.base, job.range.start, job.range.end)
+}
+
+/// Where a selected box's samples come from this frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Source {
+    /// Generated now, not cached.
+    Direct,
+    /// A valid cached set.
+    Hit,
+    /// A set built now (index into the built sets).
+    Built(usize),
+}
+
+impl Renderer for Rzb {
+    fn name(&self) -> &'static str {
+        "rzb"
+    }
+
+    fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
+        check_frame(view, frame)?;
+        let start = Instant::now();
+        let mut stats = FrameStats::default();
+        self.raster.clear(frame);
+        stats.phases.add(Phase::Clear, start.elapsed());
+        self.frame_index += 1;
+        let eps = match (&self.auto, self.opts.eps) {
+            (Some(a), _) => a.next(),
+            (None, Epsilon::Fixed(e)) => e,
+            (None, Epsilon::Auto) => 2.0,
+        };
+
+        // §5.3.2 / §7.1 / §7.3: box selection.
+        let t_select = Instant::now();
+        let sel = Selection::run(&self.scene, &self.structures, view, &self.opts, eps);
+        let select_time = t_select.elapsed();
+        stats.phases.add(Phase::Cull, select_time);
+        stats.boxes_tested = sel.boxes_tested;
+        stats.boxes_culled = sel.boxes_culled;
+        stats.nodes_visited = sel.boxes_tested;
+        crate::rasterize(&mut self.raster, view, frame, &sel.draws, &mut stats);
+
+        // §4 / §5.2 / §7.2: samples.
+        let t_samples = Instant::now();
+        let expected: f64 = sel.jobs.iter().map(|j| j.samples).sum();
+        let cap = if expected > self.opts.max_samples {
+            self.opts.max_samples / expected
+        } else {
+            1.0
+        };
+        let sampler = Sampler {
+            scene: &self.scene,
+            structures: &self.structures,
+            splat: self.opts.splat,
+            backface: match self.opts.backface {
+                Backface::Auto => self.raster.config().cull_backfaces,
+                Backface::On => true,
+                Backface::Off => false,
+            },
+            eye: view.camera().eye,
+            far_depth: view.far_depth(),
+            seed: self.opts.seed,
+        };
+        let consts = select::ViewConsts::new(view, self.opts.splat);
+        let frame_index = self.frame_index;
+        let tol = self.opts.cache_tolerance;
+        let mut hits = 0u64;
+        let mut sources = Vec::with_capacity(sel.jobs.len());
+        let mut to_build = Vec::new();
+        for (k, job) in sel.jobs.iter().enumerate() {
+            let key = (job.structure, job.base, job.range.start, job.range.end);
+            let src = match self.cache.as_mut() {
+                Some(c) => {
+                    if c.lookup(&key, job.z_min, frame_index) {
+                        hits += 1;
+                        Source::Hit
+                    } else if c.fits(job.samples * cap * (tol * tol) as f64) {
+                        to_build.push(k);
+                        Source::Built(to_build.len() - 1)
+                    } else {
+                        Source::Direct
+                    }
+                }
+                None => Source::Direct,
+            };
+            sources.push(src);
+        }
+        // §7.2: build the missing sets (parallel over boxes), at the density needed at
+        // z_min / tolerance, quantized to cells that project to at most one splat there.
+        let built: Vec<(Vec<CachedSample>, u64)> = self.raster.install(|| {
+            to_build
+                .par_iter()
+                .map(|&k| {
+                    let job = &sel.jobs[k];
+                    let mut rng = box_rng(sampler.seed, job);
+                    let n = sample_count(job.samples * cap * (tol * tol) as f64, &mut rng);
+                    let z = job.z_min / tol;
+                    let cell =
+                        (consts.splat as f64 * z as f64 / consts.focal_px) as f32 / job.scale.max(f32::MIN_POSITIVE);
+                    let place = sample::Place::new(job, sampler.eye, false);
+                    let mut points = Vec::with_capacity(n.min(1 << 24) as usize);
+                    sampler.generate(
+                        job.structure,
+                        job.range.clone(),
+                        n,
+                        &place,
+                        &mut rng,
+                        &mut |pl, p, _, item| {
+                            points.push((pl.job_from_space.transform_point3(p), item - job.base));
+                        },
+                    );
+                    let points = points.into_iter();
+                    (quantize(points, cell.max(f32::MIN_POSITIVE)), n)
+                })
+                .collect()
+        });
+        // Work units of at most PIECE samples: a direct box's pieces each have their own
+        // generator (seeded from the box and the piece index), so the frame does not depend on
+        // how units are spread over threads.
+        let mut units: Vec<Unit> = Vec::new();
+        for (k, (job, src)) in sel.jobs.iter().zip(&sources).enumerate() {
+            let n = match src {
+                Source::Direct => {
+                    let mut rng = box_rng(sampler.seed, job);
+                    sample_count(job.samples * cap, &mut rng)
+                }
+                Source::Hit => self.cache.as_ref().map_or(0, |c| c.samples(&job_key(job)).len() as u64),
+                Source::Built(b) => built[*b].0.len() as u64,
+            };
+            let mut first = 0u64;
+            let mut piece = 0u64;
+            while first < n {
+                let len = (n - first).min(PIECE);
+                units.push(Unit {
+                    job: k,
+                    piece,
+                    first: first as usize,
+                    len: len as usize,
+                });
+                first += len;
+                piece += 1;
+            }
+        }
+        // Contiguous runs of units, one per thread; run 0 draws into the frame, the others into
+        // scratch buffers merged afterwards under the (depth, item) rule.
+        let (width, height) = (frame.width(), frame.height());
+        let pixels = width as usize * height as usize;
+        let max_threads = (1usize << 30) / (pixels * 12).max(1);
+        let threads = self
+            .raster
+            .thread_count()
+            .clamp(1, max_threads.max(1))
+            .min(units.len().max(1));
+        let mut bounds: Vec<usize> = (0..=threads).map(|t| t * units.len() / threads).collect();
+        bounds.dedup();
+        if bounds.len() == 1 {
+            bounds.push(units.len());
+        }
+        let chunk_count = bounds.len() - 1;
+        self.scratch.truncate(chunk_count.saturating_sub(1));
+        while self.scratch.len() + 1 < chunk_count {
+            self.scratch.push((Vec::new(), Vec::new()));
+        }
+        let cache = self.cache.as_ref();
+        let (frame_depth, frame_items) = frame.buffers_mut();
+        let mut targets: Vec<Target<'_>> = Vec::with_capacity(chunk_count);
+        targets.push(Target {
+            depth: frame_depth,
+            items: frame_items,
+            width,
+            height,
+        });
+        for (d, i) in self.scratch.iter_mut() {
+            d.clear();
+            d.resize(pixels, 0.0);
+            i.clear();
+            i.resize(pixels, NO_ITEM);
+            targets.push(Target {
+                depth: d,
+                items: i,
+                width,
+                height,
+            });
+        }
+        let counts: Vec<SampleCounts> = self.raster.install(|| {
+            targets
+                .par_iter_mut()
+                .enumerate()
+                .map(|(c, target)| {
+                    let mut counts = SampleCounts::default();
+                    for u in &units[bounds[c]..bounds[c + 1]] {
+                        let job = &sel.jobs[u.job];
+                        match sources[u.job] {
+                            Source::Direct => {
+                                let mut rng = piece_rng(sampler.seed, job, u.piece);
+                                sampler.draw_job(job, u.len as u64, &mut rng, target, &mut counts);
+                            }
+                            Source::Hit => {
+                                if let Some(c) = cache {
+                                    let set = &c.samples(&job_key(job))[u.first..u.first + u.len];
+                                    sampler.draw_cached(&job.clip_from_structure, job.base, set, target, &mut counts);
+                                }
+                            }
+                            Source::Built(b) => {
+                                let set = &built[b].0[u.first..u.first + u.len];
+                                sampler.draw_cached(&job.clip_from_structure, job.base, set, target, &mut counts);
+                            }
+                        }
+                    }
+                    counts
+                })
+                .collect()
+        });
+        // Merge the scratch buffers into the frame.
+        let (frame_depth, frame_items) = frame.buffers_mut();
+        for (d, i) in self.scratch.iter().take(chunk_count.saturating_sub(1)) {
+            for p in 0..pixels {
+                if d[p] > 0.0 {
+                    keep_fragment(&mut frame_depth[p], &mut frame_items[p], d[p], i[p]);
+                }
+            }
+        }
+        // Store the new sets (LRU eviction under the budget).
+        let mut evictions = 0u64;
+        let mut built_samples = 0u64;
+        if let Some(c) = self.cache.as_mut() {
+            for (b, (set, generated)) in built.into_iter().enumerate() {
+                let job = &sel.jobs[to_build[b]];
+                built_samples += generated;
+                evictions += c.insert(
+                    (job.structure, job.base, job.range.start, job.range.end),
+                    set,
+                    job.z_min,
+                    frame_index,
+                );
+            }
+        }
+        let samples_time = t_samples.elapsed();
+        stats.phases.add(Phase::Samples, samples_time);
+        let sum = counts.iter().fold(SampleCounts::default(), |a, c| SampleCounts {
+            generated: a.generated + c.generated,
+            backfacing: a.backfacing + c.backfacing,
+            drawn: a.drawn + c.drawn,
+        });
+        stats.samples_drawn = sum.drawn;
+        let c = &mut stats.counters;
+        c.add("boxes_selected", sel.jobs.len() as u64);
+        c.add("boxes_zbuffer", sel.boxes_zbuffer);
+        c.add("instances_visited", sel.instances_visited);
+        c.add("samples_generated", sum.generated + built_samples);
+        c.add("samples_backfacing", sum.backfacing);
+        c.add("samples_capped", (cap < 1.0) as u64);
+        c.add("samples_expected", expected.min(u64::MAX as f64) as u64);
+        if self.cache.is_some() {
+            c.add("cache_hits", hits);
+            c.add("cache_builds", to_build.len() as u64);
+            c.add("cache_evictions", evictions);
+            c.add("cache_kib", (self.cache_bytes() >> 10) as u64);
+        }
+        c.add("eps_milli", (eps * 1000.0).round() as u64);
+        if let Some(a) = self.auto.as_mut() {
+            a.record((select_time + samples_time).as_secs_f64());
+        }
+        stats.total = start.elapsed();
+        Ok(stats)
+    }
+
+    fn memory_bytes(&self) -> usize {
+        self.structures.iter().map(Structure::memory_bytes).sum::<usize>()
+            + self.cache.as_ref().map_or(0, SampleCache::bytes)
+            + self
+                .scratch
+                .iter()
+                .map(|(d, i)| d.len() * 4 + i.len() * 8)
+                .sum::<usize>()
+    }
+
+    fn is_conservative(&self) -> bool {
+        false
+    }
+}

@@ -1,0 +1,296 @@
+//! Sample generation (§5.2, §5.3.3, §7.3) and per-pixel / splatting reconstruction (§4.1,
+//! §4.2).
+
+use occult_core::{Instance, ItemId, Mat4, NodeKind, Scene, Vec3};
+use occult_raster::keep_fragment;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+
+use super::cache::CachedSample;
+use super::select::Job;
+use super::structure::Structure;
+
+/// Where samples are written: depth and item buffers of a `width × height` frame.
+pub struct Target<'f> {
+    /// Depth (reversed-Z, greater is nearer).
+    pub depth: &'f mut [f32],
+    /// Items.
+    pub items: &'f mut [ItemId],
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+}
+
+/// Per-thread counts.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SampleCounts {
+    /// Samples generated (drawn from the distribution lists).
+    pub generated: u64,
+    /// Of which rejected as back-facing (§5.3.3).
+    pub backfacing: u64,
+    /// Samples projected into the frame (inside the view).
+    pub drawn: u64,
+}
+
+/// What every sample of a frame shares.
+pub struct Sampler<'a> {
+    /// The scene.
+    pub scene: &'a Scene,
+    /// Its structures.
+    pub structures: &'a [Structure],
+    /// Splat side `d`.
+    pub splat: u32,
+    /// Reject back-facing samples (§5.3.3).
+    pub backface: bool,
+    /// Eye in world space.
+    pub eye: Vec3,
+    /// Depth of the far plane (fragments with smaller depth are dropped).
+    pub far_depth: f32,
+    /// Renderer seed.
+    pub seed: u64,
+}
+
+/// A space samples are generated in: a structure or an instance below it.
+pub struct Place {
+    /// To clip space.
+    pub clip_from_space: Mat4,
+    /// To the selected box's structure space.
+    pub job_from_space: occult_core::Affine3A,
+    /// The eye in this space (when rejecting back faces).
+    pub eye: Vec3,
+    /// Sign of the determinant from this space to world space.
+    pub sign: f32,
+    /// Item id of the space's first triangle.
+    pub base: ItemId,
+}
+
+impl Place {
+    /// The space of `job`'s structure.
+    pub fn new(job: &Job, eye_world: Vec3, backface: bool) -> Self {
+        Self {
+            clip_from_space: job.clip_from_structure,
+            job_from_space: occult_core::Affine3A::IDENTITY,
+            eye: if backface {
+                job.world_from_structure.inverse().transform_point3(eye_world)
+            } else {
+                Vec3::ZERO
+            },
+            sign: job.world_from_structure.matrix3.determinant().signum(),
+            base: job.base,
+        }
+    }
+
+    /// The space of instance `inst` (whose items start `item_offset` after this space's).
+    #[inline]
+    pub fn enter(&self, inst: &Instance, item_offset: u64, backface: bool) -> Self {
+        let t = &inst.parent_from_child;
+        Self {
+            clip_from_space: self.clip_from_space * Mat4::from(*t),
+            job_from_space: self.job_from_space * *t,
+            eye: if backface {
+                t.inverse().transform_point3(self.eye)
+            } else {
+                Vec3::ZERO
+            },
+            sign: self.sign * t.matrix3.determinant().signum(),
+            base: self.base + item_offset,
+        }
+    }
+}
+
+/// SplitMix64 finaliser: decorrelates the per-box seeds.
+#[inline]
+fn mix(mut z: u64) -> u64 {
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// The generator of a box: a function of the seed and the box alone, so a frame does not depend
+/// on the order boxes are processed in or on the thread count.
+pub fn box_rng(seed: u64, job: &Job) -> Pcg64Mcg {
+    let h =
+        mix(seed
+            ^ mix(job.structure as u64 ^ mix(job.base ^ mix(((job.range.start as u64) << 32) | job.range.end as u64))));
+    Pcg64Mcg::seed_from_u64(h)
+}
+
+/// The generator of piece `piece` of a box's samples.
+pub fn piece_rng(seed: u64, job: &Job, piece: u64) -> Pcg64Mcg {
+    let h =
+        mix(seed
+            ^ mix(job.structure as u64 ^ mix(job.base ^ mix(((job.range.start as u64) << 32) | job.range.end as u64))));
+    Pcg64Mcg::seed_from_u64(mix(h ^ mix(piece.wrapping_add(0x9e37_79b9_7f4a_7c15))))
+}
+
+/// Number of samples to draw for an expectation `n`: `floor(n)` plus one with probability
+/// `frac(n)`, so the expected total is exact (§4.1.1 "a · ln v").
+#[inline]
+pub fn sample_count(n: f64, rng: &mut Pcg64Mcg) -> u64 {
+    let f = n.floor();
+    f as u64 + (rng.random::<f64>() < n - f) as u64
+}
+
+impl Sampler<'_> {
+    /// §5.2 and §7.3: `n` points of list positions `range` of structure `sid`, each entry
+    /// chosen with probability proportional to its area, passed to `f` in the space of the
+    /// mesh they lie on (with that space's [`Place`]).
+    ///
+    /// The `n` choices are made at once as a multinomial split: `n` sorted uniform numbers
+    /// (descending order statistics, `X₍ₖ₎ = X₍ₖ₊₁₎ · U^(1/k)`) inverted by binary searches that
+    /// move monotonically through the list. This is the same distribution as `n` independent
+    /// inversions (§5.2), but the list is read in order, and an instance chosen `k` times is
+    /// entered once with `k` samples (its transform composed once), instead of once per
+    /// sample through the whole instance chain.
+    pub fn generate<F: FnMut(&Place, Vec3, Vec3, ItemId)>(
+        &self,
+        sid: u32,
+        range: std::ops::Range<u32>,
+        n: u64,
+        place: &Place,
+        rng: &mut Pcg64Mcg,
+        f: &mut F,
+    ) {
+        if n == 0 {
+            return;
+        }
+        let st = &self.structures[sid as usize];
+        let node = self.scene.node(occult_core::NodeId(sid));
+        let entries = st.octree.entries();
+        let mut hi = range.end; // one past the last position a smaller target can land on
+        let lo_area = st.octree.prefix(range.start);
+        let area = st.octree.prefix(range.end) - lo_area;
+        let mut x = 1.0f64;
+        let mut k = n;
+        let mut run: Option<(u32, u64)> = None;
+        loop {
+            let pick = if k > 0 {
+                x *= rng.random::<f64>().powf(1.0 / k as f64);
+                k -= 1;
+                let pos = st.octree.locate(range.start..hi, lo_area + x * area);
+                // Picks descend: the next one lies at or before this position.
+                hi = (pos + 1).min(range.end);
+                Some(pos)
+            } else {
+                None
+            };
+            match (run, pick) {
+                (Some((pos, c)), Some(p)) if p == pos => run = Some((pos, c + 1)),
+                (prev, next) => {
+                    if let Some((pos, count)) = prev {
+                        let e = entries[pos as usize] as usize;
+                        match node.kind() {
+                            NodeKind::Mesh(m) => {
+                                let [a, b, c] = m.triangle_positions(e);
+                                let normal = (b - a).cross(c - a);
+                                for _ in 0..count {
+                                    let (mut r1, mut r2) = (rng.random::<f32>(), rng.random::<f32>());
+                                    if r1 + r2 > 1.0 {
+                                        r1 = 1.0 - r1;
+                                        r2 = 1.0 - r2;
+                                    }
+                                    f(place, a + (b - a) * r1 + (c - a) * r2, normal, place.base + e as u64);
+                                }
+                            }
+                            NodeKind::Group(g) => {
+                                let inst = &g[e];
+                                let child = place.enter(inst, node.item_offset(e), self.backface);
+                                let cid = inst.child.0;
+                                let len = self.structures[cid as usize].octree.entries().len() as u32;
+                                self.generate(cid, 0..len, count, &child, rng, f);
+                            }
+                        }
+                    }
+                    match next {
+                        Some(p) => run = Some((p, 1)),
+                        None => return,
+                    }
+                }
+            }
+        }
+    }
+
+    /// Draws `count` fresh samples of `job` into `out`.
+    pub fn draw_job(&self, job: &Job, count: u64, rng: &mut Pcg64Mcg, out: &mut Target<'_>, counts: &mut SampleCounts) {
+        let place = Place::new(job, self.eye, self.backface);
+        let backface = self.backface;
+        self.generate(
+            job.structure,
+            job.range.clone(),
+            count,
+            &place,
+            rng,
+            &mut |pl, p, n, item| {
+                counts.generated += 1;
+                // §5.3.3: the eye taken into the mesh's space, the determinant's sign restoring
+                // the winding.
+                if backface && pl.sign * n.dot(pl.eye - p) <= 0.0 {
+                    counts.backfacing += 1;
+                    return;
+                }
+                self.splat(&pl.clip_from_space, p, item, out, counts);
+            },
+        );
+    }
+
+    /// Draws cached samples (already quantized) of a box placed by `clip_from_structure`.
+    pub fn draw_cached(
+        &self,
+        clip_from_structure: &Mat4,
+        base: ItemId,
+        samples: &[CachedSample],
+        out: &mut Target<'_>,
+        counts: &mut SampleCounts,
+    ) {
+        for s in samples {
+            self.splat(clip_from_structure, s.position, base + s.item, out, counts);
+        }
+    }
+
+    /// §4.1/§4.2: projects `p` and writes a `d × d` splat of its depth and item under the frame's
+    /// (depth, item) rule.
+    #[inline]
+    fn splat(
+        &self,
+        clip_from_structure: &Mat4,
+        p: Vec3,
+        item: ItemId,
+        out: &mut Target<'_>,
+        counts: &mut SampleCounts,
+    ) {
+        let c = *clip_from_structure * p.extend(1.0);
+        // Reversed-Z: depth = near / w ≤ 1 in front of the near plane; NaN fails `w > 0`.
+        let in_front = c.w > 0.0;
+        if !in_front || c.z > c.w || c.x.abs() > c.w || c.y.abs() > c.w {
+            return;
+        }
+        let inv_w = 1.0 / c.w;
+        let depth = c.z * inv_w;
+        if depth < self.far_depth {
+            return;
+        }
+        let sx = (c.x * inv_w * 0.5 + 0.5) * out.width as f32;
+        let sy = (0.5 - c.y * inv_w * 0.5) * out.height as f32;
+        let px = (sx as u32).min(out.width - 1);
+        let py = (sy as u32).min(out.height - 1);
+        counts.drawn += 1;
+        if self.splat == 1 {
+            let i = (py * out.width + px) as usize;
+            keep_fragment(&mut out.depth[i], &mut out.items[i], depth, item);
+            return;
+        }
+        let d = self.splat;
+        let x0 = px.saturating_sub((d - 1) / 2);
+        let y0 = py.saturating_sub((d - 1) / 2);
+        let x1 = (x0 + d).min(out.width);
+        let y1 = (y0 + d).min(out.height);
+        for y in y0..y1 {
+            let row = (y * out.width) as usize;
+            for x in x0..x1 {
+                let i = row + x as usize;
+                keep_fragment(&mut out.depth[i], &mut out.items[i], depth, item);
+            }
+        }
+    }
+}

@@ -1,0 +1,256 @@
+//! Box selection (§5.3.2) with the large-triangle fallback (§7.1), walking the instancing DAG
+//! (§7.3) the way `frustum.rs` does, so transforms and item ids are composed identically.
+
+use occult_core::{
+    compose, Aabb, Affine3A, Containment, Frustum, ItemId, Mat4, NodeId, NodeKind, Scene, Vec3, Vec4, View,
+};
+use occult_raster::{Draw, DrawTriangles};
+
+use super::structure::{area_scale, Structure};
+use super::RzbOptions;
+
+/// Per-view constants of the projection factor (§5.1).
+#[derive(Clone, Copy, Debug)]
+pub struct ViewConsts {
+    /// Eye in world space.
+    pub eye: Vec3,
+    /// World to camera space.
+    pub view_from_world: Mat4,
+    /// Focal length in pixels: a unit length at view distance 1 spans this many pixels.
+    pub focal_px: f64,
+    /// Near plane distance.
+    pub near: f32,
+    /// `ln v` with `v` the number of splat-sized bins (§4.1.1, §4.2), at least 1.
+    pub ln_v: f64,
+    /// Splat side `d` in pixels.
+    pub splat: u32,
+    /// `1/cos α` at the frustum corners: the largest distortion factor (§5.1).
+    pub max_inv_cos: f64,
+}
+
+impl ViewConsts {
+    /// The constants of `view` for splat side `splat`.
+    pub fn new(view: &View, splat: u32) -> Self {
+        let sy = view.clip_from_view().y_axis.y as f64; // 1 / tan(fov_y / 2)
+        let sx = view.clip_from_view().x_axis.x as f64;
+        let focal_px = sy * view.height() as f64 * 0.5;
+        let bins = (view.width() as f64 * view.height() as f64) / (splat as f64 * splat as f64);
+        Self {
+            eye: view.camera().eye,
+            view_from_world: view.view_from_world(),
+            focal_px,
+            near: view.camera().near,
+            ln_v: bins.ln().max(1.0),
+            splat,
+            max_inv_cos: (1.0 + 1.0 / (sx * sx) + 1.0 / (sy * sy)).sqrt(),
+        }
+    }
+}
+
+/// A selected box: a section of one structure's list, placed by `world_from_structure`.
+#[derive(Clone, Debug)]
+pub struct Job {
+    /// The structure (= DAG node index).
+    pub structure: u32,
+    /// Its list positions.
+    pub range: std::ops::Range<u32>,
+    /// The placement, composed from the root.
+    pub world_from_structure: Affine3A,
+    /// `view.clip_from_object(world_from_structure)`.
+    pub clip_from_structure: Mat4,
+    /// Item id of the structure instance's first triangle.
+    pub base: ItemId,
+    /// Expected samples: area × maximum projection factor × ln v / d² (§5.3, §4.1.1).
+    pub samples: f64,
+    /// Nearest view distance of the box (clamped to the near plane).
+    pub z_min: f32,
+    /// Linear scale of `world_from_structure` (`|det|^(1/3)`).
+    pub scale: f32,
+}
+
+/// The result of selection for one frame.
+pub struct Selection<'a> {
+    scene: &'a Scene,
+    structures: &'a [Structure],
+    view: &'a View,
+    consts: ViewConsts,
+    eps: f64,
+    large: Option<f64>,
+    oversample: f64,
+    /// Selected boxes.
+    pub jobs: Vec<Job>,
+    /// Triangles drawn by the z-buffer (§7.1).
+    pub draws: Vec<Draw<'a>>,
+    /// Octree nodes tested against the frustum.
+    pub boxes_tested: u64,
+    /// Of which outside.
+    pub boxes_culled: u64,
+    /// Structure instances entered.
+    pub instances_visited: u64,
+    /// Boxes handed to the z-buffer.
+    pub boxes_zbuffer: u64,
+}
+
+struct Place {
+    id: NodeId,
+    world_from_structure: Affine3A,
+    clip_from_structure: Mat4,
+    frustum: Frustum,
+    /// Rows 0, 1, 2 of `view_from_structure`.
+    rows: [Vec4; 3],
+    area_scale: f64,
+    base: ItemId,
+}
+
+impl<'a> Selection<'a> {
+    /// Selects the boxes of `view` with depth accuracy `eps`.
+    pub fn run(scene: &'a Scene, structures: &'a [Structure], view: &'a View, opts: &RzbOptions, eps: f64) -> Self {
+        let mut s = Self {
+            scene,
+            structures,
+            view,
+            consts: ViewConsts::new(view, opts.splat),
+            eps,
+            large: opts.large.then_some(opts.large_threshold),
+            oversample: opts.oversample,
+            jobs: Vec::new(),
+            draws: Vec::new(),
+            boxes_tested: 0,
+            boxes_culled: 0,
+            instances_visited: 0,
+            boxes_zbuffer: 0,
+        };
+        s.structure(scene.root(), Affine3A::IDENTITY, 0);
+        s
+    }
+
+    fn structure(&mut self, id: NodeId, world_from_structure: Affine3A, base: ItemId) {
+        let st = &self.structures[id.index()];
+        if st.area <= 0.0 {
+            return;
+        }
+        self.instances_visited += 1;
+        let view_from_structure = self.consts.view_from_world * Mat4::from(world_from_structure);
+        let t = view_from_structure.transpose();
+        let place = Place {
+            id,
+            world_from_structure,
+            clip_from_structure: self.view.clip_from_object(&world_from_structure),
+            frustum: self.view.frustum(&world_from_structure),
+            rows: [t.x_axis, t.y_axis, t.z_axis],
+            area_scale: area_scale(&world_from_structure),
+            base,
+        };
+        for root in st.octree.roots().iter().flatten() {
+            self.node(&place, *root);
+        }
+    }
+
+    /// §5.1/§5.3: (nearest view distance clamped to the near plane, farthest, samples) of the
+    /// list positions `range` bounded by `b`.
+    fn estimate(&self, p: &Place, b: &Aabb, range: std::ops::Range<u32>) -> (f64, f64, f64) {
+        let c = b.center();
+        let h = b.half_extent();
+        let axis = |r: Vec4| (r.truncate().dot(c) + r.w, r.truncate().abs().dot(h));
+        let (xc, dx) = axis(p.rows[0]);
+        let (yc, dy) = axis(p.rows[1]);
+        let (zc, dz) = axis(p.rows[2]);
+        // The camera looks down -z: view distance is -z.
+        let z_min = ((-zc - dz) as f64).max(self.consts.near as f64);
+        let z_max = ((-zc + dz) as f64).max(z_min);
+        let (xm, ym) = ((xc.abs() + dx) as f64, (yc.abs() + dy) as f64);
+        let inv_cos = (1.0 + (xm * xm + ym * ym) / (z_min * z_min))
+            .sqrt()
+            .min(self.consts.max_inv_cos);
+        let st = &self.structures[p.id.index()];
+        let area = st.octree.area(range) * p.area_scale;
+        let prj = self.consts.focal_px * self.consts.focal_px / (z_min * z_min) * inv_cos;
+        let d2 = (self.consts.splat * self.consts.splat) as f64;
+        let samples = area * prj * self.consts.ln_v / d2 * self.oversample;
+        (z_min, z_max, samples)
+    }
+
+    fn test(&mut self, p: &Place, b: &Aabb) -> bool {
+        self.boxes_tested += 1;
+        if b.is_empty() || p.frustum.classify_aabb(b) == Containment::Outside {
+            self.boxes_culled += 1;
+            return false;
+        }
+        true
+    }
+
+    /// §5.3.2: select node `n` when its depth-factor ratio `(z_max / z_min)²` is within ε (and,
+    /// with §7.1, its triangles are small enough to sample); otherwise descend.
+    fn node(&mut self, p: &Place, n: u32) {
+        let st = &self.structures[p.id.index()];
+        let node = st.octree.nodes()[n as usize];
+        if !self.test(p, &node.bounds) {
+            return;
+        }
+        let (z_min, z_max, samples) = self.estimate(p, &node.bounds, node.section());
+        let ratio = (z_max / z_min).powi(2);
+        let per_item = samples / st.items(node.section()).max(1) as f64;
+        let too_dense = self.large.is_some_and(|t| per_item > t);
+        if ratio <= self.eps && !too_dense {
+            self.select(p, node.section(), samples, z_min);
+        } else if node.is_leaf() {
+            self.part(p, node.section(), node.bounds, false);
+        } else {
+            for c in node.children() {
+                self.node(p, c);
+            }
+            if node.own_first < node.end {
+                self.part(p, node.own(), node.own_bounds, true);
+            }
+        }
+    }
+
+    /// List positions that cannot be split spatially (a leaf, or a node's own entries).
+    /// Triangles: sampled at the bound's nearest distance, or drawn by the z-buffer when they
+    /// would get more than the threshold of samples each (§7.1). Instances: each entered.
+    fn part(&mut self, p: &Place, range: std::ops::Range<u32>, bounds: Aabb, test: bool) {
+        if test && !self.test(p, &bounds) {
+            return;
+        }
+        let st = &self.structures[p.id.index()];
+        match self.scene.node(p.id).kind() {
+            NodeKind::Mesh(mesh) => {
+                let (z_min, _, samples) = self.estimate(p, &bounds, range.clone());
+                let per_item = samples / st.items(range.clone()).max(1) as f64;
+                if self.large.is_some_and(|t| per_item > t) {
+                    self.boxes_zbuffer += 1;
+                    self.draws.push(Draw {
+                        mesh,
+                        triangles: DrawTriangles::List(&st.octree.entries()[range.start as usize..range.end as usize]),
+                        clip_from_object: p.clip_from_structure,
+                        first_item: p.base,
+                    });
+                } else {
+                    self.select(p, range, samples, z_min);
+                }
+            }
+            NodeKind::Group(instances) => {
+                let node = self.scene.node(p.id);
+                for pos in range {
+                    let e = st.octree.entries()[pos as usize] as usize;
+                    let inst = &instances[e];
+                    let world_from_child = compose(&p.world_from_structure, &inst.parent_from_child);
+                    self.structure(inst.child, world_from_child, p.base + node.item_offset(e));
+                }
+            }
+        }
+    }
+
+    fn select(&mut self, p: &Place, range: std::ops::Range<u32>, samples: f64, z_min: f64) {
+        self.jobs.push(Job {
+            structure: p.id.0,
+            range,
+            world_from_structure: p.world_from_structure,
+            clip_from_structure: p.clip_from_structure,
+            base: p.base,
+            samples,
+            z_min: z_min as f32,
+            scale: p.area_scale.sqrt() as f32,
+        });
+    }
+}
