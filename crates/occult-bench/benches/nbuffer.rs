@@ -6,7 +6,8 @@
 //! empty); build time depends only on resolution and level count. Query workloads are
 //! 1 M precomputed rectangles, sides 1–128 px at uniform random positions (`random`), or the
 //! same sizes on a random walk (`coherent`: each rectangle near the previous one, as the
-//! objects of a hierarchy are tested).
+//! objects of a hierarchy are tested). Each workload runs one query at a time (`query_four`,
+//! `query_one`, `occludes`) and batched (`query_four_batch`, `occludes_batch`).
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use occult_raster::{Extremum, NBuffer, PixelRect, RasterConfig, Rasterizer};
@@ -106,6 +107,17 @@ fn queries(c: &mut Criterion) {
             });
             group.bench_function(format!("{w}x{h}/{kind}/occludes"), |b| {
                 b.iter(|| rs.iter().map(|&(r, z)| usize::from(nb.occludes(r, z).0)).sum::<usize>())
+            });
+            // The same rectangles through the batched API (same answers, lookups overlapped).
+            let rects: Vec<PixelRect> = rs.iter().map(|p| p.0).collect();
+            let nearest: Vec<f32> = rs.iter().map(|p| p.1).collect();
+            let mut out = vec![0.0f32; rs.len()];
+            let mut hidden = vec![false; rs.len()];
+            group.bench_function(format!("{w}x{h}/{kind}/query_four_batch"), |b| {
+                b.iter(|| nb.query_four_batch(&rects, &mut out).expect("equal lengths"))
+            });
+            group.bench_function(format!("{w}x{h}/{kind}/occludes_batch"), |b| {
+                b.iter(|| nb.occludes_batch(&rects, &nearest, &mut hidden).expect("equal lengths"))
             });
         }
     }
