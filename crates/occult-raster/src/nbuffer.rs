@@ -49,7 +49,7 @@
 //!   AVX-512BW and chosen at run time (`kernels`); the levels are bit-identical on each
 //!   (tested). Computing all levels in one pass over the rows (each level's row as soon as
 //!   the two rows it reads are done) was measured and not kept: slower at 1024² (1.6 against
-//!   1.0 ms on one core), no faster at 640×480; one pass per level streams data that stays
+//!   1.0 ms on one core with AVX2), no faster at 640×480; one pass per level streams data that stays
 //!   in the L3 cache at the sizes of Table 1.
 //! - By default the levels stop at `⌈log2 max(w, h)⌉ - 1`, the highest the four-square
 //!   query uses (this gives the level counts of the paper's Table 1); a one-square query
