@@ -6,7 +6,8 @@
 //! empty); build time depends only on resolution and level count. Query workloads are
 //! 1 M precomputed rectangles, sides 1–128 px at uniform random positions (`random`), or the
 //! same sizes on a random walk (`coherent`: each rectangle near the previous one, as the
-//! objects of a hierarchy are tested).
+//! objects of a hierarchy are tested). Each workload runs one query at a time (`query_four`,
+//! `query_one`, `occludes`) and batched (`query_four_batch`, `occludes_batch`).
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use occult_raster::{Extremum, NBuffer, PixelRect, RasterConfig, Rasterizer};
@@ -107,6 +108,108 @@ fn queries(c: &mut Criterion) {
             group.bench_function(format!("{w}x{h}/{kind}/occludes"), |b| {
                 b.iter(|| rs.iter().map(|&(r, z)| usize::from(nb.occludes(r, z).0)).sum::<usize>())
             });
+            // The same rectangles through the batched API (same answers, lookups overlapped).
+            let rects: Vec<PixelRect> = rs.iter().map(|p| p.0).collect();
+            let nearest: Vec<f32> = rs.iter().map(|p| p.1).collect();
+            let mut out = vec![0.0f32; rs.len()];
+            let mut hidden = vec![false; rs.len()];
+            group.bench_function(format!("{w}x{h}/{kind}/query_four_batch"), |b| {
+                b.iter(|| nb.query_four_batch(&rects, &mut out).expect("equal lengths"))
+            });
+            group.bench_function(format!("{w}x{h}/{kind}/occludes_batch"), |b| {
+                b.iter(|| nb.occludes_batch(&rects, &nearest, &mut hidden).expect("equal lengths"))
+            });
+        }
+    }
+    group.finish();
+}
+
+/// Time of `work` over all of `items`, robust to the time slicing of a shared machine: the
+/// items are cut into chunks of 16 K, every chunk is timed in each of `passes` passes over all
+/// of them (so the caches hold what a single pass leaves), and the fastest time of each chunk
+/// is summed.
+fn best_of_chunks<T>(items: &[T], passes: usize, mut work: impl FnMut(&[T]) -> u64) -> std::time::Duration {
+    let chunks: Vec<&[T]> = items.chunks(16 * 1024).collect();
+    let mut best = vec![std::time::Duration::MAX; chunks.len()];
+    let mut sink = 0u64;
+    for _ in 0..passes {
+        for (b, c) in best.iter_mut().zip(&chunks) {
+            let t = std::time::Instant::now();
+            sink = sink.wrapping_add(work(c));
+            *b = (*b).min(t.elapsed());
+        }
+    }
+    std::hint::black_box(sink);
+    best.iter().sum()
+}
+
+/// The build and query figures of `nbuffer_build` / `nbuffer_query` measured as the fastest
+/// run instead of criterion's typical one, which the other builds and tests on the 2 shared
+/// cores inflate: a build's time is the fastest of 20 builds; a query workload's time is
+/// [`best_of_chunks`] over 3 passes. The reported time per iteration is that best time.
+fn best(c: &mut Criterion) {
+    let mut group = c.benchmark_group("nbuffer_best");
+    group.sample_size(10);
+    for (w, h) in [(256u32, 256u32), (512, 512), (640, 480), (1024, 1024)] {
+        let depth = depth_map(w, h);
+        let levels = NBuffer::default_level_count(w, h);
+        for threads in [1, 2] {
+            let raster = Rasterizer::new(RasterConfig {
+                threads,
+                ..RasterConfig::default()
+            })
+            .expect("valid config");
+            let mut nb = NBuffer::new(Extremum::Min, &depth, w, h).expect("valid size");
+            group.throughput(Throughput::Elements(u64::from(w * h)));
+            group.bench_function(format!("build/{w}x{h}/levels={levels}/threads={threads}"), |b| {
+                b.iter_custom(|iters| {
+                    let mut fastest = std::time::Duration::MAX;
+                    for _ in 0..20 {
+                        let t = std::time::Instant::now();
+                        raster.install(|| nb.rebuild(&depth, w, h, levels).expect("valid size"));
+                        fastest = fastest.min(t.elapsed());
+                    }
+                    fastest.mul_f64(iters as f64)
+                })
+            });
+        }
+    }
+    for (w, h) in [(640u32, 480u32), (1024, 1024)] {
+        let depth = depth_map(w, h);
+        let nb = NBuffer::new(Extremum::Min, &depth, w, h).expect("valid size");
+        for coherent in [false, true] {
+            let rs = rects(w, h, coherent);
+            let kind = if coherent { "coherent" } else { "random" };
+            let rects: Vec<PixelRect> = rs.iter().map(|p| p.0).collect();
+            let nearest: Vec<f32> = rs.iter().map(|p| p.1).collect();
+            let index: Vec<usize> = (0..rs.len()).collect();
+            let mut out = vec![0.0f32; rs.len()];
+            let mut hidden = vec![false; rs.len()];
+            group.throughput(Throughput::Elements(rs.len() as u64));
+            let mut run = |name: &str, work: &mut dyn FnMut(&[usize]) -> u64| {
+                group.bench_function(format!("query/{w}x{h}/{kind}/{name}"), |b| {
+                    b.iter_custom(|iters| best_of_chunks(&index, 3, &mut *work).mul_f64(iters as f64))
+                });
+            };
+            run("query_four", &mut |c| {
+                c.iter().map(|&i| nb.query_four(rs[i].0).depth.to_bits() as u64).sum()
+            });
+            run("query_one", &mut |c| {
+                c.iter().map(|&i| nb.query_one(rs[i].0).depth.to_bits() as u64).sum()
+            });
+            run("occludes", &mut |c| {
+                c.iter().map(|&i| u64::from(nb.occludes(rs[i].0, rs[i].1).0)).sum()
+            });
+            run("query_four_batch", &mut |c| {
+                let r = c[0]..c[0] + c.len();
+                nb.query_four_batch(&rects[r.clone()], &mut out[r])
+                    .expect("equal lengths")
+            });
+            run("occludes_batch", &mut |c| {
+                let r = c[0]..c[0] + c.len();
+                nb.occludes_batch(&rects[r.clone()], &nearest[r.clone()], &mut hidden[r])
+                    .expect("equal lengths")
+            });
         }
     }
     group.finish();
@@ -158,5 +261,5 @@ fn particles(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, build, queries, particles);
+criterion_group!(benches, build, queries, best, particles);
 criterion_main!(benches);

@@ -1,0 +1,312 @@
+//! Row kernels of the N-buffer build (§2 "Construction"), compiled once per instruction set.
+//!
+//! The same Rust code is compiled for the baseline target and, chosen at run time, with AVX2
+//! (and AVX-512BW where the CPU has it): the kernels are integer `min` / `max` over 16-bit keys
+//! and bit manipulation of f32 depths, so every instruction set gives bit-identical levels
+//! (held by tests against the baseline path). All `unsafe` of the N-buffer is here: the calls
+//! into `#[target_feature]` functions, each made only after the feature was detected.
+
+use super::{order_bits, Extremum, Key};
+
+/// The instruction set of the build's row kernels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Isa {
+    /// Whatever the compilation target has (SSE2 on x86-64).
+    Baseline,
+    /// AVX2: 16 keys per instruction.
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+    /// AVX-512BW: 32 keys per instruction.
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
+}
+
+impl Isa {
+    /// The widest instruction set this CPU has.
+    pub(super) fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if is_x86_feature_detected!("avx512bw") && is_x86_feature_detected!("avx512f") {
+                return Isa::Avx512;
+            }
+            if is_x86_feature_detected!("avx2") {
+                return Isa::Avx2;
+            }
+        }
+        Isa::Baseline
+    }
+
+    /// Every instruction set this CPU can run (for tests: each must equal the baseline).
+    #[cfg(test)]
+    pub(super) fn available() -> Vec<Self> {
+        let mut v = vec![Isa::Baseline];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if is_x86_feature_detected!("avx2") {
+                v.push(Isa::Avx2);
+            }
+            if is_x86_feature_detected!("avx512bw") && is_x86_feature_detected!("avx512f") {
+                v.push(Isa::Avx512);
+            }
+        }
+        v
+    }
+
+    /// Level 0 of one row: the storage key of each depth ([`Extremum::key_of`]), NaN read as
+    /// `unknown` (the key of the variant's worst case).
+    #[inline]
+    pub(super) fn keys_row(self, ext: Extremum, out: &mut [Key], src: &[f32], unknown: Key) {
+        match self {
+            Isa::Baseline => keys_row(ext, out, src, unknown),
+            // SAFETY: `Isa::Avx2` / `Isa::Avx512` are only made by `detect` / `available` after
+            // the features were detected on this CPU.
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => unsafe { keys_row_avx2(ext, out, src, unknown) },
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => unsafe { keys_row_avx512(ext, out, src, unknown) },
+        }
+    }
+
+    /// One row of level `i + 1` from rows `y` (`a`) and `y + step` (`b`) of level `i`
+    /// (`step = 2^i`): the extremum of `a[x], a[x + step], b[x], b[x + step]`, the neighbours
+    /// at `x + step ≥ width` skipped. `b` is `None` on the last `step` rows (no row below).
+    #[inline]
+    pub(super) fn combine(self, ext: Extremum, out: &mut [Key], a: &[Key], b: Option<&[Key]>, step: usize) {
+        match self {
+            Isa::Baseline => combine(ext, out, a, b, step),
+            // SAFETY: as in `keys_row`.
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => unsafe { combine_avx2(ext, out, a, b, step) },
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => unsafe { combine_avx512(ext, out, a, b, step) },
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn keys_row_avx2(ext: Extremum, out: &mut [Key], src: &[f32], unknown: Key) {
+    keys_row(ext, out, src, unknown)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw")]
+unsafe fn keys_row_avx512(ext: Extremum, out: &mut [Key], src: &[f32], unknown: Key) {
+    keys_row(ext, out, src, unknown)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn combine_avx2(ext: Extremum, out: &mut [Key], a: &[Key], b: Option<&[Key]>, step: usize) {
+    combine(ext, out, a, b, step)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw")]
+unsafe fn combine_avx512(ext: Extremum, out: &mut [Key], a: &[Key], b: Option<&[Key]>, step: usize) {
+    combine(ext, out, a, b, step)
+}
+
+#[inline(always)]
+fn keys_row(ext: Extremum, out: &mut [Key], src: &[f32], unknown: Key) {
+    // Branch-free forms of `Extremum::key_of` (one loop per variant, so each vectorizes).
+    match ext {
+        Extremum::Min => {
+            for (o, &s) in out.iter_mut().zip(src) {
+                let k = (order_bits_branchless(s) >> 16) as Key;
+                *o = if s.is_nan() { unknown } else { k };
+            }
+        }
+        Extremum::Max => {
+            for (o, &s) in out.iter_mut().zip(src) {
+                let k = (order_bits_branchless(s).saturating_add(0xffff) >> 16) as Key;
+                *o = if s.is_nan() { unknown } else { k };
+            }
+        }
+    }
+}
+
+/// [`order_bits`] without a branch: negative floats have every bit flipped, others the sign set.
+#[inline(always)]
+fn order_bits_branchless(f: f32) -> u32 {
+    let b = f.to_bits();
+    let flip = ((b as i32) >> 31) as u32 | 0x8000_0000;
+    let o = b ^ flip;
+    debug_assert!(f.is_nan() || o == order_bits(f));
+    o
+}
+
+#[inline(always)]
+fn combine(ext: Extremum, out: &mut [Key], a: &[Key], b: Option<&[Key]>, step: usize) {
+    match (ext, b) {
+        (Extremum::Min, Some(b)) => combine2(out, a, b, step, Key::min),
+        (Extremum::Max, Some(b)) => combine2(out, a, b, step, Key::max),
+        (Extremum::Min, None) => combine1(out, a, step, Key::min),
+        (Extremum::Max, None) => combine1(out, a, step, Key::max),
+    }
+}
+
+#[inline(always)]
+fn combine2(out: &mut [Key], a: &[Key], b: &[Key], step: usize, f: impl Fn(Key, Key) -> Key) {
+    let w = out.len();
+    let (a, b) = (&a[..w], &b[..w]);
+    let inner = w.saturating_sub(step);
+    let (out_in, out_edge) = out.split_at_mut(inner);
+    for ((((o, &a0), &a1), &b0), &b1) in out_in
+        .iter_mut()
+        .zip(a)
+        .zip(&a[w - inner..])
+        .zip(b)
+        .zip(&b[w - inner..])
+    {
+        *o = f(f(a0, a1), f(b0, b1));
+    }
+    for ((o, &a0), &b0) in out_edge.iter_mut().zip(&a[inner..]).zip(&b[inner..]) {
+        *o = f(a0, b0);
+    }
+}
+
+#[inline(always)]
+fn combine1(out: &mut [Key], a: &[Key], step: usize, f: impl Fn(Key, Key) -> Key) {
+    let w = out.len();
+    let a = &a[..w];
+    let inner = w.saturating_sub(step);
+    let (out_in, out_edge) = out.split_at_mut(inner);
+    for ((o, &a0), &a1) in out_in.iter_mut().zip(a).zip(&a[w - inner..]) {
+        *o = f(a0, a1);
+    }
+    out_edge.copy_from_slice(&a[inner..]);
+}
+
+/// Asks the CPU to bring the cache line of `keys[index]` into the caches (a hint: no effect on
+/// results, nothing when the index is out of range or the target has no prefetch).
+#[inline(always)]
+pub(super) fn prefetch(keys: &[Key], index: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(k) = keys.get(index) {
+        // SAFETY: `_mm_prefetch` only hints the cache; the pointer is to a live element, and
+        // SSE is part of the x86-64 baseline.
+        unsafe { std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>((k as *const Key).cast()) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (keys, index);
+}
+
+/// Rectangles whose covers [`cover_block`] computes at once (one AVX-512 register of `u32`).
+pub(super) const LANES: usize = 16;
+
+/// What [`cover_block`] needs of the map: its size, its level count, and where the whole map's
+/// extremum is kept. Valid only when every index into the levels fits in a `u32`.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct CoverMap {
+    pub(super) width: u32,
+    pub(super) height: u32,
+    pub(super) level_count: u32,
+    /// Index of the key past the levels (`level_count × width × height`).
+    pub(super) whole_index: u32,
+}
+
+impl Isa {
+    /// The four key indices of the Fig. 3 cover of each of `rects` (as
+    /// `NBuffer::four_indices`), lane by lane: `idx[j][k]` is the `j`-th lookup of rectangle
+    /// `k`, `lookups[k]` its lookup count, 0 for an empty rectangle (whose indices then point
+    /// to the whole map's extremum, a valid index never read).
+    #[inline]
+    pub(super) fn cover_block(
+        self,
+        map: &CoverMap,
+        rects: &[crate::PixelRect; LANES],
+        idx: &mut [[u32; LANES]; 4],
+        lookups: &mut [u32; LANES],
+    ) {
+        match self {
+            Isa::Baseline => cover_block(map, rects, idx, lookups),
+            // SAFETY: as in `keys_row`.
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => unsafe { cover_block_avx2(map, rects, idx, lookups) },
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => unsafe { cover_block_avx512(map, rects, idx, lookups) },
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,bmi1,lzcnt")]
+unsafe fn cover_block_avx2(
+    map: &CoverMap,
+    rects: &[crate::PixelRect; LANES],
+    idx: &mut [[u32; LANES]; 4],
+    lookups: &mut [u32; LANES],
+) {
+    cover_block(map, rects, idx, lookups)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512cd,bmi1,lzcnt")]
+unsafe fn cover_block_avx512(
+    map: &CoverMap,
+    rects: &[crate::PixelRect; LANES],
+    idx: &mut [[u32; LANES]; 4],
+    lookups: &mut [u32; LANES],
+) {
+    cover_block(map, rects, idx, lookups)
+}
+
+/// The cover of `NBuffer::four_indices` written lane-wise without branches (selects and
+/// wrapping 32-bit arithmetic, so that the loop vectorizes); the values of lanes that a select
+/// discards may wrap and are never used.
+#[inline(always)]
+fn cover_block(
+    map: &CoverMap,
+    rects: &[crate::PixelRect; LANES],
+    idx: &mut [[u32; LANES]; 4],
+    lookups: &mut [u32; LANES],
+) {
+    let (w, h) = (map.width, map.height);
+    let n_px = w.wrapping_mul(h);
+    for k in 0..LANES {
+        let r = rects[k];
+        let (x0, y0) = (r.x0, r.y0);
+        let x1 = r.x1.min(w);
+        let y1 = r.y1.min(h);
+        let empty = x0 >= x1 || y0 >= y1;
+        let dx = x1.wrapping_sub(x0);
+        let dy = y1.wrapping_sub(y0);
+        let m = if empty { 1 } else { dx.max(dy) };
+        // ⌈log2 m⌉ (0 for m = 1).
+        let n = 32 - (m - 1).leading_zeros();
+        let half = (1u32 << n.saturating_sub(1)) & 0u32.wrapping_sub(u32::from(n != 0));
+        let quarter = half >> 1;
+        let row4 = dx > half && dy <= quarter;
+        let col4 = dy > half && dx <= quarter;
+        let four = row4 | col4;
+        let level = n.saturating_sub(1).wrapping_sub(u32::from(four));
+        let s = 1u32 << (level & 31);
+        let ex = x1.saturating_sub(s).max(x0).wrapping_sub(x0);
+        let ey = y1.saturating_sub(s).max(y0).wrapping_sub(y0).wrapping_mul(w);
+        let along = if row4 { s } else { w << (level & 31) };
+        let a = if four { along } else { ex };
+        let b = if four { along << 1 } else { ey };
+        let base = level
+            .wrapping_mul(n_px)
+            .wrapping_add(y0.wrapping_mul(w))
+            .wrapping_add(x0);
+        let inside = level < map.level_count && !empty;
+        let whole = map.whole_index;
+        idx[0][k] = if inside { base } else { whole };
+        idx[1][k] = if inside { base.wrapping_add(a) } else { whole };
+        idx[2][k] = if inside { base.wrapping_add(b) } else { whole };
+        idx[3][k] = if inside {
+            base.wrapping_add(ex).wrapping_add(ey)
+        } else {
+            whole
+        };
+        lookups[k] = if empty {
+            0
+        } else if n == 0 || !inside {
+            1
+        } else {
+            4
+        };
+    }
+}
