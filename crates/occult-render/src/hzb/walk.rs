@@ -638,11 +638,12 @@ impl<'a> Walk<'a> {
                         }
                         let child_first = inst.first_item + scene.node(inst.id).item_offset(p as usize);
                         let has_octree = self.octrees[i.child.index()].is_some();
-                        if !has_octree {
-                            if drawn || !self.share.owns_node(key) || !self.share.owns_primitive(inst.id, root, key, p)
-                            {
-                                continue; // the visible list drew it, or another worker does
-                            }
+                        if !has_octree
+                            && (drawn
+                                || !self.share.owns_node(key)
+                                || !self.share.owns_primitive(inst.id, root, key, p))
+                        {
+                            continue; // the visible list drew it, or another worker does
                         }
                         if !self.stamp(inst.id, p, inst.first_item) {
                             continue;
