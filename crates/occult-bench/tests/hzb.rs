@@ -30,6 +30,7 @@ const CONFIGS: &[&str] = &[
     "hzb:parallel=primitive",
     "hzb:parallel=hybrid,workers=4,recheck=3",
     "hzb:whole=0.01,recheck=2",
+    "hzb:retest=off,leaf=64",
 ];
 
 #[test]

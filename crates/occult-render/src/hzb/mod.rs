@@ -62,6 +62,10 @@
 //!   (its large straddlers) are tested against their own box before they are drawn, and the
 //!   instances held by one node of a group's octree are visited nearest first (the octants
 //!   give the order between nodes, not within one).
+//! - Addition, `retest`: a visible-list entry kept while outside the frustum (§5.1) is never
+//!   rechecked there, so when it comes back into view (a street corner turned) its status is
+//!   many frames old; it is then box-tested before it is drawn (and stays off the list when
+//!   hidden). Entries seen last frame are still drawn untested (§3.3).
 //! - Addition, `whole`: a mesh instance whose visible-list nodes hold at least this fraction of
 //!   its triangles is drawn whole, as one whole-mesh draw, and the tested traversal skips it
 //!   this frame; its entries stay listed and are rechecked, so when the visible share falls
@@ -147,6 +151,9 @@ pub struct HzbOptions {
     pub area_sort: bool,
     /// Keep frustum-culled entries on the visible list (§5.1).
     pub keep_culled: bool,
+    /// Box-test kept entries when they come back into the frustum, instead of drawing them
+    /// untested (not in the paper).
+    pub retest: bool,
     /// Draw a mesh instance whole when its visible-list nodes hold at least this fraction of
     /// its triangles (0: never). Not in the paper.
     pub whole: f32,
@@ -162,7 +169,7 @@ impl Default for HzbOptions {
     fn default() -> Self {
         Self {
             octree: OctreeConfig {
-                leaf_size: 64,
+                leaf_size: 256,
                 max_depth: 10,
                 small_fraction: 0.25,
             },
@@ -174,6 +181,7 @@ impl Default for HzbOptions {
             recheck_every: 1,
             area_sort: true,
             keep_culled: true,
+            retest: true,
             whole: 0.5,
             order: ChildOrder::FrontToBack,
             distribution: Distribution::Off,
@@ -251,6 +259,7 @@ impl HzbOptions {
             recheck_every: recheck as u32,
             area_sort: p.flag("area_sort", d.area_sort)?,
             keep_culled: p.flag("keep_culled", d.keep_culled)?,
+            retest: p.flag("retest", d.retest)?,
             whole,
             order: match p.choice("order", &["front", "count"], "front")? {
                 "count" => ChildOrder::Count,
@@ -267,7 +276,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
     params: &[
         ParamDoc {
             key: "leaf",
-            default: "64",
+            default: "256",
             help: "octree leaf size in primitives (triangles or instances), >= 1 (§3.1)",
         },
         ParamDoc {
@@ -322,9 +331,14 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             help: "frustum-culled nodes keep their visible status (§5.1)",
         },
         ParamDoc {
+            key: "retest",
+            default: "on",
+            help: "visible-list entries kept while outside the frustum are box-tested when they return, not drawn untested; needs temporal (not in the paper)",
+        },
+        ParamDoc {
             key: "whole",
             default: "0.5",
-            help: "draw a mesh instance whole when its visible-list nodes hold at least this fraction of its triangles, 0 = never (not in the paper)",
+            help: "draw a mesh instance whole when its visible-list nodes hold at least this fraction of its triangles, 0 = never; needs temporal (not in the paper)",
         },
         ParamDoc {
             key: "order",
@@ -353,6 +367,8 @@ struct VisEntry {
     octree_node: u32,
     first_item: u64,
     world_from_node: Affine3A,
+    /// Listed while outside the frustum (§5.1), so not rechecked since it was last seen.
+    stale: bool,
 }
 
 /// What one walker keeps across frames: its rasterizer, pyramid and visible list (and, for a

@@ -258,6 +258,7 @@ pub(super) struct Walk<'a> {
     recheck_dropped: u64,
     batches: u64,
     whole_drawn: u64,
+    list_retested: u64,
 }
 
 impl<'a> Walk<'a> {
@@ -307,6 +308,7 @@ impl<'a> Walk<'a> {
             recheck_dropped: 0,
             batches: 0,
             whole_drawn: 0,
+            list_retested: 0,
         }
     }
 
@@ -351,10 +353,19 @@ impl<'a> Walk<'a> {
             if pl.frustum.classify_aabb(&own) == Containment::Outside {
                 self.list_culled += 1;
                 if self.options.keep_culled {
-                    self.list(e);
+                    self.list(VisEntry { stale: true, ..e });
                 }
                 continue;
             }
+            // An entry kept while outside the frustum was never rechecked there: when it comes
+            // back into view it is tested like a node of the traversal (`retest`).
+            if e.stale && self.options.retest && self.options.occlusion {
+                self.list_retested += 1;
+                if self.hidden(&pl.clip_from_object, &own, pl.eye) {
+                    continue; // the traversal lists it again if it is drawn
+                }
+            }
+            let e = VisEntry { stale: false, ..e };
             self.list_drawn += 1;
             // A flush may empty the batch; the entry stays listed either way.
             let _ = self.draw_own(
@@ -385,7 +396,7 @@ impl<'a> Walk<'a> {
         let scene: &'a Scene = self.scene;
         let mut listed: std::collections::HashMap<(u32, u64), u64, BuildHasherDefault<IdHasher>> = Default::default();
         for e in list {
-            if matches!(scene.node(e.dag_node).kind(), NodeKind::Mesh(_)) {
+            if !e.stale && matches!(scene.node(e.dag_node).kind(), NodeKind::Mesh(_)) {
                 *listed.entry((e.dag_node.0, e.first_item)).or_default() += self.node_of(e).count as u64;
             }
         }
@@ -417,7 +428,8 @@ impl<'a> Walk<'a> {
         for e in list {
             let own = self.node_of(&e).own_bounds;
             let pl = self.placement(&e);
-            let keep = if pl.frustum.classify_aabb(&own) == Containment::Outside {
+            let outside = pl.frustum.classify_aabb(&own) == Containment::Outside;
+            let keep = if outside {
                 self.options.keep_culled
             } else {
                 let mut pc = self.pc;
@@ -426,7 +438,7 @@ impl<'a> Walk<'a> {
                 !hidden
             };
             if keep {
-                kept.push(e);
+                kept.push(VisEntry { stale: outside, ..e });
             } else {
                 self.recheck_dropped += 1;
                 self.listed.remove(&(e.dag_node.0, e.octree_node, e.first_item));
@@ -450,6 +462,7 @@ impl<'a> Walk<'a> {
         c.add("recheck_dropped", self.recheck_dropped);
         c.add("batches", self.batches);
         c.add("whole_drawn", self.whole_drawn);
+        c.add("visible_list_retested", self.list_retested);
         (self.visible, self.stats)
     }
 
@@ -687,6 +700,7 @@ impl<'a> Walk<'a> {
             octree_node: n,
             first_item: inst.first_item,
             world_from_node: inst.world_from_node,
+            stale: false,
         });
     }
 
