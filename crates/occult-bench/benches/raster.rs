@@ -75,5 +75,77 @@ fn random(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, terrain, clear, random);
+/// The draw form of the culling renderers: the `city` overview (`circle` view 0, 1280 × 720)
+/// drawn as whole meshes (one `All` draw per instance) and as the same triangles in index
+/// lists of 64 consecutive triangles (an octree leaf's worth), handed over in batches of
+/// about 4096 triangles as hzb does. Throughput counts the triangles submitted.
+fn small_draws(c: &mut Criterion) {
+    let w = occult_bench::workload("city");
+    let camera = occult_scenes::path::parse_path("circle:1", &w.scene, &w.camera).expect("valid path")[0];
+    let view = occult_core::View::new(camera, 1280, 720).expect("valid view");
+    let mut whole = Vec::new();
+    let mut instances = Vec::new();
+    w.scene.for_each_mesh_instance(|world, _, mesh, first| {
+        let clip = view.clip_from_object(world);
+        whole.push(Draw {
+            mesh,
+            triangles: DrawTriangles::All,
+            clip_from_object: clip,
+            first_item: first,
+        });
+        instances.push((mesh, clip, first));
+    });
+    let lists: Vec<Vec<u32>> = instances
+        .iter()
+        .map(|(m, _, _)| (0..m.triangle_count() as u32).collect())
+        .collect();
+    let mut batches: Vec<Vec<Draw<'_>>> = vec![Vec::new()];
+    let mut in_batch = 0;
+    for ((mesh, clip, first), list) in instances.iter().zip(&lists) {
+        for part in list.chunks(64) {
+            batches.last_mut().expect("one batch").push(Draw {
+                mesh,
+                triangles: DrawTriangles::List(part),
+                clip_from_object: *clip,
+                first_item: *first,
+            });
+            in_batch += part.len();
+            if in_batch >= 4096 {
+                batches.push(Vec::new());
+                in_batch = 0;
+            }
+        }
+    }
+    let total: u64 = whole.iter().map(|d| d.mesh.triangle_count() as u64).sum();
+    let mut frame = Frame::new(1280, 720).expect("valid size");
+    let mut group = c.benchmark_group("raster/city_overview");
+    group.throughput(Throughput::Elements(total));
+    group.sample_size(10);
+    for threads in [1, 2] {
+        let mut raster = Rasterizer::new(RasterConfig {
+            threads,
+            ..RasterConfig::default()
+        })
+        .expect("valid config");
+        for (form, sets) in [("whole", vec![whole.clone()]), ("lists64", batches.clone())] {
+            group.bench_function(format!("{form}/threads={threads}"), |b| {
+                b.iter_custom(|iterations| {
+                    let mut time = std::time::Duration::ZERO;
+                    for _ in 0..iterations {
+                        raster.clear(&mut frame);
+                        let start = std::time::Instant::now();
+                        for draws in &sets {
+                            std::hint::black_box(raster.draw(&view, &mut frame, draws, RasterMode::Full));
+                        }
+                        time += start.elapsed();
+                    }
+                    time
+                })
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, terrain, clear, random, small_draws);
 criterion_main!(benches);

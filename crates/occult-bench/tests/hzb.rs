@@ -29,6 +29,8 @@ const CONFIGS: &[&str] = &[
     "hzb:parallel=structure,workers=3",
     "hzb:parallel=primitive",
     "hzb:parallel=hybrid,workers=4,recheck=3",
+    "hzb:whole=0.01,recheck=2",
+    "hzb:retest=off,leaf=64",
 ];
 
 #[test]
@@ -106,6 +108,38 @@ fn hzb_culls_on_a_city_street_and_keeps_a_visible_list() {
 }
 
 #[test]
+fn hzb_draws_mostly_visible_instances_whole() {
+    // A city overview: most of each building is visible, so with a low `whole` fraction the
+    // visible list draws instances whole (and the traversal skips them); frames stay exact.
+    let built = occult_scenes::spec::parse_spec("city:blocks=3,detail=2")
+        .and_then(|s| s.build())
+        .unwrap();
+    let cams = occult_scenes::path::parse_path("circle:4", &built.scene, &built.default_camera).unwrap();
+    let scene = Arc::new(built.scene);
+    for (whole, expect) in [("0.05", true), ("0", false)] {
+        let mut h = spec(&format!("hzb:whole={whole}"))
+            .build(scene.clone(), &RenderOptions::default())
+            .unwrap();
+        let mut z = Algorithm::ZBUFFER
+            .build(scene.clone(), &RenderOptions::default())
+            .unwrap();
+        let (mut fh, mut fz) = (Frame::new(160, 90).unwrap(), Frame::new(160, 90).unwrap());
+        let mut drawn_whole = 0;
+        for cam in &cams {
+            let view = View::new(*cam, 160, 90).unwrap();
+            drawn_whole += h.render(&view, &mut fh).unwrap().counters.get("whole_drawn");
+            z.render(&view, &mut fz).unwrap();
+            assert!(fh.same_visibility(&fz), "whole={whole}");
+        }
+        assert_eq!(
+            drawn_whole > 0,
+            expect,
+            "whole={whole}: {drawn_whole} instances drawn whole"
+        );
+    }
+}
+
+#[test]
 fn hzb_bad_parameters_are_errors() {
     let scene = Arc::new(
         occult_scenes::spec::parse_spec("chessboard:n=4")
@@ -121,6 +155,7 @@ fn hzb_bad_parameters_are_errors() {
         "hzb:small=2",
         "hzb:batch=0",
         "hzb:order=x",
+        "hzb:whole=2",
     ] {
         let s = spec(bad);
         match s.build(scene.clone(), &RenderOptions::default()) {

@@ -12,7 +12,13 @@
 //!      of each tile its box touches;
 //!   2. *rasterization* (parallel over tiles): each tile scans the triangles of its bins.
 //!
-//! Setup, shared by all three: transform (or fetch pre-transformed) vertices, trivially reject by
+//! With `threads: 1` and a direct strategy a draw runs on the calling thread: the rasterizer's
+//! one-thread pool serves only [`Rasterizer::install`] and forced tile-binned draws, as handing
+//! every small draw to another thread and back costs more than the draw.
+//!
+//! Setup, shared by all three: transform vertices (whole meshes: each vertex once per draw, in
+//! parallel; index lists and ranges: per triangle, through a small per-draw cache so that the
+//! corners neighbouring triangles share are mostly transformed once), trivially reject by
 //! outcodes, clip the rare triangle that crosses the near plane or the guard band, snap to fixed
 //! point, reject empty boxes and zero areas, and fix the depth plane. The scan derives exact
 //! integer edge functions and finds covered pixels with branch-free 8-pixel masks (boxes up to
@@ -104,7 +110,8 @@ pub enum DrawTriangles<'a> {
     All,
     /// A contiguous range of triangle indices.
     Range(Range<u32>),
-    /// An explicit list of triangle indices (each corner transformed per triangle).
+    /// An explicit list of triangle indices (corners transformed through a small per-draw
+    /// cache: shared corners of neighbouring triangles mostly once).
     List(&'a [u32]),
 }
 
@@ -412,6 +419,11 @@ impl Rasterizer {
     /// Clears `frame`'s depth and items, in parallel on this rasterizer's threads.
     pub fn clear(&self, frame: &mut Frame) {
         let (depth, items) = frame.buffers_mut();
+        if self.config.threads == 1 {
+            depth.fill(crate::CLEAR_DEPTH);
+            items.fill(occult_core::NO_ITEM);
+            return;
+        }
         self.install(|| {
             depth.par_chunks_mut(1 << 16).for_each(|c| c.fill(crate::CLEAR_DEPTH));
             items.par_chunks_mut(1 << 15).for_each(|c| c.fill(occult_core::NO_ITEM));
@@ -429,6 +441,9 @@ impl Rasterizer {
             "frame and view sizes differ"
         );
         let vp = Viewport::new(view, &self.config);
+        if self.on_caller() {
+            return self.draw_in_pool(&vp, frame, draws, mode);
+        }
         // A handle of our own: the pool stays in place even if the draw panics.
         match self.pool.clone() {
             Some(p) => p.install(|| self.draw_in_pool(&vp, frame, draws, mode)),
@@ -436,7 +451,18 @@ impl Rasterizer {
         }
     }
 
+    /// True when draws run on the calling thread: one thread, drawing directly. Handing each
+    /// draw to a one-thread pool and back would cost more than a small draw.
+    fn on_caller(&self) -> bool {
+        self.config.threads == 1 && self.config.strategy != Strategy::Binned
+    }
+
     fn draw_in_pool(&mut self, vp: &Viewport, frame: &mut Frame, draws: &[Draw<'_>], mode: RasterMode) -> RasterCounts {
+        let threads = if self.on_caller() {
+            1
+        } else {
+            rayon::current_num_threads()
+        };
         let mut counts = RasterCounts::default();
         // Pre-transform the vertices of whole-mesh draws, in parallel.
         let mut vertex_offsets = Vec::with_capacity(draws.len());
@@ -458,11 +484,17 @@ impl Rasterizer {
                 rest = tail;
                 jobs.push((d, head));
             }
-            jobs.into_par_iter().for_each(|(d, out)| {
-                out.par_chunks_mut(4096).enumerate().for_each(|(ci, out)| {
-                    isa.project_all(vp, &d.clip_from_object, &d.mesh.positions()[ci * 4096..], out);
+            if threads == 1 {
+                for (d, out) in jobs {
+                    isa.project_all(vp, &d.clip_from_object, d.mesh.positions(), out);
+                }
+            } else {
+                jobs.into_par_iter().for_each(|(d, out)| {
+                    out.par_chunks_mut(4096).enumerate().for_each(|(ci, out)| {
+                        isa.project_all(vp, &d.clip_from_object, &d.mesh.positions()[ci * 4096..], out);
+                    });
                 });
-            });
+            }
         }
 
         let mut draw_starts = Vec::with_capacity(draws.len() + 1);
@@ -474,7 +506,6 @@ impl Rasterizer {
         draw_starts.push(total);
         counts.triangles_submitted = total as u64;
 
-        let threads = rayon::current_num_threads();
         let strategy = match self.config.strategy {
             Strategy::Auto if threads == 1 => Strategy::Direct,
             Strategy::Auto if total >= SORT_LAST_MIN_TRIANGLES => Strategy::SortLast,
@@ -932,6 +963,7 @@ fn setup_range(
 ) {
     let mut d = draw_starts.partition_point(|&s| s <= range.start) - 1;
     let mut t = range.start;
+    let mut cache = VertexCache::new();
     while t < range.end {
         while draw_starts[d + 1] <= t {
             d += 1;
@@ -956,14 +988,15 @@ fn setup_range(
             }
             sel => {
                 let pos = mesh.positions();
+                let m = &draw.clip_from_object;
+                cache.reset();
                 for j in (t - draw_starts[d])..(end - draw_starts[d]) {
                     let ti = sel.triangle_index(j);
                     let [i0, i1, i2] = tris[ti as usize];
-                    let m = &draw.clip_from_object;
                     let v = [
-                        vp.project(m, pos[i0 as usize]),
-                        vp.project(m, pos[i1 as usize]),
-                        vp.project(m, pos[i2 as usize]),
+                        cache.project(vp, m, pos, i0),
+                        cache.project(vp, m, pos, i1),
+                        cache.project(vp, m, pos, i2),
                     ];
                     let clip = || [i0, i1, i2].map(|i| to_clip(m, pos[i as usize]));
                     setup_triangle(vp, v, clip, draw.first_item + ti as u64, out);
@@ -971,6 +1004,48 @@ fn setup_range(
             }
         }
         t = end;
+    }
+}
+
+/// Entries of [`VertexCache`] (a power of two).
+const VERTEX_CACHE: usize = 64;
+
+/// Projected vertices of the current index-list or range draw, direct-mapped by vertex index:
+/// the triangles of a list share corners (a quad's two triangles share two, a strip's or a
+/// fan's more), and a draw's indices are mostly runs of neighbours, so most shared corners are
+/// projected once per draw instead of once per triangle, as a whole-mesh draw's are. Results
+/// are unchanged: a projection is a function of the matrix and the position alone.
+struct VertexCache {
+    /// Vertex index held by each entry; `u32::MAX` (never an index: meshes have fewer than
+    /// `u32::MAX` vertices) when empty.
+    tags: [u32; VERTEX_CACHE],
+    vertices: [ProjVertex; VERTEX_CACHE],
+}
+
+impl VertexCache {
+    #[inline(always)]
+    fn new() -> Self {
+        Self {
+            tags: [u32::MAX; VERTEX_CACHE],
+            vertices: [ProjVertex::default(); VERTEX_CACHE],
+        }
+    }
+
+    /// Empties the cache (a new draw, a new matrix).
+    #[inline(always)]
+    fn reset(&mut self) {
+        self.tags = [u32::MAX; VERTEX_CACHE];
+    }
+
+    /// Vertex `i` of `positions` projected by `m`, from the cache when it holds it.
+    #[inline(always)]
+    fn project(&mut self, vp: &Viewport, m: &Mat4, positions: &[Vec3], i: u32) -> ProjVertex {
+        let slot = i as usize & (VERTEX_CACHE - 1);
+        if self.tags[slot] != i {
+            self.tags[slot] = i;
+            self.vertices[slot] = vp.project(m, positions[i as usize]);
+        }
+        self.vertices[slot]
     }
 }
 

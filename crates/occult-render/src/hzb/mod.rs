@@ -12,7 +12,8 @@
 //!   primitives are triangles). An instance whose prototype has an octree is a primitive with a
 //!   transform: reaching it continues in the prototype's octree; an instance of a small mesh is
 //!   drawn whole. Shared primitives (small straddlers held by several children) are drawn once
-//!   per frame: a frame stamp set keyed by the primitive's instance.
+//!   per frame and instance: §3.1's frame stamp, kept as one bit per shared primitive in a bit
+//!   set per instance that draws one this frame.
 //! - **Max z-pyramid and the box-face test (§3.2)**, [`occult_raster::ZPyramid`] and
 //!   `boxtest`: each front face of a node's box is tested at the finest pyramid level whose one
 //!   sample covers the face's screen box, descending where the comparison fails down to the
@@ -31,7 +32,8 @@
 //!   *visible list*) are drawn first, without tests, to make the depth buffer "almost
 //!   complete"; then the whole hierarchy is traversed with tests (skipping what the list drew).
 //!   At frame end the list is rechecked against the final depth and pruned; `recheck=N` does
-//!   that only every N frames (§4.2, §5.1). Nodes first drawn this frame join the list.
+//!   that only every N frames (§4.2, §5.1). Nodes first drawn this frame join the list (a
+//!   group's node only when one of its small meshes was drawn, not merely reached).
 //! - **Ordering heuristics**: the visible list in descending projected screen area (§4.2,
 //!   `area_sort`); frustum-culled list entries keep their visible status (§5.1, `keep_culled`);
 //!   `order=count` visits siblings in ascending primitive count instead of front to back
@@ -60,6 +62,16 @@
 //!   (its large straddlers) are tested against their own box before they are drawn, and the
 //!   instances held by one node of a group's octree are visited nearest first (the octants
 //!   give the order between nodes, not within one).
+//! - Addition, `retest`: a visible-list entry kept while outside the frustum (§5.1) is never
+//!   rechecked there, so when it comes back into view (a street corner turned) its status is
+//!   many frames old; it is then box-tested before it is drawn (and stays off the list when
+//!   hidden). Entries seen last frame are still drawn untested (§3.3).
+//! - Addition, `whole`: a mesh instance whose visible-list nodes hold at least this fraction of
+//!   its triangles is drawn whole, as one whole-mesh draw, and the tested traversal skips it
+//!   this frame; its entries stay listed and are rechecked, so when the visible share falls
+//!   below the fraction it is walked again. Mostly-visible instances (city overviews) then
+//!   cost one draw whose vertices are projected once, in parallel, instead of dozens of
+//!   index lists and their box tests. Conservative: it draws a superset.
 //! - By structure over a scene whose root is a mesh degenerates to by primitive (the root's
 //!   primitives are then triangles).
 //! - The invisible list of §4.2/§5.1 is flat in the paper (structures sorted by primitive count
@@ -139,6 +151,12 @@ pub struct HzbOptions {
     pub area_sort: bool,
     /// Keep frustum-culled entries on the visible list (§5.1).
     pub keep_culled: bool,
+    /// Box-test kept entries when they come back into the frustum, instead of drawing them
+    /// untested (not in the paper).
+    pub retest: bool,
+    /// Draw a mesh instance whole when its visible-list nodes hold at least this fraction of
+    /// its triangles (0: never). Not in the paper.
+    pub whole: f32,
     /// Sibling order.
     pub order: ChildOrder,
     /// Parallel distribution (§4.1).
@@ -151,7 +169,7 @@ impl Default for HzbOptions {
     fn default() -> Self {
         Self {
             octree: OctreeConfig {
-                leaf_size: 64,
+                leaf_size: 256,
                 max_depth: 10,
                 small_fraction: 0.25,
             },
@@ -163,6 +181,8 @@ impl Default for HzbOptions {
             recheck_every: 1,
             area_sort: true,
             keep_culled: true,
+            retest: true,
+            whole: 0.5,
             order: ChildOrder::FrontToBack,
             distribution: Distribution::Off,
             workers: 2,
@@ -206,6 +226,12 @@ impl HzbOptions {
                 "recheck={recheck}: the visible list is rechecked every N frames, N in 1..=1000000"
             ));
         }
+        let whole: f32 = p.get("whole", d.whole)?;
+        if !(0.0..=1.0).contains(&whole) {
+            return bad(format!(
+                "whole={whole}: the fraction of a mesh listed visible for drawing it whole must be in [0, 1]"
+            ));
+        }
         let occlusion = p.flag("occlusion", d.occlusion)?;
         let workers: usize = p.get("workers", d.workers)?;
         if workers == 0 || workers > MAX_WORKERS {
@@ -233,6 +259,8 @@ impl HzbOptions {
             recheck_every: recheck as u32,
             area_sort: p.flag("area_sort", d.area_sort)?,
             keep_culled: p.flag("keep_culled", d.keep_culled)?,
+            retest: p.flag("retest", d.retest)?,
+            whole,
             order: match p.choice("order", &["front", "count"], "front")? {
                 "count" => ChildOrder::Count,
                 _ => ChildOrder::FrontToBack,
@@ -248,7 +276,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
     params: &[
         ParamDoc {
             key: "leaf",
-            default: "64",
+            default: "256",
             help: "octree leaf size in primitives (triangles or instances), >= 1 (§3.1)",
         },
         ParamDoc {
@@ -303,6 +331,16 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             help: "frustum-culled nodes keep their visible status (§5.1)",
         },
         ParamDoc {
+            key: "retest",
+            default: "on",
+            help: "visible-list entries kept while outside the frustum are box-tested when they return, not drawn untested; needs temporal (not in the paper)",
+        },
+        ParamDoc {
+            key: "whole",
+            default: "0.5",
+            help: "draw a mesh instance whole when its visible-list nodes hold at least this fraction of its triangles, 0 = never; needs temporal (not in the paper)",
+        },
+        ParamDoc {
             key: "order",
             default: "front",
             help: "sibling order: front (front to back) or count (ascending primitive count, §4.2/§5.1)",
@@ -329,6 +367,8 @@ struct VisEntry {
     octree_node: u32,
     first_item: u64,
     world_from_node: Affine3A,
+    /// Listed while outside the frustum (§5.1), so not rechecked since it was last seen.
+    stale: bool,
 }
 
 /// What one walker keeps across frames: its rasterizer, pyramid and visible list (and, for a
@@ -336,7 +376,6 @@ struct VisEntry {
 struct Worker {
     raster: Rasterizer,
     stamps: walk::Stamps,
-    frame_number: u64,
     frame: Option<Frame>,
     pyramid: Option<ZPyramid>,
     visible: Vec<VisEntry>,
@@ -347,7 +386,7 @@ impl Worker {
         self.pyramid.as_ref().map_or(0, ZPyramid::memory_bytes)
             + self.frame.as_ref().map_or(0, Frame::memory_bytes)
             + self.visible.capacity() * std::mem::size_of::<VisEntry>()
-            + self.stamps.iter().map(|s| s.capacity() * 16).sum::<usize>()
+            + self.stamps.memory_bytes()
     }
 }
 
@@ -450,8 +489,7 @@ impl Hzb {
                 frame: None,
                 pyramid: None,
                 visible: Vec::new(),
-                stamps: walk::new_stamps(&octrees),
-                frame_number: 0,
+                stamps: walk::Stamps::new(&octrees),
             }]
         } else {
             let one = occult_raster::RasterConfig {
@@ -465,8 +503,7 @@ impl Hzb {
                         frame: None,
                         pyramid: None,
                         visible: Vec::new(),
-                        stamps: walk::new_stamps(&octrees),
-                        frame_number: 0,
+                        stamps: walk::Stamps::new(&octrees),
                     })
                 })
                 .collect::<Result<Vec<_>>>()?
@@ -497,21 +534,9 @@ fn walk_frame(
     share: walk::Share,
     recheck: bool,
     stamps: &mut walk::Stamps,
-    frame_number: u64,
 ) -> FrameStats {
     let old_visible = std::mem::take(visible);
-    let mut w = walk::Walk::new(
-        scene,
-        octrees,
-        options,
-        view,
-        raster,
-        frame,
-        pyramid,
-        share,
-        stamps,
-        frame_number,
-    );
+    let mut w = walk::Walk::new(scene, octrees, options, view, raster, frame, pyramid, share, stamps);
     if options.temporal {
         w.draw_visible_list(old_visible);
     }
@@ -548,7 +573,6 @@ impl Hzb {
                 .map(|(k, w)| {
                     s.spawn(move || {
                         let t = Instant::now();
-                        w.frame_number += 1;
                         let (Some(f), Some(p)) = (w.frame.as_mut(), w.pyramid.as_mut()) else {
                             unreachable!("frames and pyramids were made above");
                         };
@@ -570,7 +594,6 @@ impl Hzb {
                             share,
                             recheck,
                             &mut w.stamps,
-                            w.frame_number,
                         );
                         (stats, t.elapsed())
                     })
@@ -647,7 +670,6 @@ impl Renderer for Hzb {
         let (scene, octrees, options) = (&*self.scene, &self.octrees[..], &self.options);
         let mut stats = if options.distribution == Distribution::Off {
             let w = &mut self.workers[0];
-            w.frame_number += 1;
             let t = Instant::now();
             w.raster.clear(frame);
             let clear = t.elapsed();
@@ -664,7 +686,6 @@ impl Renderer for Hzb {
                 walk::Share::ALL,
                 recheck,
                 &mut w.stamps,
-                w.frame_number,
             );
             stats.phases.add(Phase::Clear, clear);
             stats
@@ -706,6 +727,8 @@ mod tests {
             ("small", "-0.1"),
             ("small", "1.5"),
             ("small", "nan"),
+            ("whole", "1.5"),
+            ("whole", "-0.5"),
             ("batch", "0"),
             ("leaf", "many"),
             ("temporal", "maybe"),

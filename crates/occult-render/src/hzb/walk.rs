@@ -38,20 +38,111 @@ type IdSet<K> = HashSet<K, BuildHasherDefault<IdHasher>>;
 /// Names one octree node of one instance of a DAG node: (DAG node, octree node, first item).
 type NodeKey = (u32, u32, u64);
 
-/// §3.1's frame stamps of shared primitives, per DAG node and primitive: the (frame, instance
-/// first item) that last drew it. Exact, so a primitive is never skipped wrongly; a primitive
-/// drawn by several instances in one frame keeps the displaced stamps in a set.
-pub(super) type Stamps = Vec<Vec<(u64, u64)>>;
+/// Marks a primitive that no other node shares in [`Stamps`]' numbering.
+const NOT_SHARED: u32 = u32::MAX;
 
-/// Stamp arrays for the shared primitives of `octrees` (empty where nothing is shared).
-pub(super) fn new_stamps(octrees: &[Option<HybridOctree>]) -> Stamps {
-    octrees
-        .iter()
-        .map(|o| match o {
-            Some(o) if o.shared_count() > 0 => vec![(u64::MAX, u64::MAX); o.primitive_count()],
-            _ => Vec::new(),
-        })
-        .collect()
+/// §3.1's frame stamps of shared primitives, kept per instance: every instance (DAG node, first
+/// item) that draws a shared primitive this frame gets a bit set over its octree's shared
+/// primitives, found once per node drawn (a one-entry cache covers the runs of one instance).
+/// Exact: a primitive is drawn once per instance and frame, never skipped wrongly.
+///
+/// Memory: per frame, `⌈shared / 64⌉` words per instance that draws a shared primitive, i.e.
+/// bounded by the frame's own walk (at most 8 bytes per 64 shared primitives of each instance
+/// reached), and reused from frame to frame.
+pub(super) struct Stamps {
+    /// Per DAG node: primitive → its bit among the octree's shared primitives, or
+    /// [`NOT_SHARED`]; empty where nothing is shared.
+    bit_of: Vec<Vec<u32>>,
+    /// Per DAG node: words of one instance's bit set.
+    words: Vec<u32>,
+    /// Instance (DAG node, first item) → offset of its bit set in `bits`, this frame.
+    slots: std::collections::HashMap<(u32, u64), usize, BuildHasherDefault<IdHasher>>,
+    bits: Vec<u64>,
+    /// The last instance looked up and its offset.
+    last: Option<((u32, u64), usize)>,
+}
+
+impl Stamps {
+    /// Stamp numbering for the shared primitives of `octrees`.
+    pub(super) fn new(octrees: &[Option<HybridOctree>]) -> Self {
+        let mut words = Vec::with_capacity(octrees.len());
+        let bit_of = octrees
+            .iter()
+            .map(|o| match o {
+                Some(o) if o.shared_count() > 0 => {
+                    let mut next = 0u32;
+                    let bits: Vec<u32> = (0..o.primitive_count() as u32)
+                        .map(|p| {
+                            if o.is_shared(p) {
+                                next += 1;
+                                next - 1
+                            } else {
+                                NOT_SHARED
+                            }
+                        })
+                        .collect();
+                    words.push(next.div_ceil(64));
+                    bits
+                }
+                _ => {
+                    words.push(0);
+                    Vec::new()
+                }
+            })
+            .collect();
+        Self {
+            bit_of,
+            words,
+            slots: Default::default(),
+            bits: Vec::new(),
+            last: None,
+        }
+    }
+
+    /// Forgets the previous frame's stamps.
+    fn begin_frame(&mut self) {
+        self.slots.clear();
+        self.bits.clear();
+        self.last = None;
+    }
+
+    /// Bytes held.
+    pub(super) fn memory_bytes(&self) -> usize {
+        self.bit_of.iter().map(|b| b.capacity() * 4).sum::<usize>()
+            + self.words.capacity() * 4
+            + self.bits.capacity() * 8
+            + self.slots.capacity() * 24
+    }
+
+    /// Stamps primitive `p` of the instance of DAG node `id` at `first_item`; false when it is
+    /// shared and that instance already drew it this frame.
+    #[inline]
+    fn stamp(&mut self, id: NodeId, p: u32, first_item: u64) -> bool {
+        let Some(&bit) = self.bit_of[id.index()].get(p as usize) else {
+            return true;
+        };
+        if bit == NOT_SHARED {
+            return true;
+        }
+        let key = (id.0, first_item);
+        let offset = match self.last {
+            Some((k, o)) if k == key => o,
+            _ => {
+                let (bits, words) = (&mut self.bits, self.words[id.index()] as usize);
+                let o = *self.slots.entry(key).or_insert_with(|| {
+                    let o = bits.len();
+                    bits.resize(o + words, 0);
+                    o
+                });
+                self.last = Some((key, o));
+                o
+            }
+        };
+        let (word, mask) = (&mut self.bits[offset + bit as usize / 64], 1u64 << (bit % 64));
+        let fresh = *word & mask == 0;
+        *word |= mask;
+        fresh
+    }
 }
 
 /// Which part of the scene one worker of a §4.1 distribution owns.
@@ -149,11 +240,10 @@ pub(super) struct Walk<'a> {
     dirty: Option<PixelRect>,
     /// Nodes whose own primitives the visible list drew this frame.
     drawn_nodes: IdSet<NodeKey>,
+    /// Mesh instances (DAG node, first item) the visible list drew whole this frame.
+    whole: IdSet<(u32, u64)>,
     /// Shared primitives drawn (§3.1's frame stamp).
     stamps: &'a mut Stamps,
-    frame_number: u64,
-    /// Stamps of this frame displaced by another instance's: (DAG node, primitive, first item).
-    displaced: IdSet<(u32, u32, u64)>,
     /// The next visible list, and its keys.
     visible: Vec<VisEntry>,
     listed: IdSet<NodeKey>,
@@ -167,6 +257,8 @@ pub(super) struct Walk<'a> {
     list_culled: u64,
     recheck_dropped: u64,
     batches: u64,
+    whole_drawn: u64,
+    list_retested: u64,
 }
 
 impl<'a> Walk<'a> {
@@ -181,8 +273,8 @@ impl<'a> Walk<'a> {
         pyramid: &'a mut ZPyramid,
         share: Share,
         stamps: &'a mut Stamps,
-        frame_number: u64,
     ) -> Self {
+        stamps.begin_frame();
         Self {
             scene,
             octrees,
@@ -201,9 +293,8 @@ impl<'a> Walk<'a> {
             pending_triangles: 0,
             dirty: None,
             drawn_nodes: IdSet::default(),
+            whole: IdSet::default(),
             stamps,
-            frame_number,
-            displaced: IdSet::default(),
             visible: Vec::new(),
             listed: IdSet::default(),
             placements: Default::default(),
@@ -216,6 +307,8 @@ impl<'a> Walk<'a> {
             list_culled: 0,
             recheck_dropped: 0,
             batches: 0,
+            whole_drawn: 0,
+            list_retested: 0,
         }
     }
 
@@ -235,17 +328,44 @@ impl<'a> Walk<'a> {
             keyed.sort_by_key(|k| std::cmp::Reverse(k.0));
             list = keyed.into_iter().map(|(_, e)| e).collect();
         }
+        let whole = self.whole_instances(&list);
         for e in list {
             let own = self.node_of(&e).own_bounds;
             let pl = self.placement(&e);
             let key = (e.dag_node.0, e.octree_node, e.first_item);
+            if whole.contains(&(e.dag_node.0, e.first_item)) {
+                // Drawn whole (once, at its first entry); its entries stay listed, so that the
+                // recheck keeps measuring how much of it is visible.
+                if self.whole.insert((e.dag_node.0, e.first_item)) {
+                    let scene: &'a Scene = self.scene;
+                    if let NodeKind::Mesh(mesh) = scene.node(e.dag_node).kind() {
+                        let b = mesh.bounds();
+                        if pl.frustum.classify_aabb(&b) != Containment::Outside {
+                            self.whole_drawn += 1;
+                            self.push(mesh, None, pl.clip_from_object, e.first_item, &b);
+                            self.maybe_flush();
+                        }
+                    }
+                }
+                self.list(e);
+                continue;
+            }
             if pl.frustum.classify_aabb(&own) == Containment::Outside {
                 self.list_culled += 1;
                 if self.options.keep_culled {
-                    self.list(e);
+                    self.list(VisEntry { stale: true, ..e });
                 }
                 continue;
             }
+            // An entry kept while outside the frustum was never rechecked there: when it comes
+            // back into view it is tested like a node of the traversal (`retest`).
+            if e.stale && self.options.retest && self.options.occlusion {
+                self.list_retested += 1;
+                if self.hidden(&pl.clip_from_object, &own, pl.eye) {
+                    continue; // the traversal lists it again if it is drawn
+                }
+            }
+            let e = VisEntry { stale: false, ..e };
             self.list_drawn += 1;
             // A flush may empty the batch; the entry stays listed either way.
             let _ = self.draw_own(
@@ -263,10 +383,37 @@ impl<'a> Walk<'a> {
         self.flush();
     }
 
+    /// The mesh instances of `list` whose listed nodes hold at least the `whole` fraction of
+    /// their mesh's triangles: most of such an instance was visible last frame, and one
+    /// whole-mesh draw (vertices projected once, no box tests) costs less than its nodes'
+    /// index lists and the tests of the rest. Not in the paper (see the module doc).
+    fn whole_instances(&self, list: &[VisEntry]) -> IdSet<(u32, u64)> {
+        let mut out = IdSet::default();
+        let fraction = self.options.whole;
+        if fraction <= 0.0 {
+            return out;
+        }
+        let scene: &'a Scene = self.scene;
+        let mut listed: std::collections::HashMap<(u32, u64), u64, BuildHasherDefault<IdHasher>> = Default::default();
+        for e in list {
+            if !e.stale && matches!(scene.node(e.dag_node).kind(), NodeKind::Mesh(_)) {
+                *listed.entry((e.dag_node.0, e.first_item)).or_default() += self.node_of(e).count as u64;
+            }
+        }
+        for (key, count) in listed {
+            if let NodeKind::Mesh(mesh) = scene.node(NodeId(key.0)).kind() {
+                if count as f64 >= fraction as f64 * mesh.triangle_count() as f64 {
+                    out.insert(key);
+                }
+            }
+        }
+        out
+    }
+
     /// The tested front-to-back traversal of the whole scene (§3.2).
     pub fn traverse(&mut self) {
         let root = self.scene.root();
-        self.instance(root, &Affine3A::IDENTITY, 0, false);
+        let _ = self.instance(root, &Affine3A::IDENTITY, 0, false);
         self.flush();
     }
 
@@ -281,7 +428,8 @@ impl<'a> Walk<'a> {
         for e in list {
             let own = self.node_of(&e).own_bounds;
             let pl = self.placement(&e);
-            let keep = if pl.frustum.classify_aabb(&own) == Containment::Outside {
+            let outside = pl.frustum.classify_aabb(&own) == Containment::Outside;
+            let keep = if outside {
                 self.options.keep_culled
             } else {
                 let mut pc = self.pc;
@@ -290,7 +438,7 @@ impl<'a> Walk<'a> {
                 !hidden
             };
             if keep {
-                kept.push(e);
+                kept.push(VisEntry { stale: outside, ..e });
             } else {
                 self.recheck_dropped += 1;
                 self.listed.remove(&(e.dag_node.0, e.octree_node, e.first_item));
@@ -313,6 +461,8 @@ impl<'a> Walk<'a> {
         c.add("visible_list_frustum_culled", self.list_culled);
         c.add("recheck_dropped", self.recheck_dropped);
         c.add("batches", self.batches);
+        c.add("whole_drawn", self.whole_drawn);
+        c.add("visible_list_retested", self.list_retested);
         (self.visible, self.stats)
     }
 
@@ -346,23 +496,9 @@ impl<'a> Walk<'a> {
         }
     }
 
-    /// Stamps shared primitive `p` of the instance of `id` at `first_item`; false when it
-    /// was already drawn this frame.
+    /// §3.1: false when primitive `p` is shared and this instance already drew it this frame.
     fn stamp(&mut self, id: NodeId, p: u32, first_item: u64) -> bool {
-        let now = (self.frame_number, first_item);
-        let held = self.stamps[id.index()][p as usize];
-        if held == now {
-            return false;
-        }
-        if held.0 == self.frame_number {
-            // Another instance drew it this frame: the displaced stamps live in a set.
-            if self.displaced.contains(&(id.0, p, first_item)) {
-                return false;
-            }
-            self.displaced.insert((id.0, p, held.1));
-        }
-        self.stamps[id.index()][p as usize] = now;
-        true
+        self.stamps.stamp(id, p, first_item)
     }
 
     fn list(&mut self, e: VisEntry) {
@@ -372,9 +508,12 @@ impl<'a> Walk<'a> {
     }
 
     /// Visits an instance of DAG node `id`: through its octree, or as one box (a small mesh).
-    fn instance(&mut self, id: NodeId, world_from_node: &Affine3A, first_item: u64, inside: bool) {
+    /// Returns whether a small mesh was queued whole (false for an instance walked through
+    /// its octree).
+    fn instance(&mut self, id: NodeId, world_from_node: &Affine3A, first_item: u64, inside: bool) -> bool {
         let octrees: &'a [Option<HybridOctree>] = self.octrees;
         match &octrees[id.index()] {
+            Some(_) if self.whole.contains(&(id.0, first_item)) => false, // drawn whole
             Some(octree) if !octree.nodes().is_empty() => {
                 let inst = Instance {
                     id,
@@ -386,16 +525,17 @@ impl<'a> Walk<'a> {
                     eye: world_from_node.inverse().transform_point3(self.view.camera().eye),
                 };
                 self.octree_node(&inst, 0, inside);
+                false
             }
-            Some(_) => {}
+            Some(_) => false,
             None => {
                 let scene: &'a Scene = self.scene;
                 let node = scene.node(id);
                 let NodeKind::Mesh(mesh) = node.kind() else {
-                    return; // an empty group
+                    return false; // an empty group
                 };
                 if mesh.triangle_count() == 0 || (id == scene.root() && self.share.index != 0) {
-                    return; // a small mesh as the whole scene: the first worker draws it
+                    return false; // a small mesh as the whole scene: the first worker draws it
                 }
                 let b = node.bounds();
                 self.stats.nodes_visited += 1;
@@ -404,17 +544,18 @@ impl<'a> Walk<'a> {
                     if self.view.frustum(world_from_node).classify_aabb(&b) == Containment::Outside {
                         self.stats.boxes_culled += 1;
                         self.frustum_culled += 1;
-                        return;
+                        return false;
                     }
                 }
                 let clip = self.view.clip_from_object(world_from_node);
                 if self.options.occlusion {
                     let eye = world_from_node.inverse().transform_point3(self.view.camera().eye);
                     if self.hidden(&clip, &b, eye) {
-                        return;
+                        return false;
                     }
                 }
                 self.push(mesh, None, clip, first_item, &b);
+                true
             }
         }
     }
@@ -510,18 +651,21 @@ impl<'a> Walk<'a> {
                         }
                         let child_first = inst.first_item + scene.node(inst.id).item_offset(p as usize);
                         let has_octree = self.octrees[i.child.index()].is_some();
-                        if !has_octree {
-                            direct = true;
-                            if drawn || !self.share.owns_node(key) || !self.share.owns_primitive(inst.id, root, key, p)
-                            {
-                                continue; // the visible list drew it, or another worker does
-                            }
+                        if !has_octree
+                            && (drawn
+                                || !self.share.owns_node(key)
+                                || !self.share.owns_primitive(inst.id, root, key, p))
+                        {
+                            continue; // the visible list drew it, or another worker does
                         }
-                        if inst.octree.is_shared(p) && !self.stamp(inst.id, p, inst.first_item) {
+                        if !self.stamp(inst.id, p, inst.first_item) {
                             continue;
                         }
                         let world_from_child = compose(&inst.world_from_node, &i.parent_from_child);
-                        self.instance(i.child, &world_from_child, child_first, inside);
+                        // The node joins the visible list only when one of its small meshes was
+                        // drawn: a node whose small meshes were all culled would otherwise be
+                        // drawn untested next frame.
+                        direct |= self.instance(i.child, &world_from_child, child_first, inside);
                     }
                     if direct && !drawn && self.options.temporal {
                         self.list_new(inst, n);
@@ -556,6 +700,7 @@ impl<'a> Walk<'a> {
             octree_node: n,
             first_item: inst.first_item,
             world_from_node: inst.world_from_node,
+            stale: false,
         });
     }
 
@@ -591,7 +736,7 @@ impl<'a> Walk<'a> {
                         continue;
                     }
                     // §3.1: a shared primitive is drawn once per frame.
-                    if octree.is_shared(p) && !self.stamp(id, p, first_item) {
+                    if !self.stamp(id, p, first_item) {
                         continue;
                     }
                     self.scratch.push(p);
@@ -611,7 +756,7 @@ impl<'a> Walk<'a> {
                         continue;
                     };
                     let child_first = first_item + scene.node(id).item_offset(p as usize);
-                    if octree.is_shared(p) && !self.stamp(id, p, first_item) {
+                    if !self.stamp(id, p, first_item) {
                         continue;
                     }
                     let world_from_child = compose(world_from_node, &i.parent_from_child);
