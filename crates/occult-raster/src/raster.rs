@@ -30,6 +30,8 @@ use occult_core::{ItemId, Mat4, Mesh, Vec3, Vec4, View};
 use rayon::prelude::*;
 use std::ops::Range;
 
+pub(crate) mod stencil;
+
 /// Sub-pixel precision of snapped vertices, in bits.
 pub const SUBPIXEL_BITS: u32 = 8;
 const SUB: i64 = 1 << SUBPIXEL_BITS;
