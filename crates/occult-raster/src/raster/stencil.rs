@@ -6,6 +6,10 @@
 //! stencil fragments) is what clamping saves. The counting rule is the depth-fail rule
 //! ("Carmack's reverse"): a face fragment that is *not nearer* than the frame's depth at its
 //! pixel adds +1 when the face is a back face seen from the eye and −1 when it is a front face.
+//! Faces must be wound counter-clockwise seen from outside their volume; front and back are
+//! decided by the snapped triangle's orientation on screen, as a GPU does, so that the signed
+//! coverage of a closed volume cancels exactly at every pixel centre (a sliver whose snapped
+//! corners twist it still counts consistently).
 //! For closed volumes (front and back caps drawn) a pixel's count is then the number of volumes
 //! that contain its visible point, whatever the eye's position (near-plane clipping only removes
 //! fragments nearer than every visible point, which never count).
@@ -83,15 +87,13 @@ impl StencilBuffer {
     }
 }
 
-/// Per-triangle data of a [`StencilDraw`], indexed by the mesh's triangle index
-/// (`item − first_item`); the slice must cover every triangle the draw sends.
+/// How the depth of a [`StencilDraw`]'s triangles is found.
 #[derive(Clone, Copy, Debug)]
 pub enum StencilFaces<'a> {
-    /// Interpolated depth (see the module doc); one z-fail increment per triangle (+1 back
-    /// face, −1 front face, 0 skip), as [`zfail_increment`] gives.
-    Interpolated(&'a [i8]),
-    /// Exact plane depth; one world-space plane `(n, d)` per triangle (`n·p + d = 0`, `n`
-    /// pointing out of the volume). The increment follows from the side the eye is on.
+    /// The rasterizer's interpolated depth (see the module doc).
+    Interpolated,
+    /// Exact plane depth: one world-space plane `(n, d)` (`n·p + d = 0`) per triangle, indexed
+    /// by the mesh's triangle index (`item − first_item`); the slice must cover every triangle.
     Planes(&'a [[f64; 4]]),
 }
 
@@ -126,36 +128,21 @@ impl std::ops::AddAssign for StencilCounts {
     }
 }
 
-/// The z-fail increment of a face with outward world plane `plane` seen from `view`'s eye:
-/// +1 for a back face (eye behind the plane), −1 for a front face, 0 when the plane passes
-/// through the eye or is not finite.
-pub fn zfail_increment(view: &View, plane: [f64; 4]) -> i8 {
-    let e = view.camera().eye.as_dvec3();
-    let s = plane[0] * e.x + plane[1] * e.y + plane[2] * e.z + plane[3];
-    if !s.is_finite() || s == 0.0 {
-        0
-    } else if s < 0.0 {
-        1
-    } else {
-        -1
-    }
-}
-
 /// A face's depth as an affine function of the pixel centre, `z = a·x + b·y + c`
-/// (`x`, `y` in pixels, centres at `+ 0.5`), and its increment.
+/// (`x`, `y` in pixels, centres at `+ 0.5`); not `exact` for a plane through the eye (seen
+/// edge-on), whose fragments then take the interpolated depth.
 #[derive(Clone, Copy, Debug)]
 struct ScreenPlane {
     a: f64,
     b: f64,
     c: f64,
-    increment: i8,
+    exact: bool,
 }
 
 /// Maps world planes to screen-space depth planes of one view.
 struct PlaneMapper {
     /// `(clip_from_world⁻¹)ᵀ`: world planes to clip-space planes.
     clip_plane_from_world_plane: DMat4,
-    eye_clip: DVec4,
     width: f64,
     height: f64,
 }
@@ -165,7 +152,6 @@ impl PlaneMapper {
         let m = view.clip_from_world().as_dmat4();
         Self {
             clip_plane_from_world_plane: m.inverse().transpose(),
-            eye_clip: m * view.camera().eye.as_dvec3().extend(1.0),
             width: view.width() as f64,
             height: view.height() as f64,
         }
@@ -175,21 +161,12 @@ impl PlaneMapper {
     /// `q.x·x_ndc + q.y·y_ndc + q.z·z_ndc + q.w = 0`, and `x_ndc = 2x/W − 1`, `y_ndc = 1 − 2y/H`.
     fn map(&self, p: [f64; 4]) -> ScreenPlane {
         let q = self.clip_plane_from_world_plane * DVec4::from_array(p);
-        let s = q.dot(self.eye_clip);
-        let increment = if !s.is_finite() || s == 0.0 {
-            0
-        } else if s < 0.0 {
-            1
-        } else {
-            -1
-        };
         if q.z == 0.0 || !q.is_finite() {
-            // The plane contains the eye: seen edge-on, it covers no pixel centre exactly.
             return ScreenPlane {
                 a: 0.0,
                 b: 0.0,
                 c: 0.0,
-                increment: 0,
+                exact: false,
             };
         }
         let inv = -1.0 / q.z;
@@ -197,7 +174,7 @@ impl PlaneMapper {
             a: q.x * 2.0 / self.width * inv,
             b: -q.y * 2.0 / self.height * inv,
             c: (q.y - q.x + q.w) * inv,
-            increment,
+            exact: true,
         }
     }
 }
@@ -206,8 +183,9 @@ impl PlaneMapper {
 struct FaceTable<'a> {
     first_item: ItemId,
     end_item: ItemId,
-    interpolated: Option<&'a [i8]>,
+    /// Empty for interpolated depth.
     planes: Vec<ScreenPlane>,
+    _faces: std::marker::PhantomData<&'a ()>,
 }
 
 impl Rasterizer {
@@ -242,27 +220,28 @@ impl Rasterizer {
         let mut tables = Vec::with_capacity(draws.len());
         for sd in draws {
             let n = sd.draw.mesh.triangle_count();
-            let (len, interpolated, planes) = match sd.faces {
-                StencilFaces::Interpolated(inc) => (inc.len(), Some(inc), Vec::new()),
+            let planes = match sd.faces {
+                StencilFaces::Interpolated => Vec::new(),
                 StencilFaces::Planes(p) => {
+                    if p.len() < n {
+                        return Err(RasterError::BadConfig(format!(
+                            "stencil pass: {} planes for a mesh of {n} triangles",
+                            p.len()
+                        )));
+                    }
                     let mut planes = Vec::new();
                     planes
                         .try_reserve_exact(p.len())
                         .map_err(|_| RasterError::OutOfMemory(p.len() * std::mem::size_of::<ScreenPlane>()))?;
                     planes.extend(p.iter().map(|&p| mapper.map(p)));
-                    (p.len(), None, planes)
+                    planes
                 }
             };
-            if len < n {
-                return Err(RasterError::BadConfig(format!(
-                    "stencil pass: {len} faces for a mesh of {n} triangles"
-                )));
-            }
             tables.push(FaceTable {
                 first_item: sd.draw.first_item,
                 end_item: sd.draw.first_item.saturating_add(n as u64),
-                interpolated,
                 planes,
+                _faces: std::marker::PhantomData,
             });
         }
         tables.sort_by_key(|t| t.first_item);
@@ -355,43 +334,38 @@ impl SetupSink for StencilSink<'_> {
         let rect = self.rect;
         let (width, depth, values) = (self.width, self.depth, &mut *self.values);
         let (mut fragments, mut updates) = (0u64, 0u64);
-        match table.interpolated {
-            Some(inc) => {
-                let increment = inc[index] as i32;
-                covered_spans(&t, rect, |y, xa, xb| {
+        // Depth-fail: +1 for a back face, −1 for a front face, by orientation on screen.
+        let increment = if t.front { -1 } else { 1 };
+        let plane = table.planes.get(index).copied().filter(|p| p.exact);
+        covered_spans(&t, rect, |y, xa, xb| {
+            let base = y as usize * width;
+            let sbase = (y - rect[1]) as usize * width;
+            match plane {
+                None => {
                     let row_depth = super::row_depth(&t, y);
-                    let base = y as usize * width;
-                    let sbase = (y - rect[1]) as usize * width;
                     for x in xa..=xb {
                         let stored = depth[base + x as usize];
                         let z = super::depth_at(&t, row_depth, x);
-                        if stored != CLEAR_DEPTH && z <= stored && increment != 0 {
+                        if stored != CLEAR_DEPTH && z <= stored {
                             values[sbase + x as usize] += increment;
                             updates += 1;
                         }
                     }
-                    fragments += (xb - xa + 1) as u64;
-                });
-            }
-            None => {
-                let p = table.planes[index];
-                let increment = p.increment as i32;
-                covered_spans(&t, rect, |y, xa, xb| {
-                    let base = y as usize * width;
-                    let sbase = (y - rect[1]) as usize * width;
+                }
+                Some(p) => {
                     let row = p.b * (y as f64 + 0.5) + p.c;
                     for x in xa..=xb {
                         let stored = depth[base + x as usize];
                         let z = p.a * (x as f64 + 0.5) + row;
-                        if stored != CLEAR_DEPTH && z <= stored as f64 && increment != 0 {
+                        if stored != CLEAR_DEPTH && z <= stored as f64 {
                             values[sbase + x as usize] += increment;
                             updates += 1;
                         }
                     }
-                    fragments += (xb - xa + 1) as u64;
-                });
+                }
             }
-        }
+            fragments += (xb - xa + 1) as u64;
+        });
         self.counts.fragments += fragments;
         self.counts.updates += updates;
     }
@@ -458,9 +432,9 @@ mod tests {
         View::new(c, w, h).unwrap()
     }
 
-    fn world_plane(t: [Vec3; 3], flip: bool) -> [f64; 4] {
+    fn world_plane(t: [Vec3; 3]) -> [f64; 4] {
         let [a, b, c] = t.map(|v| v.as_dvec3());
-        let n = (b - a).cross(c - a) * if flip { -1.0 } else { 1.0 };
+        let n = (b - a).cross(c - a);
         [n.x, n.y, n.z, -n.dot(a)]
     }
 
@@ -486,8 +460,9 @@ mod tests {
         (c.w > 0.0).then_some(c.z / c.w)
     }
 
-    /// The stencil pass against a brute force: each face drawn alone by a `Full` draw gives its
-    /// coverage (and interpolated depth); plane depths come from ray–plane intersections.
+    /// The stencil pass against a brute force: each face drawn alone by `Full` draws gives its
+    /// coverage and interpolated depth, front pieces (those a back-face-culling draw keeps)
+    /// count −1 and back pieces +1; plane depths come from ray–plane intersections.
     #[test]
     fn stencil_pass_matches_brute_force() {
         let (w, h) = (48u32, 40u32);
@@ -506,6 +481,11 @@ mod tests {
             let recv = Mesh::new(recv, vec![[0, 1, 2], [3, 4, 5], [6, 7, 8]]).unwrap();
             let mut raster = Rasterizer::new(RasterConfig {
                 threads: 2,
+                ..Default::default()
+            })
+            .unwrap();
+            let mut culling = Rasterizer::new(RasterConfig {
+                cull_backfaces: true,
                 ..Default::default()
             })
             .unwrap();
@@ -533,21 +513,16 @@ mod tests {
             let tris: Vec<[u32; 3]> = (0..face_count as u32).map(|k| [3 * k, 3 * k + 1, 3 * k + 2]).collect();
             let faces_mesh = Mesh::new(pos, tris).unwrap();
             let planes: Vec<[f64; 4]> = (0..face_count)
-                .map(|k| world_plane(faces_mesh.triangle_positions(k), seed % 2 == 1))
-                .collect();
-            let incs: Vec<i8> = planes.iter().map(|&p| zfail_increment(&v, p)).collect();
-            // Interpolated over the receivers' own triangles and the faces mesh; planes over a copy.
-            let recv_incs: Vec<i8> = (0..3)
-                .map(|k| zfail_increment(&v, world_plane(recv.triangle_positions(k), false)))
+                .map(|k| world_plane(faces_mesh.triangle_positions(k)))
                 .collect();
             let draws = [
                 StencilDraw {
                     draw: draw(&recv, 0),
-                    faces: StencilFaces::Interpolated(&recv_incs),
+                    faces: StencilFaces::Interpolated,
                 },
                 StencilDraw {
                     draw: draw(&faces_mesh, 100),
-                    faces: StencilFaces::Interpolated(&incs),
+                    faces: StencilFaces::Interpolated,
                 },
                 StencilDraw {
                     draw: draw(&faces_mesh, 200),
@@ -561,27 +536,33 @@ mod tests {
             let mut expected = vec![0i32; (w * h) as usize];
             let mut ambiguous = vec![false; (w * h) as usize];
             let mut fragments = 0u64;
-            let mut one = |mesh: &Mesh, k: usize, by_plane: Option<[f64; 4]>, inc: i8| {
-                let mut alone = Frame::new(w, h).unwrap();
+            let mut one = |mesh: &Mesh, k: usize, by_plane: Option<[f64; 4]>| {
+                let (mut all, mut front) = (Frame::new(w, h).unwrap(), Frame::new(w, h).unwrap());
                 let d = Draw {
                     mesh,
                     triangles: DrawTriangles::Range(k as u32..k as u32 + 1),
                     clip_from_object: m,
                     first_item: 0,
                 };
-                raster.draw(&v, &mut alone, &[d], RasterMode::Full);
+                raster.draw(&v, &mut all, &[d.clone()], RasterMode::Full);
+                culling.draw(&v, &mut front, &[d], RasterMode::Full);
                 for i in 0..(w * h) as usize {
-                    if alone.items()[i] == occult_core::NO_ITEM {
+                    if all.items()[i] == occult_core::NO_ITEM {
                         continue;
                     }
                     fragments += 1;
                     let stored = frame.depth()[i];
-                    if stored == CLEAR_DEPTH || inc == 0 {
+                    if stored == CLEAR_DEPTH {
                         continue;
                     }
+                    let inc = if front.items()[i] == occult_core::NO_ITEM {
+                        1
+                    } else {
+                        -1
+                    };
                     let (x, y) = (i as u32 % w, i as u32 / w);
                     let z = match by_plane {
-                        None => alone.depth()[i] as f64,
+                        None => all.depth()[i] as f64,
                         Some(p) => match ray_plane_depth(&v, p, x, y) {
                             Some(z) => z,
                             None => {
@@ -594,20 +575,18 @@ mod tests {
                         ambiguous[i] = true;
                     }
                     if z <= stored as f64 {
-                        expected[i] += inc as i32;
+                        expected[i] += inc;
                     }
                 }
             };
             for k in 0..3 {
-                one(&recv, k, None, recv_incs[k]);
+                one(&recv, k, None);
             }
             for k in 0..face_count {
-                one(&faces_mesh, k, None, incs[k]);
+                one(&faces_mesh, k, None);
             }
-            for k in 0..face_count {
-                let p = planes[k];
-                let inc = zfail_increment(&v, p);
-                one(&faces_mesh, k, Some(p), inc);
+            for (k, &p) in planes.iter().enumerate() {
+                one(&faces_mesh, k, Some(p));
             }
             assert_eq!(counts.fragments, fragments, "seed {seed}: fill");
             let mut compared = 0;
@@ -621,7 +600,6 @@ mod tests {
                 compared > (w * h) as usize * 9 / 10,
                 "seed {seed}: {compared} pixels compared"
             );
-            // A receiver's own triangle as an interpolated cap ties with the frame where visible.
             assert_eq!(counts.triangles_submitted, 3 + 2 * face_count as u64);
         }
     }
@@ -647,21 +625,17 @@ mod tests {
         };
         let mut raster = Rasterizer::new(RasterConfig::default()).unwrap();
         let mut frame = Frame::new(32, 32).unwrap();
-        raster.draw(&v, &mut frame, &[d.clone()], RasterMode::Full);
+        raster.draw(&v, &mut frame, std::slice::from_ref(&d), RasterMode::Full);
         let mut stencil = StencilBuffer::new(32, 32).unwrap();
-        let c = raster
-            .draw_stencil(
-                &v,
-                &frame,
-                &mut stencil,
-                &[StencilDraw {
-                    draw: d,
-                    faces: StencilFaces::Interpolated(&[1]),
-                }],
-            )
-            .unwrap();
+        let sd = StencilDraw {
+            draw: d,
+            faces: StencilFaces::Interpolated,
+        };
+        let c = raster.draw_stencil(&v, &frame, &mut stencil, &[sd]).unwrap();
         assert_eq!(c.fragments, frame.covered_pixel_count());
         assert_eq!(c.updates, c.fragments);
+        // Counter-clockwise toward the eye: a front face, −1 wherever it is the visible surface.
+        assert!(stencil.values().iter().all(|&s| s == 0 || s == -1));
         assert_eq!(stencil.nonzero_count(), frame.covered_pixel_count());
     }
 
@@ -683,12 +657,12 @@ mod tests {
         let mut s = StencilBuffer::new(16, 8).unwrap();
         let short = StencilDraw {
             draw: d.clone(),
-            faces: StencilFaces::Interpolated(&[]),
+            faces: StencilFaces::Planes(&[]),
         };
         assert!(raster.draw_stencil(&v, &frame, &mut s, &[short]).is_err());
         let a = StencilDraw {
             draw: d.clone(),
-            faces: StencilFaces::Interpolated(&[1]),
+            faces: StencilFaces::Interpolated,
         };
         assert!(raster.draw_stencil(&v, &frame, &mut s, &[a.clone(), a]).is_err());
     }
