@@ -40,7 +40,7 @@ pub struct ParticlesArgs {
     #[arg(long, value_name = "SIZES", default_value = "1-64", value_parser = parse_sizes)]
     pub sizes: SpriteSizes,
     /// Cull sprites against the N-buffer (`on`) or draw them all (`off`).
-    #[arg(long, value_name = "on|off", default_value = "on", value_parser = parse_on_off)]
+    #[arg(long, value_name = "on|off", default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
     pub cull: bool,
     /// Share of the scene's height (from the ground) the particles fill, in (0, 1].
     #[arg(long, value_name = "F", default_value_t = 0.3)]
