@@ -544,7 +544,7 @@ mod tests {
                     clip_from_object: m,
                     first_item: 0,
                 };
-                raster.draw(&v, &mut all, &[d.clone()], RasterMode::Full);
+                raster.draw(&v, &mut all, std::slice::from_ref(&d), RasterMode::Full);
                 culling.draw(&v, &mut front, &[d], RasterMode::Full);
                 for i in 0..(w * h) as usize {
                     if all.items()[i] == occult_core::NO_ITEM {

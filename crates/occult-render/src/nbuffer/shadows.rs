@@ -63,6 +63,9 @@
 //! extraction) and the stencil fill. Not meant for scenes above [`MAX_SHADOW_TRIANGLES`]
 //! triangle instances (every caster is visited each frame).
 
+// Negated comparisons are deliberate: they send NaN down the safe branch.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use std::collections::HashMap;
 use std::time::Instant;
 
@@ -355,13 +358,18 @@ fn unproject(world_from_clip: &DMat4, width: u32, height: u32, x: u32, y: u32, d
     h.truncate() / h.w
 }
 
-/// `v` as `f32`, rounded up (`up`) or down.
+/// A mesh's BVH leaves: world-independent box and range of its leaf-ordered triangles.
+type Leaves = Vec<(Aabb, std::ops::Range<u32>)>;
+/// An undirected edge by its corners' position bits (smaller first).
+type EdgeKey = ([u32; 3], [u32; 3]);
+
+/// Positive `v` as `f32`, rounded up (`up`) or down (to the neighbouring float).
 fn to_f32(v: f64, up: bool) -> f32 {
     let f = v as f32;
-    if up && (f as f64) < v {
-        f.next_up()
-    } else if !up && (f as f64) > v {
-        f.next_down()
+    if up && (f as f64) < v && f.is_finite() {
+        f32::from_bits(f.to_bits() + 1)
+    } else if !up && (f as f64) > v && f > 0.0 {
+        f32::from_bits(f.to_bits() - 1)
     } else {
         f
     }
@@ -404,7 +412,7 @@ impl ShadowCasters {
         }
         let mut leaf_triangles = Vec::new();
         // Per node: (index into leaf_triangles, leaves as (node box, range)).
-        let mut split: Vec<Option<(u32, Vec<(Aabb, std::ops::Range<u32>)>)>> = vec![None; scene.nodes().len()];
+        let mut split: Vec<Option<(u32, Leaves)>> = vec![None; scene.nodes().len()];
         for (i, node) in scene.nodes().iter().enumerate() {
             if let Some(m) = node.mesh() {
                 if m.triangle_count() > leaf {
@@ -774,7 +782,7 @@ impl ShadowCasters {
             let p = pos[i as usize];
             [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
         };
-        let mut edges: HashMap<([u32; 3], [u32; 3]), (i32, u32, u32)> = HashMap::with_capacity(lit.len() * 3);
+        let mut edges: HashMap<EdgeKey, (i32, u32, u32)> = HashMap::with_capacity(lit.len() * 3);
         for &(_, [i0, i1, i2]) in &lit {
             for (a, b) in [(i0, i1), (i1, i2), (i2, i0)] {
                 let (ka, kb) = (key(a), key(b));
