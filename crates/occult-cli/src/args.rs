@@ -35,6 +35,10 @@ pub enum Command {
     /// Vary one renderer parameter over a list of values: a comparison per value, with mean
     /// frame time and counters plotted against it.
     Sweep(SweepArgs),
+    /// Particle culling with an N-buffer (Décoret §3.2): sprites among a scene, culled or not.
+    Particles(crate::commands::particles::ParticlesArgs),
+    /// Shadow volumes of a spot light, clamped with litmaps and N-buffers (Décoret §3.3) or not.
+    Shadows(crate::commands::shadows::ShadowsArgs),
 }
 
 /// A frame size.

@@ -11,6 +11,8 @@
 //! | `occult compare` | several renderers on the same scenes and path: table, JSON, CSV, plots |
 //! | `occult info` | what a scene file or spec holds |
 //! | `occult scenes` | the built-in generators and their parameters |
+//! | `occult particles` | sprites among a scene, culled with an N-buffer or not |
+//! | `occult shadows` | spot-light shadow volumes, clamped with litmaps and N-buffers or not |
 //!
 //! Default sizes: 1920x1080 for `render` (a picture to look at), 640x480 for `walk` and
 //! `compare` (many frames, several renderers; brute force must stay bearable).
@@ -64,6 +66,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Scenes(a) => commands::scenes::run(a),
         Command::Algos(a) => commands::algos::run(a),
         Command::Sweep(a) => commands::sweep::run(a),
+        Command::Particles(a) => commands::particles::run(a),
+        Command::Shadows(a) => commands::shadows::run(a),
     }
 }
 

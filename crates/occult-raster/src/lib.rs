@@ -47,6 +47,7 @@ pub mod zpyramid;
 pub use frame::{keep_fragment, Frame, CLEAR_DEPTH};
 pub use nbuffer::{Extremum, NBuffer};
 pub use query::{query_box, query_rect, PixelRect};
+pub use raster::stencil::{StencilBuffer, StencilCounts, StencilDraw, StencilFaces};
 pub use raster::{Draw, DrawTriangles, RasterConfig, RasterCounts, RasterMode, Rasterizer, Strategy, SUBPIXEL_BITS};
 pub use shade::{shade, BACKGROUND};
 pub use zpyramid::{PyramidCounts, PyramidTest, ZPyramid};

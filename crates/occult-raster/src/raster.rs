@@ -36,6 +36,8 @@ use occult_core::{ItemId, Mat4, Mesh, Vec3, Vec4, View};
 use rayon::prelude::*;
 use std::ops::Range;
 
+pub(crate) mod stencil;
+
 /// Sub-pixel precision of snapped vertices, in bits.
 pub const SUBPIXEL_BITS: u32 = 8;
 const SUB: i64 = 1 << SUBPIXEL_BITS;
@@ -207,6 +209,9 @@ struct TriSetup {
     /// edge functions fit i32 lanes. The pixel box above is clamped to the frame and says nothing
     /// about that: a triangle reaching into the guard band can show a tiny box on screen.
     extent: u16,
+    /// Counter-clockwise on screen before the corners were reordered (a front face); read by
+    /// the stencil pass, which counts by orientation.
+    front: bool,
     item: ItemId,
 }
 
@@ -1164,6 +1169,7 @@ fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut
     if area > 0 && vp.cull_backfaces {
         return;
     }
+    let front = area < 0;
     if area < 0 {
         std::mem::swap(&mut x1, &mut x2);
         std::mem::swap(&mut y1, &mut y2);
@@ -1201,6 +1207,7 @@ fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut
             zmin,
             zmax,
             extent: (((maxx - minx).max(maxy - miny) >> SUBPIXEL_BITS) + 1).min(u16::MAX as i64) as u16,
+            front,
             item,
         },
     );

@@ -4,7 +4,9 @@
 pub mod algos;
 pub mod compare;
 pub mod info;
+pub mod particles;
 pub mod render;
 pub mod scenes;
+pub mod shadows;
 pub mod sweep;
 pub mod walk;

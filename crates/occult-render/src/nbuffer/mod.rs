@@ -41,6 +41,7 @@
 //! a pass over the item buffer. Not worth it when nearly everything is visible.
 
 pub mod particles;
+pub mod shadows;
 
 use std::sync::Arc;
 use std::time::Instant;

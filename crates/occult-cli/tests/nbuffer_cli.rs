@@ -1,0 +1,143 @@
+//! End-to-end tests of `occult particles` and `occult shadows` (Décoret 2005 §3.2, §3.3): small
+//! scenes and frames; bad arguments end in one line on stderr and a non-zero status.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+const CITY: &str = "city:blocks=1,detail=1,variants=2";
+
+fn occult(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_occult"))
+        .args(args)
+        .output()
+        .expect("the occult binary runs")
+}
+
+fn scratch(test: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join("occult-nbuffer-cli-tests")
+        .join(test);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn ok(args: &[&str]) -> String {
+    let out = occult(args);
+    assert!(
+        out.status.success(),
+        "occult {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn fails(args: &[&str]) -> String {
+    let out = occult(args);
+    assert!(!out.status.success(), "occult {args:?} succeeded");
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "not one line: {err}");
+    err
+}
+
+fn json(p: &std::path::Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+}
+
+#[test]
+fn particles_cull_and_report() {
+    let dir = scratch("particles");
+    let (png, j) = (dir.join("p.png"), dir.join("p.json"));
+    let (png, j) = (png.to_str().unwrap(), j.to_str().unwrap());
+    let out = ok(&[
+        "particles",
+        "--scene",
+        CITY,
+        "--count",
+        "20000",
+        "--sizes",
+        "pow2",
+        "--size",
+        "96x64",
+        "--out",
+        png,
+        "--json",
+        j,
+    ]);
+    assert!(out.contains("sprites culled"), "{out}");
+    let v = json(std::path::Path::new(j));
+    assert_eq!(v["cull"], true);
+    assert!(v["sprites_culled"].as_u64().unwrap() > 0);
+    assert!(v["lookups"].as_u64().unwrap() <= 4 * v["sprites_in_view"].as_u64().unwrap());
+    ok(&[
+        "particles",
+        "--scene",
+        CITY,
+        "--count",
+        "2000",
+        "--cull",
+        "off",
+        "--size",
+        "64x48",
+        "--out",
+        png,
+        "--json",
+        j,
+    ]);
+    assert_eq!(json(std::path::Path::new(j))["sprites_culled"], 0);
+    assert_eq!(image::open(png).unwrap().width(), 64);
+}
+
+#[test]
+fn shadows_are_identical_with_and_without_clamping() {
+    let dir = scratch("shadows");
+    let (png, j) = (dir.join("s.png"), dir.join("s.json"));
+    let (png, j) = (png.to_str().unwrap(), j.to_str().unwrap());
+    let out = ok(&[
+        "shadows", "--scene", CITY, "--size", "96x64", "--litmap", "64", "--out", png, "--json", j,
+    ]);
+    assert!(out.contains("shadows identical: yes"), "{out}");
+    let v = json(std::path::Path::new(j));
+    assert_eq!(v["differing_pixels"], 0);
+    let runs = v["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 2);
+    assert_eq!(runs[0]["shadowed_pixels"], runs[1]["shadowed_pixels"]);
+    assert!(runs[1]["stencil_fragments"].as_u64().unwrap() <= runs[0]["stencil_fragments"].as_u64().unwrap());
+    ok(&[
+        "shadows",
+        "--scene",
+        "terrain:g=24",
+        "--clamp",
+        "on",
+        "--size",
+        "64x48",
+        "--out",
+        png,
+    ]);
+    assert_eq!(image::open(png).unwrap().height(), 48);
+}
+
+#[test]
+fn bad_arguments_are_one_line_errors() {
+    let dir = scratch("bad");
+    let png = dir.join("x.png");
+    let png = png.to_str().unwrap();
+    for args in [
+        vec!["particles", "--scene", CITY, "--sizes", "1-65", "--out", png],
+        vec!["particles", "--scene", CITY, "--sizes", "pow3", "--out", png],
+        vec!["particles", "--scene", CITY, "--cull", "maybe", "--out", png],
+        vec!["particles", "--scene", CITY, "--count", "999999999999", "--out", png],
+        vec!["particles", "--scene", CITY, "--fill", "0", "--out", png],
+        vec!["shadows", "--scene", CITY, "--clamp", "sometimes", "--out", png],
+        vec!["shadows", "--scene", CITY, "--cone", "0", "--out", png],
+        vec!["shadows", "--scene", CITY, "--litmap", "0", "--out", png],
+        vec!["shadows", "--scene", CITY, "--leaf", "0", "--out", png],
+        vec!["shadows", "--scene", CITY, "--light", "1,2", "--out", png],
+        vec!["shadows", "--scene", "nowhere:x=1", "--out", png],
+    ] {
+        fails(&args);
+    }
+}
