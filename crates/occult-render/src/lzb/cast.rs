@@ -5,8 +5,8 @@
 use std::collections::{HashMap, HashSet};
 use std::hash::BuildHasherDefault;
 
-use occult_core::{compose, intersect_ray_triangle, Affine3A, ItemId, Mat4, NodeId, Ray, Vec3, Vec4};
-use occult_spatial::{traverse, FatRay, TraversalCounters};
+use occult_core::{compose, Affine3A, ItemId, Mat4, NodeId, Vec3, Vec4};
+use occult_spatial::{traverse, FatRay, ShearedRay, TraversalCounters};
 
 use super::{Accel, FrameCtx, Lzb, Mode, Selection};
 
@@ -129,7 +129,8 @@ impl<'a> Caster<'a> {
                 // the whole traversal that follows.
                 let o = h.object_from_world.transform_point3(origin);
                 let d = h.object_from_world.transform_vector3(dir);
-                if let Some(t) = self.test_leaf(h.node, h.leaf, o, d, &h.clip_from_object, t_limit, 0) {
+                let sheared = ShearedRay::new(o, d);
+                if let Some(t) = self.test_leaf(h.node, h.leaf, &sheared, d, &h.clip_from_object, t_limit, 0) {
                     t_limit = t * (1.0 + DEPTH_EPS);
                     self.found = Some(h);
                     self.coherent_starts += 1;
@@ -173,12 +174,13 @@ impl<'a> Caster<'a> {
 
     /// Tests the candidate triangles of mesh leaf `leaf` (per the selection, §III.B) and returns
     /// the nearest robust hit before `t_max` (lazy), or records the nearest hit (naive).
+    /// `sheared` is the ray `o + t·d` (object space) prepared for the watertight test.
     #[allow(clippy::too_many_arguments)]
     fn test_leaf(
         &mut self,
         node: NodeId,
         leaf: u32,
-        o: Vec3,
+        sheared: &ShearedRay,
         d: Vec3,
         clip_from_object: &Mat4,
         t_max: f32,
@@ -187,57 +189,51 @@ impl<'a> Caster<'a> {
         let lzb = self.lzb;
         let Accel::Mesh {
             octree,
-            normals,
+            refs,
             leaf_base,
             ..
         } = &lzb.accel[node.index()]
         else {
             return None;
         };
-        let mesh = lzb.scene.node(node).mesh()?;
-        let list = octree.leaf_primitives(leaf);
-        let (list, filter) = if self.naive {
-            (list, false)
+        let range = octree.nodes()[leaf as usize].range();
+        let ids = &octree.primitives()[range.clone()];
+        let list = &refs[range];
+        let (n, filter) = if self.naive {
+            (list.len(), false)
         } else {
             match lzb.opts.selection {
-                Selection::All => (list, false),
+                Selection::All => (list.len(), false),
                 // §III.B.1: the k largest triangles (the leaf list is sorted by area).
-                Selection::Static => (&list[..list.len().min(lzb.opts.k)], false),
+                Selection::Static => (list.len().min(lzb.opts.k), false),
                 // §III.B.2: visibility = -v·n·area against the leaf's base visibility.
-                Selection::Dynamic => (list, true),
+                Selection::Dynamic => (list.len(), true),
                 // Hybrid: the pre-selected occluders, filtered by visibility.
-                Selection::Hybrid => (&list[..list.len().min(lzb.opts.k)], true),
+                Selection::Hybrid => (list.len().min(lzb.opts.k), true),
             }
         };
         let dn = d.normalize();
         let base_vis = leaf_base[leaf as usize];
-        let ray = Ray {
-            origin: o,
-            direction: d,
-            t_min: 0.0,
-            t_max,
-        };
         let mut best: Option<f32> = None;
-        for &t in list {
+        for (r, &t) in list[..n].iter().zip(ids) {
             // Deviation: both faces are drawn unless back faces are culled, so |v·n| (not -v·n).
-            if filter && normals[t as usize].dot(dn).abs() <= base_vis {
+            if filter && r.normal.dot(dn).abs() <= base_vis {
                 continue;
             }
             self.tri_tests += 1;
-            let [a, b, c] = mesh.triangle_positions(t as usize);
-            let Some(hit) = intersect_ray_triangle(&ray, a, b, c) else {
+            let Some(hit_t) = sheared.intersect(&r.corners, 0.0, t_max) else {
                 continue;
             };
-            if best.is_some_and(|bt| hit.t >= bt) {
+            if best.is_some_and(|bt| hit_t >= bt) {
                 continue;
             }
             if self.naive {
-                if self.best.is_none_or(|(bt, _)| hit.t < bt) {
-                    self.best = Some((hit.t, base + t as u64));
+                if self.best.is_none_or(|(bt, _)| hit_t < bt) {
+                    self.best = Some((hit_t, base + t as u64));
                 }
-                best = Some(hit.t);
-            } else if self.robust(clip_from_object, [a, b, c], hit.t) {
-                best = Some(hit.t);
+                best = Some(hit_t);
+            } else if self.robust(clip_from_object, r.corners, hit_t) {
+                best = Some(hit_t);
             }
         }
         best
@@ -307,6 +303,7 @@ impl<'a> Caster<'a> {
                 let w_row = row_w(&clip);
                 let record = self.recording;
                 let mut recorded = false;
+                let sheared = ShearedRay::new(o, d);
                 traverse(octree, &ray, t_limit, &mut counters, |leaf, _, _, t_limit| {
                     // Deviation: the leaf's tight box, not its octant, must meet the cone.
                     let tb = &tight[leaf as usize];
@@ -322,7 +319,7 @@ impl<'a> Caster<'a> {
                         }
                         return;
                     }
-                    if let Some(t) = self.test_leaf(id, leaf, o, d, &clip, *t_limit, base) {
+                    if let Some(t) = self.test_leaf(id, leaf, &sheared, d, &clip, *t_limit, base) {
                         if self.naive {
                             *t_limit = t;
                         } else if t * (1.0 + DEPTH_EPS) < *t_limit {

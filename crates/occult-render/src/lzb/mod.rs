@@ -288,8 +288,9 @@ pub(crate) enum Accel {
     Mesh {
         /// Leaves sorted by triangle area, largest first (Octree-o).
         octree: Octree,
-        /// Per triangle: its normal scaled by its area.
-        normals: Vec<Vec3>,
+        /// Per leaf-list entry (parallel to `octree.primitives()`): the triangle's corners and
+        /// area-scaled normal, so that a ray reads a leaf's triangles contiguously.
+        refs: Vec<RefTriangle>,
         /// Per octree node (leaves only meaningful): base visibility `base_cos × mean area`.
         leaf_base: Vec<f32>,
         /// Per octree node (leaves only meaningful): the leaf's triangles' bounds clipped to
@@ -315,10 +316,15 @@ impl Accel {
             Accel::Empty => 0,
             Accel::Mesh {
                 octree,
-                normals,
+                refs,
                 leaf_base,
                 tight,
-            } => octree.memory_bytes() + normals.capacity() * 12 + leaf_base.capacity() * 4 + tight.capacity() * 24,
+            } => {
+                octree.memory_bytes()
+                    + refs.capacity() * std::mem::size_of::<RefTriangle>()
+                    + leaf_base.capacity() * 4
+                    + tight.capacity() * 24
+            }
             Accel::Group {
                 octree,
                 bounds,
@@ -332,6 +338,15 @@ impl Accel {
             }
         }
     }
+}
+
+/// A leaf-list entry's triangle, stored in leaf order for the ray caster.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RefTriangle {
+    /// Corners (object space).
+    pub corners: [Vec3; 3],
+    /// Normal scaled by the area.
+    pub normal: Vec3,
 }
 
 /// A partition plane kept for reuse (§II.B).
@@ -493,9 +508,17 @@ impl Lzb {
                                         .intersection(Aabb::new(b.min - grow, b.max + grow))
                                 })
                                 .collect();
+                            let refs = octree
+                                .primitives()
+                                .iter()
+                                .map(|&t| RefTriangle {
+                                    corners: m.triangle_positions(t as usize),
+                                    normal: normals[t as usize],
+                                })
+                                .collect();
                             Accel::Mesh {
                                 octree,
-                                normals,
+                                refs,
                                 leaf_base,
                                 tight,
                             }
