@@ -73,7 +73,8 @@ pub(super) struct Caster<'a> {
     pub coherent_starts: u64,
     /// Rays that ended at a robust hit (the others ran to the far plane or out of the scene).
     pub resolved: u64,
-    visited: Vec<(u32, u32)>,
+    /// Mailbox of the current pass: `(group visit serial, instance)` already cast.
+    visited: HashSet<(u32, u32), FxBuild>,
     serial: u32,
     last: Option<LastHit>,
     /// The hit that ended the current ray.
@@ -98,7 +99,7 @@ impl<'a> Caster<'a> {
             tri_tests: 0,
             coherent_starts: 0,
             resolved: 0,
-            visited: Vec::new(),
+            visited: HashSet::default(),
             serial: 0,
             last: None,
             found: None,
@@ -354,10 +355,9 @@ impl<'a> Caster<'a> {
                 traverse(octree, &ray, t_limit, &mut counters, |leaf, _, _, t_limit| {
                     for &i in octree.leaf_primitives(leaf) {
                         // Mailbox: an instance spanning several leaves is cast once per ray.
-                        if self.visited.contains(&(serial, i)) {
+                        if !self.visited.insert((serial, i)) {
                             continue;
                         }
-                        self.visited.push((serial, i));
                         let i = i as usize;
                         if !ray.enter(&bounds[i]).is_some_and(|(e, _)| e <= *t_limit) {
                             continue;

@@ -982,7 +982,9 @@ impl Renderer for Lzb {
             recs.extend(c.instances.iter().map(|(k, v)| (*k, *v)));
             hits.extend(c.hits);
         }
+        // The chunks' sets overlap: one entry per (instance, leaf).
         pairs.sort_unstable();
+        pairs.dedup();
         stats.rays_cast += rays;
         stats.counters.add("rays", rays);
         stats.counters.add("ray_tri_tests", tests);
