@@ -5,7 +5,7 @@
 use std::collections::{HashMap, HashSet};
 use std::hash::BuildHasherDefault;
 
-use occult_core::{compose, Affine3A, ItemId, Mat4, NodeId, Vec3, Vec4};
+use occult_core::{compose, Aabb, Affine3A, ItemId, Mat4, NodeId, Vec3, Vec4};
 use occult_spatial::{traverse, FatRay, ShearedRay, TraversalCounters};
 
 use super::{Accel, FrameCtx, Lzb, Mode, Selection};
@@ -298,7 +298,10 @@ impl<'a> Caster<'a> {
         let mut counters = TraversalCounters::default();
         match &lzb.accel[id.index()] {
             Accel::Empty => {}
-            Accel::Mesh { octree, tight, .. } => {
+            Accel::Mesh {
+                octree, tight, refs, ..
+            } => {
+                let by_triangle = lzb.opts.pvl_triangles;
                 let ray = FatRay::new(o, d, spread, if self.naive { 0.0 } else { margin(&octree.bounds()) });
                 let clip = self.ctx.view.clip_from_object(world_from_node);
                 let w_row = row_w(&clip);
@@ -314,9 +317,26 @@ impl<'a> Caster<'a> {
                     // §III.A: every leaf on the path up to (and past, by the margin) the hit is
                     // recorded; near leaves are drawn already (step 3).
                     if record {
-                        if !self.ctx.is_near(w_row, tb) {
+                        if self.ctx.is_near(w_row, tb) {
+                            return;
+                        }
+                        if !by_triangle {
                             self.pvl.insert((base, leaf));
                             recorded = true;
+                            return;
+                        }
+                        // `pvl=triangles` (deviation): only the triangles whose box the cone
+                        // enters before the bound. As conservative as the leaf: the pixel's
+                        // winner lies within the cone, nearer than the bound.
+                        let range = octree.nodes()[leaf as usize].range();
+                        for (r, &t) in refs[range.clone()].iter().zip(&octree.primitives()[range]) {
+                            if ray
+                                .enter(&Aabb::from_points(r.corners))
+                                .is_some_and(|(e, _)| e <= *t_limit)
+                            {
+                                self.pvl.insert((base, t));
+                                recorded = true;
+                            }
                         }
                         return;
                     }
