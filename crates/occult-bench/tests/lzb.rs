@@ -45,6 +45,12 @@ fn hybrid_everything_behind_the_plane_is_identical_on_every_generator() {
 }
 
 #[test]
+fn triangle_pvl_everything_behind_the_plane_is_identical_on_every_generator() {
+    // Rays record triangles, not leaves; almost every pixel goes to the rays.
+    assert_identical_on_every_generator(&spec("lzb:pvl=triangles,plane=static,plane_fraction=0.0001"), 1);
+}
+
+#[test]
 fn identical_on_paths() {
     for algo in [
         "lzb",
@@ -133,6 +139,7 @@ const RAY_HEAVY: &[&str] = &[
     "lzb:plane=static,plane_fraction=0.0001,select=all,oor=off,leaf=1,depth=8",
     "lzb:plane=static,plane_fraction=0.0001,select=static,k=1,leaf=4",
     "lzb:plane=dynamic,select=dynamic,base_cos=1,leaf=2",
+    "lzb:plane=static,plane_fraction=0.0001,pvl=triangles,select=all",
 ];
 
 #[test]
@@ -259,6 +266,7 @@ fn bad_parameters_are_errors() {
         ("lzb:plane_reuse=0", "plane_reuse"),
         ("lzb:select=some", "select"),
         ("lzb:mode=fast", "mode"),
+        ("lzb:pvl=some", "pvl"),
         ("lzb:leaf=many", "leaf"),
     ] {
         match spec(bad).build(scene.clone(), &o) {

@@ -116,6 +116,9 @@ impl OctreeNode {
 #[derive(Clone, Debug, Default)]
 pub struct Octree {
     nodes: Vec<OctreeNode>,
+    /// Per node (internal nodes only meaningful): bit `i` set when child `i` is not an empty
+    /// leaf; bit `8 + a` set when the node is not split along axis `a` (flat).
+    split_info: Vec<u16>,
     primitives: Vec<u32>,
     leaf_count: usize,
     depth: u32,
@@ -192,6 +195,19 @@ impl Octree {
             tree: &mut tree,
         };
         builder.split(0, all, 0)?;
+        tree.split_info = tree
+            .nodes
+            .iter()
+            .map(|n| {
+                if n.is_leaf() {
+                    return 0;
+                }
+                let kids = &tree.nodes[n.children().start as usize..n.children().end as usize];
+                let occupied = (0..8).filter(|&i| !(kids[i].is_leaf() && kids[i].count == 0));
+                let flat = (0..3).filter(|&a| kids[1 << a].bounds.is_empty());
+                occupied.fold(0u16, |m, i| m | 1 << i) | flat.fold(0u16, |m, a| m | 1 << (8 + a))
+            })
+            .collect();
         Ok(tree)
     }
 
@@ -199,6 +215,13 @@ impl Octree {
     #[inline]
     pub fn nodes(&self) -> &[OctreeNode] {
         &self.nodes
+    }
+    /// Per node: bit `i` (0..8) set when child `i` of an internal node is not an empty leaf,
+    /// bit `8 + a` set when the node is not split along axis `a` (its lower children span the
+    /// whole axis, its upper ones are empty). 0 for leaves.
+    #[inline]
+    pub fn split_info(&self) -> &[u16] {
+        &self.split_info
     }
     /// The concatenated leaf lists.
     #[inline]
@@ -228,7 +251,9 @@ impl Octree {
     }
     /// Bytes held.
     pub fn memory_bytes(&self) -> usize {
-        self.nodes.capacity() * std::mem::size_of::<OctreeNode>() + self.primitives.capacity() * 4
+        self.nodes.capacity() * std::mem::size_of::<OctreeNode>()
+            + self.split_info.capacity() * 2
+            + self.primitives.capacity() * 4
     }
 
     /// Reorders each leaf's list by `key`, largest first (ties by index): with triangle areas as

@@ -77,6 +77,74 @@ impl FatRay {
     }
 }
 
+/// A ray prepared for the watertight ray–triangle test (Woop, Benthin & Wald, "Watertight
+/// Ray/Triangle Intersection", JCGT 2(1), 2013, §2–3): the axis permutation and shear that
+/// depend on the ray only, computed once per ray instead of once per triangle. The arithmetic
+/// is [`occult_core::intersect_ray_triangle`]'s, operation for operation, so the results are
+/// the same bits (tested).
+#[derive(Clone, Copy, Debug)]
+pub struct ShearedRay {
+    origin: Vec3,
+    k: [usize; 3],
+    s: [f32; 3],
+}
+
+impl ShearedRay {
+    /// The shear of the ray `origin + t · direction`.
+    #[inline]
+    pub fn new(origin: Vec3, direction: Vec3) -> Self {
+        let d = direction;
+        let kz = d.abs().max_position();
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        if d[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        Self {
+            origin,
+            k: [kx, ky, kz],
+            s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]],
+        }
+    }
+
+    /// The hit parameter `t` of triangle `p` when the ray hits it with `t` in
+    /// `[t_min, t_max]` (both faces; shared edges hit by at least one of their triangles).
+    #[inline]
+    pub fn intersect(&self, p: &[Vec3; 3], t_min: f32, t_max: f32) -> Option<f32> {
+        let [kx, ky, kz] = self.k;
+        let [sx, sy, sz] = self.s;
+        let a = p[0] - self.origin;
+        let b = p[1] - self.origin;
+        let c = p[2] - self.origin;
+        let ax = a[kx] - sx * a[kz];
+        let ay = a[ky] - sy * a[kz];
+        let bx = b[kx] - sx * b[kz];
+        let by = b[ky] - sy * b[kz];
+        let cx = c[kx] - sx * c[kz];
+        let cy = c[ky] - sy * c[kz];
+        let mut u = cx * by - cy * bx;
+        let mut v = ax * cy - ay * cx;
+        let mut w = bx * ay - by * ax;
+        // §3: recompute in double precision when an edge function rounds to zero.
+        if u == 0.0 || v == 0.0 || w == 0.0 {
+            let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
+            u = (cx * by - cy * bx) as f32;
+            v = (ax * cy - ay * cx) as f32;
+            w = (bx * ay - by * ax) as f32;
+        }
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let det = u + v + w;
+        if det == 0.0 {
+            return None;
+        }
+        let t_scaled = u * (sz * a[kz]) + v * (sz * b[kz]) + w * (sz * c[kz]);
+        let t = t_scaled * (1.0 / det);
+        (t >= t_min && t <= t_max).then_some(t)
+    }
+}
+
 /// Counts of one or more traversals (pbrt style: the algorithm counts as it goes).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct TraversalCounters {
@@ -86,9 +154,69 @@ pub struct TraversalCounters {
     pub leaves_visited: u64,
 }
 
-/// Visits the leaves of `octree` that `ray` enters before `*t_limit`, nearest entry first.
+/// The two halves of internal node box `b` along each axis, as `(lower, upper)` pairs of
+/// `(min, max)` corners: `[lo0, hi0, lo1, hi1]`. A flat axis (bit `8 + a` of `split_info`) is not
+/// split: its lower half spans the whole axis. These are exactly the children's stored boxes
+/// (the build's `b.center()` split).
+#[inline]
+fn halves(b: &Aabb, split_info: u16) -> [Vec3; 4] {
+    let mid = b.center();
+    let flat = |a: usize| split_info & (1 << (8 + a)) != 0;
+    let low_max = Vec3::new(
+        if flat(0) { b.max.x } else { mid.x },
+        if flat(1) { b.max.y } else { mid.y },
+        if flat(2) { b.max.z } else { mid.z },
+    );
+    [b.min, low_max, mid, b.max]
+}
+
+impl FatRay {
+    /// The cone's radius bound over box `b` (see [`FatRay::enter`]).
+    #[inline]
+    fn grow(&self, b: &Aabb) -> f32 {
+        if self.spread == 0.0 && self.margin == 0.0 {
+            return 0.0;
+        }
+        let far_t = ((b.center() - self.origin).abs().element_sum() + b.half_extent().element_sum()) * self.inv_length;
+        self.spread * far_t + self.margin
+    }
+
+    /// Entry and exit parameters (entry clamped at 0) of the 8 children of internal node box
+    /// `b` grown by `grow` (the radius bound over `b`, which bounds each child's own), child
+    /// `i` at index `i`: the parametric form of the slab test (Revelles et al. 2000), 12 plane
+    /// distances for all 8 children instead of 48. An empty interval (entry > exit) is a miss.
+    #[inline]
+    fn enter_children(&self, b: &Aabb, split_info: u16, grow: f32) -> [(f32, f32); 8] {
+        let [lo0, hi0, lo1, hi1] = halves(b, split_info);
+        let g = Vec3::splat(grow);
+        let t = |p: Vec3| (p - self.origin) * self.inv_direction;
+        let (a0, b0) = (t(lo0 - g), t(hi0 + g));
+        let (a1, b1) = (t(lo1 - g), t(hi1 + g));
+        // Per half and axis: entry and exit (f32::min/max ignore the NaN of 0 · ∞, as in
+        // `enter`).
+        let e = [a0.min(b0), a1.min(b1)];
+        let x = [a0.max(b0), a1.max(b1)];
+        let mut out = [(0f32, 0f32); 8];
+        for (i, o) in out.iter_mut().enumerate() {
+            let (hx, hy, hz) = (i & 1, (i >> 1) & 1, (i >> 2) & 1);
+            let near = e[hx].x.max(e[hy].y).max(e[hz].z).max(0.0);
+            let far = x[hx].x.min(x[hy].y).min(x[hz].z);
+            *o = (near, far);
+        }
+        out
+    }
+}
+
+/// Visits the leaves of `octree` that `ray` enters before `*t_limit`, front to back.
 /// `leaf(node_index, t_enter, t_exit, t_limit)` sees each non-empty leaf once and may lower
 /// `*t_limit`; leaves whose entry lies beyond the bound at the time they come up are skipped.
+///
+/// Traversal (the parametric octree traversal of Revelles, Ureña & Lastra 2000, made fat): an
+/// internal node's 8 children are tested together from 12 plane distances (the node's
+/// halves, grown by the cone's radius bound over the node), and pushed in the order the ray's
+/// direction signs give (child `i ^ mask`, `mask` = the axes the ray runs down): front to back
+/// for a thin ray, and nearly so for a cone. A leaf is then tested against its own grown box,
+/// so the leaves visited are exactly those whose grown box the cone enters before the bound.
 pub fn traverse(
     octree: &Octree,
     ray: &FatRay,
@@ -97,10 +225,14 @@ pub fn traverse(
     mut leaf: impl FnMut(u32, f32, f32, &mut f32),
 ) {
     let nodes = octree.nodes();
+    let info = octree.split_info();
     let Some(root) = nodes.first() else { return };
     let Some((t0, _)) = ray.enter(&root.bounds) else {
         return;
     };
+    let mask = (ray.direction.x < 0.0) as usize
+        | ((ray.direction.y < 0.0) as usize) << 1
+        | ((ray.direction.z < 0.0) as usize) << 2;
     const STACK: usize = 8 * MAX_OCTREE_DEPTH as usize + 8;
     let mut stack = [(0u32, 0f32); STACK];
     stack[0] = (0, t0);
@@ -115,36 +247,29 @@ pub fn traverse(
         let node = &nodes[index as usize];
         if node.is_leaf() {
             if node.count > 0 {
+                // The leaf's own grown box (its parent's test grew it by the parent's bound).
+                let Some((t_enter, t_exit)) = ray.enter(&node.bounds) else {
+                    continue;
+                };
+                if t_enter > *t_limit {
+                    continue;
+                }
                 counters.leaves_visited += 1;
-                // The exit is recomputed for the leaf only (internal nodes never need it).
-                let t_exit = ray.enter(&node.bounds).map_or(t_enter, |(_, x)| x);
                 leaf(index, t_enter, t_exit, t_limit);
             }
             continue;
         }
-        // Children that the cone enters, sorted by entry, pushed farthest first.
-        let mut kids = [(0u32, 0f32); 8];
-        let mut k = 0;
-        for c in node.children() {
-            let child = &nodes[c as usize];
-            if child.is_leaf() && child.count == 0 {
-                continue;
-            }
-            if let Some((e, _)) = ray.enter(&child.bounds) {
-                if e <= *t_limit {
-                    let mut j = k;
-                    while j > 0 && kids[j - 1].1 < e {
-                        kids[j] = kids[j - 1];
-                        j -= 1;
-                    }
-                    kids[j] = (c, e);
-                    k += 1;
-                }
+        let si = info[index as usize];
+        let kids = ray.enter_children(&node.bounds, si, ray.grow(&node.bounds));
+        // Farthest first onto the stack, so the nearest pops first.
+        for j in (0..8).rev() {
+            let i = j ^ mask;
+            let (e, x) = kids[i];
+            if si & (1 << i) != 0 && e <= x && e <= *t_limit {
+                stack[top] = (node.first + i as u32, e);
+                top += 1;
             }
         }
-        // kids is sorted by decreasing entry: push in that order so the nearest pops first.
-        stack[top..top + k].copy_from_slice(&kids[..k]);
-        top += k;
     }
 }
 
@@ -250,6 +375,85 @@ mod tests {
                 .collect();
             // Pruning on ancestors may only keep leaves the scan keeps (ancestors hold them).
             assert_eq!(visited, expect);
+        }
+    }
+
+    /// The sheared ray gives intersect_ray_triangle's bits, hits and misses alike.
+    #[test]
+    fn sheared_ray_matches_the_watertight_test() {
+        let (p, t) = soup(300, 5);
+        let mut s = 17u64;
+        let mut rnd = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut hits = 0;
+        for k in 0..200 {
+            let origin = Vec3::new(rnd(), rnd(), rnd()) * 20.0 - 5.0;
+            // Aimed at a triangle's centroid (axis-aligned now and then).
+            let aim = t[k % t.len()].map(|v| p[v as usize]);
+            let mut dir = (aim[0] + aim[1] + aim[2]) / 3.0 - origin;
+            if k % 7 == 0 {
+                dir.x = 0.0;
+            }
+            let ray = Ray::new(origin, dir);
+            let sheared = ShearedRay::new(origin, dir);
+            for tri in &t {
+                let [a, b, c] = tri.map(|v| p[v as usize]);
+                let want = intersect_ray_triangle(&ray, a, b, c).map(|h| h.t.to_bits());
+                let got = sheared.intersect(&[a, b, c], 0.0, f32::INFINITY).map(f32::to_bits);
+                assert_eq!(got, want);
+                hits += want.is_some() as usize;
+            }
+        }
+        assert!(hits > 50);
+    }
+
+    /// The children's boxes the traversal derives from the parent's box are the stored ones.
+    #[test]
+    fn derived_children_are_the_stored_ones() {
+        let (p, t) = soup(500, 11);
+        // A flat layer too: its flat axis is not split.
+        let flat: Vec<Vec3> = p.iter().map(|v| Vec3::new(v.x, 2.0, v.z)).collect();
+        for pos in [&p, &flat] {
+            let o = Octree::build_triangles(
+                pos,
+                &t,
+                OctreeConfig {
+                    max_depth: 6,
+                    max_leaf_size: 4,
+                },
+            )
+            .unwrap();
+            let mut internal = 0;
+            for (n, node) in o.nodes().iter().enumerate() {
+                if node.is_leaf() {
+                    continue;
+                }
+                internal += 1;
+                let si = o.split_info()[n];
+                let h = halves(&node.bounds, si);
+                for i in 0..8usize {
+                    let c = &o.nodes()[node.first as usize + i];
+                    assert_eq!(si & (1 << i) != 0, !(c.is_leaf() && c.count == 0));
+                    if si & (1 << i) == 0 {
+                        continue;
+                    }
+                    let pick = |a: usize| {
+                        if i & (1 << a) != 0 {
+                            (h[2][a], h[3][a])
+                        } else {
+                            (h[0][a], h[1][a])
+                        }
+                    };
+                    let (x, y, z) = (pick(0), pick(1), pick(2));
+                    assert_eq!(c.bounds.min, Vec3::new(x.0, y.0, z.0));
+                    assert_eq!(c.bounds.max, Vec3::new(x.1, y.1, z.1));
+                }
+            }
+            assert!(internal > 3);
         }
     }
 

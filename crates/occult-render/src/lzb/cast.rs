@@ -5,8 +5,8 @@
 use std::collections::{HashMap, HashSet};
 use std::hash::BuildHasherDefault;
 
-use occult_core::{compose, intersect_ray_triangle, Affine3A, ItemId, Mat4, NodeId, Ray, Vec3, Vec4};
-use occult_spatial::{traverse, FatRay, TraversalCounters};
+use occult_core::{compose, Aabb, Affine3A, ItemId, Mat4, NodeId, Vec3, Vec4};
+use occult_spatial::{traverse, FatRay, ShearedRay, TraversalCounters};
 
 use super::{Accel, FrameCtx, Lzb, Mode, Selection};
 
@@ -73,7 +73,8 @@ pub(super) struct Caster<'a> {
     pub coherent_starts: u64,
     /// Rays that ended at a robust hit (the others ran to the far plane or out of the scene).
     pub resolved: u64,
-    visited: Vec<(u32, u32)>,
+    /// Mailbox of the current pass: `(group visit serial, instance)` already cast.
+    visited: HashSet<(u32, u32), FxBuild>,
     serial: u32,
     last: Option<LastHit>,
     /// The hit that ended the current ray.
@@ -98,7 +99,7 @@ impl<'a> Caster<'a> {
             tri_tests: 0,
             coherent_starts: 0,
             resolved: 0,
-            visited: Vec::new(),
+            visited: HashSet::default(),
             serial: 0,
             last: None,
             found: None,
@@ -129,7 +130,8 @@ impl<'a> Caster<'a> {
                 // the whole traversal that follows.
                 let o = h.object_from_world.transform_point3(origin);
                 let d = h.object_from_world.transform_vector3(dir);
-                if let Some(t) = self.test_leaf(h.node, h.leaf, o, d, &h.clip_from_object, t_limit, 0) {
+                let sheared = ShearedRay::new(o, d);
+                if let Some(t) = self.test_leaf(h.node, h.leaf, &sheared, d, &h.clip_from_object, t_limit, 0) {
                     t_limit = t * (1.0 + DEPTH_EPS);
                     self.found = Some(h);
                     self.coherent_starts += 1;
@@ -173,12 +175,13 @@ impl<'a> Caster<'a> {
 
     /// Tests the candidate triangles of mesh leaf `leaf` (per the selection, §III.B) and returns
     /// the nearest robust hit before `t_max` (lazy), or records the nearest hit (naive).
+    /// `sheared` is the ray `o + t·d` (object space) prepared for the watertight test.
     #[allow(clippy::too_many_arguments)]
     fn test_leaf(
         &mut self,
         node: NodeId,
         leaf: u32,
-        o: Vec3,
+        sheared: &ShearedRay,
         d: Vec3,
         clip_from_object: &Mat4,
         t_max: f32,
@@ -187,57 +190,51 @@ impl<'a> Caster<'a> {
         let lzb = self.lzb;
         let Accel::Mesh {
             octree,
-            normals,
+            refs,
             leaf_base,
             ..
         } = &lzb.accel[node.index()]
         else {
             return None;
         };
-        let mesh = lzb.scene.node(node).mesh()?;
-        let list = octree.leaf_primitives(leaf);
-        let (list, filter) = if self.naive {
-            (list, false)
+        let range = octree.nodes()[leaf as usize].range();
+        let ids = &octree.primitives()[range.clone()];
+        let list = &refs[range];
+        let (n, filter) = if self.naive {
+            (list.len(), false)
         } else {
             match lzb.opts.selection {
-                Selection::All => (list, false),
+                Selection::All => (list.len(), false),
                 // §III.B.1: the k largest triangles (the leaf list is sorted by area).
-                Selection::Static => (&list[..list.len().min(lzb.opts.k)], false),
+                Selection::Static => (list.len().min(lzb.opts.k), false),
                 // §III.B.2: visibility = -v·n·area against the leaf's base visibility.
-                Selection::Dynamic => (list, true),
+                Selection::Dynamic => (list.len(), true),
                 // Hybrid: the pre-selected occluders, filtered by visibility.
-                Selection::Hybrid => (&list[..list.len().min(lzb.opts.k)], true),
+                Selection::Hybrid => (list.len().min(lzb.opts.k), true),
             }
         };
         let dn = d.normalize();
         let base_vis = leaf_base[leaf as usize];
-        let ray = Ray {
-            origin: o,
-            direction: d,
-            t_min: 0.0,
-            t_max,
-        };
         let mut best: Option<f32> = None;
-        for &t in list {
+        for (r, &t) in list[..n].iter().zip(ids) {
             // Deviation: both faces are drawn unless back faces are culled, so |v·n| (not -v·n).
-            if filter && normals[t as usize].dot(dn).abs() <= base_vis {
+            if filter && r.normal.dot(dn).abs() <= base_vis {
                 continue;
             }
             self.tri_tests += 1;
-            let [a, b, c] = mesh.triangle_positions(t as usize);
-            let Some(hit) = intersect_ray_triangle(&ray, a, b, c) else {
+            let Some(hit_t) = sheared.intersect(&r.corners, 0.0, t_max) else {
                 continue;
             };
-            if best.is_some_and(|bt| hit.t >= bt) {
+            if best.is_some_and(|bt| hit_t >= bt) {
                 continue;
             }
             if self.naive {
-                if self.best.is_none_or(|(bt, _)| hit.t < bt) {
-                    self.best = Some((hit.t, base + t as u64));
+                if self.best.is_none_or(|(bt, _)| hit_t < bt) {
+                    self.best = Some((hit_t, base + t as u64));
                 }
-                best = Some(hit.t);
-            } else if self.robust(clip_from_object, [a, b, c], hit.t) {
-                best = Some(hit.t);
+                best = Some(hit_t);
+            } else if self.robust(clip_from_object, r.corners, hit_t) {
+                best = Some(hit_t);
             }
         }
         best
@@ -301,12 +298,16 @@ impl<'a> Caster<'a> {
         let mut counters = TraversalCounters::default();
         match &lzb.accel[id.index()] {
             Accel::Empty => {}
-            Accel::Mesh { octree, tight, .. } => {
+            Accel::Mesh {
+                octree, tight, refs, ..
+            } => {
+                let by_triangle = lzb.opts.pvl_triangles;
                 let ray = FatRay::new(o, d, spread, if self.naive { 0.0 } else { margin(&octree.bounds()) });
                 let clip = self.ctx.view.clip_from_object(world_from_node);
                 let w_row = row_w(&clip);
                 let record = self.recording;
                 let mut recorded = false;
+                let sheared = ShearedRay::new(o, d);
                 traverse(octree, &ray, t_limit, &mut counters, |leaf, _, _, t_limit| {
                     // Deviation: the leaf's tight box, not its octant, must meet the cone.
                     let tb = &tight[leaf as usize];
@@ -316,13 +317,30 @@ impl<'a> Caster<'a> {
                     // §III.A: every leaf on the path up to (and past, by the margin) the hit is
                     // recorded; near leaves are drawn already (step 3).
                     if record {
-                        if !self.ctx.is_near(w_row, tb) {
+                        if self.ctx.is_near(w_row, tb) {
+                            return;
+                        }
+                        if !by_triangle {
                             self.pvl.insert((base, leaf));
                             recorded = true;
+                            return;
+                        }
+                        // `pvl=triangles` (deviation): only the triangles whose box the cone
+                        // enters before the bound. As conservative as the leaf: the pixel's
+                        // winner lies within the cone, nearer than the bound.
+                        let range = octree.nodes()[leaf as usize].range();
+                        for (r, &t) in refs[range.clone()].iter().zip(&octree.primitives()[range]) {
+                            if ray
+                                .enter(&Aabb::from_points(r.corners))
+                                .is_some_and(|(e, _)| e <= *t_limit)
+                            {
+                                self.pvl.insert((base, t));
+                                recorded = true;
+                            }
                         }
                         return;
                     }
-                    if let Some(t) = self.test_leaf(id, leaf, o, d, &clip, *t_limit, base) {
+                    if let Some(t) = self.test_leaf(id, leaf, &sheared, d, &clip, *t_limit, base) {
                         if self.naive {
                             *t_limit = t;
                         } else if t * (1.0 + DEPTH_EPS) < *t_limit {
@@ -357,10 +375,9 @@ impl<'a> Caster<'a> {
                 traverse(octree, &ray, t_limit, &mut counters, |leaf, _, _, t_limit| {
                     for &i in octree.leaf_primitives(leaf) {
                         // Mailbox: an instance spanning several leaves is cast once per ray.
-                        if self.visited.contains(&(serial, i)) {
+                        if !self.visited.insert((serial, i)) {
                             continue;
                         }
-                        self.visited.push((serial, i));
                         let i = i as usize;
                         if !ray.enter(&bounds[i]).is_some_and(|(e, _)| e <= *t_limit) {
                             continue;

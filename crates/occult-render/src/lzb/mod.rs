@@ -57,6 +57,10 @@
 //! - Coherence bounds the traversal by the neighbour's hit instead of starting below the root
 //!   (see [`occult_spatial::raycast`]).
 //! - The PVL goes to this crate's software rasterizer, not a GPU.
+//! - `pvl=triangles` (an option; leaves by default, as the paper): the recording pass keeps,
+//!   of each leaf on the path, only the triangles whose box the ray's cone enters before the
+//!   bound. Conservative for the same reason as the leaves: the pixel's winner lies within the
+//!   cone, nearer than the bound.
 
 mod cast;
 mod oor;
@@ -142,6 +146,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             help: "object-oriented ray casting: rays only inside the screen polygons of far leaves (§III.C)",
         },
         ParamDoc {
+            key: "pvl",
+            default: "leaves",
+            help: "what a ray records: leaves (§III.A, every leaf on its path) or triangles (those of the path's leaves whose box the ray's cone enters before its bound)",
+        },
+        ParamDoc {
             key: "coherence",
             default: "on",
             help: "start each ray from its neighbour's hit (§III.D)",
@@ -202,6 +211,8 @@ pub struct LzbOptions {
     pub oor: bool,
     /// Coherence start.
     pub coherence: bool,
+    /// Rays record triangles instead of whole leaves.
+    pub pvl_triangles: bool,
 }
 
 impl Default for LzbOptions {
@@ -238,6 +249,7 @@ impl LzbOptions {
             plane_reuse: p.get("plane_reuse", 8u32)?,
             oor: p.flag("oor", true)?,
             coherence: p.flag("coherence", true)?,
+            pvl_triangles: p.choice("pvl", &["leaves", "triangles"], "leaves")? == "triangles",
         };
         o.check()?;
         Ok(o)
@@ -288,8 +300,9 @@ pub(crate) enum Accel {
     Mesh {
         /// Leaves sorted by triangle area, largest first (Octree-o).
         octree: Octree,
-        /// Per triangle: its normal scaled by its area.
-        normals: Vec<Vec3>,
+        /// Per leaf-list entry (parallel to `octree.primitives()`): the triangle's corners and
+        /// area-scaled normal, so that a ray reads a leaf's triangles contiguously.
+        refs: Vec<RefTriangle>,
         /// Per octree node (leaves only meaningful): base visibility `base_cos × mean area`.
         leaf_base: Vec<f32>,
         /// Per octree node (leaves only meaningful): the leaf's triangles' bounds clipped to
@@ -315,10 +328,15 @@ impl Accel {
             Accel::Empty => 0,
             Accel::Mesh {
                 octree,
-                normals,
+                refs,
                 leaf_base,
                 tight,
-            } => octree.memory_bytes() + normals.capacity() * 12 + leaf_base.capacity() * 4 + tight.capacity() * 24,
+            } => {
+                octree.memory_bytes()
+                    + refs.capacity() * std::mem::size_of::<RefTriangle>()
+                    + leaf_base.capacity() * 4
+                    + tight.capacity() * 24
+            }
             Accel::Group {
                 octree,
                 bounds,
@@ -332,6 +350,15 @@ impl Accel {
             }
         }
     }
+}
+
+/// A leaf-list entry's triangle, stored in leaf order for the ray caster.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RefTriangle {
+    /// Corners (object space).
+    pub corners: [Vec3; 3],
+    /// Normal scaled by the area.
+    pub normal: Vec3,
 }
 
 /// A partition plane kept for reuse (§II.B).
@@ -493,9 +520,17 @@ impl Lzb {
                                         .intersection(Aabb::new(b.min - grow, b.max + grow))
                                 })
                                 .collect();
+                            let refs = octree
+                                .primitives()
+                                .iter()
+                                .map(|&t| RefTriangle {
+                                    corners: m.triangle_positions(t as usize),
+                                    normal: normals[t as usize],
+                                })
+                                .collect();
                             Accel::Mesh {
                                 octree,
-                                normals,
+                                refs,
                                 leaf_base,
                                 tight,
                             }
@@ -635,6 +670,7 @@ impl Lzb {
         groups: &[(InstanceRec, ItemId, std::ops::Range<usize>)],
         leaves: &[u32],
         pool: &mut Vec<u32>,
+        triangles: bool,
     ) -> Vec<(InstanceRec, ItemId, std::ops::Range<usize>)> {
         let mut out = Vec::with_capacity(groups.len());
         for (rec, first_item, range) in groups {
@@ -649,7 +685,13 @@ impl Lzb {
             let stamps = &mut self.stamps[rec.node.index()];
             let start = pool.len();
             for &leaf in &leaves[range.clone()] {
-                for &t in octree.leaf_primitives(leaf) {
+                let one = [leaf];
+                let list = if triangles {
+                    &one[..]
+                } else {
+                    octree.leaf_primitives(leaf)
+                };
+                for &t in list {
                     if stamps[t as usize] != self.stamp {
                         stamps[t as usize] = self.stamp;
                         pool.push(t);
@@ -873,7 +915,7 @@ impl Renderer for Lzb {
             .collect();
         let near_leaves: Vec<u32> = near.iter().map(|&(_, l)| l).collect();
         let mut pool = Vec::new();
-        let near_lists = self.emit(&near_groups, &near_leaves, &mut pool);
+        let near_lists = self.emit(&near_groups, &near_leaves, &mut pool, false);
         stats.counters.add("near_triangles", pool.len() as u64);
         stats.phases.add(Phase::Other, t.elapsed());
         let draws = make_draws(&self.scene, view, &near_lists, &pool);
@@ -959,7 +1001,9 @@ impl Renderer for Lzb {
             recs.extend(c.instances.iter().map(|(k, v)| (*k, *v)));
             hits.extend(c.hits);
         }
+        // The chunks' sets overlap: one entry per (instance, leaf).
         pairs.sort_unstable();
+        pairs.dedup();
         stats.rays_cast += rays;
         stats.counters.add("rays", rays);
         stats.counters.add("ray_tri_tests", tests);
@@ -982,9 +1026,14 @@ impl Renderer for Lzb {
                 .map(|(key, r)| (recs[&key], key, r))
                 .collect();
             let pvl_leaves: Vec<u32> = pairs.iter().map(|&(_, l)| l).collect();
-            stats.counters.add("pvl_leaves", pvl_leaves.len() as u64);
+            let entries = if self.opts.pvl_triangles {
+                "pvl_entries_triangles"
+            } else {
+                "pvl_leaves"
+            };
+            stats.counters.add(entries, pvl_leaves.len() as u64);
             let mut pool = Vec::new();
-            let lists = self.emit(&groups, &pvl_leaves, &mut pool);
+            let lists = self.emit(&groups, &pvl_leaves, &mut pool, self.opts.pvl_triangles);
             stats.counters.add("pvl_triangles", pool.len() as u64);
             stats.phases.add(Phase::Other, t.elapsed());
             let draws = make_draws(&self.scene, view, &lists, &pool);
