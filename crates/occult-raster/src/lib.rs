@@ -48,7 +48,7 @@ pub use frame::{keep_fragment, Frame, CLEAR_DEPTH};
 pub use nbuffer::{Extremum, NBuffer};
 pub use query::{query_box, query_rect, PixelRect};
 pub use raster::{Draw, DrawTriangles, RasterConfig, RasterCounts, RasterMode, Rasterizer, Strategy, SUBPIXEL_BITS};
-pub use shade::{shade, BACKGROUND};
+pub use shade::{item_color, light_direction, shade, BACKGROUND};
 pub use zpyramid::{PyramidCounts, PyramidTest, ZPyramid};
 
 use thiserror::Error;

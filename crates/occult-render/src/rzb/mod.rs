@@ -50,6 +50,7 @@
 //!   lists.
 
 pub mod cache;
+pub mod recon;
 pub mod sample;
 pub mod select;
 pub mod structure;
@@ -78,6 +79,9 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc { key: "seed", default: "1", help: "random seed (frames are a function of seed, scene, view and cache history)" },
         ParamDoc { key: "eps", default: "2", help: "depth accuracy (5.3.2): largest (z_max/z_min)^2 of a selected box, > 1, or auto (8.2 minimum search)" },
         ParamDoc { key: "d", default: "1", help: "splat side in pixels (4.2), 1..=16; 1 is per-pixel reconstruction (4.1)" },
+        ParamDoc { key: "recon", default: "nearest", help: "reconstruction: nearest (each pixel keeps its nearest sample: per pixel for d=1 (4.1), splats for d>1 (4.2)) or gauss (4.2: splats delete hidden samples, color = Gaussian-weighted average of the visible samples)" },
+        ParamDoc { key: "sigma", default: "0.5", help: "recon=gauss: standard deviation of the Gaussian in pixels, (0, 8]" },
+        ParamDoc { key: "gauss_tolerance", default: "0.02", help: "recon=gauss: a sample is visible at a pixel when its view distance is within (1 + this) of the pixel's nearest, (0, 1]" },
         ParamDoc { key: "oversample", default: "1", help: "factor on the paper's sample count a*ln(v) (4.1.1), (0, 1000]" },
         ParamDoc { key: "large", default: "on", help: "draw boxes of large triangles with the z-buffer (7.1)" },
         ParamDoc { key: "threshold", default: "1", help: "samples per triangle above which a box is z-buffered (7.1, 8.3: projected area d^2/ln v)" },
@@ -103,6 +107,18 @@ pub enum Epsilon {
     Auto,
 }
 
+/// Reconstruction of the image from the samples (§4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Recon {
+    /// Each pixel keeps its nearest sample: per-pixel reconstruction for `d = 1` (§4.1),
+    /// splatting for `d > 1` (§4.2).
+    Nearest,
+    /// §4.2 Gaussian reconstruction: the `Nearest` pass deletes hidden samples and defines
+    /// depth and items; colors are Gaussian-weighted averages of the visible samples
+    /// ([`recon`]).
+    Gauss,
+}
+
 /// Back-face rejection of samples (§5.3.3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Backface {
@@ -124,6 +140,12 @@ pub struct RzbOptions {
     pub eps: Epsilon,
     /// Splat side `d` in pixels (1 = per-pixel reconstruction), 1..=16.
     pub splat: u32,
+    /// Reconstruction (§4.1, §4.2).
+    pub recon: Recon,
+    /// `Recon::Gauss`: standard deviation of the Gaussian in pixels, (0, 8].
+    pub sigma: f32,
+    /// `Recon::Gauss`: relative view-distance tolerance of the visibility test, (0, 1].
+    pub gauss_tolerance: f32,
     /// Factor on the paper's sample count `a · ln v` (> 0): more fills more pixels, costs more.
     pub oversample: f64,
     /// §7.1: draw boxes of large triangles with the rasterizer.
@@ -155,6 +177,9 @@ impl Default for RzbOptions {
             seed: 1,
             eps: Epsilon::Fixed(2.0),
             splat: 1,
+            recon: Recon::Nearest,
+            sigma: 0.5,
+            gauss_tolerance: 0.02,
             oversample: 1.0,
             large: true,
             large_threshold: 1.0,
@@ -185,6 +210,12 @@ impl RzbOptions {
             seed: params.get("seed", d.seed)?,
             eps,
             splat: params.get("d", d.splat)?,
+            recon: match params.choice("recon", &["nearest", "gauss"], "nearest")? {
+                "gauss" => Recon::Gauss,
+                _ => Recon::Nearest,
+            },
+            sigma: params.get("sigma", d.sigma)?,
+            gauss_tolerance: params.get("gauss_tolerance", d.gauss_tolerance)?,
             oversample: params.get("oversample", d.oversample)?,
             large: params.flag("large", d.large)?,
             large_threshold: params.get("threshold", d.large_threshold)?,
@@ -222,6 +253,12 @@ impl RzbOptions {
         }
         if !(1..=16).contains(&self.splat) {
             return bad("d", self.splat.to_string(), "1..=16");
+        }
+        if !(self.sigma > 0.0 && self.sigma <= 8.0) {
+            return bad("sigma", self.sigma.to_string(), "(0, 8]");
+        }
+        if !(self.gauss_tolerance > 0.0 && self.gauss_tolerance <= 1.0) {
+            return bad("gauss_tolerance", self.gauss_tolerance.to_string(), "(0, 1]");
         }
         if !(self.oversample > 0.0 && self.oversample <= 1e3) {
             return bad("oversample", self.oversample.to_string(), "(0, 1000]");
@@ -409,6 +446,9 @@ impl Renderer for Rzb {
         stats.boxes_culled = sel.boxes_culled;
         stats.nodes_visited = sel.boxes_tested;
         crate::rasterize(&mut self.raster, view, frame, &sel.draws, &mut stats);
+        // §4.2 Gaussian reconstruction keeps the fallback's pixels exact: remember them.
+        let gauss = self.opts.recon == Recon::Gauss;
+        let raster_items: Vec<ItemId> = if gauss { frame.items().to_vec() } else { Vec::new() };
 
         // §4 / §5.2 / §7.2: samples.
         let t_samples = Instant::now();
@@ -430,6 +470,8 @@ impl Renderer for Rzb {
             eye: view.camera().eye,
             far_depth: view.far_depth(),
             seed: self.opts.seed,
+            width: view.width(),
+            height: view.height(),
         };
         let consts = select::ViewConsts::new(view, self.opts.splat);
         let frame_index = self.frame_index;
@@ -589,6 +631,84 @@ impl Renderer for Rzb {
                     keep_fragment(&mut frame_depth[p], &mut frame_items[p], d[p], i[p]);
                 }
             }
+        }
+        // §4.2: the Gaussian pass over the same samples.
+        if gauss {
+            let filter = recon::Gaussian {
+                depth: frame.depth(),
+                width,
+                height,
+                sigma: self.opts.sigma,
+                keep: 1.0 / (1.0 + self.opts.gauss_tolerance),
+            };
+            let light = occult_raster::light_direction(view);
+            let scene = &*self.scene;
+            // One accumulation buffer per run of units (the runs of pass 1, bounded by the
+            // same budget as the scratch buffers).
+            let max_runs = ((1usize << 30) / (pixels * recon::ACCUM_BYTES).max(1)).max(1);
+            let runs: Vec<std::ops::Range<usize>> = if chunk_count <= max_runs {
+                (0..chunk_count).map(|c| bounds[c]..bounds[c + 1]).collect()
+            } else {
+                vec![0..units.len()]
+            };
+            let sums: Vec<Vec<recon::Accum>> = self.raster.install(|| {
+                runs.par_iter()
+                    .map(|run| {
+                        let mut acc = vec![[0u64; 4]; pixels];
+                        let mut colors = recon::Colors::new(scene, light);
+                        let mut counts = SampleCounts::default();
+                        let mut emit = |s: sample::Projected| {
+                            let c = colors.get(s.item);
+                            filter.add(s, c, &mut acc);
+                        };
+                        for u in &units[run.clone()] {
+                            let job = &sel.jobs[u.job];
+                            match sources[u.job] {
+                                Source::Direct => {
+                                    let mut rng = piece_rng(sampler.seed, job, u.piece);
+                                    sampler.project_job(job, u.len as u64, &mut rng, &mut counts, &mut emit);
+                                }
+                                Source::Hit => {
+                                    if let Some(c) = cache {
+                                        let set = &c.samples(&job_key(job))[u.first..u.first + u.len];
+                                        sampler.project_cached(
+                                            &job.clip_from_structure,
+                                            job.base,
+                                            set,
+                                            &mut counts,
+                                            &mut emit,
+                                        );
+                                    }
+                                }
+                                Source::Built(b) => {
+                                    let set = &built[b].0[u.first..u.first + u.len];
+                                    sampler.project_cached(
+                                        &job.clip_from_structure,
+                                        job.base,
+                                        set,
+                                        &mut counts,
+                                        &mut emit,
+                                    );
+                                }
+                            }
+                        }
+                        acc
+                    })
+                    .collect()
+            });
+            let mut colors = recon::Colors::new(scene, light);
+            let resolved: Vec<[u8; 4]> = (0..pixels)
+                .map(|p| {
+                    let mut sum = [0u64; 4];
+                    for s in &sums {
+                        for k in 0..4 {
+                            sum[k] += s[p][k];
+                        }
+                    }
+                    recon::resolve(&sum, frame.items()[p], raster_items[p], &mut colors)
+                })
+                .collect();
+            frame.resolved_color_mut().copy_from_slice(&resolved);
         }
         // Store the new sets (LRU eviction under the budget).
         let mut evictions = 0u64;

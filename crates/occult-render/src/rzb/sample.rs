@@ -49,6 +49,52 @@ pub struct Sampler<'a> {
     pub far_depth: f32,
     /// Renderer seed.
     pub seed: u64,
+    /// Frame width in pixels.
+    pub width: u32,
+    /// Frame height in pixels.
+    pub height: u32,
+}
+
+/// A sample projected into the view.
+#[derive(Clone, Copy, Debug)]
+pub struct Projected {
+    /// Position in pixels (0 at the left edge), in `[0, width]`.
+    pub x: f32,
+    /// Position in pixels (0 at the top edge), in `[0, height]`.
+    pub y: f32,
+    /// Reversed-Z depth.
+    pub depth: f32,
+    /// Item id.
+    pub item: ItemId,
+}
+
+/// Projects `p` by `clip_from_space`: `None` outside the view volume.
+#[inline]
+fn project(
+    clip_from_space: &Mat4,
+    p: Vec3,
+    item: ItemId,
+    width: u32,
+    height: u32,
+    far_depth: f32,
+) -> Option<Projected> {
+    let c = *clip_from_space * p.extend(1.0);
+    // Reversed-Z: depth = near / w ≤ 1 in front of the near plane; NaN fails `w > 0`.
+    let in_front = c.w > 0.0;
+    if !in_front || c.z > c.w || c.x.abs() > c.w || c.y.abs() > c.w {
+        return None;
+    }
+    let inv_w = 1.0 / c.w;
+    let depth = c.z * inv_w;
+    if depth < far_depth {
+        return None;
+    }
+    Some(Projected {
+        x: (c.x * inv_w * 0.5 + 0.5) * width as f32,
+        y: (0.5 - c.y * inv_w * 0.5) * height as f32,
+        depth,
+        item,
+    })
 }
 
 /// A space samples are generated in: a structure or an instance below it.
@@ -211,10 +257,38 @@ impl Sampler<'_> {
         }
     }
 
-    /// Draws `count` fresh samples of `job` into `out`.
+    /// Draws `count` fresh samples of `job` into `out` (§4.1 per pixel, §4.2 splats).
     pub fn draw_job(&self, job: &Job, count: u64, rng: &mut Pcg64Mcg, out: &mut Target<'_>, counts: &mut SampleCounts) {
+        self.project_job(job, count, rng, counts, &mut |s| self.splat(s, out));
+    }
+
+    /// Draws cached samples (already quantized) of a box placed by `clip_from_structure`.
+    pub fn draw_cached(
+        &self,
+        clip_from_structure: &Mat4,
+        base: ItemId,
+        samples: &[CachedSample],
+        out: &mut Target<'_>,
+        counts: &mut SampleCounts,
+    ) {
+        self.project_cached(clip_from_structure, base, samples, counts, &mut |s| self.splat(s, out));
+    }
+
+    /// Generates `count` fresh samples of `job` (§5.2, §5.3.3 back faces rejected) and passes
+    /// those that project into the view to `emit`. The same generator state gives the same
+    /// samples, which lets a second pass revisit them (§4.2 Gaussian reconstruction).
+    pub fn project_job<E: FnMut(Projected)>(
+        &self,
+        job: &Job,
+        count: u64,
+        rng: &mut Pcg64Mcg,
+        counts: &mut SampleCounts,
+        emit: &mut E,
+    ) {
         let place = Place::new(job, self.eye, self.backface);
         let backface = self.backface;
+        let (width, height) = (self.width, self.height);
+        let far_depth = self.far_depth;
         self.generate(
             job.structure,
             job.range.clone(),
@@ -229,52 +303,45 @@ impl Sampler<'_> {
                     counts.backfacing += 1;
                     return;
                 }
-                self.splat(&pl.clip_from_space, p, item, out, counts);
+                if let Some(s) = project(&pl.clip_from_space, p, item, width, height, far_depth) {
+                    counts.drawn += 1;
+                    emit(s);
+                }
             },
         );
     }
 
-    /// Draws cached samples (already quantized) of a box placed by `clip_from_structure`.
-    pub fn draw_cached(
+    /// Passes the cached samples that project into the view to `emit`.
+    pub fn project_cached<E: FnMut(Projected)>(
         &self,
         clip_from_structure: &Mat4,
         base: ItemId,
         samples: &[CachedSample],
-        out: &mut Target<'_>,
         counts: &mut SampleCounts,
+        emit: &mut E,
     ) {
         for s in samples {
-            self.splat(clip_from_structure, s.position, base + s.item, out, counts);
+            if let Some(p) = project(
+                clip_from_structure,
+                s.position,
+                base + s.item,
+                self.width,
+                self.height,
+                self.far_depth,
+            ) {
+                counts.drawn += 1;
+                emit(p);
+            }
         }
     }
 
-    /// §4.1/§4.2: projects `p` and writes a `d × d` splat of its depth and item under the frame's
+    /// §4.1/§4.2: writes a `d × d` splat of the sample's depth and item under the frame's
     /// (depth, item) rule.
     #[inline]
-    fn splat(
-        &self,
-        clip_from_structure: &Mat4,
-        p: Vec3,
-        item: ItemId,
-        out: &mut Target<'_>,
-        counts: &mut SampleCounts,
-    ) {
-        let c = *clip_from_structure * p.extend(1.0);
-        // Reversed-Z: depth = near / w ≤ 1 in front of the near plane; NaN fails `w > 0`.
-        let in_front = c.w > 0.0;
-        if !in_front || c.z > c.w || c.x.abs() > c.w || c.y.abs() > c.w {
-            return;
-        }
-        let inv_w = 1.0 / c.w;
-        let depth = c.z * inv_w;
-        if depth < self.far_depth {
-            return;
-        }
-        let sx = (c.x * inv_w * 0.5 + 0.5) * out.width as f32;
-        let sy = (0.5 - c.y * inv_w * 0.5) * out.height as f32;
-        let px = (sx as u32).min(out.width - 1);
-        let py = (sy as u32).min(out.height - 1);
-        counts.drawn += 1;
+    fn splat(&self, s: Projected, out: &mut Target<'_>) {
+        let px = (s.x as u32).min(out.width - 1);
+        let py = (s.y as u32).min(out.height - 1);
+        let (depth, item) = (s.depth, s.item);
         if self.splat == 1 {
             let i = (py * out.width + px) as usize;
             keep_fragment(&mut out.depth[i], &mut out.items[i], depth, item);
