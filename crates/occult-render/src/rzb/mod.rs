@@ -86,6 +86,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc { key: "large", default: "on", help: "draw boxes of large triangles with the z-buffer (7.1)" },
         ParamDoc { key: "threshold", default: "1", help: "samples per triangle above which a box is z-buffered (7.1, 8.3: projected area d^2/ln v)" },
         ParamDoc { key: "area_ratio", default: "4", help: "largest area ratio within an area class (7.1), > 1" },
+        ParamDoc { key: "orientation", default: "0", help: "orientation classes (5.3.4): bands of the polar grid of normal classes (2*bands^2 classes), 0..=8, 0 for none; bounds the orientation factor per box and skips boxes facing away when back faces are rejected" },
         ParamDoc { key: "leaf", default: "32", help: "entries per octree leaf (5.3.1), >= 1" },
         ParamDoc { key: "extension", default: "0.25", help: "extended boxes: growth per side as a fraction of the cell side (5.3.1), 0..=1" },
         ParamDoc { key: "cache", default: "off", help: "sample caching per selected box, quantized, LRU (7.2)" },
@@ -154,6 +155,8 @@ pub struct RzbOptions {
     pub large_threshold: f64,
     /// Largest area ratio within an area class (> 1; §8.3: 2..64 behave alike).
     pub area_ratio: f64,
+    /// §5.3.4: bands of the polar grid of orientation classes (0 = none, ≤ 8).
+    pub orientation: u32,
     /// Entries per octree leaf (≥ 1).
     pub leaf_size: usize,
     /// Extended boxes: growth per side as a fraction of the cell side (0..=1).
@@ -184,6 +187,7 @@ impl Default for RzbOptions {
             large: true,
             large_threshold: 1.0,
             area_ratio: 4.0,
+            orientation: 0,
             leaf_size: 32,
             extension: 0.25,
             cache: false,
@@ -220,6 +224,7 @@ impl RzbOptions {
             large: params.flag("large", d.large)?,
             large_threshold: params.get("threshold", d.large_threshold)?,
             area_ratio: params.get("area_ratio", d.area_ratio)?,
+            orientation: params.get("orientation", d.orientation)?,
             leaf_size: params.get("leaf", d.leaf_size)?,
             extension: params.get("extension", d.extension)?,
             cache: params.flag("cache", d.cache)?,
@@ -268,6 +273,9 @@ impl RzbOptions {
         }
         if !(self.area_ratio > 1.0 && self.area_ratio.is_finite()) {
             return bad("area_ratio", self.area_ratio.to_string(), "a number > 1");
+        }
+        if self.orientation > 8 {
+            return bad("orientation", self.orientation.to_string(), "0..=8");
         }
         if !(1..=1 << 20).contains(&self.leaf_size) {
             return bad("leaf", self.leaf_size.to_string(), "1..=1048576");
@@ -366,7 +374,7 @@ impl Rzb {
             extension: opts.extension,
             ..SampleOctreeConfig::default()
         };
-        let structures = raster.install(|| structure::build_all(&scene, &config, opts.area_ratio));
+        let structures = raster.install(|| structure::build_all(&scene, &config, opts.area_ratio, opts.orientation));
         Ok(Self {
             scene,
             raster,
@@ -439,7 +447,12 @@ impl Renderer for Rzb {
 
         // §5.3.2 / §7.1 / §7.3: box selection.
         let t_select = Instant::now();
-        let sel = Selection::run(&self.scene, &self.structures, view, &self.opts, eps);
+        let backface = match self.opts.backface {
+            Backface::Auto => self.raster.config().cull_backfaces,
+            Backface::On => true,
+            Backface::Off => false,
+        };
+        let sel = Selection::run(&self.scene, &self.structures, view, &self.opts, eps, backface);
         let select_time = t_select.elapsed();
         stats.phases.add(Phase::Cull, select_time);
         stats.boxes_tested = sel.boxes_tested;
@@ -462,11 +475,7 @@ impl Renderer for Rzb {
             scene: &self.scene,
             structures: &self.structures,
             splat: self.opts.splat,
-            backface: match self.opts.backface {
-                Backface::Auto => self.raster.config().cull_backfaces,
-                Backface::On => true,
-                Backface::Off => false,
-            },
+            backface,
             eye: view.camera().eye,
             far_depth: view.far_depth(),
             seed: self.opts.seed,
@@ -736,6 +745,9 @@ impl Renderer for Rzb {
         let c = &mut stats.counters;
         c.add("boxes_selected", sel.jobs.len() as u64);
         c.add("boxes_zbuffer", sel.boxes_zbuffer);
+        if self.opts.orientation > 0 {
+            c.add("boxes_backfacing", sel.boxes_backfacing);
+        }
         c.add("instances_visited", sel.instances_visited);
         c.add("samples_generated", sum.generated + built_samples);
         c.add("samples_backfacing", sum.backfacing);

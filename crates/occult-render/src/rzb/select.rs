@@ -6,7 +6,7 @@ use occult_core::{
 };
 use occult_raster::{Draw, DrawTriangles};
 
-use super::structure::{area_scale, Structure};
+use super::structure::{area_scale, Cone, Structure};
 use super::RzbOptions;
 
 /// Per-view constants of the projection factor (§5.1).
@@ -77,6 +77,9 @@ pub struct Selection<'a> {
     eps: f64,
     large: Option<f64>,
     oversample: f64,
+    /// Samples on back faces are rejected (§5.3.3): boxes whose orientation class faces away
+    /// entirely are skipped (§5.3.4).
+    backface: bool,
     /// Selected boxes.
     pub jobs: Vec<Job>,
     /// Triangles drawn by the z-buffer (§7.1).
@@ -89,6 +92,8 @@ pub struct Selection<'a> {
     pub instances_visited: u64,
     /// Boxes handed to the z-buffer.
     pub boxes_zbuffer: u64,
+    /// §5.3.4: boxes skipped wholesale because their orientation class faces away.
+    pub boxes_backfacing: u64,
 }
 
 struct Place {
@@ -100,11 +105,41 @@ struct Place {
     rows: [Vec4; 3],
     area_scale: f64,
     base: ItemId,
+    /// §5.3.4: the eye in structure space, when the placement is a similarity (angles kept).
+    eye: Option<Vec3>,
+    /// The placement mirrors (front faces are the other side).
+    mirrored: bool,
+}
+
+/// §5.3.4: bounds of `cos γ` (γ between a normal of `cone` and the direction from a point of
+/// box `b` to `eye`), all in structure space: (largest |cos γ| with both sides kept, largest
+/// cos γ of front faces; ≤ 0 when every face looks away). `None` when unbounded (eye in the
+/// box's sphere).
+fn orientation_bound(cone: &Cone, b: &Aabb, eye: Vec3, mirrored: bool) -> Option<(f64, f64)> {
+    let to_eye = eye - b.center();
+    let dist = to_eye.length();
+    let radius = b.half_extent().length();
+    if !(dist > radius) || cone.half_angle >= std::f32::consts::PI {
+        return None;
+    }
+    let axis = if mirrored { -cone.axis } else { cone.axis };
+    let theta = (to_eye.dot(axis) / dist).clamp(-1.0, 1.0).acos() as f64;
+    let spread = cone.half_angle as f64 + (radius / dist).asin() as f64;
+    let front = (theta - spread).max(0.0).cos();
+    let back = (std::f64::consts::PI - theta - spread).max(0.0).cos();
+    Some((front.max(back), front))
 }
 
 impl<'a> Selection<'a> {
     /// Selects the boxes of `view` with depth accuracy `eps`.
-    pub fn run(scene: &'a Scene, structures: &'a [Structure], view: &'a View, opts: &RzbOptions, eps: f64) -> Self {
+    pub fn run(
+        scene: &'a Scene,
+        structures: &'a [Structure],
+        view: &'a View,
+        opts: &RzbOptions,
+        eps: f64,
+        backface: bool,
+    ) -> Self {
         let mut s = Self {
             scene,
             structures,
@@ -113,12 +148,14 @@ impl<'a> Selection<'a> {
             eps,
             large: opts.large.then_some(opts.large_threshold),
             oversample: opts.oversample,
+            backface,
             jobs: Vec::new(),
             draws: Vec::new(),
             boxes_tested: 0,
             boxes_culled: 0,
             instances_visited: 0,
             boxes_zbuffer: 0,
+            boxes_backfacing: 0,
         };
         s.structure(scene.root(), Affine3A::IDENTITY, 0);
         s
@@ -140,15 +177,28 @@ impl<'a> Selection<'a> {
             rows: [t.x_axis, t.y_axis, t.z_axis],
             area_scale: area_scale(&world_from_structure),
             base,
+            eye: (!st.cones.is_empty() && is_similarity(&world_from_structure))
+                .then(|| world_from_structure.inverse().transform_point3(self.consts.eye)),
+            mirrored: world_from_structure.matrix3.determinant() < 0.0,
         };
-        for root in st.octree.roots().iter().flatten() {
-            self.node(&place, *root);
+        for (class, root) in st.octree.roots().iter().enumerate() {
+            if let Some(root) = root {
+                self.node(&place, *root, st.cones.get(class));
+            }
         }
     }
 
     /// §5.1/§5.3: (nearest view distance clamped to the near plane, farthest, samples) of the
-    /// list positions `range` bounded by `b`.
-    fn estimate(&self, p: &Place, b: &Aabb, range: std::ops::Range<u32>) -> (f64, f64, f64) {
+    /// list positions `range` bounded by `b`; with an orientation class (§5.3.4) the samples
+    /// carry its bound of the orientation factor, `None` when every face looks away and back
+    /// faces are rejected.
+    fn estimate(
+        &self,
+        p: &Place,
+        b: &Aabb,
+        range: std::ops::Range<u32>,
+        cone: Option<&Cone>,
+    ) -> Option<(f64, f64, f64)> {
         let c = b.center();
         let h = b.half_extent();
         let axis = |r: Vec4| (r.truncate().dot(c) + r.w, r.truncate().abs().dot(h));
@@ -166,8 +216,20 @@ impl<'a> Selection<'a> {
         let area = st.octree.area(range) * p.area_scale;
         let prj = self.consts.focal_px * self.consts.focal_px / (z_min * z_min) * inv_cos;
         let d2 = (self.consts.splat * self.consts.splat) as f64;
-        let samples = area * prj * self.consts.ln_v / d2 * self.oversample;
-        (z_min, z_max, samples)
+        let mut samples = area * prj * self.consts.ln_v / d2 * self.oversample;
+        if let (Some(cone), Some(eye)) = (cone, p.eye) {
+            if let Some((both, front)) = orientation_bound(cone, b, eye, p.mirrored) {
+                if self.backface {
+                    if front <= 0.0 {
+                        return None;
+                    }
+                    samples *= front;
+                } else {
+                    samples *= both;
+                }
+            }
+        }
+        Some((z_min, z_max, samples))
     }
 
     fn test(&mut self, p: &Place, b: &Aabb) -> bool {
@@ -181,26 +243,29 @@ impl<'a> Selection<'a> {
 
     /// §5.3.2: select node `n` when its depth-factor ratio `(z_max / z_min)²` is within ε (and,
     /// with §7.1, its triangles are small enough to sample); otherwise descend.
-    fn node(&mut self, p: &Place, n: u32) {
+    fn node(&mut self, p: &Place, n: u32, cone: Option<&Cone>) {
         let st = &self.structures[p.id.index()];
         let node = st.octree.nodes()[n as usize];
         if !self.test(p, &node.bounds) {
             return;
         }
-        let (z_min, z_max, samples) = self.estimate(p, &node.bounds, node.section());
+        let Some((z_min, z_max, samples)) = self.estimate(p, &node.bounds, node.section(), cone) else {
+            self.boxes_backfacing += 1;
+            return;
+        };
         let ratio = (z_max / z_min).powi(2);
         let per_item = samples / st.items(node.section()).max(1) as f64;
         let too_dense = self.large.is_some_and(|t| per_item > t);
         if ratio <= self.eps && !too_dense {
             self.select(p, node.section(), samples, z_min);
         } else if node.is_leaf() {
-            self.part(p, node.section(), node.bounds, false);
+            self.part(p, node.section(), node.bounds, false, cone);
         } else {
             for c in node.children() {
-                self.node(p, c);
+                self.node(p, c, cone);
             }
             if node.own_first < node.end {
-                self.part(p, node.own(), node.own_bounds, true);
+                self.part(p, node.own(), node.own_bounds, true, cone);
             }
         }
     }
@@ -208,14 +273,17 @@ impl<'a> Selection<'a> {
     /// List positions that cannot be split spatially (a leaf, or a node's own entries).
     /// Triangles: sampled at the bound's nearest distance, or drawn by the z-buffer when they
     /// would get more than the threshold of samples each (§7.1). Instances: each entered.
-    fn part(&mut self, p: &Place, range: std::ops::Range<u32>, bounds: Aabb, test: bool) {
+    fn part(&mut self, p: &Place, range: std::ops::Range<u32>, bounds: Aabb, test: bool, cone: Option<&Cone>) {
         if test && !self.test(p, &bounds) {
             return;
         }
         let st = &self.structures[p.id.index()];
         match self.scene.node(p.id).kind() {
             NodeKind::Mesh(mesh) => {
-                let (z_min, _, samples) = self.estimate(p, &bounds, range.clone());
+                let Some((z_min, _, samples)) = self.estimate(p, &bounds, range.clone(), cone) else {
+                    self.boxes_backfacing += 1;
+                    return;
+                };
                 let per_item = samples / st.items(range.clone()).max(1) as f64;
                 if self.large.is_some_and(|t| per_item > t) {
                     self.boxes_zbuffer += 1;
@@ -253,4 +321,19 @@ impl<'a> Selection<'a> {
             scale: p.area_scale.sqrt() as f32,
         });
     }
+}
+
+/// True when `t`'s linear part is a rotation (or reflection) times a uniform scale, so angles
+/// between directions are kept.
+fn is_similarity(t: &Affine3A) -> bool {
+    let m = t.matrix3;
+    let (x, y, z) = (Vec3::from(m.x_axis), Vec3::from(m.y_axis), Vec3::from(m.z_axis));
+    let l = x.length_squared();
+    let tol = 1e-4 * l;
+    l > 0.0
+        && (y.length_squared() - l).abs() <= tol
+        && (z.length_squared() - l).abs() <= tol
+        && x.dot(y).abs() <= tol
+        && y.dot(z).abs() <= tol
+        && x.dot(z).abs() <= tol
 }

@@ -23,6 +23,30 @@ pub struct Structure {
     pub area: f64,
     /// Groups: item count before each list position (length entries + 1); empty for meshes.
     pub item_prefix: Vec<u64>,
+    /// §5.3.4: the normal cone of each class (meshes with orientation classes; empty
+    /// otherwise).
+    pub cones: Vec<Cone>,
+}
+
+/// §5.3.4: the normals of an orientation class: every unit normal lies within `half_angle`
+/// (radians, π when unbounded) of `axis`, in the mesh's own space.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cone {
+    /// Unit axis.
+    pub axis: Vec3,
+    /// Half opening angle in radians.
+    pub half_angle: f32,
+}
+
+/// §5.3.4: the orientation class of unit normal `n` on a polar grid of `bands` bands of the polar
+/// angle θ (from +z) and `2 · bands` sectors of the azimuth φ: `2 · bands²` classes.
+pub fn orientation_class(n: Vec3, bands: u32) -> u32 {
+    let b = bands.max(1);
+    let theta = n.z.clamp(-1.0, 1.0).acos();
+    let phi = n.y.atan2(n.x) + std::f32::consts::PI;
+    let band = ((theta / std::f32::consts::PI * b as f32) as u32).min(b - 1);
+    let sector = ((phi / std::f32::consts::TAU * (2 * b) as f32) as u32).min(2 * b - 1);
+    band * 2 * b + sector
 }
 
 impl Structure {
@@ -58,7 +82,9 @@ pub fn triangle_area(p: [Vec3; 3]) -> f64 {
 }
 
 /// Builds the structure of every node (children before parents, as the DAG stores them).
-pub fn build_all(scene: &Scene, config: &SampleOctreeConfig, area_ratio: f64) -> Vec<Structure> {
+///
+/// `orientation` (§5.3.4): bands of the polar grid of orientation classes, 0 for none.
+pub fn build_all(scene: &Scene, config: &SampleOctreeConfig, area_ratio: f64, orientation: u32) -> Vec<Structure> {
     use rayon::prelude::*;
     // Node areas first (groups need their children's), then the octrees in parallel.
     let mut areas = vec![0.0f64; scene.nodes().len()];
@@ -84,11 +110,18 @@ pub fn build_all(scene: &Scene, config: &SampleOctreeConfig, area_ratio: f64) ->
     }
     (0..scene.nodes().len())
         .into_par_iter()
-        .map(|i| build_one(scene, NodeId(i as u32), &areas, config, area_ratio))
+        .map(|i| build_one(scene, NodeId(i as u32), &areas, config, area_ratio, orientation))
         .collect()
 }
 
-fn build_one(scene: &Scene, id: NodeId, areas: &[f64], config: &SampleOctreeConfig, area_ratio: f64) -> Structure {
+fn build_one(
+    scene: &Scene,
+    id: NodeId,
+    areas: &[f64],
+    config: &SampleOctreeConfig,
+    area_ratio: f64,
+    orientation: u32,
+) -> Structure {
     let node = scene.node(id);
     match node.kind() {
         NodeKind::Mesh(m) => {
@@ -119,13 +152,63 @@ fn build_one(scene: &Scene, id: NodeId, areas: &[f64], config: &SampleOctreeConf
                     }
                 })
                 .collect();
-            let class_count = classes.iter().copied().max().map_or(0, |c| c as usize + 1);
+            let area_classes = classes.iter().copied().max().map_or(0, |c| c as usize + 1);
+            if orientation == 0 {
+                let octree = SampleOctree::build(&boxes, &tri_areas, &classes, area_classes, config);
+                let area = octree.total_area();
+                return Structure {
+                    octree,
+                    area,
+                    item_prefix: Vec::new(),
+                    cones: Vec::new(),
+                };
+            }
+            // §5.3.4: class = area class × orientation class; each class's cone bounds the
+            // normals of its triangles.
+            let per = 2 * orientation * orientation;
+            let normals: Vec<Vec3> = (0..n)
+                .map(|t| {
+                    let [a, b, c] = m.triangle_positions(t);
+                    (b - a).cross(c - a).normalize_or_zero()
+                })
+                .collect();
+            let classes: Vec<u32> = classes
+                .iter()
+                .zip(&normals)
+                .map(|(&c, &nm)| c * per + orientation_class(nm, orientation))
+                .collect();
+            let class_count = area_classes * per as usize;
+            let mut sums = vec![occult_core::glam::DVec3::ZERO; class_count];
+            for (&c, &nm) in classes.iter().zip(&normals) {
+                sums[c as usize] += nm.as_dvec3();
+            }
+            let axes: Vec<Vec3> = sums.iter().map(|s| s.normalize_or_zero().as_vec3()).collect();
+            let mut half = vec![0.0f32; class_count];
+            for (&c, &nm) in classes.iter().zip(&normals) {
+                let a = axes[c as usize];
+                let h = &mut half[c as usize];
+                *h = if a == Vec3::ZERO || nm == Vec3::ZERO {
+                    std::f32::consts::PI
+                } else {
+                    // Rounding margin: the bound must hold.
+                    h.max(nm.dot(a).clamp(-1.0, 1.0).acos() + 1e-4)
+                };
+            }
+            let cones = axes
+                .into_iter()
+                .zip(half)
+                .map(|(axis, half_angle)| Cone {
+                    axis,
+                    half_angle: half_angle.min(std::f32::consts::PI),
+                })
+                .collect();
             let octree = SampleOctree::build(&boxes, &tri_areas, &classes, class_count, config);
             let area = octree.total_area();
             Structure {
                 octree,
                 area,
                 item_prefix: Vec::new(),
+                cones,
             }
         }
         NodeKind::Group(g) => {
@@ -150,6 +233,7 @@ fn build_one(scene: &Scene, id: NodeId, areas: &[f64], config: &SampleOctreeConf
                 octree,
                 area,
                 item_prefix,
+                cones: Vec::new(),
             }
         }
     }
