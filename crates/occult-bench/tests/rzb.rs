@@ -237,6 +237,7 @@ fn bad_parameters_are_errors() {
         "rzb:sigma=9",
         "rzb:gauss_tolerance=0",
         "rzb:orientation=9",
+        "rzb:dynamic=yes",
     ] {
         let spec = AlgoSpec::parse(spec).unwrap();
         match (spec.algorithm.info().build)(scene.clone(), &options(1), &spec.params) {
@@ -387,4 +388,83 @@ fn orientation_classes_skip_back_facing_boxes_and_keep_coverage() {
     );
     assert!(two_sided.1 == 0 && two_sided.0 < plain.0 && two_sided.0 > classes.0);
     assert!(classes.2 <= plain.2 + 0.02, "error {} vs {}", classes.2, plain.2);
+}
+
+/// §5.4 through the renderer: with `dynamic=on` sampling descends distribution trees; removing
+/// instances and triangles changes the frame, inserting them again restores it bit for bit
+/// (same seed), and inserting then removing returns to the frame before; sample counts follow.
+/// Also with the large-triangle fallback, whose lists are the trees' present entries.
+#[test]
+fn dynamic_updates_through_the_renderer_restore_the_frame() {
+    let (scene, camera) = scene("forest:trees=2,patches=2");
+    let view = View::new(camera, 160, 120).unwrap();
+    // The group with the most instances (trees in a patch), and a mesh.
+    let root = (0..scene.nodes().len() as u32)
+        .map(occult_core::NodeId)
+        .max_by_key(|&n| scene.node(n).instances().len())
+        .unwrap();
+    let mesh = occult_core::NodeId(scene.nodes().iter().position(|n| n.mesh().is_some()).unwrap() as u32);
+    let roots = scene.node(root).instances().len() as u32;
+    assert!(roots >= 2);
+    let updates: Vec<(occult_core::NodeId, u32)> =
+        vec![(root, 0), (root, roots - 1), (mesh, 3), (mesh, 10), (mesh, 11)];
+    for spec in ["large=off,max_samples=3e6", "large=on"] {
+        let opts = RzbOptions::from_params(
+            &AlgoSpec::parse(&format!("rzb:seed=5,dynamic=on,{spec}"))
+                .unwrap()
+                .params,
+        )
+        .unwrap();
+        let mut r = Rzb::with_options(scene.clone(), &options(2), &opts).unwrap();
+        let samples = |r: &mut Rzb| counter(r, &view, "samples_expected");
+        let a = render(&mut r, &view);
+        let sa = samples(&mut r);
+        assert!(a.covered_pixel_count() > 200, "{spec}");
+        for &(n, e) in &updates {
+            r.remove(n, e).unwrap();
+            assert!(!r.contains(n, e));
+        }
+        let b = render(&mut r, &view);
+        assert!(!b.same_visibility(&a), "{spec}: removing changed nothing");
+        assert!(samples(&mut r) < sa || spec == "large=on");
+        for &(n, e) in updates.iter().rev() {
+            r.insert(n, e).unwrap();
+        }
+        assert!(render(&mut r, &view).same_visibility(&a), "{spec}: remove then insert");
+        assert_eq!(samples(&mut r), sa);
+        // Insert then remove: from the state without the entries, back to it.
+        for &(n, e) in &updates {
+            r.remove(n, e).unwrap();
+        }
+        let before = render(&mut r, &view);
+        assert!(before.same_visibility(&b), "{spec}: removal is not history-independent");
+        for &(n, e) in &updates {
+            r.insert(n, e).unwrap();
+        }
+        for &(n, e) in &updates {
+            r.remove(n, e).unwrap();
+        }
+        assert!(
+            render(&mut r, &view).same_visibility(&before),
+            "{spec}: insert then remove"
+        );
+        // Errors are typed.
+        for e in [
+            r.remove(root, 0),
+            r.insert(mesh, 10).and_then(|_| r.insert(mesh, 10)),
+            r.remove(occult_core::NodeId(u32::MAX), 0),
+            r.insert(mesh, u32::MAX),
+        ] {
+            assert!(matches!(e, Err(RenderError::Update(_))), "{e:?}");
+        }
+    }
+    let mut static_r = Rzb::with_options(scene.clone(), &options(1), &RzbOptions::default()).unwrap();
+    assert!(matches!(static_r.remove(root, 0), Err(RenderError::Update(_))));
+    // Without updates, the trees sample the scene as the lists do: within the bound.
+    let (city, camera) = self::scene("city:blocks=4");
+    let view = View::new(camera, 320, 240).unwrap();
+    let reference = zbuffer_frame(&city, &view);
+    let mut r = rzb(&city, "rzb:dynamic=on", 2);
+    let share = differing_share(&render(r.as_mut(), &view), &reference);
+    assert!(share <= 0.03, "dynamic=on: {:.3}% differ", share * 100.0);
 }

@@ -93,6 +93,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc { key: "cache_mib", default: "256", help: "sample cache budget in MiB (7.2)" },
         ParamDoc { key: "cache_tolerance", default: "1.25", help: "distance factor within which a cached set is reused (7.2), (1, 16]" },
         ParamDoc { key: "backface", default: "auto", help: "reject back-facing samples (5.3.3): auto follows the rasterizer's back-face culling, on, off" },
+        ParamDoc { key: "dynamic", default: "off", help: "sample from distribution trees (5.4) so that entries can be removed and inserted through Rzb::remove/insert" },
         ParamDoc { key: "max_samples", default: "1e9", help: "most samples per frame; beyond, counts are scaled down (counter samples_capped)" },
     ],
     conservative: false,
@@ -169,6 +170,10 @@ pub struct RzbOptions {
     pub cache_tolerance: f32,
     /// Back-face rejection.
     pub backface: Backface,
+    /// §5.4: sample from distribution trees (summed areas in the octree nodes) instead of the
+    /// static lists, so that entries can be removed and inserted ([`Rzb::remove`],
+    /// [`Rzb::insert`]).
+    pub dynamic: bool,
     /// Most samples per frame (≥ 1): beyond, every box's count is scaled down (counter
     /// `samples_capped`), so that a box at the near plane cannot stall a frame.
     pub max_samples: f64,
@@ -195,6 +200,7 @@ impl Default for RzbOptions {
             cache_tolerance: 1.25,
             backface: Backface::Auto,
             max_samples: 1e9,
+            dynamic: false,
         }
     }
 }
@@ -236,6 +242,7 @@ impl RzbOptions {
                 _ => Backface::Auto,
             },
             max_samples: params.get("max_samples", d.max_samples)?,
+            dynamic: params.flag("dynamic", d.dynamic)?,
         };
         o.validate()?;
         Ok(o)
@@ -359,6 +366,8 @@ pub struct Rzb {
     auto: Option<AutoEps>,
     frame_index: u64,
     scratch: Vec<(Vec<f32>, Vec<ItemId>)>,
+    /// §5.4: for each DAG node, the (group, instance index) pairs that reference it.
+    referrers: Vec<Vec<(u32, u32)>>,
 }
 
 impl Rzb {
@@ -374,8 +383,22 @@ impl Rzb {
             extension: opts.extension,
             ..SampleOctreeConfig::default()
         };
-        let structures = raster.install(|| structure::build_all(&scene, &config, opts.area_ratio, opts.orientation));
-        Ok(Self {
+        let structures =
+            raster.install(|| structure::build_all(&scene, &config, opts.area_ratio, opts.orientation, opts.dynamic));
+        let referrers = if opts.dynamic {
+            let mut r = vec![Vec::new(); scene.nodes().len()];
+            for (g, n) in scene.nodes().iter().enumerate() {
+                if let occult_core::NodeKind::Group(insts) = n.kind() {
+                    for (e, inst) in insts.iter().enumerate() {
+                        r[inst.child.index()].push((g as u32, e as u32));
+                    }
+                }
+            }
+            r
+        } else {
+            Vec::new()
+        };
+        let mut rzb = Self {
             scene,
             raster,
             cache: opts
@@ -386,7 +409,132 @@ impl Rzb {
             structures,
             frame_index: 0,
             scratch: Vec::new(),
-        })
+            referrers,
+        };
+        if opts.dynamic {
+            rzb.settle();
+        }
+        Ok(rzb)
+    }
+
+    /// §5.4: sets every instance entry's area and item count from its child's tree (children
+    /// come before parents in the DAG's order), so that the values an update propagates are
+    /// the ones the trees start with, bit for bit.
+    fn settle(&mut self) {
+        for n in 0..self.structures.len() {
+            if let occult_core::NodeKind::Group(insts) = self.scene.node(occult_core::NodeId(n as u32)).kind() {
+                for (e, inst) in insts.iter().enumerate() {
+                    let child = &self.structures[inst.child.index()];
+                    let (area, items) = child
+                        .tree
+                        .as_ref()
+                        .map_or((0.0, 0), |t| (t.total_area(), t.total_weight()));
+                    let scaled = area * structure::area_scale(&inst.parent_from_child);
+                    if let Some(t) = self.structures[n].tree.as_mut() {
+                        // The area is finite and non-negative (sums of such).
+                        let _ = t.set_entry(e as u32, scaled, items);
+                    }
+                }
+            }
+            if let Some(t) = self.structures[n].tree.as_ref() {
+                self.structures[n].area = t.total_area();
+            }
+        }
+    }
+
+    /// §5.4: removes entry `entry` of DAG node `node` (a triangle of a mesh, an instance of a
+    /// group) from sampling and from the large-triangle fallback: O(height) in the node's tree,
+    /// then the node's new area and item count are set on every instance of it (O(height) per
+    /// referencing instance, up the DAG). Sample caches are emptied (their sets may hold it).
+    ///
+    /// Only the scene's own entries can be removed and inserted: item ids name scene
+    /// triangles, and the scene is shared and immutable.
+    ///
+    /// # Errors
+    /// [`RenderError::Update`] without `dynamic=on`, for a node or entry that does not exist,
+    /// is not present, or has no area.
+    pub fn remove(&mut self, node: occult_core::NodeId, entry: u32) -> Result<()> {
+        self.update(node, entry, false)
+    }
+
+    /// §5.4: inserts entry `entry` of DAG node `node` again (at its node of the static build),
+    /// the inverse of [`Rzb::remove`]: with the same seed, frames after an insertion and a
+    /// removal of the same entry are those before (the trees' sums are recomputed in a fixed
+    /// order, not adjusted).
+    ///
+    /// # Errors
+    /// As [`Rzb::remove`]; an entry already present is an error.
+    pub fn insert(&mut self, node: occult_core::NodeId, entry: u32) -> Result<()> {
+        self.update(node, entry, true)
+    }
+
+    /// True when entry `entry` of node `node` is sampled (always, without `dynamic=on`, for an
+    /// entry with area).
+    pub fn contains(&self, node: occult_core::NodeId, entry: u32) -> bool {
+        let Some(st) = self.structures.get(node.index()) else {
+            return false;
+        };
+        match &st.tree {
+            Some(t) => t.contains(entry),
+            None => st.octree.entries().contains(&entry),
+        }
+    }
+
+    fn update(&mut self, node: occult_core::NodeId, entry: u32, insert: bool) -> Result<()> {
+        let err = |m: String| Err(RenderError::Update(format!("rzb: {m}")));
+        if !self.opts.dynamic {
+            return err("dynamic updates need dynamic=on".into());
+        }
+        let Some(st) = self.structures.get_mut(node.index()) else {
+            return err(format!("no node {}", node.0));
+        };
+        let Some(tree) = st.tree.as_mut() else {
+            return err(format!("node {} has no distribution tree", node.0));
+        };
+        let result = if insert {
+            match tree.home(entry) {
+                Some(home) => {
+                    let (area, weight) = tree.entry(entry);
+                    tree.insert_at(entry, home, area, weight)
+                }
+                None => Err(format!(
+                    "entry {entry} of node {} does not exist or has no area",
+                    node.0
+                )),
+            }
+        } else {
+            tree.remove(entry).map_err(|m| format!("node {}: {m}", node.0))
+        };
+        if let Err(m) = result {
+            return err(m);
+        }
+        self.propagate(node.index());
+        if let Some(c) = self.cache.as_mut() {
+            *c = SampleCache::new(c.budget(), self.opts.cache_tolerance);
+        }
+        Ok(())
+    }
+
+    /// Sets node `n`'s area and item count from its tree and passes them to every instance of
+    /// it, recursively up the DAG.
+    fn propagate(&mut self, n: usize) {
+        let Some(tree) = self.structures[n].tree.as_ref() else {
+            return;
+        };
+        let (area, items) = (tree.total_area(), tree.total_weight());
+        self.structures[n].area = area;
+        for k in 0..self.referrers[n].len() {
+            let (g, e) = self.referrers[n][k];
+            let occult_core::NodeKind::Group(insts) = self.scene.node(occult_core::NodeId(g)).kind() else {
+                continue;
+            };
+            let scaled = area * structure::area_scale(&insts[e as usize].parent_from_child);
+            if let Some(t) = self.structures[g as usize].tree.as_mut() {
+                // The area is finite and non-negative (sums of such).
+                let _ = t.set_entry(e, scaled, items);
+            }
+            self.propagate(g as usize);
+        }
     }
 
     /// The options.
@@ -523,6 +671,7 @@ impl Renderer for Rzb {
                     sampler.generate(
                         job.structure,
                         job.range.clone(),
+                        sample::Part::of(job),
                         n,
                         &place,
                         &mut rng,
@@ -658,7 +807,7 @@ impl Renderer for Rzb {
             let runs: Vec<std::ops::Range<usize>> = if chunk_count <= max_runs {
                 (0..chunk_count).map(|c| bounds[c]..bounds[c + 1]).collect()
             } else {
-                vec![0..units.len()]
+                std::iter::once(0..units.len()).collect()
             };
             let sums: Vec<Vec<recon::Accum>> = self.raster.install(|| {
                 runs.par_iter()

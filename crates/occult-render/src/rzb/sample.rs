@@ -97,6 +97,28 @@ fn project(
     })
 }
 
+/// What a structure with a distribution tree samples from (§5.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Part {
+    /// The subtree of an octree node.
+    Subtree(u32),
+    /// A node's own entries.
+    Own(u32),
+    /// Every class (an entered instance).
+    Whole,
+}
+
+impl Part {
+    /// The part a selected box samples from.
+    pub fn of(job: &Job) -> Self {
+        if job.own {
+            Part::Own(job.node)
+        } else {
+            Part::Subtree(job.node)
+        }
+    }
+}
+
 /// A space samples are generated in: a structure or an instance below it.
 pub struct Place {
     /// To clip space.
@@ -189,10 +211,15 @@ impl Sampler<'_> {
     /// inversions (§5.2), but the list is read in order, and an instance chosen `k` times is
     /// entered once with `k` samples (its transform composed once), instead of once per
     /// sample through the whole instance chain.
+    ///
+    /// §5.4: a structure with a distribution tree samples from it instead: `part` (the job's
+    /// node, or the whole tree for an entered instance) is descended once per sample.
+    #[allow(clippy::too_many_arguments)]
     pub fn generate<F: FnMut(&Place, Vec3, Vec3, ItemId)>(
         &self,
         sid: u32,
         range: std::ops::Range<u32>,
+        part: Part,
         n: u64,
         place: &Place,
         rng: &mut Pcg64Mcg,
@@ -203,6 +230,27 @@ impl Sampler<'_> {
         }
         let st = &self.structures[sid as usize];
         let node = self.scene.node(occult_core::NodeId(sid));
+        if let Some(tree) = &st.tree {
+            for _ in 0..n {
+                let u = rng.random::<f64>();
+                let pick = match part {
+                    Part::Subtree(nd) => tree.sample(nd, u),
+                    Part::Own(nd) => tree.sample_own(nd, u),
+                    Part::Whole => tree.sample_all(u),
+                };
+                let Some(e) = pick else { return };
+                let e = e as usize;
+                match node.kind() {
+                    NodeKind::Mesh(m) => self.points(m, e, 1, place, rng, f),
+                    NodeKind::Group(g) => {
+                        let inst = &g[e];
+                        let child = place.enter(inst, node.item_offset(e), self.backface);
+                        self.generate(inst.child.0, 0..0, Part::Whole, 1, &child, rng, f);
+                    }
+                }
+            }
+            return;
+        }
         let entries = st.octree.entries();
         let mut hi = range.end; // one past the last position a smaller target can land on
         let lo_area = st.octree.prefix(range.start);
@@ -227,24 +275,13 @@ impl Sampler<'_> {
                     if let Some((pos, count)) = prev {
                         let e = entries[pos as usize] as usize;
                         match node.kind() {
-                            NodeKind::Mesh(m) => {
-                                let [a, b, c] = m.triangle_positions(e);
-                                let normal = (b - a).cross(c - a);
-                                for _ in 0..count {
-                                    let (mut r1, mut r2) = (rng.random::<f32>(), rng.random::<f32>());
-                                    if r1 + r2 > 1.0 {
-                                        r1 = 1.0 - r1;
-                                        r2 = 1.0 - r2;
-                                    }
-                                    f(place, a + (b - a) * r1 + (c - a) * r2, normal, place.base + e as u64);
-                                }
-                            }
+                            NodeKind::Mesh(m) => self.points(m, e, count, place, rng, f),
                             NodeKind::Group(g) => {
                                 let inst = &g[e];
                                 let child = place.enter(inst, node.item_offset(e), self.backface);
                                 let cid = inst.child.0;
                                 let len = self.structures[cid as usize].octree.entries().len() as u32;
-                                self.generate(cid, 0..len, count, &child, rng, f);
+                                self.generate(cid, 0..len, Part::Whole, count, &child, rng, f);
                             }
                         }
                     }
@@ -254,6 +291,29 @@ impl Sampler<'_> {
                     }
                 }
             }
+        }
+    }
+
+    /// `count` uniform points on triangle `e` of `m` (§5.2), passed to `f`.
+    #[inline]
+    fn points<F: FnMut(&Place, Vec3, Vec3, ItemId)>(
+        &self,
+        m: &occult_core::Mesh,
+        e: usize,
+        count: u64,
+        place: &Place,
+        rng: &mut Pcg64Mcg,
+        f: &mut F,
+    ) {
+        let [a, b, c] = m.triangle_positions(e);
+        let normal = (b - a).cross(c - a);
+        for _ in 0..count {
+            let (mut r1, mut r2) = (rng.random::<f32>(), rng.random::<f32>());
+            if r1 + r2 > 1.0 {
+                r1 = 1.0 - r1;
+                r2 = 1.0 - r2;
+            }
+            f(place, a + (b - a) * r1 + (c - a) * r2, normal, place.base + e as u64);
         }
     }
 
@@ -292,6 +352,7 @@ impl Sampler<'_> {
         self.generate(
             job.structure,
             job.range.clone(),
+            Part::of(job),
             count,
             &place,
             rng,

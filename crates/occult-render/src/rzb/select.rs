@@ -6,7 +6,7 @@ use occult_core::{
 };
 use occult_raster::{Draw, DrawTriangles};
 
-use super::structure::{area_scale, Cone, Structure};
+use super::structure::{area_scale, Cone, Section, Structure};
 use super::RzbOptions;
 
 /// Per-view constants of the projection factor (§5.1).
@@ -54,6 +54,10 @@ pub struct Job {
     pub structure: u32,
     /// Its list positions.
     pub range: std::ops::Range<u32>,
+    /// Its octree node.
+    pub node: u32,
+    /// Only the node's own entries.
+    pub own: bool,
     /// The placement, composed from the root.
     pub world_from_structure: Affine3A,
     /// `view.clip_from_object(world_from_structure)`.
@@ -119,7 +123,7 @@ fn orientation_bound(cone: &Cone, b: &Aabb, eye: Vec3, mirrored: bool) -> Option
     let to_eye = eye - b.center();
     let dist = to_eye.length();
     let radius = b.half_extent().length();
-    if !(dist > radius) || cone.half_angle >= std::f32::consts::PI {
+    if dist.is_nan() || dist <= radius || cone.half_angle >= std::f32::consts::PI {
         return None;
     }
     let axis = if mirrored { -cone.axis } else { cone.axis };
@@ -192,13 +196,7 @@ impl<'a> Selection<'a> {
     /// list positions `range` bounded by `b`; with an orientation class (§5.3.4) the samples
     /// carry its bound of the orientation factor, `None` when every face looks away and back
     /// faces are rejected.
-    fn estimate(
-        &self,
-        p: &Place,
-        b: &Aabb,
-        range: std::ops::Range<u32>,
-        cone: Option<&Cone>,
-    ) -> Option<(f64, f64, f64)> {
+    fn estimate(&self, p: &Place, b: &Aabb, sec: &Section, cone: Option<&Cone>) -> Option<(f64, f64, f64)> {
         let c = b.center();
         let h = b.half_extent();
         let axis = |r: Vec4| (r.truncate().dot(c) + r.w, r.truncate().abs().dot(h));
@@ -213,7 +211,7 @@ impl<'a> Selection<'a> {
             .sqrt()
             .min(self.consts.max_inv_cos);
         let st = &self.structures[p.id.index()];
-        let area = st.octree.area(range) * p.area_scale;
+        let area = st.section_area(sec) * p.area_scale;
         let prj = self.consts.focal_px * self.consts.focal_px / (z_min * z_min) * inv_cos;
         let d2 = (self.consts.splat * self.consts.splat) as f64;
         let mut samples = area * prj * self.consts.ln_v / d2 * self.oversample;
@@ -249,23 +247,33 @@ impl<'a> Selection<'a> {
         if !self.test(p, &node.bounds) {
             return;
         }
-        let Some((z_min, z_max, samples)) = self.estimate(p, &node.bounds, node.section(), cone) else {
+        let whole = Section {
+            node: n,
+            own: false,
+            range: node.section(),
+        };
+        let Some((z_min, z_max, samples)) = self.estimate(p, &node.bounds, &whole, cone) else {
             self.boxes_backfacing += 1;
             return;
         };
         let ratio = (z_max / z_min).powi(2);
-        let per_item = samples / st.items(node.section()).max(1) as f64;
+        let per_item = samples / st.section_items(&whole).max(1) as f64;
         let too_dense = self.large.is_some_and(|t| per_item > t);
         if ratio <= self.eps && !too_dense {
-            self.select(p, node.section(), samples, z_min);
+            self.select(p, whole, samples, z_min);
         } else if node.is_leaf() {
-            self.part(p, node.section(), node.bounds, false, cone);
+            self.part(p, whole, node.bounds, false, cone);
         } else {
             for c in node.children() {
                 self.node(p, c, cone);
             }
             if node.own_first < node.end {
-                self.part(p, node.own(), node.own_bounds, true, cone);
+                let own = Section {
+                    node: n,
+                    own: true,
+                    range: node.own(),
+                };
+                self.part(p, own, node.own_bounds, true, cone);
             }
         }
     }
@@ -273,34 +281,48 @@ impl<'a> Selection<'a> {
     /// List positions that cannot be split spatially (a leaf, or a node's own entries).
     /// Triangles: sampled at the bound's nearest distance, or drawn by the z-buffer when they
     /// would get more than the threshold of samples each (§7.1). Instances: each entered.
-    fn part(&mut self, p: &Place, range: std::ops::Range<u32>, bounds: Aabb, test: bool, cone: Option<&Cone>) {
+    fn part(&mut self, p: &Place, sec: Section, bounds: Aabb, test: bool, cone: Option<&Cone>) {
         if test && !self.test(p, &bounds) {
             return;
         }
         let st = &self.structures[p.id.index()];
         match self.scene.node(p.id).kind() {
             NodeKind::Mesh(mesh) => {
-                let Some((z_min, _, samples)) = self.estimate(p, &bounds, range.clone(), cone) else {
+                let Some((z_min, _, samples)) = self.estimate(p, &bounds, &sec, cone) else {
                     self.boxes_backfacing += 1;
                     return;
                 };
-                let per_item = samples / st.items(range.clone()).max(1) as f64;
+                let items = st.section_items(&sec);
+                if items == 0 {
+                    return;
+                }
+                let per_item = samples / items as f64;
                 if self.large.is_some_and(|t| per_item > t) {
                     self.boxes_zbuffer += 1;
+                    // A leaf's section is its own list; with a distribution tree, the entries
+                    // present now (sorted by id, as the static list).
+                    let list = match &st.tree {
+                        Some(t) => t.own(sec.node),
+                        None => &st.octree.entries()[sec.range.start as usize..sec.range.end as usize],
+                    };
                     self.draws.push(Draw {
                         mesh,
-                        triangles: DrawTriangles::List(&st.octree.entries()[range.start as usize..range.end as usize]),
+                        triangles: DrawTriangles::List(list),
                         clip_from_object: p.clip_from_structure,
                         first_item: p.base,
                     });
                 } else {
-                    self.select(p, range, samples, z_min);
+                    self.select(p, sec, samples, z_min);
                 }
             }
             NodeKind::Group(instances) => {
                 let node = self.scene.node(p.id);
-                for pos in range {
-                    let e = st.octree.entries()[pos as usize] as usize;
+                let present: &[u32] = match &st.tree {
+                    Some(t) => t.own(sec.node),
+                    None => &st.octree.entries()[sec.range.start as usize..sec.range.end as usize],
+                };
+                for &e in present {
+                    let e = e as usize;
                     let inst = &instances[e];
                     let world_from_child = compose(&p.world_from_structure, &inst.parent_from_child);
                     self.structure(inst.child, world_from_child, p.base + node.item_offset(e));
@@ -309,10 +331,15 @@ impl<'a> Selection<'a> {
         }
     }
 
-    fn select(&mut self, p: &Place, range: std::ops::Range<u32>, samples: f64, z_min: f64) {
+    fn select(&mut self, p: &Place, sec: Section, samples: f64, z_min: f64) {
+        if samples <= 0.0 {
+            return;
+        }
         self.jobs.push(Job {
             structure: p.id.0,
-            range,
+            range: sec.range,
+            node: sec.node,
+            own: sec.own,
             world_from_structure: p.world_from_structure,
             clip_from_structure: p.clip_from_structure,
             base: p.base,

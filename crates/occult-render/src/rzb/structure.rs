@@ -1,7 +1,7 @@
 //! Precomputed sampling structures, one per node of the scene DAG (§5.3.1, §7.1, §7.3).
 
 use occult_core::{Aabb, Affine3A, NodeId, NodeKind, Scene, Vec3};
-use occult_spatial::sample_octree::{SampleOctree, SampleOctreeConfig};
+use occult_spatial::sample_octree::{DistributionTree, SampleOctree, SampleOctreeConfig};
 
 /// Most area classes per mesh (§7.1): with ratio ≥ 1.01 this covers area ratios far beyond
 /// `f32`'s range.
@@ -26,6 +26,22 @@ pub struct Structure {
     /// §5.3.4: the normal cone of each class (meshes with orientation classes; empty
     /// otherwise).
     pub cones: Vec<Cone>,
+    /// §5.4 (`dynamic=on`): the distribution tree over the octree's nodes; sampling and the
+    /// areas and item counts of boxes then come from it, and entries can be removed and
+    /// inserted. `None`: the static lists.
+    pub tree: Option<DistributionTree>,
+}
+
+/// A part of a structure's octree: the subtree of a node, or a node's own entries, with its
+/// positions in the static list.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Section {
+    /// The node.
+    pub node: u32,
+    /// Only the node's own entries (for a leaf both are the same).
+    pub own: bool,
+    /// Static list positions.
+    pub range: std::ops::Range<u32>,
 }
 
 /// §5.3.4: the normals of an orientation class: every unit normal lies within `half_angle`
@@ -50,6 +66,26 @@ pub fn orientation_class(n: Vec3, bands: u32) -> u32 {
 }
 
 impl Structure {
+    /// Summed area of `sec` (present entries only with a distribution tree).
+    #[inline]
+    pub fn section_area(&self, sec: &Section) -> f64 {
+        match &self.tree {
+            Some(t) if sec.own => t.own_area(sec.node),
+            Some(t) => t.subtree_area(sec.node),
+            None => self.octree.area(sec.range.clone()),
+        }
+    }
+
+    /// Triangle instances in `sec` (present entries only with a distribution tree).
+    #[inline]
+    pub fn section_items(&self, sec: &Section) -> u64 {
+        match &self.tree {
+            Some(t) if sec.own => t.own_weight(sec.node),
+            Some(t) => t.subtree_weight(sec.node),
+            None => self.items(sec.range.clone()),
+        }
+    }
+
     /// Triangle instances in list positions `range`.
     #[inline]
     pub fn items(&self, range: std::ops::Range<u32>) -> u64 {
@@ -62,7 +98,13 @@ impl Structure {
 
     /// Bytes held.
     pub fn memory_bytes(&self) -> usize {
-        self.octree.memory_bytes() + self.item_prefix.len() * 8
+        // The distribution tree: about one node (≈ 80 bytes) per octree node plus 24 bytes per
+        // entry (id in a list, area, weight, location, home).
+        let tree = self
+            .tree
+            .as_ref()
+            .map_or(0, |t| t.node_count() * 80 + self.octree.entries().len() * 28);
+        self.octree.memory_bytes() + self.item_prefix.len() * 8 + tree
     }
 }
 
@@ -84,7 +126,14 @@ pub fn triangle_area(p: [Vec3; 3]) -> f64 {
 /// Builds the structure of every node (children before parents, as the DAG stores them).
 ///
 /// `orientation` (§5.3.4): bands of the polar grid of orientation classes, 0 for none.
-pub fn build_all(scene: &Scene, config: &SampleOctreeConfig, area_ratio: f64, orientation: u32) -> Vec<Structure> {
+/// `dynamic` (§5.4): also build each node's distribution tree.
+pub fn build_all(
+    scene: &Scene,
+    config: &SampleOctreeConfig,
+    area_ratio: f64,
+    orientation: u32,
+    dynamic: bool,
+) -> Vec<Structure> {
     use rayon::prelude::*;
     // Node areas first (groups need their children's), then the octrees in parallel.
     let mut areas = vec![0.0f64; scene.nodes().len()];
@@ -110,8 +159,34 @@ pub fn build_all(scene: &Scene, config: &SampleOctreeConfig, area_ratio: f64, or
     }
     (0..scene.nodes().len())
         .into_par_iter()
-        .map(|i| build_one(scene, NodeId(i as u32), &areas, config, area_ratio, orientation))
+        .map(|i| {
+            let mut st = build_one(scene, NodeId(i as u32), &areas, config, area_ratio, orientation);
+            if dynamic {
+                let (areas, weights) = entry_areas(scene, NodeId(i as u32), &areas);
+                st.tree = Some(DistributionTree::from_octree(&st.octree, &areas, &weights));
+            }
+            st
+        })
         .collect()
+}
+
+/// Area and triangle-instance count of every entry of node `id` (triangles: own-space area, 1;
+/// instances: the child's area scaled, its item count), as the static build weighs them.
+pub fn entry_areas(scene: &Scene, id: NodeId, node_areas: &[f64]) -> (Vec<f64>, Vec<u64>) {
+    match scene.node(id).kind() {
+        NodeKind::Mesh(m) => (
+            (0..m.triangle_count())
+                .map(|t| triangle_area(m.triangle_positions(t)))
+                .collect(),
+            vec![1; m.triangle_count()],
+        ),
+        NodeKind::Group(g) => (
+            g.iter()
+                .map(|inst| node_areas[inst.child.index()] * area_scale(&inst.parent_from_child))
+                .collect(),
+            g.iter().map(|inst| scene.node(inst.child).item_count()).collect(),
+        ),
+    }
 }
 
 fn build_one(
@@ -161,6 +236,7 @@ fn build_one(
                     area,
                     item_prefix: Vec::new(),
                     cones: Vec::new(),
+                    tree: None,
                 };
             }
             // §5.3.4: class = area class × orientation class; each class's cone bounds the
@@ -209,6 +285,7 @@ fn build_one(
                 area,
                 item_prefix: Vec::new(),
                 cones,
+                tree: None,
             }
         }
         NodeKind::Group(g) => {
@@ -234,6 +311,7 @@ fn build_one(
                 area,
                 item_prefix,
                 cones: Vec::new(),
+                tree: None,
             }
         }
     }
