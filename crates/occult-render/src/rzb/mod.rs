@@ -13,8 +13,15 @@
 //!   §7.1 large-triangle fallback (boxes whose triangles would get more than `large_threshold`
 //!   samples each, i.e. a projected area above `threshold · d²/ln v` pixels, §8.3, are drawn by
 //!   the rasterizer into the same frame): [`select`];
+//! - §5.3.4 orientation classes (`orientation=N`): mesh triangles split by normal on a polar
+//!   grid, each class's normal cone bounding the orientation factor of its boxes, boxes facing
+//!   away skipped when back faces are rejected: [`structure`], [`select`];
 //! - §5.2 area-proportional choice, uniform points on triangles, §5.3.3 back-face rejection,
-//!   §4.1 per-pixel reconstruction and §4.2 splatting with side `d`: [`sample`];
+//!   §4.1 per-pixel reconstruction and §4.2 splatting with side `d`: [`sample`]; §4.2
+//!   Gaussian reconstruction (`recon=gauss`): [`recon`];
+//! - §5.4 dynamic updates (`dynamic=on`): sampling from distribution trees
+//!   ([`occult_spatial::sample_octree::DistributionTree`]), entries removed and inserted through
+//!   [`Rzb::remove`] and [`Rzb::insert`];
 //! - §7.2 sample caches per selected box, quantized to an object-space grid whose cells project
 //!   to at most one splat, reused while the box's distance stays within a factor, LRU under a
 //!   byte budget: [`cache`];
@@ -45,8 +52,18 @@
 //! - Cached sets are built at the density needed at `z / tolerance`, so that they never fall
 //!   below the required density while valid; back faces are not rejected from cached sets (as
 //!   in the paper, so that validity depends on distance only).
-//! - Not built: Gaussian reconstruction (§4.2) and orientation classes (§5.3.4); the dynamic
-//!   distribution tree (§5.4) exists in `occult-spatial` but the renderer samples the static
+//! - §4.2 Gaussian reconstruction regenerates the samples in a second pass instead of keeping
+//!   them (no memory per sample); it does not raise the sample count by itself (the paper uses
+//!   about ten times the per-pixel count: `oversample=10`).
+//! - §5.3.4 orientation classes exist for meshes only: a group's entries are instances, whose
+//!   normals span their whole child (the paper has no instancing here); the cone bound is used
+//!   only where the placement is a similarity (angles kept).
+//! - §5.4 only the scene's own entries can be removed and inserted (item ids must name scene
+//!   triangles; the scene is shared and immutable); an entry returns to its node of the static
+//!   build. Sums are recomputed along the path in a fixed order instead of adjusted by the
+//!   difference, so frames depend only on which entries are present. A change of a node's area
+//!   is set on every instance of it, up the DAG (O(height) per referencing instance).
+//!   `dynamic=on` samples by one tree descent per sample instead of the multinomial split over
 //!   lists.
 
 pub mod cache;
@@ -366,8 +383,9 @@ pub struct Rzb {
     auto: Option<AutoEps>,
     frame_index: u64,
     scratch: Vec<(Vec<f32>, Vec<ItemId>)>,
-    /// §5.4: for each DAG node, the (group, instance index) pairs that reference it.
-    referrers: Vec<Vec<(u32, u32)>>,
+    /// §5.4: for each DAG node, the (group, instance index, area scale) of the instances
+    /// that reference it.
+    referrers: Vec<Vec<(u32, u32, f64)>>,
 }
 
 impl Rzb {
@@ -390,7 +408,11 @@ impl Rzb {
             for (g, n) in scene.nodes().iter().enumerate() {
                 if let occult_core::NodeKind::Group(insts) = n.kind() {
                     for (e, inst) in insts.iter().enumerate() {
-                        r[inst.child.index()].push((g as u32, e as u32));
+                        r[inst.child.index()].push((
+                            g as u32,
+                            e as u32,
+                            structure::area_scale(&inst.parent_from_child),
+                        ));
                     }
                 }
             }
@@ -523,16 +545,19 @@ impl Rzb {
         };
         let (area, items) = (tree.total_area(), tree.total_weight());
         self.structures[n].area = area;
+        let mut groups: Vec<u32> = Vec::new();
         for k in 0..self.referrers[n].len() {
-            let (g, e) = self.referrers[n][k];
-            let occult_core::NodeKind::Group(insts) = self.scene.node(occult_core::NodeId(g)).kind() else {
-                continue;
-            };
-            let scaled = area * structure::area_scale(&insts[e as usize].parent_from_child);
+            let (g, e, scale) = self.referrers[n][k];
             if let Some(t) = self.structures[g as usize].tree.as_mut() {
                 // The area is finite and non-negative (sums of such).
-                let _ = t.set_entry(e, scaled, items);
+                let _ = t.set_entry(e, area * scale, items);
             }
+            if !groups.contains(&g) {
+                groups.push(g);
+            }
+        }
+        // Each group once, after all its entries changed.
+        for g in groups {
             self.propagate(g as usize);
         }
     }
