@@ -137,8 +137,8 @@ pub struct CompareArgs {
     pub path: String,
     /// Renderers, comma-separated, each with its settings, or `all` (every renderer with default
     /// settings). Settings follow their renderer: `zbuffer,hzb:leaf=64,temporal=off,hzb` is three
-    /// renderers, reported by these labels. The reference (zbuffer, or frustum on scenes too
-    /// large for brute force) is always rendered and reported.
+    /// renderers, reported by these labels. The reference (see --reference) is always rendered
+    /// and reported.
     #[arg(long, value_name = "A,B,..", default_value = "all", value_parser = parse_algorithms)]
     pub algos: AlgorithmList,
     /// Frame size, WxH pixels.
@@ -157,6 +157,35 @@ pub struct CompareArgs {
     /// Plot of mean frame time against scene size (PNG; needs two or more --scene).
     #[arg(long, value_name = "FILE")]
     pub plot_scaling: Option<PathBuf>,
+    /// The scaling plot's x axis: `triangles` (scene size), `covered` (covered pixels),
+    /// `image` (image complexity: screen area of every triangle in view, hidden or not) or
+    /// `depth` (depth complexity: image complexity over covered pixels). `image` and `depth`
+    /// measure the image complexity (one untimed pass over the scene per view).
+    #[arg(long, value_name = "AXIS", default_value = "triangles", value_parser = ["triangles", "covered", "image", "depth"])]
+    pub plot_scaling_x: String,
+    /// Measure each view's image and depth complexity (one untimed pass over every triangle in
+    /// view per view); reported in the text, JSON and CSV.
+    #[arg(long)]
+    pub complexity: bool,
+    /// What frames are checked against: `auto` (zbuffer, or frustum on scenes too large for
+    /// brute force), `none` (nothing checked, no oracle: for scenes too large even for frustum)
+    /// or a conservative renderer's spec.
+    #[arg(long, value_name = "auto|none|SPEC", default_value = "auto", value_parser = parse_reference)]
+    pub reference: ReferenceArg,
+}
+
+/// A parsed `--reference`.
+#[derive(Clone, Debug)]
+pub struct ReferenceArg(pub occult_render::compare::Reference);
+
+/// `auto`, `none` or an algorithm spec.
+pub fn parse_reference(s: &str) -> Result<ReferenceArg, String> {
+    use occult_render::compare::Reference;
+    Ok(ReferenceArg(match s.trim() {
+        "auto" => Reference::Auto,
+        "none" => Reference::None,
+        spec => Reference::Spec(parse_algorithm(spec)?),
+    }))
 }
 
 /// A parsed `--algos` list (a newtype, because clap treats `Vec` as "many values").
@@ -218,6 +247,9 @@ pub struct SweepArgs {
     /// Mean frame time (and each --counter) against the value (PNG).
     #[arg(long, value_name = "FILE")]
     pub plot: Option<PathBuf>,
+    /// What frames are checked against, as `occult compare --reference`.
+    #[arg(long, value_name = "auto|none|SPEC", default_value = "auto", value_parser = parse_reference)]
+    pub reference: ReferenceArg,
 }
 
 /// `occult algos`.

@@ -95,9 +95,14 @@ fn draw_panel<'a>(area: &Area<'a>, panel: &Panel) -> DrawResult<'a> {
     if !(y0.is_finite() && y1.is_finite()) {
         (y0, y1) = (0.1, 1.0);
     }
-    if panel.log_x {
+    // A log axis over less than a decade gets no labelled ticks: linear there.
+    let log_x = panel.log_x && x0 > 0.0 && x1 / x0 >= 10.0;
+    if log_x {
         x0 = x0.max(1e-9);
         (x0, x1) = (x0 / 1.5, x1.max(x0) * 1.5);
+    } else if panel.log_x {
+        let pad = (x1 - x0).max(x1.abs() * 0.1).max(1e-9) * 0.1;
+        (x0, x1) = (x0 - pad, x1 + pad);
     } else if x1 <= x0 {
         x1 = x0 + 1.0;
     }
@@ -165,7 +170,7 @@ fn draw_panel<'a>(area: &Area<'a>, panel: &Panel) -> DrawResult<'a> {
                 .draw()?;
         }};
     }
-    if panel.log_x {
+    if log_x {
         finish!(builder.build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())?);
     } else {
         finish!(builder.build_cartesian_2d(x0..x1, (y0..y1).log_scale())?);

@@ -222,6 +222,60 @@ fn compare_over_several_scenes_plots_scaling() {
 }
 
 #[test]
+fn compare_without_reference_plots_scaling_against_depth_complexity() {
+    let dir = scratch("no-reference");
+    let (json, csv, scaling) = (dir.join("n.json"), dir.join("n.csv"), dir.join("n.png"));
+    let stdout = ok(&[
+        "compare",
+        "--scene",
+        "chessboard:n=8",
+        "--scene",
+        "chessboard:n=64",
+        "--path",
+        "circle:2",
+        "--algos",
+        "frustum,hzb",
+        "--reference",
+        "none",
+        "--size",
+        "48x32",
+        "--json",
+        path_arg(&json),
+        "--csv",
+        path_arg(&csv),
+        "--plot-scaling",
+        path_arg(&scaling),
+        "--plot-scaling-x",
+        "depth",
+    ]);
+    assert!(stdout.contains("reference none"), "{stdout}");
+    assert!(
+        !stdout.lines().any(|l| l.starts_with("oracle")),
+        "no oracle row: {stdout}"
+    );
+    assert!(stdout.contains("depth complexity"), "{stdout}");
+    let report = read_json(&json);
+    let run = &report["runs"][0];
+    assert!(run["reference"].is_null() && run["oracle"].is_null());
+    assert_eq!(run["renderers"].as_array().unwrap().len(), 2, "no reference added");
+    assert_eq!(run["image"]["measured_on"], "frustum");
+    assert_eq!(run["image"]["projected_pixels"].as_array().unwrap().len(), 2);
+    // The CSV carries every renderer counter as a column, empty where a renderer lacks it.
+    let csv = std::fs::read_to_string(&csv).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    assert!(
+        header.contains(&"occlusion_tests") && header.contains(&"image_complexity"),
+        "{header:?}"
+    );
+    assert_eq!(
+        csv.lines().count(),
+        1 + 2 * 2 * 2,
+        "a row per scene, renderer and frame, no oracle"
+    );
+    assert!(image::open(&scaling).is_ok());
+}
+
+#[test]
 fn walk_writes_frames_and_per_frame_stats() {
     let dir = scratch("walk");
     let (frames, csv, json) = (dir.join("frames"), dir.join("w.csv"), dir.join("w.json"));
@@ -326,6 +380,23 @@ fn bad_input_is_one_line_and_a_nonzero_status() {
             "two or more",
         ),
         (vec!["--threads", "0", "scenes"], "thread"),
+        (
+            vec![
+                "compare",
+                "--scene",
+                TERRAIN,
+                "--path",
+                "circle:1",
+                "--reference",
+                "rzb",
+            ],
+            "conservative",
+        ),
+        (vec!["compare", "--scene", TERRAIN, "--reference", "warp"], "warp"),
+        (
+            vec!["compare", "--scene", TERRAIN, "--plot-scaling-x", "colour"],
+            "colour",
+        ),
         (vec!["render", "--scene", TERRAIN], "--out"),
         (vec!["frobnicate"], "frobnicate"),
     ];

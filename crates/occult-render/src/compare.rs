@@ -6,9 +6,11 @@
 //! thermal state and cache warmth hit all of them alike. Each frame of each renderer is compared
 //! with the reference renderer's frame of the same view:
 //!
-//! - **reference**: `zbuffer` whenever the scene has at most
+//! - **reference** ([`Reference`]): by default `zbuffer` whenever the scene has at most
 //!   [`MAX_BRUTE_FORCE_ITEMS`](crate::zbuffer::MAX_BRUTE_FORCE_ITEMS) triangle instances,
-//!   otherwise `frustum` (the conservative renderer that scales). The reference is always
+//!   otherwise `frustum` (the conservative renderer that scales); or any conservative renderer
+//!   named by the caller; or none, for scenes even `frustum` cannot render in useful time
+//!   (10^14 triangles): then no frame is checked and there is no oracle. The reference is always
 //!   rendered and reported, requested or not ([`RendererReport::requested`] says which), so a
 //!   report always holds the renderer its numbers are relative to.
 //! - **identical**: depth (bit for bit) and item ids equal to the reference's
@@ -21,6 +23,11 @@
 //!   visibility oracle; each renderer's mean time is reported as a ratio to it
 //!   ([`RendererReport::vs_oracle`]). The oracle's frame is checked against the reference too:
 //!   rasterizing only the winners of every pixel must reproduce the frame exactly.
+//!
+//! - **image measures** per view ([`ImageMeasures`]): pixels covered in the reference frame
+//!   (without a reference: in the first renderer's), and on request the image complexity of
+//!   Han & Zeiger, the screen area of every triangle in the view, hidden or not, from which the
+//!   depth complexity (image complexity over covered pixels) follows.
 //!
 //! Times are wall-clock times of whole [`Renderer::render`] calls (clearing included), in
 //! milliseconds. Nothing here reads or writes files or prints, except that the process's peak
@@ -40,9 +47,9 @@
 //! let cameras = [Camera::look_at(Vec3::new(0.3, 0.3, 2.0), Vec3::new(0.3, 0.3, 0.0))];
 //! let config = CompareConfig::new(vec![Algorithm::FRUSTUM], 32, 32);
 //! let report = compare(scene, &cameras, &config, &mut |_| {}).unwrap();
-//! assert_eq!(report.reference, "zbuffer"); // rendered although not requested
+//! assert_eq!(report.reference.as_deref(), Some("zbuffer")); // rendered although not requested
 //! assert_eq!(report.renderer("frustum").unwrap().frames_identical, 1);
-//! assert_eq!(report.oracle.triangles_visible, [1]);
+//! assert_eq!(report.oracle.as_ref().unwrap().triangles_visible, [1]);
 //! ```
 //!
 //! Deviation from the harness first sketched (`views: &[View]`): it takes cameras and one
@@ -53,8 +60,11 @@ use std::collections::HashSet;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use occult_core::{Camera, CoreError, ItemId, NodeId, Scene, View, NO_ITEM};
+use occult_core::{
+    compose, Affine3A, Camera, Containment, CoreError, ItemId, Mat4, Mesh, NodeId, NodeKind, Scene, Vec4, View, NO_ITEM,
+};
 use occult_raster::{shade, Draw, DrawTriangles, Frame, RasterError, RasterMode, Rasterizer};
+use rayon::prelude::*;
 use serde::Serialize;
 use thiserror::Error;
 
@@ -96,6 +106,15 @@ pub enum CompareError {
         /// Why.
         source: RenderError,
     },
+    /// The reference asked for cannot be one: not conservative, or `zbuffer` on a scene too
+    /// large for brute force.
+    #[error("reference {reference}: {reason}")]
+    BadReference {
+        /// The renderer named as reference.
+        reference: String,
+        /// Why it cannot be.
+        reason: String,
+    },
     /// Frames or the oracle's rasterizer could not be made.
     #[error(transparent)]
     Raster(#[from] RasterError),
@@ -117,6 +136,23 @@ pub struct CompareConfig {
     pub width: u32,
     /// Frame height in pixels.
     pub height: u32,
+    /// What frames are checked against.
+    pub reference: Reference,
+    /// Also measure each view's image complexity ([`ImageMeasures::projected_pixels`]): one
+    /// more pass over every triangle of the scene per view, not timed.
+    pub image_complexity: bool,
+}
+
+/// The renderer whose frames the others must reproduce (module doc).
+#[derive(Clone, Debug, Default)]
+pub enum Reference {
+    /// `zbuffer`, or `frustum` on scenes above [`MAX_BRUTE_FORCE_ITEMS`].
+    #[default]
+    Auto,
+    /// This renderer, which must be conservative.
+    Spec(AlgoSpec),
+    /// None: frames are not checked and there is no oracle.
+    None,
 }
 
 impl CompareConfig {
@@ -128,6 +164,8 @@ impl CompareConfig {
             options: RenderOptions::default(),
             width,
             height,
+            reference: Reference::Auto,
+            image_complexity: false,
         }
     }
 }
@@ -169,7 +207,8 @@ pub struct FrameRecord {
     pub triangles_submitted: u64,
     /// Triangles rasterized (see [`FrameStats::triangles_rasterized`]).
     pub triangles_rasterized: u64,
-    /// Bit-identical to the reference frame (depth and items).
+    /// Bit-identical to the reference frame (depth and items); false when there is no
+    /// reference.
     pub identical: bool,
     /// When not identical: share of pixels covered in either frame whose item differs, in
     /// `[0, 1]`. `None` when identical.
@@ -327,6 +366,43 @@ pub struct OracleReport {
     pub triangles_visible: Vec<u64>,
 }
 
+/// What each view's image holds, independent of the renderers.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct ImageMeasures {
+    /// Whose frames the measures were read from: the reference, or the first renderer when
+    /// there is none.
+    pub measured_on: String,
+    /// Pixels covered by a triangle, per view.
+    pub covered_pixels: Vec<u64>,
+    /// Distinct triangles seen in the frame, per view (the exactly visible set when measured
+    /// on a conservative renderer).
+    pub triangles_visible: Vec<u64>,
+    /// Image complexity |Ω| (Han & Zeiger §I): the summed screen area, in pixels, of every
+    /// triangle instance of the scene clipped to the view frustum (near, far and the four
+    /// sides), hidden or not, back faces included, per view; `None` unless asked for
+    /// ([`CompareConfig::image_complexity`]).
+    pub projected_pixels: Option<Vec<f64>>,
+}
+
+impl ImageMeasures {
+    /// Mean depth complexity: image complexity over covered pixels, per view, averaged;
+    /// `None` without the image complexity.
+    pub fn mean_depth_complexity(&self) -> Option<f64> {
+        let p = self.projected_pixels.as_ref()?;
+        let per_view: Vec<f64> = p
+            .iter()
+            .zip(&self.covered_pixels)
+            .map(|(&a, &c)| if c == 0 { 0.0 } else { a / c as f64 })
+            .collect();
+        Some(mean(per_view.iter().copied(), per_view.len()))
+    }
+
+    /// Mean covered pixels per view.
+    pub fn mean_covered_pixels(&self) -> f64 {
+        mean(self.covered_pixels.iter().map(|&c| c as f64), self.covered_pixels.len())
+    }
+}
+
 /// A renderer that was requested but could not take part, and why.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Skipped {
@@ -351,12 +427,14 @@ pub struct CompareReport {
     pub scene_memory_bytes: usize,
     /// Rasterizer worker threads.
     pub threads: usize,
-    /// Name of the reference renderer.
-    pub reference: String,
+    /// Name of the reference renderer; `None` when frames were not checked.
+    pub reference: Option<String>,
     /// Why that one.
     pub reference_note: String,
-    /// The oracle.
-    pub oracle: OracleReport,
+    /// The oracle; `None` without a reference.
+    pub oracle: Option<OracleReport>,
+    /// Per-view measures of the image.
+    pub image: ImageMeasures,
     /// The renderers, requested order, the reference first when it was not requested.
     pub renderers: Vec<RendererReport>,
     /// Requested renderers left out (zbuffer on a scene too large for brute force).
@@ -416,26 +494,50 @@ pub fn compare(
 
     // Choose the reference and the line-up.
     let brute_force_ok = scene.item_count() <= MAX_BRUTE_FORCE_ITEMS;
-    let (reference, reference_note) = if brute_force_ok {
-        let note = if config.algorithms.iter().any(|s| s.label() == "zbuffer") {
-            "zbuffer: brute force, the ground truth"
-        } else {
-            "zbuffer: brute force, the ground truth (not requested; rendered as the reference)"
-        };
-        (AlgoSpec::from(Algorithm::ZBUFFER), note.to_string())
-    } else {
-        let note = format!(
-            "frustum: the scene has {} triangle instances, more than zbuffer accepts ({MAX_BRUTE_FORCE_ITEMS}); \
-             frustum culling removes only what lies outside the view, so its frames equal zbuffer's",
+    let too_large = || {
+        format!(
+            "the scene has {} triangle instances, more than brute force accepts ({MAX_BRUTE_FORCE_ITEMS})",
             scene.item_count()
-        );
-        (AlgoSpec::from(Algorithm::FRUSTUM), note)
+        )
     };
-    let reference_label = reference.label();
+    let (reference, reference_note) = match &config.reference {
+        Reference::Auto if brute_force_ok => {
+            let note = if config.algorithms.iter().any(|s| s.label() == "zbuffer") {
+                "zbuffer: brute force, the ground truth"
+            } else {
+                "zbuffer: brute force, the ground truth (not requested; rendered as the reference)"
+            };
+            (Some(AlgoSpec::from(Algorithm::ZBUFFER)), note.to_string())
+        }
+        Reference::Auto => (
+            Some(AlgoSpec::from(Algorithm::FRUSTUM)),
+            format!(
+                "frustum: {}; frustum culling removes only what lies outside the view, so its frames equal zbuffer's",
+                too_large()
+            ),
+        ),
+        Reference::Spec(spec) => {
+            let bad = |reason: String| CompareError::BadReference {
+                reference: spec.label(),
+                reason,
+            };
+            if !spec.algorithm.info().conservative {
+                return Err(bad("it is approximate; a reference must be conservative".into()));
+            }
+            if spec.algorithm == Algorithm::ZBUFFER && !brute_force_ok {
+                return Err(bad(too_large()));
+            }
+            (Some(spec.clone()), format!("{}: chosen by the caller", spec.label()))
+        }
+        Reference::None => (None, "none: frames are not checked and there is no oracle".to_string()),
+    };
+    let reference_label = reference.as_ref().map(AlgoSpec::label);
     let mut skipped = Vec::new();
     let mut lineup: Vec<(AlgoSpec, bool)> = Vec::new();
-    if !config.algorithms.iter().any(|s| s.label() == reference_label) {
-        lineup.push((reference, false));
+    if let Some(r) = &reference {
+        if !config.algorithms.iter().any(|s| s.label() == r.label()) {
+            lineup.push((r.clone(), false));
+        }
     }
     let mut seen = HashSet::new();
     for a in &config.algorithms {
@@ -445,14 +547,14 @@ pub fn compare(
         if a.algorithm == Algorithm::ZBUFFER && !brute_force_ok {
             skipped.push(Skipped {
                 name: a.label(),
-                reason: format!(
-                    "the scene has {} triangle instances, more than brute force accepts ({MAX_BRUTE_FORCE_ITEMS})",
-                    scene.item_count()
-                ),
+                reason: too_large(),
             });
             continue;
         }
         lineup.push((a.clone(), true));
+    }
+    if lineup.is_empty() {
+        return Err(CompareError::NoAlgorithms);
     }
 
     // Build (preprocessing, timed).
@@ -473,6 +575,12 @@ pub fn compare(
                 source,
             })?;
         let prepare_ms = ms(t.elapsed());
+        if reference_label.as_deref() == Some(label.as_str()) && !renderer.is_conservative() {
+            return Err(CompareError::BadReference {
+                reference: label,
+                reason: "this configuration is approximate; a reference must be conservative".into(),
+            });
+        }
         progress(CompareProgress::Built {
             label: &label,
             prepare_ms,
@@ -489,10 +597,14 @@ pub fn compare(
             stats: Vec::with_capacity(views.len()),
         });
     }
-    let reference_index = contestants
-        .iter()
-        .position(|c| c.label == reference_label)
-        .expect("the reference is always in the line-up");
+    // The frames every view is measured on: the reference's, or the first renderer's.
+    let reference_index = reference_label.as_ref().map(|l| {
+        contestants
+            .iter()
+            .position(|c| &c.label == l)
+            .expect("the reference is always in the line-up")
+    });
+    let measured_index = reference_index.unwrap_or(0);
 
     // Render, interleaved.
     let mut oracle = Oracle::new(&config.options)?;
@@ -500,7 +612,12 @@ pub fn compare(
     let mut shaded_reference = Frame::new(config.width, config.height)?;
     let mut oracle_times = Vec::with_capacity(views.len());
     let mut oracle_identical = 0;
-    let mut visible_counts = Vec::with_capacity(views.len());
+    let mut image = ImageMeasures {
+        measured_on: contestants[measured_index].label.clone(),
+        covered_pixels: Vec::with_capacity(views.len()),
+        triangles_visible: Vec::with_capacity(views.len()),
+        projected_pixels: config.image_complexity.then(|| Vec::with_capacity(views.len())),
+    };
     let n = contestants.len();
     for (view_index, view) in views.iter().enumerate() {
         for k in 0..n {
@@ -525,6 +642,21 @@ pub fn compare(
             });
             c.stats.push(stats);
         }
+
+        let measured_frame = &contestants[measured_index].frame;
+        let visible = measured_frame.visible_items();
+        image.covered_pixels.push(measured_frame.covered_pixel_count());
+        image.triangles_visible.push(visible.len() as u64);
+        if let Some(p) = &mut image.projected_pixels {
+            p.push(image_complexity(&scene, view));
+        }
+        let Some(reference_index) = reference_index else {
+            progress(CompareProgress::Frame {
+                index: view_index,
+                count: views.len(),
+            });
+            continue;
+        };
 
         // Compare with the reference.
         let (before, rest) = contestants.split_at_mut(reference_index);
@@ -554,8 +686,6 @@ pub fn compare(
             .identical = true;
 
         // The oracle, from the reference's item buffer.
-        let visible = reference_frame.visible_items();
-        visible_counts.push(visible.len() as u64);
         let time_ms = oracle.render(&scene, view, &visible, &mut oracle_frame);
         oracle_times.push(time_ms);
         if oracle_frame.same_visibility(reference_frame) {
@@ -568,12 +698,23 @@ pub fn compare(
     }
 
     // Summarise.
-    let oracle_time = TimeSummary::of(&oracle_times);
+    let oracle_report = reference_index.map(|_| {
+        let time = TimeSummary::of(&oracle_times);
+        OracleReport {
+            mean_ms: time.mean_ms,
+            p95_ms: time.p95_ms,
+            time,
+            frames_identical: oracle_identical,
+            per_frame_ms: oracle_times,
+            triangles_visible: image.triangles_visible.clone(),
+        }
+    });
+    let oracle_mean = oracle_report.as_ref().map_or(0.0, |o| o.mean_ms);
     let zbuffer_mean = contestants
         .iter()
         .find(|c| c.spec.algorithm == Algorithm::ZBUFFER)
         .map(|c| TimeSummary::of(&c.records.iter().map(|r| r.time_ms).collect::<Vec<_>>()).mean_ms);
-    let visible_total: u64 = visible_counts.iter().sum();
+    let visible_total: u64 = image.triangles_visible.iter().sum();
     let frames = views.len();
     let renderers = contestants
         .into_iter()
@@ -585,7 +726,7 @@ pub fn compare(
             let errors: Vec<f64> = c.records.iter().map(|r| r.item_error.unwrap_or(0.0)).collect();
             RendererReport {
                 name: c.label,
-                is_reference: i == reference_index,
+                is_reference: Some(i) == reference_index,
                 requested: c.requested,
                 conservative: c.renderer.is_conservative(),
                 frames,
@@ -593,7 +734,7 @@ pub fn compare(
                 mean_ms: time.mean_ms,
                 p95_ms: time.p95_ms,
                 speedup_vs_zbuffer: zbuffer_mean.and_then(|z| ratio(z, time.mean_ms)),
-                vs_oracle: ratio(time.mean_ms, oracle_time.mean_ms),
+                vs_oracle: ratio(time.mean_ms, oracle_mean),
                 triangles_rasterized: mean(c.records.iter().map(|r| r.triangles_rasterized as f64), frames),
                 triangles_rasterized_total: c.records.iter().map(|r| r.triangles_rasterized).sum(),
                 triangles_visible: visible_total as f64 / frames as f64,
@@ -623,14 +764,8 @@ pub fn compare(
         },
         reference: reference_label,
         reference_note,
-        oracle: OracleReport {
-            mean_ms: oracle_time.mean_ms,
-            p95_ms: oracle_time.p95_ms,
-            time: oracle_time,
-            frames_identical: oracle_identical,
-            per_frame_ms: oracle_times,
-            triangles_visible: visible_counts,
-        },
+        oracle: oracle_report,
+        image,
         renderers,
         skipped,
         process_peak_rss_bytes: process_peak_rss_bytes(),
@@ -695,6 +830,108 @@ impl Oracle {
         self.raster.draw(view, frame, &draws, RasterMode::Full);
         ms(t.elapsed())
     }
+}
+
+/// Image complexity |Ω| of one view (Han & Zeiger §I): the summed screen area, in pixels, of
+/// every triangle instance clipped to the view frustum (near, far, four sides), back faces
+/// included. Instances whose bounds lie outside the frustum are skipped whole; the cost is one
+/// transform and clip per triangle instance in the view, over rayon's threads.
+pub fn image_complexity(scene: &Scene, view: &View) -> f64 {
+    let mut instances: Vec<(Mat4, &Mesh)> = Vec::new();
+    collect_in_frustum(scene, view, scene.root(), &Affine3A::IDENTITY, &mut instances);
+    let (w, h) = (view.width() as f64, view.height() as f64);
+    let (near, far) = (view.camera().near, view.camera().far);
+    instances
+        .par_iter()
+        .map(|(clip_from_object, mesh)| {
+            let p = mesh.positions();
+            mesh.triangles()
+                .par_chunks(4096)
+                .map(|chunk| {
+                    chunk
+                        .iter()
+                        .map(|t| {
+                            let c = t.map(|i| *clip_from_object * p[i as usize].extend(1.0));
+                            clipped_screen_area(&c, near, far) * 0.25 * w * h
+                        })
+                        .sum::<f64>()
+                })
+                .sum::<f64>()
+        })
+        .sum()
+}
+
+/// The mesh instances below `id` whose bounds are not outside the view frustum.
+fn collect_in_frustum<'s>(
+    scene: &'s Scene,
+    view: &View,
+    id: NodeId,
+    world_from_node: &Affine3A,
+    out: &mut Vec<(Mat4, &'s Mesh)>,
+) {
+    let node = scene.node(id);
+    if view.frustum(world_from_node).classify_aabb(&node.bounds()) == Containment::Outside {
+        return;
+    }
+    match node.kind() {
+        NodeKind::Mesh(m) => out.push((view.clip_from_object(world_from_node), m)),
+        NodeKind::Group(instances) => {
+            for inst in instances {
+                let world_from_child = compose(world_from_node, &inst.parent_from_child);
+                collect_in_frustum(scene, view, inst.child, &world_from_child, out);
+            }
+        }
+    }
+}
+
+/// Area in normalized device coordinates (the screen is 2 × 2) of the clip-space triangle `c`
+/// clipped to `near <= w <= far` and `|x|, |y| <= w` (Sutherland–Hodgman in homogeneous
+/// coordinates).
+fn clipped_screen_area(c: &[Vec4; 3], near: f32, far: f32) -> f64 {
+    let planes: [fn(&Vec4, f32, f32) -> f32; 6] = [
+        |v, n, _| v.w - n,
+        |v, _, f| f - v.w,
+        |v, _, _| v.w + v.x,
+        |v, _, _| v.w - v.x,
+        |v, _, _| v.w + v.y,
+        |v, _, _| v.w - v.y,
+    ];
+    // Up to 3 + 6 vertices after six planes.
+    let mut poly = [Vec4::ZERO; 9];
+    poly[..3].copy_from_slice(c);
+    let mut len = 3;
+    let mut next = [Vec4::ZERO; 9];
+    for plane in planes {
+        let d: [f32; 9] = std::array::from_fn(|i| if i < len { plane(&poly[i], near, far) } else { 0.0 });
+        if d[..len].iter().all(|&x| x >= 0.0) {
+            continue;
+        }
+        let mut n = 0;
+        for i in 0..len {
+            let j = (i + 1) % len;
+            if d[i] >= 0.0 {
+                next[n] = poly[i];
+                n += 1;
+            }
+            if (d[i] >= 0.0) != (d[j] >= 0.0) {
+                next[n] = poly[i] + (poly[j] - poly[i]) * (d[i] / (d[i] - d[j]));
+                n += 1;
+            }
+        }
+        std::mem::swap(&mut poly, &mut next);
+        len = n;
+        if len < 3 {
+            return 0.0;
+        }
+    }
+    let ndc = |v: &Vec4| ((v.x / v.w) as f64, (v.y / v.w) as f64);
+    let twice: f64 = (0..len)
+        .map(|i| {
+            let (a, b) = (ndc(&poly[i]), ndc(&poly[(i + 1) % len]));
+            a.0 * b.1 - b.0 * a.1
+        })
+        .sum();
+    twice.abs() * 0.5
 }
 
 /// Share of pixels covered in either frame whose item differs (0 when neither covers any).
@@ -787,7 +1024,7 @@ pub fn process_peak_rss_bytes() -> Option<u64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use occult_core::{Affine3A, Instance, Mesh, SceneBuilder, Vec3};
+    use occult_core::{Instance, SceneBuilder, Vec3};
 
     /// A 6×6 grid of unit cubes (instanced) on a ground quad: cubes hide each other and the
     /// ground from most views.
@@ -865,7 +1102,7 @@ mod tests {
     fn frustum_is_identical_to_zbuffer_on_every_frame() {
         let cameras = circle(6);
         let report = run(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], &cameras).unwrap();
-        assert_eq!(report.reference, "zbuffer");
+        assert_eq!(report.reference.as_deref(), Some("zbuffer"));
         assert_eq!(report.frames, 6);
         for r in &report.renderers {
             assert_eq!(r.frames, 6);
@@ -878,7 +1115,8 @@ mod tests {
             assert!(r.min_psnr_db.is_none());
         }
         assert_eq!(
-            report.oracle.frames_identical, 6,
+            report.oracle.as_ref().unwrap().frames_identical,
+            6,
             "rasterizing the visible set must reproduce the frame"
         );
     }
@@ -916,11 +1154,11 @@ mod tests {
         }
         assert!(f.stats.triangles_submitted <= z.stats.triangles_submitted);
         // Visible triangles: from the item buffer, never more than rasterized.
-        assert_eq!(report.oracle.triangles_visible.len(), 5);
-        let visible: u64 = report.oracle.triangles_visible.iter().sum();
+        assert_eq!(report.oracle.as_ref().unwrap().triangles_visible.len(), 5);
+        let visible: u64 = report.oracle.as_ref().unwrap().triangles_visible.iter().sum();
         assert_eq!(z.triangles_visible_total, visible);
         assert!(visible > 0);
-        for (i, &v) in report.oracle.triangles_visible.iter().enumerate() {
+        for (i, &v) in report.oracle.as_ref().unwrap().triangles_visible.iter().enumerate() {
             assert!(v <= z.per_frame[i].triangles_rasterized && v < report.scene_triangles);
         }
         assert!(report.process_peak_rss_bytes.is_none_or(|b| b > 0));
@@ -962,9 +1200,9 @@ mod tests {
         camera.far = 30.0;
         let config = CompareConfig::new(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], 64, 48);
         let report = compare(scene, &[camera, camera], &config, &mut |_| {}).unwrap();
-        assert_eq!(report.reference, "frustum");
+        assert_eq!(report.reference.as_deref(), Some("frustum"));
         assert!(
-            report.reference_note.contains("more than zbuffer accepts"),
+            report.reference_note.contains("more than brute force accepts"),
             "{}",
             report.reference_note
         );
@@ -974,8 +1212,8 @@ mod tests {
         let f = &report.renderers[0];
         assert!(f.is_reference && f.requested && f.speedup_vs_zbuffer.is_none());
         assert_eq!(f.frames_identical, 2);
-        assert!(report.oracle.triangles_visible[0] > 0);
-        assert_eq!(report.oracle.frames_identical, 2);
+        assert!(report.oracle.as_ref().unwrap().triangles_visible[0] > 0);
+        assert_eq!(report.oracle.as_ref().unwrap().frames_identical, 2);
     }
 
     #[test]
@@ -1003,7 +1241,7 @@ mod tests {
     fn views_that_see_nothing_are_fine() {
         let away = Camera::look_at(Vec3::new(0.0, 50.0, 0.0), Vec3::new(0.0, 100.0, 1.0));
         let report = run(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], &[away]).unwrap();
-        assert_eq!(report.oracle.triangles_visible, vec![0]);
+        assert_eq!(report.oracle.as_ref().unwrap().triangles_visible, vec![0]);
         assert!(report.renderers.iter().all(|r| r.frames_identical == 1));
     }
 
@@ -1021,6 +1259,114 @@ mod tests {
         b.clear();
         assert_eq!(item_error(&b, &a), 1.0, "all covered pixels lost");
         assert_eq!(item_error(&b, &b), 0.0);
+    }
+
+    #[test]
+    fn reference_can_be_chosen_or_none() {
+        let cameras = circle(4);
+        let mut config = CompareConfig::new(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], 96, 64);
+        config.reference = Reference::Spec(AlgoSpec::from(Algorithm::FRUSTUM));
+        let report = compare(cubes(), &cameras, &config, &mut |_| {}).unwrap();
+        assert_eq!(report.reference.as_deref(), Some("frustum"));
+        assert!(report.renderer("frustum").unwrap().is_reference);
+        assert_eq!(report.renderer("zbuffer").unwrap().frames_identical, 4);
+        assert!(report.oracle.is_some());
+
+        config.algorithms = vec![AlgoSpec::from(Algorithm::FRUSTUM)];
+        config.reference = Reference::None;
+        let report = compare(cubes(), &cameras, &config, &mut |_| {}).unwrap();
+        assert_eq!(report.reference, None);
+        assert!(report.oracle.is_none());
+        assert_eq!(report.renderers.len(), 1, "no reference is added");
+        let f = report.renderer("frustum").unwrap();
+        assert!(!f.is_reference);
+        assert_eq!(f.frames_identical, 0, "nothing is checked");
+        assert_eq!(f.vs_oracle, None);
+        assert_eq!(report.image.measured_on, "frustum");
+        assert_eq!(report.image.covered_pixels.len(), 4);
+        assert!(report.image.covered_pixels.iter().all(|&c| c > 0));
+        assert!(
+            f.triangles_visible > 0.0,
+            "visible triangles come from the first renderer's frames"
+        );
+    }
+
+    #[test]
+    fn approximate_or_impossible_references_are_refused() {
+        let cameras = circle(1);
+        let mut config = CompareConfig::new(vec![Algorithm::FRUSTUM], 32, 32);
+        config.reference = Reference::Spec(AlgoSpec::parse("rzb").unwrap());
+        let e = compare(cubes(), &cameras, &config, &mut |_| {}).unwrap_err();
+        assert!(matches!(e, CompareError::BadReference { .. }), "{e}");
+        assert!(e.to_string().contains("conservative"), "{e}");
+        config.reference = Reference::Spec(AlgoSpec::parse("lzb:mode=naive").unwrap());
+        let e = compare(cubes(), &cameras, &config, &mut |_| {}).unwrap_err();
+        assert!(e.to_string().contains("approximate"), "{e}");
+    }
+
+    #[test]
+    fn image_complexity_is_the_clipped_screen_area_of_every_layer() {
+        // Two full-screen squares, one behind the other, facing the camera: every pixel is
+        // covered twice, so image complexity is 2 w h and depth complexity 2.
+        let quad = |z: f32| {
+            Mesh::new(
+                vec![
+                    Vec3::new(-100.0, -100.0, z),
+                    Vec3::new(100.0, -100.0, z),
+                    Vec3::new(100.0, 100.0, z),
+                    Vec3::new(-100.0, 100.0, z),
+                ],
+                vec![[0, 1, 2], [0, 2, 3]],
+            )
+            .unwrap()
+        };
+        let mut b = SceneBuilder::new();
+        let near = b.add_mesh("near", quad(0.0)).unwrap();
+        let far = b.add_mesh("far", quad(-5.0)).unwrap();
+        let root = b
+            .add_group(
+                "layers",
+                [near, far]
+                    .map(|child| Instance {
+                        parent_from_child: Affine3A::IDENTITY,
+                        child,
+                    })
+                    .to_vec(),
+            )
+            .unwrap();
+        let scene = Arc::new(b.build(root).unwrap());
+        let camera = Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO);
+        let view = View::new(camera, 64, 48).unwrap();
+        let area = image_complexity(&scene, &view);
+        assert!((area - 2.0 * 64.0 * 48.0).abs() < 1e-3 * area, "{area}");
+
+        // A triangle wholly inside the view: its projected area.
+        let tri = Mesh::new(
+            vec![
+                Vec3::new(0.0, 0.0, 0.0),
+                Vec3::new(1.0, 0.0, 0.0),
+                Vec3::new(0.0, 1.0, 0.0),
+            ],
+            vec![[0, 1, 2]],
+        )
+        .unwrap();
+        let scene = Arc::new(Scene::from_mesh("tri", tri).unwrap());
+        let view = View::new(camera, 100, 100).unwrap();
+        let c = view.clip_from_world();
+        let px = |p: Vec3| {
+            let v = c * p.extend(1.0);
+            (v.x as f64 / v.w as f64 * 50.0, v.y as f64 / v.w as f64 * 50.0)
+        };
+        let (a, b2, d) = (px(Vec3::ZERO), px(Vec3::X), px(Vec3::Y));
+        let expected = ((b2.0 - a.0) * (d.1 - a.1) - (d.0 - a.0) * (b2.1 - a.1)).abs() / 2.0;
+        let area = image_complexity(&scene, &view);
+        assert!((area - expected).abs() < 1e-3 * expected, "{area} vs {expected}");
+
+        let mut config = CompareConfig::new(vec![Algorithm::ZBUFFER], 64, 48);
+        config.image_complexity = true;
+        let report = compare(cubes(), &circle(2), &config, &mut |_| {}).unwrap();
+        let dc = report.image.mean_depth_complexity().unwrap();
+        assert!(dc >= 1.0, "depth complexity {dc}");
     }
 
     #[test]

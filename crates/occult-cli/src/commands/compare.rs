@@ -2,7 +2,7 @@
 //! ([`occult_render::compare`] does the measuring; this writes it out).
 
 use anyhow::{bail, Context, Result};
-use occult_render::compare::{compare, CompareConfig, CompareProgress, CompareReport};
+use occult_render::compare::{compare, CompareConfig, CompareProgress, CompareReport, RendererReport};
 use occult_render::RenderOptions;
 use serde::Serialize;
 
@@ -30,7 +30,7 @@ struct RunOut<'a> {
     report: &'a CompareReport,
 }
 
-const CSV_HEADER: [&str; 11] = [
+const CSV_HEADER: [&str; 13] = [
     "scene",
     "triangles",
     "renderer",
@@ -42,6 +42,8 @@ const CSV_HEADER: [&str; 11] = [
     "identical",
     "item_error",
     "psnr_db",
+    "covered_pixels",
+    "image_complexity",
 ];
 
 /// Runs the command.
@@ -50,11 +52,14 @@ pub fn run(a: CompareArgs) -> Result<()> {
     if a.plot_scaling.is_some() && a.scene.len() < 2 {
         bail!("--plot-scaling needs two or more --scene values (one point per scene)");
     }
+    let axis = ScalingAxis::parse(&a.plot_scaling_x);
     let config = CompareConfig {
         algorithms: a.algos.0.clone(),
         options: RenderOptions::default(),
         width: a.size.width,
         height: a.size.height,
+        reference: a.reference.0.clone(),
+        image_complexity: a.complexity || (a.plot_scaling.is_some() && axis.needs_image_complexity()),
     };
     let mut runs: Vec<(SceneSummary, CompareReport)> = Vec::new();
     for spec in &a.scene {
@@ -91,7 +96,9 @@ pub fn run(a: CompareArgs) -> Result<()> {
         say!("wrote {}", p.display());
     }
     if let Some(p) = &a.csv {
-        output::write_csv(p, &CSV_HEADER, &csv_rows(&runs))?;
+        let header = csv_header(&runs);
+        let header: Vec<&str> = header.iter().map(String::as_str).collect();
+        output::write_csv(p, &header, &csv_rows(&runs))?;
         say!("wrote {}", p.display());
     }
     if let Some(p) = &a.plot {
@@ -100,7 +107,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
         say!("wrote {}", p.display());
     }
     if let Some(p) = &a.plot_scaling {
-        plot::draw(p, &[scaling_panel(&a.path, &runs)])?;
+        plot::draw(p, &[scaling_panel(&a.path, &runs, axis)])?;
         say!("wrote {}", p.display());
     }
     Ok(())
@@ -120,9 +127,23 @@ fn report_text(scene: &SceneSummary, path: &str, r: &CompareReport) -> String {
         out += &format!("  warning: {w}\n");
     }
     out += &format!(
-        "path {path}: {} frames at {}x{}, {} threads; reference {}\n\n",
+        "path {path}: {} frames at {}x{}, {} threads; reference {}\n",
         r.frames, r.width, r.height, r.threads, r.reference_note
     );
+    let im = &r.image;
+    out += &format!(
+        "image (on {}): {} covered pixels per frame",
+        im.measured_on,
+        output::count(im.mean_covered_pixels())
+    );
+    if let (Some(p), Some(dc)) = (&im.projected_pixels, im.mean_depth_complexity()) {
+        let mean_p = p.iter().sum::<f64>() / p.len().max(1) as f64;
+        out += &format!(
+            ", image complexity {} pixels, depth complexity {dc:.2}",
+            output::count(mean_p)
+        );
+    }
+    out += "\n\n";
     let header = [
         "renderer",
         "mean ms",
@@ -145,7 +166,7 @@ fn report_text(scene: &SceneSummary, path: &str, r: &CompareReport) -> String {
             if x.is_reference {
                 name.push_str(" (ref)");
             }
-            let error = if x.frames_identical == x.frames {
+            let error = if x.frames_identical == x.frames || r.reference.is_none() {
                 "-".to_string()
             } else {
                 let psnr = x.min_psnr_db.map_or(String::new(), |p| format!(", {p:.1} dB"));
@@ -160,29 +181,30 @@ fn report_text(scene: &SceneSummary, path: &str, r: &CompareReport) -> String {
                 output::count(x.stats.triangles_submitted),
                 output::count(x.triangles_rasterized),
                 output::count(x.triangles_visible),
-                format!("{}/{}", x.frames_identical, x.frames),
+                identical_text(r, x),
                 error,
                 output::millis(x.prepare_ms),
                 output::bytes(x.memory_bytes as u64),
             ]
         })
         .collect();
-    let o = &r.oracle;
-    let visible_mean = o.triangles_visible.iter().sum::<u64>() as f64 / o.triangles_visible.len().max(1) as f64;
-    rows.push(vec![
-        "oracle".into(),
-        output::millis(o.mean_ms),
-        output::millis(o.p95_ms),
-        "-".into(),
-        "1.00x".into(),
-        output::count(visible_mean),
-        output::count(visible_mean),
-        output::count(visible_mean),
-        format!("{}/{}", o.frames_identical, r.frames),
-        "-".into(),
-        "-".into(),
-        "-".into(),
-    ]);
+    if let Some(o) = &r.oracle {
+        let visible_mean = o.triangles_visible.iter().sum::<u64>() as f64 / o.triangles_visible.len().max(1) as f64;
+        rows.push(vec![
+            "oracle".into(),
+            output::millis(o.mean_ms),
+            output::millis(o.p95_ms),
+            "-".into(),
+            "1.00x".into(),
+            output::count(visible_mean),
+            output::count(visible_mean),
+            output::count(visible_mean),
+            format!("{}/{}", o.frames_identical, r.frames),
+            "-".into(),
+            "-".into(),
+            "-".into(),
+        ]);
+    }
     out += &output::table(&header, &rows);
     let w = r.renderers.iter().map(|x| x.name.len()).max().unwrap_or(0);
     out += "\nmean time per phase (ms):\n";
@@ -209,18 +231,19 @@ fn report_text(scene: &SceneSummary, path: &str, r: &CompareReport) -> String {
     for s in &r.skipped {
         out += &format!("skipped {}: {}\n", s.name, s.reason);
     }
-    for x in &r.renderers {
-        if x.conservative && x.frames_identical < x.frames {
-            out += &format!(
-                "WARNING: {} is conservative but {} of {} frames differ from {} (DESIGN invariant 2)\n",
-                x.name,
-                x.frames - x.frames_identical,
-                x.frames,
-                r.reference
-            );
+    if let Some(reference) = &r.reference {
+        for x in &r.renderers {
+            if x.conservative && x.frames_identical < x.frames {
+                out += &format!(
+                    "WARNING: {} is conservative but {} of {} frames differ from {reference} (DESIGN invariant 2)\n",
+                    x.name,
+                    x.frames - x.frames_identical,
+                    x.frames,
+                );
+            }
         }
     }
-    if o.frames_identical < r.frames {
+    if let Some(o) = r.oracle.as_ref().filter(|o| o.frames_identical < r.frames) {
         out += &format!(
             "WARNING: rasterizing the visible set reproduced only {} of {} reference frames\n",
             o.frames_identical, r.frames
@@ -235,12 +258,50 @@ fn report_text(scene: &SceneSummary, path: &str, r: &CompareReport) -> String {
     out
 }
 
+/// `frames identical/frames`, or `-` when nothing was checked.
+pub fn identical_text(r: &CompareReport, x: &RendererReport) -> String {
+    if r.reference.is_none() {
+        "-".into()
+    } else {
+        format!("{}/{}", x.frames_identical, x.frames)
+    }
+}
+
+/// The CSV header: the fixed columns, then every renderer counter seen in `runs`.
+fn csv_header(runs: &[(SceneSummary, CompareReport)]) -> Vec<String> {
+    let mut header: Vec<String> = CSV_HEADER.iter().map(|s| s.to_string()).collect();
+    header.extend(counter_names(runs).into_iter().map(str::to_string));
+    header
+}
+
+/// Every renderer counter of `runs`, sorted.
+fn counter_names(runs: &[(SceneSummary, CompareReport)]) -> Vec<&'static str> {
+    let mut names: Vec<&'static str> = runs
+        .iter()
+        .flat_map(|(_, r)| r.renderers.iter())
+        .flat_map(|x| x.stats.counters.keys().copied())
+        .collect();
+    names.sort_unstable();
+    names.dedup();
+    names
+}
+
 fn csv_rows(runs: &[(SceneSummary, CompareReport)]) -> Vec<Vec<String>> {
+    let counters = counter_names(runs);
     let mut rows = Vec::new();
     for (scene, r) in runs {
+        let im = &r.image;
+        let image_fields = |i: usize| {
+            [
+                im.covered_pixels[i].to_string(),
+                im.projected_pixels
+                    .as_ref()
+                    .map_or(String::new(), |p| format!("{}", p[i])),
+            ]
+        };
         for x in &r.renderers {
             for (i, f) in x.per_frame.iter().enumerate() {
-                rows.push(vec![
+                let mut row = vec![
                     scene.spec.clone(),
                     scene.triangles.to_string(),
                     x.name.to_string(),
@@ -248,33 +309,45 @@ fn csv_rows(runs: &[(SceneSummary, CompareReport)]) -> Vec<Vec<String>> {
                     format!("{}", f.time_ms),
                     f.triangles_submitted.to_string(),
                     f.triangles_rasterized.to_string(),
-                    r.oracle.triangles_visible[i].to_string(),
-                    f.identical.to_string(),
+                    im.triangles_visible[i].to_string(),
+                    if r.reference.is_some() {
+                        f.identical.to_string()
+                    } else {
+                        String::new()
+                    },
                     opt_field(f.item_error),
                     opt_field(f.psnr_db),
-                ]);
+                ];
+                row.extend(image_fields(i));
+                row.extend(counters.iter().map(|&c| {
+                    if f.counters.0.iter().any(|(k, _)| *k == c) {
+                        f.counters.get(c).to_string()
+                    } else {
+                        String::new()
+                    }
+                }));
+                rows.push(row);
             }
         }
-        for (i, (&t, &v)) in r
-            .oracle
-            .per_frame_ms
-            .iter()
-            .zip(&r.oracle.triangles_visible)
-            .enumerate()
-        {
-            rows.push(vec![
-                scene.spec.clone(),
-                scene.triangles.to_string(),
-                "oracle".into(),
-                i.to_string(),
-                format!("{t}"),
-                v.to_string(),
-                String::new(),
-                v.to_string(),
-                String::new(),
-                String::new(),
-                String::new(),
-            ]);
+        if let Some(o) = &r.oracle {
+            for (i, (&t, &v)) in o.per_frame_ms.iter().zip(&o.triangles_visible).enumerate() {
+                let mut row = vec![
+                    scene.spec.clone(),
+                    scene.triangles.to_string(),
+                    "oracle".into(),
+                    i.to_string(),
+                    format!("{t}"),
+                    v.to_string(),
+                    String::new(),
+                    v.to_string(),
+                    String::new(),
+                    String::new(),
+                    String::new(),
+                ];
+                row.extend(image_fields(i));
+                row.extend(counters.iter().map(|_| String::new()));
+                rows.push(row);
+            }
         }
     }
     rows
@@ -295,20 +368,13 @@ fn frame_time_panel(scene: &SceneSummary, path: &str, r: &CompareReport) -> Pane
             dashed: false,
         })
         .collect();
-    series.push(Series {
-        name: format!(
-            "oracle: visible triangles only (mean {} ms)",
-            output::millis(r.oracle.mean_ms)
-        ),
-        points: r
-            .oracle
-            .per_frame_ms
-            .iter()
-            .enumerate()
-            .map(|(i, &t)| (i as f64, t))
-            .collect(),
-        dashed: true,
-    });
+    if let Some(o) = &r.oracle {
+        series.push(Series {
+            name: format!("oracle: visible triangles only (mean {} ms)", output::millis(o.mean_ms)),
+            points: o.per_frame_ms.iter().enumerate().map(|(i, &t)| (i as f64, t)).collect(),
+            dashed: true,
+        });
+    }
     Panel {
         title: format!(
             "{} ({} triangles), path {path}, {}x{}",
@@ -324,7 +390,64 @@ fn frame_time_panel(scene: &SceneSummary, path: &str, r: &CompareReport) -> Pane
     }
 }
 
-fn scaling_panel(path: &str, runs: &[(SceneSummary, CompareReport)]) -> Panel {
+/// The x axis of `--plot-scaling`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum ScalingAxis {
+    Triangles,
+    Covered,
+    Image,
+    Depth,
+}
+
+impl ScalingAxis {
+    /// From the `--plot-scaling-x` value (clap has checked it).
+    fn parse(s: &str) -> Self {
+        match s {
+            "covered" => Self::Covered,
+            "image" => Self::Image,
+            "depth" => Self::Depth,
+            _ => Self::Triangles,
+        }
+    }
+
+    fn needs_image_complexity(self) -> bool {
+        matches!(self, Self::Image | Self::Depth)
+    }
+
+    /// The x value of one scene's run.
+    fn value(self, scene: &SceneSummary, r: &CompareReport) -> Option<f64> {
+        let im = &r.image;
+        match self {
+            Self::Triangles => Some(scene.triangles as f64),
+            Self::Covered => Some(im.mean_covered_pixels()),
+            Self::Image => im
+                .projected_pixels
+                .as_ref()
+                .map(|p| p.iter().sum::<f64>() / p.len().max(1) as f64),
+            Self::Depth => im.mean_depth_complexity(),
+        }
+    }
+
+    fn label(self) -> &'static str {
+        match self {
+            Self::Triangles => "scene size (triangle instances, log)",
+            Self::Covered => "covered pixels per frame",
+            Self::Image => "image complexity (screen area of all triangles in view, pixels)",
+            Self::Depth => "depth complexity (image complexity / covered pixels)",
+        }
+    }
+
+    fn title(self) -> &'static str {
+        match self {
+            Self::Triangles => "scene size",
+            Self::Covered => "covered pixels",
+            Self::Image => "image complexity",
+            Self::Depth => "depth complexity",
+        }
+    }
+}
+
+fn scaling_panel(path: &str, runs: &[(SceneSummary, CompareReport)], axis: ScalingAxis) -> Panel {
     let mut names: Vec<&str> = Vec::new();
     for (_, r) in runs {
         for x in &r.renderers {
@@ -333,29 +456,38 @@ fn scaling_panel(path: &str, runs: &[(SceneSummary, CompareReport)]) -> Panel {
             }
         }
     }
+    // Points sorted by x, so lines join neighbours along the axis.
+    let sorted = |mut points: Vec<(f64, f64)>| {
+        points.sort_by(|a, b| a.0.total_cmp(&b.0));
+        points
+    };
     let mut series: Vec<Series> = names
         .iter()
         .map(|&name| Series {
             name: name.to_string(),
-            points: runs
-                .iter()
-                .filter_map(|(s, r)| r.renderer(name).map(|x| (s.triangles as f64, x.mean_ms)))
-                .collect(),
+            points: sorted(
+                runs.iter()
+                    .filter_map(|(s, r)| Some((axis.value(s, r)?, r.renderer(name)?.mean_ms)))
+                    .collect(),
+            ),
             dashed: false,
         })
         .collect();
-    series.push(Series {
-        name: "oracle: visible triangles only".into(),
-        points: runs
-            .iter()
-            .map(|(s, r)| (s.triangles as f64, r.oracle.mean_ms))
-            .collect(),
-        dashed: true,
-    });
+    if runs.iter().any(|(_, r)| r.oracle.is_some()) {
+        series.push(Series {
+            name: "oracle: visible triangles only".into(),
+            points: sorted(
+                runs.iter()
+                    .filter_map(|(s, r)| Some((axis.value(s, r)?, r.oracle.as_ref()?.mean_ms)))
+                    .collect(),
+            ),
+            dashed: true,
+        });
+    }
     let (w, h) = runs.first().map_or((0, 0), |(_, r)| (r.width, r.height));
     Panel {
-        title: format!("mean frame time against scene size, path {path}, {w}x{h}"),
-        x_label: "scene size (triangle instances, log)".into(),
+        title: format!("mean frame time against {}, path {path}, {w}x{h}", axis.title()),
+        x_label: axis.label().into(),
         y_label: "mean frame time (ms, log)".into(),
         log_x: true,
         series,

@@ -9,6 +9,7 @@ use occult_render::{AlgoSpec, RenderOptions};
 use serde::Serialize;
 
 use crate::args::SweepArgs;
+use crate::commands::compare::identical_text;
 use crate::output;
 use crate::plot::{self, Panel, Series};
 use crate::progress::Progress;
@@ -106,6 +107,8 @@ pub fn run(a: SweepArgs) -> Result<()> {
             options: RenderOptions::default(),
             width: a.size.width,
             height: a.size.height,
+            reference: a.reference.0.clone(),
+            image_complexity: false,
         };
         let report = compare(scene.scene.clone(), &cameras, &config, &mut |event| match event {
             CompareProgress::Building { label, .. } => {
@@ -145,7 +148,7 @@ pub fn run(a: SweepArgs) -> Result<()> {
                 x.speedup_vs_zbuffer.map_or("-".into(), |s| format!("{s:.2}x")),
                 output::count(x.triangles_rasterized),
                 output::count(x.triangles_visible),
-                format!("{}/{}", x.frames_identical, x.frames),
+                identical_text(r, x),
                 output::millis(x.prepare_ms),
             ];
             row.extend(a.counter.iter().map(|c| {
