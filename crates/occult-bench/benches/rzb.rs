@@ -61,7 +61,7 @@ fn dynamic_updates(c: &mut Criterion) {
         areas.push((s * s) as f64);
     }
     let octree = SampleOctree::build(&boxes[..n], &areas[..n], &vec![0; n], 1, &SampleOctreeConfig::default());
-    let mut tree = DistributionTree::from_octree(&octree, octree.roots()[0].expect("root"), &boxes[..n], &areas[..n]);
+    let mut tree = DistributionTree::from_octree(&octree, &areas[..n], &[]);
     c.bench_function("distribution_tree_insert_remove_5804", |b| {
         b.iter(|| {
             for i in n..n + extra {
@@ -74,5 +74,44 @@ fn dynamic_updates(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, renderers, dynamic_updates);
+/// §5.4 through the renderer (`dynamic=on`): remove then insert every triangle of the city's
+/// largest building mesh (each change also updates every instance of the mesh up the DAG).
+fn renderer_updates(c: &mut Criterion) {
+    let w = occult_bench::workload("city");
+    let scene = Arc::new(w.scene);
+    let mesh = (0..scene.nodes().len() as u32)
+        .map(occult_core::NodeId)
+        .filter(|&n| scene.node(n).mesh().is_some())
+        .max_by_key(|&n| scene.node(n).mesh().map_or(0, |m| m.triangle_count()))
+        .expect("a mesh");
+    let opts = occult_render::rzb::RzbOptions {
+        dynamic: true,
+        ..Default::default()
+    };
+    let mut r = occult_render::rzb::Rzb::with_options(scene.clone(), &RenderOptions::default(), &opts).expect("builds");
+    let tris: Vec<u32> = (0..scene.node(mesh).mesh().map_or(0, |m| m.triangle_count()) as u32)
+        .filter(|&t| r.contains(mesh, t))
+        .collect();
+    let refs = scene
+        .nodes()
+        .iter()
+        .flat_map(|n| n.instances())
+        .filter(|i| i.child == mesh)
+        .count();
+    c.bench_function(
+        &format!("rzb_remove_insert_{}_triangles_{}_instances", tris.len(), refs),
+        |b| {
+            b.iter(|| {
+                for &t in &tris {
+                    r.remove(mesh, t).expect("remove");
+                }
+                for &t in &tris {
+                    r.insert(mesh, t).expect("insert");
+                }
+            })
+        },
+    );
+}
+
+criterion_group!(benches, renderers, dynamic_updates, renderer_updates);
 criterion_main!(benches);

@@ -232,6 +232,12 @@ fn bad_parameters_are_errors() {
         "rzb:cache_tolerance=1",
         "rzb:backface=sometimes",
         "rzb:max_samples=0",
+        "rzb:recon=blur",
+        "rzb:sigma=0",
+        "rzb:sigma=9",
+        "rzb:gauss_tolerance=0",
+        "rzb:orientation=9",
+        "rzb:dynamic=yes",
     ] {
         let spec = AlgoSpec::parse(spec).unwrap();
         match (spec.algorithm.info().build)(scene.clone(), &options(1), &spec.params) {
@@ -259,4 +265,206 @@ fn frame_size_mismatch_and_degenerate_views_do_not_panic() {
     let mut f = Frame::new(64, 48).unwrap();
     r.render(&flat, &mut f).unwrap();
     assert!(!r.is_conservative());
+}
+
+fn shaded(mut f: Frame, scene: &Scene, view: &View) -> Frame {
+    occult_raster::shade(&mut f, scene, view);
+    f
+}
+
+/// §4.2 Gaussian reconstruction: depth and items are those of the nearest-sample pass with the
+/// same seed; colors are the renderer's own (kept by `shade`), independent of the thread count,
+/// closer to zbuffer's image than the per-pixel reconstruction's (PSNR; fixed seed), and pixels
+/// drawn by the fallback keep their exact color.
+#[test]
+fn gaussian_reconstruction_keeps_visibility_and_improves_psnr() {
+    let (scene, camera) = scene("city:blocks=4");
+    let camera = occult_scenes::path::parse_path("circle:1", &scene, &camera).unwrap()[0];
+    let view = View::new(camera, 160, 120).unwrap();
+    let reference = shaded(zbuffer_frame(&scene, &view), &scene, &view);
+    let mut near = rzb(&scene, "rzb:large=off,seed=3", 2);
+    let mut gauss = rzb(&scene, "rzb:large=off,seed=3,recon=gauss", 2);
+    let mut gauss1 = rzb(&scene, "rzb:large=off,seed=3,recon=gauss", 1);
+    let fn_ = shaded(render(near.as_mut(), &view), &scene, &view);
+    let fg = render(gauss.as_mut(), &view);
+    assert!(fg.color_resolved());
+    let fg = shaded(fg, &scene, &view);
+    assert!(fg.same_visibility(&fn_), "the Gaussian pass changed depth or items");
+    assert_ne!(fg.color(), fn_.color(), "recon=gauss did not filter");
+    let fg1 = render(gauss1.as_mut(), &view);
+    assert_eq!(fg1.color(), fg.color(), "colors depend on the thread count");
+    let (pn, pg) = (fn_.color_psnr(&reference), fg.color_psnr(&reference));
+    assert!(
+        pg > 18.0 && pg > pn - 2.0,
+        "Gaussian {pg:.2} dB vs per-pixel {pn:.2} dB"
+    );
+    // Two large triangles: everything is drawn by the fallback, colors exactly zbuffer's.
+    let mesh = Mesh::new(
+        vec![
+            Vec3::new(-1.0, 0.0, -1.0),
+            Vec3::new(1.0, 0.0, -1.0),
+            Vec3::new(1.0, 0.0, 1.0),
+            Vec3::new(-1.0, 0.3, 1.0),
+        ],
+        vec![[0, 2, 1], [0, 3, 2]],
+    )
+    .unwrap();
+    let two = Arc::new(Scene::from_mesh("two", mesh).unwrap());
+    let view = View::new(Camera::look_at(Vec3::new(0.0, 2.0, 3.0), Vec3::ZERO), 96, 64).unwrap();
+    let reference = shaded(zbuffer_frame(&two, &view), &two, &view);
+    let mut r = rzb(&two, "rzb:recon=gauss", 2);
+    let f = shaded(render(r.as_mut(), &view), &two, &view);
+    assert!(f.same_visibility(&reference));
+    assert_eq!(f.color(), reference.color());
+}
+
+/// A UV sphere of radius 1 with `rings × 2·rings` quads, outward-facing (counter-clockwise seen
+/// from outside).
+fn sphere(rings: u32) -> Mesh {
+    let segs = 2 * rings;
+    let mut p = Vec::new();
+    for i in 0..=rings {
+        let t = std::f32::consts::PI * i as f32 / rings as f32;
+        for j in 0..segs {
+            let f = std::f32::consts::TAU * j as f32 / segs as f32;
+            p.push(Vec3::new(t.sin() * f.cos(), t.cos(), t.sin() * f.sin()));
+        }
+    }
+    let mut tris = Vec::new();
+    for i in 0..rings {
+        for j in 0..segs {
+            let a = i * segs + j;
+            let b = i * segs + (j + 1) % segs;
+            let (c, d) = (a + segs, b + segs);
+            tris.push([a, b, c]);
+            tris.push([b, d, c]);
+        }
+    }
+    Mesh::new(p, tris).unwrap()
+}
+
+/// §5.3.4: orientation classes bound the orientation factor per box, and with back faces
+/// rejected skip the boxes whose class faces away: on a sphere about half the samples go, the
+/// surfaces stay covered (the bound is conservative) and the error stays that of the default.
+#[test]
+fn orientation_classes_skip_back_facing_boxes_and_keep_coverage() {
+    let scene = Arc::new(Scene::from_mesh("sphere", sphere(96)).unwrap());
+    let view = View::new(Camera::look_at(Vec3::new(0.4, 0.9, 3.2), Vec3::ZERO), 160, 120).unwrap();
+    let reference = zbuffer_frame(&scene, &view);
+    let covered = reference.covered_pixel_count();
+    let mut results = Vec::new();
+    for spec in [
+        "rzb:large=off,backface=on",
+        "rzb:large=off,backface=on,orientation=4",
+        "rzb:large=off,orientation=4",
+    ] {
+        let mut r = rzb(&scene, spec, 2);
+        let frame = render(r.as_mut(), &view);
+        let holes = frame
+            .items()
+            .iter()
+            .zip(reference.items())
+            .filter(|(a, b)| **b != NO_ITEM && **a == NO_ITEM)
+            .count() as u64;
+        assert!(
+            holes * 100 <= covered,
+            "{spec}: {holes} holes in {covered} covered pixels"
+        );
+        let mut f = Frame::new(160, 120).unwrap();
+        let st = r.render(&view, &mut f).unwrap();
+        results.push((
+            st.counters.get("samples_expected"),
+            st.counters.get("boxes_backfacing"),
+            differing_share(&frame, &reference),
+        ));
+    }
+    let (plain, classes, two_sided) = (results[0], results[1], results[2]);
+    assert!(classes.1 > 0, "no box skipped as back-facing");
+    assert!(
+        (classes.0 as f64) < 0.7 * plain.0 as f64,
+        "orientation classes: {} samples, without {}",
+        classes.0,
+        plain.0
+    );
+    assert!(two_sided.1 == 0 && two_sided.0 < plain.0 && two_sided.0 > classes.0);
+    assert!(classes.2 <= plain.2 + 0.02, "error {} vs {}", classes.2, plain.2);
+}
+
+/// §5.4 through the renderer: with `dynamic=on` sampling descends distribution trees; removing
+/// instances and triangles changes the frame, inserting them again restores it bit for bit
+/// (same seed), and inserting then removing returns to the frame before; sample counts follow.
+/// Also with the large-triangle fallback, whose lists are the trees' present entries.
+#[test]
+fn dynamic_updates_through_the_renderer_restore_the_frame() {
+    let (scene, camera) = scene("forest:trees=2,patches=2");
+    let view = View::new(camera, 160, 120).unwrap();
+    // The group with the most instances (trees in a patch), and a mesh.
+    let root = (0..scene.nodes().len() as u32)
+        .map(occult_core::NodeId)
+        .max_by_key(|&n| scene.node(n).instances().len())
+        .unwrap();
+    let mesh = occult_core::NodeId(scene.nodes().iter().position(|n| n.mesh().is_some()).unwrap() as u32);
+    let roots = scene.node(root).instances().len() as u32;
+    assert!(roots >= 2);
+    let updates: Vec<(occult_core::NodeId, u32)> =
+        vec![(root, 0), (root, roots - 1), (mesh, 3), (mesh, 10), (mesh, 11)];
+    for spec in ["large=off,max_samples=3e6", "large=on"] {
+        let opts = RzbOptions::from_params(
+            &AlgoSpec::parse(&format!("rzb:seed=5,dynamic=on,{spec}"))
+                .unwrap()
+                .params,
+        )
+        .unwrap();
+        let mut r = Rzb::with_options(scene.clone(), &options(2), &opts).unwrap();
+        let samples = |r: &mut Rzb| counter(r, &view, "samples_expected");
+        let a = render(&mut r, &view);
+        let sa = samples(&mut r);
+        assert!(a.covered_pixel_count() > 200, "{spec}");
+        for &(n, e) in &updates {
+            r.remove(n, e).unwrap();
+            assert!(!r.contains(n, e));
+        }
+        let b = render(&mut r, &view);
+        assert!(!b.same_visibility(&a), "{spec}: removing changed nothing");
+        assert!(samples(&mut r) < sa || spec == "large=on");
+        for &(n, e) in updates.iter().rev() {
+            r.insert(n, e).unwrap();
+        }
+        assert!(render(&mut r, &view).same_visibility(&a), "{spec}: remove then insert");
+        assert_eq!(samples(&mut r), sa);
+        // Insert then remove: from the state without the entries, back to it.
+        for &(n, e) in &updates {
+            r.remove(n, e).unwrap();
+        }
+        let before = render(&mut r, &view);
+        assert!(before.same_visibility(&b), "{spec}: removal is not history-independent");
+        for &(n, e) in &updates {
+            r.insert(n, e).unwrap();
+        }
+        for &(n, e) in &updates {
+            r.remove(n, e).unwrap();
+        }
+        assert!(
+            render(&mut r, &view).same_visibility(&before),
+            "{spec}: insert then remove"
+        );
+        // Errors are typed.
+        for e in [
+            r.remove(root, 0),
+            r.insert(mesh, 10).and_then(|_| r.insert(mesh, 10)),
+            r.remove(occult_core::NodeId(u32::MAX), 0),
+            r.insert(mesh, u32::MAX),
+        ] {
+            assert!(matches!(e, Err(RenderError::Update(_))), "{e:?}");
+        }
+    }
+    let mut static_r = Rzb::with_options(scene.clone(), &options(1), &RzbOptions::default()).unwrap();
+    assert!(matches!(static_r.remove(root, 0), Err(RenderError::Update(_))));
+    // Without updates, the trees sample the scene as the lists do: within the bound.
+    let (city, camera) = self::scene("city:blocks=4");
+    let view = View::new(camera, 320, 240).unwrap();
+    let reference = zbuffer_frame(&city, &view);
+    let mut r = rzb(&city, "rzb:dynamic=on", 2);
+    let share = differing_share(&render(r.as_mut(), &view), &reference);
+    assert!(share <= 0.03, "dynamic=on: {:.3}% differ", share * 100.0);
 }

@@ -16,6 +16,9 @@ pub struct Frame {
     pub(crate) depth: Vec<f32>,
     pub(crate) items: Vec<ItemId>,
     pub(crate) color: Vec<[u8; 4]>,
+    /// True while `color` was written by the renderer for the current depth and items (see
+    /// [`Frame::resolved_color_mut`]); [`crate::shade`] then leaves it alone.
+    pub(crate) color_resolved: bool,
 }
 
 impl Frame {
@@ -52,6 +55,7 @@ impl Frame {
             depth,
             items,
             color,
+            color_resolved: false,
         })
     }
 
@@ -82,6 +86,7 @@ impl Frame {
     }
     /// Resets depth and items (colors are stale until the next [`crate::shade`]).
     pub fn clear(&mut self) {
+        self.color_resolved = false;
         self.depth.fill(CLEAR_DEPTH);
         self.items.fill(NO_ITEM);
     }
@@ -181,7 +186,23 @@ impl Frame {
     /// Mutable access to depth and items, for renderers that write pixels themselves (point
     /// samples, ray casting) under the same (depth, item) rule as the rasterizer.
     pub fn buffers_mut(&mut self) -> (&mut [f32], &mut [ItemId]) {
+        self.color_resolved = false;
         (&mut self.depth, &mut self.items)
+    }
+
+    /// Colors written by a renderer that resolves them itself (a filtered reconstruction whose
+    /// color is not a function of the item ids): marks them resolved, so [`crate::shade`]
+    /// keeps them, until depth or items are next written ([`Frame::buffers_mut`],
+    /// [`Frame::clear`]).
+    pub fn resolved_color_mut(&mut self) -> &mut [[u8; 4]] {
+        self.color_resolved = true;
+        &mut self.color
+    }
+
+    /// True when the renderer resolved the colors ([`Frame::resolved_color_mut`]).
+    #[inline]
+    pub fn color_resolved(&self) -> bool {
+        self.color_resolved
     }
 
     /// Writes a fragment at pixel `(x, y)` under the frame's rule: it is kept when nearer

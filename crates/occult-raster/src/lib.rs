@@ -49,7 +49,7 @@ pub use nbuffer::{Extremum, NBuffer};
 pub use query::{query_box, query_rect, PixelRect};
 pub use raster::stencil::{StencilBuffer, StencilCounts, StencilDraw, StencilFaces};
 pub use raster::{Draw, DrawTriangles, RasterConfig, RasterCounts, RasterMode, Rasterizer, Strategy, SUBPIXEL_BITS};
-pub use shade::{shade, BACKGROUND};
+pub use shade::{item_color, light_direction, shade, BACKGROUND};
 pub use zpyramid::{PyramidCounts, PyramidTest, ZPyramid};
 
 use thiserror::Error;

@@ -10,13 +10,13 @@ pub const BACKGROUND: [u8; 4] = [28, 31, 38, 255];
 /// Fills `frame`'s colors from its item ids: the triangle's mesh color (or a color hashed from
 /// its mesh instance), lit two-sided by a light above and behind the eye (Lambert, with an
 /// ambient term). A pure function of (scene, view, items): identical items give identical
-/// colors, so comparing items and depth compares images.
+/// colors, so comparing items and depth compares images. Colors a renderer resolved itself
+/// ([`Frame::resolved_color_mut`]) are kept.
 pub fn shade(frame: &mut Frame, scene: &Scene, view: &View) {
-    let cam = view.camera();
-    let forward = cam.direction();
-    let right = forward.cross(cam.up).normalize();
-    let up = right.cross(forward);
-    let light = (-forward * 0.55 + up * 0.7 + right * 0.45).normalize();
+    if frame.color_resolved {
+        return;
+    }
+    let light = light_direction(view);
     let width = frame.width() as usize;
     let items = frame.items.clone();
     frame
@@ -34,7 +34,18 @@ pub fn shade(frame: &mut Frame, scene: &Scene, view: &View) {
         });
 }
 
-fn item_color(scene: &Scene, item: ItemId, light: Vec3) -> [u8; 4] {
+/// The light [`shade`] uses for `view` (world space, unit length).
+pub fn light_direction(view: &View) -> Vec3 {
+    let cam = view.camera();
+    let forward = cam.direction();
+    let right = forward.cross(cam.up).normalize();
+    let up = right.cross(forward);
+    (-forward * 0.55 + up * 0.7 + right * 0.45).normalize()
+}
+
+/// The color [`shade`] gives a pixel holding `item` under `light` ([`BACKGROUND`] for
+/// [`NO_ITEM`] or an id that names no triangle).
+pub fn item_color(scene: &Scene, item: ItemId, light: Vec3) -> [u8; 4] {
     let Some(loc) = scene.resolve_item(item) else {
         return BACKGROUND;
     };

@@ -70,6 +70,9 @@ pub enum RenderError {
     /// Unknown algorithm name.
     #[error("unknown algorithm '{0}' (known: {known})", known = Algorithm::names().join(", "))]
     UnknownAlgorithm(String),
+    /// A dynamic scene update that cannot be applied (the message names the entry and why).
+    #[error("scene update: {0}")]
+    Update(String),
 }
 
 /// Result with [`RenderError`].

@@ -361,21 +361,33 @@ impl Builder<'_> {
     }
 }
 
-/// §5.4: the octree used as a *distribution tree*: every node stores the summed area of its
-/// subtree and keeps its own entries in a list that can grow and shrink, so that entries (a
-/// triangle, or an instance with its own structure) are inserted and removed in O(height) and
-/// sampled by descending from any node in O(height · leaf size).
+/// §5.4: the octree used as a *distribution tree*: every node stores the summed area (and a
+/// summed integer weight, e.g. triangle count) of its subtree and of its own entries, and keeps
+/// its own entries in a list that can grow and shrink, so that entries (a triangle, or an
+/// instance with its own structure) are inserted and removed in O(height) and sampled by
+/// descending from any node in O(height · leaf size).
 ///
-/// Built from a class root of a [`SampleOctree`] (same nodes, same cells); insertion follows the
-/// static rule (the smallest stored node whose child's extended box does not hold the entry, or
-/// a leaf). Deviation: new entries never split leaves or create nodes (the paper rebalances
-/// through its octree operations); a leaf that receives many insertions samples in time linear
-/// in its length.
+/// Built as a mirror of every node of a [`SampleOctree`] (same node indices, cells and class
+/// roots). Own lists stay sorted by entry id (the static list's order) and sums are recomputed
+/// along the path in a fixed order (own entries, then children) rather than adjusted by
+/// differences, so the tree's state, and hence every sample drawn from it, depends only on
+/// which entries are present, not on the history of insertions and removals.
+///
+/// Insertion either descends by the static rule (the first stored child whose extended box
+/// holds the entry, [`DistributionTree::insert`]) or goes to a given node, such as the entry's
+/// node in the static build ([`DistributionTree::insert_at`]). Deviation: new entries never
+/// split leaves or create nodes (the paper rebalances through its octree operations); a leaf
+/// that receives many insertions samples in time linear in its length.
 #[derive(Clone, Debug)]
 pub struct DistributionTree {
     nodes: Vec<DynNode>,
-    /// Node and position in its own list, per entry id (`u32::MAX`: absent).
-    location: Vec<(u32, u32)>,
+    roots: Vec<Option<u32>>,
+    /// Node holding each entry id (`u32::MAX`: absent).
+    location: Vec<u32>,
+    /// Node of each entry in the static build (`u32::MAX`: none).
+    home: Vec<u32>,
+    area: Vec<f64>,
+    weight: Vec<u64>,
     extension: f32,
 }
 
@@ -384,116 +396,266 @@ struct DynNode {
     cell_min: Vec3,
     cell_side: f32,
     parent: u32,
-    children: Vec<u32>,
+    children: std::ops::Range<u32>,
+    own: Vec<u32>,
+    own_area: f64,
+    own_weight: u64,
     subtree_area: f64,
-    own: Vec<(u32, f64, Aabb)>,
+    subtree_weight: u64,
 }
 
 impl DistributionTree {
-    /// The distribution tree of class root `root` of `octree`, whose entries have `areas` and
-    /// `boxes` (indexed by entry id, as given to [`SampleOctree::build`]).
-    pub fn from_octree(octree: &SampleOctree, root: u32, boxes: &[Aabb], areas: &[f64]) -> Self {
+    /// The distribution tree of every class of `octree`, whose entries (by entry id, as given
+    /// to [`SampleOctree::build`]) have `areas` and `weights` (`weights` empty: 1 each).
+    pub fn from_octree(octree: &SampleOctree, areas: &[f64], weights: &[u64]) -> Self {
+        let ids = areas.len();
         let mut t = Self {
-            nodes: Vec::new(),
-            location: vec![(u32::MAX, 0); boxes.len()],
+            nodes: Vec::with_capacity(octree.nodes.len()),
+            roots: octree.roots.clone(),
+            location: vec![u32::MAX; ids],
+            home: vec![u32::MAX; ids],
+            area: areas.to_vec(),
+            weight: if weights.is_empty() {
+                vec![1; ids]
+            } else {
+                weights.to_vec()
+            },
             extension: octree.config.extension,
         };
-        t.copy(octree, root, u32::MAX, boxes, areas);
+        for (i, on) in octree.nodes.iter().enumerate() {
+            let own: Vec<u32> = octree.entries[on.own().start as usize..on.own().end as usize].to_vec();
+            for &e in &own {
+                t.location[e as usize] = i as u32;
+                t.home[e as usize] = i as u32;
+            }
+            t.nodes.push(DynNode {
+                cell_min: on.cell_min,
+                cell_side: on.cell_side,
+                parent: u32::MAX,
+                children: on.children(),
+                own,
+                own_area: 0.0,
+                own_weight: 0,
+                subtree_area: 0.0,
+                subtree_weight: 0,
+            });
+        }
+        for i in 0..t.nodes.len() {
+            for c in t.nodes[i].children.clone() {
+                t.nodes[c as usize].parent = i as u32;
+            }
+        }
+        // Children are stored after their parent: sum from the back.
+        for i in (0..t.nodes.len()).rev() {
+            t.own_sums(i);
+            t.subtree_sums(i);
+        }
         t
     }
 
-    fn copy(&mut self, o: &SampleOctree, n: u32, parent: u32, boxes: &[Aabb], areas: &[f64]) -> u32 {
-        let on = o.nodes[n as usize];
-        let id = self.nodes.len() as u32;
-        self.nodes.push(DynNode {
-            cell_min: on.cell_min,
-            cell_side: on.cell_side,
-            parent,
-            children: Vec::new(),
-            subtree_area: o.area(on.section()),
-            own: Vec::new(),
-        });
-        for p in on.own() {
-            let e = o.entries[p as usize];
-            let pos = self.nodes[id as usize].own.len() as u32;
-            self.nodes[id as usize]
-                .own
-                .push((e, areas[e as usize], boxes[e as usize]));
-            self.location[e as usize] = (id, pos);
+    fn own_sums(&mut self, n: usize) {
+        let node = &self.nodes[n];
+        let mut a = 0.0;
+        let mut w = 0u64;
+        for &e in &node.own {
+            a += self.area[e as usize];
+            w = w.saturating_add(self.weight[e as usize]);
         }
-        let kids: Vec<u32> = on.children().map(|c| self.copy(o, c, id, boxes, areas)).collect();
-        self.nodes[id as usize].children = kids;
-        id
+        let node = &mut self.nodes[n];
+        node.own_area = a;
+        node.own_weight = w;
     }
 
-    /// Summed area of the whole tree.
+    fn subtree_sums(&mut self, n: usize) {
+        let mut a = self.nodes[n].own_area;
+        let mut w = self.nodes[n].own_weight;
+        for c in self.nodes[n].children.clone() {
+            a += self.nodes[c as usize].subtree_area;
+            w = w.saturating_add(self.nodes[c as usize].subtree_weight);
+        }
+        self.nodes[n].subtree_area = a;
+        self.nodes[n].subtree_weight = w;
+    }
+
+    /// Recomputes the sums of node `n` and its ancestors, O(height · (own + 8)).
+    fn update_path(&mut self, n: u32) {
+        self.own_sums(n as usize);
+        let mut m = n;
+        while m != u32::MAX {
+            self.subtree_sums(m as usize);
+            m = self.nodes[m as usize].parent;
+        }
+    }
+
+    /// The root of each class (as the octree's).
+    pub fn roots(&self) -> &[Option<u32>] {
+        &self.roots
+    }
+    /// Summed area of all classes.
     pub fn total_area(&self) -> f64 {
-        self.nodes.first().map_or(0.0, |n| n.subtree_area)
+        self.roots
+            .iter()
+            .flatten()
+            .map(|&r| self.nodes[r as usize].subtree_area)
+            .sum()
     }
-
+    /// Summed weight of all classes.
+    pub fn total_weight(&self) -> u64 {
+        self.roots
+            .iter()
+            .flatten()
+            .fold(0u64, |a, &r| a.saturating_add(self.nodes[r as usize].subtree_weight))
+    }
+    /// Summed area of node `n`'s subtree.
+    #[inline]
+    pub fn subtree_area(&self, n: u32) -> f64 {
+        self.nodes[n as usize].subtree_area
+    }
+    /// Summed weight of node `n`'s subtree.
+    #[inline]
+    pub fn subtree_weight(&self, n: u32) -> u64 {
+        self.nodes[n as usize].subtree_weight
+    }
+    /// Summed area of node `n`'s own entries.
+    #[inline]
+    pub fn own_area(&self, n: u32) -> f64 {
+        self.nodes[n as usize].own_area
+    }
+    /// Summed weight of node `n`'s own entries.
+    #[inline]
+    pub fn own_weight(&self, n: u32) -> u64 {
+        self.nodes[n as usize].own_weight
+    }
+    /// The entries stored at node `n`, sorted by id.
+    #[inline]
+    pub fn own(&self, n: u32) -> &[u32] {
+        &self.nodes[n as usize].own
+    }
     /// Number of stored nodes.
     pub fn node_count(&self) -> usize {
         self.nodes.len()
     }
+    /// True when entry `id` is present.
+    pub fn contains(&self, id: u32) -> bool {
+        self.location.get(id as usize).is_some_and(|&l| l != u32::MAX)
+    }
+    /// The node that held entry `id` in the static build, if any.
+    pub fn home(&self, id: u32) -> Option<u32> {
+        self.home.get(id as usize).copied().filter(|&h| h != u32::MAX)
+    }
+    /// Area and weight of entry `id` (present or not; zero when never seen).
+    pub fn entry(&self, id: u32) -> (f64, u64) {
+        (
+            self.area.get(id as usize).copied().unwrap_or(0.0),
+            self.weight.get(id as usize).copied().unwrap_or(0),
+        )
+    }
 
-    /// Inserts entry `id` with `bounds` and `area` (> 0, finite): descends to the node that
-    /// stores it and adds the area along the path, O(height).
-    ///
-    /// # Errors
-    /// A message when the area is not positive and finite, the box is empty, or the id is
-    /// already present.
-    pub fn insert(&mut self, id: u32, bounds: Aabb, area: f64) -> Result<(), String> {
-        if !(area > 0.0 && area.is_finite()) || bounds.is_empty() {
-            return Err(format!("entry {id}: area {area} or bounds not insertable"));
+    fn check_new(&mut self, id: u32, area: f64) -> Result<(), String> {
+        if !(area > 0.0 && area.is_finite()) {
+            return Err(format!("entry {id}: area {area} is not positive and finite"));
         }
         if self.nodes.is_empty() {
-            return Err("distribution tree without root".into());
+            return Err("distribution tree without nodes".into());
         }
         if self.location.len() <= id as usize {
-            self.location.resize(id as usize + 1, (u32::MAX, 0));
+            let n = id as usize + 1;
+            self.location.resize(n, u32::MAX);
+            self.home.resize(n, u32::MAX);
+            self.area.resize(n, 0.0);
+            self.weight.resize(n, 0);
         }
-        if self.location[id as usize].0 != u32::MAX {
+        if self.location[id as usize] != u32::MAX {
             return Err(format!("entry {id} is already present"));
         }
-        let mut n = 0u32;
+        Ok(())
+    }
+
+    fn place(&mut self, id: u32, n: u32, area: f64, weight: u64) {
+        self.area[id as usize] = area;
+        self.weight[id as usize] = weight;
+        let own = &mut self.nodes[n as usize].own;
+        let pos = own.binary_search(&id).unwrap_or_else(|p| p);
+        own.insert(pos, id);
+        self.location[id as usize] = n;
+        self.update_path(n);
+    }
+
+    /// Inserts entry `id` with `bounds`, `area` (> 0, finite) and weight 1: descends from the
+    /// first class root to the node that stores it by the static rule, then corrects the sums
+    /// up to the root, O(height).
+    ///
+    /// # Errors
+    /// A message when the area is not positive and finite, the box is empty, the tree has no
+    /// class root, or the id is already present.
+    pub fn insert(&mut self, id: u32, bounds: Aabb, area: f64) -> Result<(), String> {
+        if bounds.is_empty() {
+            return Err(format!("entry {id}: empty bounds"));
+        }
+        self.check_new(id, area)?;
+        let Some(mut n) = self.roots.iter().flatten().next().copied() else {
+            return Err("distribution tree without root".into());
+        };
         'descend: loop {
-            self.nodes[n as usize].subtree_area += area;
-            let node = &self.nodes[n as usize];
-            for &c in &node.children {
+            for c in self.nodes[n as usize].children.clone() {
                 let cn = &self.nodes[c as usize];
-                let ext = extended(cn.cell_min, cn.cell_side, self.extension);
-                if contains(&ext, &bounds) {
+                if contains(&extended(cn.cell_min, cn.cell_side, self.extension), &bounds) {
                     n = c;
                     continue 'descend;
                 }
             }
             break;
         }
-        let pos = self.nodes[n as usize].own.len() as u32;
-        self.nodes[n as usize].own.push((id, area, bounds));
-        self.location[id as usize] = (n, pos);
+        self.place(id, n, area, 1);
         Ok(())
     }
 
-    /// Removes entry `id`, correcting the summed areas up to the root, O(height).
+    /// Inserts entry `id` at node `node` with `area` (> 0, finite) and `weight`, O(height).
+    ///
+    /// # Errors
+    /// A message when the area is not positive and finite, the node does not exist, or the id
+    /// is already present.
+    pub fn insert_at(&mut self, id: u32, node: u32, area: f64, weight: u64) -> Result<(), String> {
+        self.check_new(id, area)?;
+        if node as usize >= self.nodes.len() {
+            return Err(format!("entry {id}: no node {node}"));
+        }
+        self.place(id, node, area, weight);
+        Ok(())
+    }
+
+    /// Removes entry `id`, correcting the sums up to the root, O(height).
     ///
     /// # Errors
     /// A message when the entry is absent.
     pub fn remove(&mut self, id: u32) -> Result<(), String> {
-        let Some(&(n, pos)) = self.location.get(id as usize).filter(|l| l.0 != u32::MAX) else {
+        if !self.contains(id) {
             return Err(format!("entry {id} is not present"));
-        };
-        let own = &mut self.nodes[n as usize].own;
-        let (_, area, _) = own.swap_remove(pos as usize);
-        if let Some(&(moved, _, _)) = own.get(pos as usize) {
-            self.location[moved as usize].1 = pos;
         }
-        self.location[id as usize] = (u32::MAX, 0);
-        let mut m = n;
-        while m != u32::MAX {
-            let node = &mut self.nodes[m as usize];
-            node.subtree_area -= area;
-            m = node.parent;
+        let n = self.location[id as usize];
+        let own = &mut self.nodes[n as usize].own;
+        if let Ok(pos) = own.binary_search(&id) {
+            own.remove(pos);
+        }
+        self.location[id as usize] = u32::MAX;
+        self.update_path(n);
+        Ok(())
+    }
+
+    /// Changes the area and weight of entry `id` (present or not), O(height) when present.
+    ///
+    /// # Errors
+    /// A message when the area is negative or not finite.
+    pub fn set_entry(&mut self, id: u32, area: f64, weight: u64) -> Result<(), String> {
+        if !(area >= 0.0 && area.is_finite()) {
+            return Err(format!("entry {id}: area {area} is negative or not finite"));
+        }
+        if (id as usize) < self.area.len() {
+            self.area[id as usize] = area;
+            self.weight[id as usize] = weight;
+            if self.contains(id) {
+                self.update_path(self.location[id as usize]);
+            }
         }
         Ok(())
     }
@@ -502,23 +664,70 @@ impl DistributionTree {
     /// area, from `u ∈ [0, 1)`: descend, choosing the own list or a child by summed areas.
     /// `None` when the subtree has no area.
     pub fn sample(&self, node: u32, u: f64) -> Option<u32> {
-        let mut n = node as usize;
-        let mut r = u * self.nodes.get(n)?.subtree_area;
-        if self.nodes[n].subtree_area <= 0.0 {
+        let n = self.nodes.get(node as usize)?;
+        if n.subtree_area <= 0.0 {
             return None;
         }
-        loop {
-            let node = &self.nodes[n];
-            let mut last = None;
-            for &(e, a, _) in &node.own {
+        Some(self.descend(node, u * n.subtree_area))
+    }
+
+    /// An entry stored at `node` itself (not below), chosen by area from `u ∈ [0, 1)`.
+    pub fn sample_own(&self, node: u32, u: f64) -> Option<u32> {
+        let n = self.nodes.get(node as usize)?;
+        let mut r = u * n.own_area;
+        let mut last = None;
+        for &e in &n.own {
+            let a = self.area[e as usize];
+            if a > 0.0 {
                 if r < a {
                     return Some(e);
                 }
                 r -= a;
                 last = Some(e);
             }
+        }
+        last
+    }
+
+    /// An entry of the whole tree (every class), chosen by area from `u ∈ [0, 1)`.
+    pub fn sample_all(&self, u: f64) -> Option<u32> {
+        let total = self.total_area();
+        if total <= 0.0 {
+            return None;
+        }
+        let mut r = u * total;
+        let mut last = None;
+        for &root in self.roots.iter().flatten() {
+            let a = self.nodes[root as usize].subtree_area;
+            if a > 0.0 {
+                if r < a {
+                    return Some(self.descend(root, r));
+                }
+                r -= a;
+                last = Some((root, a));
+            }
+        }
+        // Rounding left r at the end: the end of the last class with area.
+        last.map(|(root, a)| self.descend(root, a))
+    }
+
+    fn descend(&self, node: u32, mut r: f64) -> u32 {
+        let mut n = node as usize;
+        loop {
+            let node = &self.nodes[n];
+            let mut last = None;
+            for &e in &node.own {
+                let a = self.area[e as usize];
+                if a > 0.0 {
+                    if r < a {
+                        return e;
+                    }
+                    r -= a;
+                    last = Some(e);
+                }
+            }
             let mut next = None;
-            for &c in &node.children {
+            for c in node.children.clone() {
                 let a = self.nodes[c as usize].subtree_area;
                 if a > 0.0 {
                     if r < a {
@@ -529,10 +738,13 @@ impl DistributionTree {
                     next = Some(c as usize);
                 }
             }
-            match next {
-                Some(c) => n = c,
+            match (next, last) {
+                (Some(c), _) => n = c,
                 // Rounding left r at the end: the last own entry.
-                None => return last,
+                (None, Some(e)) => return e,
+                // Only reachable through rounding into an empty subtree: its parent's area
+                // was positive, so some entry exists; take the first own entry found upwards.
+                (None, None) => return self.nodes[n].own.first().copied().unwrap_or(0),
             }
         }
     }
@@ -676,7 +888,7 @@ mod tests {
                 ..Default::default()
             },
         );
-        let mut d = DistributionTree::from_octree(&t, t.roots()[0].unwrap(), &boxes, &areas);
+        let mut d = DistributionTree::from_octree(&t, &areas, &[]);
         let before_total = d.total_area();
         let samples = 400_000;
         let h0 = histogram(&d, samples, 500, 9);
@@ -698,6 +910,25 @@ mod tests {
         let h2 = histogram(&d, samples, 500, 9);
         assert!(h2[400..].iter().all(|&c| c == 0));
         assert!(chi_square(&h2[..400], &areas) < 550.0);
+        // History does not matter: removing and re-inserting static entries at their home
+        // nodes restores the sums bit for bit, hence the very same samples for a seed.
+        let sums = |d: &DistributionTree| {
+            (0..d.node_count() as u32)
+                .map(|n| d.subtree_area(n).to_bits())
+                .collect::<Vec<_>>()
+        };
+        let before = sums(&d);
+        let h_before = histogram(&d, 10_000, 500, 11);
+        for i in (0..400).step_by(7) {
+            d.remove(i).unwrap();
+        }
+        assert!(sums(&d) != before);
+        for i in (0..400).step_by(7).rev() {
+            let home = d.home(i).unwrap();
+            d.insert_at(i, home, areas[i as usize], 1).unwrap();
+        }
+        assert_eq!(sums(&d), before);
+        assert_eq!(histogram(&d, 10_000, 500, 11), h_before);
         assert!(d.remove(450).is_err());
         assert!(d.insert(3, boxes[3], 1.0).is_err());
         assert!(d.insert(999, boxes[3], 0.0).is_err());

@@ -13,8 +13,15 @@
 //!   §7.1 large-triangle fallback (boxes whose triangles would get more than `large_threshold`
 //!   samples each, i.e. a projected area above `threshold · d²/ln v` pixels, §8.3, are drawn by
 //!   the rasterizer into the same frame): [`select`];
+//! - §5.3.4 orientation classes (`orientation=N`): mesh triangles split by normal on a polar
+//!   grid, each class's normal cone bounding the orientation factor of its boxes, boxes facing
+//!   away skipped when back faces are rejected: [`structure`], [`select`];
 //! - §5.2 area-proportional choice, uniform points on triangles, §5.3.3 back-face rejection,
-//!   §4.1 per-pixel reconstruction and §4.2 splatting with side `d`: [`sample`];
+//!   §4.1 per-pixel reconstruction and §4.2 splatting with side `d`: [`sample`]; §4.2
+//!   Gaussian reconstruction (`recon=gauss`): [`recon`];
+//! - §5.4 dynamic updates (`dynamic=on`): sampling from distribution trees
+//!   ([`occult_spatial::sample_octree::DistributionTree`]), entries removed and inserted through
+//!   [`Rzb::remove`] and [`Rzb::insert`];
 //! - §7.2 sample caches per selected box, quantized to an object-space grid whose cells project
 //!   to at most one splat, reused while the box's distance stays within a factor, LRU under a
 //!   byte budget: [`cache`];
@@ -40,16 +47,30 @@
 //!   draws need, requires the instance chain. One transform more per sample per level.
 //! - Samples are drawn on the CPU in parallel into per-thread buffers merged under the frame's
 //!   rule (the paper used OpenGL points).
+//! - A single sample from a whole structure (an instance entered once) is picked with a
+//!   Walker alias table ([`structure::AliasTable`], O(1)) instead of the list's binary search:
+//!   same distribution, fewer dependent loads on deep instancing.
 //! - Area scale of an instance is `|det|^(2/3)`, exact for the similarity transforms the
 //!   generators use; for non-uniform scales the child's own-space distribution is used.
 //! - Cached sets are built at the density needed at `z / tolerance`, so that they never fall
 //!   below the required density while valid; back faces are not rejected from cached sets (as
 //!   in the paper, so that validity depends on distance only).
-//! - Not built: Gaussian reconstruction (§4.2) and orientation classes (§5.3.4); the dynamic
-//!   distribution tree (§5.4) exists in `occult-spatial` but the renderer samples the static
+//! - §4.2 Gaussian reconstruction regenerates the samples in a second pass instead of keeping
+//!   them (no memory per sample); it does not raise the sample count by itself (the paper uses
+//!   about ten times the per-pixel count: `oversample=10`).
+//! - §5.3.4 orientation classes exist for meshes only: a group's entries are instances, whose
+//!   normals span their whole child (the paper has no instancing here); the cone bound is used
+//!   only where the placement is a similarity (angles kept).
+//! - §5.4 only the scene's own entries can be removed and inserted (item ids must name scene
+//!   triangles; the scene is shared and immutable); an entry returns to its node of the static
+//!   build. Sums are recomputed along the path in a fixed order instead of adjusted by the
+//!   difference, so frames depend only on which entries are present. A change of a node's area
+//!   is set on every instance of it, up the DAG (O(height) per referencing instance).
+//!   `dynamic=on` samples by one tree descent per sample instead of the multinomial split over
 //!   lists.
 
 pub mod cache;
+pub mod recon;
 pub mod sample;
 pub mod select;
 pub mod structure;
@@ -78,16 +99,21 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc { key: "seed", default: "1", help: "random seed (frames are a function of seed, scene, view and cache history)" },
         ParamDoc { key: "eps", default: "2", help: "depth accuracy (5.3.2): largest (z_max/z_min)^2 of a selected box, > 1, or auto (8.2 minimum search)" },
         ParamDoc { key: "d", default: "1", help: "splat side in pixels (4.2), 1..=16; 1 is per-pixel reconstruction (4.1)" },
+        ParamDoc { key: "recon", default: "nearest", help: "reconstruction: nearest (each pixel keeps its nearest sample: per pixel for d=1 (4.1), splats for d>1 (4.2)) or gauss (4.2: splats delete hidden samples, color = Gaussian-weighted average of the visible samples)" },
+        ParamDoc { key: "sigma", default: "0.5", help: "recon=gauss: standard deviation of the Gaussian in pixels, (0, 8]" },
+        ParamDoc { key: "gauss_tolerance", default: "0.02", help: "recon=gauss: a sample is visible at a pixel when its view distance is within (1 + this) of the pixel's nearest, (0, 1]" },
         ParamDoc { key: "oversample", default: "1", help: "factor on the paper's sample count a*ln(v) (4.1.1), (0, 1000]" },
         ParamDoc { key: "large", default: "on", help: "draw boxes of large triangles with the z-buffer (7.1)" },
         ParamDoc { key: "threshold", default: "1", help: "samples per triangle above which a box is z-buffered (7.1, 8.3: projected area d^2/ln v)" },
         ParamDoc { key: "area_ratio", default: "4", help: "largest area ratio within an area class (7.1), > 1" },
+        ParamDoc { key: "orientation", default: "0", help: "orientation classes (5.3.4): bands of the polar grid of normal classes (2*bands^2 classes), 0..=8, 0 for none; bounds the orientation factor per box and skips boxes facing away when back faces are rejected" },
         ParamDoc { key: "leaf", default: "32", help: "entries per octree leaf (5.3.1), >= 1" },
         ParamDoc { key: "extension", default: "0.25", help: "extended boxes: growth per side as a fraction of the cell side (5.3.1), 0..=1" },
         ParamDoc { key: "cache", default: "off", help: "sample caching per selected box, quantized, LRU (7.2)" },
         ParamDoc { key: "cache_mib", default: "256", help: "sample cache budget in MiB (7.2)" },
         ParamDoc { key: "cache_tolerance", default: "1.25", help: "distance factor within which a cached set is reused (7.2), (1, 16]" },
         ParamDoc { key: "backface", default: "auto", help: "reject back-facing samples (5.3.3): auto follows the rasterizer's back-face culling, on, off" },
+        ParamDoc { key: "dynamic", default: "off", help: "sample from distribution trees (5.4) so that entries can be removed and inserted through Rzb::remove/insert" },
         ParamDoc { key: "max_samples", default: "1e9", help: "most samples per frame; beyond, counts are scaled down (counter samples_capped)" },
     ],
     conservative: false,
@@ -101,6 +127,18 @@ pub enum Epsilon {
     Fixed(f64),
     /// §8.2: chosen per frame by a minimum search over measured time, starting at 2.
     Auto,
+}
+
+/// Reconstruction of the image from the samples (§4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Recon {
+    /// Each pixel keeps its nearest sample: per-pixel reconstruction for `d = 1` (§4.1),
+    /// splatting for `d > 1` (§4.2).
+    Nearest,
+    /// §4.2 Gaussian reconstruction: the `Nearest` pass deletes hidden samples and defines
+    /// depth and items; colors are Gaussian-weighted averages of the visible samples
+    /// ([`recon`]).
+    Gauss,
 }
 
 /// Back-face rejection of samples (§5.3.3).
@@ -124,6 +162,12 @@ pub struct RzbOptions {
     pub eps: Epsilon,
     /// Splat side `d` in pixels (1 = per-pixel reconstruction), 1..=16.
     pub splat: u32,
+    /// Reconstruction (§4.1, §4.2).
+    pub recon: Recon,
+    /// `Recon::Gauss`: standard deviation of the Gaussian in pixels, (0, 8].
+    pub sigma: f32,
+    /// `Recon::Gauss`: relative view-distance tolerance of the visibility test, (0, 1].
+    pub gauss_tolerance: f32,
     /// Factor on the paper's sample count `a · ln v` (> 0): more fills more pixels, costs more.
     pub oversample: f64,
     /// §7.1: draw boxes of large triangles with the rasterizer.
@@ -132,6 +176,8 @@ pub struct RzbOptions {
     pub large_threshold: f64,
     /// Largest area ratio within an area class (> 1; §8.3: 2..64 behave alike).
     pub area_ratio: f64,
+    /// §5.3.4: bands of the polar grid of orientation classes (0 = none, ≤ 8).
+    pub orientation: u32,
     /// Entries per octree leaf (≥ 1).
     pub leaf_size: usize,
     /// Extended boxes: growth per side as a fraction of the cell side (0..=1).
@@ -144,6 +190,10 @@ pub struct RzbOptions {
     pub cache_tolerance: f32,
     /// Back-face rejection.
     pub backface: Backface,
+    /// §5.4: sample from distribution trees (summed areas in the octree nodes) instead of the
+    /// static lists, so that entries can be removed and inserted ([`Rzb::remove`],
+    /// [`Rzb::insert`]).
+    pub dynamic: bool,
     /// Most samples per frame (≥ 1): beyond, every box's count is scaled down (counter
     /// `samples_capped`), so that a box at the near plane cannot stall a frame.
     pub max_samples: f64,
@@ -155,10 +205,14 @@ impl Default for RzbOptions {
             seed: 1,
             eps: Epsilon::Fixed(2.0),
             splat: 1,
+            recon: Recon::Nearest,
+            sigma: 0.5,
+            gauss_tolerance: 0.02,
             oversample: 1.0,
             large: true,
             large_threshold: 1.0,
             area_ratio: 4.0,
+            orientation: 0,
             leaf_size: 32,
             extension: 0.25,
             cache: false,
@@ -166,6 +220,7 @@ impl Default for RzbOptions {
             cache_tolerance: 1.25,
             backface: Backface::Auto,
             max_samples: 1e9,
+            dynamic: false,
         }
     }
 }
@@ -185,10 +240,17 @@ impl RzbOptions {
             seed: params.get("seed", d.seed)?,
             eps,
             splat: params.get("d", d.splat)?,
+            recon: match params.choice("recon", &["nearest", "gauss"], "nearest")? {
+                "gauss" => Recon::Gauss,
+                _ => Recon::Nearest,
+            },
+            sigma: params.get("sigma", d.sigma)?,
+            gauss_tolerance: params.get("gauss_tolerance", d.gauss_tolerance)?,
             oversample: params.get("oversample", d.oversample)?,
             large: params.flag("large", d.large)?,
             large_threshold: params.get("threshold", d.large_threshold)?,
             area_ratio: params.get("area_ratio", d.area_ratio)?,
+            orientation: params.get("orientation", d.orientation)?,
             leaf_size: params.get("leaf", d.leaf_size)?,
             extension: params.get("extension", d.extension)?,
             cache: params.flag("cache", d.cache)?,
@@ -200,6 +262,7 @@ impl RzbOptions {
                 _ => Backface::Auto,
             },
             max_samples: params.get("max_samples", d.max_samples)?,
+            dynamic: params.flag("dynamic", d.dynamic)?,
         };
         o.validate()?;
         Ok(o)
@@ -223,6 +286,12 @@ impl RzbOptions {
         if !(1..=16).contains(&self.splat) {
             return bad("d", self.splat.to_string(), "1..=16");
         }
+        if !(self.sigma > 0.0 && self.sigma <= 8.0) {
+            return bad("sigma", self.sigma.to_string(), "(0, 8]");
+        }
+        if !(self.gauss_tolerance > 0.0 && self.gauss_tolerance <= 1.0) {
+            return bad("gauss_tolerance", self.gauss_tolerance.to_string(), "(0, 1]");
+        }
         if !(self.oversample > 0.0 && self.oversample <= 1e3) {
             return bad("oversample", self.oversample.to_string(), "(0, 1000]");
         }
@@ -231,6 +300,9 @@ impl RzbOptions {
         }
         if !(self.area_ratio > 1.0 && self.area_ratio.is_finite()) {
             return bad("area_ratio", self.area_ratio.to_string(), "a number > 1");
+        }
+        if self.orientation > 8 {
+            return bad("orientation", self.orientation.to_string(), "0..=8");
         }
         if !(1..=1 << 20).contains(&self.leaf_size) {
             return bad("leaf", self.leaf_size.to_string(), "1..=1048576");
@@ -314,6 +386,9 @@ pub struct Rzb {
     auto: Option<AutoEps>,
     frame_index: u64,
     scratch: Vec<(Vec<f32>, Vec<ItemId>)>,
+    /// §5.4: for each DAG node, the (group, instance index, area scale) of the instances
+    /// that reference it.
+    referrers: Vec<Vec<(u32, u32, f64)>>,
 }
 
 impl Rzb {
@@ -329,8 +404,26 @@ impl Rzb {
             extension: opts.extension,
             ..SampleOctreeConfig::default()
         };
-        let structures = raster.install(|| structure::build_all(&scene, &config, opts.area_ratio));
-        Ok(Self {
+        let structures =
+            raster.install(|| structure::build_all(&scene, &config, opts.area_ratio, opts.orientation, opts.dynamic));
+        let referrers = if opts.dynamic {
+            let mut r = vec![Vec::new(); scene.nodes().len()];
+            for (g, n) in scene.nodes().iter().enumerate() {
+                if let occult_core::NodeKind::Group(insts) = n.kind() {
+                    for (e, inst) in insts.iter().enumerate() {
+                        r[inst.child.index()].push((
+                            g as u32,
+                            e as u32,
+                            structure::area_scale(&inst.parent_from_child),
+                        ));
+                    }
+                }
+            }
+            r
+        } else {
+            Vec::new()
+        };
+        let mut rzb = Self {
             scene,
             raster,
             cache: opts
@@ -341,7 +434,135 @@ impl Rzb {
             structures,
             frame_index: 0,
             scratch: Vec::new(),
-        })
+            referrers,
+        };
+        if opts.dynamic {
+            rzb.settle();
+        }
+        Ok(rzb)
+    }
+
+    /// §5.4: sets every instance entry's area and item count from its child's tree (children
+    /// come before parents in the DAG's order), so that the values an update propagates are
+    /// the ones the trees start with, bit for bit.
+    fn settle(&mut self) {
+        for n in 0..self.structures.len() {
+            if let occult_core::NodeKind::Group(insts) = self.scene.node(occult_core::NodeId(n as u32)).kind() {
+                for (e, inst) in insts.iter().enumerate() {
+                    let child = &self.structures[inst.child.index()];
+                    let (area, items) = child
+                        .tree
+                        .as_ref()
+                        .map_or((0.0, 0), |t| (t.total_area(), t.total_weight()));
+                    let scaled = area * structure::area_scale(&inst.parent_from_child);
+                    if let Some(t) = self.structures[n].tree.as_mut() {
+                        // The area is finite and non-negative (sums of such).
+                        let _ = t.set_entry(e as u32, scaled, items);
+                    }
+                }
+            }
+            if let Some(t) = self.structures[n].tree.as_ref() {
+                self.structures[n].area = t.total_area();
+            }
+        }
+    }
+
+    /// §5.4: removes entry `entry` of DAG node `node` (a triangle of a mesh, an instance of a
+    /// group) from sampling and from the large-triangle fallback: O(height) in the node's tree,
+    /// then the node's new area and item count are set on every instance of it (O(height) per
+    /// referencing instance, up the DAG). Sample caches are emptied (their sets may hold it).
+    ///
+    /// Only the scene's own entries can be removed and inserted: item ids name scene
+    /// triangles, and the scene is shared and immutable.
+    ///
+    /// # Errors
+    /// [`RenderError::Update`] without `dynamic=on`, for a node or entry that does not exist,
+    /// is not present, or has no area.
+    pub fn remove(&mut self, node: occult_core::NodeId, entry: u32) -> Result<()> {
+        self.update(node, entry, false)
+    }
+
+    /// §5.4: inserts entry `entry` of DAG node `node` again (at its node of the static build),
+    /// the inverse of [`Rzb::remove`]: with the same seed, frames after an insertion and a
+    /// removal of the same entry are those before (the trees' sums are recomputed in a fixed
+    /// order, not adjusted).
+    ///
+    /// # Errors
+    /// As [`Rzb::remove`]; an entry already present is an error.
+    pub fn insert(&mut self, node: occult_core::NodeId, entry: u32) -> Result<()> {
+        self.update(node, entry, true)
+    }
+
+    /// True when entry `entry` of node `node` is sampled (always, without `dynamic=on`, for an
+    /// entry with area).
+    pub fn contains(&self, node: occult_core::NodeId, entry: u32) -> bool {
+        let Some(st) = self.structures.get(node.index()) else {
+            return false;
+        };
+        match &st.tree {
+            Some(t) => t.contains(entry),
+            None => st.octree.entries().contains(&entry),
+        }
+    }
+
+    fn update(&mut self, node: occult_core::NodeId, entry: u32, insert: bool) -> Result<()> {
+        let err = |m: String| Err(RenderError::Update(format!("rzb: {m}")));
+        if !self.opts.dynamic {
+            return err("dynamic updates need dynamic=on".into());
+        }
+        let Some(st) = self.structures.get_mut(node.index()) else {
+            return err(format!("no node {}", node.0));
+        };
+        let Some(tree) = st.tree.as_mut() else {
+            return err(format!("node {} has no distribution tree", node.0));
+        };
+        let result = if insert {
+            match tree.home(entry) {
+                Some(home) => {
+                    let (area, weight) = tree.entry(entry);
+                    tree.insert_at(entry, home, area, weight)
+                }
+                None => Err(format!(
+                    "entry {entry} of node {} does not exist or has no area",
+                    node.0
+                )),
+            }
+        } else {
+            tree.remove(entry).map_err(|m| format!("node {}: {m}", node.0))
+        };
+        if let Err(m) = result {
+            return err(m);
+        }
+        self.propagate(node.index());
+        if let Some(c) = self.cache.as_mut() {
+            *c = SampleCache::new(c.budget(), self.opts.cache_tolerance);
+        }
+        Ok(())
+    }
+
+    /// Sets node `n`'s area and item count from its tree and passes them to every instance of
+    /// it, recursively up the DAG.
+    fn propagate(&mut self, n: usize) {
+        let Some(tree) = self.structures[n].tree.as_ref() else {
+            return;
+        };
+        let (area, items) = (tree.total_area(), tree.total_weight());
+        self.structures[n].area = area;
+        let mut groups: Vec<u32> = Vec::new();
+        for k in 0..self.referrers[n].len() {
+            let (g, e, scale) = self.referrers[n][k];
+            if let Some(t) = self.structures[g as usize].tree.as_mut() {
+                // The area is finite and non-negative (sums of such).
+                let _ = t.set_entry(e, area * scale, items);
+            }
+            if !groups.contains(&g) {
+                groups.push(g);
+            }
+        }
+        // Each group once, after all its entries changed.
+        for g in groups {
+            self.propagate(g as usize);
+        }
     }
 
     /// The options.
@@ -402,13 +623,21 @@ impl Renderer for Rzb {
 
         // §5.3.2 / §7.1 / §7.3: box selection.
         let t_select = Instant::now();
-        let sel = Selection::run(&self.scene, &self.structures, view, &self.opts, eps);
+        let backface = match self.opts.backface {
+            Backface::Auto => self.raster.config().cull_backfaces,
+            Backface::On => true,
+            Backface::Off => false,
+        };
+        let sel = Selection::run(&self.scene, &self.structures, view, &self.opts, eps, backface);
         let select_time = t_select.elapsed();
         stats.phases.add(Phase::Cull, select_time);
         stats.boxes_tested = sel.boxes_tested;
         stats.boxes_culled = sel.boxes_culled;
         stats.nodes_visited = sel.boxes_tested;
         crate::rasterize(&mut self.raster, view, frame, &sel.draws, &mut stats);
+        // §4.2 Gaussian reconstruction keeps the fallback's pixels exact: remember them.
+        let gauss = self.opts.recon == Recon::Gauss;
+        let raster_items: Vec<ItemId> = if gauss { frame.items().to_vec() } else { Vec::new() };
 
         // §4 / §5.2 / §7.2: samples.
         let t_samples = Instant::now();
@@ -422,14 +651,12 @@ impl Renderer for Rzb {
             scene: &self.scene,
             structures: &self.structures,
             splat: self.opts.splat,
-            backface: match self.opts.backface {
-                Backface::Auto => self.raster.config().cull_backfaces,
-                Backface::On => true,
-                Backface::Off => false,
-            },
+            backface,
             eye: view.camera().eye,
             far_depth: view.far_depth(),
             seed: self.opts.seed,
+            width: view.width(),
+            height: view.height(),
         };
         let consts = select::ViewConsts::new(view, self.opts.splat);
         let frame_index = self.frame_index;
@@ -472,6 +699,7 @@ impl Renderer for Rzb {
                     sampler.generate(
                         job.structure,
                         job.range.clone(),
+                        sample::Part::of(job),
                         n,
                         &place,
                         &mut rng,
@@ -590,6 +818,84 @@ impl Renderer for Rzb {
                 }
             }
         }
+        // §4.2: the Gaussian pass over the same samples.
+        if gauss {
+            let filter = recon::Gaussian {
+                depth: frame.depth(),
+                width,
+                height,
+                sigma: self.opts.sigma,
+                keep: 1.0 / (1.0 + self.opts.gauss_tolerance),
+            };
+            let light = occult_raster::light_direction(view);
+            let scene = &*self.scene;
+            // One accumulation buffer per run of units (the runs of pass 1, bounded by the
+            // same budget as the scratch buffers).
+            let max_runs = ((1usize << 30) / (pixels * recon::ACCUM_BYTES).max(1)).max(1);
+            let runs: Vec<std::ops::Range<usize>> = if chunk_count <= max_runs {
+                (0..chunk_count).map(|c| bounds[c]..bounds[c + 1]).collect()
+            } else {
+                std::iter::once(0..units.len()).collect()
+            };
+            let sums: Vec<Vec<recon::Accum>> = self.raster.install(|| {
+                runs.par_iter()
+                    .map(|run| {
+                        let mut acc = vec![[0u64; 4]; pixels];
+                        let mut colors = recon::Colors::new(scene, light);
+                        let mut counts = SampleCounts::default();
+                        let mut emit = |s: sample::Projected| {
+                            let c = colors.get(s.item);
+                            filter.add(s, c, &mut acc);
+                        };
+                        for u in &units[run.clone()] {
+                            let job = &sel.jobs[u.job];
+                            match sources[u.job] {
+                                Source::Direct => {
+                                    let mut rng = piece_rng(sampler.seed, job, u.piece);
+                                    sampler.project_job(job, u.len as u64, &mut rng, &mut counts, &mut emit);
+                                }
+                                Source::Hit => {
+                                    if let Some(c) = cache {
+                                        let set = &c.samples(&job_key(job))[u.first..u.first + u.len];
+                                        sampler.project_cached(
+                                            &job.clip_from_structure,
+                                            job.base,
+                                            set,
+                                            &mut counts,
+                                            &mut emit,
+                                        );
+                                    }
+                                }
+                                Source::Built(b) => {
+                                    let set = &built[b].0[u.first..u.first + u.len];
+                                    sampler.project_cached(
+                                        &job.clip_from_structure,
+                                        job.base,
+                                        set,
+                                        &mut counts,
+                                        &mut emit,
+                                    );
+                                }
+                            }
+                        }
+                        acc
+                    })
+                    .collect()
+            });
+            let mut colors = recon::Colors::new(scene, light);
+            let resolved: Vec<[u8; 4]> = (0..pixels)
+                .map(|p| {
+                    let mut sum = [0u64; 4];
+                    for s in &sums {
+                        for k in 0..4 {
+                            sum[k] += s[p][k];
+                        }
+                    }
+                    recon::resolve(&sum, frame.items()[p], raster_items[p], &mut colors)
+                })
+                .collect();
+            frame.resolved_color_mut().copy_from_slice(&resolved);
+        }
         // Store the new sets (LRU eviction under the budget).
         let mut evictions = 0u64;
         let mut built_samples = 0u64;
@@ -616,6 +922,9 @@ impl Renderer for Rzb {
         let c = &mut stats.counters;
         c.add("boxes_selected", sel.jobs.len() as u64);
         c.add("boxes_zbuffer", sel.boxes_zbuffer);
+        if self.opts.orientation > 0 {
+            c.add("boxes_backfacing", sel.boxes_backfacing);
+        }
         c.add("instances_visited", sel.instances_visited);
         c.add("samples_generated", sum.generated + built_samples);
         c.add("samples_backfacing", sum.backfacing);

@@ -49,6 +49,74 @@ pub struct Sampler<'a> {
     pub far_depth: f32,
     /// Renderer seed.
     pub seed: u64,
+    /// Frame width in pixels.
+    pub width: u32,
+    /// Frame height in pixels.
+    pub height: u32,
+}
+
+/// A sample projected into the view.
+#[derive(Clone, Copy, Debug)]
+pub struct Projected {
+    /// Position in pixels (0 at the left edge), in `[0, width]`.
+    pub x: f32,
+    /// Position in pixels (0 at the top edge), in `[0, height]`.
+    pub y: f32,
+    /// Reversed-Z depth.
+    pub depth: f32,
+    /// Item id.
+    pub item: ItemId,
+}
+
+/// Projects `p` by `clip_from_space`: `None` outside the view volume.
+#[inline]
+fn project(
+    clip_from_space: &Mat4,
+    p: Vec3,
+    item: ItemId,
+    width: u32,
+    height: u32,
+    far_depth: f32,
+) -> Option<Projected> {
+    let c = *clip_from_space * p.extend(1.0);
+    // Reversed-Z: depth = near / w ≤ 1 in front of the near plane; NaN fails `w > 0`.
+    let in_front = c.w > 0.0;
+    if !in_front || c.z > c.w || c.x.abs() > c.w || c.y.abs() > c.w {
+        return None;
+    }
+    let inv_w = 1.0 / c.w;
+    let depth = c.z * inv_w;
+    if depth < far_depth {
+        return None;
+    }
+    Some(Projected {
+        x: (c.x * inv_w * 0.5 + 0.5) * width as f32,
+        y: (0.5 - c.y * inv_w * 0.5) * height as f32,
+        depth,
+        item,
+    })
+}
+
+/// What a structure with a distribution tree samples from (§5.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Part {
+    /// The subtree of an octree node.
+    Subtree(u32),
+    /// A node's own entries.
+    Own(u32),
+    /// Every class (an entered instance).
+    Whole,
+}
+
+impl Part {
+    /// The part a selected box samples from.
+    pub fn of(job: &Job) -> Self {
+        if job.own {
+            Part::Own(job.node)
+        } else {
+            Part::Subtree(job.node)
+        }
+    }
 }
 
 /// A space samples are generated in: a structure or an instance below it.
@@ -143,10 +211,15 @@ impl Sampler<'_> {
     /// inversions (§5.2), but the list is read in order, and an instance chosen `k` times is
     /// entered once with `k` samples (its transform composed once), instead of once per
     /// sample through the whole instance chain.
+    ///
+    /// §5.4: a structure with a distribution tree samples from it instead: `part` (the job's
+    /// node, or the whole tree for an entered instance) is descended once per sample.
+    #[allow(clippy::too_many_arguments)]
     pub fn generate<F: FnMut(&Place, Vec3, Vec3, ItemId)>(
         &self,
         sid: u32,
         range: std::ops::Range<u32>,
+        part: Part,
         n: u64,
         place: &Place,
         rng: &mut Pcg64Mcg,
@@ -157,7 +230,45 @@ impl Sampler<'_> {
         }
         let st = &self.structures[sid as usize];
         let node = self.scene.node(occult_core::NodeId(sid));
+        if let Some(tree) = &st.tree {
+            for _ in 0..n {
+                let u = rng.random::<f64>();
+                let pick = match part {
+                    Part::Subtree(nd) => tree.sample(nd, u),
+                    Part::Own(nd) => tree.sample_own(nd, u),
+                    Part::Whole => tree.sample_all(u),
+                };
+                let Some(e) = pick else { return };
+                let e = e as usize;
+                match node.kind() {
+                    NodeKind::Mesh(m) => self.points(m, e, 1, place, rng, f),
+                    NodeKind::Group(g) => {
+                        let inst = &g[e];
+                        let child = place.enter(inst, node.item_offset(e), self.backface);
+                        self.generate(inst.child.0, 0..0, Part::Whole, 1, &child, rng, f);
+                    }
+                }
+            }
+            return;
+        }
         let entries = st.octree.entries();
+        // One sample from a whole structure (an instance entered once, the common case at the
+        // deep levels of instancing): the alias table picks in O(1) instead of a binary search.
+        if n == 1 && range.start == 0 && range.end as usize == entries.len() && !st.alias.is_empty() {
+            let pos = st.alias.pick(rng.random::<f64>());
+            let e = entries[pos as usize] as usize;
+            match node.kind() {
+                NodeKind::Mesh(m) => self.points(m, e, 1, place, rng, f),
+                NodeKind::Group(g) => {
+                    let inst = &g[e];
+                    let child = place.enter(inst, node.item_offset(e), self.backface);
+                    let cid = inst.child.0;
+                    let len = self.structures[cid as usize].octree.entries().len() as u32;
+                    self.generate(cid, 0..len, Part::Whole, 1, &child, rng, f);
+                }
+            }
+            return;
+        }
         let mut hi = range.end; // one past the last position a smaller target can land on
         let lo_area = st.octree.prefix(range.start);
         let area = st.octree.prefix(range.end) - lo_area;
@@ -166,7 +277,14 @@ impl Sampler<'_> {
         let mut run: Option<(u32, u64)> = None;
         loop {
             let pick = if k > 0 {
-                x *= rng.random::<f64>().powf(1.0 / k as f64);
+                // U^(1/k); the common small k without `powf` (a fifth of the time on deep
+                // instancing, where most instances are entered with one or two samples).
+                let u = rng.random::<f64>();
+                x *= match k {
+                    1 => u,
+                    2 => u.sqrt(),
+                    _ => u.powf(1.0 / k as f64),
+                };
                 k -= 1;
                 let pos = st.octree.locate(range.start..hi, lo_area + x * area);
                 // Picks descend: the next one lies at or before this position.
@@ -181,24 +299,13 @@ impl Sampler<'_> {
                     if let Some((pos, count)) = prev {
                         let e = entries[pos as usize] as usize;
                         match node.kind() {
-                            NodeKind::Mesh(m) => {
-                                let [a, b, c] = m.triangle_positions(e);
-                                let normal = (b - a).cross(c - a);
-                                for _ in 0..count {
-                                    let (mut r1, mut r2) = (rng.random::<f32>(), rng.random::<f32>());
-                                    if r1 + r2 > 1.0 {
-                                        r1 = 1.0 - r1;
-                                        r2 = 1.0 - r2;
-                                    }
-                                    f(place, a + (b - a) * r1 + (c - a) * r2, normal, place.base + e as u64);
-                                }
-                            }
+                            NodeKind::Mesh(m) => self.points(m, e, count, place, rng, f),
                             NodeKind::Group(g) => {
                                 let inst = &g[e];
                                 let child = place.enter(inst, node.item_offset(e), self.backface);
                                 let cid = inst.child.0;
                                 let len = self.structures[cid as usize].octree.entries().len() as u32;
-                                self.generate(cid, 0..len, count, &child, rng, f);
+                                self.generate(cid, 0..len, Part::Whole, count, &child, rng, f);
                             }
                         }
                     }
@@ -211,27 +318,32 @@ impl Sampler<'_> {
         }
     }
 
-    /// Draws `count` fresh samples of `job` into `out`.
+    /// `count` uniform points on triangle `e` of `m` (§5.2), passed to `f`.
+    #[inline]
+    fn points<F: FnMut(&Place, Vec3, Vec3, ItemId)>(
+        &self,
+        m: &occult_core::Mesh,
+        e: usize,
+        count: u64,
+        place: &Place,
+        rng: &mut Pcg64Mcg,
+        f: &mut F,
+    ) {
+        let [a, b, c] = m.triangle_positions(e);
+        let normal = (b - a).cross(c - a);
+        for _ in 0..count {
+            let (mut r1, mut r2) = (rng.random::<f32>(), rng.random::<f32>());
+            if r1 + r2 > 1.0 {
+                r1 = 1.0 - r1;
+                r2 = 1.0 - r2;
+            }
+            f(place, a + (b - a) * r1 + (c - a) * r2, normal, place.base + e as u64);
+        }
+    }
+
+    /// Draws `count` fresh samples of `job` into `out` (§4.1 per pixel, §4.2 splats).
     pub fn draw_job(&self, job: &Job, count: u64, rng: &mut Pcg64Mcg, out: &mut Target<'_>, counts: &mut SampleCounts) {
-        let place = Place::new(job, self.eye, self.backface);
-        let backface = self.backface;
-        self.generate(
-            job.structure,
-            job.range.clone(),
-            count,
-            &place,
-            rng,
-            &mut |pl, p, n, item| {
-                counts.generated += 1;
-                // §5.3.3: the eye taken into the mesh's space, the determinant's sign restoring
-                // the winding.
-                if backface && pl.sign * n.dot(pl.eye - p) <= 0.0 {
-                    counts.backfacing += 1;
-                    return;
-                }
-                self.splat(&pl.clip_from_space, p, item, out, counts);
-            },
-        );
+        self.project_job(job, count, rng, counts, &mut |s| self.splat(s, out));
     }
 
     /// Draws cached samples (already quantized) of a box placed by `clip_from_structure`.
@@ -243,38 +355,78 @@ impl Sampler<'_> {
         out: &mut Target<'_>,
         counts: &mut SampleCounts,
     ) {
+        self.project_cached(clip_from_structure, base, samples, counts, &mut |s| self.splat(s, out));
+    }
+
+    /// Generates `count` fresh samples of `job` (§5.2, §5.3.3 back faces rejected) and passes
+    /// those that project into the view to `emit`. The same generator state gives the same
+    /// samples, which lets a second pass revisit them (§4.2 Gaussian reconstruction).
+    pub fn project_job<E: FnMut(Projected)>(
+        &self,
+        job: &Job,
+        count: u64,
+        rng: &mut Pcg64Mcg,
+        counts: &mut SampleCounts,
+        emit: &mut E,
+    ) {
+        let place = Place::new(job, self.eye, self.backface);
+        let backface = self.backface;
+        let (width, height) = (self.width, self.height);
+        let far_depth = self.far_depth;
+        self.generate(
+            job.structure,
+            job.range.clone(),
+            Part::of(job),
+            count,
+            &place,
+            rng,
+            &mut |pl, p, n, item| {
+                counts.generated += 1;
+                // §5.3.3: the eye taken into the mesh's space, the determinant's sign restoring
+                // the winding.
+                if backface && pl.sign * n.dot(pl.eye - p) <= 0.0 {
+                    counts.backfacing += 1;
+                    return;
+                }
+                if let Some(s) = project(&pl.clip_from_space, p, item, width, height, far_depth) {
+                    counts.drawn += 1;
+                    emit(s);
+                }
+            },
+        );
+    }
+
+    /// Passes the cached samples that project into the view to `emit`.
+    pub fn project_cached<E: FnMut(Projected)>(
+        &self,
+        clip_from_structure: &Mat4,
+        base: ItemId,
+        samples: &[CachedSample],
+        counts: &mut SampleCounts,
+        emit: &mut E,
+    ) {
         for s in samples {
-            self.splat(clip_from_structure, s.position, base + s.item, out, counts);
+            if let Some(p) = project(
+                clip_from_structure,
+                s.position,
+                base + s.item,
+                self.width,
+                self.height,
+                self.far_depth,
+            ) {
+                counts.drawn += 1;
+                emit(p);
+            }
         }
     }
 
-    /// §4.1/§4.2: projects `p` and writes a `d × d` splat of its depth and item under the frame's
+    /// §4.1/§4.2: writes a `d × d` splat of the sample's depth and item under the frame's
     /// (depth, item) rule.
     #[inline]
-    fn splat(
-        &self,
-        clip_from_structure: &Mat4,
-        p: Vec3,
-        item: ItemId,
-        out: &mut Target<'_>,
-        counts: &mut SampleCounts,
-    ) {
-        let c = *clip_from_structure * p.extend(1.0);
-        // Reversed-Z: depth = near / w ≤ 1 in front of the near plane; NaN fails `w > 0`.
-        let in_front = c.w > 0.0;
-        if !in_front || c.z > c.w || c.x.abs() > c.w || c.y.abs() > c.w {
-            return;
-        }
-        let inv_w = 1.0 / c.w;
-        let depth = c.z * inv_w;
-        if depth < self.far_depth {
-            return;
-        }
-        let sx = (c.x * inv_w * 0.5 + 0.5) * out.width as f32;
-        let sy = (0.5 - c.y * inv_w * 0.5) * out.height as f32;
-        let px = (sx as u32).min(out.width - 1);
-        let py = (sy as u32).min(out.height - 1);
-        counts.drawn += 1;
+    fn splat(&self, s: Projected, out: &mut Target<'_>) {
+        let px = (s.x as u32).min(out.width - 1);
+        let py = (s.y as u32).min(out.height - 1);
+        let (depth, item) = (s.depth, s.item);
         if self.splat == 1 {
             let i = (py * out.width + px) as usize;
             keep_fragment(&mut out.depth[i], &mut out.items[i], depth, item);

@@ -6,7 +6,7 @@ use occult_core::{
 };
 use occult_raster::{Draw, DrawTriangles};
 
-use super::structure::{area_scale, Structure};
+use super::structure::{area_scale, Cone, Section, Structure};
 use super::RzbOptions;
 
 /// Per-view constants of the projection factor (§5.1).
@@ -54,6 +54,10 @@ pub struct Job {
     pub structure: u32,
     /// Its list positions.
     pub range: std::ops::Range<u32>,
+    /// Its octree node.
+    pub node: u32,
+    /// Only the node's own entries.
+    pub own: bool,
     /// The placement, composed from the root.
     pub world_from_structure: Affine3A,
     /// `view.clip_from_object(world_from_structure)`.
@@ -77,6 +81,9 @@ pub struct Selection<'a> {
     eps: f64,
     large: Option<f64>,
     oversample: f64,
+    /// Samples on back faces are rejected (§5.3.3): boxes whose orientation class faces away
+    /// entirely are skipped (§5.3.4).
+    backface: bool,
     /// Selected boxes.
     pub jobs: Vec<Job>,
     /// Triangles drawn by the z-buffer (§7.1).
@@ -89,6 +96,8 @@ pub struct Selection<'a> {
     pub instances_visited: u64,
     /// Boxes handed to the z-buffer.
     pub boxes_zbuffer: u64,
+    /// §5.3.4: boxes skipped wholesale because their orientation class faces away.
+    pub boxes_backfacing: u64,
 }
 
 struct Place {
@@ -100,11 +109,41 @@ struct Place {
     rows: [Vec4; 3],
     area_scale: f64,
     base: ItemId,
+    /// §5.3.4: the eye in structure space, when the placement is a similarity (angles kept).
+    eye: Option<Vec3>,
+    /// The placement mirrors (front faces are the other side).
+    mirrored: bool,
+}
+
+/// §5.3.4: bounds of `cos γ` (γ between a normal of `cone` and the direction from a point of
+/// box `b` to `eye`), all in structure space: (largest |cos γ| with both sides kept, largest
+/// cos γ of front faces; ≤ 0 when every face looks away). `None` when unbounded (eye in the
+/// box's sphere).
+fn orientation_bound(cone: &Cone, b: &Aabb, eye: Vec3, mirrored: bool) -> Option<(f64, f64)> {
+    let to_eye = eye - b.center();
+    let dist = to_eye.length();
+    let radius = b.half_extent().length();
+    if dist.is_nan() || dist <= radius || cone.half_angle >= std::f32::consts::PI {
+        return None;
+    }
+    let axis = if mirrored { -cone.axis } else { cone.axis };
+    let theta = (to_eye.dot(axis) / dist).clamp(-1.0, 1.0).acos() as f64;
+    let spread = cone.half_angle as f64 + (radius / dist).asin() as f64;
+    let front = (theta - spread).max(0.0).cos();
+    let back = (std::f64::consts::PI - theta - spread).max(0.0).cos();
+    Some((front.max(back), front))
 }
 
 impl<'a> Selection<'a> {
     /// Selects the boxes of `view` with depth accuracy `eps`.
-    pub fn run(scene: &'a Scene, structures: &'a [Structure], view: &'a View, opts: &RzbOptions, eps: f64) -> Self {
+    pub fn run(
+        scene: &'a Scene,
+        structures: &'a [Structure],
+        view: &'a View,
+        opts: &RzbOptions,
+        eps: f64,
+        backface: bool,
+    ) -> Self {
         let mut s = Self {
             scene,
             structures,
@@ -113,12 +152,14 @@ impl<'a> Selection<'a> {
             eps,
             large: opts.large.then_some(opts.large_threshold),
             oversample: opts.oversample,
+            backface,
             jobs: Vec::new(),
             draws: Vec::new(),
             boxes_tested: 0,
             boxes_culled: 0,
             instances_visited: 0,
             boxes_zbuffer: 0,
+            boxes_backfacing: 0,
         };
         s.structure(scene.root(), Affine3A::IDENTITY, 0);
         s
@@ -140,15 +181,22 @@ impl<'a> Selection<'a> {
             rows: [t.x_axis, t.y_axis, t.z_axis],
             area_scale: area_scale(&world_from_structure),
             base,
+            eye: (!st.cones.is_empty() && is_similarity(&world_from_structure))
+                .then(|| world_from_structure.inverse().transform_point3(self.consts.eye)),
+            mirrored: world_from_structure.matrix3.determinant() < 0.0,
         };
-        for root in st.octree.roots().iter().flatten() {
-            self.node(&place, *root);
+        for (class, root) in st.octree.roots().iter().enumerate() {
+            if let Some(root) = root {
+                self.node(&place, *root, st.cones.get(class));
+            }
         }
     }
 
     /// §5.1/§5.3: (nearest view distance clamped to the near plane, farthest, samples) of the
-    /// list positions `range` bounded by `b`.
-    fn estimate(&self, p: &Place, b: &Aabb, range: std::ops::Range<u32>) -> (f64, f64, f64) {
+    /// list positions `range` bounded by `b`; with an orientation class (§5.3.4) the samples
+    /// carry its bound of the orientation factor, `None` when every face looks away and back
+    /// faces are rejected.
+    fn estimate(&self, p: &Place, b: &Aabb, sec: &Section, cone: Option<&Cone>) -> Option<(f64, f64, f64)> {
         let c = b.center();
         let h = b.half_extent();
         let axis = |r: Vec4| (r.truncate().dot(c) + r.w, r.truncate().abs().dot(h));
@@ -163,11 +211,23 @@ impl<'a> Selection<'a> {
             .sqrt()
             .min(self.consts.max_inv_cos);
         let st = &self.structures[p.id.index()];
-        let area = st.octree.area(range) * p.area_scale;
+        let area = st.section_area(sec) * p.area_scale;
         let prj = self.consts.focal_px * self.consts.focal_px / (z_min * z_min) * inv_cos;
         let d2 = (self.consts.splat * self.consts.splat) as f64;
-        let samples = area * prj * self.consts.ln_v / d2 * self.oversample;
-        (z_min, z_max, samples)
+        let mut samples = area * prj * self.consts.ln_v / d2 * self.oversample;
+        if let (Some(cone), Some(eye)) = (cone, p.eye) {
+            if let Some((both, front)) = orientation_bound(cone, b, eye, p.mirrored) {
+                if self.backface {
+                    if front <= 0.0 {
+                        return None;
+                    }
+                    samples *= front;
+                } else {
+                    samples *= both;
+                }
+            }
+        }
+        Some((z_min, z_max, samples))
     }
 
     fn test(&mut self, p: &Place, b: &Aabb) -> bool {
@@ -181,26 +241,39 @@ impl<'a> Selection<'a> {
 
     /// §5.3.2: select node `n` when its depth-factor ratio `(z_max / z_min)²` is within ε (and,
     /// with §7.1, its triangles are small enough to sample); otherwise descend.
-    fn node(&mut self, p: &Place, n: u32) {
+    fn node(&mut self, p: &Place, n: u32, cone: Option<&Cone>) {
         let st = &self.structures[p.id.index()];
         let node = st.octree.nodes()[n as usize];
         if !self.test(p, &node.bounds) {
             return;
         }
-        let (z_min, z_max, samples) = self.estimate(p, &node.bounds, node.section());
+        let whole = Section {
+            node: n,
+            own: false,
+            range: node.section(),
+        };
+        let Some((z_min, z_max, samples)) = self.estimate(p, &node.bounds, &whole, cone) else {
+            self.boxes_backfacing += 1;
+            return;
+        };
         let ratio = (z_max / z_min).powi(2);
-        let per_item = samples / st.items(node.section()).max(1) as f64;
+        let per_item = samples / st.section_items(&whole).max(1) as f64;
         let too_dense = self.large.is_some_and(|t| per_item > t);
         if ratio <= self.eps && !too_dense {
-            self.select(p, node.section(), samples, z_min);
+            self.select(p, whole, samples, z_min);
         } else if node.is_leaf() {
-            self.part(p, node.section(), node.bounds, false);
+            self.part(p, whole, node.bounds, false, cone);
         } else {
             for c in node.children() {
-                self.node(p, c);
+                self.node(p, c, cone);
             }
             if node.own_first < node.end {
-                self.part(p, node.own(), node.own_bounds, true);
+                let own = Section {
+                    node: n,
+                    own: true,
+                    range: node.own(),
+                };
+                self.part(p, own, node.own_bounds, true, cone);
             }
         }
     }
@@ -208,31 +281,48 @@ impl<'a> Selection<'a> {
     /// List positions that cannot be split spatially (a leaf, or a node's own entries).
     /// Triangles: sampled at the bound's nearest distance, or drawn by the z-buffer when they
     /// would get more than the threshold of samples each (§7.1). Instances: each entered.
-    fn part(&mut self, p: &Place, range: std::ops::Range<u32>, bounds: Aabb, test: bool) {
+    fn part(&mut self, p: &Place, sec: Section, bounds: Aabb, test: bool, cone: Option<&Cone>) {
         if test && !self.test(p, &bounds) {
             return;
         }
         let st = &self.structures[p.id.index()];
         match self.scene.node(p.id).kind() {
             NodeKind::Mesh(mesh) => {
-                let (z_min, _, samples) = self.estimate(p, &bounds, range.clone());
-                let per_item = samples / st.items(range.clone()).max(1) as f64;
+                let Some((z_min, _, samples)) = self.estimate(p, &bounds, &sec, cone) else {
+                    self.boxes_backfacing += 1;
+                    return;
+                };
+                let items = st.section_items(&sec);
+                if items == 0 {
+                    return;
+                }
+                let per_item = samples / items as f64;
                 if self.large.is_some_and(|t| per_item > t) {
                     self.boxes_zbuffer += 1;
+                    // A leaf's section is its own list; with a distribution tree, the entries
+                    // present now (sorted by id, as the static list).
+                    let list = match &st.tree {
+                        Some(t) => t.own(sec.node),
+                        None => &st.octree.entries()[sec.range.start as usize..sec.range.end as usize],
+                    };
                     self.draws.push(Draw {
                         mesh,
-                        triangles: DrawTriangles::List(&st.octree.entries()[range.start as usize..range.end as usize]),
+                        triangles: DrawTriangles::List(list),
                         clip_from_object: p.clip_from_structure,
                         first_item: p.base,
                     });
                 } else {
-                    self.select(p, range, samples, z_min);
+                    self.select(p, sec, samples, z_min);
                 }
             }
             NodeKind::Group(instances) => {
                 let node = self.scene.node(p.id);
-                for pos in range {
-                    let e = st.octree.entries()[pos as usize] as usize;
+                let present: &[u32] = match &st.tree {
+                    Some(t) => t.own(sec.node),
+                    None => &st.octree.entries()[sec.range.start as usize..sec.range.end as usize],
+                };
+                for &e in present {
+                    let e = e as usize;
                     let inst = &instances[e];
                     let world_from_child = compose(&p.world_from_structure, &inst.parent_from_child);
                     self.structure(inst.child, world_from_child, p.base + node.item_offset(e));
@@ -241,10 +331,15 @@ impl<'a> Selection<'a> {
         }
     }
 
-    fn select(&mut self, p: &Place, range: std::ops::Range<u32>, samples: f64, z_min: f64) {
+    fn select(&mut self, p: &Place, sec: Section, samples: f64, z_min: f64) {
+        if samples <= 0.0 {
+            return;
+        }
         self.jobs.push(Job {
             structure: p.id.0,
-            range,
+            range: sec.range,
+            node: sec.node,
+            own: sec.own,
             world_from_structure: p.world_from_structure,
             clip_from_structure: p.clip_from_structure,
             base: p.base,
@@ -253,4 +348,19 @@ impl<'a> Selection<'a> {
             scale: p.area_scale.sqrt() as f32,
         });
     }
+}
+
+/// True when `t`'s linear part is a rotation (or reflection) times a uniform scale, so angles
+/// between directions are kept.
+fn is_similarity(t: &Affine3A) -> bool {
+    let m = t.matrix3;
+    let (x, y, z) = (Vec3::from(m.x_axis), Vec3::from(m.y_axis), Vec3::from(m.z_axis));
+    let l = x.length_squared();
+    let tol = 1e-4 * l;
+    l > 0.0
+        && (y.length_squared() - l).abs() <= tol
+        && (z.length_squared() - l).abs() <= tol
+        && x.dot(y).abs() <= tol
+        && y.dot(z).abs() <= tol
+        && x.dot(z).abs() <= tol
 }

@@ -1,7 +1,7 @@
 //! Precomputed sampling structures, one per node of the scene DAG (§5.3.1, §7.1, §7.3).
 
 use occult_core::{Aabb, Affine3A, NodeId, NodeKind, Scene, Vec3};
-use occult_spatial::sample_octree::{SampleOctree, SampleOctreeConfig};
+use occult_spatial::sample_octree::{DistributionTree, SampleOctree, SampleOctreeConfig};
 
 /// Most area classes per mesh (§7.1): with ratio ≥ 1.01 this covers area ratios far beyond
 /// `f32`'s range.
@@ -23,9 +23,135 @@ pub struct Structure {
     pub area: f64,
     /// Groups: item count before each list position (length entries + 1); empty for meshes.
     pub item_prefix: Vec<u64>,
+    /// §5.3.4: the normal cone of each class (meshes with orientation classes; empty
+    /// otherwise).
+    pub cones: Vec<Cone>,
+    /// Walker's alias table over the whole list, for single picks from a whole structure.
+    pub alias: AliasTable,
+    /// §5.4 (`dynamic=on`): the distribution tree over the octree's nodes; sampling and the
+    /// areas and item counts of boxes then come from it, and entries can be removed and
+    /// inserted. `None`: the static lists.
+    pub tree: Option<DistributionTree>,
+}
+
+/// Walker's alias table over list positions (weights = entry areas): one uniform number picks
+/// a position with probability proportional to its area in O(1).
+///
+/// Deviation from §5.2: used only where a whole structure gives a single sample (an instance
+/// entered once); sections of the list and several samples still invert the distribution
+/// list. Same distribution, fewer dependent loads on deep instancing.
+#[derive(Clone, Debug, Default)]
+pub struct AliasTable {
+    /// Per position: probability of keeping it, and its alias.
+    slots: Vec<(f64, u32)>,
+}
+
+impl AliasTable {
+    /// The table of `weights` (non-negative, finite, positive sum); empty otherwise.
+    pub fn new(weights: impl ExactSizeIterator<Item = f64>) -> Self {
+        let n = weights.len();
+        let w: Vec<f64> = weights.collect();
+        let total: f64 = w.iter().sum();
+        if n == 0 || !(total > 0.0 && total.is_finite()) {
+            return Self::default();
+        }
+        // Vose's method.
+        let mut scaled: Vec<f64> = w.iter().map(|&x| x * n as f64 / total).collect();
+        let mut slots = vec![(1.0f64, 0u32); n];
+        let (mut small, mut large): (Vec<u32>, Vec<u32>) = (0..n as u32).partition(|&i| scaled[i as usize] < 1.0);
+        while let (Some(&l), Some(&g)) = (small.last(), large.last()) {
+            small.pop();
+            slots[l as usize] = (scaled[l as usize], g);
+            scaled[g as usize] = (scaled[g as usize] + scaled[l as usize]) - 1.0;
+            if scaled[g as usize] < 1.0 {
+                large.pop();
+                small.push(g);
+            }
+        }
+        for i in large.into_iter().chain(small) {
+            slots[i as usize] = (1.0, i);
+        }
+        Self { slots }
+    }
+
+    /// True when there is no table.
+    pub fn is_empty(&self) -> bool {
+        self.slots.is_empty()
+    }
+
+    /// The position picked by `u ∈ [0, 1)`.
+    #[inline]
+    pub fn pick(&self, u: f64) -> u32 {
+        let x = u * self.slots.len() as f64;
+        let i = (x as usize).min(self.slots.len() - 1);
+        let (keep, alias) = self.slots[i];
+        if x - (i as f64) < keep {
+            i as u32
+        } else {
+            alias
+        }
+    }
+
+    /// Bytes held.
+    pub fn memory_bytes(&self) -> usize {
+        self.slots.len() * 16
+    }
+}
+
+/// A part of a structure's octree: the subtree of a node, or a node's own entries, with its
+/// positions in the static list.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Section {
+    /// The node.
+    pub node: u32,
+    /// Only the node's own entries (for a leaf both are the same).
+    pub own: bool,
+    /// Static list positions.
+    pub range: std::ops::Range<u32>,
+}
+
+/// §5.3.4: the normals of an orientation class: every unit normal lies within `half_angle`
+/// (radians, π when unbounded) of `axis`, in the mesh's own space.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cone {
+    /// Unit axis.
+    pub axis: Vec3,
+    /// Half opening angle in radians.
+    pub half_angle: f32,
+}
+
+/// §5.3.4: the orientation class of unit normal `n` on a polar grid of `bands` bands of the polar
+/// angle θ (from +z) and `2 · bands` sectors of the azimuth φ: `2 · bands²` classes.
+pub fn orientation_class(n: Vec3, bands: u32) -> u32 {
+    let b = bands.max(1);
+    let theta = n.z.clamp(-1.0, 1.0).acos();
+    let phi = n.y.atan2(n.x) + std::f32::consts::PI;
+    let band = ((theta / std::f32::consts::PI * b as f32) as u32).min(b - 1);
+    let sector = ((phi / std::f32::consts::TAU * (2 * b) as f32) as u32).min(2 * b - 1);
+    band * 2 * b + sector
 }
 
 impl Structure {
+    /// Summed area of `sec` (present entries only with a distribution tree).
+    #[inline]
+    pub fn section_area(&self, sec: &Section) -> f64 {
+        match &self.tree {
+            Some(t) if sec.own => t.own_area(sec.node),
+            Some(t) => t.subtree_area(sec.node),
+            None => self.octree.area(sec.range.clone()),
+        }
+    }
+
+    /// Triangle instances in `sec` (present entries only with a distribution tree).
+    #[inline]
+    pub fn section_items(&self, sec: &Section) -> u64 {
+        match &self.tree {
+            Some(t) if sec.own => t.own_weight(sec.node),
+            Some(t) => t.subtree_weight(sec.node),
+            None => self.items(sec.range.clone()),
+        }
+    }
+
     /// Triangle instances in list positions `range`.
     #[inline]
     pub fn items(&self, range: std::ops::Range<u32>) -> u64 {
@@ -38,7 +164,13 @@ impl Structure {
 
     /// Bytes held.
     pub fn memory_bytes(&self) -> usize {
-        self.octree.memory_bytes() + self.item_prefix.len() * 8
+        // The distribution tree: about one node (≈ 80 bytes) per octree node plus 24 bytes per
+        // entry (id in a list, area, weight, location, home).
+        let tree = self
+            .tree
+            .as_ref()
+            .map_or(0, |t| t.node_count() * 80 + self.octree.entries().len() * 28);
+        self.octree.memory_bytes() + self.item_prefix.len() * 8 + tree + self.alias.memory_bytes()
     }
 }
 
@@ -58,7 +190,16 @@ pub fn triangle_area(p: [Vec3; 3]) -> f64 {
 }
 
 /// Builds the structure of every node (children before parents, as the DAG stores them).
-pub fn build_all(scene: &Scene, config: &SampleOctreeConfig, area_ratio: f64) -> Vec<Structure> {
+///
+/// `orientation` (§5.3.4): bands of the polar grid of orientation classes, 0 for none.
+/// `dynamic` (§5.4): also build each node's distribution tree.
+pub fn build_all(
+    scene: &Scene,
+    config: &SampleOctreeConfig,
+    area_ratio: f64,
+    orientation: u32,
+    dynamic: bool,
+) -> Vec<Structure> {
     use rayon::prelude::*;
     // Node areas first (groups need their children's), then the octrees in parallel.
     let mut areas = vec![0.0f64; scene.nodes().len()];
@@ -84,11 +225,46 @@ pub fn build_all(scene: &Scene, config: &SampleOctreeConfig, area_ratio: f64) ->
     }
     (0..scene.nodes().len())
         .into_par_iter()
-        .map(|i| build_one(scene, NodeId(i as u32), &areas, config, area_ratio))
+        .map(|i| {
+            let mut st = build_one(scene, NodeId(i as u32), &areas, config, area_ratio, orientation);
+            let o = &st.octree;
+            st.alias = AliasTable::new((0..o.entries().len() as u32).map(|p| o.area(p..p + 1)));
+            if dynamic {
+                let (areas, weights) = entry_areas(scene, NodeId(i as u32), &areas);
+                st.tree = Some(DistributionTree::from_octree(&st.octree, &areas, &weights));
+            }
+            st
+        })
         .collect()
 }
 
-fn build_one(scene: &Scene, id: NodeId, areas: &[f64], config: &SampleOctreeConfig, area_ratio: f64) -> Structure {
+/// Area and triangle-instance count of every entry of node `id` (triangles: own-space area, 1;
+/// instances: the child's area scaled, its item count), as the static build weighs them.
+pub fn entry_areas(scene: &Scene, id: NodeId, node_areas: &[f64]) -> (Vec<f64>, Vec<u64>) {
+    match scene.node(id).kind() {
+        NodeKind::Mesh(m) => (
+            (0..m.triangle_count())
+                .map(|t| triangle_area(m.triangle_positions(t)))
+                .collect(),
+            vec![1; m.triangle_count()],
+        ),
+        NodeKind::Group(g) => (
+            g.iter()
+                .map(|inst| node_areas[inst.child.index()] * area_scale(&inst.parent_from_child))
+                .collect(),
+            g.iter().map(|inst| scene.node(inst.child).item_count()).collect(),
+        ),
+    }
+}
+
+fn build_one(
+    scene: &Scene,
+    id: NodeId,
+    areas: &[f64],
+    config: &SampleOctreeConfig,
+    area_ratio: f64,
+    orientation: u32,
+) -> Structure {
     let node = scene.node(id);
     match node.kind() {
         NodeKind::Mesh(m) => {
@@ -119,13 +295,67 @@ fn build_one(scene: &Scene, id: NodeId, areas: &[f64], config: &SampleOctreeConf
                     }
                 })
                 .collect();
-            let class_count = classes.iter().copied().max().map_or(0, |c| c as usize + 1);
+            let area_classes = classes.iter().copied().max().map_or(0, |c| c as usize + 1);
+            if orientation == 0 {
+                let octree = SampleOctree::build(&boxes, &tri_areas, &classes, area_classes, config);
+                let area = octree.total_area();
+                return Structure {
+                    octree,
+                    area,
+                    item_prefix: Vec::new(),
+                    cones: Vec::new(),
+                    tree: None,
+                    alias: AliasTable::default(),
+                };
+            }
+            // §5.3.4: class = area class × orientation class; each class's cone bounds the
+            // normals of its triangles.
+            let per = 2 * orientation * orientation;
+            let normals: Vec<Vec3> = (0..n)
+                .map(|t| {
+                    let [a, b, c] = m.triangle_positions(t);
+                    (b - a).cross(c - a).normalize_or_zero()
+                })
+                .collect();
+            let classes: Vec<u32> = classes
+                .iter()
+                .zip(&normals)
+                .map(|(&c, &nm)| c * per + orientation_class(nm, orientation))
+                .collect();
+            let class_count = area_classes * per as usize;
+            let mut sums = vec![occult_core::glam::DVec3::ZERO; class_count];
+            for (&c, &nm) in classes.iter().zip(&normals) {
+                sums[c as usize] += nm.as_dvec3();
+            }
+            let axes: Vec<Vec3> = sums.iter().map(|s| s.normalize_or_zero().as_vec3()).collect();
+            let mut half = vec![0.0f32; class_count];
+            for (&c, &nm) in classes.iter().zip(&normals) {
+                let a = axes[c as usize];
+                let h = &mut half[c as usize];
+                *h = if a == Vec3::ZERO || nm == Vec3::ZERO {
+                    std::f32::consts::PI
+                } else {
+                    // Rounding margin: the bound must hold.
+                    h.max(nm.dot(a).clamp(-1.0, 1.0).acos() + 1e-4)
+                };
+            }
+            let cones = axes
+                .into_iter()
+                .zip(half)
+                .map(|(axis, half_angle)| Cone {
+                    axis,
+                    half_angle: half_angle.min(std::f32::consts::PI),
+                })
+                .collect();
             let octree = SampleOctree::build(&boxes, &tri_areas, &classes, class_count, config);
             let area = octree.total_area();
             Structure {
                 octree,
                 area,
                 item_prefix: Vec::new(),
+                cones,
+                tree: None,
+                alias: AliasTable::default(),
             }
         }
         NodeKind::Group(g) => {
@@ -150,7 +380,42 @@ fn build_one(scene: &Scene, id: NodeId, areas: &[f64], config: &SampleOctreeConf
                 octree,
                 area,
                 item_prefix,
+                cones: Vec::new(),
+                tree: None,
+                alias: AliasTable::default(),
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn alias_table_picks_in_proportion_to_weights() {
+        let w = [1.0, 0.0, 3.0, 0.5, 2.5, 1.0];
+        let t = AliasTable::new(w.iter().copied());
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(4);
+        let mut h = [0u32; 6];
+        let n = 200_000;
+        for _ in 0..n {
+            h[t.pick(rng.random::<f64>()) as usize] += 1;
+        }
+        assert_eq!(h[1], 0);
+        // χ² with 4 degrees of freedom: 25 is far beyond the 0.1 % point (18.5).
+        let chi: f64 = w
+            .iter()
+            .zip(h)
+            .filter(|(&w, _)| w > 0.0)
+            .map(|(&w, c)| {
+                let e = n as f64 * w / 8.0;
+                (c as f64 - e).powi(2) / e
+            })
+            .sum();
+        assert!(chi < 25.0, "chi² {chi}");
+        assert!(AliasTable::new([0.0, 0.0].into_iter()).is_empty());
+        assert_eq!(AliasTable::new([2.0].into_iter()).pick(0.999), 0);
     }
 }
