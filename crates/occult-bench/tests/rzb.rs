@@ -237,7 +237,7 @@ fn bad_parameters_are_errors() {
         "rzb:sigma=9",
         "rzb:gauss_tolerance=0",
         "rzb:orientation=9",
-        "rzb:dynamic=yes",
+        "rzb:dynamic=maybe",
     ] {
         let spec = AlgoSpec::parse(spec).unwrap();
         match (spec.algorithm.info().build)(scene.clone(), &options(1), &spec.params) {
