@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Figures of notes/oqgrid.md from an `occult compare --json` report (stdlib only).
+"""Figures of docs/oqgrid.md from an `occult compare --json` report (stdlib only).
 
 Usage: analyze.py REPORT.json [BASELINE_LABEL]   (baseline: frustum)
 Per renderer: mean frame time and speedup over the baseline (ratio of means); the speedup on
