@@ -158,6 +158,11 @@ pub struct CompareArgs {
     /// Plot of frame time per frame, per renderer (PNG; one panel per scene).
     #[arg(long, value_name = "FILE")]
     pub plot: Option<PathBuf>,
+    /// What `--plot` shows per frame: `time`, `submitted` or `rasterized` triangles (with the
+    /// exactly visible ones dashed), or the name of a renderer counter (`queries`,
+    /// `cells_visible`, ...; see the text report).
+    #[arg(long, value_name = "WHAT", default_value = "time")]
+    pub plot_y: String,
     /// Plot of mean frame time against scene size (PNG; needs two or more --scene).
     #[arg(long, value_name = "FILE")]
     pub plot_scaling: Option<PathBuf>,

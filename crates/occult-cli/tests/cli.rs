@@ -276,6 +276,30 @@ fn compare_without_reference_plots_scaling_against_depth_complexity() {
 }
 
 #[test]
+fn compare_plots_triangles_or_a_counter_per_frame() {
+    let dir = scratch("plot-y");
+    for what in ["rasterized", "submitted", "occlusion_tests"] {
+        let plot = dir.join(format!("{what}.png"));
+        ok(&[
+            "compare",
+            "--scene",
+            CITY,
+            "--path",
+            "circle:2",
+            "--algos",
+            "frustum,hzb",
+            "--size",
+            "48x32",
+            "--plot",
+            path_arg(&plot),
+            "--plot-y",
+            what,
+        ]);
+        assert!(image::open(&plot).is_ok(), "{what}");
+    }
+}
+
+#[test]
 fn walk_writes_frames_and_per_frame_stats() {
     let dir = scratch("walk");
     let (frames, csv, json) = (dir.join("frames"), dir.join("w.csv"), dir.join("w.json"));
@@ -396,6 +420,13 @@ fn bad_input_is_one_line_and_a_nonzero_status() {
         (
             vec!["compare", "--scene", TERRAIN, "--plot-scaling-x", "colour"],
             "colour",
+        ),
+        (
+            vec![
+                "compare", "--scene", TERRAIN, "--path", "circle:1", "--algos", "frustum", "--size", "16x16", "--plot",
+                out, "--plot-y", "bogus",
+            ],
+            "bogus",
         ),
         (vec!["render", "--scene", TERRAIN], "--out"),
         (vec!["frobnicate"], "frobnicate"),

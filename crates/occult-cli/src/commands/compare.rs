@@ -2,7 +2,7 @@
 //! ([`occult_render::compare`] does the measuring; this writes it out).
 
 use anyhow::{bail, Context, Result};
-use occult_render::compare::{compare, CompareConfig, CompareProgress, CompareReport, RendererReport};
+use occult_render::compare::{compare, CompareConfig, CompareProgress, CompareReport, FrameRecord, RendererReport};
 use occult_render::RenderOptions;
 use serde::Serialize;
 
@@ -102,7 +102,22 @@ pub fn run(a: CompareArgs) -> Result<()> {
         say!("wrote {}", p.display());
     }
     if let Some(p) = &a.plot {
-        let panels: Vec<Panel> = runs.iter().map(|(s, r)| frame_time_panel(s, &a.path, r)).collect();
+        let known = ["time", "submitted", "rasterized"].contains(&a.plot_y.as_str())
+            || runs.iter().any(|(_, r)| {
+                r.renderers
+                    .iter()
+                    .any(|x| x.stats.counters.contains_key(a.plot_y.as_str()))
+            });
+        if !known {
+            bail!(
+                "--plot-y {}: not time, submitted, rasterized or a counter of these renderers (see the text report)",
+                a.plot_y
+            );
+        }
+        let panels: Vec<Panel> = runs
+            .iter()
+            .map(|(s, r)| frame_panel(s, &a.path, r, &a.plot_y))
+            .collect();
         plot::draw(p, &panels)?;
         say!("wrote {}", p.display());
     }
@@ -353,28 +368,71 @@ fn csv_rows(runs: &[(SceneSummary, CompareReport)]) -> Vec<Vec<String>> {
     rows
 }
 
-fn frame_time_panel(scene: &SceneSummary, path: &str, r: &CompareReport) -> Panel {
+/// One scene's per-frame plot of `what` (see `--plot-y`).
+fn frame_panel(scene: &SceneSummary, path: &str, r: &CompareReport, what: &str) -> Panel {
+    let value = |f: &FrameRecord| -> Option<f64> {
+        match what {
+            "time" => Some(f.time_ms),
+            "submitted" => Some(f.triangles_submitted as f64),
+            "rasterized" => Some(f.triangles_rasterized as f64),
+            counter => f.counters.0.iter().find(|(k, _)| *k == counter).map(|&(_, v)| v as f64),
+        }
+    };
+    let mean_of = |points: &[(f64, f64)]| points.iter().map(|p| p.1).sum::<f64>() / points.len().max(1) as f64;
     let mut series: Vec<Series> = r
         .renderers
         .iter()
-        .map(|x| Series {
-            name: format!("{} (mean {} ms)", x.name, output::millis(x.mean_ms)),
-            points: x
+        .filter_map(|x| {
+            let points: Vec<(f64, f64)> = x
                 .per_frame
                 .iter()
                 .enumerate()
-                .map(|(i, f)| (i as f64, f.time_ms))
-                .collect(),
-            dashed: false,
+                .filter_map(|(i, f)| Some((i as f64, value(f)?)))
+                .collect();
+            let mean = match what {
+                "time" => format!("mean {} ms", output::millis(x.mean_ms)),
+                _ if points.is_empty() => return None,
+                _ => format!("mean {}", output::count(mean_of(&points))),
+            };
+            Some(Series {
+                name: format!("{} ({mean})", x.name),
+                points,
+                dashed: false,
+            })
         })
         .collect();
-    if let Some(o) = &r.oracle {
-        series.push(Series {
+    match (what, &r.oracle) {
+        ("time", Some(o)) => series.push(Series {
             name: format!("oracle: visible triangles only (mean {} ms)", output::millis(o.mean_ms)),
             points: o.per_frame_ms.iter().enumerate().map(|(i, &t)| (i as f64, t)).collect(),
             dashed: true,
-        });
+        }),
+        ("submitted" | "rasterized", _) => {
+            let points: Vec<(f64, f64)> = r
+                .image
+                .triangles_visible
+                .iter()
+                .enumerate()
+                .map(|(i, &v)| (i as f64, v as f64))
+                .collect();
+            series.push(Series {
+                name: format!(
+                    "visible on {} (mean {})",
+                    r.image.measured_on,
+                    output::count(mean_of(&points))
+                ),
+                points,
+                dashed: true,
+            });
+        }
+        _ => {}
     }
+    let y_label = match what {
+        "time" => "frame time (ms, log)".to_string(),
+        "submitted" => "triangles submitted per frame (log)".to_string(),
+        "rasterized" => "triangles rasterized per frame (log)".to_string(),
+        counter => format!("{counter} per frame (log)"),
+    };
     Panel {
         title: format!(
             "{} ({} triangles), path {path}, {}x{}",
@@ -384,7 +442,7 @@ fn frame_time_panel(scene: &SceneSummary, path: &str, r: &CompareReport) -> Pane
             r.height
         ),
         x_label: "frame".into(),
-        y_label: "frame time (ms, log)".into(),
+        y_label,
         log_x: false,
         series,
     }
