@@ -640,47 +640,46 @@ impl Rasterizer {
                 width: w,
             });
         }
-        let results: Vec<(u64, u64, [u32; 4])> = targets
+        let results: Vec<(u64, u64, Vec<[u32; 4]>)> = targets
             .par_iter()
             .enumerate()
             .map(|(k, target)| {
                 // Worker k takes every parts-th block: each gets a share of near and far, large
                 // and small triangles, and a block is long enough to keep the frame in cache.
-                let mut acc = (0, 0, EMPTY_RECT);
+                let (mut rasterized, mut written, mut boxes) = (0, 0, Vec::new());
                 for start in (k * SORT_LAST_BLOCK..total).step_by(parts * SORT_LAST_BLOCK) {
                     let range = start..(start + SORT_LAST_BLOCK).min(total);
                     // SAFETY: each worker owns its own frame (the real one or a scratch one).
                     let (r, f, d) = unsafe {
                         isa.draw_direct(vp, draws, draw_starts, vertex_offsets, vertices, range, target, mode)
                     };
-                    acc = (
-                        acc.0 + r,
-                        acc.1 + f,
-                        [
-                            acc.2[0].min(d[0]),
-                            acc.2[1].min(d[1]),
-                            acc.2[2].max(d[2]),
-                            acc.2[3].max(d[3]),
-                        ],
-                    );
+                    rasterized += r;
+                    written += f;
+                    if d[0] <= d[2] && d[1] <= d[3] {
+                        boxes.push(d);
+                    }
                 }
-                acc
+                (rasterized, written, boxes)
             })
             .collect();
         let (depth, items) = frame.buffers_mut();
-        for (k, &(_, _, dirty)) in results.iter().enumerate().skip(1) {
-            if dirty[0] > dirty[2] || dirty[1] > dirty[3] {
-                continue;
-            }
+        for (k, (_, _, boxes)) in results.iter().enumerate().skip(1) {
+            // The merge reads and resets only each row's span of the boxes of this worker's
+            // blocks, not their bounding box: blocks of a coherent stream (a terrain's rows, a
+            // mesh's neighbouring triangles) touch bands of the frame, so a worker's share of
+            // blocks covers about its share of the pixels, and the merge (memory bound) shrinks
+            // with it.
+            let Some(spans) = row_spans(boxes, h) else { continue };
             let (sd, si) = &mut self.scratch[k - 1];
-            let (x0, x1) = (dirty[0] as usize, dirty[2] as usize + 1);
-            let rows = dirty[1] as usize..dirty[3] as usize + 1;
-            depth[rows.start * w..rows.end * w]
+            depth
                 .par_chunks_mut(w)
-                .zip(items[rows.start * w..rows.end * w].par_chunks_mut(w))
-                .zip(sd[rows.start * w..rows.end * w].par_chunks_mut(w))
-                .zip(si[rows.start * w..rows.end * w].par_chunks_mut(w))
-                .for_each(|(((d, it), sd), si)| {
+                .zip(items.par_chunks_mut(w))
+                .zip(sd.par_chunks_mut(w))
+                .zip(si.par_chunks_mut(w))
+                .zip(spans.par_iter())
+                .filter(|(_, &(x0, x1))| x0 < x1)
+                .for_each(|((((d, it), sd), si), &(x0, x1))| {
+                    let (x0, x1) = (x0 as usize, x1 as usize);
                     for x in x0..x1 {
                         if sd[x] == crate::CLEAR_DEPTH {
                             continue; // nothing drawn there
@@ -700,6 +699,24 @@ impl Rasterizer {
         self.scratch_clean = true;
         Some(results.iter().fold((0, 0), |(r, f), &(rr, ff, _)| (r + rr, f + ff)))
     }
+}
+
+/// Per row of a `height`-row frame, the half-open pixel span `x0..x1` that the inclusive boxes
+/// touch (`x0 == x1`: none); `None` when there are no boxes.
+fn row_spans(boxes: &[[u32; 4]], height: usize) -> Option<Vec<(u32, u32)>> {
+    if boxes.is_empty() {
+        return None;
+    }
+    let mut spans = vec![(u32::MAX, 0u32); height];
+    for b in boxes {
+        for span in &mut spans[b[1] as usize..=b[3] as usize] {
+            *span = (span.0.min(b[0]), span.1.max(b[2] + 1));
+        }
+    }
+    for span in &mut spans {
+        span.0 = span.0.min(span.1);
+    }
+    Some(spans)
 }
 
 /// Draws at least this large go sort-last on several threads (below it, the tile-binned path:
