@@ -665,10 +665,8 @@ impl Rasterizer {
         let (depth, items) = frame.buffers_mut();
         for (k, (_, _, boxes)) in results.iter().enumerate().skip(1) {
             // The merge reads and resets only each row's span of the boxes of this worker's
-            // blocks, not their bounding box: blocks of a coherent stream (a terrain's rows, a
-            // mesh's neighbouring triangles) touch bands of the frame, so a worker's share of
-            // blocks covers about its share of the pixels, and the merge (memory bound) shrinks
-            // with it.
+            // blocks, not their bounding box: where the blocks of a coherent stream touch bands
+            // of the frame, the merge (memory bound) skips the rows between them.
             let Some(spans) = row_spans(boxes, h) else { continue };
             let (sd, si) = &mut self.scratch[k - 1];
             depth
@@ -680,20 +678,7 @@ impl Rasterizer {
                 .filter(|(_, &(x0, x1))| x0 < x1)
                 .for_each(|((((d, it), sd), si), &(x0, x1))| {
                     let (x0, x1) = (x0 as usize, x1 as usize);
-                    for x in x0..x1 {
-                        if sd[x] == crate::CLEAR_DEPTH {
-                            continue; // nothing drawn there
-                        }
-                        if mode == RasterMode::Full {
-                            crate::keep_fragment(&mut d[x], &mut it[x], sd[x], si[x]);
-                        } else if sd[x] > d[x] {
-                            d[x] = sd[x];
-                        }
-                    }
-                    // Only depth is reset: a scratch item matters only where the scratch depth is
-                    // not clear (a fragment always beats a clear pixel, and ties need a
-                    // fragment drawn in the same draw), so stale items are never read.
-                    sd[x0..x1].fill(crate::CLEAR_DEPTH);
+                    isa.merge_row(&mut d[x0..x1], &mut it[x0..x1], &mut sd[x0..x1], &si[x0..x1], mode);
                 });
         }
         self.scratch_clean = true;
@@ -717,6 +702,38 @@ fn row_spans(boxes: &[[u32; 4]], height: usize) -> Option<Vec<(u32, u32)>> {
         span.0 = span.0.min(span.1);
     }
     Some(spans)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,bmi1,bmi2,popcnt,lzcnt")]
+unsafe fn merge_row_avx2(d: &mut [f32], it: &mut [ItemId], sd: &mut [f32], si: &[ItemId], mode: RasterMode) {
+    merge_row(d, it, sd, si, mode)
+}
+
+/// See [`Isa::merge_row`]. Branch-free, so that the compiler vectorizes it: the merge is
+/// memory bound, and a branch per pixel on whether the worker drew it mispredicts along the
+/// borders of everything drawn.
+#[inline(always)]
+fn merge_row(d: &mut [f32], it: &mut [ItemId], sd: &mut [f32], si: &[ItemId], mode: RasterMode) {
+    let n = d.len();
+    let (it, sd, si) = (&mut it[..n], &mut sd[..n], &si[..n]);
+    if mode == RasterMode::Full {
+        for x in 0..n {
+            let (s, t) = (sd[x], d[x]);
+            // A clear private pixel was not drawn: its item is stale and must lose. A fragment
+            // always beats a clear pixel, so the rule is keep_fragment's for drawn pixels.
+            let win = s != crate::CLEAR_DEPTH && (s > t || (s == t && si[x] < it[x]));
+            d[x] = if win { s } else { t };
+            it[x] = if win { si[x] } else { it[x] };
+        }
+    } else {
+        for x in 0..n {
+            d[x] = if sd[x] > d[x] { sd[x] } else { d[x] };
+        }
+    }
+    // Only depth is reset: a private item matters only where the private depth is not clear,
+    // so stale items are never read.
+    sd.fill(crate::CLEAR_DEPTH);
 }
 
 /// Draws at least this large go sort-last on several threads (below it, the tile-binned path:
@@ -779,6 +796,17 @@ impl Isa {
         }
         let _ = simd;
         Isa::Baseline
+    }
+
+    /// Merges one row of a worker's private frame into the frame under the (depth, item) rule
+    /// and resets the private depth to clear.
+    fn merge_row(self, d: &mut [f32], it: &mut [ItemId], sd: &mut [f32], si: &[ItemId], mode: RasterMode) {
+        match self {
+            Isa::Baseline => merge_row(d, it, sd, si, mode),
+            // SAFETY: `select` checked that the processor has these features.
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => unsafe { merge_row_avx2(d, it, sd, si, mode) },
+        }
     }
 
     #[allow(clippy::too_many_arguments)]
