@@ -169,9 +169,10 @@ pub struct CompareArgs {
     /// The scaling plot's x axis: `triangles` (scene size), `covered` (covered pixels),
     /// `image` (image complexity: screen area of every triangle in view, hidden or not) or
     /// `depth` (depth complexity: image complexity over covered pixels). `image` and `depth`
-    /// measure the image complexity (one untimed pass over the scene per view).
-    #[arg(long, value_name = "AXIS", default_value = "triangles", value_parser = ["triangles", "covered", "image", "depth"])]
-    pub plot_scaling_x: String,
+    /// measure the image complexity (one untimed pass over the scene per view). Several,
+    /// comma-separated, draw one plot each from the same run: `F.png` becomes `F-<axis>.png`.
+    #[arg(long, value_name = "AXIS[,AXIS...]", default_value = "triangles", value_delimiter = ',', value_parser = ["triangles", "covered", "image", "depth"])]
+    pub plot_scaling_x: Vec<String>,
     /// Measure each view's image and depth complexity (one untimed pass over every triangle in
     /// view per view); reported in the text, JSON and CSV.
     #[arg(long)]

@@ -246,7 +246,7 @@ fn compare_without_reference_plots_scaling_against_depth_complexity() {
         "--plot-scaling",
         path_arg(&scaling),
         "--plot-scaling-x",
-        "depth",
+        "depth,covered",
     ]);
     assert!(stdout.contains("reference none"), "{stdout}");
     assert!(
@@ -272,7 +272,10 @@ fn compare_without_reference_plots_scaling_against_depth_complexity() {
         1 + 2 * 2 * 2,
         "a row per scene, renderer and frame, no oracle"
     );
-    assert!(image::open(&scaling).is_ok());
+    // Two axes: one plot each from the same run, named after the axis.
+    assert!(!scaling.exists());
+    assert!(image::open(dir.join("n-depth.png")).is_ok());
+    assert!(image::open(dir.join("n-covered.png")).is_ok());
 }
 
 #[test]

@@ -5,6 +5,7 @@ use anyhow::{bail, Context, Result};
 use occult_render::compare::{compare, CompareConfig, CompareProgress, CompareReport, FrameRecord, RendererReport};
 use occult_render::RenderOptions;
 use serde::Serialize;
+use std::path::{Path, PathBuf};
 
 use crate::args::CompareArgs;
 use crate::output::{self, opt_field};
@@ -48,18 +49,26 @@ const CSV_HEADER: [&str; 13] = [
 
 /// Runs the command.
 pub fn run(a: CompareArgs) -> Result<()> {
-    output::check_outputs([&a.json, &a.csv, &a.plot, &a.plot_scaling])?;
+    let axes: Vec<ScalingAxis> = a.plot_scaling_x.iter().map(|x| ScalingAxis::parse(x)).collect();
+    let scaling_plots: Vec<(ScalingAxis, Option<PathBuf>)> = match &a.plot_scaling {
+        Some(p) if axes.len() > 1 => axes.iter().map(|&x| (x, Some(x.file_for(p)))).collect(),
+        p => vec![(axes[0], p.clone())],
+    };
+    output::check_outputs(
+        [&a.json, &a.csv, &a.plot]
+            .into_iter()
+            .chain(scaling_plots.iter().map(|(_, p)| p)),
+    )?;
     if a.plot_scaling.is_some() && a.scene.len() < 2 {
         bail!("--plot-scaling needs two or more --scene values (one point per scene)");
     }
-    let axis = ScalingAxis::parse(&a.plot_scaling_x);
     let config = CompareConfig {
         algorithms: a.algos.0.clone(),
         options: RenderOptions::default(),
         width: a.size.width,
         height: a.size.height,
         reference: a.reference.0.clone(),
-        image_complexity: a.complexity || (a.plot_scaling.is_some() && axis.needs_image_complexity()),
+        image_complexity: a.complexity || (a.plot_scaling.is_some() && axes.iter().any(|x| x.needs_image_complexity())),
     };
     let mut runs: Vec<(SceneSummary, CompareReport)> = Vec::new();
     for spec in &a.scene {
@@ -121,9 +130,11 @@ pub fn run(a: CompareArgs) -> Result<()> {
         plot::draw(p, &panels)?;
         say!("wrote {}", p.display());
     }
-    if let Some(p) = &a.plot_scaling {
-        plot::draw(p, &[scaling_panel(&a.path, &runs, axis)])?;
-        say!("wrote {}", p.display());
+    for (axis, p) in &scaling_plots {
+        if let Some(p) = p {
+            plot::draw(p, &[scaling_panel(&a.path, &runs, *axis)])?;
+            say!("wrote {}", p.display());
+        }
     }
     Ok(())
 }
@@ -465,6 +476,26 @@ impl ScalingAxis {
             "image" => Self::Image,
             "depth" => Self::Depth,
             _ => Self::Triangles,
+        }
+    }
+
+    /// The file of this axis's plot when several are drawn: `F.png` → `F-<axis>.png`.
+    fn file_for(self, path: &Path) -> PathBuf {
+        let stem = path.file_stem().map(|s| s.to_string_lossy()).unwrap_or_default();
+        let name = match path.extension() {
+            Some(ext) => format!("{stem}-{}.{}", self.key(), ext.to_string_lossy()),
+            None => format!("{stem}-{}", self.key()),
+        };
+        path.with_file_name(name)
+    }
+
+    /// The `--plot-scaling-x` value naming this axis.
+    fn key(self) -> &'static str {
+        match self {
+            Self::Triangles => "triangles",
+            Self::Covered => "covered",
+            Self::Image => "image",
+            Self::Depth => "depth",
         }
     }
 
