@@ -261,7 +261,7 @@ impl<'a> Selection<'a> {
         // the depth test bounds as well (§5.3.2: the selected boxes exceed the frustum's cross
         // section only by a constant). Ours are tight bounds, which for a row of instances
         // (`forest`'s replication rows, 682 km × 9 km) can be a slab seen edge-on: a small depth
-        // ratio, yet ten times wider than the frustum, so that 90 % of its samples fall outside
+        // ratio, yet up to 40 times wider than the frustum, so that 90 % of its samples fall outside
         // the view. A box is therefore selected only when its lateral extent is also within
         // what a cube passing the depth test could have (`√3 · (√ε − 1) · z_min`: a cube's
         // view-space width is at most √3 times its depth extent), else it is split further.
