@@ -100,6 +100,26 @@ fn paper_sample_count_covers_the_surfaces() {
     assert!(holes * 100 <= covered, "{holes} holes in {covered} covered pixels");
 }
 
+/// §5.3.2: selected boxes exceed the view frustum only by a constant. `forest`'s replication
+/// rows are slabs (32 tiles long, one deep) with a small depth ratio when seen edge-on; unless
+/// their width across the view is bounded too, most of their samples fall outside the view
+/// (a third of all samples drawn before the bound, three quarters with it).
+#[test]
+fn wide_boxes_are_split_so_that_samples_land_in_the_view() {
+    let (scene, camera) = scene("forest:trees=2,patches=2,replicate=32,levels=2");
+    let view = View::new(camera, 80, 60).unwrap();
+    let mut r = rzb(&scene, "rzb", 2);
+    let mut f = Frame::new(view.width(), view.height()).unwrap();
+    let stats = r.render(&view, &mut f).unwrap();
+    let generated = stats.counters.get("samples_generated");
+    assert!(generated > 100_000, "{generated} samples");
+    assert!(
+        stats.samples_drawn * 10 >= generated * 6,
+        "{} of {generated} samples in the view",
+        stats.samples_drawn
+    );
+}
+
 #[test]
 fn same_frame_for_the_same_seed_whatever_the_threads() {
     for spec in ["chessboard:n=400", "forest:trees=2,patches=2"] {

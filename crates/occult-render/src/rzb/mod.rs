@@ -47,9 +47,13 @@
 //!   draws need, requires the instance chain. One transform more per sample per level.
 //! - Samples are drawn on the CPU in parallel into per-thread buffers merged under the frame's
 //!   rule (the paper used OpenGL points).
-//! - A single sample from a whole structure (an instance entered once) is picked with a
-//!   Walker alias table ([`structure::AliasTable`], O(1)) instead of the list's binary search:
-//!   same distribution, fewer dependent loads on deep instancing.
+//! - A single sample from a whole structure (an instance entered once), and every sample of a
+//!   whole mesh, is picked with a Walker alias table ([`structure::AliasTable`], O(1)) instead
+//!   of the list's binary search, a mesh's triangles read from a copy in list order: same
+//!   distribution, fewer dependent loads on deep instancing.
+//! - §5.3.2 selects boxes by their depth ratio; the paper's boxes are octree cubes, whose width
+//!   across the view that ratio bounds as well. Ours are tight bounds (slabs, for rows of
+//!   instances), so a selected box's view-space width is bounded too ([`select`]).
 //! - Area scale of an instance is `|det|^(2/3)`, exact for the similarity transforms the
 //!   generators use; for non-uniform scales the child's own-space distribution is used.
 //! - Cached sets are built at the density needed at `z / tolerance`, so that they never fall

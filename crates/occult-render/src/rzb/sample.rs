@@ -192,6 +192,28 @@ pub fn piece_rng(seed: u64, job: &Job, piece: u64) -> Pcg64Mcg {
     Pcg64Mcg::seed_from_u64(mix(h ^ mix(piece.wrapping_add(0x9e37_79b9_7f4a_7c15))))
 }
 
+/// `count` uniform points on the triangle `[a, b, c]` (entry `e` of its mesh) (§5.2), passed
+/// to `f`.
+#[inline]
+fn points_of<F: FnMut(&Place, Vec3, Vec3, ItemId)>(
+    [a, b, c]: [Vec3; 3],
+    e: usize,
+    count: u64,
+    place: &Place,
+    rng: &mut Pcg64Mcg,
+    f: &mut F,
+) {
+    let normal = (b - a).cross(c - a);
+    for _ in 0..count {
+        let (mut r1, mut r2) = (rng.random::<f32>(), rng.random::<f32>());
+        if r1 + r2 > 1.0 {
+            r1 = 1.0 - r1;
+            r2 = 1.0 - r2;
+        }
+        f(place, a + (b - a) * r1 + (c - a) * r2, normal, place.base + e as u64);
+    }
+}
+
 /// Number of samples to draw for an expectation `n`: `floor(n)` plus one with probability
 /// `frac(n)`, so the expected total is exact (§4.1.1 "a · ln v").
 #[inline]
@@ -252,13 +274,24 @@ impl Sampler<'_> {
             return;
         }
         let entries = st.octree.entries();
+        let whole = range.start == 0 && range.end as usize == entries.len() && !st.alias.is_empty();
+        // Samples of a whole mesh (an entered instance, the deepest level of instancing): one
+        // alias pick per sample, O(1) each, instead of the sorted split (a `powf` and a binary
+        // search per sample) — a mesh has no instances whose repeated picks the split groups.
+        if whole && n > 1 && matches!(node.kind(), NodeKind::Mesh(_)) {
+            for _ in 0..n {
+                let pos = st.alias.pick(rng.random::<f64>()) as usize;
+                points_of(st.soup[pos], entries[pos] as usize, 1, place, rng, f);
+            }
+            return;
+        }
         // One sample from a whole structure (an instance entered once, the common case at the
         // deep levels of instancing): the alias table picks in O(1) instead of a binary search.
-        if n == 1 && range.start == 0 && range.end as usize == entries.len() && !st.alias.is_empty() {
+        if n == 1 && whole {
             let pos = st.alias.pick(rng.random::<f64>());
             let e = entries[pos as usize] as usize;
             match node.kind() {
-                NodeKind::Mesh(m) => self.points(m, e, 1, place, rng, f),
+                NodeKind::Mesh(_) => points_of(st.soup[pos as usize], e, 1, place, rng, f),
                 NodeKind::Group(g) => {
                     let inst = &g[e];
                     let child = place.enter(inst, node.item_offset(e), self.backface);
@@ -329,16 +362,7 @@ impl Sampler<'_> {
         rng: &mut Pcg64Mcg,
         f: &mut F,
     ) {
-        let [a, b, c] = m.triangle_positions(e);
-        let normal = (b - a).cross(c - a);
-        for _ in 0..count {
-            let (mut r1, mut r2) = (rng.random::<f32>(), rng.random::<f32>());
-            if r1 + r2 > 1.0 {
-                r1 = 1.0 - r1;
-                r2 = 1.0 - r2;
-            }
-            f(place, a + (b - a) * r1 + (c - a) * r2, normal, place.base + e as u64);
-        }
+        points_of(m.triangle_positions(e), e, count, place, rng, f);
     }
 
     /// Draws `count` fresh samples of `job` into `out` (§4.1 per pixel, §4.2 splats).

@@ -192,11 +192,11 @@ impl<'a> Selection<'a> {
         }
     }
 
-    /// §5.1/§5.3: (nearest view distance clamped to the near plane, farthest, samples) of the
-    /// list positions `range` bounded by `b`; with an orientation class (§5.3.4) the samples
-    /// carry its bound of the orientation factor, `None` when every face looks away and back
-    /// faces are rejected.
-    fn estimate(&self, p: &Place, b: &Aabb, sec: &Section, cone: Option<&Cone>) -> Option<(f64, f64, f64)> {
+    /// §5.1/§5.3: (nearest view distance clamped to the near plane, farthest, largest lateral
+    /// extent across the view direction, samples) of the list positions `range` bounded by `b`;
+    /// with an orientation class (§5.3.4) the samples carry its bound of the orientation factor,
+    /// `None` when every face looks away and back faces are rejected.
+    fn estimate(&self, p: &Place, b: &Aabb, sec: &Section, cone: Option<&Cone>) -> Option<(f64, f64, f64, f64)> {
         let c = b.center();
         let h = b.half_extent();
         let axis = |r: Vec4| (r.truncate().dot(c) + r.w, r.truncate().abs().dot(h));
@@ -227,7 +227,7 @@ impl<'a> Selection<'a> {
                 }
             }
         }
-        Some((z_min, z_max, samples))
+        Some((z_min, z_max, 2.0 * dx.max(dy) as f64, samples))
     }
 
     fn test(&mut self, p: &Place, b: &Aabb) -> bool {
@@ -252,14 +252,23 @@ impl<'a> Selection<'a> {
             own: false,
             range: node.section(),
         };
-        let Some((z_min, z_max, samples)) = self.estimate(p, &node.bounds, &whole, cone) else {
+        let Some((z_min, z_max, lateral, samples)) = self.estimate(p, &node.bounds, &whole, cone) else {
             self.boxes_backfacing += 1;
             return;
         };
         let ratio = (z_max / z_min).powi(2);
+        // Deviation: the paper's boxes are the octree's cubes, whose extent across the view
+        // the depth test bounds as well (§5.3.2: the selected boxes exceed the frustum's cross
+        // section only by a constant). Ours are tight bounds, which for a row of instances
+        // (`forest`'s replication rows, 682 km × 9 km) can be a slab seen edge-on: a small depth
+        // ratio, yet up to 40 times wider than the frustum, so that 90 % of its samples fall outside
+        // the view. A box is therefore selected only when its lateral extent is also within
+        // what a cube passing the depth test could have (`√3 · (√ε − 1) · z_min`: a cube's
+        // view-space width is at most √3 times its depth extent), else it is split further.
+        let lateral_ok = lateral <= 3f64.sqrt() * (self.eps.sqrt() - 1.0) * z_min;
         let per_item = samples / st.section_items(&whole).max(1) as f64;
         let too_dense = self.large.is_some_and(|t| per_item > t);
-        if ratio <= self.eps && !too_dense {
+        if ratio <= self.eps && lateral_ok && !too_dense {
             self.select(p, whole, samples, z_min);
         } else if node.is_leaf() {
             self.part(p, whole, node.bounds, false, cone);
@@ -288,7 +297,7 @@ impl<'a> Selection<'a> {
         let st = &self.structures[p.id.index()];
         match self.scene.node(p.id).kind() {
             NodeKind::Mesh(mesh) => {
-                let Some((z_min, _, samples)) = self.estimate(p, &bounds, &sec, cone) else {
+                let Some((z_min, _, _, samples)) = self.estimate(p, &bounds, &sec, cone) else {
                     self.boxes_backfacing += 1;
                     return;
                 };

@@ -26,8 +26,12 @@ pub struct Structure {
     /// §5.3.4: the normal cone of each class (meshes with orientation classes; empty
     /// otherwise).
     pub cones: Vec<Cone>,
-    /// Walker's alias table over the whole list, for single picks from a whole structure.
+    /// Walker's alias table over the whole list, for picks from a whole structure.
     pub alias: AliasTable,
+    /// Meshes: the triangles' positions in list order, so that a pick from the alias table
+    /// reaches its vertices in one load instead of three dependent ones (entry, indices,
+    /// positions); empty for groups.
+    pub soup: Vec<[Vec3; 3]>,
     /// §5.4 (`dynamic=on`): the distribution tree over the octree's nodes; sampling and the
     /// areas and item counts of boxes then come from it, and entries can be removed and
     /// inserted. `None`: the static lists.
@@ -42,8 +46,9 @@ pub struct Structure {
 /// list. Same distribution, fewer dependent loads on deep instancing.
 #[derive(Clone, Debug, Default)]
 pub struct AliasTable {
-    /// Per position: probability of keeping it, and its alias.
-    slots: Vec<(f64, u32)>,
+    /// Per position: probability of keeping it, and its alias (8 bytes, so that the table of a
+    /// 20 K-triangle tree stays in the L2 cache).
+    slots: Vec<(f32, u32)>,
 }
 
 impl AliasTable {
@@ -57,11 +62,11 @@ impl AliasTable {
         }
         // Vose's method.
         let mut scaled: Vec<f64> = w.iter().map(|&x| x * n as f64 / total).collect();
-        let mut slots = vec![(1.0f64, 0u32); n];
+        let mut slots = vec![(1.0f32, 0u32); n];
         let (mut small, mut large): (Vec<u32>, Vec<u32>) = (0..n as u32).partition(|&i| scaled[i as usize] < 1.0);
         while let (Some(&l), Some(&g)) = (small.last(), large.last()) {
             small.pop();
-            slots[l as usize] = (scaled[l as usize], g);
+            slots[l as usize] = (scaled[l as usize] as f32, g);
             scaled[g as usize] = (scaled[g as usize] + scaled[l as usize]) - 1.0;
             if scaled[g as usize] < 1.0 {
                 large.pop();
@@ -85,7 +90,7 @@ impl AliasTable {
         let x = u * self.slots.len() as f64;
         let i = (x as usize).min(self.slots.len() - 1);
         let (keep, alias) = self.slots[i];
-        if x - (i as f64) < keep {
+        if x - (i as f64) < keep as f64 {
             i as u32
         } else {
             alias
@@ -94,7 +99,7 @@ impl AliasTable {
 
     /// Bytes held.
     pub fn memory_bytes(&self) -> usize {
-        self.slots.len() * 16
+        self.slots.len() * 8
     }
 }
 
@@ -170,7 +175,11 @@ impl Structure {
             .tree
             .as_ref()
             .map_or(0, |t| t.node_count() * 80 + self.octree.entries().len() * 28);
-        self.octree.memory_bytes() + self.item_prefix.len() * 8 + tree + self.alias.memory_bytes()
+        self.octree.memory_bytes()
+            + self.item_prefix.len() * 8
+            + tree
+            + self.alias.memory_bytes()
+            + self.soup.len() * std::mem::size_of::<[Vec3; 3]>()
     }
 }
 
@@ -229,6 +238,9 @@ pub fn build_all(
             let mut st = build_one(scene, NodeId(i as u32), &areas, config, area_ratio, orientation);
             let o = &st.octree;
             st.alias = AliasTable::new((0..o.entries().len() as u32).map(|p| o.area(p..p + 1)));
+            if let NodeKind::Mesh(m) = scene.node(NodeId(i as u32)).kind() {
+                st.soup = o.entries().iter().map(|&e| m.triangle_positions(e as usize)).collect();
+            }
             if dynamic {
                 let (areas, weights) = entry_areas(scene, NodeId(i as u32), &areas);
                 st.tree = Some(DistributionTree::from_octree(&st.octree, &areas, &weights));
@@ -306,6 +318,7 @@ fn build_one(
                     cones: Vec::new(),
                     tree: None,
                     alias: AliasTable::default(),
+                    soup: Vec::new(),
                 };
             }
             // §5.3.4: class = area class × orientation class; each class's cone bounds the
@@ -356,6 +369,7 @@ fn build_one(
                 cones,
                 tree: None,
                 alias: AliasTable::default(),
+                soup: Vec::new(),
             }
         }
         NodeKind::Group(g) => {
@@ -383,6 +397,7 @@ fn build_one(
                 cones: Vec::new(),
                 tree: None,
                 alias: AliasTable::default(),
+                soup: Vec::new(),
             }
         }
     }
