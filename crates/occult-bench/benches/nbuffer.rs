@@ -235,8 +235,13 @@ fn particles(c: &mut Criterion) {
     for pow2 in [false, true] {
         let p = Particles::scatter(&scene.bounds(), 1_000_000, 64, pow2, 0.3, 9).expect("particles");
         let sizes = if pow2 { "pow2" } else { "any" };
-        for cull in [false, true] {
-            let name = format!("1M_sprites/{sizes}/{}", if cull { "nbuffer_cull" } else { "draw_all" });
+        // Draw all; cull with the batched tests; cull with one test call per sprite.
+        for (cull, batched, mode) in [
+            (false, true, "draw_all"),
+            (true, true, "nbuffer_cull"),
+            (true, false, "nbuffer_cull_single_calls"),
+        ] {
+            let name = format!("1M_sprites/{sizes}/{mode}");
             group.bench_function(name, |b| {
                 b.iter_batched_ref(
                     || base.clone(),
@@ -247,7 +252,8 @@ fn particles(c: &mut Criterion) {
                                     .expect("valid size")
                             })
                         });
-                        draw_particles(&mut raster, &view, frame, &p, scene.item_count(), nb.as_ref()).expect("draw")
+                        draw_particles(&mut raster, &view, frame, &p, scene.item_count(), nb.as_ref(), batched)
+                            .expect("draw")
                     },
                     criterion::BatchSize::LargeInput,
                 )
@@ -255,7 +261,8 @@ fn particles(c: &mut Criterion) {
         }
         let mut frame = base.clone();
         let nb = NBuffer::with_levels(Extremum::Min, base.depth(), 640, 480, p.levels_needed()).expect("valid size");
-        let counts = draw_particles(&mut raster, &view, &mut frame, &p, scene.item_count(), Some(&nb)).expect("draw");
+        let counts =
+            draw_particles(&mut raster, &view, &mut frame, &p, scene.item_count(), Some(&nb), true).expect("draw");
         eprintln!("particles {sizes}: {counts:?}");
     }
     group.finish();

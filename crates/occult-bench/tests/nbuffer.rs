@@ -210,9 +210,17 @@ fn particle_frames_are_identical_with_and_without_culling() {
                 z.render(&view, &mut b).unwrap();
                 let nb = NBuffer::with_levels(Extremum::Min, b.depth(), w, h, particles.levels_needed()).unwrap();
                 let first = scene.item_count();
-                let all = draw_particles(&mut raster, &view, &mut a, &particles, first, None).unwrap();
-                let cut = draw_particles(&mut raster, &view, &mut b, &particles, first, Some(&nb)).unwrap();
+                let mut c = b.clone();
+                let all = draw_particles(&mut raster, &view, &mut a, &particles, first, None, true).unwrap();
+                let cut = draw_particles(&mut raster, &view, &mut b, &particles, first, Some(&nb), true).unwrap();
+                let one = draw_particles(&mut raster, &view, &mut c, &particles, first, Some(&nb), false).unwrap();
                 assert!(a.same_visibility(&b), "{scene_spec}: culled sprites changed the frame");
+                assert!(b.same_visibility(&c), "{scene_spec}: batched and single tests differ");
+                assert_eq!(
+                    (cut.sprites_culled, cut.lookups, cut.single_lookup_tests, cut.raster),
+                    (one.sprites_culled, one.lookups, one.single_lookup_tests, one.raster),
+                    "{scene_spec}: batched and single tests differ"
+                );
                 assert_eq!(all.sprites_culled, 0);
                 assert_eq!(all.sprites_in_view, cut.sprites_in_view);
                 assert!(cut.lookups <= 4 * cut.sprites_in_view);

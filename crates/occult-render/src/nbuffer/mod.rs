@@ -178,6 +178,8 @@ pub struct NBufferCulling {
     drawn: Vec<bool>,
     /// Resolution of the previous frame (occluders are dropped when it changes).
     last_size: (u32, u32),
+    /// The flat list's batched tests (scratch).
+    batch: Batch,
 }
 
 impl NBufferCulling {
@@ -314,6 +316,7 @@ impl NBufferCulling {
             visible: vec![false; n],
             drawn: vec![false; n],
             last_size: (0, 0),
+            batch: Batch::default(),
         })
     }
 
@@ -424,6 +427,47 @@ enum Against<'a> {
     Query(&'a Frame, &'a View),
 }
 
+/// Where a world box lands on screen.
+enum Screen {
+    /// An empty box: nothing to draw.
+    Empty,
+    /// It reaches the near plane (or behind the eye): it may cover anything.
+    Anywhere,
+    /// Its pixel-centre rectangle and nearest depth.
+    Rect(PixelRect, f32),
+}
+
+/// The rectangles of a flat object list, tested in one [`NBuffer::occludes_batch`] call
+/// (reused from frame to frame).
+#[derive(Default)]
+struct Batch {
+    objects: Vec<u32>,
+    rects: Vec<PixelRect>,
+    nearest: Vec<f32>,
+    hidden: Vec<bool>,
+}
+
+impl Batch {
+    fn clear(&mut self) {
+        self.objects.clear();
+        self.rects.clear();
+        self.nearest.clear();
+    }
+
+    fn push(&mut self, object: usize, rect: PixelRect, nearest: f32) {
+        self.objects.push(object as u32);
+        self.rects.push(rect);
+        self.nearest.push(nearest);
+    }
+
+    /// Tests every rectangle (into `hidden`); returns the lookups made.
+    fn test(&mut self, nbuffer: &NBuffer) -> Result<u64> {
+        self.hidden.clear();
+        self.hidden.resize(self.rects.len(), false);
+        Ok(nbuffer.occludes_batch(&self.rects, &self.nearest, &mut self.hidden)?)
+    }
+}
+
 /// The screen test of a world box.
 struct BoxTest<'a> {
     against: Against<'a>,
@@ -433,12 +477,14 @@ struct BoxTest<'a> {
 }
 
 impl BoxTest<'_> {
-    /// The box's screen rectangle (pixel centres) and nearest depth, or `None` when it
-    /// reaches the near plane (or behind the eye) and may cover anything.
-    fn screen(&self, b: &Aabb) -> Option<(PixelRect, f32)> {
+    /// The box's screen rectangle (pixel centres) and nearest depth.
+    fn screen(&self, b: &Aabb) -> Screen {
+        if b.is_empty() {
+            return Screen::Empty;
+        }
         let clip = b.corners().map(|c| self.clip_from_world * c.extend(1.0));
         if clip.iter().any(|c| !c.is_finite() || c.z * (1.0 + 1e-5) > c.w) {
-            return None;
+            return Screen::Anywhere;
         }
         let (mut minx, mut maxx, mut miny, mut maxy) =
             (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
@@ -464,18 +510,17 @@ impl BoxTest<'_> {
             x1: hi(maxx, self.width),
             y1: hi(maxy, self.height),
         };
-        Some((rect, nearest))
+        Screen::Rect(rect, nearest)
     }
 
     /// True when the box is hidden; adds the depth comparisons made and the pixels of the
     /// tested rectangle to `tally`. Boxes reaching the near plane are never hidden and are
     /// not tested (in both modes, so both test the same boxes).
     fn hidden(&self, b: &Aabb, tally: &mut Tally) -> bool {
-        if b.is_empty() {
-            return true;
-        }
-        let Some((rect, nearest)) = self.screen(b) else {
-            return false;
+        let (rect, nearest) = match self.screen(b) {
+            Screen::Empty => return true,
+            Screen::Anywhere => return false,
+            Screen::Rect(rect, nearest) => (rect, nearest),
         };
         tally.rect_pixels += rect.area();
         match self.against {
@@ -620,11 +665,46 @@ impl Renderer for NBufferCulling {
                     stack.push((n + 1, inside));
                 }
             }
-            _ => {
-                for i in 0..objects.len() {
-                    test_object(i, false, &mut stats, &mut tally);
+            _ => match test.against {
+                Against::NBuffer(nbuffer, true) => {
+                    // §3.1 over the flat list: every object's rectangle first, then one
+                    // batched test (same answers as one call each; the lookups overlap).
+                    let batch = &mut self.batch;
+                    batch.clear();
+                    for (i, object) in objects.iter().enumerate() {
+                        if drawn[i] {
+                            continue;
+                        }
+                        stats.boxes_tested += 1;
+                        if frustum.classify_aabb(&object.bounds) == Containment::Outside {
+                            stats.boxes_culled += 1;
+                            continue;
+                        }
+                        stats.rects_tested += 1;
+                        match test.screen(&object.bounds) {
+                            Screen::Empty => stats.rects_culled += 1,
+                            Screen::Anywhere => survivors.push(i),
+                            Screen::Rect(rect, nearest) => {
+                                tally.rect_pixels += rect.area();
+                                batch.push(i, rect, nearest);
+                            }
+                        }
+                    }
+                    tally.comparisons += batch.test(nbuffer)?;
+                    for (&i, &hidden) in batch.objects.iter().zip(&batch.hidden) {
+                        if hidden {
+                            stats.rects_culled += 1;
+                        } else {
+                            survivors.push(i as usize);
+                        }
+                    }
                 }
-            }
+                _ => {
+                    for i in 0..objects.len() {
+                        test_object(i, false, &mut stats, &mut tally);
+                    }
+                }
+            },
         }
         // Table 2: the depth comparisons of the tests (N-buffer lookups, or the pixels the
         // occlusion queries compared).
@@ -663,5 +743,9 @@ impl Renderer for NBufferCulling {
             + self.nbuffer.as_ref().map_or(0, NBuffer::memory_bytes)
             + self.visible.capacity()
             + self.drawn.capacity()
+            + self.batch.objects.capacity() * 4
+            + self.batch.rects.capacity() * std::mem::size_of::<PixelRect>()
+            + self.batch.nearest.capacity() * 4
+            + self.batch.hidden.capacity()
     }
 }
