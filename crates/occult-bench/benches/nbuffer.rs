@@ -8,6 +8,11 @@
 //! same sizes on a random walk (`coherent`: each rectangle near the previous one, as the
 //! objects of a hierarchy are tested). Each workload runs one query at a time (`query_four`,
 //! `query_one`, `occludes`) and batched (`query_four_batch`, `occludes_batch`).
+//!
+//! Particles (§3.2): 10^6 sprites among `city`, drawn all or culled (batched or one test call
+//! each). Shadows (§3.3, §4.4): the stencil pass alone (`ShadowVolumes::stencil`) of the
+//! unclamped and clamped volumes of `terrain` and `city:detail=1` from their default views
+//! at 640×480, with the stencil fragments (the fill rate) printed beside.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use occult_raster::{Extremum, NBuffer, PixelRect, RasterConfig, Rasterizer};
@@ -218,25 +223,41 @@ fn best(c: &mut Criterion) {
 /// §3.2 / §4.3: 10^6 sprites (sides 1–64 px) among the `city` seen from its default camera at
 /// 640×480: drawing them all against drawing the survivors of the N-buffer test (the N-buffer
 /// build from the scene's depth included). The scene itself is drawn once, outside the timing.
-fn particles(c: &mut Criterion) {
-    use occult_render::nbuffer::particles::{draw_particles, Particles};
-    use std::sync::Arc;
-    let w = occult_bench::workload("city");
-    let scene = Arc::new(w.scene);
+/// Scene `spec` drawn by zbuffer from its default camera at 640×480.
+fn drawn(
+    spec: &str,
+) -> (
+    std::sync::Arc<occult_core::Scene>,
+    occult_core::View,
+    occult_raster::Frame,
+) {
+    let w = occult_bench::workload(spec);
+    let scene = std::sync::Arc::new(w.scene);
     let view = occult_core::View::new(w.camera, 640, 480).expect("valid view");
     let mut z = occult_render::Algorithm::ZBUFFER
         .build(scene.clone(), &occult_render::RenderOptions::default())
         .expect("zbuffer");
-    let mut base = occult_raster::Frame::new(640, 480).expect("valid size");
-    z.render(&view, &mut base).expect("render");
+    let mut frame = occult_raster::Frame::new(640, 480).expect("valid size");
+    z.render(&view, &mut frame).expect("render");
+    (scene, view, frame)
+}
+
+fn particles(c: &mut Criterion) {
+    use occult_render::nbuffer::particles::{draw_particles, Particles};
+    let (scene, view, base) = drawn("city");
     let mut raster = Rasterizer::new(RasterConfig::default()).expect("valid config");
     let mut group = c.benchmark_group("nbuffer_particles");
     group.sample_size(10);
     for pow2 in [false, true] {
         let p = Particles::scatter(&scene.bounds(), 1_000_000, 64, pow2, 0.3, 9).expect("particles");
         let sizes = if pow2 { "pow2" } else { "any" };
-        for cull in [false, true] {
-            let name = format!("1M_sprites/{sizes}/{}", if cull { "nbuffer_cull" } else { "draw_all" });
+        // Draw all; cull with the batched tests; cull with one test call per sprite.
+        for (cull, batched, mode) in [
+            (false, true, "draw_all"),
+            (true, true, "nbuffer_cull"),
+            (true, false, "nbuffer_cull_single_calls"),
+        ] {
+            let name = format!("1M_sprites/{sizes}/{mode}");
             group.bench_function(name, |b| {
                 b.iter_batched_ref(
                     || base.clone(),
@@ -247,7 +268,8 @@ fn particles(c: &mut Criterion) {
                                     .expect("valid size")
                             })
                         });
-                        draw_particles(&mut raster, &view, frame, &p, scene.item_count(), nb.as_ref()).expect("draw")
+                        draw_particles(&mut raster, &view, frame, &p, scene.item_count(), nb.as_ref(), batched)
+                            .expect("draw")
                     },
                     criterion::BatchSize::LargeInput,
                 )
@@ -255,11 +277,36 @@ fn particles(c: &mut Criterion) {
         }
         let mut frame = base.clone();
         let nb = NBuffer::with_levels(Extremum::Min, base.depth(), 640, 480, p.levels_needed()).expect("valid size");
-        let counts = draw_particles(&mut raster, &view, &mut frame, &p, scene.item_count(), Some(&nb)).expect("draw");
+        let counts =
+            draw_particles(&mut raster, &view, &mut frame, &p, scene.item_count(), Some(&nb), true).expect("draw");
         eprintln!("particles {sizes}: {counts:?}");
     }
     group.finish();
 }
 
-criterion_group!(benches, build, queries, best, particles);
+/// §3.3, §4.4: the stencil pass of the shadow volumes, unclamped and clamped.
+fn stencil(c: &mut Criterion) {
+    use occult_render::nbuffer::shadows::{Clamping, ShadowCasters, SpotLight};
+    let mut group = c.benchmark_group("nbuffer_stencil");
+    group.sample_size(10);
+    for spec in ["terrain", "city:detail=1"] {
+        let (scene, view, frame) = drawn(spec);
+        let casters = ShadowCasters::new(scene.clone(), 4096).expect("casters");
+        let light = SpotLight::for_bounds(&scene.bounds());
+        let mut raster = Rasterizer::new(RasterConfig::default()).expect("valid config");
+        for (clamping, mode) in [(Clamping::Off, "unclamped"), (Clamping::On, "clamped")] {
+            let volumes = casters
+                .volumes(&mut raster, &view, &frame, &light, clamping)
+                .expect("volumes");
+            let (_, counts) = volumes.stencil(&mut raster, &view, &frame).expect("stencil");
+            eprintln!("stencil {spec} {mode}: {counts:?}");
+            group.bench_function(format!("{spec}/{mode}"), |b| {
+                b.iter(|| volumes.stencil(&mut raster, &view, &frame).expect("stencil"))
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, build, queries, best, particles, stencil);
 criterion_main!(benches);

@@ -15,6 +15,8 @@ const CONFIGS: &[&str] = &[
     "nbuffer:cover=one",
     "nbuffer:hierarchy=flat,cover=one",
     "nbuffer:leaf=7,group_leaf=1",
+    "nbuffer:test=query",
+    "nbuffer:test=query,hierarchy=flat",
 ];
 
 #[test]
@@ -51,6 +53,7 @@ fn bad_parameters_are_errors() {
         "nbuffer:group_leaf=0",
         "nbuffer:hierarchy=octree",
         "nbuffer:cover=two",
+        "nbuffer:test=hardware",
         "nbuffer:leaf=-3",
         "nbuffer:leaf=many",
     ] {
@@ -66,13 +69,18 @@ fn bad_parameters_are_errors() {
         .is_err());
 }
 
-#[test]
-fn street_walk_culls_with_at_most_four_lookups_per_rectangle() {
+/// A small city and a street walk through it.
+fn city_street() -> (Arc<occult_core::Scene>, Vec<occult_core::Camera>) {
     let built = occult_scenes::spec::parse_spec("city:blocks=4,detail=2")
         .and_then(|s| s.build())
         .unwrap();
     let cams = occult_scenes::path::parse_path("street:10", &built.scene, &built.default_camera).unwrap();
-    let scene = Arc::new(built.scene);
+    (Arc::new(built.scene), cams)
+}
+
+#[test]
+fn street_walk_culls_with_at_most_four_lookups_per_rectangle() {
+    let (scene, cams) = city_street();
     for spec in ["nbuffer", "nbuffer:hierarchy=flat"] {
         let mut r = AlgoSpec::parse(spec)
             .unwrap()
@@ -99,6 +107,52 @@ fn street_walk_culls_with_at_most_four_lookups_per_rectangle() {
         assert!(culled > 0, "{spec}: nothing culled along a street");
         assert!(occluders > 0, "{spec}: no occluders after the first frame");
     }
+}
+
+/// Table 2: occlusion queries test the same objects as the N-buffer (the occluders are the
+/// same exact visible set, the frames being identical) and cull at least what it culls (the
+/// N-buffer's rectangle and rounded keys are conservative bounds of the query's silhouette),
+/// at the cost of one depth comparison per silhouette pixel instead of at most four lookups.
+#[test]
+fn occlusion_queries_test_the_same_objects_and_cull_at_least_as_much() {
+    let (scene, cams) = city_street();
+    let build = |spec: &str| {
+        AlgoSpec::parse(spec)
+            .unwrap()
+            .build(scene.clone(), &RenderOptions::default())
+            .unwrap()
+    };
+    let (mut nb, mut oq) = (
+        build("nbuffer:hierarchy=flat"),
+        build("nbuffer:hierarchy=flat,test=query"),
+    );
+    let (mut a, mut b) = (Frame::new(160, 90).unwrap(), Frame::new(160, 90).unwrap());
+    let (mut comparisons, mut lookups) = (0, 0);
+    for (i, cam) in cams.iter().enumerate() {
+        let view = View::new(*cam, 160, 90).unwrap();
+        let s = nb.render(&view, &mut a).unwrap();
+        let q = oq.render(&view, &mut b).unwrap();
+        assert!(a.same_visibility(&b), "frame {i}");
+        assert_eq!(s.rects_tested, q.rects_tested, "frame {i}: not the same objects tested");
+        assert!(q.rects_culled >= s.rects_culled, "frame {i}: the query culled less");
+        assert_eq!(
+            s.counters.get("rect_pixels"),
+            q.counters.get("rect_pixels"),
+            "frame {i}"
+        );
+        assert!(
+            q.counters.get("depth_comparisons") <= q.counters.get("rect_pixels"),
+            "frame {i}"
+        );
+        assert_eq!(s.counters.get("depth_comparisons"), s.counters.get("nbuffer_lookups"));
+        assert_eq!(q.counters.get("nbuffer_lookups"), 0);
+        comparisons += q.counters.get("depth_comparisons");
+        lookups += s.counters.get("nbuffer_lookups");
+    }
+    assert!(
+        comparisons > 10 * lookups,
+        "{comparisons} query comparisons, {lookups} lookups"
+    );
 }
 
 #[test]
@@ -156,9 +210,17 @@ fn particle_frames_are_identical_with_and_without_culling() {
                 z.render(&view, &mut b).unwrap();
                 let nb = NBuffer::with_levels(Extremum::Min, b.depth(), w, h, particles.levels_needed()).unwrap();
                 let first = scene.item_count();
-                let all = draw_particles(&mut raster, &view, &mut a, &particles, first, None).unwrap();
-                let cut = draw_particles(&mut raster, &view, &mut b, &particles, first, Some(&nb)).unwrap();
+                let mut c = b.clone();
+                let all = draw_particles(&mut raster, &view, &mut a, &particles, first, None, true).unwrap();
+                let cut = draw_particles(&mut raster, &view, &mut b, &particles, first, Some(&nb), true).unwrap();
+                let one = draw_particles(&mut raster, &view, &mut c, &particles, first, Some(&nb), false).unwrap();
                 assert!(a.same_visibility(&b), "{scene_spec}: culled sprites changed the frame");
+                assert!(b.same_visibility(&c), "{scene_spec}: batched and single tests differ");
+                assert_eq!(
+                    (cut.sprites_culled, cut.lookups, cut.single_lookup_tests, cut.raster),
+                    (one.sprites_culled, one.lookups, one.single_lookup_tests, one.raster),
+                    "{scene_spec}: batched and single tests differ"
+                );
                 assert_eq!(all.sprites_culled, 0);
                 assert_eq!(all.sprites_in_view, cut.sprites_in_view);
                 assert!(cut.lookups <= 4 * cut.sprites_in_view);

@@ -105,7 +105,28 @@ fn shadows_are_identical_with_and_without_clamping() {
     let runs = v["runs"].as_array().unwrap();
     assert_eq!(runs.len(), 2);
     assert_eq!(runs[0]["shadowed_pixels"], runs[1]["shadowed_pixels"]);
-    assert!(runs[1]["stencil_fragments"].as_u64().unwrap() <= runs[0]["stencil_fragments"].as_u64().unwrap());
+    assert!(runs[1]["stencil_fragments"].as_f64().unwrap() <= runs[0]["stencil_fragments"].as_f64().unwrap());
+    // Along a path: per-frame figures, identical shadows on every frame, the means in `runs`.
+    let out = ok(&[
+        "shadows", "--scene", CITY, "--path", "circle:3", "--size", "96x64", "--litmap", "64", "--out", png, "--json",
+        j,
+    ]);
+    assert!(out.contains("shadows identical on every frame: yes"), "{out}");
+    assert_eq!(out.matches("frame ").count(), 3 + 1, "{out}"); // 3 frames and the "frames" line
+    let v = json(std::path::Path::new(j));
+    let frames = v["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 3);
+    assert_eq!(v["differing_pixels"], 0);
+    let mean_on: f64 = frames
+        .iter()
+        .map(|f| f["runs"][1]["stencil_fragments"].as_f64().unwrap())
+        .sum::<f64>()
+        / 3.0;
+    assert!((v["runs"][1]["stencil_fragments"].as_f64().unwrap() - mean_on).abs() < 1e-6);
+    for f in frames {
+        assert_eq!(f["differing_pixels"], 0);
+        assert_eq!(f["runs"][0]["shadowed_pixels"], f["runs"][1]["shadowed_pixels"]);
+    }
     ok(&[
         "shadows",
         "--scene",
@@ -135,6 +156,18 @@ fn bad_arguments_are_one_line_errors() {
         vec!["shadows", "--scene", CITY, "--cone", "0", "--out", png],
         vec!["shadows", "--scene", CITY, "--litmap", "0", "--out", png],
         vec!["shadows", "--scene", CITY, "--leaf", "0", "--out", png],
+        vec!["shadows", "--scene", CITY, "--path", "nowhere:3", "--out", png],
+        vec![
+            "shadows",
+            "--scene",
+            CITY,
+            "--path",
+            "circle:3",
+            "--view",
+            "circle:3:1",
+            "--out",
+            png,
+        ],
         vec!["shadows", "--scene", CITY, "--light", "1,2", "--out", png],
         vec!["shadows", "--scene", "nowhere:x=1", "--out", png],
     ] {

@@ -46,7 +46,7 @@ pub mod zpyramid;
 
 pub use frame::{keep_fragment, Frame, CLEAR_DEPTH};
 pub use nbuffer::{Extremum, NBuffer};
-pub use query::{query_box, query_rect, PixelRect};
+pub use query::{query_box, query_box_counted, query_rect, BoxQuery, PixelRect};
 pub use raster::stencil::{StencilBuffer, StencilCounts, StencilDraw, StencilFaces};
 pub use raster::{Draw, DrawTriangles, RasterConfig, RasterCounts, RasterMode, Rasterizer, Strategy, SUBPIXEL_BITS};
 pub use shade::{item_color, light_direction, shade, BACKGROUND};

@@ -62,13 +62,33 @@ pub fn query_rect(frame: &Frame, rect: PixelRect, nearest: f32) -> u64 {
 /// the far plane; a box that reaches the near plane counts every pixel of the frame it could
 /// touch (it may cover anything). `clip_from_object` places the box, as in [`crate::Draw`].
 pub fn query_box(frame: &Frame, view: &View, clip_from_object: &Mat4, aabb: &Aabb) -> u64 {
+    query_box_counted(frame, view, clip_from_object, aabb).samples
+}
+
+/// What [`query_box_counted`] found and what it cost.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BoxQuery {
+    /// The samples that pass (the result of [`query_box`]).
+    pub samples: u64,
+    /// The depth comparisons made: every pixel centre inside the silhouette (a hardware
+    /// occlusion query with back-face culling compares each once), the whole frame for a box
+    /// reaching the near plane, 0 for one rejected before any pixel.
+    pub comparisons: u64,
+}
+
+/// [`query_box`] with its cost: the samples and the depth comparisons made.
+pub fn query_box_counted(frame: &Frame, view: &View, clip_from_object: &Mat4, aabb: &Aabb) -> BoxQuery {
+    let none = BoxQuery::default();
     if aabb.is_empty() {
-        return 0;
+        return none;
     }
     let (w, h) = (frame.width() as f64, frame.height() as f64);
     let clip = aabb.corners().map(|c| *clip_from_object * c.extend(1.0));
     // A box that may cover anything: every pixel where anything could still be drawn.
-    let everywhere = || query_rect(frame, PixelRect::whole(frame), f32::INFINITY);
+    let everywhere = || BoxQuery {
+        samples: query_rect(frame, PixelRect::whole(frame), f32::INFINITY),
+        comparisons: PixelRect::whole(frame).area(),
+    };
     if clip.iter().any(|c| !c.is_finite()) {
         return everywhere();
     }
@@ -80,7 +100,7 @@ pub fn query_box(frame: &Frame, view: &View, clip_from_object: &Mat4, aabb: &Aab
         || outside(&|c| c.y < -c.w * m)
         || outside(&|c| c.y > c.w * m)
     {
-        return 0;
+        return none;
     }
     let near_margin = 1.0 + 1e-5;
     if clip.iter().any(|c| c.z * near_margin > c.w) {
@@ -88,7 +108,7 @@ pub fn query_box(frame: &Frame, view: &View, clip_from_object: &Mat4, aabb: &Aab
     }
     let nearest = clip.iter().map(|c| c.z / c.w).fold(0.0f32, f32::max) * (1.0 + 1e-5);
     if nearest < view.far_depth() * (1.0 - 1e-5) {
-        return 0;
+        return none;
     }
     let pts: Vec<(f64, f64)> = clip
         .iter()
@@ -111,7 +131,7 @@ pub fn query_box(frame: &Frame, view: &View, clip_from_object: &Mat4, aabb: &Aab
     let px1 = ((maxx + margin - 0.5).floor().min(w - 1.0)).max(-1.0) as i64 + 1;
     let py1 = ((maxy + margin - 0.5).floor().min(h - 1.0)).max(-1.0) as i64 + 1;
     if px1 <= px0 as i64 || py1 <= py0 as i64 {
-        return 0;
+        return none;
     }
     // Edges of the counter-clockwise (y down: clockwise on screen) hull as half-planes with the
     // interior on the non-negative side, each widened by `margin`.
@@ -130,19 +150,18 @@ pub fn query_box(frame: &Frame, view: &View, clip_from_object: &Mat4, aabb: &Aab
             .collect()
     };
     let fw = frame.width() as usize;
-    let mut count = 0;
+    let mut q = none;
     for y in py0..py1 as u32 {
         let cy = y as f64 + 0.5;
         for x in px0..px1 as u32 {
             let cx = x as f64 + 0.5;
-            if edges.iter().all(|&(a, b, c)| a * cx + b * cy + c >= 0.0)
-                && frame.depth()[y as usize * fw + x as usize] <= nearest
-            {
-                count += 1;
+            if edges.iter().all(|&(a, b, c)| a * cx + b * cy + c >= 0.0) {
+                q.comparisons += 1;
+                q.samples += u64::from(frame.depth()[y as usize * fw + x as usize] <= nearest);
             }
         }
     }
-    count
+    q
 }
 
 /// Convex hull (Andrew's monotone chain), in the orientation where `(ay - by, bx - ax)` points

@@ -3,7 +3,9 @@
 use occult_core::glam::Affine3A;
 use occult_core::glam::{Mat4, Vec4};
 use occult_core::{Aabb, Camera, Mesh, Vec3, View, NO_ITEM};
-use occult_raster::{query_box, Draw, DrawTriangles, Frame, RasterConfig, RasterMode, Rasterizer, Strategy};
+use occult_raster::{
+    query_box, query_box_counted, Draw, DrawTriangles, Frame, RasterConfig, RasterMode, Rasterizer, Strategy,
+};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -445,7 +447,16 @@ fn query_box_is_conservative() {
             let written = raster(1, 32)
                 .draw(&view, &mut f, &[d], RasterMode::Full)
                 .fragments_written;
-            let samples = query_box(&base, &view, &view.clip_from_object(&Affine3A::IDENTITY), &b);
+            let clip_from_world = view.clip_from_object(&Affine3A::IDENTITY);
+            let samples = query_box(&base, &view, &clip_from_world, &b);
+            // The counted query: the same samples; its comparisons are the silhouette's pixels,
+            // which do not depend on the depth (on a cleared frame every one of them passes).
+            let counted = query_box_counted(&base, &view, &clip_from_world, &b);
+            let on_empty = query_box_counted(&Frame::new(96, 64).unwrap(), &view, &clip_from_world, &b);
+            assert_eq!(counted.samples, samples);
+            assert!(counted.comparisons >= samples);
+            assert_eq!(counted.comparisons, on_empty.comparisons);
+            assert_eq!(on_empty.samples, on_empty.comparisons);
             if written > 0 {
                 assert!(
                     samples > 0,

@@ -42,6 +42,10 @@ pub struct ParticlesArgs {
     /// Cull sprites against the N-buffer (`on`) or draw them all (`off`).
     #[arg(long, value_name = "on|off", default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
     pub cull: bool,
+    /// Test the four-lookup sprites in one batched N-buffer call (`on`) or one call each
+    /// (`off`: same results; for measuring the batch).
+    #[arg(long, value_name = "on|off", default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
+    pub batch: bool,
     /// Share of the scene's height (from the ground) the particles fill, in (0, 1].
     #[arg(long, value_name = "F", default_value_t = 0.3)]
     pub fill: f32,
@@ -105,6 +109,7 @@ struct ParticlesOut {
     max_sprite: u32,
     power_of_two: bool,
     cull: bool,
+    batch: bool,
     sprites_in_view: u64,
     sprites_culled: u64,
     lookups: u64,
@@ -116,6 +121,8 @@ struct ParticlesOut {
     nbuffer_ms: f64,
     /// Culling and drawing the sprites, ms (N-buffer build excluded).
     draw_ms: f64,
+    /// The N-buffer tests alone, ms (part of `draw_ms`).
+    cull_ms: f64,
     /// Both, ms.
     total_ms: f64,
     scene_ms: f64,
@@ -164,8 +171,9 @@ pub fn run(a: ParticlesArgs) -> Result<()> {
     let nbuffer_ms = t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
     let first = scene.scene.item_count();
-    let c = draw_particles(&mut raster, &view, &mut frame, &particles, first, nb.as_ref())?;
+    let c = draw_particles(&mut raster, &view, &mut frame, &particles, first, nb.as_ref(), a.batch)?;
     let draw_ms = t.elapsed().as_secs_f64() * 1e3;
+    let cull_ms = c.cull_time.as_secs_f64() * 1e3;
     shade(&mut frame, &scene.scene, &view);
     output::write_color_png(&frame, &a.out)?;
 
@@ -217,12 +225,14 @@ pub fn run(a: ParticlesArgs) -> Result<()> {
         output::count(c.raster.fragments_written as f64)
     );
     say!(
-        "  {:<24} {} ms (N-buffer {} ms, {} levels; cull and draw {} ms); scene {} ms",
+        "  {:<24} {} ms (N-buffer {} ms, {} levels; cull and draw {} ms, of which tests {} ms{}); scene {} ms",
         "time",
         output::millis(nbuffer_ms + draw_ms),
         output::millis(nbuffer_ms),
         nb.as_ref().map_or(0, |n| n.level_count()),
         output::millis(draw_ms),
+        output::millis(cull_ms),
+        if a.batch { ", batched" } else { ", one call each" },
         output::millis(scene_ms)
     );
     say!("wrote {}", a.out.display());
@@ -236,6 +246,7 @@ pub fn run(a: ParticlesArgs) -> Result<()> {
             max_sprite: a.sizes.max,
             power_of_two: a.sizes.power_of_two,
             cull: a.cull,
+            batch: a.batch,
             sprites_in_view: c.sprites_in_view,
             sprites_culled: c.sprites_culled,
             lookups: c.lookups,
@@ -245,6 +256,7 @@ pub fn run(a: ParticlesArgs) -> Result<()> {
             nbuffer_levels: nb.as_ref().map_or(0, |n| n.level_count()),
             nbuffer_ms,
             draw_ms,
+            cull_ms,
             total_ms: nbuffer_ms + draw_ms,
             scene_ms,
         };

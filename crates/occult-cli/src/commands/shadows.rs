@@ -1,5 +1,6 @@
 //! `occult shadows`: shadow volumes of a spot light counted in a stencil pass, with or without
-//! culling and clamping by min/max litmaps and N-buffers (Décoret 2005 §3.3, §4.4).
+//! culling and clamping by min/max litmaps and N-buffers (Décoret 2005 §3.3, §4.4), from one
+//! view or along a camera path (§4.4 measured "along recorded path").
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -23,8 +24,13 @@ pub struct ShadowsArgs {
     #[arg(long, value_name = "SPEC")]
     pub scene: String,
     /// Camera: `default`, or camera `i` of a path as `PATH:i`.
-    #[arg(long, value_name = "VIEW", default_value = "default")]
+    #[arg(long, value_name = "VIEW", default_value = "default", conflicts_with = "path")]
     pub view: String,
+    /// Camera path instead of one view (`circle:N`, `street:N`, `flyover:N` or a JSON file of
+    /// cameras, as `walk` and `compare` take): per-frame and mean figures; the image is the
+    /// last frame's.
+    #[arg(long, value_name = "PATH")]
+    pub path: Option<String>,
     #[command(flatten)]
     pub camera: CameraOverrides,
     /// Frame size, WxH pixels.
@@ -57,7 +63,7 @@ pub struct ShadowsArgs {
     pub json: Option<PathBuf>,
 }
 
-#[derive(Serialize)]
+#[derive(Clone, Serialize)]
 struct Run {
     clamp: bool,
     casters: u64,
@@ -104,9 +110,20 @@ impl Run {
     }
 }
 
+/// One camera of the path: its runs (one per clamping mode) and the pixels whose shadow differs.
+#[derive(Serialize)]
+struct FrameOut {
+    camera: Camera,
+    runs: Vec<Run>,
+    differing_pixels: Option<u64>,
+}
+
 #[derive(Serialize)]
 struct ShadowsOut {
     scene: SceneSummary,
+    /// The camera path, when given.
+    path: Option<String>,
+    /// The (last) camera.
     camera: Camera,
     width: u32,
     height: u32,
@@ -115,9 +132,28 @@ struct ShadowsOut {
     cone_deg: f32,
     litmap: u32,
     casters: usize,
-    runs: Vec<Run>,
-    /// With `--clamp both`: pixels whose shadow state differs (always 0).
+    /// Per clamping mode, the mean of every figure over the frames (the one frame's figures
+    /// for a single view).
+    runs: Vec<serde_json::Value>,
+    /// With `--clamp both`: pixels whose shadow state differs, over all frames (always 0).
     differing_pixels: Option<u64>,
+    /// Per frame.
+    frames: Vec<FrameOut>,
+}
+
+/// The mean of every numeric field of `runs` (serialized), other fields from the first.
+fn mean_run(runs: &[&Run]) -> Result<serde_json::Value> {
+    let values: Vec<serde_json::Value> = runs.iter().map(serde_json::to_value).collect::<Result<_, _>>()?;
+    let mut mean = values.first().cloned().context("no frame")?;
+    if let Some(fields) = mean.as_object_mut() {
+        for (key, field) in fields.iter_mut() {
+            if field.is_number() {
+                let sum: f64 = values.iter().filter_map(|v| v[key].as_f64()).sum();
+                *field = serde_json::json!(sum / values.len() as f64);
+            }
+        }
+    }
+    Ok(mean)
 }
 
 /// Runs the command.
@@ -127,8 +163,15 @@ pub fn run(a: ShadowsArgs) -> Result<()> {
         bail!("--leaf must be at least 1");
     }
     let scene = scene::load(&a.scene)?;
-    let camera = scene::camera(&a.view, &a.camera, &scene)?;
-    let view = View::new(camera, a.size.width, a.size.height).context("view")?;
+    let cameras = match &a.path {
+        Some(p) => scene::path(p, &scene)?,
+        None => vec![scene::camera(&a.view, &a.camera, &scene)?],
+    };
+    let views = cameras
+        .iter()
+        .enumerate()
+        .map(|(i, c)| View::new(*c, a.size.width, a.size.height).with_context(|| format!("camera {i}")))
+        .collect::<Result<Vec<_>>>()?;
     let mut light = SpotLight::for_bounds(&scene.scene.bounds());
     light.position = a.light.unwrap_or(light.position);
     light.target = a.light_target.unwrap_or(light.target);
@@ -140,31 +183,48 @@ pub fn run(a: ShadowsArgs) -> Result<()> {
         .build(scene.scene.clone(), &RenderOptions::default())
         .context("building zbuffer")?;
     let mut frame = Frame::new(a.size.width, a.size.height)?;
-    z.render(&view, &mut frame).context("rendering the scene")?;
     let mut raster = Rasterizer::new(RasterConfig::default())?;
     let modes: &[Clamping] = match a.clamp.as_str() {
         "on" => &[Clamping::On],
         "off" => &[Clamping::Off],
         _ => &[Clamping::Off, Clamping::On],
     };
-    let mut results: Vec<(ShadowFrame, f64)> = Vec::new();
-    for &m in modes {
-        let t = Instant::now();
-        let r = casters.shadows(&mut raster, &view, &frame, &light, m)?;
-        results.push((r, t.elapsed().as_secs_f64() * 1e3));
-    }
-    let differing = (results.len() == 2).then(|| {
-        results[0]
-            .0
-            .shades
+    let mut frames: Vec<FrameOut> = Vec::with_capacity(views.len());
+    let mut last: Option<ShadowFrame> = None;
+    for (i, view) in views.iter().enumerate() {
+        z.render(view, &mut frame)
+            .with_context(|| format!("rendering the scene, camera {i}"))?;
+        let mut results: Vec<(ShadowFrame, f64)> = Vec::new();
+        for &m in modes {
+            let t = Instant::now();
+            let r = casters.shadows(&mut raster, view, &frame, &light, m)?;
+            results.push((r, t.elapsed().as_secs_f64() * 1e3));
+        }
+        let differing = (results.len() == 2).then(|| {
+            results[0]
+                .0
+                .shades
+                .iter()
+                .zip(&results[1].0.shades)
+                .filter(|(x, y)| x != y)
+                .count() as u64
+        });
+        let runs = modes
             .iter()
-            .zip(&results[1].0.shades)
-            .filter(|(x, y)| x != y)
-            .count() as u64
-    });
-    shade(&mut frame, &scene.scene, &view);
+            .zip(&results)
+            .map(|(&m, (r, ms))| Run::new(m == Clamping::On, &r.counts, *ms))
+            .collect();
+        frames.push(FrameOut {
+            camera: cameras[i],
+            runs,
+            differing_pixels: differing,
+        });
+        last = results.pop().map(|(r, _)| r);
+    }
+    let view = views.last().expect("one camera at least");
+    shade(&mut frame, &scene.scene, view);
     let mut img = frame.color_image();
-    results.last().expect("one run at least").0.darken(&mut img);
+    last.expect("one run at least").darken(&mut img);
     img.save_with_format(&a.out, image::ImageFormat::Png)
         .with_context(|| format!("cannot write '{}'", a.out.display()))?;
 
@@ -186,11 +246,48 @@ pub fn run(a: ShadowsArgs) -> Result<()> {
         a.size.width,
         a.size.height
     );
-    let runs: Vec<Run> = modes
-        .iter()
-        .zip(&results)
-        .map(|(&m, (r, ms))| Run::new(m == Clamping::On, &r.counts, *ms))
-        .collect();
+    // Per clamping mode: the mean over the frames (the one frame's figures for one view).
+    let means: Vec<serde_json::Value> = (0..modes.len())
+        .map(|k| mean_run(&frames.iter().map(|f| &f.runs[k]).collect::<Vec<_>>()))
+        .collect::<Result<_>>()?;
+    let num = |v: &serde_json::Value, key: &str| v[key].as_f64().unwrap_or(0.0);
+    let differing: Option<u64> = (modes.len() == 2).then(|| frames.iter().filter_map(|f| f.differing_pixels).sum());
+    if frames.len() > 1 {
+        say!(
+            "path {}: {} frames{}",
+            a.path.as_deref().unwrap_or(""),
+            frames.len(),
+            if modes.len() == 2 {
+                "; per frame, unclamped → clamped"
+            } else {
+                ""
+            }
+        );
+        for (i, f) in frames.iter().enumerate() {
+            let r = f.runs.last().expect("one mode at least");
+            let mut line = format!(
+                "  frame {i:>3}: casters culled {} clamped {}; stencil fragments {}",
+                output::count(r.casters_culled as f64),
+                output::count(r.casters_clamped as f64),
+                output::count(r.stencil_fragments as f64),
+            );
+            if let ([off, on], Some(d)) = (f.runs.as_slice(), f.differing_pixels) {
+                line = format!(
+                    "  frame {i:>3}: casters culled {} clamped {}; stencil fragments {} → {} ({:.1} %); {} → {} ms; identical {}",
+                    output::count(on.casters_culled as f64),
+                    output::count(on.casters_clamped as f64),
+                    output::count(off.stencil_fragments as f64),
+                    output::count(on.stencil_fragments as f64),
+                    100.0 * on.stencil_fragments as f64 / off.stencil_fragments.max(1) as f64,
+                    output::millis(off.total_ms),
+                    output::millis(on.total_ms),
+                    if d == 0 { "yes".to_string() } else { format!("NO ({d} pixels)") }
+                );
+            }
+            say!("{line}");
+        }
+        say!("mean per frame:");
+    }
     let header = [
         "clamping",
         "casters",
@@ -203,30 +300,34 @@ pub fn run(a: ShadowsArgs) -> Result<()> {
         "total ms",
         "stencil ms",
     ];
-    let rows: Vec<Vec<String>> = runs
+    let rows: Vec<Vec<String>> = means
         .iter()
         .map(|r| {
-            vec![
-                if r.clamp { "on" } else { "off" }.to_string(),
-                output::count(r.casters as f64),
-                output::count(r.casters_culled as f64),
-                output::count(r.casters_clamped as f64),
-                output::count(r.lookups as f64),
-                output::count(r.volume_triangles as f64),
-                output::count(r.stencil_fragments as f64),
-                output::count(r.shadowed_pixels as f64),
-                output::millis(r.total_ms),
-                output::millis(r.stencil_ms),
-            ]
+            let mut row = vec![if r["clamp"] == true { "on" } else { "off" }.to_string()];
+            for key in [
+                "casters",
+                "casters_culled",
+                "casters_clamped",
+                "lookups",
+                "volume_triangles",
+                "stencil_fragments",
+                "shadowed_pixels",
+            ] {
+                row.push(output::count(num(r, key)));
+            }
+            row.push(output::millis(num(r, "total_ms")));
+            row.push(output::millis(num(r, "stencil_ms")));
+            row
         })
         .collect();
     say_raw!("{}", output::table(&header, &rows));
     if let Some(d) = differing {
-        let (off, on) = (runs[0].stencil_fragments, runs[1].stencil_fragments);
+        let (off, on) = (&means[0], &means[1]);
         say!(
-            "clamped fill {:.2} % of unclamped; time {:.2}x; shadows identical: {}",
-            100.0 * on as f64 / off.max(1) as f64,
-            runs[0].total_ms / runs[1].total_ms.max(1e-9),
+            "clamped fill {:.2} % of unclamped; time {:.2}x; shadows identical{}: {}",
+            100.0 * num(on, "stencil_fragments") / num(off, "stencil_fragments").max(1.0),
+            num(off, "total_ms") / num(on, "total_ms").max(1e-9),
+            if frames.len() > 1 { " on every frame" } else { "" },
             if d == 0 {
                 "yes".to_string()
             } else {
@@ -238,7 +339,8 @@ pub fn run(a: ShadowsArgs) -> Result<()> {
     if let Some(p) = &a.json {
         let out = ShadowsOut {
             scene: summary,
-            camera,
+            path: a.path.clone(),
+            camera: *cameras.last().expect("one camera at least"),
             width: a.size.width,
             height: a.size.height,
             light: light.position.to_array(),
@@ -246,8 +348,9 @@ pub fn run(a: ShadowsArgs) -> Result<()> {
             cone_deg: light.cone_deg,
             litmap: a.litmap,
             casters: casters.caster_count(),
-            runs,
+            runs: means,
             differing_pixels: differing,
+            frames,
         };
         output::write_json(p, &out)?;
         say!("wrote {}", p.display());

@@ -34,6 +34,11 @@
 //!   the same margins as [`occult_raster::query_box`]; boxes reaching the near plane are never
 //!   culled. A tie in depth is not culled (the tie can be won on item id).
 //! - `cover=one` replaces the four-square cover by the one-square query (ablation).
+//! - `test=query` replaces the N-buffer by an occlusion query of each box against the depth
+//!   buffer ([`occult_raster::query_box_counted`]: the pixels of its projected silhouette,
+//!   as a hardware query with back-face culling compares them), on the same objects and
+//!   nodes, to measure Table 2's OQ columns (§4.2). No N-buffer is built; the counter
+//!   `depth_comparisons` is the pixels compared (the lookups with the N-buffer).
 //!
 //! # Cost
 //! Per frame: drawing last frame's visible set, one N-buffer build (resolution only), 4 loads
@@ -47,7 +52,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use occult_core::{Aabb, Affine3A, Containment, ItemId, NodeId, NodeKind, Scene, Vec3, View, NO_ITEM};
-use occult_raster::{Draw, DrawTriangles, Extremum, Frame, NBuffer, PixelRect, Rasterizer};
+use occult_raster::{query_box_counted, Draw, DrawTriangles, Extremum, Frame, NBuffer, PixelRect, Rasterizer};
 use occult_spatial::Bvh;
 
 use crate::{check_frame, AlgorithmInfo, FrameStats, ParamDoc, Phase, RenderError, RenderOptions, Renderer, Result};
@@ -71,6 +76,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             help: "rectangle query: four-square cover of Fig. 3 (four) or one square (one)",
         },
         ParamDoc {
+            key: "test",
+            default: "nbuffer",
+            help: "box test: N-buffer lookups (nbuffer) or an occlusion query of the box's silhouette against the depth buffer (query, Table 2's OQ)",
+        },
+        ParamDoc {
             key: "leaf",
             default: "4096",
             help: "triangles per object: meshes above this are split into BVH leaves (>= 1)",
@@ -87,6 +97,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         let no = NBufferOptions {
             hierarchy: params.choice("hierarchy", &["bvh", "flat"], "bvh")? == "bvh",
             four_square: params.choice("cover", &["four", "one"], "four")? == "four",
+            query: params.choice("test", &["nbuffer", "query"], "nbuffer")? == "query",
             leaf_size: params.get("leaf", defaults.leaf_size)?,
             group_leaf_size: params.get("group_leaf", defaults.group_leaf_size)?,
         };
@@ -101,6 +112,10 @@ pub struct NBufferOptions {
     pub hierarchy: bool,
     /// Four-square cover (true) or one-square query (false).
     pub four_square: bool,
+    /// Test boxes with an occlusion query against the depth buffer
+    /// ([`occult_raster::query_box_counted`]) instead of the N-buffer (Table 2's OQ columns;
+    /// no N-buffer is built).
+    pub query: bool,
     /// Triangles per object (≥ 1): larger meshes are split into BVH leaves.
     pub leaf_size: usize,
     /// Objects per leaf of the hierarchy (≥ 1).
@@ -112,6 +127,7 @@ impl Default for NBufferOptions {
         Self {
             hierarchy: true,
             four_square: true,
+            query: false,
             leaf_size: 4096,
             group_leaf_size: 4,
         }
@@ -162,6 +178,8 @@ pub struct NBufferCulling {
     drawn: Vec<bool>,
     /// Resolution of the previous frame (occluders are dropped when it changes).
     last_size: (u32, u32),
+    /// The flat list's batched tests (scratch).
+    batch: Batch,
 }
 
 impl NBufferCulling {
@@ -298,6 +316,7 @@ impl NBufferCulling {
             visible: vec![false; n],
             drawn: vec![false; n],
             last_size: (0, 0),
+            batch: Batch::default(),
         })
     }
 
@@ -392,33 +411,80 @@ fn widen(b: Aabb) -> Aabb {
     Aabb::new(b.min - Vec3::splat(pad), b.max + Vec3::splat(pad))
 }
 
-/// Lookups and rectangle pixels of a frame's tests.
+/// Depth comparisons and rectangle pixels of a frame's tests.
 #[derive(Default)]
 struct Tally {
-    lookups: u64,
+    /// N-buffer lookups, or the pixels an occlusion query compared (`test=query`).
+    comparisons: u64,
     rect_pixels: u64,
 }
 
-/// The screen test of a world box against the N-buffer: `Some(culled)` when it could be
-/// tested, with the lookups in `lookups`.
+/// What a world box is tested against.
+enum Against<'a> {
+    /// §3.1: the N-buffer, with the four-square cover (true) or one square (false).
+    NBuffer(&'a NBuffer, bool),
+    /// Table 2's OQ: an occlusion query of the box's silhouette against the depth buffer.
+    Query(&'a Frame, &'a View),
+}
+
+/// Where a world box lands on screen.
+enum Screen {
+    /// An empty box: nothing to draw.
+    Empty,
+    /// It reaches the near plane (or behind the eye): it may cover anything.
+    Anywhere,
+    /// Its pixel-centre rectangle and nearest depth.
+    Rect(PixelRect, f32),
+}
+
+/// The rectangles of a flat object list, tested in one [`NBuffer::occludes_batch`] call
+/// (reused from frame to frame).
+#[derive(Default)]
+struct Batch {
+    objects: Vec<u32>,
+    rects: Vec<PixelRect>,
+    nearest: Vec<f32>,
+    hidden: Vec<bool>,
+}
+
+impl Batch {
+    fn clear(&mut self) {
+        self.objects.clear();
+        self.rects.clear();
+        self.nearest.clear();
+    }
+
+    fn push(&mut self, object: usize, rect: PixelRect, nearest: f32) {
+        self.objects.push(object as u32);
+        self.rects.push(rect);
+        self.nearest.push(nearest);
+    }
+
+    /// Tests every rectangle (into `hidden`); returns the lookups made.
+    fn test(&mut self, nbuffer: &NBuffer) -> Result<u64> {
+        self.hidden.clear();
+        self.hidden.resize(self.rects.len(), false);
+        Ok(nbuffer.occludes_batch(&self.rects, &self.nearest, &mut self.hidden)?)
+    }
+}
+
+/// The screen test of a world box.
 struct BoxTest<'a> {
-    nbuffer: &'a NBuffer,
+    against: Against<'a>,
     clip_from_world: occult_core::Mat4,
     width: f64,
     height: f64,
-    four_square: bool,
 }
 
 impl BoxTest<'_> {
-    /// True when the box is hidden behind the N-buffer's depth; adds the lookups made and
-    /// the pixels of the tested rectangle to `tally`.
-    fn hidden(&self, b: &Aabb, tally: &mut Tally) -> bool {
+    /// The box's screen rectangle (pixel centres) and nearest depth.
+    fn screen(&self, b: &Aabb) -> Screen {
         if b.is_empty() {
-            return true;
+            return Screen::Empty;
         }
         let clip = b.corners().map(|c| self.clip_from_world * c.extend(1.0));
         if clip.iter().any(|c| !c.is_finite() || c.z * (1.0 + 1e-5) > c.w) {
-            return false; // reaches the near plane (or behind the eye): may cover anything
+            return Screen::Anywhere;
         }
         let (mut minx, mut maxx, mut miny, mut maxy) =
             (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
@@ -444,15 +510,37 @@ impl BoxTest<'_> {
             x1: hi(maxx, self.width),
             y1: hi(maxy, self.height),
         };
+        Screen::Rect(rect, nearest)
+    }
+
+    /// True when the box is hidden; adds the depth comparisons made and the pixels of the
+    /// tested rectangle to `tally`. Boxes reaching the near plane are never hidden and are
+    /// not tested (in both modes, so both test the same boxes).
+    fn hidden(&self, b: &Aabb, tally: &mut Tally) -> bool {
+        let (rect, nearest) = match self.screen(b) {
+            Screen::Empty => return true,
+            Screen::Anywhere => return false,
+            Screen::Rect(rect, nearest) => (rect, nearest),
+        };
         tally.rect_pixels += rect.area();
-        if self.four_square {
-            let (hidden, n) = self.nbuffer.occludes(rect, nearest);
-            tally.lookups += u64::from(n);
-            hidden
-        } else {
-            let q = self.nbuffer.query_one(rect);
-            tally.lookups += u64::from(q.lookups);
-            q.lookups == 0 || nearest < q.depth
+        match self.against {
+            Against::NBuffer(nbuffer, true) => {
+                let (hidden, n) = nbuffer.occludes(rect, nearest);
+                tally.comparisons += u64::from(n);
+                hidden
+            }
+            Against::NBuffer(nbuffer, false) => {
+                let q = nbuffer.query_one(rect);
+                tally.comparisons += u64::from(q.lookups);
+                q.lookups == 0 || nearest < q.depth
+            }
+            Against::Query(frame, view) => {
+                // Deviation: the software occlusion query counts every pixel of the
+                // silhouette (no early out), as a hardware query's sample count does.
+                let q = query_box_counted(frame, view, &self.clip_from_world, b);
+                tally.comparisons += q.comparisons;
+                q.samples == 0
+            }
         }
     }
 }
@@ -495,28 +583,33 @@ impl Renderer for NBufferCulling {
         drop(draws);
         stats.counters.add("occluders_drawn", occluders.len() as u64);
 
-        // §2: the N-buffer of the occluders' depth (min variant: farthest depth).
-        let t = Instant::now();
+        // §2: the N-buffer of the occluders' depth (min variant: farthest depth); none for
+        // occlusion queries, which read the depth buffer itself.
         let (w, h) = (view.width(), view.height());
-        let levels = NBuffer::default_level_count(w, h);
-        let result = self.raster.install(|| match &mut self.nbuffer {
-            Some(nb) => nb.rebuild(frame.depth(), w, h, levels),
-            None => NBuffer::new(Extremum::Min, frame.depth(), w, h).map(|nb| {
-                self.nbuffer = Some(nb);
-            }),
-        });
-        result?;
-        stats.phases.add(Phase::DepthStructure, t.elapsed());
+        if !self.options.query {
+            let t = Instant::now();
+            let levels = NBuffer::default_level_count(w, h);
+            let result = self.raster.install(|| match &mut self.nbuffer {
+                Some(nb) => nb.rebuild(frame.depth(), w, h, levels),
+                None => NBuffer::new(Extremum::Min, frame.depth(), w, h).map(|nb| {
+                    self.nbuffer = Some(nb);
+                }),
+            });
+            result?;
+            stats.phases.add(Phase::DepthStructure, t.elapsed());
+        }
 
         // §3.1: test every object (through the hierarchy or flat), keep the survivors.
         let t = Instant::now();
-        let nbuffer = self.nbuffer.as_ref().expect("built above");
+        let against = match &self.nbuffer {
+            Some(nbuffer) if !self.options.query => Against::NBuffer(nbuffer, self.options.four_square),
+            _ => Against::Query(&*frame, view),
+        };
         let test = BoxTest {
-            nbuffer,
+            against,
             clip_from_world: view.clip_from_object(&Affine3A::IDENTITY),
             width: f64::from(w),
             height: f64::from(h),
-            four_square: self.options.four_square,
         };
         let mut tally = Tally::default();
         let mut survivors = Vec::new();
@@ -572,15 +665,55 @@ impl Renderer for NBufferCulling {
                     stack.push((n + 1, inside));
                 }
             }
-            _ => {
-                for i in 0..objects.len() {
-                    test_object(i, false, &mut stats, &mut tally);
+            _ => match test.against {
+                Against::NBuffer(nbuffer, true) => {
+                    // §3.1 over the flat list: every object's rectangle first, then one
+                    // batched test (same answers as one call each; the lookups overlap).
+                    let batch = &mut self.batch;
+                    batch.clear();
+                    for (i, object) in objects.iter().enumerate() {
+                        if drawn[i] {
+                            continue;
+                        }
+                        stats.boxes_tested += 1;
+                        if frustum.classify_aabb(&object.bounds) == Containment::Outside {
+                            stats.boxes_culled += 1;
+                            continue;
+                        }
+                        stats.rects_tested += 1;
+                        match test.screen(&object.bounds) {
+                            Screen::Empty => stats.rects_culled += 1,
+                            Screen::Anywhere => survivors.push(i),
+                            Screen::Rect(rect, nearest) => {
+                                tally.rect_pixels += rect.area();
+                                batch.push(i, rect, nearest);
+                            }
+                        }
+                    }
+                    tally.comparisons += batch.test(nbuffer)?;
+                    for (&i, &hidden) in batch.objects.iter().zip(&batch.hidden) {
+                        if hidden {
+                            stats.rects_culled += 1;
+                        } else {
+                            survivors.push(i as usize);
+                        }
+                    }
                 }
-            }
+                _ => {
+                    for i in 0..objects.len() {
+                        test_object(i, false, &mut stats, &mut tally);
+                    }
+                }
+            },
         }
-        stats.counters.add("nbuffer_lookups", tally.lookups);
-        // Table 2's comparison: the depth tests a per-pixel test of the same rectangles
-        // (`query_rect`, an occlusion query of the box's screen rectangle) would make.
+        // Table 2: the depth comparisons of the tests (N-buffer lookups, or the pixels the
+        // occlusion queries compared).
+        stats.counters.add("depth_comparisons", tally.comparisons);
+        if !self.options.query {
+            stats.counters.add("nbuffer_lookups", tally.comparisons);
+        }
+        // The pixels of the tested boxes' screen rectangles (what a per-pixel test of the
+        // rectangles, `query_rect`, would compare).
         stats.counters.add("rect_pixels", tally.rect_pixels);
         stats.counters.add("survivors_drawn", survivors.len() as u64);
         let draws = draws_of(&self.scene, &self.objects, &self.mesh_bvhs, view, &mut survivors);
@@ -610,5 +743,9 @@ impl Renderer for NBufferCulling {
             + self.nbuffer.as_ref().map_or(0, NBuffer::memory_bytes)
             + self.visible.capacity()
             + self.drawn.capacity()
+            + self.batch.objects.capacity() * 4
+            + self.batch.rects.capacity() * std::mem::size_of::<PixelRect>()
+            + self.batch.nearest.capacity() * 4
+            + self.batch.hidden.capacity()
     }
 }

@@ -4,7 +4,8 @@
 //! sprite (two triangles through the rasterizer, at the particle's depth), like a point
 //! sprite. Before drawing, each sprite is tested against an N-buffer (min variant: farthest
 //! depth) of the scene's depth buffer in constant time: one lookup when its side is a power of
-//! two (the one-square query covers it exactly), four (Fig. 3 cover) otherwise. Only the first
+//! two (the one-square query covers it exactly), four (Fig. 3 cover) otherwise, all of those in
+//! one batched call ([`NBuffer::occludes_batch`]: their lookups overlap). Only the first
 //! `⌈log2 max size⌉ + 1` levels are built (§3.2: "only the first few levels").
 //!
 //! Culling never changes the frame ([`draw_particles`] with and without an N-buffer gives
@@ -19,6 +20,8 @@
 //!   pixel rectangle is known exactly.
 //! - Sprites are culled on the CPU (the paper did it in a vertex shader); sprites reaching the
 //!   near plane or beyond the far plane are dropped, as the rasterizer would drop them.
+
+use std::time::{Duration, Instant};
 
 use occult_core::{Aabb, ItemId, Mat4, Mesh, Vec3, View};
 use occult_raster::{Draw, DrawTriangles, Frame, NBuffer, PixelRect, RasterCounts, RasterMode, Rasterizer};
@@ -119,6 +122,8 @@ pub struct ParticleCounts {
     pub lookups: u64,
     /// Sprites tested with a single lookup (power-of-two sides).
     pub single_lookup_tests: u64,
+    /// Time of the N-buffer tests (zero without culling).
+    pub cull_time: Duration,
     /// The rasterizer's counts for the sprites drawn.
     pub raster: RasterCounts,
 }
@@ -126,7 +131,9 @@ pub struct ParticleCounts {
 /// Draws `particles` as sprites into `frame` (which holds the scene already), with item ids
 /// `first_item + 2 i` and `+ 1` for particle `i`'s two triangles. With `cull`, each sprite is
 /// first tested against that N-buffer (min variant, built from `frame`'s depth before the
-/// sprites) and skipped when hidden; the frame is the same either way.
+/// sprites) and skipped when hidden; the frame is the same either way. `batched` tests the
+/// four-lookup sprites in one [`NBuffer::occludes_batch`] call (the default of the CLI), or
+/// one [`NBuffer::occludes`] call each (ablation: same answers, slower).
 ///
 /// # Errors
 /// [`RenderError::BadParameter`] when the N-buffer's size differs from the frame's, or when
@@ -138,6 +145,7 @@ pub fn draw_particles(
     particles: &Particles,
     first_item: ItemId,
     cull: Option<&NBuffer>,
+    batched: bool,
 ) -> Result<ParticleCounts> {
     if let Some(nb) = cull {
         if (nb.width(), nb.height()) != (frame.width(), frame.height()) {
@@ -154,9 +162,8 @@ pub fn draw_particles(
     let clip_from_world = view.clip_from_object(&occult_core::Affine3A::IDENTITY);
     let far_depth = view.far_depth();
     let mut counts = ParticleCounts::default();
-    let mut positions = Vec::new();
-    let mut triangles = Vec::new();
-    let mut items = Vec::new();
+    // Pass 1: the sprites in view, their pixel squares and depths.
+    let mut sprites: Vec<Sprite> = Vec::new();
     for (i, (&p, &size)) in particles.positions.iter().zip(&particles.sizes).enumerate() {
         let c = clip_from_world * p.extend(1.0);
         // In front of the near plane, not beyond the far plane, finite.
@@ -176,36 +183,34 @@ pub fn draw_particles(
         if x1 <= 0.0 || y1 <= 0.0 || x0 >= w || y0 >= h {
             continue;
         }
-        counts.sprites_in_view += 1;
-        if let Some(nb) = cull {
-            let rect = PixelRect {
-                x0: x0.max(0.0) as u32,
-                y0: y0.max(0.0) as u32,
-                x1: x1.min(w) as u32,
-                y1: y1.min(h) as u32,
-            };
-            // §3.2: a power-of-two sprite is one square of the N-buffer: a single lookup. A
-            // sprite clipped by the screen edge is a smaller rectangle: the four-square cover.
-            let whole_on_screen = rect.x1 - rect.x0 == size && rect.y1 - rect.y0 == size;
-            let (hidden, n) = if size.is_power_of_two() && whole_on_screen {
-                counts.single_lookup_tests += 1;
-                nb.occludes_one(rect, depth)
-            } else {
-                nb.occludes(rect, depth)
-            };
-            counts.lookups += u64::from(n);
-            if hidden {
-                counts.sprites_culled += 1;
-                continue;
-            }
-        }
+        sprites.push(Sprite {
+            index: i as u32,
+            corner: [x0, y0],
+            size,
+            depth,
+            hidden: false,
+        });
+    }
+    counts.sprites_in_view = sprites.len() as u64;
+    if let Some(nb) = cull {
+        let t = Instant::now();
+        cull_sprites(nb, &mut sprites, (w, h), batched, &mut counts)?;
+        counts.cull_time = t.elapsed();
+    }
+    // Pass 2: the survivors' squares, in particle order.
+    let mut positions = Vec::new();
+    let mut triangles = Vec::new();
+    let mut items = Vec::new();
+    for sprite in sprites.iter().filter(|s| !s.hidden) {
+        let ([x0, y0], size, depth) = (sprite.corner, sprite.size as f32, sprite.depth);
+        let (x1, y1) = (x0 + size, y0 + size);
         // The sprite in NDC (w = 1), counter-clockwise with y up.
         let ndc = |x: f32, y: f32| Vec3::new(x / w * 2.0 - 1.0, 1.0 - y / h * 2.0, depth);
         let base = positions.len() as u32;
         positions.extend([ndc(x0, y1), ndc(x1, y1), ndc(x1, y0), ndc(x0, y0)]);
         triangles.push([base, base + 1, base + 2]);
         triangles.push([base, base + 2, base + 3]);
-        items.push(i);
+        items.push(sprite.index as usize);
     }
     if triangles.is_empty() {
         return Ok(counts);
@@ -229,6 +234,83 @@ pub fn draw_particles(
     }
     counts.raster = raster.draw(view, frame, &draws, RasterMode::Full);
     Ok(counts)
+}
+
+/// A sprite in view: its particle, pixel corner, side and depth, and whether it was culled.
+struct Sprite {
+    index: u32,
+    corner: [f32; 2],
+    size: u32,
+    depth: f32,
+    hidden: bool,
+}
+
+/// Sprites tested per [`NBuffer::occludes_batch`] call: enough to keep many lookups in
+/// flight, few enough that the rectangles stay in L1 and no large buffer is allocated (fresh
+/// pages cost more than the tests; measured).
+const BATCH: usize = 1024;
+
+/// §3.2: tests every sprite of `sprites` against `nb` (a `w × h` min N-buffer), marking the
+/// hidden ones. A power-of-two sprite wholly on screen is one square of the N-buffer: a single
+/// lookup ([`NBuffer::occludes_one`]). The others (any side, or clipped by the screen edge:
+/// smaller rectangles) take the four-square cover, [`BATCH`] at a time in one
+/// [`NBuffer::occludes_batch`] call when `batched` (same answers as one call each; their
+/// lookups overlap).
+fn cull_sprites(
+    nb: &NBuffer,
+    sprites: &mut [Sprite],
+    (w, h): (f32, f32),
+    batched: bool,
+    counts: &mut ParticleCounts,
+) -> Result<()> {
+    let mut rects = Vec::with_capacity(BATCH);
+    let mut nearest = Vec::with_capacity(BATCH);
+    let mut four = Vec::with_capacity(BATCH);
+    let mut hidden = vec![false; BATCH];
+    let mut flush =
+        |rects: &mut Vec<PixelRect>, nearest: &mut Vec<f32>, four: &mut Vec<u32>, sprites: &mut [Sprite]| {
+            let hidden = &mut hidden[..rects.len()];
+            let lookups = nb.occludes_batch(rects, nearest, hidden)?;
+            for (&k, &hidden) in four.iter().zip(hidden.iter()) {
+                sprites[k as usize].hidden = hidden;
+            }
+            rects.clear();
+            nearest.clear();
+            four.clear();
+            Ok::<u64, RenderError>(lookups)
+        };
+    for k in 0..sprites.len() {
+        let s = &mut sprites[k];
+        let [x0, y0] = s.corner;
+        let (x1, y1) = (x0 + s.size as f32, y0 + s.size as f32);
+        let rect = PixelRect {
+            x0: x0.max(0.0) as u32,
+            y0: y0.max(0.0) as u32,
+            x1: x1.min(w) as u32,
+            y1: y1.min(h) as u32,
+        };
+        let whole_on_screen = rect.x1 - rect.x0 == s.size && rect.y1 - rect.y0 == s.size;
+        if s.size.is_power_of_two() && whole_on_screen {
+            counts.single_lookup_tests += 1;
+            let (hidden, n) = nb.occludes_one(rect, s.depth);
+            counts.lookups += u64::from(n);
+            s.hidden = hidden;
+        } else if !batched {
+            let (hidden, n) = nb.occludes(rect, s.depth);
+            counts.lookups += u64::from(n);
+            s.hidden = hidden;
+        } else {
+            rects.push(rect);
+            nearest.push(s.depth);
+            four.push(k as u32);
+            if rects.len() == BATCH {
+                counts.lookups += flush(&mut rects, &mut nearest, &mut four, sprites)?;
+            }
+        }
+    }
+    counts.lookups += flush(&mut rects, &mut nearest, &mut four, sprites)?;
+    counts.sprites_culled = sprites.iter().filter(|s| s.hidden).count() as u64;
+    Ok(())
 }
 
 /// SplitMix64 (Steele et al. 2014): a small seeded generator, enough to scatter particles.

@@ -393,6 +393,77 @@ struct Volume {
     lookups: u64,
 }
 
+/// The shadow volumes of one frame ([`ShadowCasters::volumes`]), ready for the stencil pass.
+pub struct ShadowVolumes<'a> {
+    casters: &'a ShadowCasters,
+    /// Per observer pixel: its lexel and light depth, `None` outside the light.
+    lexels: Vec<Option<(u32, f64)>>,
+    volumes: Vec<Volume>,
+    /// Front caps, grouped by mesh instance (one interpolated draw each), in instance order.
+    cap_lists: Vec<(u32, Vec<u32>)>,
+    /// Generated faces per caster: instance, mesh, first item.
+    meshes: Vec<(u32, Mesh, ItemId)>,
+    /// Everything counted up to the volumes.
+    pub counts: ShadowCounts,
+}
+
+impl ShadowVolumes<'_> {
+    /// The stencil pass (§3.3, §4.4): every volume's faces counted into a new stencil buffer
+    /// under the z-fail rule against `frame`'s depth. `view` and `frame` must be those the
+    /// volumes were built for.
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] when a caster instance is not a mesh; raster errors
+    /// (sizes, allocation).
+    pub fn stencil(
+        &self,
+        raster: &mut Rasterizer,
+        view: &View,
+        frame: &Frame,
+    ) -> Result<(StencilBuffer, StencilCounts)> {
+        let plane_lists: Vec<&[[f64; 4]]> = self
+            .volumes
+            .iter()
+            .filter(|v| v.lit > 0 && !v.culled && !v.triangles.is_empty())
+            .map(|v| &v.planes[..])
+            .collect();
+        let casters = self.casters;
+        let mut draws = Vec::with_capacity(self.cap_lists.len() + self.meshes.len());
+        for (k, tris) in &self.cap_lists {
+            let inst = &casters.instances[*k as usize];
+            let mesh = casters
+                .scene
+                .node(inst.mesh)
+                .mesh()
+                .ok_or_else(|| RenderError::BadParameter("shadows: a caster instance is not a mesh".into()))?;
+            draws.push(StencilDraw {
+                draw: Draw {
+                    mesh,
+                    triangles: DrawTriangles::List(tris),
+                    clip_from_object: view.clip_from_object(&inst.world_from_object),
+                    first_item: inst.first_item,
+                },
+                faces: StencilFaces::Interpolated,
+            });
+        }
+        for ((instance, mesh, first), planes) in self.meshes.iter().zip(plane_lists) {
+            let inst = &casters.instances[*instance as usize];
+            draws.push(StencilDraw {
+                draw: Draw {
+                    mesh,
+                    triangles: DrawTriangles::All,
+                    clip_from_object: view.clip_from_object(&inst.world_from_object),
+                    first_item: *first,
+                },
+                faces: StencilFaces::Planes(planes),
+            });
+        }
+        let mut stencil = StencilBuffer::new(frame.width(), frame.height())?;
+        let counts = raster.draw_stencil(view, frame, &mut stencil, &draws)?;
+        Ok((stencil, counts))
+    }
+}
+
 impl ShadowCasters {
     /// The casters of `scene`: its mesh instances, meshes above `leaf` triangles split into
     /// the leaves of a BVH over their triangles.
@@ -477,7 +548,8 @@ impl ShadowCasters {
         self.casters.len()
     }
 
-    /// Shadows of `light` on `frame` (already drawn by a conservative renderer from `view`).
+    /// Shadows of `light` on `frame` (already drawn by a conservative renderer from `view`):
+    /// [`ShadowCasters::volumes`], then [`ShadowVolumes::stencil`], then each pixel's shade.
     ///
     /// # Errors
     /// [`RenderError::BadParameter`] for a bad light (see [`SpotLight::view`]) or a frame whose
@@ -490,6 +562,46 @@ impl ShadowCasters {
         light: &SpotLight,
         clamping: Clamping,
     ) -> Result<ShadowFrame> {
+        let volumes = self.volumes(raster, view, frame, light, clamping)?;
+        let t3 = Instant::now();
+        let (stencil, stencil_counts) = volumes.stencil(raster, view, frame)?;
+        let ShadowVolumes { lexels, mut counts, .. } = volumes;
+        counts.stencil = stencil_counts;
+        counts.stencil_ms = t3.elapsed().as_secs_f64() * 1e3;
+
+        let shades: Vec<Shade> = lexels
+            .iter()
+            .zip(frame.depth())
+            .zip(stencil.values())
+            .map(|((l, &d), &s)| {
+                if d == CLEAR_DEPTH || !d.is_finite() {
+                    Shade::Sky
+                } else if l.is_none() {
+                    Shade::OutsideLight
+                } else if s != 0 {
+                    Shade::Shadowed
+                } else {
+                    Shade::Lit
+                }
+            })
+            .collect();
+        counts.shadowed_pixels = shades.iter().filter(|&&s| s == Shade::Shadowed).count() as u64;
+        Ok(ShadowFrame { shades, counts })
+    }
+
+    /// The litmaps, culling, clamping and shadow volumes of `light` for `frame` (already drawn
+    /// from `view`), ready for the stencil pass; `counts` holds everything but the stencil's.
+    ///
+    /// # Errors
+    /// As [`ShadowCasters::shadows`].
+    pub fn volumes(
+        &self,
+        raster: &mut Rasterizer,
+        view: &View,
+        frame: &Frame,
+        light: &SpotLight,
+        clamping: Clamping,
+    ) -> Result<ShadowVolumes<'_>> {
         let light_view = light.view()?;
         if (frame.width(), frame.height()) != (view.width(), view.height()) {
             return Err(RenderError::BadParameter(format!(
@@ -598,69 +710,17 @@ impl ShadowCasters {
                 base += v.triangles.len() as u64;
             }
         }
-        let plane_lists: Vec<&[[f64; 4]]> = volumes
-            .iter()
-            .filter(|v| v.lit > 0 && !v.culled && !v.triangles.is_empty())
-            .map(|v| &v.planes[..])
-            .collect();
-        let mut draws = Vec::with_capacity(cap_lists.len() + meshes.len());
-        let mut cap_keys: Vec<&u32> = cap_lists.keys().collect();
-        cap_keys.sort();
-        for k in cap_keys {
-            let tris = &cap_lists[k];
-            let inst = &self.instances[*k as usize];
-            let mesh = self
-                .scene
-                .node(inst.mesh)
-                .mesh()
-                .ok_or_else(|| RenderError::BadParameter("shadows: a caster instance is not a mesh".into()))?;
-            draws.push(StencilDraw {
-                draw: Draw {
-                    mesh,
-                    triangles: DrawTriangles::List(tris),
-                    clip_from_object: view.clip_from_object(&inst.world_from_object),
-                    first_item: inst.first_item,
-                },
-                faces: StencilFaces::Interpolated,
-            });
-        }
-        for ((instance, mesh, first), planes) in meshes.iter().zip(plane_lists) {
-            let inst = &self.instances[*instance as usize];
-            draws.push(StencilDraw {
-                draw: Draw {
-                    mesh,
-                    triangles: DrawTriangles::All,
-                    clip_from_object: view.clip_from_object(&inst.world_from_object),
-                    first_item: *first,
-                },
-                faces: StencilFaces::Planes(planes),
-            });
-        }
+        let mut cap_lists: Vec<(u32, Vec<u32>)> = cap_lists.into_iter().collect();
+        cap_lists.sort_unstable_by_key(|&(k, _)| k);
         counts.volumes_ms = t2.elapsed().as_secs_f64() * 1e3;
-
-        let t3 = Instant::now();
-        let mut stencil = StencilBuffer::new(w, h)?;
-        counts.stencil = raster.draw_stencil(view, frame, &mut stencil, &draws)?;
-        counts.stencil_ms = t3.elapsed().as_secs_f64() * 1e3;
-
-        let shades: Vec<Shade> = lexels
-            .iter()
-            .zip(frame.depth())
-            .zip(stencil.values())
-            .map(|((l, &d), &s)| {
-                if d == CLEAR_DEPTH || !d.is_finite() {
-                    Shade::Sky
-                } else if l.is_none() {
-                    Shade::OutsideLight
-                } else if s != 0 {
-                    Shade::Shadowed
-                } else {
-                    Shade::Lit
-                }
-            })
-            .collect();
-        counts.shadowed_pixels = shades.iter().filter(|&&s| s == Shade::Shadowed).count() as u64;
-        Ok(ShadowFrame { shades, counts })
+        Ok(ShadowVolumes {
+            casters: self,
+            lexels,
+            volumes,
+            cap_lists,
+            meshes,
+            counts,
+        })
     }
 
     /// The volume of one caster (§3.3 "Shadowing").
