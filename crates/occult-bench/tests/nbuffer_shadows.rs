@@ -129,3 +129,36 @@ fn bad_lights_are_errors() {
     assert_eq!(r.counts.casters_culled, r.counts.casters);
     assert_eq!(r.counts.stencil.fragments, 0);
 }
+
+#[test]
+fn a_point_on_a_shadow_boundary_is_classified_alike_with_and_without_clamping() {
+    // `terrain`, camera 7 of `flyover:8`, 640×480, the default light: one visible point lies on
+    // a side face of a clamped caster's volume. When the unclamped sides ran to the far plane in
+    // one quad, their snapped corners differed from the clamped ones and this pixel flipped.
+    let built = occult_scenes::spec::parse_spec("terrain")
+        .and_then(|s| s.build())
+        .unwrap();
+    let cams = occult_scenes::path::parse_path("flyover:8", &built.scene, &built.default_camera).unwrap();
+    let scene = Arc::new(built.scene);
+    let casters = ShadowCasters::new(scene.clone(), 4096).unwrap();
+    let mut z = Algorithm::ZBUFFER
+        .build(scene.clone(), &RenderOptions::default())
+        .unwrap();
+    let mut raster = Rasterizer::new(RasterConfig::default()).unwrap();
+    let light = SpotLight::for_bounds(&scene.bounds());
+    let view = View::new(cams[7], 640, 480).unwrap();
+    let mut frame = Frame::new(640, 480).unwrap();
+    z.render(&view, &mut frame).unwrap();
+    let off = casters
+        .shadows(&mut raster, &view, &frame, &light, Clamping::Off)
+        .unwrap();
+    let on = casters
+        .shadows(&mut raster, &view, &frame, &light, Clamping::On)
+        .unwrap();
+    assert!(on.counts.casters_clamped > 0 && on.counts.shadowed_pixels > 10_000);
+    let differ: Vec<usize> = (0..off.shades.len())
+        .filter(|&i| off.shades[i] != on.shades[i])
+        .collect();
+    assert!(differ.is_empty(), "pixels differ with clamping: {differ:?}");
+    assert!(on.counts.stencil.fragments < off.counts.stencil.fragments);
+}

@@ -28,6 +28,8 @@
 //!
 //! - **Unclamped**: front caps are the lit triangles themselves, sides run from the caster to
 //!   the plane at distance `D` (beyond every point of the scene), where the back cap lies.
+//!   Each side quad is cut where the clamped volume's sides start and end (the litmaps and
+//!   N-buffers are built in both modes for that): the same surface, in more triangles.
 //! - **Clamped**: the caster's box in light space is looked up in both N-buffers; culled when
 //!   its box holds no visible point (`z_max < z_min`, the paper's test) or when every visible
 //!   point of the box is nearer the light than the caster's nearest lit corner (an extra test:
@@ -41,6 +43,10 @@
 //! its count does not change; the caps moved to the planes stay `ε` away from every visible
 //! point, and the side faces keep their exact planes (plane depth, see
 //! [`occult_raster::StencilFaces::Planes`]) so a shadow boundary cannot move by rounding.
+//! Between the two planes, where every visible point lies, both modes draw the very same side
+//! triangles (same snapped corners): a visible point exactly on a shadow's boundary is
+//! classified alike. (With one quad from the caster to `D`, the far corners' snapping moved
+//! the screen edges along the light rays, and one terrain pixel flipped: tested.)
 //!
 //! # Deviations
 //! - Software throughout: the litmaps are built by reprojecting the observer's depth buffer
@@ -52,6 +58,8 @@
 //!   than the plane is not projected onto it). The volume stays closed in every case.
 //! - Per-triangle volumes with shared sides cancelled instead of a silhouette of a closed
 //!   mesh: the scenes' meshes are not all closed.
+//! - The unclamped volumes' sides are cut at the clamping planes (see above), so the
+//!   unclamped run builds the litmaps and N-buffers too; its fill is unchanged.
 //! - A margin `ε` around the planes, and one lexel around each box, absorb the rounding of the
 //!   reprojection; the N-buffers' 16-bit keys round outward by themselves.
 //! - Cost of a caster's box: its world box's 8 corners projected (the paper's "vertices of a
@@ -635,8 +643,10 @@ impl ShadowCasters {
         });
         let mut near_map = Vec::new();
         let mut far_map = Vec::new();
-        let mut nbuffers = None;
-        if clamping == Clamping::On {
+        let nbuffers;
+        // Both modes build the N-buffers: the unclamped volumes are split where the clamped ones
+        // end, so that near every visible point both are drawn with the same triangles.
+        {
             let n = (ls.resolution * ls.resolution) as usize;
             // Reversed-Z light depth (near / distance): empty lexels read 0 (no point, never the
             // nearest) in the nearest map and +inf in the farthest map.
@@ -660,8 +670,6 @@ impl ShadowCasters {
             });
             nbuffers = Some((nearest?, farthest?));
             counts.nbuffer_ms = t1.elapsed().as_secs_f64() * 1e3;
-        } else {
-            counts.litmap_ms = t0.elapsed().as_secs_f64() * 1e3;
         }
 
         // Beyond every point of the scene: where unclamped volumes end.
@@ -679,7 +687,7 @@ impl ShadowCasters {
         let volumes: Vec<Volume> = raster.install(|| {
             self.casters
                 .par_iter()
-                .map(|c| self.volume(c, &ls, far_plane, nbuffers.as_ref()))
+                .map(|c| self.volume(c, &ls, far_plane, nbuffers.as_ref(), clamping))
                 .collect()
         });
         // Front caps, grouped by mesh instance (one interpolated draw each).
@@ -730,6 +738,7 @@ impl ShadowCasters {
         ls: &LightSpace,
         far_plane: f64,
         nbuffers: Option<&(NBuffer, NBuffer)>,
+        clamping: Clamping,
     ) -> Volume {
         let inst = &self.instances[caster.instance as usize];
         let mut v = Volume {
@@ -792,20 +801,42 @@ impl ShadowCasters {
                 0.0
             };
             if z_max < z_min || z_max < c_lo * (1.0 - CLAMP_MARGIN) {
-                v.culled = true;
-                return v;
+                if clamping == Clamping::On {
+                    v.culled = true;
+                    return v;
+                }
+            } else {
+                let b = (z_max.max(c_hi) * (1.0 + CLAMP_MARGIN)).min(far_plane);
+                if b < far_plane {
+                    back = b;
+                    v.clamped = true;
+                }
+                let f = z_min * (1.0 - CLAMP_MARGIN);
+                if f > c_hi * (1.0 + CLAMP_MARGIN) {
+                    front = Some(f);
+                    v.clamped = true;
+                    v.front_moved = true;
+                }
             }
-            let b = (z_max.max(c_hi) * (1.0 + CLAMP_MARGIN)).min(far_plane);
-            if b < far_plane {
-                back = b;
-                v.clamped = true;
-            }
-            let f = z_min * (1.0 - CLAMP_MARGIN);
-            if f > c_hi * (1.0 + CLAMP_MARGIN) {
-                front = Some(f);
-                v.clamped = true;
-                v.front_moved = true;
-            }
+        }
+        // Where the side faces are split: the clamping planes. Unclamped, the volume keeps its
+        // caps (the lit triangles, the far plane) and only its sides are cut there, so that
+        // the faces near any visible point (all lie between the planes) are the very triangles,
+        // with the same snapped corners, that the clamped volume draws: a point on a shadow's
+        // boundary is then classified alike in both modes.
+        let splits: Vec<f64> = match clamping {
+            Clamping::On => vec![back],
+            Clamping::Off => front
+                .into_iter()
+                .chain((back < far_plane).then_some(back))
+                .chain([far_plane])
+                .collect(),
+        };
+        if clamping == Clamping::Off {
+            v.clamped = false;
+            v.front_moved = false;
+            front = None;
+            back = far_plane;
         }
         // A point of the object-space ray from the light through `p` at light distance `dist`.
         let at = |i: u32, dist: f64| -> Vec3 {
@@ -866,20 +897,26 @@ impl ShadowCasters {
             let plane = [n.x, n.y, n.z, -n.dot(ls.position)];
             for _ in 0..m.unsigned_abs() {
                 v.edges += 1;
-                let (an, bn) = match front {
+                let (mut an, mut bn) = match front {
                     None => (pos[a as usize], pos[b as usize]),
                     Some(f) => (at(a, f), at(b, f)),
                 };
-                let ia = vertex(&mut v, an);
-                let ib = vertex(&mut v, bn);
-                let fa = vertex(&mut v, at(a, back));
-                let fb = vertex(&mut v, at(b, back));
-                // The quad b, a, a', b': counter-clockwise seen from outside for the edge a → b
-                // of a triangle that faces the light.
-                v.triangles.push([ib, ia, fa]);
-                v.triangles.push([ib, fa, fb]);
-                v.planes.push(plane);
-                v.planes.push(plane);
+                // Unclamped, the first split is the moved front plane's place, not a start.
+                let ends = splits.iter().filter(|&&d| front.is_none_or(|f| d > f));
+                for &d in ends {
+                    let (a2, b2) = (at(a, d), at(b, d));
+                    let ia = vertex(&mut v, an);
+                    let ib = vertex(&mut v, bn);
+                    let fa = vertex(&mut v, a2);
+                    let fb = vertex(&mut v, b2);
+                    // The quad b, a, a', b': counter-clockwise seen from outside for the edge
+                    // a → b of a triangle that faces the light.
+                    v.triangles.push([ib, ia, fa]);
+                    v.triangles.push([ib, fa, fb]);
+                    v.planes.push(plane);
+                    v.planes.push(plane);
+                    (an, bn) = (a2, b2);
+                }
             }
         }
         v
