@@ -8,19 +8,42 @@ use occult_raster::{Frame, RasterConfig, Rasterizer};
 use occult_render::nbuffer::shadows::{Clamping, Shade, ShadowCasters, SpotLight};
 use occult_render::{Algorithm, RenderOptions};
 
-/// Renders each camera of `path` on `scene_spec` and compares shadow flags with and without
-/// clamping; returns (unclamped, clamped) stencil fragments summed over the path.
-fn compare(scene_spec: &str, path: &str, leaf: usize, w: u32, h: u32, lights: &[SpotLight]) -> (u64, u64) {
+/// A generated scene, the cameras of a path on it, its casters, a zbuffer and a rasterizer.
+struct Setup {
+    scene: Arc<occult_core::Scene>,
+    cams: Vec<occult_core::Camera>,
+    casters: ShadowCasters,
+    z: Box<dyn occult_render::Renderer>,
+    raster: Rasterizer,
+}
+
+fn setup(scene_spec: &str, path: &str, leaf: usize) -> Setup {
     let built = occult_scenes::spec::parse_spec(scene_spec)
         .and_then(|s| s.build())
         .unwrap();
     let cams = occult_scenes::path::parse_path(path, &built.scene, &built.default_camera).unwrap();
     let scene = Arc::new(built.scene);
-    let casters = ShadowCasters::new(scene.clone(), leaf).unwrap();
-    let mut z = Algorithm::ZBUFFER
-        .build(scene.clone(), &RenderOptions::default())
-        .unwrap();
-    let mut raster = Rasterizer::new(RasterConfig::default()).unwrap();
+    Setup {
+        casters: ShadowCasters::new(scene.clone(), leaf).unwrap(),
+        z: Algorithm::ZBUFFER
+            .build(scene.clone(), &RenderOptions::default())
+            .unwrap(),
+        raster: Rasterizer::new(RasterConfig::default()).unwrap(),
+        scene,
+        cams,
+    }
+}
+
+/// Renders each camera of `path` on `scene_spec` and compares shadow flags with and without
+/// clamping; returns (unclamped, clamped) stencil fragments summed over the path.
+fn compare(scene_spec: &str, path: &str, leaf: usize, w: u32, h: u32, lights: &[SpotLight]) -> (u64, u64) {
+    let Setup {
+        scene,
+        cams,
+        casters,
+        mut z,
+        mut raster,
+    } = setup(scene_spec, path, leaf);
     let (mut off_fill, mut on_fill) = (0, 0);
     let mut shadowed = 0;
     let mut lights: Vec<SpotLight> = lights.to_vec();
@@ -135,16 +158,13 @@ fn a_point_on_a_shadow_boundary_is_classified_alike_with_and_without_clamping() 
     // `terrain`, camera 7 of `flyover:8`, 640×480, the default light: one visible point lies on
     // a side face of a clamped caster's volume. When the unclamped sides ran to the far plane in
     // one quad, their snapped corners differed from the clamped ones and this pixel flipped.
-    let built = occult_scenes::spec::parse_spec("terrain")
-        .and_then(|s| s.build())
-        .unwrap();
-    let cams = occult_scenes::path::parse_path("flyover:8", &built.scene, &built.default_camera).unwrap();
-    let scene = Arc::new(built.scene);
-    let casters = ShadowCasters::new(scene.clone(), 4096).unwrap();
-    let mut z = Algorithm::ZBUFFER
-        .build(scene.clone(), &RenderOptions::default())
-        .unwrap();
-    let mut raster = Rasterizer::new(RasterConfig::default()).unwrap();
+    let Setup {
+        scene,
+        cams,
+        casters,
+        mut z,
+        mut raster,
+    } = setup("terrain", "flyover:8", 4096);
     let light = SpotLight::for_bounds(&scene.bounds());
     let view = View::new(cams[7], 640, 480).unwrap();
     let mut frame = Frame::new(640, 480).unwrap();
