@@ -84,7 +84,8 @@ impl FatRay {
 /// the same bits (tested).
 #[derive(Clone, Copy, Debug)]
 pub struct ShearedRay {
-    origin: Vec3,
+    /// The origin's coordinates in the permuted order `kx, ky, kz`.
+    origin: [f32; 3],
     k: [usize; 3],
     s: [f32; 3],
 }
@@ -101,7 +102,7 @@ impl ShearedRay {
             std::mem::swap(&mut kx, &mut ky);
         }
         Self {
-            origin,
+            origin: [origin[kx], origin[ky], origin[kz]],
             k: [kx, ky, kz],
             s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]],
         }
@@ -113,15 +114,20 @@ impl ShearedRay {
     pub fn intersect(&self, p: &[Vec3; 3], t_min: f32, t_max: f32) -> Option<f32> {
         let [kx, ky, kz] = self.k;
         let [sx, sy, sz] = self.s;
-        let a = p[0] - self.origin;
-        let b = p[1] - self.origin;
-        let c = p[2] - self.origin;
-        let ax = a[kx] - sx * a[kz];
-        let ay = a[ky] - sy * a[kz];
-        let bx = b[kx] - sx * b[kz];
-        let by = b[ky] - sy * b[kz];
-        let cx = c[kx] - sx * c[kz];
-        let cy = c[ky] - sy * c[kz];
+        let [ox, oy, oz] = self.origin;
+        // Each corner relative to the origin, in the permuted axes: read from memory at the
+        // ray's axis indices (the same subtractions as `p - origin`, then picked).
+        let rel = |v: &Vec3| {
+            let v: &[f32; 3] = v.as_ref();
+            (v[kx] - ox, v[ky] - oy, v[kz] - oz)
+        };
+        let (a, b, c) = (rel(&p[0]), rel(&p[1]), rel(&p[2]));
+        let ax = a.0 - sx * a.2;
+        let ay = a.1 - sy * a.2;
+        let bx = b.0 - sx * b.2;
+        let by = b.1 - sy * b.2;
+        let cx = c.0 - sx * c.2;
+        let cy = c.1 - sy * c.2;
         let mut u = cx * by - cy * bx;
         let mut v = ax * cy - ay * cx;
         let mut w = bx * ay - by * ax;
@@ -139,7 +145,7 @@ impl ShearedRay {
         if det == 0.0 {
             return None;
         }
-        let t_scaled = u * (sz * a[kz]) + v * (sz * b[kz]) + w * (sz * c[kz]);
+        let t_scaled = u * (sz * a.2) + v * (sz * b.2) + w * (sz * c.2);
         let t = t_scaled * (1.0 / det);
         (t >= t_min && t <= t_max).then_some(t)
     }
@@ -222,6 +228,105 @@ pub fn traverse(
     ray: &FatRay,
     t_limit: &mut f32,
     counters: &mut TraversalCounters,
+    leaf: impl FnMut(u32, f32, f32, &mut f32),
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: AVX2 is present.
+        unsafe { traverse_avx2(octree, ray, t_limit, counters, leaf) };
+        return;
+    }
+    traverse_body::<false>(octree, ray, t_limit, counters, leaf);
+}
+
+/// [`traverse`] on the scalar path whatever the machine: the reference the AVX2 path is held
+/// to (same leaves, same order, same bounds).
+pub fn traverse_scalar(
+    octree: &Octree,
+    ray: &FatRay,
+    t_limit: &mut f32,
+    counters: &mut TraversalCounters,
+    leaf: impl FnMut(u32, f32, f32, &mut f32),
+) {
+    traverse_body::<false>(octree, ray, t_limit, counters, leaf);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn traverse_avx2(
+    octree: &Octree,
+    ray: &FatRay,
+    t_limit: &mut f32,
+    counters: &mut TraversalCounters,
+    leaf: impl FnMut(u32, f32, f32, &mut f32),
+) {
+    traverse_body::<true>(octree, ray, t_limit, counters, leaf);
+}
+
+/// The children of internal node box `b` the ray enters no later than `t_limit`: a bit mask
+/// (child `i` at bit `i`, only occupied children) and each child's entry parameter.
+#[inline(always)]
+fn children_scalar(ray: &FatRay, b: &Aabb, split_info: u16, grow: f32, t_limit: f32) -> (u32, [f32; 8]) {
+    let kids = ray.enter_children(b, split_info, grow);
+    let mut hits = 0;
+    let mut near = [0f32; 8];
+    for (i, &(e, x)) in kids.iter().enumerate() {
+        near[i] = e;
+        hits |= ((split_info & (1 << i) != 0 && e <= x && e <= t_limit) as u32) << i;
+    }
+    (hits, near)
+}
+
+/// [`children_scalar`] with the 8 children in the lanes of AVX2 registers: the same
+/// operations on the same values, so the same bits (f32::min/max ignore a NaN operand, which
+/// the blends reproduce).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn children_avx2(ray: &FatRay, b: &Aabb, split_info: u16, grow: f32, t_limit: f32) -> (u32, [f32; 8]) {
+    use std::arch::x86_64::*;
+    let [lo0, hi0, lo1, hi1] = halves(b, split_info);
+    let g = Vec3::splat(grow);
+    let t = |p: Vec3| (p - ray.origin) * ray.inv_direction;
+    let (a0, b0) = (t(lo0 - g), t(hi0 + g));
+    let (a1, b1) = (t(lo1 - g), t(hi1 + g));
+    let (e0, e1) = (a0.min(b0), a1.min(b1));
+    let (x0, x1) = (a0.max(b0), a1.max(b1));
+    // SAFETY: the caller runs with AVX2; the stores write 8 floats into an [f32; 8].
+    unsafe {
+        // Lane i is child i: half (i & 1) on x, (i >> 1) & 1 on y, (i >> 2) & 1 on z.
+        let lanes = |v0: f32, v1: f32, pattern: i32| -> __m256 {
+            let (a, b) = (_mm256_set1_ps(v0), _mm256_set1_ps(v1));
+            match pattern {
+                0 => _mm256_blend_ps::<0b1010_1010>(a, b),
+                1 => _mm256_blend_ps::<0b1100_1100>(a, b),
+                _ => _mm256_blend_ps::<0b1111_0000>(a, b),
+            }
+        };
+        // f32::max / f32::min: a NaN operand yields the other one.
+        let max = |a: __m256, b: __m256| _mm256_blendv_ps(_mm256_max_ps(a, b), a, _mm256_cmp_ps::<_CMP_UNORD_Q>(b, b));
+        let min = |a: __m256, b: __m256| _mm256_blendv_ps(_mm256_min_ps(a, b), a, _mm256_cmp_ps::<_CMP_UNORD_Q>(b, b));
+        let near = max(max(lanes(e0.x, e1.x, 0), lanes(e0.y, e1.y, 1)), lanes(e0.z, e1.z, 2));
+        // max(NaN, 0) = 0 as in f32::max.
+        let near = _mm256_max_ps(near, _mm256_setzero_ps());
+        let far = min(min(lanes(x0.x, x1.x, 0), lanes(x0.y, x1.y, 1)), lanes(x0.z, x1.z, 2));
+        let enter = _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_LE_OQ>(near, far),
+            _mm256_cmp_ps::<_CMP_LE_OQ>(near, _mm256_set1_ps(t_limit)),
+        );
+        let hits = _mm256_movemask_ps(enter) as u32 & (split_info as u32 & 0xff);
+        let mut out = [0f32; 8];
+        _mm256_storeu_ps(out.as_mut_ptr(), near);
+        (hits, out)
+    }
+}
+
+/// The body of [`traverse`], compiled once per instruction set.
+#[inline(always)]
+fn traverse_body<const AVX2: bool>(
+    octree: &Octree,
+    ray: &FatRay,
+    t_limit: &mut f32,
+    counters: &mut TraversalCounters,
     mut leaf: impl FnMut(u32, f32, f32, &mut f32),
 ) {
     let nodes = octree.nodes();
@@ -234,12 +339,15 @@ pub fn traverse(
         | ((ray.direction.y < 0.0) as usize) << 1
         | ((ray.direction.z < 0.0) as usize) << 2;
     const STACK: usize = 8 * MAX_OCTREE_DEPTH as usize + 8;
-    let mut stack = [(0u32, 0f32); STACK];
-    stack[0] = (0, t0);
+    // Uninitialized: a traversal runs per ray and per mesh instance met, and clearing 1.6 KB
+    // each time cost more than a shallow traversal.
+    let mut stack = [const { std::mem::MaybeUninit::<(u32, f32)>::uninit() }; STACK];
+    stack[0].write((0, t0));
     let mut top = 1;
     while top > 0 {
         top -= 1;
-        let (index, t_enter) = stack[top];
+        // SAFETY: slots below `top` were written (pushes write before raising `top`).
+        let (index, t_enter) = unsafe { stack[top].assume_init() };
         if t_enter > *t_limit {
             continue;
         }
@@ -260,15 +368,39 @@ pub fn traverse(
             continue;
         }
         let si = info[index as usize];
-        let kids = ray.enter_children(&node.bounds, si, ray.grow(&node.bounds));
-        // Farthest first onto the stack, so the nearest pops first.
-        for j in (0..8).rev() {
-            let i = j ^ mask;
-            let (e, x) = kids[i];
-            if si & (1 << i) != 0 && e <= x && e <= *t_limit {
-                stack[top] = (node.first + i as u32, e);
-                top += 1;
+        let grow = ray.grow(&node.bounds);
+        let (hits, near) = {
+            #[cfg(target_arch = "x86_64")]
+            {
+                if AVX2 {
+                    // SAFETY: `AVX2` is only set by `traverse_avx2`.
+                    unsafe { children_avx2(ray, &node.bounds, si, grow, *t_limit) }
+                } else {
+                    children_scalar(ray, &node.bounds, si, grow, *t_limit)
+                }
             }
+            #[cfg(not(target_arch = "x86_64"))]
+            children_scalar(ray, &node.bounds, si, grow, *t_limit)
+        };
+        // Farthest first onto the stack, so the nearest pops first: child `i` is pushed in
+        // the order of `j = i ^ mask`, so the hit bits are permuted into that order (each
+        // direction bit swaps halves of the mask) and taken from the highest down.
+        let mut ordered = hits;
+        if mask & 1 != 0 {
+            ordered = ((ordered & 0x55) << 1) | ((ordered >> 1) & 0x55);
+        }
+        if mask & 2 != 0 {
+            ordered = ((ordered & 0x33) << 2) | ((ordered >> 2) & 0x33);
+        }
+        if mask & 4 != 0 {
+            ordered = ((ordered & 0x0f) << 4) | ((ordered >> 4) & 0x0f);
+        }
+        while ordered != 0 {
+            let j = 31 - ordered.leading_zeros() as usize;
+            ordered &= !(1 << j);
+            let i = j ^ mask;
+            stack[top].write((node.first + i as u32, near[i]));
+            top += 1;
         }
     }
 }
@@ -279,14 +411,18 @@ mod tests {
     use crate::octree::OctreeConfig;
     use occult_core::{intersect_ray_triangle, Ray};
 
-    fn soup(n: usize, seed: u64) -> (Vec<Vec3>, Vec<[u32; 3]>) {
-        let mut s = seed;
-        let mut rnd = || {
+    /// Uniform numbers in [0, 1) from a xorshift generator.
+    fn xorshift(mut s: u64) -> impl FnMut() -> f32 {
+        move || {
             s ^= s << 13;
             s ^= s >> 7;
             s ^= s << 17;
             (s >> 40) as f32 / (1u64 << 24) as f32
-        };
+        }
+    }
+
+    fn soup(n: usize, seed: u64) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+        let mut rnd = xorshift(seed);
         let mut p = Vec::new();
         let mut t = Vec::new();
         for i in 0..n as u32 {
@@ -309,13 +445,7 @@ mod tests {
             max_leaf_size: 8,
         };
         let o = Octree::build_triangles(&p, &t, cfg).unwrap();
-        let mut s = 99u64;
-        let mut rnd = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rnd = xorshift(99);
         let mut counters = TraversalCounters::default();
         for _ in 0..500 {
             let origin = Vec3::new(rnd(), rnd(), rnd()) * 30.0 - 10.0;
@@ -378,17 +508,68 @@ mod tests {
         }
     }
 
+    /// The dispatched traversal (AVX2 where present) visits the same leaves in the same order
+    /// with the same bounds as the scalar one: thin and fat rays, rays along axes (zero
+    /// direction components), origins on slab planes, flat layers, bounds lowered on the way.
+    #[test]
+    fn dispatched_traversal_matches_the_scalar_one() {
+        let (p, t) = soup(600, 13);
+        let flat: Vec<Vec3> = p.iter().map(|v| Vec3::new(v.x, 2.0, v.z)).collect();
+        let mut rnd = xorshift(5);
+        let mut leaves = 0;
+        for pos in [&p, &flat] {
+            let o = Octree::build_triangles(
+                pos,
+                &t,
+                OctreeConfig {
+                    max_depth: 7,
+                    max_leaf_size: 4,
+                },
+            )
+            .unwrap();
+            for k in 0..400 {
+                let mut origin = Vec3::new(rnd(), rnd(), rnd()) * 16.0 - 3.0;
+                let mut dir = Vec3::new(rnd(), rnd(), rnd()) * 2.0 - 1.0;
+                if k % 5 == 0 {
+                    dir[k % 3] = 0.0;
+                }
+                if k % 7 == 0 {
+                    // On a slab plane of the root's box, along it.
+                    origin.y = o.bounds().min.y;
+                    dir.y = 0.0;
+                }
+                let (spread, margin) = if k % 2 == 0 { (0.0, 0.0) } else { (0.002, 0.01) };
+                let ray = FatRay::new(origin, dir, spread, margin);
+                let run = |scalar: bool| {
+                    let mut seen = vec![];
+                    let mut limit = 40.0f32;
+                    let mut c = TraversalCounters::default();
+                    let f = |l: u32, e: f32, x: f32, lim: &mut f32| {
+                        seen.push((l, e.to_bits(), x.to_bits()));
+                        if seen.len() % 3 == 0 {
+                            *lim = lim.min(x);
+                        }
+                    };
+                    if scalar {
+                        traverse_scalar(&o, &ray, &mut limit, &mut c, f);
+                    } else {
+                        traverse(&o, &ray, &mut limit, &mut c, f);
+                    }
+                    (seen, limit.to_bits(), c)
+                };
+                let (a, b) = (run(true), run(false));
+                leaves += a.0.len();
+                assert_eq!(a, b, "ray {k}");
+            }
+        }
+        assert!(leaves > 500, "{leaves}");
+    }
+
     /// The sheared ray gives intersect_ray_triangle's bits, hits and misses alike.
     #[test]
     fn sheared_ray_matches_the_watertight_test() {
         let (p, t) = soup(300, 5);
-        let mut s = 17u64;
-        let mut rnd = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rnd = xorshift(17);
         let mut hits = 0;
         for k in 0..200 {
             let origin = Vec3::new(rnd(), rnd(), rnd()) * 20.0 - 5.0;
