@@ -151,6 +151,133 @@ impl ShearedRay {
     }
 }
 
+/// A triangle as a ray caster stores it in leaf order: its corners and its normal scaled by its
+/// area (the layout [`ShearedRay::intersect8`] reads).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
+pub struct LeafTriangle {
+    /// Corners.
+    pub corners: [Vec3; 3],
+    /// Normal scaled by the area.
+    pub normal: Vec3,
+}
+
+impl ShearedRay {
+    /// [`ShearedRay::intersect`] on up to 8 triangles at once: bit `i` of the result is set
+    /// when `tris[i]` (tested only where bit `i` of `active` is set) is hit with `t` in
+    /// `[t_min, t_max]`, and lane `i` of the array holds that `t`. The same bits as the
+    /// one-triangle test (AVX2 lanes where present: the same operations in the same order).
+    pub fn intersect8(&self, tris: &[LeafTriangle], active: u32, t_min: f32, t_max: f32) -> (u32, [f32; 8]) {
+        let active = active & (((1u64 << tris.len().min(8)) - 1) as u32);
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: AVX2 is present; `active` names only lanes below `tris.len()`.
+            return unsafe { self.intersect8_avx2(tris, active, t_min, t_max) };
+        }
+        self.intersect8_scalar(tris, active, t_min, t_max)
+    }
+
+    /// [`ShearedRay::intersect8`] one triangle at a time.
+    pub fn intersect8_scalar(&self, tris: &[LeafTriangle], active: u32, t_min: f32, t_max: f32) -> (u32, [f32; 8]) {
+        let mut hits = 0;
+        let mut t = [0f32; 8];
+        for (i, tri) in tris.iter().enumerate().take(8) {
+            if active & (1 << i) != 0 {
+                if let Some(h) = self.intersect(&tri.corners, t_min, t_max) {
+                    hits |= 1 << i;
+                    t[i] = h;
+                }
+            }
+        }
+        (hits, t)
+    }
+
+    /// # Safety
+    /// AVX2 must be present, and `active` may only name lanes below `tris.len()`.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn intersect8_avx2(&self, tris: &[LeafTriangle], active: u32, t_min: f32, t_max: f32) -> (u32, [f32; 8]) {
+        use std::arch::x86_64::*;
+        const STRIDE: i32 = (std::mem::size_of::<LeafTriangle>() / 4) as i32;
+        let [kx, ky, kz] = self.k;
+        let [sx, sy, sz] = self.s.map(|v| _mm256_set1_ps(v));
+        let [ox, oy, oz] = self.origin.map(|v| _mm256_set1_ps(v));
+        let base = tris.as_ptr().cast::<f32>();
+        let lanes = _mm256_setr_epi32(
+            0,
+            STRIDE,
+            2 * STRIDE,
+            3 * STRIDE,
+            4 * STRIDE,
+            5 * STRIDE,
+            6 * STRIDE,
+            7 * STRIDE,
+        );
+        let bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+        let on = _mm256_castsi256_ps(_mm256_cmpeq_epi32(
+            _mm256_and_si256(_mm256_set1_epi32(active as i32), bits),
+            bits,
+        ));
+        // Coordinate `axis` of corner `corner` of every active triangle, minus the origin's.
+        let rel = |corner: usize, axis: usize, o: __m256| {
+            // SAFETY: only active lanes are read, and they lie inside `tris`.
+            let v =
+                unsafe { _mm256_mask_i32gather_ps::<4>(_mm256_setzero_ps(), base.add(3 * corner + axis), lanes, on) };
+            _mm256_sub_ps(v, o)
+        };
+        let (a0, a1, a2) = (rel(0, kx, ox), rel(0, ky, oy), rel(0, kz, oz));
+        let (b0, b1, b2) = (rel(1, kx, ox), rel(1, ky, oy), rel(1, kz, oz));
+        let (c0, c1, c2) = (rel(2, kx, ox), rel(2, ky, oy), rel(2, kz, oz));
+        let shear = |p: __m256, q: __m256, s: __m256| _mm256_sub_ps(p, _mm256_mul_ps(s, q));
+        let (ax, ay) = (shear(a0, a2, sx), shear(a1, a2, sy));
+        let (bx, by) = (shear(b0, b2, sx), shear(b1, b2, sy));
+        let (cx, cy) = (shear(c0, c2, sx), shear(c1, c2, sy));
+        let cross =
+            |p: __m256, q: __m256, r: __m256, s: __m256| _mm256_sub_ps(_mm256_mul_ps(p, q), _mm256_mul_ps(r, s));
+        let u = cross(cx, by, cy, bx);
+        let v = cross(ax, cy, ay, cx);
+        let w = cross(bx, ay, by, ax);
+        let zero = _mm256_setzero_ps();
+        let any = |f: &dyn Fn(__m256) -> __m256| _mm256_or_ps(_mm256_or_ps(f(u), f(v)), f(w));
+        // Lanes where an edge function rounded to zero take the scalar test's f64 path.
+        let exact = _mm256_movemask_ps(any(&|e| _mm256_cmp_ps::<_CMP_EQ_OQ>(e, zero))) as u32 & active;
+        let miss = _mm256_and_ps(
+            any(&|e| _mm256_cmp_ps::<_CMP_LT_OQ>(e, zero)),
+            any(&|e| _mm256_cmp_ps::<_CMP_GT_OQ>(e, zero)),
+        );
+        let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
+        let t_scaled = _mm256_add_ps(
+            _mm256_add_ps(
+                _mm256_mul_ps(u, _mm256_mul_ps(sz, a2)),
+                _mm256_mul_ps(v, _mm256_mul_ps(sz, b2)),
+            ),
+            _mm256_mul_ps(w, _mm256_mul_ps(sz, c2)),
+        );
+        let t = _mm256_mul_ps(t_scaled, _mm256_div_ps(_mm256_set1_ps(1.0), det));
+        let ok = _mm256_and_ps(
+            _mm256_andnot_ps(
+                _mm256_or_ps(miss, _mm256_cmp_ps::<_CMP_EQ_OQ>(det, zero)),
+                _mm256_cmp_ps::<_CMP_GE_OQ>(t, _mm256_set1_ps(t_min)),
+            ),
+            _mm256_cmp_ps::<_CMP_LE_OQ>(t, _mm256_set1_ps(t_max)),
+        );
+        let mut hits = _mm256_movemask_ps(ok) as u32 & active & !exact;
+        let mut out = [0f32; 8];
+        // SAFETY: 8 floats into an [f32; 8].
+        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), t) };
+        let mut rest = exact;
+        while rest != 0 {
+            let i = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            if let Some(h) = self.intersect(&tris[i].corners, t_min, t_max) {
+                hits |= 1 << i;
+                out[i] = h;
+            }
+        }
+        (hits, out)
+    }
+}
+
 /// Counts of one or more traversals (pbrt style: the algorithm counts as it goes).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct TraversalCounters {
@@ -590,6 +717,77 @@ mod tests {
             }
         }
         assert!(hits > 50);
+    }
+
+    /// Eight at a time gives the one-at-a-time bits: random triangles, rays aimed at corners
+    /// (edge functions of zero: the f64 path), along axes, partial groups and masks.
+    #[test]
+    fn eight_triangle_test_matches_the_single_one() {
+        let (p, t) = soup(400, 21);
+        let tris: Vec<LeafTriangle> = t
+            .iter()
+            .map(|tri| LeafTriangle {
+                corners: tri.map(|v| p[v as usize]),
+                normal: Vec3::ZERO,
+            })
+            .collect();
+        let mut rnd = xorshift(23);
+        let (mut hits, mut corner_hits) = (0, 0);
+        for k in 0..600 {
+            let origin = Vec3::new(rnd(), rnd(), rnd()) * 20.0 - 5.0;
+            let start = (k * 7) % (tris.len() - 8);
+            let group = &tris[start..start + 1 + k % 8];
+            let aim = group[k % group.len()].corners;
+            let mut dir = match k % 3 {
+                0 => (aim[0] + aim[1] + aim[2]) / 3.0 - origin,
+                1 => aim[k % 3] - origin,
+                _ => (aim[0] + aim[1]) * 0.5 - origin,
+            };
+            if k % 11 == 0 {
+                dir[k % 3] = 0.0;
+            }
+            let ray = ShearedRay::new(origin, dir);
+            let active = if k % 4 == 0 { 0xff } else { (k as u32 * 37) & 0xff };
+            let (t_min, t_max) = if k % 5 == 0 { (0.3, 0.9) } else { (0.0, f32::INFINITY) };
+            let (h8, t8) = ray.intersect8(group, active, t_min, t_max);
+            let (h1, t1) = ray.intersect8_scalar(group, active, t_min, t_max);
+            assert_eq!(h8, h1, "ray {k}");
+            for i in 0..8 {
+                if h1 & (1 << i) != 0 {
+                    assert_eq!(t8[i].to_bits(), t1[i].to_bits(), "ray {k} lane {i}");
+                }
+            }
+            hits += h1.count_ones();
+            corner_hits += (k % 3 == 1 && h1 != 0) as u32;
+        }
+        assert!(hits > 100 && corner_hits > 20, "{hits} {corner_hits}");
+        // Exact zeros: the ray through a shared corner and along a shared edge of a fan.
+        let fan: Vec<LeafTriangle> = (0..6)
+            .map(|i| {
+                let a = i as f32 * std::f32::consts::TAU / 6.0;
+                let b = a + std::f32::consts::TAU / 6.0;
+                LeafTriangle {
+                    corners: [
+                        Vec3::new(0.0, 0.0, 5.0),
+                        Vec3::new(a.cos(), a.sin(), 5.0),
+                        Vec3::new(b.cos(), b.sin(), 5.0),
+                    ],
+                    normal: Vec3::ZERO,
+                }
+            })
+            .collect();
+        for origin in [Vec3::ZERO, Vec3::new(0.5, 0.0, 0.0), Vec3::new(0.25, 0.0, -1.0)] {
+            let ray = ShearedRay::new(origin, Vec3::Z);
+            let (h8, t8) = ray.intersect8(&fan, 0xff, 0.0, f32::INFINITY);
+            let (h1, t1) = ray.intersect8_scalar(&fan, 0xff, 0.0, f32::INFINITY);
+            assert_eq!(h8, h1);
+            assert!(h1 != 0, "the fan is hit at {origin}");
+            for i in 0..6 {
+                if h1 & (1 << i) != 0 {
+                    assert_eq!(t8[i].to_bits(), t1[i].to_bits());
+                }
+            }
+        }
     }
 
     /// The children's boxes the traversal derives from the parent's box are the stored ones.

@@ -352,14 +352,8 @@ impl Accel {
     }
 }
 
-/// A leaf-list entry's triangle, stored in leaf order for the ray caster.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct RefTriangle {
-    /// Corners (object space).
-    pub corners: [Vec3; 3],
-    /// Normal scaled by the area.
-    pub normal: Vec3,
-}
+/// A leaf-list entry's triangle (object space), stored in leaf order for the ray caster.
+pub(crate) use occult_spatial::LeafTriangle as RefTriangle;
 
 /// A partition plane kept for reuse (§II.B).
 struct PlaneCache {
