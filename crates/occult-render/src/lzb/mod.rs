@@ -958,7 +958,23 @@ impl Renderer for Lzb {
             stats.counters.add("oor_polygons", polygons);
             cast_mask = done;
         }
-        let pixels: Vec<u32> = (0..cast_mask.len() as u32).filter(|&i| cast_mask[i as usize]).collect();
+        // In tiles of 8×8 pixels, row-major within a tile: neighbouring rays meet the same
+        // nodes and triangles, which a chunk then finds in cache (and §III.D's neighbour is
+        // still the previous ray).
+        const TILE: u32 = 8;
+        let mut pixels: Vec<u32> = Vec::new();
+        for ty in (0..h).step_by(TILE as usize) {
+            for tx in (0..w).step_by(TILE as usize) {
+                for y in ty..(ty + TILE).min(h) {
+                    for x in tx..(tx + TILE).min(w) {
+                        let i = y * w + x;
+                        if cast_mask[i as usize] {
+                            pixels.push(i);
+                        }
+                    }
+                }
+            }
+        }
         stats.phases.add(Phase::Other, t.elapsed());
 
         // Step 5: rays, in chunks over threads; PVLs merged without duplicates.
