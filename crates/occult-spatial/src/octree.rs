@@ -211,6 +211,18 @@ impl Octree {
         Ok(tree)
     }
 
+    /// Replaces the box of every leaf but the root by `tight(leaf, its primitives)`, which
+    /// must hold every point of those primitives that lies in the leaf's octant (for example
+    /// their bounds clipped to it): rays and culling then test that box instead. Internal nodes
+    /// keep their octants, from which [`crate::traverse`] derives their children's.
+    pub fn tighten_leaves(&mut self, mut tight: impl FnMut(&OctreeNode, &[u32]) -> Aabb) {
+        for n in self.nodes.iter_mut().skip(1) {
+            if n.is_leaf() {
+                n.bounds = tight(n, &self.primitives[n.range()]);
+            }
+        }
+    }
+
     /// All nodes; node 0 is the root (absent for an empty tree).
     #[inline]
     pub fn nodes(&self) -> &[OctreeNode] {

@@ -309,9 +309,7 @@ impl<'a> Caster<'a> {
         let mut counters = TraversalCounters::default();
         match &lzb.accel[id.index()] {
             Accel::Empty => {}
-            Accel::Mesh {
-                octree, tight, refs, ..
-            } => {
+            Accel::Mesh { octree, refs, .. } => {
                 let by_triangle = lzb.opts.pvl_triangles;
                 let ray = FatRay::new(o, d, spread, if self.naive { 0.0 } else { margin(&octree.bounds()) });
                 let clip = self.ctx.view.clip_from_object(world_from_node);
@@ -319,12 +317,11 @@ impl<'a> Caster<'a> {
                 let record = self.recording;
                 let mut recorded = false;
                 let sheared = ShearedRay::new(o, d);
+                // Deviation: the leaves' boxes are their tight boxes, not their octants
+                // (`Octree::tighten_leaves`): the traversal hands over only leaves whose tight
+                // box the cone enters before the bound.
                 traverse(octree, &ray, t_limit, &mut counters, |leaf, _, _, t_limit| {
-                    // Deviation: the leaf's tight box, not its octant, must meet the cone.
-                    let tb = &tight[leaf as usize];
-                    if !ray.enter(tb).is_some_and(|(e, _)| e <= *t_limit) {
-                        return;
-                    }
+                    let tb = &octree.nodes()[leaf as usize].bounds;
                     // §III.A: every leaf on the path up to (and past, by the margin) the hit is
                     // recorded; near leaves are drawn already (step 3).
                     if record {

@@ -305,10 +305,6 @@ pub(crate) enum Accel {
         refs: Vec<RefTriangle>,
         /// Per octree node (leaves only meaningful): base visibility `base_cos × mean area`.
         leaf_base: Vec<f32>,
-        /// Per octree node (leaves only meaningful): the leaf's triangles' bounds clipped to
-        /// the leaf (grown as the overlap test grows it). Every point of a triangle inside the
-        /// leaf lies in it, so it stands for the leaf in every test (near/far, rays, OOR).
-        tight: Vec<Aabb>,
     },
     /// A group: octree over its instances' boxes.
     Group {
@@ -330,12 +326,8 @@ impl Accel {
                 octree,
                 refs,
                 leaf_base,
-                tight,
             } => {
-                octree.memory_bytes()
-                    + refs.capacity() * std::mem::size_of::<RefTriangle>()
-                    + leaf_base.capacity() * 4
-                    + tight.capacity() * 24
+                octree.memory_bytes() + refs.capacity() * std::mem::size_of::<RefTriangle>() + leaf_base.capacity() * 4
             }
             Accel::Group {
                 octree,
@@ -494,26 +486,21 @@ impl Lzb {
                                     base_cos * sum / list.len() as f32
                                 })
                                 .collect();
-                            let tight = octree
-                                .nodes()
-                                .iter()
-                                .map(|n| {
-                                    if !n.is_leaf() {
-                                        return n.bounds;
-                                    }
-                                    let list = &octree.primitives()[n.range()];
-                                    let b = n.bounds;
-                                    let grow = Vec3::splat(
-                                        b.size().max_element() * 2e-5
-                                            + b.min.abs().max(b.max.abs()).max_element() * 2e-6,
-                                    );
-                                    list.iter()
-                                        .fold(Aabb::EMPTY, |a, &t| {
-                                            a.union(Aabb::from_points(m.triangle_positions(t as usize)))
-                                        })
-                                        .intersection(Aabb::new(b.min - grow, b.max + grow))
-                                })
-                                .collect();
+                            // Leaves stand for their tight boxes (the triangles' bounds clipped
+                            // to the octant, grown as the overlap test grows it): every point of
+                            // a triangle inside the leaf lies in it, so it serves every test
+                            // (near/far, rays, OOR).
+                            octree.tighten_leaves(|n, list| {
+                                let b = n.bounds;
+                                let grow = Vec3::splat(
+                                    b.size().max_element() * 2e-5 + b.min.abs().max(b.max.abs()).max_element() * 2e-6,
+                                );
+                                list.iter()
+                                    .fold(Aabb::EMPTY, |a, &t| {
+                                        a.union(Aabb::from_points(m.triangle_positions(t as usize)))
+                                    })
+                                    .intersection(Aabb::new(b.min - grow, b.max + grow))
+                            });
                             let refs = octree
                                 .primitives()
                                 .iter()
@@ -526,7 +513,6 @@ impl Lzb {
                                 octree,
                                 refs,
                                 leaf_base,
-                                tight,
                             }
                         }
                         NodeKind::Group(instances) => {
@@ -755,7 +741,7 @@ impl Walk<'_> {
             };
         match &self.lzb.accel[id.index()] {
             Accel::Empty => {}
-            Accel::Mesh { octree, tight, .. } => {
+            Accel::Mesh { octree, .. } => {
                 let clip = self.ctx.view.clip_from_object(world_from_node);
                 let w_row = row_w(&clip);
                 let inst = self.instances.len() as u32;
@@ -774,7 +760,8 @@ impl Walk<'_> {
                         };
                     if on.is_leaf() {
                         any = true;
-                        if self.ctx.is_near(w_row, &tight[n as usize]) {
+                        // The leaf's tight box (`Octree::tighten_leaves`).
+                        if self.ctx.is_near(w_row, &on.bounds) {
                             self.near.push((inst, n));
                         } else {
                             self.far.push((inst, n));
@@ -931,10 +918,10 @@ impl Renderer for Lzb {
             let mut polygons = 0u64;
             for &(inst, leaf) in &far {
                 let (rec, _, clip) = &instances[inst as usize];
-                let Accel::Mesh { tight, .. } = &self.accel[rec.node.index()] else {
+                let Accel::Mesh { octree, .. } = &self.accel[rec.node.index()] else {
                     continue;
                 };
-                let b = tight[leaf as usize];
+                let b = octree.nodes()[leaf as usize].bounds;
                 match oor::project_box(clip, &b, w, h, ctx.near) {
                     oor::Projection::Nothing => {}
                     oor::Projection::Screen => {
