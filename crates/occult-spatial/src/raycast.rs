@@ -405,37 +405,57 @@ fn children_scalar(ray: &FatRay, b: &Aabb, split_info: u16, grow: f32, t_limit: 
 }
 
 /// [`children_scalar`] with the 8 children in the lanes of AVX2 registers: the same
-/// operations on the same values, so the same bits (f32::min/max ignore a NaN operand, which
-/// the blends reproduce).
+/// operations on the same values, so the same bits. The two halves' corners sit in the two
+/// 128-bit halves of one register (lane 3 of each unused); `min_ps`/`max_ps` are glam's
+/// `Vec3::min`/`max` lane for lane (`a < b ? a : b`), and f32::min/max's "a NaN operand yields
+/// the other" is reproduced by blends.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 unsafe fn children_avx2(ray: &FatRay, b: &Aabb, split_info: u16, grow: f32, t_limit: f32) -> (u32, [f32; 8]) {
     use std::arch::x86_64::*;
-    let [lo0, hi0, lo1, hi1] = halves(b, split_info);
-    let g = Vec3::splat(grow);
-    let t = |p: Vec3| (p - ray.origin) * ray.inv_direction;
-    let (a0, b0) = (t(lo0 - g), t(hi0 + g));
-    let (a1, b1) = (t(lo1 - g), t(hi1 + g));
-    let (e0, e1) = (a0.min(b0), a1.min(b1));
-    let (x0, x1) = (a0.max(b0), a1.max(b1));
-    // SAFETY: the caller runs with AVX2; the stores write 8 floats into an [f32; 8].
+    // SAFETY: the caller runs with AVX2; the store writes 8 floats into an [f32; 8].
     unsafe {
+        let lo = _mm_setr_ps(b.min.x, b.min.y, b.min.z, 0.0);
+        let hi = _mm_setr_ps(b.max.x, b.max.y, b.max.z, 0.0);
+        // `halves`: the centre (Aabb::center's arithmetic), the lower halves' max corner the
+        // box's own max on a flat axis.
+        let mid = _mm_mul_ps(_mm_add_ps(lo, hi), _mm_set1_ps(0.5));
+        let axes = _mm_setr_epi32(1, 2, 4, 0);
+        let flat = _mm_castsi128_ps(_mm_cmpeq_epi32(
+            _mm_and_si128(_mm_set1_epi32((split_info >> 8) as i32), axes),
+            axes,
+        ));
+        let low_max = _mm_blendv_ps(mid, hi, flat);
+        let g = _mm256_set1_ps(grow);
+        let o = _mm256_setr_ps(
+            ray.origin.x,
+            ray.origin.y,
+            ray.origin.z,
+            0.0,
+            ray.origin.x,
+            ray.origin.y,
+            ray.origin.z,
+            0.0,
+        );
+        let inv = ray.inv_direction;
+        let inv = _mm256_setr_ps(inv.x, inv.y, inv.z, 1.0, inv.x, inv.y, inv.z, 1.0);
+        // Low 128 bits: half 0, high: half 1; `(p ∓ g - o) · inv` as `t(p ∓ g)` computes it.
+        let a = _mm256_mul_ps(_mm256_sub_ps(_mm256_sub_ps(_mm256_set_m128(mid, lo), g), o), inv);
+        let c = _mm256_mul_ps(_mm256_sub_ps(_mm256_add_ps(_mm256_set_m128(hi, low_max), g), o), inv);
+        let e = _mm256_min_ps(a, c);
+        let x = _mm256_max_ps(a, c);
         // Lane i is child i: half (i & 1) on x, (i >> 1) & 1 on y, (i >> 2) & 1 on z.
-        let lanes = |v0: f32, v1: f32, pattern: i32| -> __m256 {
-            let (a, b) = (_mm256_set1_ps(v0), _mm256_set1_ps(v1));
-            match pattern {
-                0 => _mm256_blend_ps::<0b1010_1010>(a, b),
-                1 => _mm256_blend_ps::<0b1100_1100>(a, b),
-                _ => _mm256_blend_ps::<0b1111_0000>(a, b),
-            }
-        };
+        let px = _mm256_setr_epi32(0, 4, 0, 4, 0, 4, 0, 4);
+        let py = _mm256_setr_epi32(1, 1, 5, 5, 1, 1, 5, 5);
+        let pz = _mm256_setr_epi32(2, 2, 2, 2, 6, 6, 6, 6);
+        let lanes = |v: __m256, p: __m256i| _mm256_permutevar8x32_ps(v, p);
         // f32::max / f32::min: a NaN operand yields the other one.
         let max = |a: __m256, b: __m256| _mm256_blendv_ps(_mm256_max_ps(a, b), a, _mm256_cmp_ps::<_CMP_UNORD_Q>(b, b));
         let min = |a: __m256, b: __m256| _mm256_blendv_ps(_mm256_min_ps(a, b), a, _mm256_cmp_ps::<_CMP_UNORD_Q>(b, b));
-        let near = max(max(lanes(e0.x, e1.x, 0), lanes(e0.y, e1.y, 1)), lanes(e0.z, e1.z, 2));
+        let near = max(max(lanes(e, px), lanes(e, py)), lanes(e, pz));
         // max(NaN, 0) = 0 as in f32::max.
         let near = _mm256_max_ps(near, _mm256_setzero_ps());
-        let far = min(min(lanes(x0.x, x1.x, 0), lanes(x0.y, x1.y, 1)), lanes(x0.z, x1.z, 2));
+        let far = min(min(lanes(x, px), lanes(x, py)), lanes(x, pz));
         let enter = _mm256_and_ps(
             _mm256_cmp_ps::<_CMP_LE_OQ>(near, far),
             _mm256_cmp_ps::<_CMP_LE_OQ>(near, _mm256_set1_ps(t_limit)),
