@@ -25,4 +25,4 @@ pub mod sample_octree;
 pub use bvh::{Bvh, BvhNode};
 pub use octree::{Octree, OctreeConfig, OctreeError, OctreeNode};
 pub use octree_hybrid::HybridOctree;
-pub use raycast::{traverse, traverse_scalar, FatRay, LeafTriangle, ShearedRay, TraversalCounters};
+pub use raycast::{prefetch_triangles, traverse, traverse_scalar, FatRay, LeafTriangle, ShearedRay, TraversalCounters};

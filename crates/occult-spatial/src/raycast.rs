@@ -162,6 +162,25 @@ pub struct LeafTriangle {
     pub normal: Vec3,
 }
 
+/// Asks the memory system for every cache line of `tris` at once, so that the lines a leaf's
+/// later groups of eight need are on their way while the first group is tested (the hardware
+/// would otherwise take one miss after another). A hint: it changes no result.
+#[inline]
+pub fn prefetch_triangles(tris: &[LeafTriangle]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        let start = tris.as_ptr().cast::<i8>();
+        let bytes = std::mem::size_of_val(tris);
+        for offset in (0..bytes).step_by(64) {
+            // SAFETY: the address lies inside `tris`; prefetching never faults anyway.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(start.wrapping_add(offset)) };
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = tris;
+}
+
 impl ShearedRay {
     /// [`ShearedRay::intersect`] on up to 8 triangles at once: bit `i` of the result is set
     /// when `tris[i]` (tested only where bit `i` of `active` is set) is hit with `t` in

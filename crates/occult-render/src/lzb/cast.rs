@@ -213,6 +213,7 @@ impl<'a> Caster<'a> {
                 Selection::Hybrid => (list.len().min(lzb.opts.k), true),
             }
         };
+        occult_spatial::prefetch_triangles(&list[..n]);
         let dn = if filter { d.normalize() } else { d };
         let base_vis = leaf_base[leaf as usize];
         let mut best: Option<f32> = None;
