@@ -188,6 +188,9 @@ impl ShearedRay {
     /// one-triangle test (AVX2 lanes where present: the same operations in the same order).
     pub fn intersect8(&self, tris: &[LeafTriangle], active: u32, t_min: f32, t_max: f32) -> (u32, [f32; 8]) {
         let active = active & (((1u64 << tris.len().min(8)) - 1) as u32);
+        if active == 0 {
+            return (0, [0.0; 8]);
+        }
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: AVX2 is present; `active` names only lanes below `tris.len()`.
@@ -240,8 +243,9 @@ impl ShearedRay {
         // Coordinate `axis` of corner `corner` of every active triangle, minus the origin's.
         let rel = |corner: usize, axis: usize, o: __m256| {
             // SAFETY: only active lanes are read, and they lie inside `tris`.
-            let v =
-                unsafe { _mm256_mask_i32gather_ps::<4>(_mm256_setzero_ps(), base.add(3 * corner + axis), lanes, on) };
+            let v = unsafe {
+                _mm256_mask_i32gather_ps::<4>(_mm256_setzero_ps(), base.wrapping_add(3 * corner + axis), lanes, on)
+            };
             _mm256_sub_ps(v, o)
         };
         let (a0, a1, a2) = (rel(0, kx, ox), rel(0, ky, oy), rel(0, kz, oz));
