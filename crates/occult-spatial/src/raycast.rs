@@ -162,6 +162,9 @@ pub struct LeafTriangle {
     pub normal: Vec3,
 }
 
+// `intersect8` gathers corner `c`, axis `a` of triangle `i` at float `12 i + 3 c + a`.
+const _: () = assert!(std::mem::size_of::<LeafTriangle>() == 48 && std::mem::size_of::<Vec3>() == 12);
+
 /// Asks the memory system for every cache line of `tris` at once, so that the lines a leaf's
 /// later groups of eight need are on their way while the first group is tested (the hardware
 /// would otherwise take one miss after another). A hint: it changes no result.
@@ -372,7 +375,10 @@ impl FatRay {
 /// halves, grown by the cone's radius bound over the node), and pushed in the order the ray's
 /// direction signs give (child `i ^ mask`, `mask` = the axes the ray runs down): front to back
 /// for a thin ray, and nearly so for a cone. A leaf is then tested against its own grown box,
-/// so the leaves visited are exactly those whose grown box the cone enters before the bound.
+/// so the leaves visited are exactly those whose grown box the cone enters before the bound
+/// (on a tree whose leaves were tightened, [`Octree::tighten_leaves`], those whose own box the
+/// cone enters inside their parent's grown octant: the part of a tight box outside its octant
+/// belongs to neighbouring leaves).
 pub fn traverse(
     octree: &Octree,
     ray: &FatRay,
@@ -614,10 +620,22 @@ mod tests {
             max_depth: 6,
             max_leaf_size: 8,
         };
-        let o = Octree::build_triangles(&p, &t, cfg).unwrap();
+        let plain = Octree::build_triangles(&p, &t, cfg).unwrap();
+        // And with leaves tightened to their triangles' bounds clipped to the octant, as lzb
+        // does: the same nearest hits.
+        let mut tight = plain.clone();
+        tight.tighten_leaves(|n, list| {
+            list.iter()
+                .fold(Aabb::EMPTY, |a, &i| {
+                    a.union(Aabb::from_points(t[i as usize].map(|v| p[v as usize])))
+                })
+                .intersection(n.bounds)
+        });
+        assert_ne!(plain.nodes(), tight.nodes());
         let mut rnd = xorshift(99);
         let mut counters = TraversalCounters::default();
-        for _ in 0..500 {
+        for k in 0..1000 {
+            let o = if k % 2 == 0 { &plain } else { &tight };
             let origin = Vec3::new(rnd(), rnd(), rnd()) * 30.0 - 10.0;
             let dir = Vec3::new(rnd(), rnd(), rnd()) * 10.0 + 0.0 - origin * 0.2;
             let ray = Ray::new(origin, dir);
@@ -683,6 +701,10 @@ mod tests {
     /// direction components), origins on slab planes, flat layers, bounds lowered on the way.
     #[test]
     fn dispatched_traversal_matches_the_scalar_one() {
+        #[cfg(target_arch = "x86_64")]
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("note: no AVX2 here; the dispatched path is the scalar one, compared with itself");
+        }
         let (p, t) = soup(600, 13);
         let flat: Vec<Vec3> = p.iter().map(|v| Vec3::new(v.x, 2.0, v.z)).collect();
         let mut rnd = xorshift(5);
@@ -766,6 +788,10 @@ mod tests {
     /// (edge functions of zero: the f64 path), along axes, partial groups and masks.
     #[test]
     fn eight_triangle_test_matches_the_single_one() {
+        #[cfg(target_arch = "x86_64")]
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("note: no AVX2 here; the dispatched path is the scalar one, compared with itself");
+        }
         let (p, t) = soup(400, 21);
         let tris: Vec<LeafTriangle> = t
             .iter()
