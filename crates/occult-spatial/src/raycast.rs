@@ -648,7 +648,7 @@ mod tests {
                 .fold(f32::INFINITY, f32::min);
             let fat = FatRay::new(origin, dir, 0.0, 0.0);
             let mut limit = f32::INFINITY;
-            traverse(&o, &fat, &mut limit, &mut counters, |leaf, _, _, limit| {
+            traverse(o, &fat, &mut limit, &mut counters, |leaf, _, _, limit| {
                 for &i in o.leaf_primitives(leaf) {
                     let [a, b, c] = tri(i);
                     if let Some(h) = intersect_ray_triangle(&ray, a, b, c) {
