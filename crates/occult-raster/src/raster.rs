@@ -36,6 +36,7 @@ use occult_core::{ItemId, Mat4, Mesh, Vec3, Vec4, View};
 use rayon::prelude::*;
 use std::ops::Range;
 
+mod setup8;
 pub(crate) mod stencil;
 
 /// Sub-pixel precision of snapped vertices, in bits.
@@ -821,7 +822,7 @@ impl Isa {
         out: &mut ChunkBins,
     ) {
         match self {
-            Isa::Baseline => setup_range(vp, draws, draw_starts, vertex_offsets, vertices, range, out),
+            Isa::Baseline => setup_range::<false>(vp, draws, draw_starts, vertex_offsets, vertices, range, out),
             // SAFETY: `select` checked that the processor has these features.
             #[cfg(target_arch = "x86_64")]
             Isa::Avx2 => unsafe { setup_range_avx2(vp, draws, draw_starts, vertex_offsets, vertices, range, out) },
@@ -901,7 +902,7 @@ unsafe fn setup_range_avx2(
     range: Range<usize>,
     out: &mut ChunkBins,
 ) {
-    setup_range(vp, draws, draw_starts, vertex_offsets, vertices, range, out)
+    setup_range::<true>(vp, draws, draw_starts, vertex_offsets, vertices, range, out)
 }
 
 #[inline(always)]
@@ -959,7 +960,7 @@ unsafe fn draw_direct<const AVX2: bool>(
         written: 0,
         dirty: EMPTY_RECT,
     };
-    setup_range(vp, draws, draw_starts, vertex_offsets, vertices, range, &mut sink);
+    setup_range::<AVX2>(vp, draws, draw_starts, vertex_offsets, vertices, range, &mut sink);
     (sink.rasterized, sink.written, sink.dirty)
 }
 
@@ -1000,9 +1001,10 @@ unsafe fn scan_tile<const AVX2: bool>(
     written
 }
 
-/// Sets up and bins the triangles `range` of the global stream.
+/// Sets up and bins the triangles `range` of the global stream: one by one, or with `AVX2`
+/// (only where the processor has it) eight at a time through [`setup8::Batch`].
 #[inline(always)]
-fn setup_range(
+fn setup_range<const AVX2: bool>(
     vp: &Viewport,
     draws: &[Draw<'_>],
     draw_starts: &[usize],
@@ -1014,6 +1016,23 @@ fn setup_range(
     let mut d = draw_starts.partition_point(|&s| s <= range.start) - 1;
     let mut t = range.start;
     let mut cache = VertexCache::new();
+    let mut batch = setup8::Batch::new();
+    // Where the 8-lane setup runs, each triangle joins the batch (flushed when full); the
+    // scalar setup takes it at once otherwise.
+    let mut emit = |v: [ProjVertex; 3], indices: [u32; 3], d: usize, item: ItemId, out: &mut _| {
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 {
+            batch.push(v, indices, d, item);
+            if batch.is_full() {
+                // SAFETY: the AVX2 instantiation only runs where `Isa::select` found AVX2.
+                unsafe { setup8::setup8_avx2(vp, draws, &mut batch, out) };
+            }
+            return;
+        }
+        let draw = &draws[d];
+        let clip = || indices.map(|i| to_clip(&draw.clip_from_object, draw.mesh.positions()[i as usize]));
+        setup_triangle(vp, v, clip, item, out);
+    };
     while t < range.end {
         while draw_starts[d + 1] <= t {
             d += 1;
@@ -1032,8 +1051,7 @@ fn setup_range(
                     .map(|(k, t)| (first + k, t))
                 {
                     let v = [verts[i0 as usize], verts[i1 as usize], verts[i2 as usize]];
-                    let clip = || [i0, i1, i2].map(|i| to_clip(&draw.clip_from_object, mesh.positions()[i as usize]));
-                    setup_triangle(vp, v, clip, draw.first_item + j as u64, out);
+                    emit(v, [i0, i1, i2], d, draw.first_item + j as u64, out);
                 }
             }
             sel => {
@@ -1048,12 +1066,16 @@ fn setup_range(
                         cache.project(vp, m, pos, i1),
                         cache.project(vp, m, pos, i2),
                     ];
-                    let clip = || [i0, i1, i2].map(|i| to_clip(m, pos[i as usize]));
-                    setup_triangle(vp, v, clip, draw.first_item + ti as u64, out);
+                    emit(v, [i0, i1, i2], d, draw.first_item + ti as u64, out);
                 }
             }
         }
         t = end;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        // SAFETY: as above.
+        unsafe { setup8::setup8_avx2(vp, draws, &mut batch, out) };
     }
 }
 
@@ -1221,8 +1243,8 @@ fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut
         std::mem::swap(&mut z1, &mut z2);
         area = -area;
     }
-    let zmin = z0.min(z1).min(z2);
-    let zmax = z0.max(z1).max(z2);
+    let zmin = min_f32(min_f32(z0, z1), z2);
+    let zmax = max_f32(max_f32(z0, z1), z2);
     if zmax < vp.far_depth {
         return;
     }
@@ -1258,9 +1280,46 @@ fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut
     );
 }
 
+/// The smaller of `a` and `b`, `b` when they compare equal or either is NaN: the rule of
+/// `minps`, which the 8-lane setup uses (`f32::min` leaves the sign of a zero unspecified).
+#[inline(always)]
+fn min_f32(a: f32, b: f32) -> f32 {
+    if a < b {
+        a
+    } else {
+        b
+    }
+}
+
+/// The larger of `a` and `b`, by the rule of `maxps` (see [`min_f32`]).
+#[inline(always)]
+fn max_f32(a: f32, b: f32) -> f32 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// Edge functions of a triangle the small scan takes (see [`scan_small`]), as
+/// [`scan_triangle`] derives them: their values at the centre of pixel `(px0, py0)` and their
+/// steps per pixel right and down.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct SmallEdges {
+    row: [i32; 3],
+    step_x: [i32; 3],
+    step_y: [i32; 3],
+}
+
 /// Where set-up triangles go: bins for the tile pass, or straight to the scan.
 trait SetupSink {
     fn push(&mut self, vp: &Viewport, t: TriSetup);
+    /// [`Self::push`] for a triangle whose box the small scan takes, with its edge functions
+    /// already derived (by the 8-lane setup).
+    #[inline(always)]
+    fn push_small(&mut self, vp: &Viewport, t: TriSetup, _edges: SmallEdges) {
+        self.push(vp, t);
+    }
     /// A triangle whose box starts at pixel `(x, y)` (and covers row `y + 1` if `two_rows`)
     /// is being set up: a sink that scans at once may start fetching those pixels.
     #[inline(always)]
@@ -1329,6 +1388,22 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
         // no other thread touches the frame during the draw.
         self.written += unsafe { scan_triangle::<AVX2>(vp, &t, self.rect, self.target, self.mode) };
     }
+
+    #[inline(always)]
+    fn push_small(&mut self, vp: &Viewport, t: TriSetup, edges: SmallEdges) {
+        self.rasterized += 1;
+        self.dirty = [
+            self.dirty[0].min(t.px0 as u32),
+            self.dirty[1].min(t.py0 as u32),
+            self.dirty[2].max(t.px1 as u32),
+            self.dirty[3].max(t.py1 as u32),
+        ];
+        // The direct sink's rectangle is the whole frame, which holds the box: `scan_triangle`
+        // would scan the box itself, small, from these edge functions.
+        let rect = [t.px0 as u32, t.py0 as u32, t.px1 as u32, t.py1 as u32];
+        // SAFETY: as in `push`.
+        self.written += unsafe { scan_small::<AVX2>(vp, &t, rect, edges, self.target, self.mode) };
+    }
 }
 
 /// Spans shorter than this are written pixel by pixel; longer ones by the vectorized loop.
@@ -1372,17 +1447,18 @@ unsafe fn scan_small<const AVX2: bool>(
     vp: &Viewport,
     t: &TriSetup,
     rect: [u32; 4],
-    e: [i64; 3],
-    step_x: [i64; 3],
-    step_y: [i64; 3],
+    edges: SmallEdges,
     target: &FrameTarget,
     mode: RasterMode,
 ) -> u64 {
     let [x0, y0, x1, y1] = rect;
     let w = x1 - x0 + 1;
     let mut mask = 0u64;
-    let mut row = [e[0] as i32, e[1] as i32, e[2] as i32];
-    let sx = [step_x[0] as i32, step_x[1] as i32, step_x[2] as i32];
+    let SmallEdges {
+        mut row,
+        step_x: sx,
+        step_y,
+    } = edges;
     let valid = (1u64 << w) - 1;
     for j in 0..=(y1 - y0) {
         let bits = if AVX2 {
@@ -1392,9 +1468,9 @@ unsafe fn scan_small<const AVX2: bool>(
             row_mask(row, sx)
         };
         mask |= (bits & valid) << (j * SMALL);
-        row[0] += step_y[0] as i32;
-        row[1] += step_y[1] as i32;
-        row[2] += step_y[2] as i32;
+        row[0] += step_y[0];
+        row[1] += step_y[1];
+        row[2] += step_y[2];
     }
     let mut written = 0;
     while mask != 0 {
@@ -1540,6 +1616,30 @@ fn depth_at(t: &TriSetup, row_depth: f32, x: u32) -> f32 {
     }
 }
 
+/// The edge functions of `t` at the centre of pixel `(x0, y0)`, with their steps per pixel
+/// right and down. Edge i runs from corner i to corner i+1; E(p) = A·px + B·py + C >= 0
+/// inside, exactly, with the top-left rule folded in.
+#[inline(always)]
+fn edge_functions(t: &TriSetup, x0: u32, y0: u32) -> ([i64; 3], [i64; 3], [i64; 3]) {
+    let (cx, cy) = (x0 as i64 * SUB + HALF, y0 as i64 * SUB + HALF);
+    let mut row = [0i64; 3];
+    let mut step_x = [0i64; 3];
+    let mut step_y = [0i64; 3];
+    for i in 0..3 {
+        let j = (i + 1) % 3;
+        let (xi, yi) = (t.x[i] as i64, t.y[i] as i64);
+        let ea = yi - t.y[j] as i64;
+        let eb = t.x[j] as i64 - xi;
+        // Top-left rule: a centre on the edge counts only for left (A > 0) or top
+        // (A = 0, B > 0) edges; other edges need E > 0, i.e. E - 1 >= 0 in integers.
+        let bias = -(((ea < 0) | ((ea == 0) & (eb <= 0))) as i64);
+        row[i] = ea * (cx - xi) + eb * (cy - yi) + bias;
+        step_x[i] = ea * SUB;
+        step_y[i] = eb * SUB;
+    }
+    (row, step_x, step_y)
+}
+
 /// Scans triangle `t` inside the inclusive pixel rectangle `rect`; returns fragments written.
 ///
 /// # Safety
@@ -1559,27 +1659,15 @@ unsafe fn scan_triangle<const AVX2: bool>(
     if x0 > x1 || y0 > y1 {
         return 0;
     }
-    // Edge i runs from corner i to corner i+1; E(p) = A·px + B·py + C >= 0 inside, evaluated
-    // exactly at the centre of pixel (x0, y0).
-    let (cx, cy) = (x0 as i64 * SUB + HALF, y0 as i64 * SUB + HALF);
-    let mut row = [0i64; 3];
-    let mut step_x = [0i64; 3];
-    let mut step_y = [0i64; 3];
-    for i in 0..3 {
-        let j = (i + 1) % 3;
-        let (xi, yi) = (t.x[i] as i64, t.y[i] as i64);
-        let ea = yi - t.y[j] as i64;
-        let eb = t.x[j] as i64 - xi;
-        // Top-left rule: a centre on the edge counts only for left (A > 0) or top
-        // (A = 0, B > 0) edges; other edges need E > 0, i.e. E - 1 >= 0 in integers.
-        let bias = -(((ea < 0) | ((ea == 0) & (eb <= 0))) as i64);
-        row[i] = ea * (cx - xi) + eb * (cy - yi) + bias;
-        step_x[i] = ea * SUB;
-        step_y[i] = eb * SUB;
-    }
+    let (mut row, step_x, step_y) = edge_functions(t, x0, y0);
     if (t.extent as u32) < MASKED && x1 - x0 < SMALL && y1 - y0 < SMALL {
+        let edges = SmallEdges {
+            row: row.map(|e| e as i32),
+            step_x: step_x.map(|e| e as i32),
+            step_y: step_y.map(|e| e as i32),
+        };
         // SAFETY: forwarded from the caller.
-        return unsafe { scan_small::<AVX2>(vp, t, [x0, y0, x1, y1], row, step_x, step_y, target, mode) };
+        return unsafe { scan_small::<AVX2>(vp, t, [x0, y0, x1, y1], edges, target, mode) };
     }
     let mut written = 0;
     let width = x1 - x0 + 1;

@@ -297,7 +297,7 @@ impl Rasterizer {
                         counts: StencilCounts::default(),
                     };
                     if total > 0 {
-                        setup_range(&vp, &plain, &draw_starts, &vertex_offsets, &[], 0..total, &mut sink);
+                        setup_range::<false>(&vp, &plain, &draw_starts, &vertex_offsets, &[], 0..total, &mut sink);
                     }
                     sink.counts
                 })

@@ -1,0 +1,621 @@
+//! Triangle setup eight at a time (AVX2): the same operations as [`super::setup_snapped`],
+//! one triangle per lane.
+//!
+//! Whole-mesh and index-list draws alike collect their projected corners into a [`Batch`];
+//! [`setup8_avx2`] then rejects, orients and bounds the eight triangles and fixes their depth
+//! planes in lanes, and hands the survivors to the sink in stream order (those that need
+//! clipping last, through the scalar path; order never changes a frame). For triangles the
+//! small scan takes (box at most 8 × 8 pixels, corners within [`MASKED`] pixels), it also
+//! derives the three edge functions at the first pixel centre in i32 lanes, so the scan
+//! starts from them.
+//!
+//! Every value equals the scalar setup's bit for bit (tested on random and degenerate
+//! batches): integer parts are exact in 32-bit lanes (snapped coordinates stay below 2^24),
+//! the area is exact in f64 (products below 2^50), and the depth plane runs the scalar f64
+//! expression lane by lane, in the same order, without contraction. Triangles that need
+//! clipping leave the batch for the scalar path.
+
+use super::{
+    clip_and_setup, to_clip, Draw, ProjVertex, SetupSink, SmallEdges, TriSetup, Viewport, HALF, MASKED, NEEDS_CLIP,
+    NOT_FINITE, OUT_OF_VIEW, SMALL, SUB, SUBPIXEL_BITS,
+};
+use occult_core::ItemId;
+
+/// Lanes of a batch.
+pub(super) const LANES: usize = 8;
+
+/// Up to eight triangles of a draw stream, in stream order, waiting for the 8-lane setup.
+pub(super) struct Batch {
+    /// `corners[c][k]`: corner `c` of the triangle in lane `k`, as projected.
+    corners: [[ProjVertex; LANES]; 3],
+    /// Mesh vertex indices of each lane's corners and the draw they belong to: a triangle
+    /// that needs clipping is transformed again from them.
+    indices: [[u32; 3]; LANES],
+    draw: [u32; LANES],
+    item: [ItemId; LANES],
+    len: usize,
+}
+
+impl Batch {
+    pub(super) fn new() -> Self {
+        Self {
+            corners: [[ProjVertex::default(); LANES]; 3],
+            indices: [[0; 3]; LANES],
+            draw: [0; LANES],
+            item: [0; LANES],
+            len: 0,
+        }
+    }
+
+    /// Appends a triangle; the batch must not be full.
+    #[inline(always)]
+    pub(super) fn push(&mut self, v: [ProjVertex; 3], indices: [u32; 3], draw: usize, item: ItemId) {
+        let k = self.len;
+        self.corners[0][k] = v[0];
+        self.corners[1][k] = v[1];
+        self.corners[2][k] = v[2];
+        self.indices[k] = indices;
+        self.draw[k] = draw as u32;
+        self.item[k] = item;
+        self.len = k + 1;
+    }
+
+    #[inline(always)]
+    pub(super) fn is_full(&self) -> bool {
+        self.len == LANES
+    }
+}
+
+/// The lanes of a set-up batch, spilled for the per-triangle hand-over.
+#[repr(C, align(32))]
+#[derive(Default)]
+struct Lanes {
+    x: [[i32; LANES]; 3],
+    y: [[i32; LANES]; 3],
+    px0: [i32; LANES],
+    py0: [i32; LANES],
+    px1: [i32; LANES],
+    py1: [i32; LANES],
+    extent: [i32; LANES],
+    zc: [f32; LANES],
+    dzdx: [f32; LANES],
+    dzdy: [f32; LANES],
+    zmin: [f32; LANES],
+    zmax: [f32; LANES],
+    row: [[i32; LANES]; 3],
+    step_x: [[i32; LANES]; 3],
+    step_y: [[i32; LANES]; 3],
+}
+
+/// Sets up the batch's triangles and hands them to `out` (see the module doc), then empties it.
+///
+/// # Safety
+/// The processor must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(super) unsafe fn setup8_avx2(vp: &Viewport, draws: &[Draw<'_>], batch: &mut Batch, out: &mut impl SetupSink) {
+    use std::arch::x86_64::*;
+
+    let n = batch.len;
+    batch.len = 0;
+    if n == 0 {
+        return;
+    }
+    let in_batch = (1u32 << n) - 1;
+    // Corner c of the eight lanes, from eight 16-byte vertices: a 4 × 4 transpose per half.
+    let corner = |c: usize| {
+        let v = &batch.corners[c];
+        let load = |k: usize| _mm_loadu_si128((&raw const v[k]).cast());
+        let pair = |a: usize, b: usize| _mm256_inserti128_si256::<1>(_mm256_castsi128_si256(load(a)), load(b));
+        let (t0, t1, t2, t3) = (pair(0, 4), pair(1, 5), pair(2, 6), pair(3, 7));
+        let (u0, u1) = (_mm256_unpacklo_epi32(t0, t1), _mm256_unpackhi_epi32(t0, t1));
+        let (u2, u3) = (_mm256_unpacklo_epi32(t2, t3), _mm256_unpackhi_epi32(t2, t3));
+        (
+            _mm256_unpacklo_epi64(u0, u2),
+            _mm256_unpackhi_epi64(u0, u2),
+            _mm256_castsi256_ps(_mm256_unpacklo_epi64(u1, u3)),
+            _mm256_unpackhi_epi64(u1, u3),
+        )
+    };
+    let (x0, y0, z0, c0) = corner(0);
+    let (x1, y1, z1, c1) = corner(1);
+    let (x2, y2, z2, c2) = corner(2);
+    let zero = _mm256_setzero_si256();
+    let bits = |m: __m256i| _mm256_movemask_ps(_mm256_castsi256_ps(m)) as u32;
+    let any = |c: __m256i, flags: u32| {
+        bits(_mm256_cmpgt_epi32(
+            _mm256_and_si256(c, _mm256_set1_epi32(flags as i32)),
+            zero,
+        ))
+    };
+    let all_codes = _mm256_and_si256(_mm256_and_si256(c0, c1), c2);
+    let any_codes = _mm256_or_si256(_mm256_or_si256(c0, c1), c2);
+    let rejected = any(all_codes, OUT_OF_VIEW) | any(any_codes, NOT_FINITE);
+    let clipped = in_batch & !rejected & any(any_codes, NEEDS_CLIP);
+    let mut live = in_batch & !rejected & !clipped;
+
+    // Pixel boxes: centres (i + 1/2) inside [min, max] of the snapped corners.
+    let min3 = |a, b, c| _mm256_min_epi32(_mm256_min_epi32(a, b), c);
+    let max3 = |a, b, c| _mm256_max_epi32(_mm256_max_epi32(a, b), c);
+    let (minx, maxx) = (min3(x0, x1, x2), max3(x0, x1, x2));
+    let (miny, maxy) = (min3(y0, y1, y2), max3(y0, y1, y2));
+    let shift = |v: __m256i, add: i64| {
+        _mm256_srai_epi32::<{ SUBPIXEL_BITS as i32 }>(_mm256_add_epi32(v, _mm256_set1_epi32(add as i32)))
+    };
+    let px0 = _mm256_max_epi32(shift(minx, SUB - 1 - HALF), zero);
+    let py0 = _mm256_max_epi32(shift(miny, SUB - 1 - HALF), zero);
+    let px1 = _mm256_min_epi32(shift(maxx, -HALF), _mm256_set1_epi32(vp.width as i32 - 1));
+    let py1 = _mm256_min_epi32(shift(maxy, -HALF), _mm256_set1_epi32(vp.height as i32 - 1));
+    live &= !bits(_mm256_or_si256(
+        _mm256_cmpgt_epi32(px0, px1),
+        _mm256_cmpgt_epi32(py0, py1),
+    ));
+    if live == 0 && clipped == 0 {
+        return;
+    }
+    let mut l = Lanes::default();
+    let store = |dst: &mut [i32; LANES], v: __m256i| _mm256_storeu_si256(dst.as_mut_ptr().cast(), v);
+    store(&mut l.px0, px0);
+    store(&mut l.py0, py0);
+    store(&mut l.py1, py1);
+    let mut m = live;
+    while m != 0 {
+        let k = m.trailing_zeros() as usize;
+        m &= m - 1;
+        out.will_touch(l.px0[k] as u32, l.py0[k] as u32, l.py1[k] > l.py0[k]);
+    }
+
+    // Area, exact in f64 halves: |coordinates| < 2^24, so products < 2^50.
+    let (dx1, dy1) = (_mm256_sub_epi32(x1, x0), _mm256_sub_epi32(y1, y0));
+    let (dx2, dy2) = (_mm256_sub_epi32(x2, x0), _mm256_sub_epi32(y2, y0));
+    let (area_lo, area_hi) = (
+        area(lo_pd(dx1), lo_pd(dy1), lo_pd(dx2), lo_pd(dy2)),
+        area(hi_pd(dx1), hi_pd(dy1), hi_pd(dx2), hi_pd(dy2)),
+    );
+    let zd = _mm256_setzero_pd();
+    let signs = |lo: __m256d, hi: __m256d| (_mm256_movemask_pd(lo) | (_mm256_movemask_pd(hi) << 4)) as u32;
+    let negative = signs(
+        _mm256_cmp_pd::<_CMP_LT_OQ>(area_lo, zd),
+        _mm256_cmp_pd::<_CMP_LT_OQ>(area_hi, zd),
+    );
+    let positive = signs(
+        _mm256_cmp_pd::<_CMP_GT_OQ>(area_lo, zd),
+        _mm256_cmp_pd::<_CMP_GT_OQ>(area_hi, zd),
+    );
+    // Zero areas fail both.
+    live &= negative | if vp.cull_backfaces { 0 } else { positive };
+
+    // Orient counter-clockwise on screen (negative area) triangles like the others: swap 1, 2.
+    let lane_bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+    let swap = _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(negative as i32), lane_bit), lane_bit);
+    let swap_ps = _mm256_castsi256_ps(swap);
+    let (x1, x2) = (_mm256_blendv_epi8(x1, x2, swap), _mm256_blendv_epi8(x2, x1, swap));
+    let (y1, y2) = (_mm256_blendv_epi8(y1, y2, swap), _mm256_blendv_epi8(y2, y1, swap));
+    let (z1, z2) = (_mm256_blendv_ps(z1, z2, swap_ps), _mm256_blendv_ps(z2, z1, swap_ps));
+    let abs = _mm256_set1_pd(-0.0);
+    let (area_lo, area_hi) = (_mm256_andnot_pd(abs, area_lo), _mm256_andnot_pd(abs, area_hi));
+
+    // Depth range, as `min_f32` / `max_f32` (the instructions' own operand rule).
+    let zmin = _mm256_min_ps(_mm256_min_ps(z0, z1), z2);
+    let zmax = _mm256_max_ps(_mm256_max_ps(z0, z1), z2);
+    live &= !(_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(zmax, _mm256_set1_ps(vp.far_depth))) as u32);
+
+    if live != 0 {
+        // Depth plane in pixel units relative to corner 0, in f64, anchored at the centre of
+        // pixel (px0, py0): the scalar expression, operation for operation.
+        let (dz1, dz2) = (_mm256_sub_ps(z1, z0), _mm256_sub_ps(z2, z0));
+        let (dx1, dy1) = (_mm256_sub_epi32(x1, x0), _mm256_sub_epi32(y1, y0));
+        let (dx2, dy2) = (_mm256_sub_epi32(x2, x0), _mm256_sub_epi32(y2, y0));
+        let (zc_lo, dzdx_lo, dzdy_lo) = plane(
+            area_lo,
+            [lo_pd(dx1), lo_pd(dy1), lo_pd(dx2), lo_pd(dy2)],
+            [lo_ps(dz1), lo_ps(dz2), lo_ps(z0)],
+            [lo_pd(px0), lo_pd(py0), lo_pd(x0), lo_pd(y0)],
+        );
+        let (zc_hi, dzdx_hi, dzdy_hi) = plane(
+            area_hi,
+            [hi_pd(dx1), hi_pd(dy1), hi_pd(dx2), hi_pd(dy2)],
+            [hi_ps(dz1), hi_ps(dz2), hi_ps(z0)],
+            [hi_pd(px0), hi_pd(py0), hi_pd(x0), hi_pd(y0)],
+        );
+        let store_ps = |dst: &mut [f32; LANES], v: __m256| _mm256_storeu_ps(dst.as_mut_ptr(), v);
+        store_ps(&mut l.zc, _mm256_set_m128(zc_hi, zc_lo));
+        store_ps(&mut l.dzdx, _mm256_set_m128(dzdx_hi, dzdx_lo));
+        store_ps(&mut l.dzdy, _mm256_set_m128(dzdy_hi, dzdy_lo));
+        store_ps(&mut l.zmin, zmin);
+        store_ps(&mut l.zmax, zmax);
+        let extent = _mm256_add_epi32(
+            _mm256_srai_epi32::<{ SUBPIXEL_BITS as i32 }>(_mm256_max_epi32(
+                _mm256_sub_epi32(maxx, minx),
+                _mm256_sub_epi32(maxy, miny),
+            )),
+            _mm256_set1_epi32(1),
+        );
+        let extent = _mm256_min_epi32(extent, _mm256_set1_epi32(u16::MAX as i32));
+        store(&mut l.extent, extent);
+        store(&mut l.px1, px1);
+        let (xs, ys) = ([x0, x1, x2], [y0, y1, y2]);
+        for c in 0..3 {
+            store(&mut l.x[c], xs[c]);
+            store(&mut l.y[c], ys[c]);
+        }
+        // Edge functions at the centre of pixel (px0, py0), for the small scan: exact in i32
+        // for boxes it takes (see `scan_small`); other lanes are not read.
+        let small_box = _mm256_set1_epi32(SMALL as i32);
+        let small = live
+            & bits(_mm256_cmpgt_epi32(_mm256_set1_epi32(MASKED as i32), extent))
+            & bits(_mm256_cmpgt_epi32(small_box, _mm256_sub_epi32(px1, px0)))
+            & bits(_mm256_cmpgt_epi32(small_box, _mm256_sub_epi32(py1, py0)));
+        if small != 0 {
+            let centre = |p: __m256i| {
+                _mm256_add_epi32(
+                    _mm256_slli_epi32::<{ SUBPIXEL_BITS as i32 }>(p),
+                    _mm256_set1_epi32(HALF as i32),
+                )
+            };
+            let (cx, cy) = (centre(px0), centre(py0));
+            for i in 0..3 {
+                let j = (i + 1) % 3;
+                let ea = _mm256_sub_epi32(ys[i], ys[j]);
+                let eb = _mm256_sub_epi32(xs[j], xs[i]);
+                // Top-left rule as in `scan_triangle`: -1 unless A > 0, or A = 0 and B > 0.
+                let bias = _mm256_or_si256(
+                    _mm256_cmpgt_epi32(zero, ea),
+                    _mm256_andnot_si256(_mm256_cmpgt_epi32(eb, zero), _mm256_cmpeq_epi32(ea, zero)),
+                );
+                let row = _mm256_add_epi32(
+                    _mm256_add_epi32(
+                        _mm256_mullo_epi32(ea, _mm256_sub_epi32(cx, xs[i])),
+                        _mm256_mullo_epi32(eb, _mm256_sub_epi32(cy, ys[i])),
+                    ),
+                    bias,
+                );
+                store(&mut l.row[i], row);
+                store(&mut l.step_x[i], _mm256_slli_epi32::<{ SUBPIXEL_BITS as i32 }>(ea));
+                store(&mut l.step_y[i], _mm256_slli_epi32::<{ SUBPIXEL_BITS as i32 }>(eb));
+            }
+        }
+        let mut m = live;
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let t = TriSetup {
+                x: [l.x[0][k], l.x[1][k], l.x[2][k]],
+                y: [l.y[0][k], l.y[1][k], l.y[2][k]],
+                px0: l.px0[k] as u16,
+                py0: l.py0[k] as u16,
+                px1: l.px1[k] as u16,
+                py1: l.py1[k] as u16,
+                zc: l.zc[k],
+                dzdx: l.dzdx[k],
+                dzdy: l.dzdy[k],
+                zmin: l.zmin[k],
+                zmax: l.zmax[k],
+                extent: l.extent[k] as u16,
+                front: negative & (1 << k) != 0,
+                item: batch.item[k],
+            };
+            if small & (1 << k) != 0 {
+                let edges = SmallEdges {
+                    row: [l.row[0][k], l.row[1][k], l.row[2][k]],
+                    step_x: [l.step_x[0][k], l.step_x[1][k], l.step_x[2][k]],
+                    step_y: [l.step_y[0][k], l.step_y[1][k], l.step_y[2][k]],
+                };
+                out.push_small(vp, t, edges);
+            } else {
+                out.push(vp, t);
+            }
+        }
+    }
+    let mut m = clipped;
+    while m != 0 {
+        let k = m.trailing_zeros() as usize;
+        m &= m - 1;
+        let d = &draws[batch.draw[k] as usize];
+        let pos = d.mesh.positions();
+        let clip = batch.indices[k].map(|i| to_clip(&d.clip_from_object, pos[i as usize]));
+        clip_and_setup(vp, clip, batch.item[k], out);
+    }
+}
+
+/// Lanes 0..4 of eight i32 as f64.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn lo_pd(v: std::arch::x86_64::__m256i) -> std::arch::x86_64::__m256d {
+    use std::arch::x86_64::*;
+    _mm256_cvtepi32_pd(_mm256_castsi256_si128(v))
+}
+
+/// Lanes 4..8 of eight i32 as f64.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn hi_pd(v: std::arch::x86_64::__m256i) -> std::arch::x86_64::__m256d {
+    use std::arch::x86_64::*;
+    _mm256_cvtepi32_pd(_mm256_extracti128_si256::<1>(v))
+}
+
+/// Lanes 0..4 of eight f32 as f64.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn lo_ps(v: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256d {
+    use std::arch::x86_64::*;
+    _mm256_cvtps_pd(_mm256_castps256_ps128(v))
+}
+
+/// Lanes 4..8 of eight f32 as f64.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn hi_ps(v: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256d {
+    use std::arch::x86_64::*;
+    _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(v))
+}
+
+/// `(x1 - x0)(y2 - y0) - (x2 - x0)(y1 - y0)` from the differences `[dx1, dy1, dx2, dy2]`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn area(
+    dx1: std::arch::x86_64::__m256d,
+    dy1: std::arch::x86_64::__m256d,
+    dx2: std::arch::x86_64::__m256d,
+    dy2: std::arch::x86_64::__m256d,
+) -> std::arch::x86_64::__m256d {
+    use std::arch::x86_64::*;
+    _mm256_sub_pd(_mm256_mul_pd(dx1, dy2), _mm256_mul_pd(dx2, dy1))
+}
+
+/// The scalar setup's depth plane in four f64 lanes: `d = [dx1, dy1, dx2, dy2]` (oriented
+/// corners minus corner 0, in 1/256 pixel), `z = [z1 - z0, z2 - z0, z0]` (the differences taken
+/// in f32, as there), `o = [px0, py0, x0, y0]`; returns `(zc, dzdx, dzdy)` rounded to f32.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn plane(
+    area: std::arch::x86_64::__m256d,
+    d: [std::arch::x86_64::__m256d; 4],
+    z: [std::arch::x86_64::__m256d; 3],
+    o: [std::arch::x86_64::__m256d; 4],
+) -> (
+    std::arch::x86_64::__m128,
+    std::arch::x86_64::__m128,
+    std::arch::x86_64::__m128,
+) {
+    use std::arch::x86_64::*;
+    let sub = _mm256_set1_pd(SUB as f64);
+    let half = _mm256_set1_pd(0.5);
+    let inv = _mm256_div_pd(
+        _mm256_set1_pd(1.0),
+        _mm256_div_pd(area, _mm256_set1_pd((SUB * SUB) as f64)),
+    );
+    let (fx1, fy1) = (_mm256_div_pd(d[0], sub), _mm256_div_pd(d[1], sub));
+    let (fx2, fy2) = (_mm256_div_pd(d[2], sub), _mm256_div_pd(d[3], sub));
+    let [dz1, dz2, z0] = z;
+    let dzdx = _mm256_mul_pd(_mm256_sub_pd(_mm256_mul_pd(dz1, fy2), _mm256_mul_pd(dz2, fy1)), inv);
+    let dzdy = _mm256_mul_pd(_mm256_sub_pd(_mm256_mul_pd(fx1, dz2), _mm256_mul_pd(fx2, dz1)), inv);
+    let ox = _mm256_sub_pd(_mm256_add_pd(o[0], half), _mm256_div_pd(o[2], sub));
+    let oy = _mm256_sub_pd(_mm256_add_pd(o[1], half), _mm256_div_pd(o[3], sub));
+    let zc = _mm256_add_pd(_mm256_add_pd(z0, _mm256_mul_pd(dzdx, ox)), _mm256_mul_pd(dzdy, oy));
+    (_mm256_cvtpd_ps(zc), _mm256_cvtpd_ps(dzdx), _mm256_cvtpd_ps(dzdy))
+}
+
+#[cfg(all(test, target_arch = "x86_64"))]
+mod tests {
+    use super::super::{
+        edge_functions, setup_triangle, DrawTriangles, OUT_BOTTOM, OUT_LEFT, OUT_NEAR, OUT_RIGHT, OUT_TOP,
+    };
+    use super::*;
+    use occult_core::{Affine3A, Camera, Mesh, Vec3, View};
+    use rand::{Rng, SeedableRng};
+    use rand_pcg::Pcg64Mcg;
+
+    /// A set-up record as comparable bits, and the edge functions it came with.
+    type Entry = (ItemId, [u64; 16], Option<SmallEdges>);
+
+    #[derive(Default)]
+    struct Recorder(Vec<Entry>);
+
+    fn key(t: &TriSetup) -> [u64; 16] {
+        let f = |v: f32| v.to_bits() as u64;
+        let i = |v: i32| v as u32 as u64;
+        [
+            i(t.x[0]),
+            i(t.x[1]),
+            i(t.x[2]),
+            i(t.y[0]),
+            i(t.y[1]),
+            i(t.y[2]),
+            (t.px0 as u64) | (t.py0 as u64) << 16 | (t.px1 as u64) << 32 | (t.py1 as u64) << 48,
+            f(t.zc),
+            f(t.dzdx),
+            f(t.dzdy),
+            f(t.zmin),
+            f(t.zmax),
+            t.extent as u64,
+            t.front as u64,
+            t.item,
+            0,
+        ]
+    }
+
+    impl SetupSink for Recorder {
+        fn push(&mut self, _vp: &Viewport, t: TriSetup) {
+            self.0.push((t.item, key(&t), None));
+        }
+        fn push_small(&mut self, _vp: &Viewport, t: TriSetup, edges: SmallEdges) {
+            self.0.push((t.item, key(&t), Some(edges)));
+        }
+    }
+
+    fn viewport(rng: &mut Pcg64Mcg) -> Viewport {
+        let (width, height) = (rng.random_range(1..2000), rng.random_range(1..1200));
+        Viewport {
+            width,
+            height,
+            fwidth: width as f32,
+            fheight: height as f32,
+            guard_x: 2.0 * super::super::GUARD_PIXELS / width as f32 - 1.0,
+            guard_y: 2.0 * super::super::GUARD_PIXELS / height as f32 - 1.0,
+            far_depth: [0.0, 0.25, -1.0][rng.random_range(0..3)],
+            tile_size: 64,
+            tile_shift: 6,
+            tiles_x: width.div_ceil(64),
+            tiles_y: height.div_ceil(64),
+            cull_backfaces: rng.random_bool(0.3),
+        }
+    }
+
+    /// Random corners as a projection could produce them: tiny to guard-band-sized
+    /// triangles, shared and signed-zero depths, every kind of outcode.
+    fn corners(rng: &mut Pcg64Mcg, vp: &Viewport) -> [ProjVertex; 3] {
+        const LIMIT: i32 = 1 << 23;
+        let spread = [300, 300, 1500, 3000, 40_000, LIMIT][rng.random_range(0..6)];
+        let cx = rng.random_range(-30_000..(vp.width as i32 + 100) * 256);
+        let cy = rng.random_range(-30_000..(vp.height as i32 + 100) * 256);
+        let z_shared = rng.random_range(-0.5f32..1.5);
+        let mut v = [ProjVertex::default(); 3];
+        for p in &mut v {
+            p.x = (cx + rng.random_range(-spread..=spread)).clamp(-LIMIT, LIMIT);
+            p.y = (cy + rng.random_range(-spread..=spread)).clamp(-LIMIT, LIMIT);
+            p.z = match rng.random_range(0..6) {
+                0 => 0.0,
+                1 => -0.0,
+                2 => z_shared,
+                3 => 1.0,
+                _ => rng.random_range(-0.5f32..1.5),
+            };
+            p.code = match rng.random_range(0..20) {
+                0 => OUT_LEFT,
+                1 => OUT_RIGHT | OUT_TOP,
+                2 => OUT_BOTTOM,
+                3 => OUT_NEAR | NEEDS_CLIP,
+                4 => NEEDS_CLIP,
+                5 => NOT_FINITE,
+                _ => 0,
+            };
+        }
+        // Degenerate shapes: repeated corners and collinear ones.
+        match rng.random_range(0..12) {
+            0 => v[1] = v[0],
+            1 => {
+                v[2].x = 2 * v[1].x - v[0].x;
+                v[2].y = 2 * v[1].y - v[0].y;
+            }
+            _ => {}
+        }
+        v
+    }
+
+    #[test]
+    fn eight_lane_setup_matches_the_scalar_one() {
+        if !is_x86_feature_detected!("avx2") {
+            eprintln!("no AVX2 on this processor: the 8-lane setup is not exercised");
+            return;
+        }
+        let mut rng = Pcg64Mcg::seed_from_u64(11);
+        // Triangles needing clipping are transformed again from a mesh, on both paths.
+        let positions: Vec<Vec3> = (0..64)
+            .map(|_| {
+                Vec3::new(
+                    rng.random_range(-9.0..9.0),
+                    rng.random_range(-9.0..9.0),
+                    rng.random_range(-9.0..9.0),
+                )
+            })
+            .collect();
+        let mesh = Mesh::new(positions, vec![[0, 1, 2]]).unwrap();
+        let draws = [Draw {
+            mesh: &mesh,
+            triangles: DrawTriangles::All,
+            clip_from_object: View::new(Camera::look_at(Vec3::new(0.0, 2.0, 10.0), Vec3::ZERO), 640, 480)
+                .unwrap()
+                .clip_from_object(&Affine3A::IDENTITY),
+            first_item: 0,
+        }];
+        let (mut small, mut large, mut clipped) = (0, 0, 0);
+        for round in 0..4000 {
+            let vp = viewport(&mut rng);
+            let n = rng.random_range(1..=LANES);
+            let mut batch = Batch::new();
+            let mut scalar = Recorder::default();
+            for k in 0..n {
+                let v = corners(&mut rng, &vp);
+                let indices = [0, 1, 2].map(|_| rng.random_range(0..64u32));
+                let item = (round * LANES + k) as ItemId;
+                batch.push(v, indices, 0, item);
+                let codes = v.map(|p| p.code);
+                if (codes[0] | codes[1] | codes[2]) & (NEEDS_CLIP | NOT_FINITE) == NEEDS_CLIP
+                    && codes[0] & codes[1] & codes[2] & OUT_OF_VIEW == 0
+                {
+                    clipped += 1;
+                }
+                let clip = || indices.map(|i| to_clip(&draws[0].clip_from_object, mesh.positions()[i as usize]));
+                setup_triangle(&vp, v, clip, item, &mut scalar);
+            }
+            let mut lanes = Recorder::default();
+            // SAFETY: AVX2 was detected above.
+            unsafe { setup8_avx2(&vp, &draws, &mut batch, &mut lanes) };
+            assert_eq!(batch.len, 0, "the batch is emptied");
+            // Clipped triangles are handed over after the others: compare in item order.
+            scalar.0.sort_by_key(|e| e.0);
+            lanes.0.sort_by_key(|e| e.0);
+            assert_eq!(scalar.0.len(), lanes.0.len(), "round {round}: triangles set up");
+            for (s, l) in scalar.0.iter().zip(&lanes.0) {
+                assert_eq!(s.1, l.1, "round {round}: record of item {}", s.0);
+                let ext = l.1[12] as u32;
+                let b = l.1[6];
+                let (px0, py0, px1, py1) = (
+                    b as u16 as u32,
+                    (b >> 16) as u16 as u32,
+                    (b >> 32) as u16 as u32,
+                    (b >> 48) as u16 as u32,
+                );
+                let takes_small = ext < MASKED && px1 - px0 < SMALL && py1 - py0 < SMALL;
+                match l.2 {
+                    Some(edges) => {
+                        assert!(takes_small, "round {round}: item {} is not small", s.0);
+                        let t = lanes_setup(&l.1);
+                        let (row, sx, sy) = edge_functions(&t, px0, py0);
+                        let want = SmallEdges {
+                            row: row.map(|e| e as i32),
+                            step_x: sx.map(|e| e as i32),
+                            step_y: sy.map(|e| e as i32),
+                        };
+                        assert_eq!(edges, want, "round {round}: edges of item {}", s.0);
+                        assert!(row.iter().all(|&e| e == e as i32 as i64), "edges fit i32");
+                        small += 1;
+                    }
+                    None => large += 1,
+                }
+            }
+        }
+        assert!(
+            small > 1000 && large > 1000 && clipped > 10,
+            "{small} small, {large} large, {clipped} clipped"
+        );
+    }
+
+    /// The corners of a recorded setup (all [`edge_functions`] reads).
+    fn lanes_setup(k: &[u64; 16]) -> TriSetup {
+        TriSetup {
+            x: [k[0] as u32 as i32, k[1] as u32 as i32, k[2] as u32 as i32],
+            y: [k[3] as u32 as i32, k[4] as u32 as i32, k[5] as u32 as i32],
+            px0: 0,
+            py0: 0,
+            px1: 0,
+            py1: 0,
+            zc: 0.0,
+            dzdx: 0.0,
+            dzdy: 0.0,
+            zmin: 0.0,
+            zmax: 0.0,
+            extent: 0,
+            front: false,
+            item: 0,
+        }
+    }
+}
