@@ -297,10 +297,21 @@ impl Viewport {
         let inv_w = 1.0 / c.w;
         let sx = (c.x * inv_w * 0.5 + 0.5) * self.fwidth;
         let sy = (0.5 - c.y * inv_w * 0.5) * self.fheight;
+        let z = c.z * inv_w;
+        // A `w` so small that its inverse overflows (no guard band test catches a vertex on the
+        // axis) leaves nothing to draw.
+        if !(sx.is_finite() && sy.is_finite() && z.is_finite()) {
+            return ProjVertex {
+                x: 0,
+                y: 0,
+                z: 0.0,
+                code: NOT_FINITE,
+            };
+        }
         ProjVertex {
             x: snap(sx),
             y: snap(sy),
-            z: c.z * inv_w,
+            z,
             code,
         }
     }
@@ -915,7 +926,16 @@ fn project_all(vp: &Viewport, clip_from_object: &Mat4, positions: &[Vec3], out: 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,bmi1,bmi2,popcnt,lzcnt")]
 unsafe fn project_all_avx2(vp: &Viewport, clip_from_object: &Mat4, positions: &[Vec3], out: &mut [ProjVertex]) {
-    project_all(vp, clip_from_object, positions, out)
+    let n = out.len().min(positions.len());
+    let whole = n - n % setup8::LANES;
+    for (o, p) in out[..whole]
+        .chunks_exact_mut(setup8::LANES)
+        .zip(positions.chunks_exact(setup8::LANES))
+    {
+        // SAFETY: `select` checked the processor's features; the chunks hold eight each.
+        unsafe { setup8::project8_avx2(vp, clip_from_object, p, o) };
+    }
+    project_all(vp, clip_from_object, &positions[whole..n], &mut out[whole..n])
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -1022,6 +1042,12 @@ fn setup_range<const AVX2: bool>(
     let mut emit = |v: [ProjVertex; 3], indices: [u32; 3], d: usize, item: ItemId, out: &mut _| {
         #[cfg(target_arch = "x86_64")]
         if AVX2 {
+            // Trivial rejects (most of a scene outside the view) never take a lane.
+            if v[0].code & v[1].code & v[2].code & OUT_OF_VIEW != 0
+                || (v[0].code | v[1].code | v[2].code) & NOT_FINITE != 0
+            {
+                return;
+            }
             batch.push(v, indices, d, item);
             if batch.is_full() {
                 // SAFETY: the AVX2 instantiation only runs where `Isa::select` found AVX2.

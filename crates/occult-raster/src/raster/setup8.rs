@@ -17,9 +17,9 @@
 
 use super::{
     clip_and_setup, to_clip, Draw, ProjVertex, SetupSink, SmallEdges, TriSetup, Viewport, HALF, MASKED, NEEDS_CLIP,
-    NOT_FINITE, OUT_OF_VIEW, SMALL, SUB, SUBPIXEL_BITS,
+    NOT_FINITE, OUT_BOTTOM, OUT_LEFT, OUT_NEAR, OUT_OF_VIEW, OUT_RIGHT, OUT_TOP, SMALL, SUB, SUBPIXEL_BITS,
 };
-use occult_core::ItemId;
+use occult_core::{ItemId, Mat4, Vec3, Vec4};
 
 /// Lanes of a batch.
 pub(super) const LANES: usize = 8;
@@ -319,6 +319,116 @@ pub(super) unsafe fn setup8_avx2(vp: &Viewport, draws: &[Draw<'_>], batch: &mut 
     }
 }
 
+/// Projects eight positions as [`Viewport::project`] does each, bit for bit: the clip-space
+/// product in glam's order (`((x·c0 + y·c1) + z·c2) + 1·c3`), the same comparisons for the
+/// outcodes, and the snap as a conversion of `256·s` (exact in f32) rounding to nearest even,
+/// which is what the scalar `snap` computes in f64.
+///
+/// # Safety
+/// The processor must support AVX2; `positions` and `out` hold at least eight entries.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(super) unsafe fn project8_avx2(vp: &Viewport, m: &Mat4, positions: &[Vec3], out: &mut [ProjVertex]) {
+    use std::arch::x86_64::*;
+    assert!(positions.len() >= LANES && out.len() >= LANES);
+    let base: *const f32 = positions.as_ptr().cast();
+    let stride = _mm256_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21);
+    let x = _mm256_i32gather_ps::<4>(base, stride);
+    let y = _mm256_i32gather_ps::<4>(base.add(1), stride);
+    let z = _mm256_i32gather_ps::<4>(base.add(2), stride);
+    let one = _mm256_set1_ps(1.0);
+    let row = |r: usize| {
+        let c = |axis: Vec4| _mm256_set1_ps(axis[r]);
+        _mm256_add_ps(
+            _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(c(m.x_axis), x), _mm256_mul_ps(c(m.y_axis), y)),
+                _mm256_mul_ps(c(m.z_axis), z),
+            ),
+            _mm256_mul_ps(c(m.w_axis), one),
+        )
+    };
+    let (cx, cy, cz, cw) = (row(0), row(1), row(2), row(3));
+    let sign = _mm256_set1_ps(-0.0);
+    let inf = _mm256_set1_ps(f32::INFINITY);
+    let finite = |v: __m256| _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_andnot_ps(sign, v), inf);
+    let flag = |mask: __m256, f: u32| _mm256_and_si256(_mm256_castps_si256(mask), _mm256_set1_epi32(f as i32));
+    let neg_w = _mm256_xor_ps(cw, sign);
+    let mut code = _mm256_or_si256(
+        _mm256_or_si256(
+            flag(_mm256_cmp_ps::<_CMP_LT_OQ>(cx, neg_w), OUT_LEFT),
+            flag(_mm256_cmp_ps::<_CMP_GT_OQ>(cx, cw), OUT_RIGHT),
+        ),
+        _mm256_or_si256(
+            flag(_mm256_cmp_ps::<_CMP_LT_OQ>(cy, neg_w), OUT_BOTTOM),
+            flag(_mm256_cmp_ps::<_CMP_GT_OQ>(cy, cw), OUT_TOP),
+        ),
+    );
+    let near = _mm256_or_ps(
+        _mm256_cmp_ps::<_CMP_GT_OQ>(cz, cw),
+        _mm256_cmp_ps::<_CMP_LE_OQ>(cw, _mm256_setzero_ps()),
+    );
+    code = _mm256_or_si256(code, flag(near, OUT_NEAR | NEEDS_CLIP));
+    let guard = _mm256_or_ps(
+        _mm256_cmp_ps::<_CMP_GT_OQ>(
+            _mm256_andnot_ps(sign, cx),
+            _mm256_mul_ps(_mm256_set1_ps(vp.guard_x), cw),
+        ),
+        _mm256_cmp_ps::<_CMP_GT_OQ>(
+            _mm256_andnot_ps(sign, cy),
+            _mm256_mul_ps(_mm256_set1_ps(vp.guard_y), cw),
+        ),
+    );
+    code = _mm256_or_si256(code, flag(guard, NEEDS_CLIP));
+    let inv_w = _mm256_div_ps(one, cw);
+    let half = _mm256_set1_ps(0.5);
+    let sx = _mm256_mul_ps(
+        _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(cx, inv_w), half), half),
+        _mm256_set1_ps(vp.fwidth),
+    );
+    let sy = _mm256_mul_ps(
+        _mm256_sub_ps(half, _mm256_mul_ps(_mm256_mul_ps(cy, inv_w), half)),
+        _mm256_set1_ps(vp.fheight),
+    );
+    let zs = _mm256_mul_ps(cz, inv_w);
+    let sub = _mm256_set1_ps(SUB as f32);
+    let (px, py) = (
+        _mm256_cvtps_epi32(_mm256_mul_ps(sx, sub)),
+        _mm256_cvtps_epi32(_mm256_mul_ps(sy, sub)),
+    );
+    // Lanes that keep a position: finite clip coordinates, no clipping, a finite projection.
+    let clip_finite = _mm256_and_ps(
+        _mm256_and_ps(finite(cx), finite(cy)),
+        _mm256_and_ps(finite(cz), finite(cw)),
+    );
+    let needs_clip = _mm256_cmpgt_epi32(flag(_mm256_castsi256_ps(code), NEEDS_CLIP), _mm256_setzero_si256());
+    let projected = _mm256_and_ps(_mm256_and_ps(finite(sx), finite(sy)), finite(zs));
+    let keep = _mm256_andnot_si256(needs_clip, _mm256_castps_si256(_mm256_and_ps(clip_finite, projected)));
+    // Not finite: the code alone; needing clipping: the codes, no position.
+    let not_finite = _mm256_castps_si256(_mm256_or_ps(
+        _mm256_xor_ps(clip_finite, _mm256_castsi256_ps(_mm256_set1_epi32(-1))),
+        _mm256_andnot_ps(
+            _mm256_castsi256_ps(needs_clip),
+            _mm256_xor_ps(projected, _mm256_castsi256_ps(_mm256_set1_epi32(-1))),
+        ),
+    ));
+    let code = _mm256_blendv_epi8(code, _mm256_set1_epi32(NOT_FINITE as i32), not_finite);
+    let px = _mm256_and_si256(px, keep);
+    let py = _mm256_and_si256(py, keep);
+    let zs = _mm256_castsi256_ps(_mm256_and_si256(_mm256_castps_si256(zs), keep));
+    // Eight (x, y, z, code) records: a 4 × 4 transpose per half.
+    let zi = _mm256_castps_si256(zs);
+    let (t0, t1) = (_mm256_unpacklo_epi32(px, py), _mm256_unpackhi_epi32(px, py));
+    let (t2, t3) = (_mm256_unpacklo_epi32(zi, code), _mm256_unpackhi_epi32(zi, code));
+    let (v0, v1) = (_mm256_unpacklo_epi64(t0, t2), _mm256_unpackhi_epi64(t0, t2));
+    let (v2, v3) = (_mm256_unpacklo_epi64(t1, t3), _mm256_unpackhi_epi64(t1, t3));
+    let dst: *mut __m256i = out.as_mut_ptr().cast();
+    _mm256_storeu_si256(dst, _mm256_permute2x128_si256::<0x20>(v0, v1));
+    _mm256_storeu_si256(dst.add(1), _mm256_permute2x128_si256::<0x20>(v2, v3));
+    _mm256_storeu_si256(dst.add(2), _mm256_permute2x128_si256::<0x31>(v0, v1));
+    _mm256_storeu_si256(dst.add(3), _mm256_permute2x128_si256::<0x31>(v2, v3));
+}
+
 /// Lanes 0..4 of eight i32 as f64.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
@@ -596,6 +706,79 @@ mod tests {
         assert!(
             small > 1000 && large > 1000 && clipped > 10,
             "{small} small, {large} large, {clipped} clipped"
+        );
+    }
+
+    #[test]
+    fn eight_lane_projection_matches_the_scalar_one() {
+        if !is_x86_feature_detected!("avx2") {
+            eprintln!("no AVX2 on this processor: the 8-lane projection is not exercised");
+            return;
+        }
+        let mut rng = Pcg64Mcg::seed_from_u64(5);
+        let special = [
+            0.0,
+            -0.0,
+            f32::NAN,
+            f32::INFINITY,
+            -f32::INFINITY,
+            1.0e-40,
+            3.0e38,
+            -1.0e30,
+        ];
+        let mut kinds = [0usize; 4];
+        for round in 0..3000 {
+            let vp = viewport(&mut rng);
+            let eye = Vec3::new(
+                rng.random_range(-20.0..20.0),
+                rng.random_range(-20.0..20.0),
+                rng.random_range(-20.0..20.0),
+            );
+            let mut camera = Camera::look_at(eye, Vec3::ZERO);
+            camera.fov_y_deg = rng.random_range(10.0..120.0);
+            camera.near = rng.random_range(0.001..1.0);
+            let Ok(view) = View::new(camera, vp.width, vp.height) else {
+                continue;
+            };
+            let mut m = view.clip_from_object(&Affine3A::IDENTITY);
+            if round % 50 == 0 {
+                // A projection whose w reaches zero and below on the axis.
+                m.w_axis.w = 0.0;
+            }
+            let positions: Vec<Vec3> = (0..LANES)
+                .map(|_| {
+                    let mut p = Vec3::new(
+                        rng.random_range(-30.0..30.0),
+                        rng.random_range(-30.0..30.0),
+                        rng.random_range(-30.0..30.0),
+                    );
+                    if rng.random_bool(0.05) {
+                        p[rng.random_range(0..3)] = special[rng.random_range(0..special.len())];
+                    }
+                    if rng.random_bool(0.05) {
+                        p = Vec3::ZERO;
+                    }
+                    p
+                })
+                .collect();
+            let mut lanes = [ProjVertex::default(); LANES];
+            // SAFETY: AVX2 was detected above.
+            unsafe { project8_avx2(&vp, &m, &positions, &mut lanes) };
+            for (p, l) in positions.iter().zip(&lanes) {
+                let s = vp.project(&m, *p);
+                let bits = |v: &ProjVertex| (v.x, v.y, v.z.to_bits(), v.code);
+                assert_eq!(bits(&s), bits(l), "round {round}: {p}");
+                kinds[match s.code {
+                    c if c & NOT_FINITE != 0 => 0,
+                    c if c & NEEDS_CLIP != 0 => 1,
+                    0 => 2,
+                    _ => 3,
+                }] += 1;
+            }
+        }
+        assert!(
+            kinds.iter().all(|&k| k > 100),
+            "not finite, clipped, inside, outside: {kinds:?}"
         );
     }
 
