@@ -20,9 +20,12 @@
 //! parallel; index lists and ranges: per triangle, through a small per-draw cache so that the
 //! corners neighbouring triangles share are mostly transformed once), trivially reject by
 //! outcodes, clip the rare triangle that crosses the near plane or the guard band, snap to fixed
-//! point, reject empty boxes and zero areas, and fix the depth plane. The scan derives exact
-//! integer edge functions and finds covered pixels with branch-free 8-pixel masks (boxes up to
-//! 64 pixels) or per-row integer span solving (larger ones).
+//! point, reject empty boxes and zero areas, and fix the depth plane. Where the processor has
+//! AVX2, vertices are projected and triangles set up eight at a time, in lanes
+//! ([`setup8`]), with the same operations in the same order as the scalar path (tested bit
+//! for bit). The scan derives exact integer edge functions (the 8-lane setup hands them over
+//! for small boxes) and finds covered pixels with branch-free 8-pixel masks (boxes up to 64
+//! pixels) or per-row integer span solving (larger ones).
 //!
 //! The result cannot depend on the strategy, the split or the thread count: every fragment's
 //! depth is a function of the triangle and the pixel alone, and pixels keep the nearest
