@@ -1399,9 +1399,9 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
         // is about to test: first touches of the frame are this loop's main stall.
         let i = y as usize * self.target.width + x as usize;
         prefetch(self.target, i);
-        if two_rows {
-            prefetch(self.target, i + self.target.width);
-        }
+        // Without a branch (it mispredicts on tiny triangles): the first row again when the
+        // box has one.
+        prefetch(self.target, i + if two_rows { self.target.width } else { 0 });
     }
 
     #[inline(always)]
