@@ -40,6 +40,7 @@ use occult_core::{ItemId, Mat4, Mesh, Vec3, Vec4, View};
 use rayon::prelude::*;
 use std::ops::Range;
 
+#[cfg(target_arch = "x86_64")]
 mod setup8;
 pub(crate) mod stencil;
 
@@ -183,8 +184,10 @@ impl std::ops::AddAssign for RasterCounts {
     }
 }
 
-/// A vertex in clip space with its snapped screen position.
+/// A vertex in clip space with its snapped screen position. The 8-lane setup loads and stores
+/// it as one 16-byte vector of these four fields, in this order.
 #[derive(Clone, Copy, Debug, Default)]
+#[repr(C)]
 struct ProjVertex {
     x: i32,
     y: i32,
@@ -192,10 +195,13 @@ struct ProjVertex {
     code: u32,
 }
 
+const _: () = assert!(std::mem::size_of::<ProjVertex>() == 16);
+
 /// A triangle ready to scan: its snapped corners (1/256 pixel, oriented so that the edge
 /// functions are non-negative inside), its pixel box, and its depth plane anchored at the centre
-/// of pixel `(px0, py0)`. One cache line: the scan re-derives the edge functions from the corners,
-/// which costs less than moving them through memory.
+/// of pixel `(px0, py0)`. One cache line: the tile-binned scan re-derives the edge functions
+/// from the corners, which costs less than moving them through memory (the direct sink takes
+/// them from the 8-lane setup for small boxes, where they are at hand).
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 struct TriSetup {
@@ -1041,6 +1047,7 @@ fn setup_range<const AVX2: bool>(
     let mut d = draw_starts.partition_point(|&s| s <= range.start) - 1;
     let mut t = range.start;
     let mut cache = VertexCache::new();
+    #[cfg(target_arch = "x86_64")]
     let mut batch = setup8::Batch::new();
     // Where the 8-lane setup runs, each triangle joins the batch (flushed when full); the
     // scalar setup takes it at once otherwise.
@@ -1425,6 +1432,20 @@ struct DirectSink<'a, const AVX2: bool> {
     dirty: [u32; 4],
 }
 
+impl<const AVX2: bool> DirectSink<'_, AVX2> {
+    /// Counts a triangle about to be scanned and grows the box of what was drawn by its box.
+    #[inline(always)]
+    fn count(&mut self, t: &TriSetup) {
+        self.rasterized += 1;
+        self.dirty = [
+            self.dirty[0].min(t.px0 as u32),
+            self.dirty[1].min(t.py0 as u32),
+            self.dirty[2].max(t.px1 as u32),
+            self.dirty[3].max(t.py1 as u32),
+        ];
+    }
+}
+
 impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
     #[inline(always)]
     fn will_touch(&mut self, x: u32, y: u32, two_rows: bool) {
@@ -1439,13 +1460,7 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
 
     #[inline(always)]
     fn push(&mut self, vp: &Viewport, t: TriSetup) {
-        self.rasterized += 1;
-        self.dirty = [
-            self.dirty[0].min(t.px0 as u32),
-            self.dirty[1].min(t.py0 as u32),
-            self.dirty[2].max(t.px1 as u32),
-            self.dirty[3].max(t.py1 as u32),
-        ];
+        self.count(&t);
         // SAFETY: a DirectSink is only made by `Isa::draw_direct`, whose caller guarantees that
         // no other thread touches the frame during the draw.
         self.written += unsafe { scan_triangle::<AVX2>(vp, &t, self.rect, self.target, self.mode) };
@@ -1453,13 +1468,7 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
 
     #[inline(always)]
     fn push_small(&mut self, vp: &Viewport, t: TriSetup, edges: SmallEdges) {
-        self.rasterized += 1;
-        self.dirty = [
-            self.dirty[0].min(t.px0 as u32),
-            self.dirty[1].min(t.py0 as u32),
-            self.dirty[2].max(t.px1 as u32),
-            self.dirty[3].max(t.py1 as u32),
-        ];
+        self.count(&t);
         // The direct sink's rectangle is the whole frame, which holds the box: `scan_triangle`
         // would scan the box itself, small, from these edge functions.
         let rect = [t.px0 as u32, t.py0 as u32, t.px1 as u32, t.py1 as u32];

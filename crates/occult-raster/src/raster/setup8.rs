@@ -1,13 +1,15 @@
 //! Triangle setup eight at a time (AVX2): the same operations as [`super::setup_snapped`],
 //! one triangle per lane.
 //!
-//! Whole-mesh and index-list draws alike collect their projected corners into a [`Batch`];
+//! Whole-mesh, index-list and range draws alike collect their projected corners into a
+//! [`Batch`] (list and range corners projected in lanes too, by [`project8_avx2`]);
 //! [`setup8_avx2`] then rejects, orients and bounds the eight triangles and fixes their depth
-//! planes in lanes, and hands the survivors to the sink in stream order (those that need
-//! clipping last, through the scalar path; order never changes a frame). For triangles the
-//! small scan takes (box at most 8 × 8 pixels, corners within [`MASKED`] pixels), it also
-//! derives the three edge functions at the first pixel centre in i32 lanes, so the scan
-//! starts from them.
+//! planes in lanes, and hands the survivors to the sink in stream order, those that need
+//! clipping through the scalar path in their place (so that even the count of fragments
+//! written, which depends on order, is the scalar path's). For triangles the small scan takes
+//! (box at most 8 × 8 pixels, corners within [`MASKED`] pixels), it also derives the three
+//! edge functions at the first pixel centre in i32 lanes: the direct sink's scan starts from
+//! them; the tile-binned sink drops them (its scan clips to a tile and re-derives them).
 //!
 //! Every value equals the scalar setup's bit for bit (tested on random and degenerate
 //! batches): integer parts are exact in 32-bit lanes (snapped coordinates stay below 2^24),
@@ -201,6 +203,8 @@ pub(super) unsafe fn setup8_avx2(vp: &Viewport, draws: &[Draw<'_>], batch: &mut 
     let zmax = _mm256_max_ps(_mm256_max_ps(z0, z1), z2);
     live &= !(_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(zmax, _mm256_set1_ps(vp.far_depth))) as u32);
 
+    // Lanes whose box the small scan takes, with their edge functions in `l`.
+    let mut small = 0;
     if live != 0 {
         // Depth plane in pixel units relative to corner 0, in f64, anchored at the centre of
         // pixel (px0, py0): the scalar expression, operation for operation.
@@ -243,7 +247,7 @@ pub(super) unsafe fn setup8_avx2(vp: &Viewport, draws: &[Draw<'_>], batch: &mut 
         // Edge functions at the centre of pixel (px0, py0), for the small scan: exact in i32
         // for boxes it takes (see `scan_small`); other lanes are not read.
         let small_box = _mm256_set1_epi32(SMALL as i32);
-        let small = live
+        small = live
             & bits(_mm256_cmpgt_epi32(_mm256_set1_epi32(MASKED as i32), extent))
             & bits(_mm256_cmpgt_epi32(small_box, _mm256_sub_epi32(px1, px0)))
             & bits(_mm256_cmpgt_epi32(small_box, _mm256_sub_epi32(py1, py0)));
@@ -276,46 +280,45 @@ pub(super) unsafe fn setup8_avx2(vp: &Viewport, draws: &[Draw<'_>], batch: &mut 
                 store(&mut l.step_y[i], _mm256_slli_epi32::<{ SUBPIXEL_BITS as i32 }>(eb));
             }
         }
-        let mut m = live;
-        while m != 0 {
-            let k = m.trailing_zeros() as usize;
-            m &= m - 1;
-            let t = TriSetup {
-                x: [l.x[0][k], l.x[1][k], l.x[2][k]],
-                y: [l.y[0][k], l.y[1][k], l.y[2][k]],
-                px0: l.px0[k] as u16,
-                py0: l.py0[k] as u16,
-                px1: l.px1[k] as u16,
-                py1: l.py1[k] as u16,
-                zc: l.zc[k],
-                dzdx: l.dzdx[k],
-                dzdy: l.dzdy[k],
-                zmin: l.zmin[k],
-                zmax: l.zmax[k],
-                extent: l.extent[k] as u16,
-                front: negative & (1 << k) != 0,
-                item: batch.item[k],
-            };
-            if small & (1 << k) != 0 {
-                let edges = SmallEdges {
-                    row: [l.row[0][k], l.row[1][k], l.row[2][k]],
-                    step_x: [l.step_x[0][k], l.step_x[1][k], l.step_x[2][k]],
-                    step_y: [l.step_y[0][k], l.step_y[1][k], l.step_y[2][k]],
-                };
-                out.push_small(vp, t, edges);
-            } else {
-                out.push(vp, t);
-            }
-        }
     }
-    let mut m = clipped;
+    // In stream order: the set-up lanes, and the clipped ones through the scalar path.
+    let mut m = live | clipped;
     while m != 0 {
         let k = m.trailing_zeros() as usize;
         m &= m - 1;
-        let d = &draws[batch.draw[k] as usize];
-        let pos = d.mesh.positions();
-        let clip = batch.indices[k].map(|i| to_clip(&d.clip_from_object, pos[i as usize]));
-        clip_and_setup(vp, clip, batch.item[k], out);
+        if clipped & (1 << k) != 0 {
+            let d = &draws[batch.draw[k] as usize];
+            let pos = d.mesh.positions();
+            let clip = batch.indices[k].map(|i| to_clip(&d.clip_from_object, pos[i as usize]));
+            clip_and_setup(vp, clip, batch.item[k], out);
+            continue;
+        }
+        let t = TriSetup {
+            x: [l.x[0][k], l.x[1][k], l.x[2][k]],
+            y: [l.y[0][k], l.y[1][k], l.y[2][k]],
+            px0: l.px0[k] as u16,
+            py0: l.py0[k] as u16,
+            px1: l.px1[k] as u16,
+            py1: l.py1[k] as u16,
+            zc: l.zc[k],
+            dzdx: l.dzdx[k],
+            dzdy: l.dzdy[k],
+            zmin: l.zmin[k],
+            zmax: l.zmax[k],
+            extent: l.extent[k] as u16,
+            front: negative & (1 << k) != 0,
+            item: batch.item[k],
+        };
+        if small & (1 << k) != 0 {
+            let edges = SmallEdges {
+                row: [l.row[0][k], l.row[1][k], l.row[2][k]],
+                step_x: [l.step_x[0][k], l.step_x[1][k], l.step_x[2][k]],
+                step_y: [l.step_y[0][k], l.step_y[1][k], l.step_y[2][k]],
+            };
+            out.push_small(vp, t, edges);
+        } else {
+            out.push(vp, t);
+        }
     }
 }
 
@@ -562,7 +565,11 @@ mod tests {
     }
 
     fn viewport(rng: &mut Pcg64Mcg) -> Viewport {
-        let (width, height) = (rng.random_range(1..2000), rng.random_range(1..1200));
+        let (width, height) = if rng.random_bool(0.1) {
+            (rng.random_range(1..=16384), rng.random_range(1..=16384))
+        } else {
+            (rng.random_range(1..2000), rng.random_range(1..1200))
+        };
         Viewport {
             width,
             height,
@@ -670,9 +677,7 @@ mod tests {
             // SAFETY: AVX2 was detected above.
             unsafe { setup8_avx2(&vp, &draws, &mut batch, &mut lanes) };
             assert_eq!(batch.len, 0, "the batch is emptied");
-            // Clipped triangles are handed over after the others: compare in item order.
-            scalar.0.sort_by_key(|e| e.0);
-            lanes.0.sort_by_key(|e| e.0);
+            // Same records in the same order (clipped triangles in their place).
             assert_eq!(scalar.0.len(), lanes.0.len(), "round {round}: triangles set up");
             for (s, l) in scalar.0.iter().zip(&lanes.0) {
                 assert_eq!(s.1, l.1, "round {round}: record of item {}", s.0);

@@ -35,7 +35,7 @@
 //! Cost: O(faces × bands + covered pixels); rows are split into one band per thread and each
 //! band sets up every face (setup is cheap next to the fill of shadow volumes).
 
-use super::{setup_range, Draw, DrawTriangles, Rasterizer, SetupSink, TriSetup, Viewport, HALF, SUB};
+use super::{setup_range, Draw, DrawTriangles, Rasterizer, SetupSink, TriSetup, Viewport};
 use crate::{Frame, RasterError, CLEAR_DEPTH};
 use occult_core::{glam::DMat4, glam::DVec4, ItemId, View};
 use rayon::prelude::*;
@@ -382,20 +382,7 @@ fn covered_spans(t: &TriSetup, rect: [u32; 4], mut f: impl FnMut(u32, u32, u32))
     if x0 > x1 || y0 > y1 {
         return;
     }
-    let (cx, cy) = (x0 as i64 * SUB + HALF, y0 as i64 * SUB + HALF);
-    let mut row = [0i64; 3];
-    let mut step_x = [0i64; 3];
-    let mut step_y = [0i64; 3];
-    for i in 0..3 {
-        let j = (i + 1) % 3;
-        let (xi, yi) = (t.x[i] as i64, t.y[i] as i64);
-        let ea = yi - t.y[j] as i64;
-        let eb = t.x[j] as i64 - xi;
-        let bias = -(((ea < 0) | ((ea == 0) & (eb <= 0))) as i64);
-        row[i] = ea * (cx - xi) + eb * (cy - yi) + bias;
-        step_x[i] = ea * SUB;
-        step_y[i] = eb * SUB;
-    }
+    let (mut row, step_x, step_y) = super::edge_functions(t, x0, y0);
     let width = (x1 - x0 + 1) as i64;
     for y in y0..=y1 {
         let (mut lo, mut hi) = (0i64, width - 1);
