@@ -1383,6 +1383,9 @@ struct SmallEdges {
 /// Where set-up triangles go: bins for the tile pass, or straight to the scan.
 trait SetupSink {
     fn push(&mut self, vp: &Viewport, t: TriSetup);
+    /// Whether [`Self::push_small`] uses the edge functions it is given: the 8-lane setup
+    /// derives them only for sinks that do.
+    const TAKES_EDGES: bool = false;
     /// [`Self::push`] for a triangle whose box the small scan takes, with its edge functions
     /// already derived (by the 8-lane setup).
     #[inline(always)]
@@ -1465,6 +1468,8 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
         // no other thread touches the frame during the draw.
         self.written += unsafe { scan_triangle::<AVX2>(vp, &t, self.rect, self.target, self.mode) };
     }
+
+    const TAKES_EDGES: bool = true;
 
     #[inline(always)]
     fn push_small(&mut self, vp: &Viewport, t: TriSetup, edges: SmallEdges) {

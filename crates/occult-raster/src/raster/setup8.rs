@@ -9,7 +9,8 @@
 //! written, which depends on order, is the scalar path's). For triangles the small scan takes
 //! (box at most 8 × 8 pixels, corners within [`MASKED`] pixels), it also derives the three
 //! edge functions at the first pixel centre in i32 lanes: the direct sink's scan starts from
-//! them; the tile-binned sink drops them (its scan clips to a tile and re-derives them).
+//! them; for the tile-binned sink, whose scan clips to a tile and re-derives them, they are
+//! not computed.
 //!
 //! Every value equals the scalar setup's bit for bit (tested on random and degenerate
 //! batches): integer parts are exact in 32-bit lanes (snapped coordinates stay below 2^24),
@@ -96,7 +97,7 @@ struct Lanes {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[inline]
-pub(super) unsafe fn setup8_avx2(vp: &Viewport, draws: &[Draw<'_>], batch: &mut Batch, out: &mut impl SetupSink) {
+pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>], batch: &mut Batch, out: &mut S) {
     use std::arch::x86_64::*;
 
     let n = batch.len;
@@ -247,7 +248,7 @@ pub(super) unsafe fn setup8_avx2(vp: &Viewport, draws: &[Draw<'_>], batch: &mut 
         // Edge functions at the centre of pixel (px0, py0), for the small scan: exact in i32
         // for boxes it takes (see `scan_small`); other lanes are not read.
         let small_box = _mm256_set1_epi32(SMALL as i32);
-        small = live
+        small = if S::TAKES_EDGES { live } else { 0 }
             & bits(_mm256_cmpgt_epi32(_mm256_set1_epi32(MASKED as i32), extent))
             & bits(_mm256_cmpgt_epi32(small_box, _mm256_sub_epi32(px1, px0)))
             & bits(_mm256_cmpgt_epi32(small_box, _mm256_sub_epi32(py1, py0)));
@@ -556,6 +557,8 @@ mod tests {
     }
 
     impl SetupSink for Recorder {
+        const TAKES_EDGES: bool = true;
+
         fn push(&mut self, _vp: &Viewport, t: TriSetup) {
             self.0.push((t.item, key(&t), None));
         }
