@@ -332,7 +332,7 @@ impl Heightfield {
             }
             // Square step: edge midpoints, from their four wrapped neighbours.
             for j in (0..n).step_by(half) {
-                let start = if (j / half) % 2 == 0 { half } else { 0 };
+                let start = if (j / half).is_multiple_of(2) { half } else { 0 };
                 for i in (start..n).step_by(step) {
                     let avg =
                         (h[at(i + n - half, j)] + h[at(i + half, j)] + h[at(i, j + n - half)] + h[at(i, j + half)])

@@ -1,0 +1,61 @@
+//! Two threads against one on the `terrain` anchor view, measured as pairs: one draw with a
+//! 1-thread rasterizer, then one with a 2-thread rasterizer, alternating in one process, so
+//! that both see the same machine load. Prints the minimum and median of each and the median
+//! of the per-pair ratios, which drift on a noisy machine affects least.
+//!
+//! `cargo run --release -p occult-bench --example thread_scaling [pairs]` (default 15).
+
+use occult_core::glam::Affine3A;
+use occult_raster::{Draw, DrawTriangles, Frame, RasterConfig, RasterMode, Rasterizer};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let pairs: usize = match std::env::args().nth(1) {
+        Some(a) => a.parse().map_err(|e| format!("pairs: {e}"))?,
+        None => 15,
+    };
+    if pairs == 0 {
+        return Err("pairs: at least one".into());
+    }
+    let (scene, view) = occult_bench::terrain_view();
+    let mesh = scene.node(scene.root()).mesh().ok_or("terrain is one mesh")?;
+    let draw = Draw {
+        mesh,
+        triangles: DrawTriangles::All,
+        clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
+        first_item: 0,
+    };
+    let mut rasterizers = [1, 2].map(|threads| {
+        Rasterizer::new(RasterConfig {
+            threads,
+            ..RasterConfig::default()
+        })
+    });
+    let mut frame = Frame::new(view.width(), view.height())?;
+    let mut times = [Vec::new(), Vec::new()];
+    for _ in 0..pairs {
+        for (r, t) in rasterizers.iter_mut().zip(&mut times) {
+            let r = r.as_mut().map_err(|e| e.to_string())?;
+            r.clear(&mut frame);
+            let start = std::time::Instant::now();
+            r.draw(&view, &mut frame, std::slice::from_ref(&draw), RasterMode::Full);
+            t.push(start.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    let ratios: Vec<f64> = times[0].iter().zip(&times[1]).map(|(a, b)| a / b).collect();
+    let median = |v: &[f64]| {
+        let mut v = v.to_vec();
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let min = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
+    println!(
+        "1 thread: min {:.1} ms, median {:.1} ms; 2 threads: min {:.1} ms, median {:.1} ms; \
+         2 over 1, median of {pairs} pairs: {:.2}x",
+        min(&times[0]),
+        median(&times[0]),
+        min(&times[1]),
+        median(&times[1]),
+        median(&ratios)
+    );
+    Ok(())
+}
