@@ -4,18 +4,26 @@
 //! of the per-pair ratios, which drift on a noisy machine affects least.
 //!
 //! `cargo run --release -p occult-bench --example thread_scaling [pairs]` (default 15).
+//! `... thread_scaling one-thread N` instead draws N times with one thread only, for counting
+//! instructions under a profiler (`valgrind --tool=callgrind
+//! --toggle-collect='occult_raster::raster::Rasterizer::draw'`).
 
 use occult_core::glam::Affine3A;
 use occult_raster::{Draw, DrawTriangles, Frame, RasterConfig, RasterMode, Rasterizer};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let pairs: usize = match std::env::args().nth(1) {
-        Some(a) => a.parse().map_err(|e| format!("pairs: {e}"))?,
-        None => 15,
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let one_thread = args.first().is_some_and(|a| a == "one-thread");
+    let count = |a: Option<&String>| -> Result<usize, String> {
+        match a {
+            Some(a) => match a.parse() {
+                Ok(0) | Err(_) => Err(format!("expected a count of draws of at least 1, got `{a}`")),
+                Ok(n) => Ok(n),
+            },
+            None => Ok(15),
+        }
     };
-    if pairs == 0 {
-        return Err("pairs: at least one".into());
-    }
+    let pairs = count(args.get(usize::from(one_thread)))?;
     let (scene, view) = occult_bench::terrain_view();
     let mesh = scene.node(scene.root()).mesh().ok_or("terrain is one mesh")?;
     let draw = Draw {
@@ -31,6 +39,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         })
     });
     let mut frame = Frame::new(view.width(), view.height())?;
+    if one_thread {
+        let r = rasterizers[0].as_mut().map_err(|e| e.to_string())?;
+        for _ in 0..pairs {
+            r.clear(&mut frame);
+            let start = std::time::Instant::now();
+            let counts = r.draw(&view, &mut frame, std::slice::from_ref(&draw), RasterMode::Full);
+            println!("1 thread: {:.1} ms, {counts:?}", start.elapsed().as_secs_f64() * 1e3);
+        }
+        return Ok(());
+    }
     let mut times = [Vec::new(), Vec::new()];
     for _ in 0..pairs {
         for (r, t) in rasterizers.iter_mut().zip(&mut times) {
