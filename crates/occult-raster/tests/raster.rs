@@ -198,6 +198,19 @@ fn random_view(rng: &mut Pcg64Mcg, w: u32, h: u32) -> View {
     }
 }
 
+/// `order` as index-list draws of `chunk` triangles each.
+fn list_draws<'a>(mesh: &'a Mesh, order: &'a [u32], chunk: usize, m: Mat4) -> Vec<Draw<'a>> {
+    order
+        .chunks(chunk)
+        .map(|c| Draw {
+            mesh,
+            triangles: DrawTriangles::List(c),
+            clip_from_object: m,
+            first_item: 0,
+        })
+        .collect()
+}
+
 #[test]
 fn frames_independent_of_order_threads_and_tiles() {
     let mut rng = Pcg64Mcg::seed_from_u64(7);
@@ -223,15 +236,7 @@ fn frames_independent_of_order_threads_and_tiles() {
             .unwrap();
             let mut f = Frame::new(173, 97).unwrap();
             let m = view.clip_from_object(&Affine3A::IDENTITY);
-            let draws: Vec<Draw> = order
-                .chunks(517)
-                .map(|c| Draw {
-                    mesh: &mesh,
-                    triangles: DrawTriangles::List(c),
-                    clip_from_object: m,
-                    first_item: 0,
-                })
-                .collect();
+            let draws = list_draws(&mesh, &order, 517, m);
             r.draw(&view, &mut f, &draws, RasterMode::Full);
             assert!(
                 f.same_visibility(&reference),
@@ -274,15 +279,7 @@ fn counts_do_not_depend_on_the_instruction_set() {
                         clip_from_object: m,
                         first_item: 0,
                     }];
-                    let lists: Vec<Draw> = order
-                        .chunks(37)
-                        .map(|c| Draw {
-                            mesh: &mesh,
-                            triangles: DrawTriangles::List(c),
-                            clip_from_object: m,
-                            first_item: 0,
-                        })
-                        .collect();
+                    let lists = list_draws(&mesh, &order, 37, m);
                     [&whole[..], &lists[..]].map(|draws| {
                         let mut f = Frame::new(157, 113).unwrap();
                         let c = r.draw(&view, &mut f, draws, RasterMode::Full);

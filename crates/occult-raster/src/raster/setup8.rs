@@ -647,12 +647,12 @@ mod tests {
                 )
             })
             .collect();
-        let mesh = Mesh::new(positions, vec![[0, 1, 2]]).unwrap();
+        let mesh = Mesh::new(positions, vec![[0, 1, 2]]).expect("64 finite positions, indices in range");
         let draws = [Draw {
             mesh: &mesh,
             triangles: DrawTriangles::All,
             clip_from_object: View::new(Camera::look_at(Vec3::new(0.0, 2.0, 10.0), Vec3::ZERO), 640, 480)
-                .unwrap()
+                .expect("a valid camera and size")
                 .clip_from_object(&Affine3A::IDENTITY),
             first_item: 0,
         }];
