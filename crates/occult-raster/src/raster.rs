@@ -1051,7 +1051,7 @@ fn setup_range<const AVX2: bool>(
     let mut batch = setup8::Batch::new();
     // Where the 8-lane setup runs, each triangle joins the batch (flushed when full); the
     // scalar setup takes it at once otherwise.
-    let mut emit = |v: [ProjVertex; 3], indices: [u32; 3], d: usize, item: ItemId, out: &mut _| {
+    let mut emit = |v: [&ProjVertex; 3], indices: [u32; 3], d: usize, item: ItemId, out: &mut _| {
         #[cfg(target_arch = "x86_64")]
         if AVX2 {
             // Trivial rejects (most of a scene outside the view) never take a lane.
@@ -1069,7 +1069,7 @@ fn setup_range<const AVX2: bool>(
         }
         let draw = &draws[d];
         let clip = || indices.map(|i| to_clip(&draw.clip_from_object, draw.mesh.positions()[i as usize]));
-        setup_triangle(vp, v, clip, item, out);
+        setup_triangle(vp, v.map(|p| *p), clip, item, out);
     };
     while t < range.end {
         while draw_starts[d + 1] <= t {
@@ -1088,7 +1088,17 @@ fn setup_range<const AVX2: bool>(
                     .enumerate()
                     .map(|(k, t)| (first + k, t))
                 {
-                    let v = [verts[i0 as usize], verts[i1 as usize], verts[i2 as usize]];
+                    // SAFETY: `verts` holds one entry per position of the mesh, and `Mesh`
+                    // guarantees that every index names a position (checked by `Mesh::new`,
+                    // its only constructor). The loop runs once per triangle of the scene:
+                    // three bounds checks were a tenth of its instructions.
+                    let v = unsafe {
+                        [
+                            verts.get_unchecked(i0 as usize),
+                            verts.get_unchecked(i1 as usize),
+                            verts.get_unchecked(i2 as usize),
+                        ]
+                    };
                     emit(v, [i0, i1, i2], d, draw.first_item + j as u64, out);
                 }
             }
@@ -1118,7 +1128,7 @@ fn setup_range<const AVX2: bool>(
                     }
                     for k in 0..n {
                         let item = draw.first_item + triangle[k] as u64;
-                        emit([v[0][k], v[1][k], v[2][k]], indices[k], d, item, out);
+                        emit([&v[0][k], &v[1][k], &v[2][k]], indices[k], d, item, out);
                     }
                     j += n;
                 }
@@ -1135,7 +1145,7 @@ fn setup_range<const AVX2: bool>(
                         cache.project(vp, m, pos, i1),
                         cache.project(vp, m, pos, i2),
                     ];
-                    emit(v, [i0, i1, i2], d, draw.first_item + ti as u64, out);
+                    emit([&v[0], &v[1], &v[2]], [i0, i1, i2], d, draw.first_item + ti as u64, out);
                 }
             }
         }
@@ -1378,6 +1388,10 @@ struct SmallEdges {
     row: [i32; 3],
     step_x: [i32; 3],
     step_y: [i32; 3],
+    /// For boxes of at most [`TINY`] × [`TINY`] pixels, the covered centres as
+    /// [`scan_small`]'s mask (bit `8·j + i` for centre `(i, j)` from the box's corner),
+    /// derived in lanes with the edge functions.
+    mask: Option<u32>,
 }
 
 /// Where set-up triangles go: bins for the tile pass, or straight to the scan.
@@ -1392,6 +1406,10 @@ trait SetupSink {
     fn push_small(&mut self, vp: &Viewport, t: TriSetup, _edges: SmallEdges) {
         self.push(vp, t);
     }
+    /// `n` triangles the 8-lane setup found to cover no pixel centre of a box of at most
+    /// [`TINY`] × [`TINY`] pixels (only sinks that take edge functions get them): they count
+    /// as set up; scanning them would write nothing.
+    fn count_uncovered(&mut self, n: u32);
     /// A triangle whose box starts at pixel `(x, y)` (and covers row `y + 1` if `two_rows`)
     /// is being set up: a sink that scans at once may start fetching those pixels.
     #[inline(always)]
@@ -1399,6 +1417,11 @@ trait SetupSink {
 }
 
 impl SetupSink for ChunkBins {
+    #[inline(always)]
+    fn count_uncovered(&mut self, n: u32) {
+        self.rasterized += n as u64;
+    }
+
     #[inline(always)]
     fn push(&mut self, vp: &Viewport, t: TriSetup) {
         self.rasterized += 1;
@@ -1472,6 +1495,12 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
     const TAKES_EDGES: bool = true;
 
     #[inline(always)]
+    fn count_uncovered(&mut self, n: u32) {
+        // Counted like any other; nothing drawn, so the box of what was drawn stays.
+        self.rasterized += n as u64;
+    }
+
+    #[inline(always)]
     fn push_small(&mut self, vp: &Viewport, t: TriSetup, edges: SmallEdges) {
         self.count(&t);
         // The direct sink's rectangle is the whole frame, which holds the box: `scan_triangle`
@@ -1502,6 +1531,10 @@ fn prefetch(target: &FrameTarget, i: usize) {
 
 /// Side of the block scanned without branches for small triangles.
 const SMALL: u32 = 8;
+/// Boxes of at most this many pixels a side have their mask of covered centres derived by the
+/// 8-lane setup (in 32-bit lanes: the mask's bits reach `8·(TINY − 1) + TINY − 1`).
+const TINY: u32 = 4;
+const _: () = assert!(SMALL * (TINY - 1) + TINY <= 31);
 /// Triangles whose snapped corners span fewer pixels than this (both axes) have their inside
 /// masks computed in i32 lanes. The lanes reach up to 8 pixels past the box, so every point
 /// evaluated lies within (56 + 8)·√2 pixels of a corner, and |E| <= (64·√2·256)² < 2^31.
@@ -1534,19 +1567,24 @@ unsafe fn scan_small<const AVX2: bool>(
         mut row,
         step_x: sx,
         step_y,
+        mask: tiny,
     } = edges;
-    let valid = (1u64 << w) - 1;
-    for j in 0..=(y1 - y0) {
-        let bits = if AVX2 {
-            // SAFETY: the AVX2 instantiation only runs where `Isa::select` found AVX2.
-            unsafe { simd::row_mask_avx2(row, sx) }
-        } else {
-            row_mask(row, sx)
-        };
-        mask |= (bits & valid) << (j * SMALL);
-        row[0] += step_y[0];
-        row[1] += step_y[1];
-        row[2] += step_y[2];
+    if let Some(tiny) = tiny {
+        mask = tiny as u64;
+    } else {
+        let valid = (1u64 << w) - 1;
+        for j in 0..=(y1 - y0) {
+            let bits = if AVX2 {
+                // SAFETY: the AVX2 instantiation only runs where `Isa::select` found AVX2.
+                unsafe { simd::row_mask_avx2(row, sx) }
+            } else {
+                row_mask(row, sx)
+            };
+            mask |= (bits & valid) << (j * SMALL);
+            row[0] += step_y[0];
+            row[1] += step_y[1];
+            row[2] += step_y[2];
+        }
     }
     let mut written = 0;
     while mask != 0 {
@@ -1741,6 +1779,7 @@ unsafe fn scan_triangle<const AVX2: bool>(
             row: row.map(|e| e as i32),
             step_x: step_x.map(|e| e as i32),
             step_y: step_y.map(|e| e as i32),
+            mask: None,
         };
         // SAFETY: forwarded from the caller.
         return unsafe { scan_small::<AVX2>(vp, t, [x0, y0, x1, y1], edges, target, mode) };

@@ -10,7 +10,9 @@
 //! (box at most 8 × 8 pixels, corners within [`MASKED`] pixels), it also derives the three
 //! edge functions at the first pixel centre in i32 lanes: the direct sink's scan starts from
 //! them; for the tile-binned sink, whose scan clips to a tile and re-derives them, they are
-//! not computed.
+//! not computed. For boxes of at most [`TINY`] × [`TINY`] pixels it goes on to the mask of
+//! covered centres, in lanes too: the scan then has no row loop to run, and triangles that
+//! cover no centre (a quarter of those set up on the `terrain` anchor view) are only counted.
 //!
 //! Every value equals the scalar setup's bit for bit (tested on random and degenerate
 //! batches): integer parts are exact in 32-bit lanes (snapped coordinates stay below 2^24),
@@ -20,7 +22,7 @@
 
 use super::{
     clip_and_setup, to_clip, Draw, ProjVertex, SetupSink, SmallEdges, TriSetup, Viewport, HALF, MASKED, NEEDS_CLIP,
-    NOT_FINITE, OUT_BOTTOM, OUT_LEFT, OUT_NEAR, OUT_OF_VIEW, OUT_RIGHT, OUT_TOP, SMALL, SUB, SUBPIXEL_BITS,
+    NOT_FINITE, OUT_BOTTOM, OUT_LEFT, OUT_NEAR, OUT_OF_VIEW, OUT_RIGHT, OUT_TOP, SMALL, SUB, SUBPIXEL_BITS, TINY,
 };
 use occult_core::{ItemId, Mat4, Vec3, Vec4};
 
@@ -52,11 +54,19 @@ impl Batch {
 
     /// Appends a triangle; the batch must not be full.
     #[inline(always)]
-    pub(super) fn push(&mut self, v: [ProjVertex; 3], indices: [u32; 3], draw: usize, item: ItemId) {
-        let k = self.len;
-        self.corners[0][k] = v[0];
-        self.corners[1][k] = v[1];
-        self.corners[2][k] = v[2];
+    pub(super) fn push(&mut self, v: [&ProjVertex; 3], indices: [u32; 3], draw: usize, item: ItemId) {
+        debug_assert!(self.len < LANES, "a full batch is set up before the next push");
+        // The mask only spares the bounds checks: a full batch never takes a push.
+        let k = self.len % LANES;
+        for (corners, v) in self.corners.iter_mut().zip(v) {
+            // SAFETY: both point to a 16-byte `ProjVertex` (size asserted); unaligned access
+            // is allowed. One vector move instead of the field-wise copy the compiler emits.
+            unsafe {
+                use std::arch::x86_64::{__m128i, _mm_loadu_si128, _mm_storeu_si128};
+                let dst: *mut __m128i = (&raw mut corners[k]).cast();
+                _mm_storeu_si128(dst, _mm_loadu_si128((v as *const ProjVertex).cast()));
+            }
+        }
         self.indices[k] = indices;
         self.draw[k] = draw as u32;
         self.item[k] = item;
@@ -88,6 +98,7 @@ struct Lanes {
     row: [[i32; LANES]; 3],
     step_x: [[i32; LANES]; 3],
     step_y: [[i32; LANES]; 3],
+    mask: [i32; LANES],
 }
 
 /// Sets up the batch's triangles and hands them to `out` (see the module doc), then empties it.
@@ -204,8 +215,12 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
     let zmax = _mm256_max_ps(_mm256_max_ps(z0, z1), z2);
     live &= !(_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(zmax, _mm256_set1_ps(vp.far_depth))) as u32);
 
-    // Lanes whose box the small scan takes, with their edge functions in `l`.
+    // Lanes whose box the small scan takes, with their edge functions in `l`; those of them
+    // whose box is at most `TINY × TINY`, with their mask of covered centres in `l`; and
+    // those of these that cover no centre.
     let mut small = 0;
+    let mut tiny = 0;
+    let mut uncovered = 0;
     if live != 0 {
         // Depth plane in pixel units relative to corner 0, in f64, anchored at the centre of
         // pixel (px0, py0): the scalar expression, operation for operation.
@@ -260,6 +275,11 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
                 )
             };
             let (cx, cy) = (centre(px0), centre(py0));
+            // Inside bits of the first 4 × 4 centres of each box, bit `8·j + i` for centre
+            // (i, j) from the box's corner as in `scan_small`'s mask (a set sign bit in an
+            // edge function means outside).
+            let mut inside = zero;
+            let (mut rows, mut sxs, mut sys) = ([zero; 3], [zero; 3], [zero; 3]);
             for i in 0..3 {
                 let j = (i + 1) % 3;
                 let ea = _mm256_sub_epi32(ys[i], ys[j]);
@@ -269,21 +289,55 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
                     _mm256_cmpgt_epi32(zero, ea),
                     _mm256_andnot_si256(_mm256_cmpgt_epi32(eb, zero), _mm256_cmpeq_epi32(ea, zero)),
                 );
-                let row = _mm256_add_epi32(
+                rows[i] = _mm256_add_epi32(
                     _mm256_add_epi32(
                         _mm256_mullo_epi32(ea, _mm256_sub_epi32(cx, xs[i])),
                         _mm256_mullo_epi32(eb, _mm256_sub_epi32(cy, ys[i])),
                     ),
                     bias,
                 );
-                store(&mut l.row[i], row);
-                store(&mut l.step_x[i], _mm256_slli_epi32::<{ SUBPIXEL_BITS as i32 }>(ea));
-                store(&mut l.step_y[i], _mm256_slli_epi32::<{ SUBPIXEL_BITS as i32 }>(eb));
+                sxs[i] = _mm256_slli_epi32::<{ SUBPIXEL_BITS as i32 }>(ea);
+                sys[i] = _mm256_slli_epi32::<{ SUBPIXEL_BITS as i32 }>(eb);
+                store(&mut l.row[i], rows[i]);
+                store(&mut l.step_x[i], sxs[i]);
+                store(&mut l.step_y[i], sys[i]);
             }
+            // Exact in i32 as the small scan's own masks are: these centres lie in its block.
+            let mut row = rows;
+            for j in 0..TINY {
+                let mut e = row;
+                for i in 0..TINY {
+                    let out = _mm256_or_si256(_mm256_or_si256(e[0], e[1]), e[2]);
+                    let bit = _mm256_set1_epi32(1 << (j * SMALL + i));
+                    inside = _mm256_or_si256(inside, _mm256_andnot_si256(_mm256_srai_epi32::<31>(out), bit));
+                    for k in 0..3 {
+                        e[k] = _mm256_add_epi32(e[k], sxs[k]);
+                    }
+                }
+                for k in 0..3 {
+                    row[k] = _mm256_add_epi32(row[k], sys[k]);
+                }
+            }
+            // Only the centres inside the box: (1 << w) - 1 per row, for the box's h rows.
+            let (w, h) = (_mm256_sub_epi32(px1, px0), _mm256_sub_epi32(py1, py0));
+            let one = _mm256_set1_epi32(1);
+            let columns = _mm256_sub_epi32(_mm256_sllv_epi32(one, _mm256_add_epi32(w, one)), one);
+            let mut valid = columns;
+            for j in 1..TINY {
+                let has_row = _mm256_cmpgt_epi32(h, _mm256_set1_epi32(j as i32 - 1));
+                let shifted = _mm256_sllv_epi32(columns, _mm256_set1_epi32((j * SMALL) as i32));
+                valid = _mm256_or_si256(valid, _mm256_and_si256(has_row, shifted));
+            }
+            let mask = _mm256_and_si256(inside, valid);
+            store(&mut l.mask, mask);
+            let tiny_box = _mm256_set1_epi32(TINY as i32);
+            tiny = small & bits(_mm256_cmpgt_epi32(tiny_box, w)) & bits(_mm256_cmpgt_epi32(tiny_box, h));
+            uncovered = tiny & bits(_mm256_cmpeq_epi32(mask, zero));
         }
     }
     // In stream order: the set-up lanes, and the clipped ones through the scalar path.
-    let mut m = live | clipped;
+    out.count_uncovered(uncovered.count_ones());
+    let mut m = (live | clipped) & !uncovered;
     while m != 0 {
         let k = m.trailing_zeros() as usize;
         m &= m - 1;
@@ -315,6 +369,11 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
                 row: [l.row[0][k], l.row[1][k], l.row[2][k]],
                 step_x: [l.step_x[0][k], l.step_x[1][k], l.step_x[2][k]],
                 step_y: [l.step_y[0][k], l.step_y[1][k], l.step_y[2][k]],
+                mask: if tiny & (1 << k) != 0 {
+                    Some(l.mask[k] as u32)
+                } else {
+                    None
+                },
             };
             out.push_small(vp, t, edges);
         } else {
@@ -520,7 +579,7 @@ fn plane(
 #[cfg(all(test, target_arch = "x86_64"))]
 mod tests {
     use super::super::{
-        edge_functions, setup_triangle, DrawTriangles, OUT_BOTTOM, OUT_LEFT, OUT_NEAR, OUT_RIGHT, OUT_TOP,
+        edge_functions, row_mask, setup_triangle, DrawTriangles, OUT_BOTTOM, OUT_LEFT, OUT_NEAR, OUT_RIGHT, OUT_TOP,
     };
     use super::*;
     use occult_core::{Affine3A, Camera, Mesh, Vec3, View};
@@ -531,7 +590,10 @@ mod tests {
     type Entry = (ItemId, [u64; 16], Option<SmallEdges>);
 
     #[derive(Default)]
-    struct Recorder(Vec<Entry>);
+    struct Recorder {
+        records: Vec<Entry>,
+        uncovered: usize,
+    }
 
     fn key(t: &TriSetup) -> [u64; 16] {
         let f = |v: f32| v.to_bits() as u64;
@@ -560,10 +622,13 @@ mod tests {
         const TAKES_EDGES: bool = true;
 
         fn push(&mut self, _vp: &Viewport, t: TriSetup) {
-            self.0.push((t.item, key(&t), None));
+            self.records.push((t.item, key(&t), None));
         }
         fn push_small(&mut self, _vp: &Viewport, t: TriSetup, edges: SmallEdges) {
-            self.0.push((t.item, key(&t), Some(edges)));
+            self.records.push((t.item, key(&t), Some(edges)));
+        }
+        fn count_uncovered(&mut self, n: u32) {
+            self.uncovered += n as usize;
         }
     }
 
@@ -656,7 +721,7 @@ mod tests {
                 .clip_from_object(&Affine3A::IDENTITY),
             first_item: 0,
         }];
-        let (mut small, mut large, mut clipped) = (0, 0, 0);
+        let (mut small, mut large, mut clipped, mut tiny, mut uncovered) = (0, 0, 0, 0, 0);
         for round in 0..4000 {
             let vp = viewport(&mut rng);
             let n = rng.random_range(1..=LANES);
@@ -666,7 +731,7 @@ mod tests {
                 let v = corners(&mut rng, &vp);
                 let indices = [0, 1, 2].map(|_| rng.random_range(0..64u32));
                 let item = (round * LANES + k) as ItemId;
-                batch.push(v, indices, 0, item);
+                batch.push([&v[0], &v[1], &v[2]], indices, 0, item);
                 let codes = v.map(|p| p.code);
                 if (codes[0] | codes[1] | codes[2]) & (NEEDS_CLIP | NOT_FINITE) == NEEDS_CLIP
                     && codes[0] & codes[1] & codes[2] & OUT_OF_VIEW == 0
@@ -680,37 +745,59 @@ mod tests {
             // SAFETY: AVX2 was detected above.
             unsafe { setup8_avx2(&vp, &draws, &mut batch, &mut lanes) };
             assert_eq!(batch.len, 0, "the batch is emptied");
-            // Same records in the same order (clipped triangles in their place).
-            assert_eq!(scalar.0.len(), lanes.0.len(), "round {round}: triangles set up");
-            for (s, l) in scalar.0.iter().zip(&lanes.0) {
-                assert_eq!(s.1, l.1, "round {round}: record of item {}", s.0);
-                let ext = l.1[12] as u32;
-                let b = l.1[6];
+            // Same records in the same order (clipped triangles in their place), but for
+            // those whose tiny box covers no centre, which are only counted.
+            let mut next = lanes.records.iter();
+            let mut skipped = 0;
+            for s in &scalar.records {
+                let b = s.1[6];
                 let (px0, py0, px1, py1) = (
                     b as u16 as u32,
                     (b >> 16) as u16 as u32,
                     (b >> 32) as u16 as u32,
                     (b >> 48) as u16 as u32,
                 );
-                let takes_small = ext < MASKED && px1 - px0 < SMALL && py1 - py0 < SMALL;
+                let takes_small = (s.1[12] as u32) < MASKED && px1 - px0 < SMALL && py1 - py0 < SMALL;
+                let t = lanes_setup(&s.1);
+                let (row, sx, sy) = edge_functions(&t, px0, py0);
+                let want_mask = (px1 - px0 < TINY && py1 - py0 < TINY).then(|| {
+                    // The small scan's own row masks, in its layout.
+                    (0..=py1 - py0).fold(0u64, |m, j| {
+                        let r = [0, 1, 2].map(|i| (row[i] + j as i64 * sy[i]) as i32);
+                        m | (row_mask(r, sx.map(|e| e as i32)) & ((1 << (px1 - px0 + 1)) - 1)) << (j * SMALL)
+                    }) as u32
+                });
+                if takes_small && want_mask == Some(0) {
+                    skipped += 1;
+                    uncovered += 1;
+                    small += 1;
+                    continue;
+                }
+                let l = next
+                    .next()
+                    .unwrap_or_else(|| panic!("round {round}: item {} missing", s.0));
+                assert_eq!(s.1, l.1, "round {round}: record of item {}", s.0);
                 match l.2 {
                     Some(edges) => {
                         assert!(takes_small, "round {round}: item {} is not small", s.0);
-                        let t = lanes_setup(&l.1);
-                        let (row, sx, sy) = edge_functions(&t, px0, py0);
                         let want = SmallEdges {
                             row: row.map(|e| e as i32),
                             step_x: sx.map(|e| e as i32),
                             step_y: sy.map(|e| e as i32),
+                            mask: want_mask,
                         };
                         assert_eq!(edges, want, "round {round}: edges of item {}", s.0);
                         assert!(row.iter().all(|&e| e == e as i32 as i64), "edges fit i32");
                         small += 1;
+                        tiny += want_mask.is_some() as usize;
                     }
                     None => large += 1,
                 }
             }
+            assert!(next.next().is_none(), "round {round}: records beyond the scalar path's");
+            assert_eq!(lanes.uncovered, skipped, "round {round}: uncovered triangles counted");
         }
+        assert!(tiny > 300 && uncovered > 200, "{tiny} tiny, {uncovered} uncovered");
         assert!(
             small > 1000 && large > 1000 && clipped > 10,
             "{small} small, {large} large, {clipped} clipped"

@@ -325,6 +325,10 @@ struct StencilSink<'a> {
 }
 
 impl SetupSink for StencilSink<'_> {
+    fn count_uncovered(&mut self, n: u32) {
+        self.counts.triangles_rasterized += (self.rect[1] == 0) as u64 * n as u64;
+    }
+
     fn push(&mut self, _vp: &Viewport, t: TriSetup) {
         // Every band sets up every face: the first band counts them.
         self.counts.triangles_rasterized += (self.rect[1] == 0) as u64;
