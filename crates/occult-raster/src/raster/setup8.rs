@@ -39,6 +39,9 @@ pub(super) struct Batch {
     draw: [u32; LANES],
     item: [ItemId; LANES],
     len: usize,
+    /// Where [`setup8_avx2`] spills its lanes: kept with the batch, so that it is not cleared
+    /// for every eight triangles (lanes are read only where they were written).
+    lanes: Lanes,
 }
 
 impl Batch {
@@ -49,6 +52,7 @@ impl Batch {
             draw: [0; LANES],
             item: [0; LANES],
             len: 0,
+            lanes: Lanes::default(),
         }
     }
 
@@ -168,16 +172,21 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
     if live == 0 && clipped == 0 {
         return;
     }
-    let mut l = Lanes::default();
+    let l = &mut batch.lanes;
     let store = |dst: &mut [i32; LANES], v: __m256i| _mm256_storeu_si256(dst.as_mut_ptr().cast(), v);
     store(&mut l.px0, px0);
     store(&mut l.py0, py0);
     store(&mut l.py1, py1);
-    let mut m = live;
-    while m != 0 {
-        let k = m.trailing_zeros() as usize;
-        m &= m - 1;
-        out.will_touch(l.px0[k] as u32, l.py0[k] as u32, l.py1[k] > l.py0[k]);
+    // Every lane, without a branch on which are live (a loop over the live ones mispredicts
+    // its exit): a dead lane's hint names pixel (0, 0).
+    let on = live_lanes(live);
+    let (hint_x, hint_y) = (_mm256_and_si256(px0, on), _mm256_and_si256(py0, on));
+    let two_rows = live & bits(_mm256_cmpgt_epi32(py1, py0));
+    let (mut xs, mut ys) = ([0i32; LANES], [0i32; LANES]);
+    store(&mut xs, hint_x);
+    store(&mut ys, hint_y);
+    for k in 0..LANES {
+        out.will_touch(xs[k] as u32, ys[k] as u32, two_rows & (1 << k) != 0);
     }
 
     // Area, exact in f64 halves: |coordinates| < 2^24, so products < 2^50.
@@ -201,8 +210,7 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
     live &= negative | if vp.cull_backfaces { 0 } else { positive };
 
     // Orient counter-clockwise on screen (negative area) triangles like the others: swap 1, 2.
-    let lane_bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-    let swap = _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(negative as i32), lane_bit), lane_bit);
+    let swap = live_lanes(negative);
     let swap_ps = _mm256_castsi256_ps(swap);
     let (x1, x2) = (_mm256_blendv_epi8(x1, x2, swap), _mm256_blendv_epi8(x2, x1, swap));
     let (y1, y2) = (_mm256_blendv_epi8(y1, y2, swap), _mm256_blendv_epi8(y2, y1, swap));
@@ -490,6 +498,16 @@ pub(super) unsafe fn project8_avx2(vp: &Viewport, m: &Mat4, positions: &[Vec3], 
     _mm256_storeu_si256(dst.add(1), _mm256_permute2x128_si256::<0x20>(v2, v3));
     _mm256_storeu_si256(dst.add(2), _mm256_permute2x128_si256::<0x31>(v0, v1));
     _mm256_storeu_si256(dst.add(3), _mm256_permute2x128_si256::<0x31>(v2, v3));
+}
+
+/// All bits set in the lanes whose bit is set in `mask`, none in the others.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn live_lanes(mask: u32) -> std::arch::x86_64::__m256i {
+    use std::arch::x86_64::*;
+    let lane_bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+    _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(mask as i32), lane_bit), lane_bit)
 }
 
 /// Lanes 0..4 of eight i32 as f64.
