@@ -20,7 +20,9 @@ pub enum MeshColors {
 ///
 /// Invariants, checked by [`Mesh::new`]: every coordinate is finite, every index names a vertex,
 /// per-triangle colors match the triangle count. Degenerate (zero-area) triangles are allowed:
-/// the rasterizer draws nothing for them.
+/// the rasterizer draws nothing for them. The rasterizer's unsafe code relies on the index
+/// invariant (it reads projected vertices without bounds checks): keep the fields private and
+/// every change to the indices checked.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Mesh {
     positions: Vec<Vec3>,

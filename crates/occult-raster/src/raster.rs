@@ -170,7 +170,8 @@ pub struct RasterCounts {
     /// Triangles handed in.
     pub triangles_submitted: u64,
     /// Triangles (after clipping, each clipped piece counted) whose box held a pixel centre,
-    /// with non-zero area, facing right, not beyond the far plane: the ones scanned.
+    /// with non-zero area, facing right, not beyond the far plane: the ones scanned, or for
+    /// a box of at most 4 × 4 pixels whose centres all lie outside, found to cover none.
     pub triangles_rasterized: u64,
     /// Fragments that won their pixel when written.
     pub fragments_written: u64,
@@ -1088,10 +1089,12 @@ fn setup_range<const AVX2: bool>(
                     .enumerate()
                     .map(|(k, t)| (first + k, t))
                 {
-                    // SAFETY: `verts` holds one entry per position of the mesh, and `Mesh`
-                    // guarantees that every index names a position (checked by `Mesh::new`,
-                    // its only constructor). The loop runs once per triangle of the scene:
-                    // three bounds checks were a tenth of its instructions.
+                    // SAFETY: `verts` holds one entry per position of the mesh (sliced with a
+                    // check above), and `Mesh` guarantees that every index names a position
+                    // (checked by `Mesh::new`, its only constructor; fields private, see its
+                    // doc). The loop runs once per triangle of the scene: three bounds checks
+                    // were a tenth of its instructions.
+                    debug_assert!([i0, i1, i2].iter().all(|&i| (i as usize) < verts.len()));
                     let v = unsafe {
                         [
                             verts.get_unchecked(i0 as usize),
@@ -1410,8 +1413,10 @@ trait SetupSink {
     /// [`TINY`] × [`TINY`] pixels (only sinks that take edge functions get them): they count
     /// as set up; scanning them would write nothing.
     fn count_uncovered(&mut self, n: u32);
-    /// A triangle whose box starts at pixel `(x, y)` (and covers row `y + 1` if `two_rows`)
-    /// is being set up: a sink that scans at once may start fetching those pixels.
+    /// A hint: a triangle whose box starts at pixel `(x, y)` (and covers row `y + 1` if
+    /// `two_rows`) is being set up, and a sink that scans at once may start fetching those
+    /// pixels. The 8-lane setup hints all eight lanes, a lane without a triangle as (0, 0), so
+    /// it must have no effect beyond the fetch.
     #[inline(always)]
     fn will_touch(&mut self, _x: u32, _y: u32, _two_rows: bool) {}
 }
@@ -1541,8 +1546,10 @@ const _: () = assert!(SMALL * (TINY - 1) + TINY <= 31);
 const MASKED: u32 = 56;
 
 /// Scans a box of at most `SMALL × SMALL` pixels: the inside mask of each row is formed
-/// without branches in 32-bit lanes (tiny triangles make per-pixel branches mispredict), then
-/// only the covered pixels are depth-tested. Bit-identical to the general scan.
+/// without branches in 32-bit lanes (tiny triangles make per-pixel branches mispredict), or
+/// taken from `edges.mask` where the 8-lane setup formed it already (anchored at the box's
+/// corner, which is then `rect`'s), then only the covered pixels are depth-tested.
+/// Bit-identical to the general scan.
 ///
 /// 32 bits suffice: the caller checked that the snapped corners span fewer than [`MASKED`]
 /// pixels, and every centre `p` of the 8 × 8 block lies within 8 pixels of the triangle's box,
@@ -1570,6 +1577,11 @@ unsafe fn scan_small<const AVX2: bool>(
         mask: tiny,
     } = edges;
     if let Some(tiny) = tiny {
+        debug_assert_eq!(
+            (x0, y0),
+            (t.px0 as u32, t.py0 as u32),
+            "a lane mask is anchored at the box"
+        );
         mask = tiny as u64;
     } else {
         let valid = (1u64 << w) - 1;

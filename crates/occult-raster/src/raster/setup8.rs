@@ -40,7 +40,7 @@ pub(super) struct Batch {
     item: [ItemId; LANES],
     len: usize,
     /// Where [`setup8_avx2`] spills its lanes: kept with the batch, so that it is not cleared
-    /// for every eight triangles (lanes are read only where they were written).
+    /// for every eight triangles (a call reads only lanes it wrote itself).
     lanes: Lanes,
 }
 
@@ -56,15 +56,19 @@ impl Batch {
         }
     }
 
-    /// Appends a triangle; the batch must not be full.
+    /// Appends a triangle. The batch must not be full (callers set a full batch up before the
+    /// next push): in release builds a push into a full one would overwrite lane 0.
     #[inline(always)]
     pub(super) fn push(&mut self, v: [&ProjVertex; 3], indices: [u32; 3], draw: usize, item: ItemId) {
         debug_assert!(self.len < LANES, "a full batch is set up before the next push");
         // The mask only spares the bounds checks: a full batch never takes a push.
         let k = self.len % LANES;
         for (corners, v) in self.corners.iter_mut().zip(v) {
-            // SAFETY: both point to a 16-byte `ProjVertex` (size asserted); unaligned access
-            // is allowed. One vector move instead of the field-wise copy the compiler emits.
+            // SAFETY: SSE2 is part of every x86_64 processor (this module is x86_64 only);
+            // both pointers name a `ProjVertex`, `repr(C)` with four 4-byte fields and no
+            // padding (size asserted), so the 16 bytes read are initialized and any 16 bytes
+            // are a valid value; unaligned access is allowed. One vector move instead of the
+            // field-wise copy the compiler emits.
             unsafe {
                 use std::arch::x86_64::{__m128i, _mm_loadu_si128, _mm_storeu_si128};
                 let dst: *mut __m128i = (&raw mut corners[k]).cast();
@@ -275,6 +279,10 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
             & bits(_mm256_cmpgt_epi32(_mm256_set1_epi32(MASKED as i32), extent))
             & bits(_mm256_cmpgt_epi32(small_box, _mm256_sub_epi32(px1, px0)))
             & bits(_mm256_cmpgt_epi32(small_box, _mm256_sub_epi32(py1, py0)));
+        // Edge functions at the first centre and their steps, kept for the masks below; the
+        // box's extent less one pixel.
+        let (mut rows, mut sxs, mut sys) = ([zero; 3], [zero; 3], [zero; 3]);
+        let (w, h) = (_mm256_sub_epi32(px1, px0), _mm256_sub_epi32(py1, py0));
         if small != 0 {
             let centre = |p: __m256i| {
                 _mm256_add_epi32(
@@ -283,11 +291,6 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
                 )
             };
             let (cx, cy) = (centre(px0), centre(py0));
-            // Inside bits of the first 4 × 4 centres of each box, bit `8·j + i` for centre
-            // (i, j) from the box's corner as in `scan_small`'s mask (a set sign bit in an
-            // edge function means outside).
-            let mut inside = zero;
-            let (mut rows, mut sxs, mut sys) = ([zero; 3], [zero; 3], [zero; 3]);
             for i in 0..3 {
                 let j = (i + 1) % 3;
                 let ea = _mm256_sub_epi32(ys[i], ys[j]);
@@ -310,7 +313,15 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
                 store(&mut l.step_x[i], sxs[i]);
                 store(&mut l.step_y[i], sys[i]);
             }
-            // Exact in i32 as the small scan's own masks are: these centres lie in its block.
+            let tiny_box = _mm256_set1_epi32(TINY as i32);
+            tiny = small & bits(_mm256_cmpgt_epi32(tiny_box, w)) & bits(_mm256_cmpgt_epi32(tiny_box, h));
+        }
+        if tiny != 0 {
+            // Inside bits of the first 4 × 4 centres of each box, bit `8·j + i` for centre
+            // (i, j) from the box's corner as in `scan_small`'s mask (a set sign bit in an
+            // edge function means outside); exact in i32 as the small scan's own masks are:
+            // these centres lie in its block.
+            let mut inside = zero;
             let mut row = rows;
             for j in 0..TINY {
                 let mut e = row;
@@ -326,8 +337,7 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
                     row[k] = _mm256_add_epi32(row[k], sys[k]);
                 }
             }
-            // Only the centres inside the box: (1 << w) - 1 per row, for the box's h rows.
-            let (w, h) = (_mm256_sub_epi32(px1, px0), _mm256_sub_epi32(py1, py0));
+            // Only the centres inside the box: (1 << (w + 1)) - 1 per row, for its h + 1 rows.
             let one = _mm256_set1_epi32(1);
             let columns = _mm256_sub_epi32(_mm256_sllv_epi32(one, _mm256_add_epi32(w, one)), one);
             let mut valid = columns;
@@ -338,8 +348,6 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
             }
             let mask = _mm256_and_si256(inside, valid);
             store(&mut l.mask, mask);
-            let tiny_box = _mm256_set1_epi32(TINY as i32);
-            tiny = small & bits(_mm256_cmpgt_epi32(tiny_box, w)) & bits(_mm256_cmpgt_epi32(tiny_box, h));
             uncovered = tiny & bits(_mm256_cmpeq_epi32(mask, zero));
         }
     }
@@ -740,10 +748,12 @@ mod tests {
             first_item: 0,
         }];
         let (mut small, mut large, mut clipped, mut tiny, mut uncovered) = (0, 0, 0, 0, 0);
+        // One batch for every round, as the draws use it: lanes spilled by a round are
+        // still there in the next.
+        let mut batch = Batch::new();
         for round in 0..4000 {
             let vp = viewport(&mut rng);
             let n = rng.random_range(1..=LANES);
-            let mut batch = Batch::new();
             let mut scalar = Recorder::default();
             for k in 0..n {
                 let v = corners(&mut rng, &vp);
@@ -778,7 +788,7 @@ mod tests {
                 let takes_small = (s.1[12] as u32) < MASKED && px1 - px0 < SMALL && py1 - py0 < SMALL;
                 let t = lanes_setup(&s.1);
                 let (row, sx, sy) = edge_functions(&t, px0, py0);
-                let want_mask = (px1 - px0 < TINY && py1 - py0 < TINY).then(|| {
+                let want_mask = (takes_small && px1 - px0 < TINY && py1 - py0 < TINY).then(|| {
                     // The small scan's own row masks, in its layout.
                     (0..=py1 - py0).fold(0u64, |m, j| {
                         let r = [0, 1, 2].map(|i| (row[i] + j as i64 * sy[i]) as i32);
