@@ -1,9 +1,11 @@
 //! Rasterizer throughput: the `terrain` anchor view (1 and 2 threads, exact depth and item
-//! ids) and random triangles of three sizes. Times are for one `Rasterizer::draw` of all the
+//! ids), the same mesh from behind (projection and outcode rejection only) and random
+//! triangles of three sizes. Times are for one `Rasterizer::draw` of all the
 //! triangles into a frame cleared before each (the clear is not timed; `clear` benchmarks it).
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use occult_core::glam::Affine3A;
+use occult_core::{Camera, Vec3, View};
 use occult_raster::{Draw, DrawTriangles, Frame, RasterConfig, RasterMode, Rasterizer};
 
 fn draw_all(c: &mut Criterion, name: &str, mesh: &occult_core::Mesh, view: &occult_core::View, threads: usize) {
@@ -46,6 +48,11 @@ fn terrain(c: &mut Criterion) {
     for threads in [1, 2] {
         draw_all(c, "terrain", mesh, &view, threads);
     }
+    // The same mesh from its default eye looking away from it: every triangle is rejected by
+    // its corners' outcodes, so the draw measures vertex projection and the reject loop.
+    let camera = Camera::look_at(Vec3::new(0.0, 25.0, -110.0), Vec3::new(0.0, 25.0, -300.0));
+    let behind = View::new(camera, view.width(), view.height()).expect("a valid camera");
+    draw_all(c, "terrain_behind", mesh, &behind, 1);
 }
 
 fn clear(c: &mut Criterion) {

