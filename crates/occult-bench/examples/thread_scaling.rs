@@ -40,12 +40,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
         first_item: 0,
     };
-    let one = || {
+    let raster = |threads| {
         Rasterizer::new(RasterConfig {
-            threads: 1,
+            threads,
             ..RasterConfig::default()
         })
     };
+    let one = || raster(1);
     // One timed draw into a cleared frame, in milliseconds.
     let timed = |r: &mut Rasterizer, frame: &mut Frame| {
         r.clear(frame);
@@ -100,12 +101,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
         return Ok(());
     }
-    let mut rasterizers = [1, 2].map(|threads| {
-        Rasterizer::new(RasterConfig {
-            threads,
-            ..RasterConfig::default()
-        })
-    });
+    let mut rasterizers = [1, 2].map(raster);
     let mut frame = Frame::new(view.width(), view.height())?;
     let mut times = [Vec::new(), Vec::new()];
     for _ in 0..pairs {

@@ -1569,21 +1569,21 @@ unsafe fn scan_small<const AVX2: bool>(
 ) -> u64 {
     let [x0, y0, x1, y1] = rect;
     let w = x1 - x0 + 1;
-    let mut mask = 0u64;
     let SmallEdges {
         mut row,
         step_x: sx,
         step_y,
         mask: tiny,
     } = edges;
-    if let Some(tiny) = tiny {
+    let mut mask = if let Some(tiny) = tiny {
         debug_assert_eq!(
             (x0, y0),
             (t.px0 as u32, t.py0 as u32),
             "a lane mask is anchored at the box"
         );
-        mask = tiny as u64;
+        tiny as u64
     } else {
+        let mut mask = 0u64;
         let valid = (1u64 << w) - 1;
         for j in 0..=(y1 - y0) {
             let bits = if AVX2 {
@@ -1597,7 +1597,8 @@ unsafe fn scan_small<const AVX2: bool>(
             row[1] += step_y[1];
             row[2] += step_y[2];
         }
-    }
+        mask
+    };
     let mut written = 0;
     while mask != 0 {
         let k = mask.trailing_zeros();

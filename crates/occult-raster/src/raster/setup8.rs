@@ -183,7 +183,7 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
     store(&mut l.py1, py1);
     // Every lane, without a branch on which are live (a loop over the live ones mispredicts
     // its exit): a dead lane's hint names pixel (0, 0).
-    let on = live_lanes(live);
+    let on = lane_mask(live);
     let (hint_x, hint_y) = (_mm256_and_si256(px0, on), _mm256_and_si256(py0, on));
     let two_rows = live & bits(_mm256_cmpgt_epi32(py1, py0));
     let (mut xs, mut ys) = ([0i32; LANES], [0i32; LANES]);
@@ -214,7 +214,7 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
     live &= negative | if vp.cull_backfaces { 0 } else { positive };
 
     // Orient counter-clockwise on screen (negative area) triangles like the others: swap 1, 2.
-    let swap = live_lanes(negative);
+    let swap = lane_mask(negative);
     let swap_ps = _mm256_castsi256_ps(swap);
     let (x1, x2) = (_mm256_blendv_epi8(x1, x2, swap), _mm256_blendv_epi8(x2, x1, swap));
     let (y1, y2) = (_mm256_blendv_epi8(y1, y2, swap), _mm256_blendv_epi8(y2, y1, swap));
@@ -274,15 +274,15 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
         }
         // Edge functions at the centre of pixel (px0, py0), for the small scan: exact in i32
         // for boxes it takes (see `scan_small`); other lanes are not read.
+        // The box's width and height less one pixel.
+        let (w, h) = (_mm256_sub_epi32(px1, px0), _mm256_sub_epi32(py1, py0));
         let small_box = _mm256_set1_epi32(SMALL as i32);
         small = if S::TAKES_EDGES { live } else { 0 }
             & bits(_mm256_cmpgt_epi32(_mm256_set1_epi32(MASKED as i32), extent))
-            & bits(_mm256_cmpgt_epi32(small_box, _mm256_sub_epi32(px1, px0)))
-            & bits(_mm256_cmpgt_epi32(small_box, _mm256_sub_epi32(py1, py0)));
-        // Edge functions at the first centre and their steps, kept for the masks below; the
-        // box's extent less one pixel.
+            & bits(_mm256_cmpgt_epi32(small_box, w))
+            & bits(_mm256_cmpgt_epi32(small_box, h));
+        // Edge functions at the first centre and their steps, kept for the masks below.
         let (mut rows, mut sxs, mut sys) = ([zero; 3], [zero; 3], [zero; 3]);
-        let (w, h) = (_mm256_sub_epi32(px1, px0), _mm256_sub_epi32(py1, py0));
         if small != 0 {
             let centre = |p: __m256i| {
                 _mm256_add_epi32(
@@ -520,7 +520,7 @@ pub(super) unsafe fn project8_avx2(vp: &Viewport, m: &Mat4, positions: &[Vec3], 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[inline]
-fn live_lanes(mask: u32) -> std::arch::x86_64::__m256i {
+fn lane_mask(mask: u32) -> std::arch::x86_64::__m256i {
     use std::arch::x86_64::*;
     let lane_bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
     _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(mask as i32), lane_bit), lane_bit)
