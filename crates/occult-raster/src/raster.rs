@@ -36,6 +36,7 @@
 //! hidden, that is what the culling renderers avoid.
 
 use crate::frame::Frame;
+use occult_core::glam::DVec4;
 use occult_core::{ItemId, Mat4, Mesh, Vec3, Vec4, View};
 use rayon::prelude::*;
 use std::ops::Range;
@@ -340,8 +341,14 @@ fn to_clip(clip_from_object: &Mat4, p: Vec3) -> Vec4 {
 /// depending on SSE4.1's `roundss`.
 #[inline(always)]
 fn snap(v: f32) -> i32 {
+    snap64(v as f64)
+}
+
+/// [`snap`] of a coordinate computed in f64 (a corner made by clipping).
+#[inline(always)]
+fn snap64(v: f64) -> i32 {
     const MAGIC: f64 = 6755399441055744.0; // 1.5 · 2^52
-    ((v as f64 * SUB as f64 + MAGIC) - MAGIC) as i32
+    ((v * SUB as f64 + MAGIC) - MAGIC) as i32
 }
 
 /// Reusable per-chunk storage.
@@ -471,12 +478,48 @@ impl Rasterizer {
         );
         let vp = Viewport::new(view, &self.config);
         if self.on_caller() {
-            return self.draw_in_pool(&vp, frame, draws, mode);
+            return self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES);
         }
         // A handle of our own: the pool stays in place even if the draw panics.
         match self.pool.clone() {
-            Some(p) => p.install(|| self.draw_in_pool(&vp, frame, draws, mode)),
-            None => self.draw_in_pool(&vp, frame, draws, mode),
+            Some(p) => p.install(|| self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES)),
+            None => self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES),
+        }
+    }
+
+    /// Draws in passes of consecutive draws whose whole meshes have at most `max_vertices`
+    /// vertices together (a larger mesh goes alone): each pass projects those vertices ahead
+    /// into one buffer, which thus stays bounded however many instances a scene draws. The
+    /// frame is the same (order independence).
+    fn draw_in_passes(
+        &mut self,
+        vp: &Viewport,
+        frame: &mut Frame,
+        draws: &[Draw<'_>],
+        mode: RasterMode,
+        max_vertices: usize,
+    ) -> RasterCounts {
+        let mut counts = RasterCounts::default();
+        let mut rest = draws;
+        loop {
+            let (mut n, mut vertices) = (0, 0);
+            while let Some(d) = rest.get(n) {
+                let v = match d.triangles {
+                    DrawTriangles::All => d.mesh.positions().len(),
+                    _ => 0,
+                };
+                if n > 0 && vertices + v > max_vertices {
+                    break;
+                }
+                vertices += v;
+                n += 1;
+            }
+            let (pass, tail) = rest.split_at(n);
+            counts += self.draw_in_pool(vp, frame, pass, mode);
+            rest = tail;
+            if rest.is_empty() {
+                return counts;
+            }
         }
     }
 
@@ -759,6 +802,9 @@ fn merge_row(d: &mut [f32], it: &mut [ItemId], sd: &mut [f32], si: &[ItemId], mo
     // so stale items are never read.
     sd.fill(crate::CLEAR_DEPTH);
 }
+
+/// Most vertices of whole-mesh draws projected ahead in one pass of a draw (16 bytes each).
+const MAX_PROJECTED_VERTICES: usize = 1 << 22;
 
 /// Draws at least this large go sort-last on several threads (below it, the tile-binned path:
 /// its cost does not grow with the frame, the merge's does).
@@ -1069,8 +1115,8 @@ fn setup_range<const AVX2: bool>(
             return;
         }
         let draw = &draws[d];
-        let clip = || indices.map(|i| to_clip(&draw.clip_from_object, draw.mesh.positions()[i as usize]));
-        setup_triangle(vp, v.map(|p| *p), clip, item, out);
+        let corners = || indices.map(|i| draw.mesh.positions()[i as usize]);
+        setup_triangle(vp, v.map(|p| *p), &draw.clip_from_object, corners, item, out);
     };
     while t < range.end {
         while draw_starts[d + 1] <= t {
@@ -1207,7 +1253,8 @@ impl VertexCache {
 fn setup_triangle(
     vp: &Viewport,
     v: [ProjVertex; 3],
-    clip: impl FnOnce() -> [Vec4; 3],
+    clip_from_object: &Mat4,
+    corners: impl FnOnce() -> [Vec3; 3],
     item: ItemId,
     out: &mut impl SetupSink,
 ) {
@@ -1216,7 +1263,7 @@ fn setup_triangle(
         return;
     }
     if or & NEEDS_CLIP != 0 {
-        clip_and_setup(vp, clip(), item, out);
+        clip_and_setup(vp, clip_from_object, corners(), item, out);
         return;
     }
     setup_snapped(
@@ -1231,36 +1278,58 @@ fn setup_triangle(
     );
 }
 
-/// Clips a triangle against the near plane and the guard band in homogeneous space and sets up
-/// the fan of the resulting polygon.
+/// Clips a triangle (object-space corners `p` under `clip_from_object`) against the near plane
+/// and the guard band in homogeneous space and sets up the fan of the resulting polygon.
+///
+/// The clip coordinates are recomputed and clipped in f64: clipping subtracts those of corners
+/// that may lie far apart (a ground plane reaching far past the near plane), and in f32 a new
+/// corner's `w` could round to or below 0 and lose the whole triangle. The f64 products of the
+/// f32 inputs are exact. A corner that no plane moves is still projected from its f32 clip
+/// coordinates, which give it the bits every other path gives it, so that neighbours meet.
 #[cold]
-fn clip_and_setup(vp: &Viewport, c: [Vec4; 3], item: ItemId, out: &mut impl SetupSink) {
+fn clip_and_setup(vp: &Viewport, clip_from_object: &Mat4, p: [Vec3; 3], item: ItemId, out: &mut impl SetupSink) {
+    /// A corner of the clipped polygon: its clip coordinates in f64, and in f32 for a corner
+    /// of the triangle itself.
+    #[derive(Clone, Copy)]
+    struct Corner {
+        clip: DVec4,
+        original: Option<Vec4>,
+    }
+    let (gx, gy) = (vp.guard_x as f64, vp.guard_y as f64);
     let planes = [
-        Vec4::new(0.0, 0.0, -1.0, 1.0),        // near: w - z >= 0
-        Vec4::new(-1.0, 0.0, 0.0, vp.guard_x), // guard: g·w - x >= 0
-        Vec4::new(1.0, 0.0, 0.0, vp.guard_x),
-        Vec4::new(0.0, -1.0, 0.0, vp.guard_y),
-        Vec4::new(0.0, 1.0, 0.0, vp.guard_y),
+        DVec4::new(0.0, 0.0, -1.0, 1.0), // near: w - z >= 0
+        DVec4::new(-1.0, 0.0, 0.0, gx),  // guard: g·w - x >= 0
+        DVec4::new(1.0, 0.0, 0.0, gx),
+        DVec4::new(0.0, -1.0, 0.0, gy),
+        DVec4::new(0.0, 1.0, 0.0, gy),
     ];
-    let mut poly: Vec<Vec4> = c.to_vec();
+    let m = clip_from_object.as_dmat4();
+    let mut poly: Vec<Corner> = p
+        .iter()
+        .map(|&p| Corner {
+            clip: m * p.as_dvec3().extend(1.0),
+            original: Some(to_clip(clip_from_object, p)),
+        })
+        .collect();
     let mut next = Vec::with_capacity(9);
     for plane in planes {
         next.clear();
         for i in 0..poly.len() {
             let a = poly[i];
             let b = poly[(i + 1) % poly.len()];
-            let da = plane.dot(a);
-            let db = plane.dot(b);
+            let da = plane.dot(a.clip);
+            let db = plane.dot(b.clip);
             if da >= 0.0 {
                 next.push(a);
             }
             if (da >= 0.0) != (db >= 0.0) {
                 // Interpolate from the inside vertex, so a shared edge clips identically.
-                next.push(if da >= 0.0 {
-                    a + (b - a) * (da / (da - db))
+                let clip = if da >= 0.0 {
+                    a.clip + (b.clip - a.clip) * (da / (da - db))
                 } else {
-                    b + (a - b) * (db / (db - da))
-                });
+                    b.clip + (a.clip - b.clip) * (db / (db - da))
+                };
+                next.push(Corner { clip, original: None });
             }
         }
         std::mem::swap(&mut poly, &mut next);
@@ -1269,20 +1338,29 @@ fn clip_and_setup(vp: &Viewport, c: [Vec4; 3], item: ItemId, out: &mut impl Setu
         }
     }
     // A NaN w also fails this test.
-    if !poly.iter().all(|c| c.w > 0.0) {
+    if !poly.iter().all(|c| c.clip.w > 0.0) {
         return;
     }
     // Clipped vertices lie on or inside every clip plane up to rounding: project them directly.
     let p: Vec<(i32, i32, f32)> = poly
         .iter()
-        .map(|&c| {
-            let inv_w = 1.0 / c.w;
-            let sx = (c.x * inv_w * 0.5 + 0.5) * vp.fwidth;
-            let sy = (0.5 - c.y * inv_w * 0.5) * vp.fheight;
-            (snap(sx), snap(sy), c.z * inv_w)
+        .map(|c| match c.original {
+            // The expression of `Viewport::project_clip`, for the same bits.
+            Some(c) if c.w > 0.0 => {
+                let inv_w = 1.0 / c.w;
+                let sx = (c.x * inv_w * 0.5 + 0.5) * vp.fwidth;
+                let sy = (0.5 - c.y * inv_w * 0.5) * vp.fheight;
+                (snap(sx), snap(sy), c.z * inv_w)
+            }
+            _ => {
+                let c = c.clip;
+                let sx = (c.x / c.w * 0.5 + 0.5) * vp.width as f64;
+                let sy = (0.5 - c.y / c.w * 0.5) * vp.height as f64;
+                (snap64(sx), snap64(sy), (c.z / c.w) as f32)
+            }
         })
         .collect();
-    if p.iter().any(|v| !v.2.is_finite()) || poly.iter().any(|c| !c.is_finite()) {
+    if p.iter().any(|v| !v.2.is_finite()) || poly.iter().any(|c| !c.clip.is_finite()) {
         return;
     }
     for i in 1..p.len() - 1 {
@@ -1868,4 +1946,97 @@ unsafe fn scan_triangle<const AVX2: bool>(
         row[2] += step_y[2];
     }
     written
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use occult_core::{Affine3A, Camera};
+
+    /// Draws split into passes to bound the projected vertices give the frame and counts of
+    /// one pass.
+    #[test]
+    fn passes_bounding_projected_vertices_change_nothing() {
+        let (w, h) = (96, 64);
+        let view = View::new(
+            Camera::look_at(Vec3::new(0.5, 1.0, 6.0), Vec3::new(0.0, 0.0, 0.0)),
+            w,
+            h,
+        )
+        .unwrap();
+        // A strip of 40 quads (82 vertices) and a fan (11 vertices), each instanced thrice,
+        // with an index-list draw between them.
+        let strip = Mesh::new(
+            (0..=40)
+                .flat_map(|i| {
+                    [
+                        Vec3::new(i as f32 * 0.1 - 2.0, 0.0, 0.0),
+                        Vec3::new(i as f32 * 0.1 - 2.0, 1.0, 0.3),
+                    ]
+                })
+                .collect(),
+            (0..40u32)
+                .flat_map(|i| [[2 * i, 2 * i + 2, 2 * i + 1], [2 * i + 1, 2 * i + 2, 2 * i + 3]])
+                .collect(),
+        )
+        .unwrap();
+        let fan = Mesh::new(
+            std::iter::once(Vec3::ZERO)
+                .chain((0..10).map(|i| {
+                    let a = i as f32 * 0.6;
+                    Vec3::new(a.cos(), a.sin(), 0.2)
+                }))
+                .collect(),
+            (1..10u32).map(|i| [0, i, i + 1]).collect(),
+        )
+        .unwrap();
+        let list = [1u32, 5, 7, 30, 31];
+        let mut draws = Vec::new();
+        for k in 0..3 {
+            let m = Affine3A::from_translation(Vec3::new(0.0, k as f32 * 0.4 - 0.6, -(k as f32)));
+            for (mesh, triangles) in [
+                (&strip, DrawTriangles::All),
+                (&fan, DrawTriangles::All),
+                (&strip, DrawTriangles::List(&list)),
+            ] {
+                draws.push(Draw {
+                    mesh,
+                    triangles,
+                    clip_from_object: view.clip_from_object(&m),
+                    first_item: draws.len() as u64 * 1000,
+                });
+            }
+        }
+        for threads in [1, 2] {
+            let mut r = Rasterizer::new(RasterConfig {
+                threads,
+                ..RasterConfig::default()
+            })
+            .unwrap();
+            let vp = Viewport::new(&view, r.config());
+            let pool = r.pool.clone();
+            let mut runs = Vec::new();
+            // One pass; each whole mesh alone (82 > 50 goes alone, two fans fit); every draw alone.
+            for max_vertices in [usize::MAX, 50, 1] {
+                let mut f = Frame::new(w, h).unwrap();
+                let mut pass = || r.draw_in_passes(&vp, &mut f, &draws, RasterMode::Full, max_vertices);
+                let counts = match pool.clone() {
+                    Some(p) => p.install(pass),
+                    None => pass(),
+                };
+                runs.push((counts, f));
+            }
+            assert!(runs[0].0.fragments_written > 500, "the view shows the draws");
+            for (counts, f) in &runs[1..] {
+                assert_eq!(counts.triangles_submitted, runs[0].0.triangles_submitted);
+                assert_eq!(counts.triangles_rasterized, runs[0].0.triangles_rasterized);
+                assert_eq!(f.items(), runs[0].1.items(), "{threads} threads");
+                assert!(f
+                    .depth()
+                    .iter()
+                    .zip(runs[0].1.depth())
+                    .all(|(a, b)| a.to_bits() == b.to_bits()));
+            }
+        }
+    }
 }

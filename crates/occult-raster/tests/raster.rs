@@ -397,10 +397,9 @@ fn depth_only_matches_full_depth() {
         .all(|(a, b)| a.to_bits() == b.to_bits()));
 }
 
-#[test]
-fn huge_ground_plane_crossing_near_plane_has_no_cracks() {
-    let s = 1e6;
-    let mesh = Mesh::new(
+/// A square of half-size `s` at y = 0, facing up.
+fn ground(s: f32) -> Mesh {
+    Mesh::new(
         vec![
             Vec3::new(-s, 0.0, -s),
             Vec3::new(s, 0.0, -s),
@@ -409,7 +408,12 @@ fn huge_ground_plane_crossing_near_plane_has_no_cracks() {
         ],
         vec![[0, 2, 1], [0, 3, 2]],
     )
-    .unwrap();
+    .unwrap()
+}
+
+#[test]
+fn huge_ground_plane_crossing_near_plane_has_no_cracks() {
+    let mesh = ground(1e6);
     let mut cam = Camera::look_at(Vec3::new(0.0, 1.0, 0.0), Vec3::new(0.0, 0.8, -10.0));
     cam.far = 1e7;
     // Small frames too: a triangle reaching far into the guard band shows a tiny box there.
@@ -428,6 +432,36 @@ fn huge_ground_plane_crossing_near_plane_has_no_cracks() {
                 }
             }
         }
+    }
+}
+
+/// However far a ground plane reaches past the view, what the view shows of it is the same:
+/// clipping must not lose a triangle to rounding in its distant corners.
+#[test]
+fn ground_plane_coverage_does_not_depend_on_its_size() {
+    for near in [0.1, 10.0] {
+        let mut cam = Camera::look_at(Vec3::new(0.0, 5.0, -20.0), Vec3::ZERO);
+        (cam.near, cam.far) = (near, 100.0);
+        let view = View::new(cam, 160, 120).unwrap();
+        let mut covered = Vec::new();
+        for s in [1e3f32, 1e5, 1e6, 3e6, 1e7, 1e8, 1e9] {
+            let mesh = ground(s);
+            for threads in [1, 2] {
+                covered.push((
+                    s,
+                    threads,
+                    draw_all(&mut raster(threads, 32), &view, &mesh).covered_pixel_count(),
+                ));
+            }
+        }
+        assert!(
+            covered[0].2 > 160 * 120 / 4,
+            "near {near}: the ground fills the view's lower part"
+        );
+        assert!(
+            covered.iter().all(|c| c.2 == covered[0].2),
+            "near {near}: covered pixels by half-size and threads: {covered:?}"
+        );
     }
 }
 

@@ -21,8 +21,8 @@
 //! clipping leave the batch for the scalar path.
 
 use super::{
-    clip_and_setup, to_clip, Draw, ProjVertex, SetupSink, SmallEdges, TriSetup, Viewport, HALF, MASKED, NEEDS_CLIP,
-    NOT_FINITE, OUT_BOTTOM, OUT_LEFT, OUT_NEAR, OUT_OF_VIEW, OUT_RIGHT, OUT_TOP, SMALL, SUB, SUBPIXEL_BITS, TINY,
+    clip_and_setup, Draw, ProjVertex, SetupSink, SmallEdges, TriSetup, Viewport, HALF, MASKED, NEEDS_CLIP, NOT_FINITE,
+    OUT_BOTTOM, OUT_LEFT, OUT_NEAR, OUT_OF_VIEW, OUT_RIGHT, OUT_TOP, SMALL, SUB, SUBPIXEL_BITS, TINY,
 };
 use occult_core::{ItemId, Mat4, Vec3, Vec4};
 
@@ -360,8 +360,8 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
         if clipped & (1 << k) != 0 {
             let d = &draws[batch.draw[k] as usize];
             let pos = d.mesh.positions();
-            let clip = batch.indices[k].map(|i| to_clip(&d.clip_from_object, pos[i as usize]));
-            clip_and_setup(vp, clip, batch.item[k], out);
+            let corners = batch.indices[k].map(|i| pos[i as usize]);
+            clip_and_setup(vp, &d.clip_from_object, corners, batch.item[k], out);
             continue;
         }
         let t = TriSetup {
@@ -774,8 +774,8 @@ mod tests {
                 {
                     clipped += 1;
                 }
-                let clip = || indices.map(|i| to_clip(&draws[0].clip_from_object, mesh.positions()[i as usize]));
-                setup_triangle(&vp, v, clip, item, &mut scalar);
+                let corners = || indices.map(|i| mesh.positions()[i as usize]);
+                setup_triangle(&vp, v, &draws[0].clip_from_object, corners, item, &mut scalar);
             }
             let mut lanes = Recorder::default();
             // SAFETY: AVX2 was detected above.

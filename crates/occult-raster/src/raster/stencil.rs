@@ -587,8 +587,10 @@ mod tests {
                     compared += 1;
                 }
             }
+            // Faces that re-use receivers are ties, left out wherever their depths agree to
+            // 10⁻⁶: on a view where receivers fill much of the frame that is a fifth of it.
             assert!(
-                compared > (w * h) as usize * 9 / 10,
+                compared > (w * h) as usize * 3 / 4,
                 "seed {seed}: {compared} pixels compared"
             );
             assert_eq!(counts.triangles_submitted, 3 + 2 * face_count as u64);
