@@ -18,6 +18,7 @@ use occult_core::{compose, Affine3A, Containment, ItemId, NodeId, NodeKind, Scen
 use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 use occult_spatial::Bvh;
 
+use crate::zbuffer::MAX_BRUTE_FORCE_ITEMS as MAX_FRAME_TRIANGLES;
 use crate::{check_frame, AlgorithmInfo, FrameStats, ParamDoc, Phase, RenderError, RenderOptions, Renderer, Result};
 
 /// Tunables of [`FrustumCulling`].
@@ -27,6 +28,9 @@ pub struct FrustumOptions {
     pub mesh_leaf_size: usize,
     /// Instances per BVH leaf of a group (≥ 1).
     pub group_leaf_size: usize,
+    /// Draws handed to the rasterizer at a time (≥ 1): bounds a frame's memory where many
+    /// instances lie in the view (each batch past the first walks the hierarchy again).
+    pub batch_draws: usize,
 }
 
 impl Default for FrustumOptions {
@@ -34,6 +38,7 @@ impl Default for FrustumOptions {
         Self {
             mesh_leaf_size: 256,
             group_leaf_size: 4,
+            batch_draws: 1 << 20,
         }
     }
 }
@@ -53,6 +58,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             default: "4",
             help: "instances per BVH leaf of a group (>= 1)",
         },
+        ParamDoc {
+            key: "batch",
+            default: "1048576",
+            help: "draws handed to the rasterizer at a time (>= 1; about 100 bytes each): a frame with more walks the hierarchy again per batch",
+        },
     ],
     conservative: true,
     build: |scene, options, params| {
@@ -60,6 +70,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         let fo = FrustumOptions {
             mesh_leaf_size: params.get("leaf", defaults.mesh_leaf_size)?,
             group_leaf_size: params.get("group_leaf", defaults.group_leaf_size)?,
+            batch_draws: params.get("batch", defaults.batch_draws)?,
         };
         Ok(Box::new(FrustumCulling::with_options(scene, options, &fo)?))
     },
@@ -71,6 +82,8 @@ pub struct FrustumCulling {
     raster: Rasterizer,
     /// Per node: its hierarchy (None when small enough to test as one box).
     hierarchies: Vec<Option<Bvh>>,
+    /// [`FrustumOptions::batch_draws`].
+    batch_draws: usize,
 }
 
 impl FrustumCulling {
@@ -91,6 +104,9 @@ impl FrustumCulling {
             return Err(RenderError::BadParameter(
                 "frustum: leaf sizes must be at least 1".into(),
             ));
+        }
+        if fo.batch_draws == 0 {
+            return Err(RenderError::BadParameter("frustum: batch must be at least 1".into()));
         }
         let raster = Rasterizer::new(options.raster.clone())?;
         let hierarchies = raster.install(|| {
@@ -120,6 +136,7 @@ impl FrustumCulling {
             scene,
             raster,
             hierarchies,
+            batch_draws: fo.batch_draws,
         })
     }
 }
@@ -129,13 +146,44 @@ struct Walk<'a> {
     scene: &'a Scene,
     hierarchies: &'a [Option<Bvh>],
     view: &'a View,
+    /// Draws of this walk's batch: those after the first `skip` in traversal order, at most
+    /// `cap` of them.
     draws: Vec<Draw<'a>>,
+    skip: usize,
+    cap: usize,
+    /// Draws met so far in traversal order, and their triangles.
+    met: usize,
+    triangles: u64,
+    /// Draws met beyond the batch.
+    more: bool,
+    /// The triangles met passed [`MAX_FRAME_TRIANGLES`]: the walk stops.
+    too_many: bool,
+    /// Index lists of the leaves kept in the mesh being walked.
+    leaves: Vec<&'a [u32]>,
     stats: FrameStats,
 }
 
 impl<'a> Walk<'a> {
     /// Visits node `id` placed by `world_from_node`; `inside` when an ancestor was wholly inside.
+    /// Meets a draw of `triangles` triangles, in traversal order.
+    fn draw(&mut self, draw: Draw<'a>, triangles: usize) {
+        self.triangles += triangles as u64;
+        self.too_many |= self.triangles > MAX_FRAME_TRIANGLES;
+        self.met += 1;
+        if self.met <= self.skip {
+            return;
+        }
+        if self.draws.len() < self.cap {
+            self.draws.push(draw);
+        } else {
+            self.more = true;
+        }
+    }
+
     fn node(&mut self, id: NodeId, world_from_node: &Affine3A, first_item: ItemId, inside: bool) {
+        if self.too_many {
+            return;
+        }
         let node = self.scene.node(id);
         let frustum = self.view.frustum(world_from_node);
         let test = |stats: &mut FrameStats, b: &occult_core::Aabb| -> Containment {
@@ -163,19 +211,17 @@ impl<'a> Walk<'a> {
                 if mesh.triangle_count() == 0 {
                     return;
                 }
+                let whole = Draw {
+                    mesh,
+                    triangles: DrawTriangles::All,
+                    clip_from_object,
+                    first_item,
+                };
                 let bvh = match (&self.hierarchies[id.index()], inside) {
                     (Some(bvh), false) => bvh,
-                    _ => {
-                        self.draws.push(Draw {
-                            mesh,
-                            triangles: DrawTriangles::All,
-                            clip_from_object,
-                            first_item,
-                        });
-                        return;
-                    }
+                    _ => return self.draw(whole, mesh.triangle_count()),
                 };
-                let first_draw = self.draws.len();
+                self.leaves.clear();
                 let mut kept = 0usize;
                 let mut stack = vec![(0u32, false)];
                 while let Some((n, inside)) = stack.pop() {
@@ -189,12 +235,7 @@ impl<'a> Walk<'a> {
                     if inside || bn.is_leaf() {
                         let list = &bvh.primitive_indices()[bn.range()];
                         kept += list.len();
-                        self.draws.push(Draw {
-                            mesh,
-                            triangles: DrawTriangles::List(list),
-                            clip_from_object,
-                            first_item,
-                        });
+                        self.leaves.push(list);
                     } else {
                         stack.push((bn.second_child, false));
                         stack.push((n + 1, false));
@@ -204,14 +245,20 @@ impl<'a> Walk<'a> {
                 // vertices. When most of the mesh survived, drawing it whole is cheaper (the
                 // rasterizer's outcode test drops the rest at a few ns each).
                 if kept * 2 > mesh.triangle_count() {
-                    self.draws.truncate(first_draw);
-                    self.draws.push(Draw {
-                        mesh,
-                        triangles: DrawTriangles::All,
-                        clip_from_object,
-                        first_item,
-                    });
+                    return self.draw(whole, mesh.triangle_count());
                 }
+                let leaves = std::mem::take(&mut self.leaves);
+                for &list in &leaves {
+                    let triangles = DrawTriangles::List(list);
+                    self.draw(
+                        Draw {
+                            triangles,
+                            ..whole.clone()
+                        },
+                        list.len(),
+                    );
+                }
+                self.leaves = leaves;
             }
             NodeKind::Group(instances) => {
                 let visit = |w: &mut Self, i: usize, inside: bool| {
@@ -261,23 +308,190 @@ impl Renderer for FrustumCulling {
         self.raster.clear(frame);
         let clear = start.elapsed();
         let t = Instant::now();
-        let mut walk = Walk {
-            scene: &self.scene,
-            hierarchies: &self.hierarchies,
-            view,
-            draws: Vec::new(),
-            stats: FrameStats::default(),
+        let walk = |skip: usize, cap: usize| {
+            let mut walk = Walk {
+                scene: &self.scene,
+                hierarchies: &self.hierarchies,
+                view,
+                draws: Vec::new(),
+                skip,
+                cap,
+                met: 0,
+                triangles: 0,
+                more: false,
+                too_many: false,
+                leaves: Vec::new(),
+                stats: FrameStats::default(),
+            };
+            walk.node(self.scene.root(), &Affine3A::IDENTITY, 0, false);
+            walk
         };
-        walk.node(self.scene.root(), &Affine3A::IDENTITY, 0, false);
-        let Walk { draws, mut stats, .. } = walk;
+        // The first walk meets every draw (keeping the first batch) and gives the statistics.
+        let Walk {
+            mut draws,
+            mut stats,
+            met,
+            triangles,
+            mut more,
+            too_many,
+            ..
+        } = walk(0, self.batch_draws);
         stats.phases.add(Phase::Clear, clear);
         stats.phases.add(Phase::Cull, t.elapsed());
-        crate::rasterize(&mut self.raster, view, frame, &draws, &mut stats);
+        if too_many {
+            return Err(RenderError::TooManyInView {
+                renderer: "frustum",
+                limit: MAX_FRAME_TRIANGLES,
+            });
+        }
+        let mut done = 0;
+        loop {
+            crate::rasterize(&mut self.raster, view, frame, &draws, &mut stats);
+            done += draws.len();
+            if !more {
+                break;
+            }
+            let t = Instant::now();
+            let next = walk(done, self.batch_draws);
+            stats.phases.add(Phase::Cull, t.elapsed());
+            (draws, more) = (next.draws, next.more);
+        }
+        debug_assert_eq!((done, stats.triangles_submitted), (met, triangles));
         stats.total = start.elapsed();
         Ok(stats)
     }
 
     fn memory_bytes(&self) -> usize {
         self.hierarchies.iter().flatten().map(Bvh::memory_bytes).sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use occult_core::{Camera, Instance, Mesh, SceneBuilder, Vec3};
+
+    /// A `g` × `g`-quad grid over the unit square at z = 0.
+    fn grid(g: u32) -> Mesh {
+        let n = g + 1;
+        let positions = (0..n * n)
+            .map(|i| Vec3::new((i % n) as f32 / g as f32, (i / n) as f32 / g as f32, 0.0))
+            .collect();
+        let triangles = (0..g * g)
+            .flat_map(|q| {
+                let (x, y) = (q % g, q / g);
+                let a = y * n + x;
+                [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
+            })
+            .collect();
+        Mesh::new(positions, triangles).unwrap()
+    }
+
+    fn render(scene: &Arc<Scene>, params: &str, view: &View) -> Result<(FrameStats, Frame)> {
+        let spec = if params.is_empty() {
+            "frustum".to_string()
+        } else {
+            format!("frustum:{params}")
+        };
+        let mut r = crate::AlgoSpec::parse(&spec)?.build(scene.clone(), &RenderOptions::default())?;
+        let mut f = Frame::new(view.width(), view.height()).unwrap();
+        let stats = r.render(view, &mut f)?;
+        Ok((stats, f))
+    }
+
+    /// Batches of any size draw the frame and count what one batch does.
+    #[test]
+    fn batches_draw_what_one_batch_draws() {
+        let mut b = SceneBuilder::new();
+        let big = b.add_mesh("big", grid(40)).unwrap();
+        let small = b.add_mesh("small", grid(3)).unwrap();
+        let instances = (0..30)
+            .map(|i| Instance {
+                parent_from_child: Affine3A::from_translation(Vec3::new(
+                    (i % 6) as f32 * 1.2,
+                    (i / 6) as f32 * 1.2,
+                    0.0,
+                )),
+                child: if i % 3 == 0 { big } else { small },
+            })
+            .collect();
+        let root = b.add_group("grid", instances).unwrap();
+        let scene = Arc::new(b.build(root).unwrap());
+        // Close to the grid, so that the big meshes are cut by the frustum (index lists).
+        let camera = Camera::look_at(Vec3::new(2.0, 2.5, 3.0), Vec3::new(3.0, 3.0, 0.0));
+        let view = View::new(camera, 64, 48).unwrap();
+        let (one, frame) = render(&scene, "leaf=16", &view).unwrap();
+        assert!(one.triangles_rasterized > 100, "the view shows the grid");
+        for batch in [1, 2, 7] {
+            let (s, f) = render(&scene, &format!("leaf=16,batch={batch}"), &view).unwrap();
+            assert_eq!(f.items(), frame.items(), "batch={batch}");
+            assert_eq!(
+                (
+                    s.triangles_submitted,
+                    s.triangles_rasterized,
+                    s.nodes_visited,
+                    s.boxes_tested,
+                    s.boxes_culled
+                ),
+                (
+                    one.triangles_submitted,
+                    one.triangles_rasterized,
+                    one.nodes_visited,
+                    one.boxes_tested,
+                    one.boxes_culled
+                ),
+                "batch={batch}"
+            );
+        }
+        assert!(render(&scene, "batch=0", &view).is_err());
+    }
+
+    /// A view of more triangles than a frame can draw is an error, found before drawing, for
+    /// the renderers that walk everything in the view (the others cull what lies behind, or
+    /// refuse the scene): never a failed allocation.
+    #[test]
+    fn too_many_triangles_in_view_is_an_error() {
+        let mut b = SceneBuilder::new();
+        // 20,000 triangles, under levels of 100, 10, 10 and 100 instances: 2·10^10 in view.
+        let mut id = b.add_mesh("grid", grid(100)).unwrap();
+        for (level, count) in [100, 10, 10, 100].into_iter().enumerate() {
+            let instances = (0..count)
+                .map(|i| Instance {
+                    parent_from_child: Affine3A::from_translation(Vec3::new(0.0, 0.0, -(i as f32) * 1e-3)),
+                    child: id,
+                })
+                .collect();
+            id = b.add_group(format!("level{level}"), instances).unwrap();
+        }
+        let scene = Arc::new(b.build(id).unwrap());
+        let view = View::new(
+            Camera::look_at(Vec3::new(0.5, 0.5, 3.0), Vec3::new(0.5, 0.5, 0.0)),
+            32,
+            32,
+        )
+        .unwrap();
+        let e = render(&scene, "", &view).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                RenderError::TooManyInView {
+                    renderer: "frustum",
+                    limit: MAX_FRAME_TRIANGLES
+                }
+            ),
+            "{e}"
+        );
+        assert!(e.to_string().contains("more than 2000000000 triangle instances"), "{e}");
+        // lzb walks the view in the same way, collecting leaves.
+        let lzb = crate::AlgoSpec::parse("lzb")
+            .unwrap()
+            .build(scene.clone(), &RenderOptions::default())
+            .unwrap()
+            .render(&view, &mut Frame::new(32, 32).unwrap())
+            .map(drop);
+        assert!(
+            matches!(lzb, Err(RenderError::TooManyInView { renderer: "lzb", .. })),
+            "{lzb:?}"
+        );
     }
 }

@@ -70,6 +70,15 @@ pub enum RenderError {
     /// Unknown algorithm name.
     #[error("unknown algorithm '{0}' (known: {known})", known = Algorithm::names().join(", "))]
     UnknownAlgorithm(String),
+    /// More triangles lie in the view than one frame can draw (the message leaves the
+    /// renderer's name to the caller, as the command line names it already).
+    #[error("more than {limit} triangle instances lie in the view, more than one frame can draw; choose a view that sees less")]
+    TooManyInView {
+        /// The renderer that stopped.
+        renderer: &'static str,
+        /// The most triangles one frame draws.
+        limit: u64,
+    },
     /// A dynamic scene update that cannot be applied (the message names the entry and why).
     #[error("scene update: {0}")]
     Update(String),

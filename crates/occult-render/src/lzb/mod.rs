@@ -75,6 +75,7 @@ use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 use occult_spatial::{Octree, OctreeConfig};
 use rayon::prelude::*;
 
+use crate::zbuffer::MAX_BRUTE_FORCE_ITEMS as MAX_FRAME_TRIANGLES;
 use crate::{
     check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result,
 };
@@ -714,11 +715,18 @@ struct Walk<'a> {
     instances: Vec<(InstanceRec, ItemId, Mat4)>,
     near: Vec<(u32, u32)>,
     far: Vec<(u32, u32)>,
+    /// Triangle references of the leaves met (a triangle in several leaves counts in each).
+    triangles: u64,
+    /// `triangles` passed [`MAX_FRAME_TRIANGLES`]: the walk stops, its lists bounded.
+    too_many: bool,
     stats: FrameStats,
 }
 
 impl Walk<'_> {
     fn node(&mut self, id: NodeId, world_from_node: &Affine3A, base: ItemId, inside: bool) {
+        if self.too_many {
+            return;
+        }
         let node = self.lzb.scene.node(id);
         let frustum = self.ctx.view.frustum(world_from_node);
         let test = |stats: &mut FrameStats, b: &Aabb| -> Containment {
@@ -760,6 +768,8 @@ impl Walk<'_> {
                         };
                     if on.is_leaf() {
                         any = true;
+                        self.triangles += on.count as u64;
+                        self.too_many |= self.triangles > MAX_FRAME_TRIANGLES;
                         // The leaf's tight box (`Octree::tighten_leaves`).
                         if self.ctx.is_near(w_row, &on.bounds) {
                             self.near.push((inst, n));
@@ -868,6 +878,8 @@ impl Renderer for Lzb {
             instances: Vec::new(),
             near: Vec::new(),
             far: Vec::new(),
+            triangles: 0,
+            too_many: false,
             stats: FrameStats::default(),
         };
         walk.node(self.scene.root(), &Affine3A::IDENTITY, 0, false);
@@ -875,9 +887,16 @@ impl Renderer for Lzb {
             instances,
             near,
             far,
+            too_many,
             stats: wstats,
             ..
         } = walk;
+        if too_many {
+            return Err(RenderError::TooManyInView {
+                renderer: "lzb",
+                limit: MAX_FRAME_TRIANGLES,
+            });
+        }
         stats.nodes_visited += wstats.nodes_visited;
         stats.boxes_tested += wstats.boxes_tested;
         stats.boxes_culled += wstats.boxes_culled;
