@@ -44,7 +44,8 @@ impl Camera {
     ///
     /// # Errors
     /// [`CoreError::DegenerateCamera`] for non-finite values, a fov outside (0°, 180°),
-    /// `near <= 0`, `near >= far`, `eye == target`, or `up` parallel to the view direction.
+    /// `near <= 0`, `near >= far`, `eye == target`, `up` parallel to the view direction, or
+    /// coordinates so large that `target - eye` overflows 32-bit floats.
     pub fn validate(&self) -> Result<()> {
         let bad = |why: &str| Err(CoreError::DegenerateCamera(why.to_string()));
         if !(self.eye.is_finite() && self.target.is_finite() && self.up.is_finite()) {
@@ -63,10 +64,18 @@ impl Camera {
             ));
         }
         let dir = self.target - self.eye;
-        if dir.length_squared() <= f32::MIN_POSITIVE || !dir.length_squared().is_finite() {
+        if !dir.is_finite() {
+            return bad(
+                "eye and target are too far apart: target - eye overflows 32-bit floats (coordinates too large)",
+            );
+        }
+        // Compared by the largest component, whose square cannot overflow where the squared
+        // length would (eye at 1e30 is far, not coincident).
+        let largest = dir.abs().max_element();
+        if largest * largest <= f32::MIN_POSITIVE {
             return bad("eye and target coincide");
         }
-        if dir.normalize().cross(self.up.normalize_or_zero()).length_squared() < 1e-10 {
+        if unit(dir).cross(unit(self.up)).length_squared() < 1e-10 {
             return bad("up is parallel to the view direction (or zero)");
         }
         Ok(())
@@ -74,8 +83,19 @@ impl Camera {
 
     /// Unit view direction.
     pub fn direction(&self) -> Vec3 {
-        (self.target - self.eye).normalize()
+        unit(self.target - self.eye)
     }
+}
+
+/// `v` scaled to unit length, or zero for a zero or non-finite `v`. Scaled by its largest
+/// component first, so that vectors whose squared length overflows `f32` (components beyond
+/// about 1.8e19) still normalize.
+fn unit(v: Vec3) -> Vec3 {
+    let largest = v.abs().max_element();
+    if !(largest > 0.0 && largest.is_finite()) {
+        return Vec3::ZERO;
+    }
+    (v / largest).normalize_or_zero()
 }
 
 /// A validated camera with a resolution, and its matrices.
@@ -104,7 +124,9 @@ impl View {
         let clip_from_view = reversed_z_infinite(camera.fov_y_deg.to_radians(), aspect, camera.near);
         let clip_from_world = clip_from_view * view_from_world;
         if !clip_from_world.is_finite() {
-            return Err(CoreError::DegenerateCamera("view matrix is not finite".into()));
+            return Err(CoreError::DegenerateCamera(
+                "the view matrix overflows 32-bit floats (eye coordinates too large)".into(),
+            ));
         }
         Ok(Self {
             camera,
@@ -171,8 +193,8 @@ impl View {
 
 /// Right-handed look-at: the camera looks down its `-z`, `+y` is up.
 fn look_at(eye: Vec3, target: Vec3, up: Vec3) -> Mat4 {
-    let f = (target - eye).normalize();
-    let s = f.cross(up).normalize();
+    let f = unit(target - eye);
+    let s = f.cross(unit(up)).normalize();
     let u = s.cross(f);
     Mat4::from_cols(
         Vec4::new(s.x, u.x, -f.x, 0.0),
@@ -239,6 +261,36 @@ mod tests {
         let mut c = cam();
         c.eye.x = f32::NAN;
         assert!(View::new(c, 10, 10).is_err());
+    }
+
+    #[test]
+    fn huge_coordinates_work_or_say_they_are_too_large() {
+        // |target - eye|^2 overflows f32, the direction does not: a valid, distant camera.
+        let mut c = Camera::look_at(Vec3::new(1e30, 0.0, 0.0), Vec3::ZERO);
+        c.far = 1e31;
+        let v = View::new(c, 10, 10).unwrap();
+        assert!(v.clip_from_world().is_finite());
+        assert!((c.direction() - Vec3::NEG_X).length() < 1e-6);
+        // A scene at ±1e20 framed from 2e20: the view works.
+        let mut c = Camera::look_at(Vec3::new(0.0, 1e20, 2e20), Vec3::ZERO);
+        c.near = 1e18;
+        c.far = 1e21;
+        View::new(c, 10, 10).unwrap();
+        // target - eye overflows: said so, not "coincide".
+        let c = Camera::look_at(Vec3::new(3e38, 0.0, 0.0), Vec3::new(-3e38, 0.0, 0.0));
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("too large") && !e.contains("coincide"), "{e}");
+        // A huge up vector is a direction like any other.
+        let mut c = cam();
+        c.up = Vec3::new(0.0, 1e30, 0.0);
+        View::new(c, 10, 10).unwrap();
+        // The translation of the view matrix overflows: said so.
+        let c = Camera::look_at(Vec3::splat(3e38), Vec3::new(3e38, 3e38, 2e38));
+        let e = View::new(c, 10, 10).unwrap_err().to_string();
+        assert!(e.contains("too large"), "{e}");
+        // Coincident stays coincident.
+        let c = Camera::look_at(Vec3::ONE, Vec3::ONE);
+        assert!(c.validate().unwrap_err().to_string().contains("coincide"));
     }
 
     #[test]
