@@ -341,6 +341,15 @@ fn info_describes_a_scene() {
     assert!(info["bounds_min"].as_array().unwrap().len() == 3);
     let text = ok(&["info", CITY]);
     assert!(text.contains("triangles") && text.contains("instances"), "{text}");
+    // Variants no instance reaches are not counted: never more unique than instances.
+    for spec in ["city:blocks=1", "forest:trees=1,patches=1", CITY] {
+        let info: Value = serde_json::from_str(&ok(&["info", spec, "--json"])).unwrap();
+        let (unique, all) = (
+            info["unique_triangles"].as_u64().unwrap(),
+            info["triangles"].as_u64().unwrap(),
+        );
+        assert!(unique <= all, "{spec}: {unique} unique of {all}");
+    }
 }
 
 #[test]

@@ -291,17 +291,43 @@ impl Scene {
     pub fn item_count(&self) -> u64 {
         self.node(self.root).item_count
     }
-    /// Triangles stored (each mesh counted once, however often it is instanced).
+    /// Distinct triangles the scene shows: every mesh reachable from the root counted once,
+    /// however often it is instanced. Meshes that no instance reaches (a builder may hold
+    /// them) are left out, so this never exceeds [`Scene::item_count`].
     pub fn unique_triangle_count(&self) -> u64 {
+        let reachable = self.reachable();
         self.nodes
             .iter()
-            .filter_map(|n| n.mesh())
+            .zip(&reachable)
+            .filter(|(_, &r)| r)
+            .filter_map(|(n, _)| n.mesh())
             .map(|m| m.triangle_count() as u64)
             .sum()
     }
-    /// Instances stored in all groups.
+    /// Instances stored in the groups reachable from the root (each group counted once).
     pub fn instance_count(&self) -> u64 {
-        self.nodes.iter().map(|n| n.instances().len() as u64).sum()
+        let reachable = self.reachable();
+        self.nodes
+            .iter()
+            .zip(&reachable)
+            .filter(|(_, &r)| r)
+            .map(|(n, _)| n.instances().len() as u64)
+            .sum()
+    }
+
+    /// Per node, whether the root reaches it. One pass from the root down: a group only
+    /// refers to nodes added before it, so children have smaller ids than their parents.
+    fn reachable(&self) -> Vec<bool> {
+        let mut reachable = vec![false; self.nodes.len()];
+        reachable[self.root.index()] = true;
+        for i in (0..=self.root.index()).rev() {
+            if reachable[i] {
+                for instance in self.nodes[i].instances() {
+                    reachable[instance.child.index()] = true;
+                }
+            }
+        }
+        reachable
     }
     /// Approximate bytes held by the scene (meshes, instances, offsets, names).
     pub fn memory_bytes(&self) -> usize {
@@ -435,6 +461,41 @@ mod tests {
             .collect();
         let root = b.add_group("grid", rows).unwrap();
         b.build(root).unwrap()
+    }
+
+    #[test]
+    fn unreachable_meshes_are_not_counted() {
+        // Variants built but never instanced (as generators with few placements leave them):
+        // 1 + 1000 + 500 triangles stored, one triangle shown twice.
+        let mut b = SceneBuilder::new();
+        let big = |n: u32| {
+            let p = (0..n + 2).map(|i| Vec3::new(i as f32, (i % 2) as f32, 0.0)).collect();
+            Mesh::new(p, (0..n).map(|i| [i, i + 1, i + 2]).collect()).unwrap()
+        };
+        let used = b.add_mesh("used", tri()).unwrap();
+        let unused = b.add_mesh("unused", big(1000)).unwrap();
+        let _orphan = b.add_mesh("orphan", big(500)).unwrap();
+        let twice = |child| {
+            (0..2)
+                .map(|i| Instance {
+                    parent_from_child: Affine3A::from_translation(Vec3::Z * i as f32),
+                    child,
+                })
+                .collect::<Vec<_>>()
+        };
+        let _unused_group = b.add_group("unused group", twice(unused)).unwrap();
+        let root = b.add_group("root", twice(used)).unwrap();
+        let s = b.build(root).unwrap();
+        assert_eq!(s.item_count(), 2);
+        assert_eq!(s.unique_triangle_count(), 1);
+        assert!(s.unique_triangle_count() <= s.item_count());
+        assert_eq!(
+            s.instance_count(),
+            2,
+            "the unreachable group's instances are not counted"
+        );
+        let one = Scene::from_mesh("one", tri()).unwrap();
+        assert_eq!((one.unique_triangle_count(), one.instance_count()), (1, 0));
     }
 
     #[test]

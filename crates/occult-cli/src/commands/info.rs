@@ -42,7 +42,7 @@ pub fn run(a: InfoArgs) -> Result<()> {
         (
             "unique triangles",
             format!(
-                "{} (stored once however often instanced)",
+                "{} (each mesh reachable from the root once, however often instanced)",
                 output::count(s.unique_triangles as f64)
             ),
         ),
