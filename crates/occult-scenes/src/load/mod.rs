@@ -144,13 +144,20 @@ pub fn load_file(path: &Path) -> Result<LoadedScene, LoadError> {
 }
 
 /// Where in a file an error lies. Displays as the text that follows the file name:
-/// `" line 42"`, `": vertex 17"`, `" line 20: face 3"`, or nothing for the whole file.
+/// `" line 42"`, `" line 3, column 9"`, `": vertex 17"`, `" line 20: face 3"`, or nothing for the whole file.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Location {
     /// The file as a whole.
     File,
     /// A line of a text file, 1-based.
     Line(u64),
+    /// A line and a column of a text file, both 1-based.
+    LineColumn {
+        /// The line.
+        line: u64,
+        /// The column (characters from the line's start, 1 for the first).
+        column: u64,
+    },
     /// An element of a kind, 0-based: `vertex 17`, `face 3`, `accessor 2`.
     Element {
         /// What kind of element (`vertex`, `face`, `mesh`, `accessor`, ...).
@@ -186,6 +193,7 @@ impl fmt::Display for Location {
         match self {
             Location::File => Ok(()),
             Location::Line(line) => write!(f, " line {line}"),
+            Location::LineColumn { line, column } => write!(f, " line {line}, column {column}"),
             Location::Element { kind, index } => write!(f, ": {kind} {index}"),
             Location::ElementAtLine { kind, index, line } => write!(f, " line {line}: {kind} {index}"),
             Location::Part(part) => write!(f, ": {part}"),

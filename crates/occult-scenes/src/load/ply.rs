@@ -433,17 +433,21 @@ impl PropertyAccess for PlyRecord {
 }
 
 fn header_error(path: &Path, error: ParseError) -> LoadError {
-    let location = error.line().map_or(Location::File, |line| Location::Line(line as u64));
     let text = error.to_string();
     // `ParseError` displays as "Line N: message"; the location already says the line.
-    let message = match error.line() {
-        Some(line) => text
-            .strip_prefix(&format!("Line {line}: "))
-            .unwrap_or(&text)
-            .to_string(),
-        None => text,
+    let raw = match error.line() {
+        Some(line) => text.strip_prefix(&format!("Line {line}: ")).unwrap_or(&text),
+        None => &text,
     };
-    let message = message.replace("\n\t", "; ").replace('\n', " ");
+    let (column, message) = describe_header_error(raw);
+    let location = match (error.line(), column) {
+        (Some(line), Some(column)) => Location::LineColumn {
+            line: line as u64,
+            column,
+        },
+        (Some(line), None) => Location::Line(line as u64),
+        (None, _) => Location::File,
+    };
     if error.kind() == std::io::ErrorKind::UnexpectedEof {
         LoadError::Truncated {
             path: path.to_path_buf(),
@@ -456,6 +460,95 @@ fn header_error(path: &Path, error: ParseError) -> LoadError {
             location,
             message: format!("bad header: {message}"),
         }
+    }
+}
+
+/// One line from the text of a header `ParseError` of `ply-rs`, which reads
+/// `"<message>\n\tString: '<line>'\n\tError: <Debug of the grammar's error>"`: the message,
+/// the offending line quoted, and what the grammar expected at which column (returned apart,
+/// 1-based). Messages that embed Debug dumps get words instead.
+fn describe_header_error(raw: &str) -> (Option<u64>, String) {
+    let mut parts = raw.split("\n\t");
+    let head = parts.next().unwrap_or("").trim();
+    let mut line = None;
+    let mut grammar = None;
+    for part in parts {
+        if let Some(l) = part.strip_prefix("String: ") {
+            line = Some(l.trim().trim_matches('\'').trim_end());
+        } else if let Some(e) = part.strip_prefix("Error: ") {
+            grammar = Some(e);
+        }
+    }
+    let quoted = line.map_or(String::new(), |l| format!("'{l}'"));
+    let magic = head.starts_with("Expected magic number");
+    let mut message = if magic {
+        format!("the first line must be 'ply', not {quoted}")
+    } else if head.starts_with("Property") && head.contains("without preceding element") {
+        format!("a property line before any element line: {quoted}")
+    } else if head.starts_with("Found contradicting format") {
+        format!("a second format line contradicts the first: {quoted}")
+    } else if head.starts_with("Couldn't parse line") {
+        format!("cannot parse line {quoted}")
+    } else {
+        let head = head.trim_end_matches('.').replace(['\n', '\t'], " ");
+        match line {
+            Some(_) => format!("{head}: {quoted}"),
+            None => head,
+        }
+    };
+    let column = grammar
+        .and_then(|g| debug_field(g, "column: "))
+        .and_then(|c| c.parse().ok());
+    // The grammar's set for the first line lists every header keyword: no help there.
+    if let Some(expected) = grammar.filter(|_| !magic).and_then(expected_tokens) {
+        message.push_str(&format!(": expected {expected}"));
+    }
+    (column, message)
+}
+
+/// The digits after `key` in a Debug dump.
+fn debug_field<'a>(dump: &'a str, key: &str) -> Option<&'a str> {
+    let rest = &dump[dump.find(key)? + key.len()..];
+    let end = rest.find(|c: char| !c.is_ascii_digit()).unwrap_or(rest.len());
+    (end > 0).then(|| &rest[..end])
+}
+
+/// The tokens of the `ExpectedSet { expected: {...} }` of a Debug dump of a `peg` error, as
+/// words: `"element"` → element, `[' '|'\t']` → a space, `['0'..='9']` → a digit.
+fn expected_tokens(dump: &str) -> Option<String> {
+    let key = "expected: {";
+    let body = &dump[dump.rfind(key)? + key.len()..];
+    // The set holds Debug forms of strings: quoted, with backslash escapes.
+    let mut tokens: Vec<String> = Vec::new();
+    let mut chars = body.chars();
+    while let Some(c) = chars.next() {
+        match c {
+            '}' => break,
+            '"' => {
+                let mut token = String::new();
+                while let Some(c) = chars.next() {
+                    match c {
+                        '\\' => token.extend(chars.next()),
+                        '"' => break,
+                        c => token.push(c),
+                    }
+                }
+                tokens.push(match token.as_str() {
+                    r"[' '|'\t']" => "a space".to_string(),
+                    "['0'..='9']" => "a digit".to_string(),
+                    r#""\n""# | r#""\r\n""# | r"['\n'|'\r']" => "the end of the line".to_string(),
+                    t => t.trim_matches('"').to_string(),
+                });
+            }
+            _ => {}
+        }
+    }
+    tokens.retain(|t| !t.is_empty());
+    tokens.dedup();
+    match tokens.len() {
+        0 => None,
+        1 => Some(tokens.remove(0)),
+        n => Some(format!("one of {} or {}", tokens[..n - 1].join(", "), tokens[n - 1])),
     }
 }
 
@@ -649,6 +742,52 @@ fn parse_f64(token: &[u8]) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn header_errors_are_one_line_with_line_column_and_what_was_expected() {
+        let dir = std::env::temp_dir().join(format!("occult-ply-header-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let error = |name: &str, text: &str| {
+            let path = dir.join(name);
+            std::fs::write(&path, text).unwrap();
+            load_ply(&path).unwrap_err().to_string()
+        };
+        let e = error("typo.ply", "ply\nformat ascii 1.0\nelment vertex 3\nend_header\n");
+        assert_eq!(
+            e,
+            format!(
+                "{} line 3, column 1: bad header: cannot parse line 'elment vertex 3': expected one of comment, element, end_header, format, obj_info, ply or property",
+                dir.join("typo.ply").display()
+            )
+        );
+        let e = error("count.ply", "ply\nformat ascii 1.0\nelement vertex x\nend_header\n");
+        assert!(
+            e.ends_with("line 3, column 16: bad header: cannot parse line 'element vertex x': expected one of a space or a digit"),
+            "{e}"
+        );
+        let e = error(
+            "type.ply",
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty flot x\nend_header\n",
+        );
+        assert!(e.contains("line 4, column 10:") && e.contains("float, float32"), "{e}");
+        let e = error("magic.ply", "plx\nformat ascii 1.0\n");
+        assert!(
+            e.ends_with("line 1, column 1: bad header: the first line must be 'ply', not 'plx'"),
+            "{e}"
+        );
+        let e = error("orphan.ply", "ply\nproperty float x\nend_header\n");
+        assert!(
+            e.ends_with("line 2: bad header: a property line before any element line: 'property float x'"),
+            "{e}"
+        );
+        for e in [e, error("noformat.ply", "ply\nelement vertex 3\nend_header\n")] {
+            assert!(
+                !e.contains('{') && !e.contains('\n') && !e.contains("ParseError"),
+                "{e}"
+            );
+        }
+        std::fs::remove_dir_all(&dir).ok();
+    }
     use ply_rs_bw::ply::{Addable, PropertyDef};
 
     fn header(encoding: Encoding, vertex_count: usize) -> Header {
