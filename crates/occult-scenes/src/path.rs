@@ -223,11 +223,34 @@ fn validate_views(views: &[Camera]) -> Result<(), PathError> {
 /// A camera looking at the centre of `bounds` from `direction` (towards the eye), at the
 /// smallest distance where every corner of `bounds` lies within `fov_y_deg` both vertically and
 /// horizontally (so any landscape aspect ratio shows it all), plus 5 %; near and far planes
-/// just hold the box. Degenerate bounds are treated as a small box.
+/// just hold the box. Degenerate bounds are treated as a small box. Flat bounds (a plane
+/// model) are never looked at edge-on: a direction within about 6° of their plane is turned
+/// about 27° out of it ([`out_of_flat_planes`]).
 pub fn framing_camera(bounds: &Aabb, direction: Vec3, fov_y_deg: f32) -> Camera {
     let frame = Framing::new(bounds, fov_y_deg);
-    let back = direction.normalize_or(Vec3::new(0.0, 0.42, -0.9));
+    let back = out_of_flat_planes(bounds, direction.normalize_or(Vec3::new(0.0, 0.42, -0.9)));
     frame.camera(back, frame.distance(back))
+}
+
+/// `back` (unit) turned out of the plane of `bounds` along every axis on which they are flat
+/// (under 1 % of their largest side): where its component along such an axis is under a tenth
+/// of the rest, it becomes half of the rest (atan ½ ≈ 27° out of the plane).
+fn out_of_flat_planes(bounds: &Aabb, back: Vec3) -> Vec3 {
+    let size = bounds.size();
+    let largest = size.max_element();
+    if !(largest > 0.0 && largest.is_finite()) {
+        return back;
+    }
+    let mut b = back;
+    for axis in 0..3 {
+        let mut rest = b;
+        rest[axis] = 0.0;
+        let rest = rest.length();
+        if size[axis] < 0.01 * largest && b[axis].abs() < 0.1 * rest {
+            b[axis] = if b[axis] < 0.0 { -0.5 * rest } else { 0.5 * rest };
+        }
+    }
+    b.normalize_or(back)
 }
 
 /// A box to frame and a field of view.
@@ -742,6 +765,26 @@ mod tests {
         assert_eq!(r.at(5.0), Vec3::new(3.0, 0.0, 2.0));
         assert_eq!(r.at(99.0), Vec3::new(3.0, 0.0, 4.0));
         assert_eq!(r.at(-1.0), Vec3::ZERO);
+    }
+
+    #[test]
+    fn flat_bounds_are_not_framed_edge_on() {
+        let front = Vec3::new(0.0, 0.42, -0.9);
+        // A triangle in the yz plane: the default direction lies in its plane.
+        let yz = Aabb::new(Vec3::new(0.0, -1.0, -1.0), Vec3::new(0.0, 1.0, 1.0));
+        let c = framing_camera(&yz, front, 60.0);
+        c.validate().unwrap();
+        let d = c.direction();
+        assert!(d.x.abs() > 0.4, "looks along {d}, within its plane");
+        // Flat in y (ground) and z (a wall facing the camera): the direction is kept.
+        for flat in [
+            Aabb::new(Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 0.0, 1.0)),
+            Aabb::new(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, 1.0, 0.0)),
+            Aabb::new(Vec3::splat(-1.0), Vec3::splat(1.0)),
+        ] {
+            let c = framing_camera(&flat, front, 60.0);
+            assert!((c.direction() + front.normalize()).length() < 1e-5, "{flat:?}");
+        }
     }
 
     #[test]
