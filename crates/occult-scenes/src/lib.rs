@@ -8,7 +8,8 @@
 //!   `occluder`; each a params struct with `Default`, a `generate` function and a default camera.
 //! - [`spec`]: [`parse_spec`] turns the one string the CLI takes into a [`SceneSpec`], whose
 //!   [`SceneSpec::build`] gives a [`BuiltScene`] (scene, name, default camera, loader warnings).
-//! - [`path`]: [`parse_path`] turns a path spec into views; [`path::write_path_json`] saves them.
+//! - [`path`]: [`parse_path`] turns a path spec into views ([`PathSpec`] checks one before the
+//!   scene exists, [`ViewSpec`] names one view); [`path::write_path_json`] saves them.
 //! - [`load`]: [`load::load_file`] reads a model file.
 //!
 //! ```
@@ -27,5 +28,5 @@ pub mod path;
 pub mod spec;
 
 pub use generate::{GenerateError, Generator, GeneratorInfo, ParamInfo};
-pub use path::{parse_path, PathError};
+pub use path::{parse_path, PathError, PathSpec, ViewSpec};
 pub use spec::{generators, parse_spec, BuiltScene, SceneSpec, SpecError};

@@ -18,6 +18,16 @@
 //!
 //! Paths are saved with [`write_path_json`] (the same format, every field written), so that
 //! benchmarks replay recorded walkthroughs.
+//!
+//! A spec is checked in two steps: [`PathSpec::parse`] checks everything that does not need the
+//! scene (kind, count; a file is read and its JSON checked), so that a bad spec fails before a
+//! scene is built; [`PathSpec::views`] then makes the cameras for a scene.
+//!
+//! A single view ([`ViewSpec`], `occult render --view`) is a path spec, meaning its first
+//! camera, or `PATH:i`, camera `i` (from 0) of `PATH`: `circle:8:3`, `default:0`,
+//! `cams.json:2`. A generated kind takes an index only after its count (`circle:120:3`), so that
+//! `circle:3` always means the path of three views, as `--path circle:3` does, and `circle:0`
+//! is refused as it is there.
 
 use crate::generate::{city, plant};
 use occult_core::{intersect_ray_triangle, Aabb, Affine3A, Camera, CoreError, NodeId, NodeKind, Ray, Scene, Vec3};
@@ -97,6 +107,18 @@ pub enum PathError {
         /// Views found.
         count: usize,
     },
+    /// A view index past the end of its path.
+    #[error("view '{view}': index {index} is past the end of path '{path}', which has {count} views")]
+    ViewIndex {
+        /// The view spec as given.
+        view: String,
+        /// The index asked for.
+        index: usize,
+        /// The path part of the spec.
+        path: String,
+        /// Views in that path.
+        count: usize,
+    },
     /// A view that cannot form a camera.
     #[error("camera path view {index}: {source}")]
     BadView {
@@ -157,36 +179,161 @@ impl ViewRecord {
     }
 }
 
-/// The views of path `spec` through `scene`.
+/// The views of path `spec` through `scene`: [`PathSpec::parse`], then [`PathSpec::views`].
 ///
 /// # Errors
 /// [`PathError::Empty`], [`PathError::Unknown`], [`PathError::BadCount`] for `N` outside
 /// `1..=MAX_VIEWS`; for files [`PathError::Io`], [`PathError::FileTooLarge`],
 /// [`PathError::Json`], [`PathError::ViewCount`]; [`PathError::BadView`] for a degenerate view.
 pub fn parse_path(spec: &str, scene: &Scene, default_camera: &Camera) -> Result<Vec<Camera>, PathError> {
-    let spec = spec.trim();
-    if spec.is_empty() {
-        return Err(PathError::Empty);
-    }
-    let (kind, count) = match spec.split_once(':') {
-        Some((k, n)) => (k, Some(n)),
-        None => (spec, None),
-    };
-    let views = match kind {
-        "default" if count.is_none() => vec![*default_camera],
-        "circle" | "street" | "flyover" => {
-            let n = parse_count(spec, count)?;
-            match kind {
-                "circle" => circle(&scene.bounds(), n, default_camera),
-                "street" => street(scene, n, default_camera),
-                _ => flyover(&scene.bounds(), n, default_camera),
-            }
+    PathSpec::parse(spec)?.views(scene, default_camera)
+}
+
+/// A path spec checked without a scene (module doc): the kind and count, or a file's views.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PathSpec {
+    /// `default`: the scene's default camera.
+    Default,
+    /// `circle:N`.
+    Circle(u32),
+    /// `street:N`.
+    Street(u32),
+    /// `flyover:N`.
+    Flyover(u32),
+    /// A JSON file of views, read; fields it leaves out come from the default camera.
+    File {
+        /// The file.
+        path: PathBuf,
+        /// Its views, 1..=[`MAX_VIEWS`] of them.
+        records: Vec<ViewRecord>,
+    },
+}
+
+impl PathSpec {
+    /// Parses `spec`; a file is read and its JSON checked here.
+    ///
+    /// # Errors
+    /// [`PathError::Empty`], [`PathError::Unknown`], [`PathError::BadCount`]; for files
+    /// [`PathError::Io`], [`PathError::FileTooLarge`], [`PathError::Json`],
+    /// [`PathError::ViewCount`].
+    pub fn parse(spec: &str) -> Result<Self, PathError> {
+        let spec = spec.trim();
+        if spec.is_empty() {
+            return Err(PathError::Empty);
         }
-        _ if looks_like_file(spec) => read_path_json(Path::new(spec), default_camera)?,
-        _ => return Err(PathError::Unknown(spec.to_string())),
-    };
-    validate_views(&views)?;
-    Ok(views)
+        let (kind, count) = match spec.split_once(':') {
+            Some((k, n)) => (k, Some(n)),
+            None => (spec, None),
+        };
+        Ok(match kind {
+            "default" if count.is_none() => Self::Default,
+            "circle" => Self::Circle(parse_count(spec, count)?),
+            "street" => Self::Street(parse_count(spec, count)?),
+            "flyover" => Self::Flyover(parse_count(spec, count)?),
+            _ if looks_like_file(spec) => {
+                let path = PathBuf::from(spec);
+                let records = read_path_records(&path)?;
+                Self::File { path, records }
+            }
+            _ => return Err(PathError::Unknown(spec.to_string())),
+        })
+    }
+
+    /// Views the path holds (known before the scene).
+    pub fn len(&self) -> usize {
+        match self {
+            Self::Default => 1,
+            Self::Circle(n) | Self::Street(n) | Self::Flyover(n) => *n as usize,
+            Self::File { records, .. } => records.len(),
+        }
+    }
+
+    /// Always false: a parsed path holds at least one view.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The views through `scene`, each validated.
+    ///
+    /// # Errors
+    /// [`PathError::BadView`] for a degenerate view.
+    pub fn views(&self, scene: &Scene, default_camera: &Camera) -> Result<Vec<Camera>, PathError> {
+        let views = match self {
+            Self::Default => vec![*default_camera],
+            Self::Circle(n) => circle(&scene.bounds(), *n, default_camera),
+            Self::Street(n) => street(scene, *n, default_camera),
+            Self::Flyover(n) => flyover(&scene.bounds(), *n, default_camera),
+            Self::File { records, .. } => records.iter().map(|r| r.to_camera(default_camera)).collect(),
+        };
+        validate_views(&views)?;
+        Ok(views)
+    }
+}
+
+/// One camera of a path (module doc): `PATH` (its first view) or `PATH:i`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ViewSpec {
+    /// The path.
+    pub path: PathSpec,
+    /// The view's index in it, from 0, within its length.
+    pub index: usize,
+}
+
+impl ViewSpec {
+    /// Parses `view` (module doc).
+    ///
+    /// # Errors
+    /// As [`PathSpec::parse`] for the path part; [`PathError::ViewIndex`] for an index past
+    /// the path's end.
+    pub fn parse(view: &str) -> Result<Self, PathError> {
+        let view = view.trim();
+        let whole = PathSpec::parse(view);
+        if let Ok(path) = whole {
+            return Ok(Self { path, index: 0 });
+        }
+        // `PATH:i`, where PATH is not a bare generated kind (whose count the index would be).
+        let indexed = view.rsplit_once(':').and_then(|(prefix, i)| {
+            let index = i.trim().parse::<usize>().ok()?;
+            let bare_kind = ["circle", "street", "flyover"].contains(&prefix.trim());
+            (!bare_kind && !i.trim().is_empty()).then_some((prefix, index))
+        });
+        let Some((prefix, index)) = indexed else {
+            return whole.map(|path| Self { path, index: 0 });
+        };
+        let path = PathSpec::parse(prefix)?;
+        if index >= path.len() {
+            return Err(PathError::ViewIndex {
+                view: view.to_string(),
+                index,
+                path: prefix.trim().to_string(),
+                count: path.len(),
+            });
+        }
+        Ok(Self { path, index })
+    }
+
+    /// The camera through `scene`. Not validated when it is the default camera or a file's
+    /// (the caller may override fields first, then validates it); a generated path's views
+    /// are.
+    ///
+    /// # Errors
+    /// [`PathError::BadView`] for a degenerate generated view; [`PathError::ViewIndex`] for
+    /// an index past the path's end (possible only for a spec not made by
+    /// [`ViewSpec::parse`]).
+    pub fn camera(&self, scene: &Scene, default_camera: &Camera) -> Result<Camera, PathError> {
+        let camera = match &self.path {
+            PathSpec::Default if self.index == 0 => Some(*default_camera),
+            PathSpec::Default => None,
+            PathSpec::File { records, .. } => records.get(self.index).map(|r| r.to_camera(default_camera)),
+            path => path.views(scene, default_camera)?.get(self.index).copied(),
+        };
+        camera.ok_or_else(|| PathError::ViewIndex {
+            view: format!("{:?}", self.path),
+            index: self.index,
+            path: format!("{:?}", self.path),
+            count: self.path.len(),
+        })
+    }
 }
 
 fn looks_like_file(spec: &str) -> bool {
@@ -697,6 +844,16 @@ pub fn path_to_json(views: &[Camera]) -> String {
 /// [`PathError::Json`] for malformed JSON or unknown fields, [`PathError::ViewCount`] for an
 /// empty list or more than [`MAX_VIEWS`], [`PathError::BadView`] for a degenerate view.
 pub fn path_from_json(text: &str, source_name: &str, defaults: &Camera) -> Result<Vec<Camera>, PathError> {
+    let views: Vec<Camera> = records_from_json(text, source_name)?
+        .iter()
+        .map(|r| r.to_camera(defaults))
+        .collect();
+    validate_views(&views)?;
+    Ok(views)
+}
+
+/// The views of a JSON list, unchecked as cameras.
+fn records_from_json(text: &str, source_name: &str) -> Result<Vec<ViewRecord>, PathError> {
     let records: Vec<ViewRecord> = serde_json::from_str(text).map_err(|e| PathError::Json {
         source_name: source_name.to_string(),
         message: e.to_string(),
@@ -707,9 +864,7 @@ pub fn path_from_json(text: &str, source_name: &str, defaults: &Camera) -> Resul
             count: records.len(),
         });
     }
-    let views: Vec<Camera> = records.iter().map(|r| r.to_camera(defaults)).collect();
-    validate_views(&views)?;
-    Ok(views)
+    Ok(records)
 }
 
 /// Reads a JSON path file (at most [`MAX_PATH_FILE_BYTES`]).
@@ -717,6 +872,13 @@ pub fn path_from_json(text: &str, source_name: &str, defaults: &Camera) -> Resul
 /// # Errors
 /// [`PathError::Io`], [`PathError::FileTooLarge`], and those of [`path_from_json`].
 pub fn read_path_json(path: &Path, defaults: &Camera) -> Result<Vec<Camera>, PathError> {
+    let views: Vec<Camera> = read_path_records(path)?.iter().map(|r| r.to_camera(defaults)).collect();
+    validate_views(&views)?;
+    Ok(views)
+}
+
+/// The views of a JSON path file, unchecked as cameras.
+fn read_path_records(path: &Path) -> Result<Vec<ViewRecord>, PathError> {
     let io = |source| PathError::Io {
         path: path.to_path_buf(),
         source,
@@ -730,7 +892,7 @@ pub fn read_path_json(path: &Path, defaults: &Camera) -> Result<Vec<Camera>, Pat
         });
     }
     let text = std::fs::read_to_string(path).map_err(io)?;
-    path_from_json(&text, &path.display().to_string(), defaults)
+    records_from_json(&text, &path.display().to_string())
 }
 
 /// Writes `views` to `path` as JSON ([`path_to_json`]).
@@ -785,6 +947,49 @@ mod tests {
             let c = framing_camera(&flat, front, 60.0);
             assert!((c.direction() + front.normalize()).length() < 1e-5, "{flat:?}");
         }
+    }
+
+    #[test]
+    fn views_take_an_index_only_where_it_cannot_be_a_count() {
+        let v = |s: &str| ViewSpec::parse(s);
+        assert_eq!(
+            v("circle:8").unwrap(),
+            ViewSpec {
+                path: PathSpec::Circle(8),
+                index: 0
+            }
+        );
+        assert_eq!(
+            v("circle:8:3").unwrap(),
+            ViewSpec {
+                path: PathSpec::Circle(8),
+                index: 3
+            }
+        );
+        assert_eq!(
+            v("default").unwrap(),
+            ViewSpec {
+                path: PathSpec::Default,
+                index: 0
+            }
+        );
+        assert_eq!(
+            v("default:0").unwrap(),
+            ViewSpec {
+                path: PathSpec::Default,
+                index: 0
+            }
+        );
+        assert_eq!(v("circle").unwrap().path, PathSpec::Circle(DEFAULT_VIEW_COUNT));
+        // As --path circle:0 is refused, so is --view circle:0 (not camera 0 of `circle`).
+        assert!(matches!(v("circle:0"), Err(PathError::BadCount { .. })));
+        assert!(matches!(v("street:0"), Err(PathError::BadCount { .. })));
+        let e = v("circle:8:8").unwrap_err();
+        assert!(matches!(e, PathError::ViewIndex { index: 8, count: 8, .. }), "{e}");
+        assert!(matches!(v("default:1"), Err(PathError::ViewIndex { .. })));
+        assert!(matches!(v("circle:x"), Err(PathError::BadCount { .. })));
+        assert!(matches!(v("spiral:3"), Err(PathError::Unknown(_))));
+        assert!(matches!(v("no/such.json:2"), Err(PathError::Io { .. })));
     }
 
     #[test]
