@@ -214,6 +214,28 @@ impl Algorithm {
         self.0.params.iter().map(|d| d.key).collect::<Vec<_>>().join(", ")
     }
 
+    /// The names of the counters ([`FrameStats::counters`]) it may report, whichever its
+    /// settings (a frame reports some only in some configurations); empty for renderers
+    /// without counters of their own.
+    pub fn counter_names(self) -> Vec<&'static str> {
+        let own: &[&'static str] = match self.0.name {
+            "hzb" => {
+                return hzb::COUNTERS
+                    .iter()
+                    .chain(&hzb::BUSY)
+                    .chain(&hzb::IDLE)
+                    .copied()
+                    .collect()
+            }
+            "lzb" => &lzb::COUNTERS,
+            "nbuffer" => &nbuffer::COUNTERS,
+            "oqgrid" => &oqgrid::COUNTERS,
+            "rzb" => &rzb::COUNTERS,
+            _ => &[],
+        };
+        own.to_vec()
+    }
+
     /// Builds the renderer for `scene` with default settings, doing its preprocessing (time
     /// it from outside).
     ///
@@ -261,4 +283,99 @@ pub(crate) fn check_frame(view: &View, frame: &Frame) -> Result<()> {
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use occult_core::{Affine3A, Camera, Instance, Mesh, SceneBuilder, Vec3};
+
+    /// Nine instanced boxes in a row along the view, on a ground quad: near boxes hide far ones.
+    fn boxes() -> Arc<Scene> {
+        let p: Vec<Vec3> = (0..8)
+            .map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, (i >> 2) as f32) - 0.5)
+            .collect();
+        let t = vec![
+            [0, 2, 1],
+            [1, 2, 3],
+            [4, 5, 6],
+            [5, 7, 6],
+            [0, 1, 4],
+            [1, 5, 4],
+            [2, 6, 3],
+            [3, 6, 7],
+            [0, 4, 2],
+            [2, 4, 6],
+            [1, 3, 5],
+            [3, 7, 5],
+        ];
+        let mut b = SceneBuilder::new();
+        let cube = b.add_mesh("cube", Mesh::new(p, t).unwrap()).unwrap();
+        let ground = Mesh::new(
+            vec![
+                Vec3::new(-9.0, -0.5, -20.0),
+                Vec3::new(9.0, -0.5, -20.0),
+                Vec3::new(9.0, -0.5, 2.0),
+                Vec3::new(-9.0, -0.5, 2.0),
+            ],
+            vec![[0, 2, 1], [0, 3, 2]],
+        )
+        .unwrap();
+        let ground = b.add_mesh("ground", ground).unwrap();
+        let mut instances = vec![Instance {
+            parent_from_child: Affine3A::IDENTITY,
+            child: ground,
+        }];
+        instances.extend((0..9).map(|i| Instance {
+            parent_from_child: Affine3A::from_translation(Vec3::new(0.0, 0.0, -2.0 * i as f32)),
+            child: cube,
+        }));
+        let root = b.add_group("row", instances).unwrap();
+        Arc::new(b.build(root).unwrap())
+    }
+
+    #[test]
+    fn every_counter_reported_is_declared() {
+        let scene = boxes();
+        let views: Vec<View> = [
+            Vec3::new(0.0, 0.5, 4.0),
+            Vec3::new(0.2, 0.6, 3.9),
+            Vec3::new(6.0, 3.0, 4.0),
+        ]
+        .iter()
+        .map(|&eye| View::new(Camera::look_at(eye, Vec3::new(0.0, 0.0, -8.0)), 64, 48).unwrap())
+        .collect();
+        let specs = [
+            "zbuffer",
+            "frustum",
+            "hzb",
+            "hzb:parallel=hybrid,workers=2",
+            "hzb:temporal=off,global=off",
+            "lzb",
+            "lzb:pvl=triangles,select=dynamic",
+            "lzb:mode=naive,plane=static",
+            "lzb:oor=off,coherence=off",
+            "oqgrid",
+            "oqgrid:grid=uniform,queries=off",
+            "nbuffer",
+            "nbuffer:test=query,hierarchy=flat",
+            "rzb",
+            "rzb:cache=on,orientation=2",
+            "rzb:eps=auto,max_samples=10",
+        ];
+        let mut options = RenderOptions::default();
+        options.raster.threads = 1;
+        for spec in specs {
+            let spec = AlgoSpec::parse(spec).unwrap();
+            let declared = spec.algorithm.counter_names();
+            let mut renderer = spec.build(Arc::clone(&scene), &options).unwrap();
+            let mut frame = Frame::new(64, 48).unwrap();
+            for view in &views {
+                let stats = renderer.render(view, &mut frame).unwrap();
+                for (name, _) in &stats.counters.0 {
+                    assert!(declared.contains(name), "{spec}: counter {name} is not declared");
+                }
+            }
+        }
+    }
 }

@@ -14,6 +14,9 @@
 
 use std::fmt;
 use std::str::FromStr;
+use std::sync::Arc;
+
+use occult_core::{Mesh, Scene, Vec3};
 
 use crate::{Algorithm, RenderError, Result};
 
@@ -229,6 +232,40 @@ impl AlgoSpec {
         Ok(())
     }
 
+    /// Checks every setting's value too, not only its key, before a scene exists: by building
+    /// the renderer on a scene of one triangle (a millisecond or so: no real preprocessing),
+    /// with a one-thread rasterizer inside a private one-thread pool (rayon's global pool is
+    /// left untouched, so it can still be configured afterwards). Only
+    /// [`RenderError::BadParameter`] counts: other failures of that build belong to the scene,
+    /// not to the settings. Specs without settings are not built.
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] for an unknown key or a value the renderer refuses, with
+    /// the renderer's message naming the key and value.
+    pub fn validate(&self) -> Result<()> {
+        self.check_keys()?;
+        if self.params.entries().is_empty() {
+            return Ok(());
+        }
+        let Ok(pool) = rayon::ThreadPoolBuilder::new().num_threads(1).build() else {
+            // Without a private pool the check would touch the global one: leave the values
+            // to the real build.
+            return Ok(());
+        };
+        let mut options = crate::RenderOptions::default();
+        options.raster.threads = 1;
+        let build = || {
+            let triangle = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]])
+                .and_then(|mesh| Scene::from_mesh("validate", mesh))
+                .expect("one triangle is a valid scene");
+            self.build(Arc::new(triangle), &options).map(drop)
+        };
+        match pool.install(build) {
+            Err(e @ RenderError::BadParameter(_)) => Err(e),
+            _ => Ok(()),
+        }
+    }
+
     /// The canonical text: `name` alone, or `name:key=value,...` in the order given. Used as the
     /// renderer's name in comparison reports.
     pub fn label(&self) -> String {
@@ -294,5 +331,34 @@ mod tests {
         assert!(AlgoSpec::parse_list("zbuffer,,frustum").is_err());
         let e = AlgoSpec::parse_list("zbuffer,warp").unwrap_err().to_string();
         assert!(e.contains("warp") && e.contains("frustum"), "{e}");
+    }
+
+    #[test]
+    fn validate_checks_values_without_a_scene() {
+        let check = |s: &str| AlgoSpec::parse(s).unwrap().validate();
+        for bad in [
+            "frustum:leaf=abc",
+            "frustum:leaf=0",
+            "frustum:group_leaf=-1",
+            "hzb:temporal=maybe",
+            "hzb:workers=99",
+            "lzb:mode=fast",
+            "oqgrid:grid=hex",
+            "nbuffer:cover=three",
+            "rzb:eps=x",
+        ] {
+            let e = check(bad).expect_err(bad).to_string();
+            let key = bad.split_once(':').unwrap().1.split('=').next().unwrap();
+            assert!(e.contains(key), "{bad}: {e}");
+        }
+        // Every documented default, set explicitly, is valid.
+        for a in Algorithm::all() {
+            check(a.name()).unwrap();
+            for d in a.info().params {
+                check(&format!("{}:{}={}", a.name(), d.key, d.default)).unwrap_or_else(|e| panic!("{}: {e}", d.key));
+            }
+        }
+        check("frustum:leaf=8,group_leaf=2").unwrap();
+        check("rzb:eps=auto").unwrap();
     }
 }

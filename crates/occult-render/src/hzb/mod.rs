@@ -269,6 +269,26 @@ impl HzbOptions {
     }
 }
 
+/// Every counter ([`FrameStats::counters`](crate::FrameStats::counters)) a frame may report,
+/// whichever the settings, except the per-worker ones of `parallel=on` (`worker<k>_busy_us`,
+/// `worker<k>_idle_us`); [`Algorithm::counter_names`](crate::Algorithm::counter_names) lists
+/// those too.
+pub const COUNTERS: [&str; 13] = [
+    "occlusion_tests",
+    "occlusion_culled",
+    "frustum_culled",
+    "pyramid_tests",
+    "pyramid_descents",
+    "global_rejects",
+    "visible_list",
+    "visible_list_drawn",
+    "visible_list_frustum_culled",
+    "recheck_dropped",
+    "batches",
+    "whole_drawn",
+    "visible_list_retested",
+];
+
 /// Registry entry of [`Hzb`].
 pub static INFO: AlgorithmInfo = AlgorithmInfo {
     name: "hzb",
@@ -402,7 +422,7 @@ pub struct Hzb {
 }
 
 /// Counter names per worker (counters are named by static strings).
-const BUSY: [&str; MAX_WORKERS] = [
+pub(crate) const BUSY: [&str; MAX_WORKERS] = [
     "worker0_busy_us",
     "worker1_busy_us",
     "worker2_busy_us",
@@ -412,7 +432,7 @@ const BUSY: [&str; MAX_WORKERS] = [
     "worker6_busy_us",
     "worker7_busy_us",
 ];
-const IDLE: [&str; MAX_WORKERS] = [
+pub(crate) const IDLE: [&str; MAX_WORKERS] = [
     "worker0_idle_us",
     "worker1_idle_us",
     "worker2_idle_us",

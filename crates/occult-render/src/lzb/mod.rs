@@ -81,6 +81,28 @@ use crate::{
 };
 use cast::{row_w, Caster, InstanceRec};
 
+/// Every counter ([`FrameStats::counters`](crate::FrameStats::counters)) a frame may report,
+/// whichever the settings.
+pub const COUNTERS: [&str; 17] = [
+    "plane_reused",
+    "coarse_rays",
+    "near_leaves",
+    "far_leaves",
+    "near_triangles",
+    "oor_polygons",
+    "rays",
+    "ray_tri_tests",
+    "ray_leaves_visited",
+    "ray_nodes_visited",
+    "coherent_starts",
+    "rays_resolved",
+    "unfinished_pixels",
+    "z_clip_permille_of_far",
+    "pvl_leaves",
+    "pvl_entries_triangles",
+    "pvl_triangles",
+];
+
 /// The registry entry of `lzb`.
 pub static INFO: AlgorithmInfo = AlgorithmInfo {
     name: "lzb",

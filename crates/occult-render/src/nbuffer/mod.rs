@@ -60,6 +60,16 @@ use crate::{check_frame, AlgorithmInfo, FrameStats, ParamDoc, Phase, RenderError
 /// Largest number of objects (mesh instances × triangle chunks) the renderer flattens.
 pub const MAX_OBJECTS: u64 = 1 << 24;
 
+/// Every counter ([`FrameStats::counters`](crate::FrameStats::counters)) a frame may report,
+/// whichever the settings.
+pub const COUNTERS: [&str; 5] = [
+    "occluders_drawn",
+    "depth_comparisons",
+    "nbuffer_lookups",
+    "rect_pixels",
+    "survivors_drawn",
+];
+
 /// Registry entry of [`NBufferCulling`].
 pub static INFO: AlgorithmInfo = AlgorithmInfo {
     name: "nbuffer",

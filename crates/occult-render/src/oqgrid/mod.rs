@@ -80,6 +80,19 @@ use crate::{
     check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result,
 };
 
+/// Every counter ([`FrameStats::counters`](crate::FrameStats::counters)) a frame may report,
+/// whichever the settings.
+pub const COUNTERS: [&str; 8] = [
+    "cells_visited",
+    "cells_in_frustum",
+    "queries",
+    "queries_hidden",
+    "queries_skipped",
+    "cells_visible",
+    "node_occurrences",
+    "parallel_batches",
+];
+
 /// Registry entry: every [`OqGridOptions`] field is a parameter.
 pub static INFO: AlgorithmInfo = AlgorithmInfo {
     name: "oqgrid",

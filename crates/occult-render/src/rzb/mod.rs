@@ -95,6 +95,24 @@ use sample::{box_rng, piece_rng, sample_count, SampleCounts, Sampler, Target};
 use select::Selection;
 use structure::Structure;
 
+/// Every counter ([`FrameStats::counters`](crate::FrameStats::counters)) a frame may report,
+/// whichever the settings.
+pub const COUNTERS: [&str; 13] = [
+    "boxes_selected",
+    "boxes_zbuffer",
+    "boxes_backfacing",
+    "instances_visited",
+    "samples_generated",
+    "samples_backfacing",
+    "samples_capped",
+    "samples_expected",
+    "cache_hits",
+    "cache_builds",
+    "cache_evictions",
+    "cache_kib",
+    "eps_milli",
+];
+
 /// Registry entry: `rzb:eps=1.5,d=2,cache=on,...`.
 pub static INFO: AlgorithmInfo = AlgorithmInfo {
     name: "rzb",
