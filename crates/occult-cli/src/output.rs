@@ -113,7 +113,7 @@ fn csv_field(f: &str) -> String {
 }
 
 /// An optional number as a CSV field (empty when absent).
-pub fn opt_field(v: Option<f64>) -> String {
+pub fn opt_field<T: std::fmt::Display>(v: Option<T>) -> String {
     v.map_or_else(String::new, |v| format!("{v}"))
 }
 

@@ -162,9 +162,18 @@ fn compare_reports_frustum_identical_to_zbuffer() {
             "frames",
             "prepare_ms",
             "memory_bytes",
+            "memory_bytes_after_build",
+            "peak_rss_bytes",
             "per_frame",
         ] {
             assert!(r.get(field).is_some(), "{field} missing in {r}");
+        }
+        // A measured peak of the whole process, or null where it cannot be measured.
+        let peak = &r["peak_rss_bytes"];
+        assert!(peak.is_null() || peak.as_u64().is_some_and(|b| b > 0), "{peak}");
+        if cfg!(target_os = "linux") && std::fs::write("/proc/self/clear_refs", "5").is_ok() {
+            assert!(peak.as_u64().is_some(), "the kernel allows the measure: {r}");
+            assert!(peak.as_u64() <= run["process_peak_rss_bytes"].as_u64());
         }
         assert_eq!(r["frames"], 4);
         assert_eq!(
@@ -177,8 +186,10 @@ fn compare_reports_frustum_identical_to_zbuffer() {
     let frustum = renderers.iter().find(|r| r["name"] == "frustum").unwrap();
     assert!(frustum["speedup_vs_zbuffer"].as_f64().unwrap() > 0.0);
     assert_eq!(run["oracle"]["frames_identical"], 4);
+    assert!(stdout.contains("peak RSS"), "{stdout}");
     let csv = std::fs::read_to_string(&csv).unwrap();
     assert!(csv.starts_with("scene,triangles,renderer,frame,time_ms"));
+    assert!(csv.lines().next().unwrap().split(',').any(|c| c == "peak_rss_bytes"));
     assert_eq!(
         csv.lines().count(),
         1 + 3 * 4,
@@ -258,6 +269,13 @@ fn compare_without_reference_plots_scaling_against_depth_complexity() {
     let run = &report["runs"][0];
     assert!(run["reference"].is_null() && run["oracle"].is_null());
     assert_eq!(run["renderers"].as_array().unwrap().len(), 2, "no reference added");
+    for r in run["renderers"].as_array().unwrap() {
+        assert!(
+            r["frames_identical"].is_null(),
+            "nothing was checked: {}",
+            r["frames_identical"]
+        );
+    }
     assert_eq!(run["image"]["measured_on"], "frustum");
     assert_eq!(run["image"]["projected_pixels"].as_array().unwrap().len(), 2);
     // The CSV carries every renderer counter as a column, empty where a renderer lacks it.

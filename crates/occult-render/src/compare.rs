@@ -29,10 +29,19 @@
 //!   Han & Zeiger, the screen area of every triangle in the view, hidden or not, from which the
 //!   depth complexity (image complexity over covered pixels) follows.
 //!
+//! - **memory**: each renderer's own structures ([`Renderer::memory_bytes`]) after its build and
+//!   after its last frame, and the peak resident set size of the process while it was built and
+//!   while it rendered ([`RendererReport::peak_rss_bytes`]): on Linux the kernel's high-water
+//!   mark is reset (`5` written to `/proc/self/clear_refs`) before the build and before each of
+//!   its frames, and read (`VmHWM` of `/proc/self/status`) after each. It is the whole process's
+//!   memory: the scene, the harness's frames, and, because renderers are built one after another
+//!   and then render interleaved, every renderer built before it (during its build) or all of
+//!   them (during its frames). What tells renderers apart is what their build and frames add.
+//!
 //! Times are wall-clock times of whole [`Renderer::render`] calls (clearing included), in
-//! milliseconds. Nothing here reads or writes files or prints, except that the process's peak
-//! resident set size is read from `/proc/self/status` where it exists (Linux); the CLI writes
-//! the report out.
+//! milliseconds; the memory readings lie outside the timed calls. Nothing here reads or writes
+//! files or prints, except the `/proc/self` files above where they exist (Linux); the CLI
+//! writes the report out.
 //!
 //! Cost: every renderer's frames plus one shading pass per non-identical frame; one frame
 //! buffer (16 bytes a pixel) per renderer plus two.
@@ -48,7 +57,7 @@
 //! let config = CompareConfig::new(vec![Algorithm::FRUSTUM], 32, 32);
 //! let report = compare(scene, &cameras, &config, &mut |_| {}).unwrap();
 //! assert_eq!(report.reference.as_deref(), Some("zbuffer")); // rendered although not requested
-//! assert_eq!(report.renderer("frustum").unwrap().frames_identical, 1);
+//! assert_eq!(report.renderer("frustum").unwrap().frames_identical, Some(1));
 //! assert_eq!(report.oracle.as_ref().unwrap().triangles_visible, [1]);
 //! ```
 //!
@@ -57,6 +66,7 @@
 //! comparison must have the same size and camera paths yield cameras.
 
 use std::collections::HashSet;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -306,8 +316,9 @@ pub struct RendererReport {
     pub conservative: bool,
     /// Frames rendered.
     pub frames: usize,
-    /// Frames bit-identical to the reference's.
-    pub frames_identical: usize,
+    /// Frames bit-identical to the reference's; `None` when there is no reference (nothing was
+    /// checked).
+    pub frames_identical: Option<usize>,
     /// Mean frame time, ms.
     pub mean_ms: f64,
     /// 95th percentile frame time, ms.
@@ -335,6 +346,11 @@ pub struct RendererReport {
     pub memory_bytes: usize,
     /// [`Renderer::memory_bytes`] right after it was built.
     pub memory_bytes_after_build: usize,
+    /// Peak resident set size of the whole process while this renderer was built and while it
+    /// rendered its frames, bytes (module doc: the scene and the other renderers' structures
+    /// are included). `None` where it cannot be measured: not Linux, or the kernel's
+    /// high-water mark could not be reset.
+    pub peak_rss_bytes: Option<u64>,
     /// Mean share of differing covered pixels over all frames (0 for identical frames).
     pub mean_item_error: f64,
     /// Largest per-frame share of differing covered pixels.
@@ -460,6 +476,9 @@ struct Contestant {
     frame: Frame,
     prepare_ms: f64,
     memory_bytes_after_build: usize,
+    /// Highest process high-water mark over its build and frames; `None` once one could not
+    /// be measured.
+    peak_rss_bytes: Option<u64>,
     records: Vec<FrameRecord>,
     stats: Vec<FrameStats>,
 }
@@ -567,6 +586,7 @@ pub fn compare(
             index,
             count,
         });
+        let rss = PeakWindow::start();
         let t = Instant::now();
         let renderer = spec
             .build(Arc::clone(&scene), &config.options)
@@ -575,6 +595,7 @@ pub fn compare(
                 source,
             })?;
         let prepare_ms = ms(t.elapsed());
+        let peak_rss_bytes = rss.end();
         if reference_label.as_deref() == Some(label.as_str()) && !renderer.is_conservative() {
             return Err(CompareError::BadReference {
                 reference: label,
@@ -590,6 +611,7 @@ pub fn compare(
             label,
             requested,
             memory_bytes_after_build: renderer.memory_bytes(),
+            peak_rss_bytes,
             renderer,
             frame: Frame::new(config.width, config.height)?,
             prepare_ms,
@@ -623,6 +645,7 @@ pub fn compare(
         for k in 0..n {
             // Rotate the order so that no renderer always runs first (or right after another).
             let c = &mut contestants[(k + view_index) % n];
+            let rss = PeakWindow::start();
             let t = Instant::now();
             let stats = c
                 .renderer
@@ -633,6 +656,7 @@ pub fn compare(
                     source,
                 })?;
             let time_ms = ms(t.elapsed());
+            c.peak_rss_bytes = c.peak_rss_bytes.zip(rss.end()).map(|(a, b)| a.max(b));
             c.records.push(FrameRecord {
                 time_ms,
                 triangles_submitted: stats.triangles_submitted,
@@ -730,7 +754,7 @@ pub fn compare(
                 requested: c.requested,
                 conservative: c.renderer.is_conservative(),
                 frames,
-                frames_identical: c.records.iter().filter(|r| r.identical).count(),
+                frames_identical: reference_index.map(|_| c.records.iter().filter(|r| r.identical).count()),
                 mean_ms: time.mean_ms,
                 p95_ms: time.p95_ms,
                 speedup_vs_zbuffer: zbuffer_mean.and_then(|z| ratio(z, time.mean_ms)),
@@ -742,6 +766,7 @@ pub fn compare(
                 prepare_ms: c.prepare_ms,
                 memory_bytes: c.renderer.memory_bytes(),
                 memory_bytes_after_build: c.memory_bytes_after_build,
+                peak_rss_bytes: c.peak_rss_bytes,
                 mean_item_error: mean(errors.iter().copied(), frames),
                 max_item_error: errors.iter().copied().fold(0.0, f64::max),
                 min_psnr_db: c.records.iter().filter_map(|r| r.psnr_db).reduce(f64::min),
@@ -1006,9 +1031,21 @@ fn mean_stats(stats: &[FrameStats]) -> MeanStats {
     }
 }
 
-/// Peak resident set size of this process (`VmHWM` of `/proc/self/status`), bytes; `None`
-/// where the file does not exist (not Linux) or lacks the line.
+/// The highest `VmHWM` read so far, KiB: the kernel's mark is reset for per-renderer peaks
+/// ([`PeakWindow`]), so the process's own peak is the highest of every reading.
+static PROCESS_PEAK_KIB: AtomicU64 = AtomicU64::new(0);
+
+/// Peak resident set size of this process since it started, bytes: the kernel's high-water
+/// mark (`VmHWM` of `/proc/self/status`), or the highest one read before one of the resets of
+/// [`PeakWindow`] if that was higher. `None` where `/proc/self/status` is unavailable
+/// (not Linux).
 pub fn process_peak_rss_bytes() -> Option<u64> {
+    high_water_mark_kib().map(|kib| PROCESS_PEAK_KIB.load(Ordering::Relaxed).max(kib) * 1024)
+}
+
+/// The kernel's resident high-water mark (`VmHWM`) now, KiB, folded into
+/// [`PROCESS_PEAK_KIB`]; `None` where `/proc/self/status` is unavailable.
+fn high_water_mark_kib() -> Option<u64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kib: u64 = line
@@ -1018,7 +1055,30 @@ pub fn process_peak_rss_bytes() -> Option<u64> {
         .trim()
         .parse()
         .ok()?;
-    Some(kib * 1024)
+    PROCESS_PEAK_KIB.fetch_max(kib, Ordering::Relaxed);
+    Some(kib)
+}
+
+/// The process's resident peak over a stretch of work: [`PeakWindow::start`] resets the
+/// kernel's high-water mark to the current resident size, [`PeakWindow::end`] reads it.
+struct PeakWindow {
+    /// Whether the reset succeeded.
+    reset: bool,
+}
+
+impl PeakWindow {
+    /// Resets the mark (after folding the current one into the process peak): `5` written to
+    /// `/proc/self/clear_refs` (Linux; see proc(5)).
+    fn start() -> Self {
+        let reset = high_water_mark_kib().is_some() && std::fs::write("/proc/self/clear_refs", "5").is_ok();
+        Self { reset }
+    }
+
+    /// The peak since [`PeakWindow::start`], bytes; `None` when the mark was not reset (it
+    /// would be an older peak) or cannot be read.
+    fn end(self) -> Option<u64> {
+        self.reset.then(high_water_mark_kib).flatten().map(|kib| kib * 1024)
+    }
 }
 
 #[cfg(test)]
@@ -1106,7 +1166,7 @@ mod tests {
         assert_eq!(report.frames, 6);
         for r in &report.renderers {
             assert_eq!(r.frames, 6);
-            assert_eq!(r.frames_identical, 6, "{} differs from the reference", r.name);
+            assert_eq!(r.frames_identical, Some(6), "{} differs from the reference", r.name);
             assert!(r
                 .per_frame
                 .iter()
@@ -1165,12 +1225,47 @@ mod tests {
     }
 
     #[test]
+    fn peak_memory_is_measured_per_renderer_where_the_kernel_allows() {
+        let report = run(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], &circle(2)).unwrap();
+        let process = report.process_peak_rss_bytes;
+        let measurable = cfg!(target_os = "linux") && std::fs::write("/proc/self/clear_refs", "5").is_ok();
+        for r in &report.renderers {
+            match r.peak_rss_bytes {
+                Some(peak) => {
+                    assert!(measurable, "{}: a peak where none can be measured", r.name);
+                    assert!(peak > 0);
+                    // Each reading is of the whole process, so never above its peak.
+                    assert!(peak <= process.unwrap(), "{}: {peak} > {process:?}", r.name);
+                }
+                None => assert!(!measurable, "{}: no peak although the mark can be reset", r.name),
+            }
+        }
+    }
+
+    #[test]
+    fn the_process_peak_survives_the_resets() {
+        if process_peak_rss_bytes().is_none() {
+            return;
+        }
+        // 64 MiB touched and freed, then the mark reset: the process peak still holds it.
+        let block = vec![1u8; 64 << 20];
+        assert_eq!(block.iter().step_by(4096).map(|&b| b as usize).sum::<usize>(), 16384);
+        let grown = process_peak_rss_bytes().unwrap();
+        drop(block);
+        assert!(grown >= 64 << 20, "{grown}");
+        let window = PeakWindow::start();
+        let after = window.end();
+        assert!(process_peak_rss_bytes().unwrap() >= grown);
+        assert!(after.is_none_or(|a| a <= process_peak_rss_bytes().unwrap()));
+    }
+
+    #[test]
     fn reference_is_added_when_not_requested() {
         let report = run(vec![Algorithm::FRUSTUM], &circle(2)).unwrap();
         let z = &report.renderers[0];
         assert_eq!((z.name.as_str(), z.is_reference, z.requested), ("zbuffer", true, false));
         assert!(report.reference_note.contains("not requested"));
-        assert_eq!(report.renderers[1].frames_identical, 2);
+        assert_eq!(report.renderers[1].frames_identical, Some(2));
     }
 
     #[test]
@@ -1211,7 +1306,7 @@ mod tests {
         assert_eq!(report.renderers.len(), 1);
         let f = &report.renderers[0];
         assert!(f.is_reference && f.requested && f.speedup_vs_zbuffer.is_none());
-        assert_eq!(f.frames_identical, 2);
+        assert_eq!(f.frames_identical, Some(2));
         assert!(report.oracle.as_ref().unwrap().triangles_visible[0] > 0);
         assert_eq!(report.oracle.as_ref().unwrap().frames_identical, 2);
     }
@@ -1242,7 +1337,7 @@ mod tests {
         let away = Camera::look_at(Vec3::new(0.0, 50.0, 0.0), Vec3::new(0.0, 100.0, 1.0));
         let report = run(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], &[away]).unwrap();
         assert_eq!(report.oracle.as_ref().unwrap().triangles_visible, vec![0]);
-        assert!(report.renderers.iter().all(|r| r.frames_identical == 1));
+        assert!(report.renderers.iter().all(|r| r.frames_identical == Some(1)));
     }
 
     #[test]
@@ -1269,7 +1364,7 @@ mod tests {
         let report = compare(cubes(), &cameras, &config, &mut |_| {}).unwrap();
         assert_eq!(report.reference.as_deref(), Some("frustum"));
         assert!(report.renderer("frustum").unwrap().is_reference);
-        assert_eq!(report.renderer("zbuffer").unwrap().frames_identical, 4);
+        assert_eq!(report.renderer("zbuffer").unwrap().frames_identical, Some(4));
         assert!(report.oracle.is_some());
 
         config.algorithms = vec![AlgoSpec::from(Algorithm::FRUSTUM)];
@@ -1280,7 +1375,7 @@ mod tests {
         assert_eq!(report.renderers.len(), 1, "no reference is added");
         let f = report.renderer("frustum").unwrap();
         assert!(!f.is_reference);
-        assert_eq!(f.frames_identical, 0, "nothing is checked");
+        assert_eq!(f.frames_identical, None, "nothing is checked");
         assert_eq!(f.vs_oracle, None);
         assert_eq!(report.image.measured_on, "frustum");
         assert_eq!(report.image.covered_pixels.len(), 4);

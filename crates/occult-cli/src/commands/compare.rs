@@ -31,7 +31,7 @@ struct RunOut<'a> {
     report: &'a CompareReport,
 }
 
-const CSV_HEADER: [&str; 13] = [
+const CSV_HEADER: [&str; 14] = [
     "scene",
     "triangles",
     "renderer",
@@ -45,6 +45,7 @@ const CSV_HEADER: [&str; 13] = [
     "psnr_db",
     "covered_pixels",
     "image_complexity",
+    "peak_rss_bytes",
 ];
 
 /// Runs the command.
@@ -183,6 +184,7 @@ fn report_text(scene: &SceneSummary, path: &str, r: &CompareReport) -> String {
         "error",
         "prepare ms",
         "memory",
+        "peak RSS",
     ];
     let mut rows: Vec<Vec<String>> = r
         .renderers
@@ -192,7 +194,7 @@ fn report_text(scene: &SceneSummary, path: &str, r: &CompareReport) -> String {
             if x.is_reference {
                 name.push_str(" (ref)");
             }
-            let error = if x.frames_identical == x.frames || r.reference.is_none() {
+            let error = if x.frames_identical.is_none_or(|n| n == x.frames) {
                 "-".to_string()
             } else {
                 let psnr = x.min_psnr_db.map_or(String::new(), |p| format!(", {p:.1} dB"));
@@ -207,10 +209,11 @@ fn report_text(scene: &SceneSummary, path: &str, r: &CompareReport) -> String {
                 output::count(x.stats.triangles_submitted),
                 output::count(x.triangles_rasterized),
                 output::count(x.triangles_visible),
-                identical_text(r, x),
+                identical_text(x),
                 error,
                 output::millis(x.prepare_ms),
                 output::bytes(x.memory_bytes as u64),
+                x.peak_rss_bytes.map_or("-".into(), output::bytes),
             ]
         })
         .collect();
@@ -226,6 +229,7 @@ fn report_text(scene: &SceneSummary, path: &str, r: &CompareReport) -> String {
             output::count(visible_mean),
             output::count(visible_mean),
             format!("{}/{}", o.frames_identical, r.frames),
+            "-".into(),
             "-".into(),
             "-".into(),
             "-".into(),
@@ -259,11 +263,12 @@ fn report_text(scene: &SceneSummary, path: &str, r: &CompareReport) -> String {
     }
     if let Some(reference) = &r.reference {
         for x in &r.renderers {
-            if x.conservative && x.frames_identical < x.frames {
+            let identical = x.frames_identical.unwrap_or(x.frames);
+            if x.conservative && identical < x.frames {
                 out += &format!(
                     "WARNING: {} is conservative but {} of {} frames differ from {reference} (DESIGN invariant 2)\n",
                     x.name,
-                    x.frames - x.frames_identical,
+                    x.frames - identical,
                     x.frames,
                 );
             }
@@ -275,6 +280,9 @@ fn report_text(scene: &SceneSummary, path: &str, r: &CompareReport) -> String {
             o.frames_identical, r.frames
         );
     }
+    if r.renderers.iter().any(|x| x.peak_rss_bytes.is_some()) {
+        out += "peak RSS: the whole process while that renderer was built and rendered (the scene and the other renderers' structures included)\n";
+    }
     if let Some(rss) = r.process_peak_rss_bytes {
         out += &format!(
             "process peak RSS (whole process, all renderers and the scene): {}\n",
@@ -285,12 +293,9 @@ fn report_text(scene: &SceneSummary, path: &str, r: &CompareReport) -> String {
 }
 
 /// `frames identical/frames`, or `-` when nothing was checked.
-pub fn identical_text(r: &CompareReport, x: &RendererReport) -> String {
-    if r.reference.is_none() {
-        "-".into()
-    } else {
-        format!("{}/{}", x.frames_identical, x.frames)
-    }
+pub fn identical_text(x: &RendererReport) -> String {
+    x.frames_identical
+        .map_or_else(|| "-".into(), |n| format!("{n}/{}", x.frames))
 }
 
 /// The CSV header: the fixed columns, then every renderer counter seen in `runs`.
@@ -345,6 +350,7 @@ fn csv_rows(runs: &[(SceneSummary, CompareReport)]) -> Vec<Vec<String>> {
                     opt_field(f.psnr_db),
                 ];
                 row.extend(image_fields(i));
+                row.push(opt_field(x.peak_rss_bytes));
                 row.extend(counters.iter().map(|&c| {
                     if f.counters.0.iter().any(|(k, _)| *k == c) {
                         f.counters.get(c).to_string()
@@ -371,6 +377,7 @@ fn csv_rows(runs: &[(SceneSummary, CompareReport)]) -> Vec<Vec<String>> {
                     String::new(),
                 ];
                 row.extend(image_fields(i));
+                row.push(String::new());
                 row.extend(counters.iter().map(|_| String::new()));
                 rows.push(row);
             }

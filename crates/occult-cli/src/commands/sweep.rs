@@ -148,7 +148,7 @@ pub fn run(a: SweepArgs) -> Result<()> {
                 x.speedup_vs_zbuffer.map_or("-".into(), |s| format!("{s:.2}x")),
                 output::count(x.triangles_rasterized),
                 output::count(x.triangles_visible),
-                identical_text(r, x),
+                identical_text(x),
                 output::millis(x.prepare_ms),
             ];
             row.extend(a.counter.iter().map(|c| {
