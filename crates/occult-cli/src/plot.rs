@@ -2,11 +2,21 @@
 //!
 //! Text uses Noto Sans Regular embedded in the binary (crate `ttf-noto-sans`, Apache-2.0),
 //! registered with plotters' `ab_glyph` backend at first use: no system font is assumed.
+//!
+//! Ticks are chosen here, not by plotters: its log axis labels only powers of ten, so a range
+//! within one decade got no label at all, and its linear axis puts ticks at fractions where
+//! x counts frames. A log axis is labelled at 1, 10, 100…, or 1-2-5, or 1…9 per decade,
+//! whichever gives at least three ticks, or else at evenly spaced round numbers
+//! ([`log_ticks`]); a linear axis at round steps, whole numbers where x counts
+//! ([`linear_ticks`]).
 
 use std::path::Path;
 use std::sync::OnceLock;
 
 use anyhow::{anyhow, bail, Result};
+use plotters::coord::combinators::LogCoord;
+use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint, Ranged};
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 /// Plot font family name under which the embedded font is registered.
@@ -32,6 +42,8 @@ pub struct Panel {
     pub y_label: String,
     /// Logarithmic x axis.
     pub log_x: bool,
+    /// X values are counts (frame numbers): ticks at whole numbers only.
+    pub integer_x: bool,
     /// The lines.
     pub series: Vec<Series>,
 }
@@ -112,6 +124,13 @@ fn draw_panel<'a>(area: &Area<'a>, panel: &Panel) -> DrawResult<'a> {
     let legend_share = ((panel.series.len() as f64 + 1.0) * 22.0 / 370.0).min(0.6);
     let y1 = (y0.ln() + (y1.ln() - y0.ln()) / (1.0 - legend_share)).exp();
 
+    let y_ticks = log_ticks(y0, y1);
+    let x_ticks = if log_x {
+        log_ticks(x0, x1)
+    } else {
+        linear_ticks(x0, x1, panel.integer_x)
+    };
+
     let mut builder = ChartBuilder::on(area);
     builder
         .caption(&panel.title, (FONT, 20))
@@ -125,8 +144,8 @@ fn draw_panel<'a>(area: &Area<'a>, panel: &Panel) -> DrawResult<'a> {
             let mut chart = $chart;
             chart
                 .configure_mesh()
-                .x_label_formatter(&|x: &f64| axis_number(*x))
-                .y_label_formatter(&|y: &f64| axis_number(*y))
+                .x_label_formatter(&|x: &f64| tick_label(*x))
+                .y_label_formatter(&|y: &f64| tick_label(*y))
                 .x_desc(x_desc)
                 .y_desc(y_desc)
                 .label_style((FONT, 14))
@@ -170,42 +189,128 @@ fn draw_panel<'a>(area: &Area<'a>, panel: &Panel) -> DrawResult<'a> {
                 .draw()?;
         }};
     }
+    let y_axis = Ticked {
+        inner: LogCoord::from((y0..y1).log_scale()),
+        ticks: y_ticks,
+    };
     if log_x {
-        finish!(builder.build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())?);
+        let x_axis = Ticked {
+            inner: LogCoord::from((x0..x1).log_scale()),
+            ticks: x_ticks,
+        };
+        finish!(builder.build_cartesian_2d(x_axis, y_axis)?);
     } else {
-        finish!(builder.build_cartesian_2d(x0..x1, (y0..y1).log_scale())?);
+        let x_axis = Ticked {
+            inner: RangedCoordf64::from(x0..x1),
+            ticks: x_ticks,
+        };
+        finish!(builder.build_cartesian_2d(x_axis, y_axis)?);
     }
     Ok(())
 }
 
-/// An axis label: integers plainly (with a k/M/G suffix when large), small values with the
-/// digits they need.
-fn axis_number(v: f64) -> String {
-    let a = v.abs();
-    if a >= 1e9 {
-        format!("{}G", trim(v / 1e9))
-    } else if a >= 1e6 {
-        format!("{}M", trim(v / 1e6))
-    } else if a >= 1e4 {
-        format!("{}k", trim(v / 1e3))
-    } else {
-        trim(v)
+/// An axis with the ticks chosen here (module doc); `inner` maps values to pixels. The grid
+/// has lines at the ticks only.
+struct Ticked<R> {
+    inner: R,
+    ticks: Vec<f64>,
+}
+
+impl<R: Ranged<ValueType = f64>> Ranged for Ticked<R> {
+    type FormatOption = DefaultFormatting;
+    type ValueType = f64;
+
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        self.inner.map(value, limit)
+    }
+
+    fn key_points<Hint: KeyPointHint>(&self, hint: Hint) -> Vec<f64> {
+        if hint.weight().allow_light_points() {
+            Vec::new()
+        } else {
+            self.ticks.clone()
+        }
+    }
+
+    fn range(&self) -> std::ops::Range<f64> {
+        self.inner.range()
     }
 }
 
-fn trim(v: f64) -> String {
-    let s = if v.abs() >= 100.0 {
-        format!("{v:.0}")
-    } else if v.abs() >= 1.0 {
-        format!("{v:.1}")
-    } else {
-        format!("{v:.3}")
-    };
-    if s.contains('.') {
-        s.trim_end_matches('0').trim_end_matches('.').to_string()
-    } else {
-        s
+/// Most ticks an axis gets.
+const MAX_TICKS: usize = 12;
+
+/// Ticks of a log axis over `[lo, hi]`, `0 < lo < hi`: powers of ten, else 1-2-5, else 1…9
+/// per decade, the first of these to give three ticks or more (thinned to at most
+/// [`MAX_TICKS`]); a range too narrow for that (within one decade) gets round linear steps.
+/// At least two ticks for any range that is not a point.
+fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    if !(lo > 0.0 && hi > lo && hi.is_finite()) {
+        return linear_ticks(lo, hi, false);
     }
+    let per_decade: [&[f64]; 3] = [&[1.0], &[1.0, 2.0, 5.0], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]];
+    for mantissas in per_decade {
+        let mut ticks = Vec::new();
+        let mut decade = 10f64.powi(lo.log10().floor() as i32);
+        while decade <= hi {
+            for &m in mantissas {
+                let t = m * decade;
+                if t >= lo * (1.0 - 1e-9) && t <= hi * (1.0 + 1e-9) {
+                    ticks.push(t);
+                }
+            }
+            decade *= 10.0;
+        }
+        if ticks.len() >= 3 {
+            let every = ticks.len().div_ceil(MAX_TICKS);
+            return ticks.into_iter().step_by(every).collect();
+        }
+    }
+    linear_ticks(lo, hi, false)
+}
+
+/// Ticks of a linear axis over `[lo, hi]` at a round step (1, 2 or 5 times a power of ten)
+/// giving about six; with `integer`, steps of at least 1 and whole-number ticks only.
+fn linear_ticks(lo: f64, hi: f64, integer: bool) -> Vec<f64> {
+    if !(lo.is_finite() && hi.is_finite()) || hi <= lo {
+        return if lo.is_finite() { vec![lo] } else { Vec::new() };
+    }
+    let raw = (hi - lo) / 6.0;
+    let magnitude = 10f64.powf(raw.log10().floor());
+    let mut step = [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * magnitude)
+        .find(|&s| s >= raw)
+        .unwrap_or(10.0 * magnitude);
+    if integer {
+        step = step.max(1.0).round();
+    }
+    let first = (lo / step).ceil() as i64;
+    let last = (hi / step).floor() as i64;
+    (first..=last).map(|k| k as f64 * step).take(4 * MAX_TICKS).collect()
+}
+
+/// A tick's label: the number with a k/M/G suffix from 10^4 on, written with the fewest
+/// decimals (up to six) that state it exactly, so round ticks read `0.25`, `40k`, `1.25M`.
+fn tick_label(v: f64) -> String {
+    let a = v.abs();
+    let (unit, suffix) = if a >= 1e9 {
+        (1e9, "G")
+    } else if a >= 1e6 {
+        (1e6, "M")
+    } else if a >= 1e4 {
+        (1e3, "k")
+    } else {
+        (1.0, "")
+    };
+    let x = v / unit;
+    let decimals = (0..=6)
+        .find(|&d| {
+            let shown: f64 = format!("{x:.d$}").parse().unwrap_or(f64::NAN);
+            (shown - x).abs() <= 1e-9 * x.abs().max(1e-12)
+        })
+        .unwrap_or(6);
+    format!("{x:.decimals$}{suffix}")
 }
 
 #[cfg(test)]
@@ -213,13 +318,57 @@ mod tests {
     use super::*;
 
     #[test]
-    fn axis_numbers() {
-        assert_eq!(axis_number(3.0), "3");
-        assert_eq!(axis_number(2.5), "2.5");
-        assert_eq!(axis_number(0.125), "0.125");
-        assert_eq!(axis_number(1_048_352.0), "1M");
-        assert_eq!(axis_number(2_500_000.0), "2.5M");
-        assert_eq!(axis_number(40_000.0), "40k");
+    fn tick_labels_state_round_numbers_exactly() {
+        assert_eq!(tick_label(3.0), "3");
+        assert_eq!(tick_label(2.5), "2.5");
+        assert_eq!(tick_label(0.125), "0.125");
+        assert_eq!(tick_label(3.0 * 0.1), "0.3");
+        assert_eq!(tick_label(1e-4), "0.0001");
+        assert_eq!(tick_label(2_500_000.0), "2.5M");
+        assert_eq!(tick_label(1_250_000.0), "1.25M");
+        assert_eq!(tick_label(40_000.0), "40k");
+        assert_eq!(tick_label(0.0), "0");
+    }
+
+    #[test]
+    fn log_axes_are_labelled_even_within_one_decade() {
+        // Frame times of 40..46 ms, padded as the plot pads them: within one decade, where
+        // labelling only powers of ten left the axis bare.
+        for (lo, hi) in [
+            (30.8, 69.0),
+            (2.3, 4.1),
+            (41.0, 42.0),
+            (0.011, 0.013),
+            (1.0, 1e6),
+            (0.5, 30.0),
+            (1e-3, 1e12),
+        ] {
+            let ticks = log_ticks(lo, hi);
+            assert!(ticks.len() >= 2 && ticks.len() <= MAX_TICKS, "{lo}..{hi}: {ticks:?}");
+            assert!(
+                ticks.iter().all(|&t| t >= lo * (1.0 - 1e-9) && t <= hi * (1.0 + 1e-9)),
+                "{ticks:?}"
+            );
+            let labels: Vec<String> = ticks.iter().map(|&t| tick_label(t)).collect();
+            let mut distinct = labels.clone();
+            distinct.dedup();
+            assert_eq!(distinct, labels, "{lo}..{hi}: labels repeat");
+        }
+        assert_eq!(log_ticks(30.8, 69.0), [40.0, 50.0, 60.0]);
+        assert_eq!(log_ticks(1.0, 1000.0), [1.0, 10.0, 100.0, 1000.0]);
+    }
+
+    #[test]
+    fn frame_axes_tick_whole_frames() {
+        for (lo, hi) in [(0.0, 1.0), (0.0, 3.0), (0.0, 15.0), (0.0, 119.0), (0.0, 999.0)] {
+            let ticks = linear_ticks(lo, hi, true);
+            assert!(ticks.len() >= 2, "{lo}..{hi}: {ticks:?}");
+            assert!(ticks.iter().all(|t| t.fract() == 0.0), "{lo}..{hi}: {ticks:?}");
+        }
+        assert_eq!(linear_ticks(0.0, 1.0, true), [0.0, 1.0]);
+        assert_eq!(linear_ticks(0.0, 3.0, true), [0.0, 1.0, 2.0, 3.0]);
+        // Without the constraint, the same range is cut at fractions.
+        assert!(linear_ticks(0.0, 1.0, false).iter().any(|t| t.fract() != 0.0));
     }
 
     #[test]
@@ -232,6 +381,7 @@ mod tests {
             x_label: "frame".into(),
             y_label: "ms".into(),
             log_x: false,
+            integer_x: true,
             series: vec![
                 Series {
                     name: "a".into(),

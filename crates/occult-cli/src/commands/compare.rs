@@ -462,6 +462,7 @@ fn frame_panel(scene: &SceneSummary, path: &str, r: &CompareReport, what: &str) 
         x_label: "frame".into(),
         y_label,
         log_x: false,
+        integer_x: true,
         series,
     }
 }
@@ -586,6 +587,7 @@ fn scaling_panel(path: &str, runs: &[(SceneSummary, CompareReport)], axis: Scali
         x_label: axis.label().into(),
         y_label: "mean frame time (ms, log)".into(),
         log_x: true,
+        integer_x: false,
         series,
     }
 }

@@ -231,6 +231,7 @@ pub fn run(a: SweepArgs) -> Result<()> {
             x_label: vary_text.clone(),
             y_label: "mean frame time (ms, log)".into(),
             log_x: a.log_x,
+            integer_x: false,
             series: series_of(&|x| Some(x.mean_ms)),
         }];
         for c in &a.counter {
@@ -239,6 +240,7 @@ pub fn run(a: SweepArgs) -> Result<()> {
                 x_label: vary_text.clone(),
                 y_label: format!("{c} (log)"),
                 log_x: a.log_x,
+                integer_x: false,
                 series: series_of(&|x| x.stats.counters.get(c.as_str()).copied()),
             });
         }
