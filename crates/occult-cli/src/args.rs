@@ -3,8 +3,9 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
-use occult_core::Vec3;
+use occult_core::{Camera, CoreError, Vec3};
 use occult_render::{AlgoSpec, Algorithm};
+use occult_scenes::{PathSpec, SceneSpec, ViewSpec};
 
 /// Render, walk and compare visibility algorithms on huge triangle scenes.
 #[derive(Debug, Parser)]
@@ -55,12 +56,14 @@ pub struct Size {
 pub struct RenderArgs {
     /// Scene: a generator spec (`city:blocks=8`, see `occult scenes`) or a file (.obj, .ply,
     /// .gltf, .glb).
-    #[arg(long, value_name = "SPEC")]
-    pub scene: String,
-    /// Camera: `default` (the scene's), or camera `i` of a path, as `PATH:i` (`circle:8:3`); a
-    /// path without index gives its first camera.
-    #[arg(long, value_name = "VIEW", default_value = "default")]
-    pub view: String,
+    #[arg(long, value_name = "SPEC", value_parser = parse_scene)]
+    pub scene: SceneArg,
+    /// Camera: `default` (the scene's), or camera `i` of a path, as `PATH:i` (`circle:8:3`,
+    /// `default:0`, `cams.json:2`); a path without index gives its first camera. `circle:3` is
+    /// the path of three views, as for `--path`: camera 3 of a bare `circle` is
+    /// `circle:120:3`.
+    #[arg(long, value_name = "VIEW", default_value = "default", value_parser = parse_view)]
+    pub view: ViewArg,
     #[command(flatten)]
     pub camera: CameraOverrides,
     /// Renderer with its settings, `name` or `name:key=value,...` (see `occult algos`).
@@ -93,25 +96,73 @@ pub struct CameraOverrides {
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
     pub up: Option<Vec3>,
     /// Vertical field of view, degrees.
-    #[arg(long, value_name = "DEG", value_parser = parse_finite)]
+    #[arg(long, value_name = "DEG", value_parser = parse_finite, allow_negative_numbers = true)]
     pub fov: Option<f32>,
     /// Near plane distance.
-    #[arg(long, value_name = "DIST", value_parser = parse_finite)]
+    #[arg(long, value_name = "DIST", value_parser = parse_finite, allow_negative_numbers = true)]
     pub near: Option<f32>,
     /// Far plane distance.
-    #[arg(long, value_name = "DIST", value_parser = parse_finite)]
+    #[arg(long, value_name = "DIST", value_parser = parse_finite, allow_negative_numbers = true)]
     pub far: Option<f32>,
+}
+
+impl CameraOverrides {
+    /// The checks of [`Camera::validate`] that need no scene, on the fields given: the field of
+    /// view, the near and far planes, and eye, target and up when eye and target are both
+    /// given. Run before the scene is built, so that a bad camera fails first; the camera as a
+    /// whole is checked again once the scene's fills the fields not given.
+    ///
+    /// # Errors
+    /// [`CoreError::DegenerateCamera`], as [`Camera::validate`] words it.
+    pub fn check(&self) -> Result<(), CoreError> {
+        let probe = Camera::look_at(Vec3::Z, Vec3::ZERO);
+        if let Some(fov) = self.fov {
+            Camera {
+                fov_y_deg: fov,
+                ..probe
+            }
+            .validate()?;
+        }
+        match (self.near, self.far) {
+            (Some(near), Some(far)) => Camera { near, far, ..probe }.validate()?,
+            (Some(near), None) => Camera {
+                near,
+                far: 2.0 * near.abs() + 1.0,
+                ..probe
+            }
+            .validate()?,
+            (None, Some(far)) if far <= 0.0 => {
+                return Err(CoreError::DegenerateCamera(format!("far plane {far} is not positive")))
+            }
+            _ => {}
+        }
+        if let (Some(eye), Some(target)) = (self.eye, self.target) {
+            Camera {
+                eye,
+                target,
+                up: self.up.unwrap_or(Vec3::Y),
+                ..probe
+            }
+            .validate()
+            .or_else(|e| match (self.up, e) {
+                // The scene's up may suit a view along +-y where the default +y does not.
+                (None, CoreError::DegenerateCamera(why)) if why.starts_with("up is parallel") => Ok(()),
+                (_, e) => Err(e),
+            })?;
+        }
+        Ok(())
+    }
 }
 
 /// `occult walk`.
 #[derive(Debug, Args)]
 pub struct WalkArgs {
     /// Scene spec or file (see `occult render --help`).
-    #[arg(long, value_name = "SPEC")]
-    pub scene: String,
+    #[arg(long, value_name = "SPEC", value_parser = parse_scene)]
+    pub scene: SceneArg,
     /// Camera path: `circle:N`, `street:N`, `flyover:N`, `default`, or a JSON file of cameras.
-    #[arg(long, value_name = "PATH", default_value = "circle:16")]
-    pub path: String,
+    #[arg(long, value_name = "PATH", default_value = "circle:16", value_parser = parse_path)]
+    pub path: PathArg,
     /// Renderer with its settings, `name` or `name:key=value,...` (see `occult algos`).
     #[arg(long, value_name = "SPEC", default_value = "frustum", value_parser = parse_algorithm)]
     pub algo: AlgoSpec,
@@ -134,11 +185,11 @@ pub struct WalkArgs {
 pub struct CompareArgs {
     /// Scene spec or file; repeat for several scenes (for example growing sizes, with
     /// `--plot-scaling`).
-    #[arg(long, value_name = "SPEC", required = true)]
-    pub scene: Vec<String>,
+    #[arg(long, value_name = "SPEC", required = true, value_parser = parse_scene)]
+    pub scene: Vec<SceneArg>,
     /// Camera path: `circle:N`, `street:N`, `flyover:N`, `default`, or a JSON file of cameras.
-    #[arg(long, value_name = "PATH", default_value = "circle:16")]
-    pub path: String,
+    #[arg(long, value_name = "PATH", default_value = "circle:16", value_parser = parse_path)]
+    pub path: PathArg,
     /// Renderers, comma-separated, each with its settings, or `all` (every renderer with default
     /// settings). Settings follow their renderer: `zbuffer,hzb:leaf=64,temporal=off,hzb` is three
     /// renderers, reported by these labels. The reference (see --reference) is always rendered
@@ -206,8 +257,8 @@ pub struct AlgorithmList(pub Vec<AlgoSpec>);
 #[derive(Debug, Args)]
 pub struct InfoArgs {
     /// Scene file or generator spec.
-    #[arg(value_name = "FILE|SPEC")]
-    pub scene: String,
+    #[arg(value_name = "FILE|SPEC", value_parser = parse_scene)]
+    pub scene: SceneArg,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
@@ -225,11 +276,11 @@ pub struct ScenesArgs {
 #[derive(Debug, Args)]
 pub struct SweepArgs {
     /// Scene spec or file.
-    #[arg(long, value_name = "SPEC")]
-    pub scene: String,
+    #[arg(long, value_name = "SPEC", value_parser = parse_scene)]
+    pub scene: SceneArg,
     /// Camera path: `circle:N`, `street:N`, `flyover:N`, `default`, or a JSON file of cameras.
-    #[arg(long, value_name = "PATH", default_value = "circle:16")]
-    pub path: String,
+    #[arg(long, value_name = "PATH", default_value = "circle:16", value_parser = parse_path)]
+    pub path: PathArg,
     /// Renderers compared at every value (as `occult compare --algos`); the varied one must be
     /// among them.
     #[arg(long, value_name = "A,B,..", value_parser = parse_algorithms)]
@@ -268,6 +319,78 @@ pub struct AlgosArgs {
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
+}
+
+/// A scene named on the command line: the text as given and the spec it parses to.
+#[derive(Clone, Debug)]
+pub struct SceneArg {
+    /// As given.
+    pub text: String,
+    /// Parsed: generator parameters checked, a file known to exist.
+    pub spec: SceneSpec,
+}
+
+impl std::fmt::Display for SceneArg {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.text)
+    }
+}
+
+/// A scene spec, checked as far as it can be without building the scene: a generator's
+/// parameters in full, a file's existence (its contents are read when the scene is built).
+pub fn parse_scene(s: &str) -> Result<SceneArg, String> {
+    let spec = occult_scenes::parse_spec(s).map_err(|e| e.to_string())?;
+    if let SceneSpec::File(path) = &spec {
+        match std::fs::metadata(path) {
+            Ok(m) if m.is_file() => {}
+            Ok(_) => return Err(format!("{} is not a file", path.display())),
+            Err(e) => return Err(format!("{}: {e}", path.display())),
+        }
+    }
+    Ok(SceneArg {
+        text: s.to_string(),
+        spec,
+    })
+}
+
+/// A camera path named on the command line: the text as given and the spec it parses to.
+#[derive(Clone, Debug)]
+pub struct PathArg {
+    /// As given.
+    pub text: String,
+    /// Parsed: kind and count checked, a file read.
+    pub spec: PathSpec,
+}
+
+impl std::fmt::Display for PathArg {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.text)
+    }
+}
+
+/// A camera path spec ([`PathSpec::parse`]).
+pub fn parse_path(s: &str) -> Result<PathArg, String> {
+    Ok(PathArg {
+        text: s.to_string(),
+        spec: PathSpec::parse(s).map_err(|e| e.to_string())?,
+    })
+}
+
+/// One camera named on the command line: the text as given and the spec it parses to.
+#[derive(Clone, Debug)]
+pub struct ViewArg {
+    /// As given.
+    pub text: String,
+    /// Parsed: the path checked, the index within it.
+    pub spec: ViewSpec,
+}
+
+/// A view spec ([`ViewSpec::parse`]): `PATH` or `PATH:i`.
+pub fn parse_view(s: &str) -> Result<ViewArg, String> {
+    Ok(ViewArg {
+        text: s.to_string(),
+        spec: ViewSpec::parse(s).map_err(|e| e.to_string())?,
+    })
 }
 
 /// `WxH`, checked against the engine's resolution limits.
@@ -313,12 +436,15 @@ pub fn parse_threads(s: &str) -> Result<usize, String> {
     }
 }
 
-/// One algorithm spec, `name` or `name:key=value,...`.
+/// One algorithm spec, `name` or `name:key=value,...`, keys and values checked
+/// ([`AlgoSpec::validate`]).
 pub fn parse_algorithm(s: &str) -> Result<AlgoSpec, String> {
-    AlgoSpec::parse(s).map_err(|e| e.to_string())
+    let spec = AlgoSpec::parse(s).map_err(|e| e.to_string())?;
+    spec.validate().map_err(|e| e.to_string())?;
+    Ok(spec)
 }
 
-/// Comma-separated algorithm specs (duplicates dropped), or `all`.
+/// Comma-separated algorithm specs (duplicates dropped; keys and values checked), or `all`.
 pub fn parse_algorithms(s: &str) -> Result<AlgorithmList, String> {
     if s.trim() == "all" {
         return Ok(AlgorithmList(
@@ -327,6 +453,7 @@ pub fn parse_algorithms(s: &str) -> Result<AlgorithmList, String> {
     }
     let mut list: Vec<AlgoSpec> = Vec::new();
     for spec in AlgoSpec::parse_list(s).map_err(|e| e.to_string())? {
+        spec.validate().map_err(|e| e.to_string())?;
         if !list.iter().any(|a| a.label() == spec.label()) {
             list.push(spec);
         }
@@ -379,6 +506,53 @@ mod tests {
         let e = parse_algorithms("zbuffer,warp").unwrap_err();
         assert!(e.contains("warp") && e.contains("frustum"), "{e}");
         assert!(parse_algorithms("zbuffer,,frustum").is_err());
+    }
+
+    #[test]
+    fn setting_values_are_checked_when_parsed() {
+        let e = parse_algorithms("zbuffer,frustum:leaf=abc").unwrap_err();
+        assert!(e.contains("leaf=abc"), "{e}");
+        assert!(parse_algorithm("frustum:leaf=0").is_err());
+        assert!(parse_reference("hzb:temporal=maybe").is_err());
+        assert!(parse_algorithm("frustum:leaf=8").is_ok());
+    }
+
+    #[test]
+    fn negative_numbers_reach_our_checks() {
+        use clap::Parser;
+        let parse = |args: &[&str]| {
+            let mut all = vec!["occult", "render", "--scene", "terrain:g=2", "--out", "x.png"];
+            all.extend_from_slice(args);
+            Cli::try_parse_from(all)
+        };
+        for (flag, value) in [("--fov", "-10"), ("--near", "-1"), ("--far", "-5")] {
+            let cli = parse(&[flag, value]).unwrap_or_else(|e| panic!("{flag} {value}: {e}"));
+            let Command::Render(r) = cli.command else {
+                unreachable!()
+            };
+            let e = r.camera.check().unwrap_err().to_string();
+            assert!(e.contains(value), "{flag}: {e}");
+        }
+        let cli = parse(&["--eye", "-1,2,3", "--target", "-1,2,3"]).unwrap();
+        let Command::Render(r) = cli.command else {
+            unreachable!()
+        };
+        assert!(r.camera.check().unwrap_err().to_string().contains("coincide"));
+        let cli = parse(&["--fov", "45", "--near", "0.5", "--eye", "0,5,0", "--target", "0,0,0"]).unwrap();
+        let Command::Render(r) = cli.command else {
+            unreachable!()
+        };
+        r.camera.check().unwrap();
+    }
+
+    #[test]
+    fn scenes_paths_and_views_are_checked_when_parsed() {
+        assert!(parse_scene("city:blocks=A").unwrap_err().contains("blocks"));
+        assert!(parse_scene("no/such/model.obj").unwrap_err().contains("model.obj"));
+        assert!(parse_path("circle:0").is_err());
+        assert!(parse_view("circle:0").is_err(), "as --path circle:0");
+        assert_eq!(parse_view("circle:8:3").unwrap().spec.index, 3);
+        assert!(parse_view("circle:8:8").unwrap_err().contains("index 8"));
     }
 
     #[test]

@@ -305,6 +305,19 @@ pub fn table(header: &[&str], rows: &[Vec<String>]) -> String {
     out
 }
 
+/// `names` sorted and comma-separated without repeats, or `they have none` when empty: the
+/// tail of a message listing what a name could have been.
+pub fn names_or_none(names: &[&str]) -> String {
+    let mut names = names.to_vec();
+    names.sort_unstable();
+    names.dedup();
+    if names.is_empty() {
+        "they have none".to_string()
+    } else {
+        format!("known: {}", names.join(", "))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

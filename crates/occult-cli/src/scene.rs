@@ -6,7 +6,7 @@ use std::time::Instant;
 use anyhow::{bail, Result};
 use occult_core::{Camera, Scene};
 
-use crate::args::CameraOverrides;
+use crate::args::{CameraOverrides, PathArg, SceneArg, ViewArg};
 use crate::progress::Progress;
 
 /// A scene built from a spec, with what the CLI reports about it.
@@ -25,16 +25,16 @@ pub struct LoadedScene {
     pub build_ms: f64,
 }
 
-/// Parses and builds the scene `spec` (a generator spec or a file), with a spinner while it
-/// takes long.
+/// Builds the scene of a parsed spec (a generator or a file), with a spinner while it takes
+/// long.
 ///
 /// # Errors
-/// Bad specs, unknown generators, unreadable or malformed files, generator limits.
-pub fn load(spec: &str) -> Result<LoadedScene> {
+/// Unreadable or malformed files, generator limits.
+pub fn load(arg: &SceneArg) -> Result<LoadedScene> {
+    let spec = arg.text.as_str();
     let start = Instant::now();
-    let parsed = occult_scenes::spec::parse_spec(spec).map_err(|e| naming(e, "scene", spec))?;
     let progress = Progress::spinner(format!("building scene {spec}"));
-    let built = parsed.build().map_err(|e| naming(e, "scene", spec))?;
+    let built = arg.spec.build().map_err(|e| naming(e, "scene", spec))?;
     drop(progress);
     let build_ms = start.elapsed().as_secs_f64() * 1e3;
     Ok(LoadedScene {
@@ -47,12 +47,15 @@ pub fn load(spec: &str) -> Result<LoadedScene> {
     })
 }
 
-/// The cameras of path `spec` through `scene`.
+/// The cameras of a parsed path through `scene`.
 ///
 /// # Errors
-/// Bad path specs, unreadable camera files, empty paths.
-pub fn path(spec: &str, scene: &LoadedScene) -> Result<Vec<Camera>> {
-    let cameras = occult_scenes::path::parse_path(spec, &scene.scene, &scene.default_camera)
+/// Degenerate views (in camera files), empty paths.
+pub fn path(arg: &PathArg, scene: &LoadedScene) -> Result<Vec<Camera>> {
+    let spec = arg.text.as_str();
+    let cameras = arg
+        .spec
+        .views(&scene.scene, &scene.default_camera)
         .map_err(|e| naming(e, "camera path", spec))?;
     if cameras.is_empty() {
         bail!("camera path '{spec}' holds no camera");
@@ -63,13 +66,12 @@ pub fn path(spec: &str, scene: &LoadedScene) -> Result<Vec<Camera>> {
 /// The camera named by `view` (`default`, a path, or `PATH:i`) with `overrides` applied.
 ///
 /// # Errors
-/// Bad path specs, an index past the path's end, a degenerate camera.
-pub fn camera(view: &str, overrides: &CameraOverrides, scene: &LoadedScene) -> Result<Camera> {
-    let mut camera = if view == "default" {
-        scene.default_camera
-    } else {
-        path_camera(view, scene)?
-    };
+/// A degenerate camera.
+pub fn camera(view: &ViewArg, overrides: &CameraOverrides, scene: &LoadedScene) -> Result<Camera> {
+    let mut camera = view
+        .spec
+        .camera(&scene.scene, &scene.default_camera)
+        .map_err(|e| naming(e, "view", &view.text))?;
     let o = overrides;
     camera.eye = o.eye.unwrap_or(camera.eye);
     camera.target = o.target.unwrap_or(camera.target);
@@ -87,23 +89,6 @@ fn naming<E: std::error::Error + Send + Sync + 'static>(error: E, what: &str, sp
         anyhow::Error::new(error)
     } else {
         anyhow::Error::new(error).context(format!("{what} '{spec}'"))
-    }
-}
-
-/// `PATH` (its first camera) or `PATH:i`.
-fn path_camera(view: &str, scene: &LoadedScene) -> Result<Camera> {
-    let whole = path(view, scene);
-    let (prefix, index) = match view.rsplit_once(':').map(|(p, i)| (p, i.parse::<usize>())) {
-        Some((prefix, Ok(index))) if whole.is_err() => (prefix, index),
-        _ => return Ok(whole?[0]),
-    };
-    let cameras = path(prefix, scene)?;
-    match cameras.get(index) {
-        Some(c) => Ok(*c),
-        None => bail!(
-            "view '{view}': index {index} is past the end of path '{prefix}', which has {} cameras",
-            cameras.len()
-        ),
     }
 }
 

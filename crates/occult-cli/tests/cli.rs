@@ -370,6 +370,171 @@ fn info_describes_a_scene() {
     }
 }
 
+/// Status, stdout and stderr of a run that must fail.
+fn fails(args: &[&str]) -> (Option<i32>, String, String) {
+    let out = occult(args);
+    assert!(!out.status.success(), "occult {args:?} succeeded");
+    let stderr = text(&out.stderr);
+    assert_eq!(stderr.trim().lines().count(), 1, "occult {args:?}: {stderr}");
+    (out.status.code(), text(&out.stdout), stderr)
+}
+
+#[test]
+fn bad_arguments_fail_before_any_work() {
+    let dir = scratch("early");
+    let (json, plot) = (dir.join("c.json"), dir.join("c.png"));
+    let compare = |extra: &[&str]| {
+        let mut args = vec![
+            "compare",
+            "--scene",
+            CITY,
+            "--path",
+            "circle:2",
+            "--size",
+            "32x24",
+            "--json",
+            path_arg(&json),
+        ];
+        args.extend_from_slice(extra);
+        fails(&args)
+    };
+    // A --plot-y no renderer can report: refused before the run, nothing written.
+    let (_, stdout, stderr) = compare(&["--algos", "frustum,hzb", "--plot", path_arg(&plot), "--plot-y", "bogus"]);
+    assert!(
+        stderr.contains("bogus") && stderr.contains("occlusion_tests"),
+        "{stderr}"
+    );
+    assert!(stdout.is_empty() && !json.exists() && !plot.exists(), "{stdout}");
+    // A bad second scene: refused before the first is run.
+    let (code, stdout, stderr) = compare(&["--scene", "city:blocks=A"]);
+    assert_eq!(code, Some(2), "a usage error: {stderr}");
+    assert!(
+        stderr.contains("blocks") && stdout.is_empty() && !json.exists(),
+        "{stderr}"
+    );
+    let missing = dir.join("missing.ply");
+    let (code, stdout, stderr) = compare(&["--scene", path_arg(&missing)]);
+    assert!(
+        code == Some(2) && stderr.contains("missing.ply") && stdout.is_empty(),
+        "{stderr}"
+    );
+    // Setting values are checked with the keys, as the command line is parsed.
+    for bad in [
+        "frustum:leaf=abc",
+        "frustum:leaf=0",
+        "hzb:temporal=maybe",
+        "frustum:bogus=1",
+    ] {
+        let (code, stdout, stderr) = compare(&["--algos", bad]);
+        assert_eq!(code, Some(2), "{bad}: {stderr}");
+        assert!(stdout.is_empty() && stderr.contains(bad.split_once(':').unwrap().1.split('=').next().unwrap()));
+    }
+    let (code, _, stderr) = compare(&["--reference", "frustum:leaf=x"]);
+    assert!(code == Some(2) && stderr.contains("leaf=x"), "{stderr}");
+    // The same in the other commands.
+    let out = dir.join("x.png");
+    for args in [
+        &["walk", "--scene", CITY, "--algo", "hzb:leaf=-3", "--path", "circle:1"][..],
+        &[
+            "render",
+            "--scene",
+            CITY,
+            "--out",
+            path_arg(&out),
+            "--algo",
+            "frustum:group_leaf=x",
+        ],
+        &["render", "--scene", "city:blocks=A", "--out", path_arg(&out)],
+        &["walk", "--scene", CITY, "--path", "circle:0"],
+    ] {
+        let (code, stdout, stderr) = fails(args);
+        assert!(code == Some(2) && stdout.is_empty(), "{args:?}: {stderr}");
+    }
+    let sweep = |extra: &[&str]| {
+        let mut args = vec![
+            "sweep", "--scene", CITY, "--path", "circle:1", "--size", "32x24", "--algos", "frustum",
+        ];
+        args.extend_from_slice(extra);
+        fails(&args)
+    };
+    let (_, stdout, stderr) = sweep(&["--vary", "frustum.leaf=8,0"]);
+    assert!(stdout.is_empty() && stderr.contains("leaf"), "{stderr}");
+    let (_, stdout, stderr) = sweep(&["--vary", "frustum.leaf=8", "--counter", "bogus"]);
+    assert!(stdout.is_empty() && stderr.contains("bogus"), "{stderr}");
+}
+
+#[test]
+fn negative_and_huge_camera_values_get_our_messages() {
+    let dir = scratch("camera-values");
+    let out = dir.join("x.png");
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", "--scene", TERRAIN, "--size", "32x24", "--out", path_arg(&out)];
+        args.extend_from_slice(extra);
+        fails(&args).2
+    };
+    assert!(render(&["--fov", "-10"]).contains("vertical fov -10"));
+    assert!(render(&["--fov=-10"]).contains("vertical fov -10"));
+    assert!(render(&["--near", "-1"]).contains("near plane -1"));
+    assert!(render(&["--far", "-2"]).contains("far plane -2"));
+    let e = render(&["--eye", "3e38,0,0", "--target", "-3e38,0,0"]);
+    assert!(e.contains("too large") && !e.contains("coincide"), "{e}");
+    // As --path circle:0, --view circle:0 is refused (not read as camera 0 of `circle`).
+    let e = render(&["--view", "circle:0"]);
+    assert!(e.contains("circle:0") && e.contains("at least one view"), "{e}");
+    let e = fails(&["walk", "--scene", TERRAIN, "--path", "circle:0"]).2;
+    assert!(e.contains("at least one view"), "{e}");
+    // A distant eye is a valid camera, not a coincident one.
+    ok(&[
+        "render",
+        "--scene",
+        TERRAIN,
+        "--size",
+        "32x24",
+        "--out",
+        path_arg(&out),
+        "--eye",
+        "1e30,0,0",
+    ]);
+}
+
+#[test]
+fn model_files_get_a_working_default_camera_and_clear_header_errors() {
+    let dir = scratch("models");
+    let json = dir.join("r.json");
+    let render = |name: &str, text: &str| {
+        let model = dir.join(name);
+        std::fs::write(&model, text).unwrap();
+        let out = dir.join("x.png");
+        ok(&[
+            "render",
+            "--scene",
+            path_arg(&model),
+            "--algo",
+            "zbuffer",
+            "--size",
+            "64x48",
+            "--out",
+            path_arg(&out),
+            "--json",
+            path_arg(&json),
+        ]);
+        read_json(&json)["covered_pixels"].as_u64().unwrap()
+    };
+    // Coordinates of ±1e20: the default camera frames them.
+    assert!(render("huge.obj", "v -1e20 -1e20 0\nv 1e20 -1e20 0\nv 0 1e20 1e20\nf 1 2 3\n") > 0);
+    // A triangle in the yz plane: the default camera does not look along its plane.
+    assert!(render("yz.obj", "v 0 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\n") > 0);
+    // A PLY header error: one line naming the file, line, column and what was expected.
+    let ply = dir.join("typo.ply");
+    std::fs::write(&ply, "ply\nformat ascii 1.0\nelment vertex 3\nend_header\n").unwrap();
+    let e = fails(&["info", path_arg(&ply)]).2;
+    assert!(
+        e.contains("typo.ply line 3, column 1: bad header: cannot parse line 'elment vertex 3': expected one of"),
+        "{e}"
+    );
+    assert!(!e.contains("ParseError") && !e.contains('{'), "{e}");
+}
+
 #[test]
 fn scenes_lists_generators_and_parameters() {
     let out = ok(&["scenes"]);

@@ -2,8 +2,10 @@
 //! ([`occult_render::compare`] does the measuring; this writes it out).
 
 use anyhow::{bail, Context, Result};
-use occult_render::compare::{compare, CompareConfig, CompareProgress, CompareReport, FrameRecord, RendererReport};
-use occult_render::RenderOptions;
+use occult_render::compare::{
+    compare, CompareConfig, CompareProgress, CompareReport, FrameRecord, Reference, RendererReport,
+};
+use occult_render::{AlgoSpec, RenderOptions};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -63,6 +65,9 @@ pub fn run(a: CompareArgs) -> Result<()> {
     if a.plot_scaling.is_some() && a.scene.len() < 2 {
         bail!("--plot-scaling needs two or more --scene values (one point per scene)");
     }
+    if a.plot.is_some() {
+        check_plot_y(&a)?;
+    }
     let config = CompareConfig {
         algorithms: a.algos.0.clone(),
         options: RenderOptions::default(),
@@ -84,7 +89,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
         .with_context(|| format!("comparing on scene '{spec}'"))?;
         drop(progress);
         let summary = scene.summary();
-        say_raw!("{}", report_text(&summary, &a.path, &report));
+        say_raw!("{}", report_text(&summary, &a.path.text, &report));
         runs.push((summary, report));
     }
 
@@ -92,7 +97,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
         let out = CompareOut {
             tool: "occult",
             version: env!("CARGO_PKG_VERSION"),
-            path: &a.path,
+            path: &a.path.text,
             algorithms: a.algos.0.iter().map(|a| a.label()).collect(),
             runs: runs
                 .iter()
@@ -112,30 +117,56 @@ pub fn run(a: CompareArgs) -> Result<()> {
         say!("wrote {}", p.display());
     }
     if let Some(p) = &a.plot {
-        let known = ["time", "submitted", "rasterized"].contains(&a.plot_y.as_str())
+        // Checked before the run; a counter some renderers report only in some configurations
+        // may still be missing from this one.
+        let reported = PLOT_Y_FIXED.contains(&a.plot_y.as_str())
             || runs.iter().any(|(_, r)| {
                 r.renderers
                     .iter()
                     .any(|x| x.stats.counters.contains_key(a.plot_y.as_str()))
             });
-        if !known {
+        if !reported {
             bail!(
-                "--plot-y {}: not time, submitted, rasterized or a counter of these renderers (see the text report)",
+                "--plot-y {}: no renderer reported this counter in this run (it depends on their settings)",
                 a.plot_y
             );
         }
         let panels: Vec<Panel> = runs
             .iter()
-            .map(|(s, r)| frame_panel(s, &a.path, r, &a.plot_y))
+            .map(|(s, r)| frame_panel(s, &a.path.text, r, &a.plot_y))
             .collect();
         plot::draw(p, &panels)?;
         say!("wrote {}", p.display());
     }
     for (axis, p) in &scaling_plots {
         if let Some(p) = p {
-            plot::draw(p, &[scaling_panel(&a.path, &runs, *axis)])?;
+            plot::draw(p, &[scaling_panel(&a.path.text, &runs, *axis)])?;
             say!("wrote {}", p.display());
         }
+    }
+    Ok(())
+}
+
+/// What `--plot-y` takes besides counter names.
+const PLOT_Y_FIXED: [&str; 3] = ["time", "submitted", "rasterized"];
+
+/// Refuses a `--plot-y` that is neither a fixed quantity nor a counter any renderer of the
+/// line-up (the reference included) can report.
+fn check_plot_y(a: &CompareArgs) -> Result<()> {
+    if PLOT_Y_FIXED.contains(&a.plot_y.as_str()) {
+        return Ok(());
+    }
+    let mut lineup: Vec<&AlgoSpec> = a.algos.0.iter().collect();
+    if let Reference::Spec(r) = &a.reference.0 {
+        lineup.push(r);
+    }
+    let known: Vec<&str> = lineup.iter().flat_map(|s| s.algorithm.counter_names()).collect();
+    if !known.contains(&a.plot_y.as_str()) {
+        bail!(
+            "--plot-y {}: not time, submitted, rasterized or a counter of these renderers ({})",
+            a.plot_y,
+            output::names_or_none(&known)
+        );
     }
     Ok(())
 }

@@ -13,7 +13,7 @@ use occult_render::nbuffer::particles::{draw_particles, Particles, MAX_PARTICLES
 use occult_render::{Algorithm, RenderOptions};
 use serde::Serialize;
 
-use crate::args::{parse_size, CameraOverrides, Size};
+use crate::args::{parse_scene, parse_size, parse_view, CameraOverrides, SceneArg, Size, ViewArg};
 use crate::output;
 use crate::scene::{self, SceneSummary};
 
@@ -22,11 +22,11 @@ use crate::scene::{self, SceneSummary};
 pub struct ParticlesArgs {
     /// Scene spec or file (see `occult render --help`); `city` or `forest` place the sprites
     /// among buildings or trees.
-    #[arg(long, value_name = "SPEC")]
-    pub scene: String,
-    /// Camera: `default`, or camera `i` of a path as `PATH:i`.
-    #[arg(long, value_name = "VIEW", default_value = "default")]
-    pub view: String,
+    #[arg(long, value_name = "SPEC", value_parser = parse_scene)]
+    pub scene: SceneArg,
+    /// Camera: `default`, or camera `i` of a path as `PATH:i` (see `occult render --help`).
+    #[arg(long, value_name = "VIEW", default_value = "default", value_parser = parse_view)]
+    pub view: ViewArg,
     #[command(flatten)]
     pub camera: CameraOverrides,
     /// Frame size, WxH pixels.
@@ -47,7 +47,7 @@ pub struct ParticlesArgs {
     #[arg(long, value_name = "on|off", default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
     pub batch: bool,
     /// Share of the scene's height (from the ground) the particles fill, in (0, 1].
-    #[arg(long, value_name = "F", default_value_t = 0.3)]
+    #[arg(long, value_name = "F", default_value_t = 0.3, allow_negative_numbers = true)]
     pub fill: f32,
     /// Seed of the particle placement.
     #[arg(long, value_name = "N", default_value_t = 9)]
@@ -137,6 +137,7 @@ pub fn run(a: ParticlesArgs) -> Result<()> {
     if !(a.fill > 0.0 && a.fill <= 1.0) {
         bail!("--fill {} is not in (0, 1]", a.fill);
     }
+    a.camera.check()?;
     let scene = scene::load(&a.scene)?;
     let camera = scene::camera(&a.view, &a.camera, &scene)?;
     let view = View::new(camera, a.size.width, a.size.height).context("view")?;

@@ -37,6 +37,7 @@ struct RenderOut<'a> {
 /// Runs the command.
 pub fn run(a: RenderArgs) -> Result<()> {
     output::check_outputs([&Some(a.out.clone()), &a.depth_out, &a.json])?;
+    a.camera.check()?;
     let scene = scene::load(&a.scene)?;
     let camera = scene::camera(&a.view, &a.camera, &scene)?;
     let view = View::new(camera, a.size.width, a.size.height).context("view")?;

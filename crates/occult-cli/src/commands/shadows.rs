@@ -7,13 +7,16 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use occult_core::{Camera, Vec3, View};
+use occult_core::{Aabb, Camera, Vec3, View};
 use occult_raster::{shade, Frame, RasterConfig, Rasterizer};
 use occult_render::nbuffer::shadows::{Clamping, ShadowCasters, ShadowCounts, ShadowFrame, SpotLight};
 use occult_render::{Algorithm, RenderOptions};
 use serde::Serialize;
 
-use crate::args::{parse_finite, parse_size, parse_vec3, CameraOverrides, Size};
+use crate::args::{
+    parse_finite, parse_path, parse_scene, parse_size, parse_vec3, parse_view, CameraOverrides, PathArg, SceneArg,
+    Size, ViewArg,
+};
 use crate::output;
 use crate::scene::{self, SceneSummary};
 
@@ -21,16 +24,16 @@ use crate::scene::{self, SceneSummary};
 #[derive(Debug, Args)]
 pub struct ShadowsArgs {
     /// Scene spec or file (see `occult render --help`).
-    #[arg(long, value_name = "SPEC")]
-    pub scene: String,
-    /// Camera: `default`, or camera `i` of a path as `PATH:i`.
-    #[arg(long, value_name = "VIEW", default_value = "default", conflicts_with = "path")]
-    pub view: String,
+    #[arg(long, value_name = "SPEC", value_parser = parse_scene)]
+    pub scene: SceneArg,
+    /// Camera: `default`, or camera `i` of a path as `PATH:i` (see `occult render --help`).
+    #[arg(long, value_name = "VIEW", default_value = "default", conflicts_with = "path", value_parser = parse_view)]
+    pub view: ViewArg,
     /// Camera path instead of one view (`circle:N`, `street:N`, `flyover:N` or a JSON file of
     /// cameras, as `walk` and `compare` take): per-frame and mean figures; the image is the
     /// last frame's.
-    #[arg(long, value_name = "PATH")]
-    pub path: Option<String>,
+    #[arg(long, value_name = "PATH", value_parser = parse_path)]
+    pub path: Option<PathArg>,
     #[command(flatten)]
     pub camera: CameraOverrides,
     /// Frame size, WxH pixels.
@@ -43,7 +46,7 @@ pub struct ShadowsArgs {
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
     pub light_target: Option<Vec3>,
     /// Full cone angle of the light, degrees, in (0, 170]; default: holds the whole scene.
-    #[arg(long, value_name = "DEG", value_parser = parse_finite)]
+    #[arg(long, value_name = "DEG", value_parser = parse_finite, allow_negative_numbers = true)]
     pub cone: Option<f32>,
     /// Litmap side in lexels.
     #[arg(long, value_name = "N", default_value_t = 512)]
@@ -162,6 +165,13 @@ pub fn run(a: ShadowsArgs) -> Result<()> {
     if a.leaf == 0 {
         bail!("--leaf must be at least 1");
     }
+    // The light's own checks on the values given, before the scene is built (a light about
+    // a unit box stands in for the scene's).
+    let mut probe = SpotLight::for_bounds(&Aabb::new(-Vec3::ONE, Vec3::ONE));
+    probe.cone_deg = a.cone.unwrap_or(probe.cone_deg);
+    probe.resolution = a.litmap;
+    probe.view()?;
+    a.camera.check()?;
     let scene = scene::load(&a.scene)?;
     let cameras = match &a.path {
         Some(p) => scene::path(p, &scene)?,
@@ -255,7 +265,7 @@ pub fn run(a: ShadowsArgs) -> Result<()> {
     if frames.len() > 1 {
         say!(
             "path {}: {} frames{}",
-            a.path.as_deref().unwrap_or(""),
+            a.path.as_ref().map_or("", |p| p.text.as_str()),
             frames.len(),
             if modes.len() == 2 {
                 "; per frame, unclamped → clamped"
@@ -339,7 +349,7 @@ pub fn run(a: ShadowsArgs) -> Result<()> {
     if let Some(p) = &a.json {
         let out = ShadowsOut {
             scene: summary,
-            path: a.path.clone(),
+            path: a.path.as_ref().map(|p| p.text.clone()),
             camera: *cameras.last().expect("one camera at least"),
             width: a.size.width,
             height: a.size.height,

@@ -77,9 +77,8 @@ pub fn run(a: SweepArgs) -> Result<()> {
             a.algos.0.iter().map(AlgoSpec::label).collect::<Vec<_>>().join(", ")
         );
     }
-    let scene = scene::load(&a.scene)?;
-    let cameras = scene::path(&a.path, &scene)?;
-    // One line-up per value; the varied algorithm's specs get key=value.
+    // One line-up per value; the varied algorithm's specs get key=value, each checked before
+    // the scene is built.
     let lineups: Vec<Vec<AlgoSpec>> = vary
         .values
         .iter()
@@ -91,13 +90,25 @@ pub fn run(a: SweepArgs) -> Result<()> {
                     let mut s = s.clone();
                     if s.algorithm.name() == vary.algorithm {
                         s.params.set(&vary.key, v);
-                        s.check_keys()?;
+                        s.validate()?;
                     }
                     Ok(s)
                 })
                 .collect::<Result<Vec<_>, occult_render::RenderError>>()
         })
         .collect::<Result<_, _>>()?;
+    let known: Vec<&str> = a.algos.0.iter().flat_map(|s| s.algorithm.counter_names()).collect();
+    for c in &a.counter {
+        if !known.contains(&c.as_str()) {
+            bail!(
+                "--counter {c}: not a counter of {} ({})",
+                a.algos.0.iter().map(AlgoSpec::label).collect::<Vec<_>>().join(", "),
+                output::names_or_none(&known)
+            );
+        }
+    }
+    let scene = scene::load(&a.scene)?;
+    let cameras = scene::path(&a.path, &scene)?;
     let total = (cameras.len() * lineups.len()) as u64;
     let progress = Progress::bar(total, format!("{}: preparing", a.scene));
     let mut reports = Vec::with_capacity(lineups.len());
@@ -176,7 +187,7 @@ pub fn run(a: SweepArgs) -> Result<()> {
             tool: "occult",
             version: env!("CARGO_PKG_VERSION"),
             scene: summary.clone(),
-            path: &a.path,
+            path: &a.path.text,
             vary: vary_text.clone(),
             points: vary
                 .values

@@ -180,7 +180,7 @@ pub fn run(a: WalkArgs) -> Result<()> {
     if let Some(p) = &a.json {
         let out = WalkOut {
             scene: summary,
-            path: a.path.clone(),
+            path: a.path.text.clone(),
             algorithm: &a.algo.label(),
             width: a.size.width,
             height: a.size.height,
