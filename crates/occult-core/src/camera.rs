@@ -87,10 +87,15 @@ impl Camera {
     }
 }
 
-/// `v` scaled to unit length, or zero for a zero or non-finite `v`. Scaled by its largest
-/// component first, so that vectors whose squared length overflows `f32` (components beyond
-/// about 1.8e19) still normalize.
+/// `v` scaled to unit length, or zero for a zero or non-finite `v`. Where its squared length
+/// overflows (components beyond about 1.8e19) or underflows `f32`, scaled by its largest
+/// component first; otherwise plain `normalize`, so that every ordinary camera keeps the
+/// matrices, and the frames, it always had.
 fn unit(v: Vec3) -> Vec3 {
+    let squared = v.length_squared();
+    if squared.is_finite() && squared >= f32::MIN_POSITIVE {
+        return v.normalize();
+    }
     let largest = v.abs().max_element();
     if !(largest > 0.0 && largest.is_finite()) {
         return Vec3::ZERO;
