@@ -321,20 +321,24 @@ pub struct AlgosArgs {
     pub json: bool,
 }
 
-/// A scene named on the command line: the text as given and the spec it parses to.
+/// A spec named on the command line: the text as given (which is how it is shown) and what it
+/// parses to.
 #[derive(Clone, Debug)]
-pub struct SceneArg {
+pub struct Given<T> {
     /// As given.
     pub text: String,
-    /// Parsed: generator parameters checked, a file known to exist.
-    pub spec: SceneSpec,
+    /// Parsed and checked as far as it can be before any work.
+    pub spec: T,
 }
 
-impl std::fmt::Display for SceneArg {
+impl<T> std::fmt::Display for Given<T> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(&self.text)
     }
 }
+
+/// A scene: generator parameters checked, a file known to exist.
+pub type SceneArg = Given<SceneSpec>;
 
 /// A scene spec, checked as far as it can be without building the scene: a generator's
 /// parameters in full, a file's existence (its contents are read when the scene is built).
@@ -353,20 +357,8 @@ pub fn parse_scene(s: &str) -> Result<SceneArg, String> {
     })
 }
 
-/// A camera path named on the command line: the text as given and the spec it parses to.
-#[derive(Clone, Debug)]
-pub struct PathArg {
-    /// As given.
-    pub text: String,
-    /// Parsed: kind and count checked, a file read.
-    pub spec: PathSpec,
-}
-
-impl std::fmt::Display for PathArg {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.text)
-    }
-}
+/// A camera path: kind and count checked, a file read.
+pub type PathArg = Given<PathSpec>;
 
 /// A camera path spec ([`PathSpec::parse`]).
 pub fn parse_path(s: &str) -> Result<PathArg, String> {

@@ -1089,58 +1089,8 @@ mod tests {
     /// A 6×6 grid of unit cubes (instanced) on a ground quad: cubes hide each other and the
     /// ground from most views.
     fn cubes() -> Arc<Scene> {
-        let p = [
-            Vec3::new(-0.5, -0.5, -0.5),
-            Vec3::new(0.5, -0.5, -0.5),
-            Vec3::new(0.5, 0.5, -0.5),
-            Vec3::new(-0.5, 0.5, -0.5),
-            Vec3::new(-0.5, -0.5, 0.5),
-            Vec3::new(0.5, -0.5, 0.5),
-            Vec3::new(0.5, 0.5, 0.5),
-            Vec3::new(-0.5, 0.5, 0.5),
-        ];
-        let t = vec![
-            [0, 2, 1],
-            [0, 3, 2],
-            [4, 5, 6],
-            [4, 6, 7],
-            [0, 1, 5],
-            [0, 5, 4],
-            [3, 7, 6],
-            [3, 6, 2],
-            [0, 4, 7],
-            [0, 7, 3],
-            [1, 2, 6],
-            [1, 6, 5],
-        ];
-        let mut b = SceneBuilder::new();
-        let cube = b.add_mesh("cube", Mesh::new(p.to_vec(), t).unwrap()).unwrap();
-        let ground = Mesh::new(
-            vec![
-                Vec3::new(-8.0, -0.5, -8.0),
-                Vec3::new(8.0, -0.5, -8.0),
-                Vec3::new(8.0, -0.5, 8.0),
-                Vec3::new(-8.0, -0.5, 8.0),
-            ],
-            vec![[0, 2, 1], [0, 3, 2]],
-        )
-        .unwrap();
-        let ground = b.add_mesh("ground", ground).unwrap();
-        let mut instances = vec![Instance {
-            parent_from_child: Affine3A::IDENTITY,
-            child: ground,
-        }];
-        for i in 0..6 {
-            for j in 0..6 {
-                let at = Vec3::new(i as f32 * 2.0 - 5.0, 0.0, j as f32 * 2.0 - 5.0);
-                instances.push(Instance {
-                    parent_from_child: Affine3A::from_translation(at),
-                    child: cube,
-                });
-            }
-        }
-        let root = b.add_group("grid", instances).unwrap();
-        Arc::new(b.build(root).unwrap())
+        let at = (0..36).map(|k| Vec3::new((k / 6) as f32 * 2.0 - 5.0, 0.0, (k % 6) as f32 * 2.0 - 5.0));
+        crate::tests::cubes_on_ground([-8.0, 8.0, -8.0, 8.0], at)
     }
 
     fn circle(n: usize) -> Vec<Camera> {

@@ -290,33 +290,43 @@ mod tests {
     use super::*;
     use occult_core::{Affine3A, Camera, Instance, Mesh, SceneBuilder, Vec3};
 
-    /// Nine instanced boxes in a row along the view, on a ground quad: near boxes hide far ones.
-    fn boxes() -> Arc<Scene> {
-        let p: Vec<Vec3> = (0..8)
-            .map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, (i >> 2) as f32) - 0.5)
-            .collect();
+    /// Unit cubes (one mesh, instanced) centred at `at` on a ground quad at y = -0.5 spanning
+    /// `[x0, x1, z0, z1]`: the test scene of this crate's tests, where cubes hide each other
+    /// and the ground.
+    pub(crate) fn cubes_on_ground(ground: [f32; 4], at: impl IntoIterator<Item = Vec3>) -> Arc<Scene> {
+        let p = [
+            Vec3::new(-0.5, -0.5, -0.5),
+            Vec3::new(0.5, -0.5, -0.5),
+            Vec3::new(0.5, 0.5, -0.5),
+            Vec3::new(-0.5, 0.5, -0.5),
+            Vec3::new(-0.5, -0.5, 0.5),
+            Vec3::new(0.5, -0.5, 0.5),
+            Vec3::new(0.5, 0.5, 0.5),
+            Vec3::new(-0.5, 0.5, 0.5),
+        ];
         let t = vec![
             [0, 2, 1],
-            [1, 2, 3],
+            [0, 3, 2],
             [4, 5, 6],
-            [5, 7, 6],
-            [0, 1, 4],
-            [1, 5, 4],
-            [2, 6, 3],
-            [3, 6, 7],
-            [0, 4, 2],
-            [2, 4, 6],
-            [1, 3, 5],
-            [3, 7, 5],
+            [4, 6, 7],
+            [0, 1, 5],
+            [0, 5, 4],
+            [3, 7, 6],
+            [3, 6, 2],
+            [0, 4, 7],
+            [0, 7, 3],
+            [1, 2, 6],
+            [1, 6, 5],
         ];
         let mut b = SceneBuilder::new();
-        let cube = b.add_mesh("cube", Mesh::new(p, t).unwrap()).unwrap();
+        let cube = b.add_mesh("cube", Mesh::new(p.to_vec(), t).unwrap()).unwrap();
+        let [x0, x1, z0, z1] = ground;
         let ground = Mesh::new(
             vec![
-                Vec3::new(-9.0, -0.5, -20.0),
-                Vec3::new(9.0, -0.5, -20.0),
-                Vec3::new(9.0, -0.5, 2.0),
-                Vec3::new(-9.0, -0.5, 2.0),
+                Vec3::new(x0, -0.5, z0),
+                Vec3::new(x1, -0.5, z0),
+                Vec3::new(x1, -0.5, z1),
+                Vec3::new(x0, -0.5, z1),
             ],
             vec![[0, 2, 1], [0, 3, 2]],
         )
@@ -326,12 +336,20 @@ mod tests {
             parent_from_child: Affine3A::IDENTITY,
             child: ground,
         }];
-        instances.extend((0..9).map(|i| Instance {
-            parent_from_child: Affine3A::from_translation(Vec3::new(0.0, 0.0, -2.0 * i as f32)),
+        instances.extend(at.into_iter().map(|at| Instance {
+            parent_from_child: Affine3A::from_translation(at),
             child: cube,
         }));
-        let root = b.add_group("row", instances).unwrap();
+        let root = b.add_group("cubes", instances).unwrap();
         Arc::new(b.build(root).unwrap())
+    }
+
+    /// Nine instanced boxes in a row along the view, on a ground quad: near boxes hide far ones.
+    fn boxes() -> Arc<Scene> {
+        cubes_on_ground(
+            [-9.0, 9.0, -20.0, 2.0],
+            (0..9).map(|i| Vec3::new(0.0, 0.0, -2.0 * i as f32)),
+        )
     }
 
     #[test]
