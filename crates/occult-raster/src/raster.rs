@@ -381,6 +381,28 @@ impl std::fmt::Debug for Rasterizer {
 }
 
 impl Rasterizer {
+    /// Bytes of the scratch memory it keeps between draws: the projected vertices of whole
+    /// meshes, the tile bins and set-up records, and the private frames of sort-last draws
+    /// (each as big as a frame). Grows with the largest draw so far; not the frame drawn into.
+    pub fn memory_bytes(&self) -> usize {
+        use std::mem::size_of;
+        let chunks: usize = self
+            .chunks
+            .iter()
+            .map(|c| {
+                c.records.capacity() * size_of::<TriSetup>()
+                    + c.bins.capacity() * size_of::<Vec<u32>>()
+                    + c.bins.iter().map(|b| b.capacity() * size_of::<u32>()).sum::<usize>()
+            })
+            .sum();
+        let scratch: usize = self
+            .scratch
+            .iter()
+            .map(|(d, i)| d.capacity() * size_of::<f32>() + i.capacity() * size_of::<ItemId>())
+            .sum();
+        self.vertices.capacity() * size_of::<ProjVertex>() + chunks + scratch
+    }
+
     /// A rasterizer with its own pool of `config.threads` threads (or rayon's global pool).
     ///
     /// # Errors

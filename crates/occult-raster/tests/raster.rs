@@ -465,6 +465,30 @@ fn ground_plane_coverage_does_not_depend_on_its_size() {
     }
 }
 
+/// The scratch memory a rasterizer keeps is counted: projected vertices, and the private
+/// frames of sort-last draws.
+#[test]
+fn memory_bytes_counts_the_scratch_memory() {
+    let mesh = soup(3, 2000);
+    let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 12.0), Vec3::ZERO), 96, 64).unwrap();
+    let mut r = raster(1, 32);
+    assert_eq!(r.memory_bytes(), 0, "nothing drawn yet");
+    draw_all(&mut r, &view, &mesh);
+    assert!(r.memory_bytes() >= mesh.positions().len() * 16, "{}", r.memory_bytes());
+    let mut r = Rasterizer::new(RasterConfig {
+        threads: 2,
+        strategy: Strategy::SortLast,
+        ..RasterConfig::default()
+    })
+    .unwrap();
+    draw_all(&mut r, &view, &mesh);
+    assert!(
+        r.memory_bytes() >= 96 * 64 * 12 + mesh.positions().len() * 16,
+        "{}",
+        r.memory_bytes()
+    );
+}
+
 #[test]
 fn behind_camera_and_beyond_far_draw_nothing() {
     let mesh = soup(1, 500);

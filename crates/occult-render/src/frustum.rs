@@ -362,7 +362,7 @@ impl Renderer for FrustumCulling {
     }
 
     fn memory_bytes(&self) -> usize {
-        self.hierarchies.iter().flatten().map(Bvh::memory_bytes).sum()
+        self.hierarchies.iter().flatten().map(Bvh::memory_bytes).sum::<usize>() + self.raster.memory_bytes()
     }
 }
 

@@ -100,7 +100,8 @@ pub trait Renderer: Send {
     /// # Errors
     /// [`RenderError::FrameSizeMismatch`] when the frame does not match the view.
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats>;
-    /// Bytes held by the renderer's own structures (not the scene's).
+    /// Bytes held by the renderer's own structures, its rasterizers' scratch memory included
+    /// (not the scene's, nor the frame it draws into).
     fn memory_bytes(&self) -> usize;
     /// False for renderers whose frames are approximate (measured, not held identical).
     fn is_conservative(&self) -> bool {

@@ -82,6 +82,6 @@ impl Renderer for ZBuffer {
     }
 
     fn memory_bytes(&self) -> usize {
-        0
+        self.raster.memory_bytes()
     }
 }

@@ -407,6 +407,7 @@ impl Worker {
             + self.frame.as_ref().map_or(0, Frame::memory_bytes)
             + self.visible.capacity() * std::mem::size_of::<VisEntry>()
             + self.stamps.memory_bytes()
+            + self.raster.memory_bytes()
     }
 }
 

@@ -1084,6 +1084,7 @@ impl Renderer for Lzb {
     fn memory_bytes(&self) -> usize {
         self.accel.iter().map(Accel::memory_bytes).sum::<usize>()
             + self.stamps.iter().map(|s| s.capacity() * 4).sum::<usize>()
+            + self.raster.memory_bytes()
     }
 
     fn is_conservative(&self) -> bool {

@@ -757,5 +757,6 @@ impl Renderer for NBufferCulling {
             + self.batch.rects.capacity() * std::mem::size_of::<PixelRect>()
             + self.batch.nearest.capacity() * 4
             + self.batch.hidden.capacity()
+            + self.raster.memory_bytes()
     }
 }

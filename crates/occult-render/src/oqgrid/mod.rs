@@ -755,5 +755,7 @@ impl Renderer for OqGrid {
     fn memory_bytes(&self) -> usize {
         self.grids.iter().map(NestedGrid::memory_bytes).sum::<usize>()
             + self.stamps.iter().map(|s| s.len() * 4).sum::<usize>()
+            + self.raster.memory_bytes()
+            + self.direct.memory_bytes()
     }
 }

@@ -974,6 +974,7 @@ impl Renderer for Rzb {
                 .iter()
                 .map(|(d, i)| d.len() * 4 + i.len() * 8)
                 .sum::<usize>()
+            + self.raster.memory_bytes()
     }
 
     fn is_conservative(&self) -> bool {
