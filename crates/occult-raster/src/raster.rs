@@ -170,9 +170,10 @@ pub enum RasterMode {
 pub struct RasterCounts {
     /// Triangles handed in.
     pub triangles_submitted: u64,
-    /// Triangles (after clipping, each clipped piece counted) whose box held a pixel centre,
-    /// with non-zero area, facing right, not beyond the far plane: the ones scanned, or for
-    /// a box of at most 4 × 4 pixels whose centres all lie outside, found to cover none.
+    /// Triangles whose box held a pixel centre, with non-zero area, facing right, not beyond
+    /// the far plane: the ones scanned, or for a box of at most 4 × 4 pixels whose centres
+    /// all lie outside, found to cover none. A triangle that clipping cut into pieces counts
+    /// once if any piece is (so never more than were submitted).
     pub triangles_rasterized: u64,
     /// Fragments that won their pixel when written.
     pub fragments_written: u64,
@@ -1385,14 +1386,17 @@ fn clip_and_setup(vp: &Viewport, clip_from_object: &Mat4, p: [Vec3; 3], item: It
     if p.iter().any(|v| !v.2.is_finite()) || poly.iter().any(|c| !c.clip.is_finite()) {
         return;
     }
-    for i in 1..p.len() - 1 {
-        setup_snapped(vp, [p[0], p[i], p[i + 1]], item, out);
-    }
+    let pieces = (1..p.len() - 1)
+        .filter(|&i| setup_snapped(vp, [p[0], p[i], p[i + 1]], item, out))
+        .count() as u32;
+    // One triangle, counted once however many pieces it was cut into.
+    out.uncount(pieces.saturating_sub(1));
 }
 
-/// Sets up a triangle from snapped vertices `(x, y, z)` and bins it.
+/// Sets up a triangle from snapped vertices `(x, y, z)` and hands it to `out`; false when
+/// there is nothing to scan (no pixel centre in its box, no area, facing away, beyond far).
 #[inline(always)]
-fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut impl SetupSink) {
+fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut impl SetupSink) -> bool {
     let (x0, y0) = (v[0].0 as i64, v[0].1 as i64);
     let (mut x1, mut y1, mut z1) = (v[1].0 as i64, v[1].1 as i64, v[1].2);
     let (mut x2, mut y2, mut z2) = (v[2].0 as i64, v[2].1 as i64, v[2].2);
@@ -1407,16 +1411,16 @@ fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut
     let py0 = ((miny - HALF + SUB - 1) >> SUBPIXEL_BITS).max(0);
     let py1 = ((maxy - HALF) >> SUBPIXEL_BITS).min(vp.height as i64 - 1);
     if px0 > px1 || py0 > py1 {
-        return;
+        return false;
     }
     out.will_touch(px0 as u32, py0 as u32, py1 > py0);
     let mut area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
     if area == 0 {
-        return;
+        return false;
     }
     // On screen (y down) a counter-clockwise front face has negative area.
     if area > 0 && vp.cull_backfaces {
-        return;
+        return false;
     }
     let front = area < 0;
     if area < 0 {
@@ -1428,7 +1432,7 @@ fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut
     let zmin = min_f32(min_f32(z0, z1), z2);
     let zmax = max_f32(max_f32(z0, z1), z2);
     if zmax < vp.far_depth {
-        return;
+        return false;
     }
     // Depth plane in pixel units, relative to corner 0, computed in f64; anchored at the centre
     // of pixel (px0, py0) and stored in f32.
@@ -1460,6 +1464,7 @@ fn setup_snapped(vp: &Viewport, v: [(i32, i32, f32); 3], item: ItemId, out: &mut
             item,
         },
     );
+    true
 }
 
 /// The smaller of `a` and `b`, `b` when they compare equal or either is NaN: the rule of
@@ -1513,6 +1518,9 @@ trait SetupSink {
     /// [`TINY`] × [`TINY`] pixels (only sinks that take edge functions get them): they count
     /// as set up; scanning them would write nothing.
     fn count_uncovered(&mut self, n: u32);
+    /// `n` of the triangles pushed were further pieces of one that clipping cut: a triangle
+    /// counts once as rasterized, however many pieces it was cut into.
+    fn uncount(&mut self, n: u32);
     /// A hint: a triangle whose box starts at pixel `(x, y)` (and covers row `y + 1` if
     /// `two_rows`) is being set up, and a sink that scans at once may start fetching those
     /// pixels. The 8-lane setup hints all eight lanes, a lane without a triangle as (0, 0), so
@@ -1525,6 +1533,10 @@ impl SetupSink for ChunkBins {
     #[inline(always)]
     fn count_uncovered(&mut self, n: u32) {
         self.rasterized += n as u64;
+    }
+
+    fn uncount(&mut self, n: u32) {
+        self.rasterized -= n as u64;
     }
 
     #[inline(always)]
@@ -1603,6 +1615,10 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
     fn count_uncovered(&mut self, n: u32) {
         // Counted like any other; nothing drawn, so the box of what was drawn stays.
         self.rasterized += n as u64;
+    }
+
+    fn uncount(&mut self, n: u32) {
+        self.rasterized -= n as u64;
     }
 
     #[inline(always)]

@@ -4,7 +4,8 @@ use occult_core::glam::Affine3A;
 use occult_core::glam::{Mat4, Vec4};
 use occult_core::{Aabb, Camera, Mesh, Vec3, View, NO_ITEM};
 use occult_raster::{
-    query_box, query_box_counted, Draw, DrawTriangles, Frame, RasterConfig, RasterMode, Rasterizer, Strategy,
+    query_box, query_box_counted, Draw, DrawTriangles, Frame, RasterConfig, RasterCounts, RasterMode, Rasterizer,
+    Strategy,
 };
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -20,6 +21,11 @@ fn raster(threads: usize, tile: u32) -> Rasterizer {
 }
 
 fn draw_all(r: &mut Rasterizer, view: &View, mesh: &Mesh) -> Frame {
+    draw_counted(r, view, mesh).0
+}
+
+/// [`draw_all`], with the draw's counts.
+fn draw_counted(r: &mut Rasterizer, view: &View, mesh: &Mesh) -> (Frame, RasterCounts) {
     let mut f = Frame::new(view.width(), view.height()).unwrap();
     let d = Draw {
         mesh,
@@ -27,8 +33,8 @@ fn draw_all(r: &mut Rasterizer, view: &View, mesh: &Mesh) -> Frame {
         clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
         first_item: 0,
     };
-    r.draw(view, &mut f, &[d], RasterMode::Full);
-    f
+    let counts = r.draw(view, &mut f, &[d], RasterMode::Full);
+    (f, counts)
 }
 
 /// A z = 0 grid whose vertices project exactly onto pixel centres and corners (camera at
@@ -489,6 +495,30 @@ fn memory_bytes_counts_the_scratch_memory() {
     );
 }
 
+/// A triangle that clipping cuts into pieces counts once as rasterized.
+#[test]
+fn clipped_triangles_count_once() {
+    let mesh = ground(1e3);
+    // Looking along the diagonal the two triangles share: both in view.
+    let mut cam = Camera::look_at(Vec3::new(0.0, 1.0, 0.0), Vec3::new(-10.0, 0.8, -10.0));
+    cam.far = 1e4;
+    let view = View::new(cam, 64, 48).unwrap();
+    for (threads, strategy) in [(1, Strategy::Direct), (2, Strategy::Binned), (2, Strategy::SortLast)] {
+        let mut r = Rasterizer::new(RasterConfig {
+            threads,
+            strategy,
+            ..RasterConfig::default()
+        })
+        .unwrap();
+        let (_, counts) = draw_counted(&mut r, &view, &mesh);
+        assert_eq!(
+            (counts.triangles_submitted, counts.triangles_rasterized),
+            (2, 2),
+            "{strategy:?}: both cut by the near plane and the guard band"
+        );
+    }
+}
+
 #[test]
 fn behind_camera_and_beyond_far_draw_nothing() {
     let mesh = soup(1, 500);
@@ -514,15 +544,7 @@ fn degenerate_triangles_draw_nothing() {
         32,
     )
     .unwrap();
-    let mut r = raster(1, 8);
-    let mut f = Frame::new(32, 32).unwrap();
-    let d = Draw {
-        mesh: &mesh,
-        triangles: DrawTriangles::All,
-        clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
-        first_item: 0,
-    };
-    let c = r.draw(&view, &mut f, &[d], RasterMode::Full);
+    let (f, c) = draw_counted(&mut raster(1, 8), &view, &mesh);
     assert_eq!(c.triangles_rasterized, 0);
     assert_eq!(f.covered_pixel_count(), 0);
 }

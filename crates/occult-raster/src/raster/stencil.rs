@@ -111,7 +111,8 @@ pub struct StencilDraw<'a> {
 pub struct StencilCounts {
     /// Triangles handed in.
     pub triangles_submitted: u64,
-    /// Triangles (clipped pieces counted) set up with a pixel box on screen.
+    /// Triangles set up with a pixel box on screen (one cut into pieces by clipping counts
+    /// once).
     pub triangles_rasterized: u64,
     /// Covered pixel centres of all faces: the fill rate of the pass (§4.4).
     pub fragments: u64,
@@ -327,6 +328,10 @@ struct StencilSink<'a> {
 impl SetupSink for StencilSink<'_> {
     fn count_uncovered(&mut self, n: u32) {
         self.counts.triangles_rasterized += (self.rect[1] == 0) as u64 * n as u64;
+    }
+
+    fn uncount(&mut self, n: u32) {
+        self.counts.triangles_rasterized -= (self.rect[1] == 0) as u64 * n as u64;
     }
 
     fn push(&mut self, _vp: &Viewport, t: TriSetup) {
