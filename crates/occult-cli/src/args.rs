@@ -178,6 +178,10 @@ pub struct WalkArgs {
     /// Per-frame statistics out (CSV, one row per frame).
     #[arg(long, value_name = "FILE")]
     pub csv: Option<PathBuf>,
+    /// The path's cameras out, as a JSON file of views that `--path` reads back (every field
+    /// written): a generated walk saved to be edited or replayed.
+    #[arg(long, value_name = "FILE")]
+    pub path_out: Option<PathBuf>,
 }
 
 /// `occult compare`.

@@ -350,6 +350,47 @@ fn walk_writes_frames_and_per_frame_stats() {
 }
 
 #[test]
+fn walk_saves_its_path_and_reads_it_back() {
+    let dir = scratch("path-out");
+    let (cams, first, again) = (dir.join("street.json"), dir.join("a.json"), dir.join("b.json"));
+    let walk = |path: &str, json: &std::path::Path, path_out: Option<&std::path::Path>| {
+        let mut args = vec![
+            "walk",
+            "--scene",
+            CITY,
+            "--path",
+            path,
+            "--size",
+            "40x30",
+            "--json",
+            path_arg(json),
+        ];
+        if let Some(p) = path_out {
+            args.extend(["--path-out", path_arg(p)]);
+        }
+        ok(&args);
+    };
+    walk("street:3", &first, Some(&cams));
+    let saved = read_json(&cams);
+    assert_eq!(saved.as_array().unwrap().len(), 3);
+    assert!(
+        saved[0]["eye"].is_array() && saved[0]["fov_y_deg"].is_number(),
+        "{saved}"
+    );
+    walk(path_arg(&cams), &again, None);
+    // The saved cameras are the walk's: the same triangles in view, frame by frame.
+    let per_frame = |p: &std::path::Path| -> Vec<(Value, Value)> {
+        let report = read_json(p);
+        let frames = report["frames"].as_array().unwrap();
+        frames
+            .iter()
+            .map(|f| (f["triangles_submitted"].clone(), f["triangles_visible"].clone()))
+            .collect()
+    };
+    assert_eq!(per_frame(&first), per_frame(&again));
+}
+
+#[test]
 fn info_describes_a_scene() {
     let out = ok(&["info", TERRAIN, "--json"]);
     let info: Value = serde_json::from_str(&out).unwrap();

@@ -62,7 +62,7 @@ const CSV_HEADER: [&str; 15] = [
 
 /// Runs the command.
 pub fn run(a: WalkArgs) -> Result<()> {
-    output::check_outputs([&a.json, &a.csv])?;
+    output::check_outputs([&a.json, &a.csv, &a.path_out])?;
     if let Some(dir) = &a.frames_out {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create directory '{}'", dir.display()))?;
     }
@@ -75,6 +75,9 @@ pub fn run(a: WalkArgs) -> Result<()> {
             View::new(*c, a.size.width, a.size.height).with_context(|| format!("camera {i} of path '{}'", a.path))
         })
         .collect::<Result<Vec<_>>>()?;
+    if let Some(p) = &a.path_out {
+        occult_scenes::path::write_path_json(p, &cameras)?;
+    }
 
     let progress = Progress::spinner(format!("preparing {}", a.algo.label()));
     let t = Instant::now();
@@ -141,6 +144,9 @@ pub fn run(a: WalkArgs) -> Result<()> {
     );
     if let Some(dir) = &a.frames_out {
         say!("wrote {} frames to {}", frames.len(), dir.display());
+    }
+    if let Some(p) = &a.path_out {
+        say!("wrote the path's {} cameras to {}", cameras.len(), p.display());
     }
     if let Some(p) = &a.csv {
         // The renderer's own counters follow the fixed columns, in the order first reported.
