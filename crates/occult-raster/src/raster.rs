@@ -6,11 +6,15 @@
 //!   blocks `k, k + threads, …` of the triangle stream directly into its own frame (thread 0
 //!   into the real one);
 //!   the other frames are merged under the (depth, item) rule over the pixel box each touched.
-//! - **Tile-binned** (several threads, smaller draws, whose cost must not grow with the frame as
-//!   a merge's does), in rounds of `threads × 2` chunks of [`CHUNK_TRIANGLES`] triangles:
+//! - **Tile-binned** (several threads, when asked for, or when sort-last cannot allocate its
+//!   private frames), in rounds of `threads × 2` chunks of [`CHUNK_TRIANGLES`] triangles:
 //!   1. *setup and binning* (parallel over chunks): each set-up triangle is appended to the bin
 //!      of each tile its box touches;
 //!   2. *rasterization* (parallel over tiles): each tile scans the triangles of its bins.
+//!
+//!   The automatic strategy draws a draw too small for sort-last directly on the calling
+//!   thread: binning it cost more than it saved in every renderer measured (see
+//!   `Rasterizer::stays_on_caller`).
 //!
 //! With `threads: 1` and a direct strategy a draw runs on the calling thread: the rasterizer's
 //! one-thread pool serves only [`Rasterizer::install`] and forced tile-binned draws, as handing
@@ -87,8 +91,8 @@ pub struct RasterConfig {
 /// How a draw is spread over threads.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Strategy {
-    /// Direct on one thread; sort-last for draws of at least 200,000 triangles; tile-binned
-    /// otherwise.
+    /// Direct on one thread; on several, sort-last for draws of at least 200,000 triangles and
+    /// direct on the calling thread for smaller ones.
     #[default]
     Auto,
     /// Set up and scan each triangle at once, on the calling thread.
@@ -500,14 +504,35 @@ impl Rasterizer {
             "frame and view sizes differ"
         );
         let vp = Viewport::new(view, &self.config);
-        if self.on_caller() {
-            return self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES);
+        if self.on_caller() || self.stays_on_caller(draws) {
+            return self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES, true);
         }
         // A handle of our own: the pool stays in place even if the draw panics.
         match self.pool.clone() {
-            Some(p) => p.install(|| self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES)),
-            None => self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES),
+            Some(p) => p.install(|| self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES, false)),
+            None => self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES, false),
         }
+    }
+
+    /// True when `draws` run on the calling thread although the rasterizer has several: under
+    /// [`Strategy::Auto`], draws of fewer than [`SORT_LAST_MIN_TRIANGLES`] triangles. Tile
+    /// binning would share them, but its fixed cost (waking the threads for two parallel
+    /// phases, each set-up triangle stored and read back, a large triangle's spans found
+    /// again in every tile it touches) was more than it saved in every renderer measured,
+    /// even for draws of a few large triangles. Frames and counts are those of the binned path
+    /// (both scan each pixel's fragments in stream order).
+    fn stays_on_caller(&self, draws: &[Draw<'_>]) -> bool {
+        if self.config.strategy != Strategy::Auto {
+            return false;
+        }
+        let mut total = 0;
+        for d in draws {
+            total += d.triangles.len(d.mesh);
+            if total >= SORT_LAST_MIN_TRIANGLES {
+                return false;
+            }
+        }
+        true
     }
 
     /// Draws in passes of consecutive draws whose whole meshes have at most `max_vertices`
@@ -521,6 +546,7 @@ impl Rasterizer {
         draws: &[Draw<'_>],
         mode: RasterMode,
         max_vertices: usize,
+        single: bool,
     ) -> RasterCounts {
         let mut counts = RasterCounts::default();
         let mut rest = draws;
@@ -538,7 +564,7 @@ impl Rasterizer {
                 n += 1;
             }
             let (pass, tail) = rest.split_at(n);
-            counts += self.draw_in_pool(vp, frame, pass, mode);
+            counts += self.draw_in_pool(vp, frame, pass, mode, single);
             rest = tail;
             if rest.is_empty() {
                 return counts;
@@ -552,12 +578,17 @@ impl Rasterizer {
         self.config.threads == 1 && self.config.strategy != Strategy::Binned
     }
 
-    fn draw_in_pool(&mut self, vp: &Viewport, frame: &mut Frame, draws: &[Draw<'_>], mode: RasterMode) -> RasterCounts {
-        let threads = if self.on_caller() {
-            1
-        } else {
-            rayon::current_num_threads()
-        };
+    /// Draws one pass: on the calling thread alone when `single`, else over the pool the
+    /// caller runs in.
+    fn draw_in_pool(
+        &mut self,
+        vp: &Viewport,
+        frame: &mut Frame,
+        draws: &[Draw<'_>],
+        mode: RasterMode,
+        single: bool,
+    ) -> RasterCounts {
+        let threads = if single { 1 } else { rayon::current_num_threads() };
         let mut counts = RasterCounts::default();
         // Pre-transform the vertices of whole-mesh draws, in parallel.
         let mut vertex_offsets = Vec::with_capacity(draws.len());
@@ -602,9 +633,9 @@ impl Rasterizer {
         counts.triangles_submitted = total as u64;
 
         let strategy = match self.config.strategy {
-            Strategy::Auto if threads == 1 => Strategy::Direct,
-            Strategy::Auto if total >= SORT_LAST_MIN_TRIANGLES => Strategy::SortLast,
-            Strategy::Auto => Strategy::Binned,
+            // A smaller pass of a large draw (see `draw_in_passes`) is drawn directly too.
+            Strategy::Auto if threads > 1 && total >= SORT_LAST_MIN_TRIANGLES => Strategy::SortLast,
+            Strategy::Auto => Strategy::Direct,
             Strategy::SortLast if threads == 1 => Strategy::Direct,
             s => s,
         };
@@ -829,8 +860,8 @@ fn merge_row(d: &mut [f32], it: &mut [ItemId], sd: &mut [f32], si: &[ItemId], mo
 /// Most vertices of whole-mesh draws projected ahead in one pass of a draw (16 bytes each).
 const MAX_PROJECTED_VERTICES: usize = 1 << 22;
 
-/// Draws at least this large go sort-last on several threads (below it, the tile-binned path:
-/// its cost does not grow with the frame, the merge's does).
+/// Draws at least this large go sort-last on several threads (below it, the calling thread
+/// draws them directly: see `Rasterizer::stays_on_caller`).
 const SORT_LAST_MIN_TRIANGLES: usize = 200_000;
 
 /// Parts per thread in sort-last draws: more balance the load, each adds a merge.
@@ -1991,6 +2022,74 @@ mod tests {
     use super::*;
     use occult_core::{Affine3A, Camera};
 
+    /// An `n × n` grid of quads of side `side`, centred on the origin in the plane z = 0.
+    fn grid(n: u32, side: f32) -> Mesh {
+        let c = n as f32 * side / 2.0;
+        let positions = (0..=n)
+            .flat_map(|j| (0..=n).map(move |i| Vec3::new(i as f32 * side - c, j as f32 * side - c, 0.0)))
+            .collect();
+        let v = |i: u32, j: u32| j * (n + 1) + i;
+        let triangles = (0..n)
+            .flat_map(|j| {
+                (0..n).flat_map(move |i| {
+                    [
+                        [v(i, j), v(i + 1, j), v(i, j + 1)],
+                        [v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)],
+                    ]
+                })
+            })
+            .collect();
+        Mesh::new(positions, triangles).unwrap()
+    }
+
+    /// On several threads, the automatic strategy draws fewer than
+    /// [`SORT_LAST_MIN_TRIANGLES`] triangles on the calling thread, small or large, with the
+    /// binned path's frame and counts.
+    #[test]
+    fn small_draws_stay_on_the_calling_thread() {
+        // One pixel is 2·10·tan 30° / 960 ≈ 0.012 units at the grid's distance.
+        let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 1280, 960).unwrap();
+        let (tiny, large) = (grid(60, 0.012), grid(20, 0.5));
+        let whole = |mesh| Draw {
+            mesh,
+            triangles: DrawTriangles::All,
+            clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
+            first_item: 0,
+        };
+        let raster = |strategy| {
+            Rasterizer::new(RasterConfig {
+                threads: 2,
+                strategy,
+                ..RasterConfig::default()
+            })
+            .unwrap()
+        };
+        let (mut auto, mut binned) = (raster(Strategy::Auto), raster(Strategy::Binned));
+        assert!(auto.stays_on_caller(&[whole(&tiny)]) && auto.stays_on_caller(&[whole(&large)]));
+        assert!(!binned.stays_on_caller(&[whole(&tiny)]), "only the automatic strategy");
+        // Sort-last's draws are shared.
+        let many: Vec<u32> = (0..SORT_LAST_MIN_TRIANGLES as u32).map(|i| i % 7200).collect();
+        let sort_last = Draw {
+            triangles: DrawTriangles::List(&many),
+            ..whole(&tiny)
+        };
+        assert!(!auto.stays_on_caller(&[whole(&tiny), sort_last]));
+        for mesh in [&tiny, &large] {
+            let draw = [whole(mesh)];
+            let mut frames = [Frame::new(1280, 960).unwrap(), Frame::new(1280, 960).unwrap()];
+            let a = auto.draw(&view, &mut frames[0], &draw, RasterMode::Full);
+            let b = binned.draw(&view, &mut frames[1], &draw, RasterMode::Full);
+            assert!(a.fragments_written > 1000);
+            assert_eq!(a, b, "{} triangles", mesh.triangle_count());
+            assert_eq!(frames[0].items(), frames[1].items());
+            assert!(frames[0]
+                .depth()
+                .iter()
+                .zip(frames[1].depth())
+                .all(|(x, y)| x.to_bits() == y.to_bits()));
+        }
+    }
+
     /// Draws split into passes to bound the projected vertices give the frame and counts of
     /// one pass.
     #[test]
@@ -2057,7 +2156,8 @@ mod tests {
             // One pass; each whole mesh alone (82 > 50 goes alone, two fans fit); every draw alone.
             for max_vertices in [usize::MAX, 50, 1] {
                 let mut f = Frame::new(w, h).unwrap();
-                let mut pass = || r.draw_in_passes(&vp, &mut f, &draws, RasterMode::Full, max_vertices);
+                let single = threads == 1;
+                let mut pass = || r.draw_in_passes(&vp, &mut f, &draws, RasterMode::Full, max_vertices, single);
                 let counts = match pool.clone() {
                     Some(p) => p.install(pass),
                     None => pass(),

@@ -44,9 +44,9 @@
 //!   them to other threads cost more than the queries, measured); there is no pipeline to keep
 //!   full, but the culling lost to a batch (cells of a batch do not see each other's geometry)
 //!   is the same as in §3.4.
-//! - A batch's visible triangles are one draw; draws of at most [`DIRECT_DRAW_MAX_TRIANGLES`]
-//!   run on the calling thread (`Strategy::Direct`), larger ones on the rasterizer's threads.
-//!   Frames do not depend on it.
+//! - A batch's visible triangles are one draw; the rasterizer keeps a draw with too few pixels
+//!   to share on the calling thread, and spreads larger ones over its threads. Frames do not
+//!   depend on it.
 //! - Deviation: cells are queried with their *tight* box (cell ∩ bounds of its contents), never
 //!   larger than the cube of the paper, so at least as much is culled.
 //! - Deviation: slabs are bands of the cell centres' distance along the view direction, one
@@ -321,8 +321,6 @@ impl OqGridOptions {
 pub struct OqGrid {
     scene: Arc<Scene>,
     raster: Rasterizer,
-    /// The same configuration on [`occult_raster::Strategy::Direct`], for small batches.
-    direct: Rasterizer,
     options: OqGridOptions,
     /// Per node of the scene: its grid, in the node's space.
     grids: Vec<NestedGrid>,
@@ -349,13 +347,6 @@ impl OqGrid {
     pub fn with_options(scene: Arc<Scene>, options: &RenderOptions, oq: &OqGridOptions) -> Result<Self> {
         oq.validate()?;
         let raster = Rasterizer::new(options.raster.clone())?;
-        let direct = Rasterizer::new(occult_raster::RasterConfig {
-            strategy: occult_raster::Strategy::Direct,
-            // No pool of its own: a direct draw runs on the calling thread (a pool would hand
-            // every small draw to another thread and back).
-            threads: 0,
-            ..options.raster.clone()
-        })?;
         let mut left = oq.max_memory_bytes;
         let mut grids = Vec::with_capacity(scene.nodes().len());
         let mut stamps = Vec::with_capacity(scene.nodes().len());
@@ -396,7 +387,6 @@ impl OqGrid {
         Ok(Self {
             scene,
             raster,
-            direct,
             options: oq.clone(),
             grids,
             stamps,
@@ -423,10 +413,6 @@ impl OqGrid {
 
 /// Screen pixels below which a batch's queries are evaluated on the calling thread.
 pub const PARALLEL_QUERY_MIN_PIXELS: f32 = 131_072.0;
-
-/// Triangles below which a batch is drawn on the calling thread (`Strategy::Direct`): tile
-/// binning on all threads costs more than it saves for small draws. Frames do not depend on it.
-pub const DIRECT_DRAW_MAX_TRIANGLES: usize = 4096;
 
 /// Area in pixels of the screen rectangle of `aabb`'s corners (the whole screen when a corner
 /// is behind the eye): an estimate of a query's work.
@@ -491,7 +477,6 @@ struct Walk<'a> {
     stamps: &'a mut [Vec<u32>],
     epoch: &'a mut u32,
     raster: &'a mut Rasterizer,
-    direct: &'a mut Rasterizer,
     options: &'a OqGridOptions,
     view: &'a View,
     frame: &'a mut Frame,
@@ -651,12 +636,7 @@ impl<'a> Walk<'a> {
                         first_item: occ.first_item,
                     };
                     let t = Instant::now();
-                    let raster = if self.list.len() <= DIRECT_DRAW_MAX_TRIANGLES {
-                        &mut *self.direct
-                    } else {
-                        &mut *self.raster
-                    };
-                    crate::rasterize(raster, self.view, self.frame, &[draw], &mut self.stats);
+                    crate::rasterize(self.raster, self.view, self.frame, &[draw], &mut self.stats);
                     self.raster_time += t.elapsed();
                 }
                 for (&(_, i), _) in batch.iter().zip(&visible).filter(|(_, v)| **v) {
@@ -712,7 +692,6 @@ impl Renderer for OqGrid {
             stamps: &mut self.stamps,
             epoch: &mut self.epoch,
             raster: &mut self.raster,
-            direct: &mut self.direct,
             options: &self.options,
             view,
             frame,
@@ -756,6 +735,5 @@ impl Renderer for OqGrid {
         self.grids.iter().map(NestedGrid::memory_bytes).sum::<usize>()
             + self.stamps.iter().map(|s| s.len() * 4).sum::<usize>()
             + self.raster.memory_bytes()
-            + self.direct.memory_bytes()
     }
 }
