@@ -44,9 +44,9 @@
 //!   them to other threads cost more than the queries, measured); there is no pipeline to keep
 //!   full, but the culling lost to a batch (cells of a batch do not see each other's geometry)
 //!   is the same as in §3.4.
-//! - A batch's visible triangles are one draw; the rasterizer keeps a draw with too few pixels
-//!   to share on the calling thread, and spreads larger ones over its threads. Frames do not
-//!   depend on it.
+//! - A batch's visible triangles are one draw; the rasterizer draws it on the calling thread
+//!   unless it is large enough to share over its threads (sort-last). Frames do not depend on
+//!   it.
 //! - Deviation: cells are queried with their *tight* box (cell ∩ bounds of its contents), never
 //!   larger than the cube of the paper, so at least as much is culled.
 //! - Deviation: slabs are bands of the cell centres' distance along the view direction, one
