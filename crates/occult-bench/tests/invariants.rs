@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use occult_bench::invariants::{assert_identical_on_every_generator, assert_identical_on_path};
 use occult_core::View;
-use occult_raster::{Frame, RasterConfig};
+use occult_raster::{Frame, RasterConfig, Strategy};
 use occult_render::{AlgoSpec, Algorithm, RenderOptions};
 
 #[test]
@@ -52,8 +52,9 @@ fn default_views_and_paths_are_identical() {
 
 #[test]
 fn identical_when_zbuffer_and_frustum_take_different_raster_strategies() {
-    // zbuffer sends ~2M triangles (sort-last on several threads), frustum far fewer
-    // (tile-binned); small frames make tiny on-screen boxes of guard-band-sized triangles.
+    // zbuffer sends ~2M triangles (sort-last on several threads), frustum far fewer, here
+    // tile-binned (the automatic strategy would draw them directly); small frames make tiny
+    // on-screen boxes of guard-band-sized triangles.
     let built = occult_scenes::spec::parse_spec("city").and_then(|s| s.build()).unwrap();
     let scene = Arc::new(built.scene);
     let options = RenderOptions {
@@ -62,8 +63,14 @@ fn identical_when_zbuffer_and_frustum_take_different_raster_strategies() {
             ..RasterConfig::default()
         },
     };
+    let binned = RenderOptions {
+        raster: RasterConfig {
+            strategy: Strategy::Binned,
+            ..options.raster.clone()
+        },
+    };
     let mut z = Algorithm::ZBUFFER.build(scene.clone(), &options).unwrap();
-    let mut f = Algorithm::FRUSTUM.build(scene.clone(), &options).unwrap();
+    let mut f = Algorithm::FRUSTUM.build(scene.clone(), &binned).unwrap();
     let cams = occult_scenes::path::parse_path("street:6", &scene, &built.default_camera).unwrap();
     for (w, h) in [(64, 48), (160, 90)] {
         let (mut a, mut b) = (Frame::new(w, h).unwrap(), Frame::new(w, h).unwrap());

@@ -14,7 +14,7 @@
 //!
 //!   The automatic strategy draws a draw too small for sort-last directly on the calling
 //!   thread: binning it cost more than it saved in every renderer measured (see
-//!   `Rasterizer::stays_on_caller`).
+//!   `Rasterizer::on_caller`).
 //!
 //! With `threads: 1` and a direct strategy a draw runs on the calling thread: the rasterizer's
 //! one-thread pool serves only [`Rasterizer::install`] and forced tile-binned draws, as handing
@@ -74,8 +74,8 @@ const NOT_FINITE: u32 = 64;
 pub struct RasterConfig {
     /// Worker threads; 0 uses rayon's global pool (all cores).
     pub threads: usize,
-    /// Tile side in pixels, a power of two in 8..=1024: smaller balances load better, larger
-    /// bins less.
+    /// Tile side in pixels, a power of two in 8..=1024, of the tile-binned path (forced, or
+    /// sort-last's fallback): smaller balances load better, larger bins less.
     pub tile_size: u32,
     /// Skip back faces (clockwise on screen). Off by default: open meshes stay visible from
     /// behind. Every renderer compared against another must use the same setting.
@@ -91,11 +91,14 @@ pub struct RasterConfig {
 /// How a draw is spread over threads.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Strategy {
-    /// Direct on one thread; on several, sort-last for draws of at least 200,000 triangles and
-    /// direct on the calling thread for smaller ones.
+    /// Direct on the calling thread on one thread, and on several for draws of fewer than
+    /// 200,000 triangles; sort-last over the threads for larger ones (of which a pass of fewer,
+    /// split off to bound memory, is drawn directly by one thread). The split was measured on
+    /// two cores: on many, draws of large triangles may gain from [`Strategy::Binned`].
     #[default]
     Auto,
-    /// Set up and scan each triangle at once, on the calling thread.
+    /// Set up and scan each triangle at once, on the calling thread, whatever the thread
+    /// count.
     Direct,
     /// Tile-binned setup and scan, on all threads.
     Binned,
@@ -375,6 +378,9 @@ pub struct Rasterizer {
     /// False while a sort-last draw is in flight (a panic there leaves the scratch drawn).
     scratch_clean: bool,
     isa: Isa,
+    /// The thread and the strategy of the last pass drawn, for tests of the choice.
+    #[cfg(test)]
+    last_pass: Option<(std::thread::ThreadId, Strategy)>,
 }
 
 impl std::fmt::Debug for Rasterizer {
@@ -445,6 +451,8 @@ impl Rasterizer {
             chunks: Vec::new(),
             scratch: Vec::new(),
             scratch_clean: true,
+            #[cfg(test)]
+            last_pass: None,
             isa,
         })
     }
@@ -504,7 +512,7 @@ impl Rasterizer {
             "frame and view sizes differ"
         );
         let vp = Viewport::new(view, &self.config);
-        if self.on_caller() || self.stays_on_caller(draws) {
+        if self.on_caller(draws) {
             return self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES, true);
         }
         // A handle of our own: the pool stays in place even if the draw panics.
@@ -514,25 +522,31 @@ impl Rasterizer {
         }
     }
 
-    /// True when `draws` run on the calling thread although the rasterizer has several: under
-    /// [`Strategy::Auto`], draws of fewer than [`SORT_LAST_MIN_TRIANGLES`] triangles. Tile
-    /// binning would share them, but its fixed cost (waking the threads for two parallel
-    /// phases, each set-up triangle stored and read back, a large triangle's spans found
-    /// again in every tile it touches) was more than it saved in every renderer measured,
-    /// even for draws of a few large triangles. Frames and counts are those of the binned path
-    /// (both scan each pixel's fragments in stream order).
-    fn stays_on_caller(&self, draws: &[Draw<'_>]) -> bool {
-        if self.config.strategy != Strategy::Auto {
-            return false;
-        }
-        let mut total = 0;
-        for d in draws {
-            total += d.triangles.len(d.mesh);
-            if total >= SORT_LAST_MIN_TRIANGLES {
-                return false;
+    /// True when `draws` run directly on the calling thread, never handed to the pool:
+    /// - on a one-thread rasterizer unless tile binning is forced: handing each draw to a
+    ///   one-thread pool and back would cost more than a small draw;
+    /// - under [`Strategy::Direct`], as it says;
+    /// - under [`Strategy::Auto`], draws of fewer than [`SORT_LAST_MIN_TRIANGLES`] triangles.
+    ///   Tile binning would share them over the threads, but its fixed cost (waking them for
+    ///   two parallel phases, each set-up triangle stored and read back, a large triangle's
+    ///   spans found again in every tile it touches) was more than it saved for every
+    ///   renderer's draws measured on two cores, even a few large triangles. Frames and
+    ///   counts are those of the binned path (both scan each pixel's fragments in stream
+    ///   order).
+    fn on_caller(&self, draws: &[Draw<'_>]) -> bool {
+        match self.config.strategy {
+            Strategy::Direct => true,
+            Strategy::Binned => false,
+            Strategy::SortLast => self.config.threads == 1,
+            Strategy::Auto => {
+                let mut total = 0;
+                self.config.threads == 1
+                    || draws.iter().all(|d| {
+                        total += d.triangles.len(d.mesh);
+                        total < SORT_LAST_MIN_TRIANGLES
+                    })
             }
         }
-        true
     }
 
     /// Draws in passes of consecutive draws whose whole meshes have at most `max_vertices`
@@ -570,12 +584,6 @@ impl Rasterizer {
                 return counts;
             }
         }
-    }
-
-    /// True when draws run on the calling thread: one thread, drawing directly. Handing each
-    /// draw to a one-thread pool and back would cost more than a small draw.
-    fn on_caller(&self) -> bool {
-        self.config.threads == 1 && self.config.strategy != Strategy::Binned
     }
 
     /// Draws one pass: on the calling thread alone when `single`, else over the pool the
@@ -639,6 +647,10 @@ impl Rasterizer {
             Strategy::SortLast if threads == 1 => Strategy::Direct,
             s => s,
         };
+        #[cfg(test)]
+        {
+            self.last_pass = Some((std::thread::current().id(), strategy));
+        }
         if strategy == Strategy::Direct {
             let target = FrameTarget::new(frame);
             // SAFETY: only this thread touches the frame while it is drawn.
@@ -861,7 +873,7 @@ fn merge_row(d: &mut [f32], it: &mut [ItemId], sd: &mut [f32], si: &[ItemId], mo
 const MAX_PROJECTED_VERTICES: usize = 1 << 22;
 
 /// Draws at least this large go sort-last on several threads (below it, the calling thread
-/// draws them directly: see `Rasterizer::stays_on_caller`).
+/// draws them directly: see `Rasterizer::on_caller`).
 const SORT_LAST_MIN_TRIANGLES: usize = 200_000;
 
 /// Parts per thread in sort-last draws: more balance the load, each adds a merge.
@@ -2043,8 +2055,9 @@ mod tests {
     }
 
     /// On several threads, the automatic strategy draws fewer than
-    /// [`SORT_LAST_MIN_TRIANGLES`] triangles on the calling thread, small or large, with the
-    /// binned path's frame and counts.
+    /// [`SORT_LAST_MIN_TRIANGLES`] triangles directly on the calling thread, small or large,
+    /// with the binned path's frame and counts; larger draws go sort-last over the pool, and
+    /// forced strategies do what they say.
     #[test]
     fn small_draws_stay_on_the_calling_thread() {
         // One pixel is 2·10·tan 30° / 960 ≈ 0.012 units at the grid's distance.
@@ -2056,38 +2069,62 @@ mod tests {
             clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
             first_item: 0,
         };
-        let raster = |strategy| {
-            Rasterizer::new(RasterConfig {
-                threads: 2,
-                strategy,
-                ..RasterConfig::default()
-            })
-            .unwrap()
-        };
-        let (mut auto, mut binned) = (raster(Strategy::Auto), raster(Strategy::Binned));
-        assert!(auto.stays_on_caller(&[whole(&tiny)]) && auto.stays_on_caller(&[whole(&large)]));
-        assert!(!binned.stays_on_caller(&[whole(&tiny)]), "only the automatic strategy");
-        // Sort-last's draws are shared.
         let many: Vec<u32> = (0..SORT_LAST_MIN_TRIANGLES as u32).map(|i| i % 7200).collect();
         let sort_last = Draw {
             triangles: DrawTriangles::List(&many),
             ..whole(&tiny)
         };
-        assert!(!auto.stays_on_caller(&[whole(&tiny), sort_last]));
+        let caller = std::thread::current().id();
+        let pass = |strategy, draws: &[Draw<'_>]| {
+            let mut frame = Frame::new(1280, 960).unwrap();
+            let mut r = Rasterizer::new(RasterConfig {
+                threads: 2,
+                strategy,
+                ..RasterConfig::default()
+            })
+            .unwrap();
+            let counts = r.draw(&view, &mut frame, draws, RasterMode::Full);
+            let (thread, used) = r.last_pass.unwrap();
+            (thread == caller, used, counts)
+        };
         for mesh in [&tiny, &large] {
             let draw = [whole(mesh)];
-            let mut frames = [Frame::new(1280, 960).unwrap(), Frame::new(1280, 960).unwrap()];
-            let a = auto.draw(&view, &mut frames[0], &draw, RasterMode::Full);
-            let b = binned.draw(&view, &mut frames[1], &draw, RasterMode::Full);
-            assert!(a.fragments_written > 1000);
-            assert_eq!(a, b, "{} triangles", mesh.triangle_count());
-            assert_eq!(frames[0].items(), frames[1].items());
-            assert!(frames[0]
-                .depth()
-                .iter()
-                .zip(frames[1].depth())
-                .all(|(x, y)| x.to_bits() == y.to_bits()));
+            let (on_caller, used, auto) = pass(Strategy::Auto, &draw);
+            assert!(
+                on_caller && used == Strategy::Direct,
+                "{} triangles",
+                mesh.triangle_count()
+            );
+            let (on_caller, used, binned) = pass(Strategy::Binned, &draw);
+            assert!(!on_caller && used == Strategy::Binned);
+            assert!(auto.fragments_written > 1000);
+            assert_eq!(auto, binned, "{} triangles", mesh.triangle_count());
         }
+        let (on_caller, used, _) = pass(Strategy::Auto, std::slice::from_ref(&sort_last));
+        assert!(!on_caller && used == Strategy::SortLast, "large draws are shared");
+        let (on_caller, used, _) = pass(Strategy::Direct, &[sort_last]);
+        assert!(
+            on_caller && used == Strategy::Direct,
+            "forced direct stays on the caller"
+        );
+        // Frames: the same draw, automatic and binned.
+        let draw = [whole(&tiny), whole(&large)];
+        let mut frames = [Frame::new(1280, 960).unwrap(), Frame::new(1280, 960).unwrap()];
+        for (f, strategy) in frames.iter_mut().zip([Strategy::Auto, Strategy::Binned]) {
+            let mut r = Rasterizer::new(RasterConfig {
+                threads: 2,
+                strategy,
+                ..RasterConfig::default()
+            })
+            .unwrap();
+            r.draw(&view, f, &draw, RasterMode::Full);
+        }
+        assert_eq!(frames[0].items(), frames[1].items());
+        assert!(frames[0]
+            .depth()
+            .iter()
+            .zip(frames[1].depth())
+            .all(|(x, y)| x.to_bits() == y.to_bits()));
     }
 
     /// Draws split into passes to bound the projected vertices give the frame and counts of
@@ -2144,9 +2181,11 @@ mod tests {
                 });
             }
         }
-        for threads in [1, 2] {
+        // Two threads bin: the automatic strategy would draw these small passes directly.
+        for (threads, strategy) in [(1, Strategy::Auto), (2, Strategy::Binned)] {
             let mut r = Rasterizer::new(RasterConfig {
                 threads,
+                strategy,
                 ..RasterConfig::default()
             })
             .unwrap();

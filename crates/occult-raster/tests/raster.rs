@@ -12,13 +12,22 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
 fn raster(threads: usize, tile: u32) -> Rasterizer {
+    raster_with(threads, tile, Strategy::Auto)
+}
+
+fn raster_with(threads: usize, tile: u32, strategy: Strategy) -> Rasterizer {
     Rasterizer::new(RasterConfig {
         threads,
         tile_size: tile,
+        strategy,
         ..RasterConfig::default()
     })
     .unwrap()
 }
+
+/// One thread, and two with the small draws of these tests drawn directly (the automatic
+/// strategy) or tile-binned.
+const STRATEGIES: [(usize, Strategy); 3] = [(1, Strategy::Auto), (2, Strategy::Auto), (2, Strategy::Binned)];
 
 fn draw_all(r: &mut Rasterizer, view: &View, mesh: &Mesh) -> Frame {
     draw_counted(r, view, mesh).0
@@ -226,17 +235,20 @@ fn frames_independent_of_order_threads_and_tiles() {
         let reference = draw_all(&mut raster(1, 64), &view, &mesh);
         let mut order: Vec<u32> = (0..mesh.triangle_count() as u32).collect();
         order.shuffle(&mut rng);
-        for (threads, tile, simd) in [
-            (1, 8, true),
-            (2, 16, false),
-            (3, 64, true),
-            (2, 1024, false),
-            (1, 64, false),
+        // Tile sizes matter to the tile-binned path only.
+        for (threads, tile, simd, strategy) in [
+            (1, 8, true, Strategy::Auto),
+            (2, 16, false, Strategy::Binned),
+            (3, 64, true, Strategy::Binned),
+            (2, 1024, false, Strategy::Binned),
+            (2, 64, true, Strategy::Auto),
+            (1, 64, false, Strategy::Auto),
         ] {
             let mut r = Rasterizer::new(RasterConfig {
                 threads,
                 tile_size: tile,
                 simd,
+                strategy,
                 ..RasterConfig::default()
             })
             .unwrap();
@@ -246,7 +258,7 @@ fn frames_independent_of_order_threads_and_tiles() {
             r.draw(&view, &mut f, &draws, RasterMode::Full);
             assert!(
                 f.same_visibility(&reference),
-                "seed {seed}, {threads} threads, tile {tile}, simd {simd}"
+                "seed {seed}, {threads} threads, {strategy:?}, tile {tile}, simd {simd}"
             );
         }
     }
@@ -316,7 +328,7 @@ fn counts_do_not_depend_on_the_instruction_set() {
 #[test]
 fn large_draws_are_identical_across_strategies() {
     // Above 200,000 triangles, several threads draw sort-last (direct workers and a merge);
-    // one thread draws directly; small draws go tile-binned. All must agree.
+    // one thread draws directly. They must agree (the forced strategies are tested below).
     let mut rng = Pcg64Mcg::seed_from_u64(99);
     let mesh = soup(5, 260_000);
     for _ in 0..3 {
@@ -425,15 +437,15 @@ fn huge_ground_plane_crossing_near_plane_has_no_cracks() {
     // Small frames too: a triangle reaching far into the guard band shows a tiny box there.
     for (w, h) in [(128u32, 96u32), (64, 48), (32, 32), (8, 8), (5, 3)] {
         let view = View::new(cam, w, h).unwrap();
-        for threads in [1, 2] {
-            let f = draw_all(&mut raster(threads, 32), &view, &mesh);
+        for (threads, strategy) in STRATEGIES {
+            let f = draw_all(&mut raster_with(threads, 32, strategy), &view, &mesh);
             // Every pixel of the bottom half sees the ground.
             for y in h.div_ceil(2)..h {
                 for x in 0..w {
                     assert_ne!(
                         f.items()[(y * w + x) as usize],
                         NO_ITEM,
-                        "{w}x{h}, {threads} threads: crack at {x},{y}"
+                        "{w}x{h}, {threads} threads, {strategy:?}: crack at {x},{y}"
                     );
                 }
             }
@@ -452,21 +464,22 @@ fn ground_plane_coverage_does_not_depend_on_its_size() {
         let mut covered = Vec::new();
         for s in [1e3f32, 1e5, 1e6, 3e6, 1e7, 1e8, 1e9] {
             let mesh = ground(s);
-            for threads in [1, 2] {
+            for (threads, strategy) in STRATEGIES {
                 covered.push((
                     s,
                     threads,
-                    draw_all(&mut raster(threads, 32), &view, &mesh).covered_pixel_count(),
+                    strategy,
+                    draw_all(&mut raster_with(threads, 32, strategy), &view, &mesh).covered_pixel_count(),
                 ));
             }
         }
         assert!(
-            covered[0].2 > 160 * 120 / 4,
+            covered[0].3 > 160 * 120 / 4,
             "near {near}: the ground fills the view's lower part"
         );
         assert!(
-            covered.iter().all(|c| c.2 == covered[0].2),
-            "near {near}: covered pixels by half-size and threads: {covered:?}"
+            covered.iter().all(|c| c.3 == covered[0].3),
+            "near {near}: covered pixels by half-size, threads and strategy: {covered:?}"
         );
     }
 }
