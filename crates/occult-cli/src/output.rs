@@ -48,12 +48,22 @@ pub fn check_output(path: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Checks every path of `paths` with [`check_output`].
+/// Checks every path of `paths` with [`check_output`], and that no two name the same file (one
+/// output would overwrite the other).
 ///
 /// # Errors
-/// As [`check_output`].
+/// As [`check_output`]; two paths naming one file.
 pub fn check_outputs<'a>(paths: impl IntoIterator<Item = &'a Option<PathBuf>>) -> Result<()> {
-    paths.into_iter().flatten().try_for_each(|p| check_output(p))
+    let mut seen: Vec<(PathBuf, &Path)> = Vec::new();
+    for p in paths.into_iter().flatten() {
+        check_output(p)?;
+        let file = std::path::absolute(p).unwrap_or_else(|_| p.clone());
+        if let Some((_, first)) = seen.iter().find(|(f, _)| *f == file) {
+            bail!("'{}' and '{}' name the same output file", first.display(), p.display());
+        }
+        seen.push((file, p));
+    }
+    Ok(())
 }
 
 /// Writes the frame's color (after shading) as PNG.

@@ -353,6 +353,7 @@ fn walk_writes_frames_and_per_frame_stats() {
 fn walk_saves_its_path_and_reads_it_back() {
     let dir = scratch("path-out");
     let (cams, first, again) = (dir.join("street.json"), dir.join("a.json"), dir.join("b.json"));
+    let cams_again = dir.join("again.json");
     let walk = |path: &str, json: &std::path::Path, path_out: Option<&std::path::Path>| {
         let mut args = vec![
             "walk",
@@ -377,8 +378,10 @@ fn walk_saves_its_path_and_reads_it_back() {
         saved[0]["eye"].is_array() && saved[0]["fov_y_deg"].is_number(),
         "{saved}"
     );
-    walk(path_arg(&cams), &again, None);
-    // The saved cameras are the walk's: the same triangles in view, frame by frame.
+    walk(path_arg(&cams), &again, Some(&cams_again));
+    // Read back, every field of every camera is the same (saved again byte for byte) ...
+    assert_eq!(std::fs::read(&cams).unwrap(), std::fs::read(&cams_again).unwrap());
+    // ... and the walk sees the same triangles, frame by frame.
     let per_frame = |p: &std::path::Path| -> Vec<(Value, Value)> {
         let report = read_json(p);
         let frames = report["frames"].as_array().unwrap();
@@ -388,6 +391,27 @@ fn walk_saves_its_path_and_reads_it_back() {
             .collect()
     };
     assert_eq!(per_frame(&first), per_frame(&again));
+}
+
+#[test]
+fn two_outputs_naming_one_file_are_refused() {
+    let dir = scratch("same-output");
+    let out = dir.join("w.json");
+    let dotted = dir.join(".").join("w.json");
+    let (code, _, e) = fails(&[
+        "walk",
+        "--scene",
+        TERRAIN,
+        "--path",
+        "circle:1",
+        "--json",
+        path_arg(&out),
+        "--path-out",
+        path_arg(&dotted),
+    ]);
+    assert_eq!(code, Some(1));
+    assert!(e.contains("name the same output file"), "{e}");
+    assert!(!out.exists(), "refused before any work");
 }
 
 #[test]
