@@ -843,11 +843,38 @@ unsafe fn merge_row_avx2(d: &mut [f32], it: &mut [ItemId], sd: &mut [f32], si: &
     merge_row(d, it, sd, si, mode)
 }
 
-/// See [`Isa::merge_row`]. Branch-free, so that the compiler vectorizes it: the merge is
-/// memory bound, and a branch per pixel on whether the worker drew it mispredicts along the
-/// borders of everything drawn.
+/// See [`Isa::merge_row`]. The row goes by runs of [`MERGE_RUN`] pixels: a run the worker
+/// left clear (the rows between its triangles, the parts of the frame the other workers drew)
+/// costs only the read of its private depths; the others are merged branch-free, so that the
+/// compiler vectorizes them (a branch per pixel on whether the worker drew it mispredicts
+/// along the borders of everything drawn), and their private depths reset.
 #[inline(always)]
 fn merge_row(d: &mut [f32], it: &mut [ItemId], sd: &mut [f32], si: &[ItemId], mode: RasterMode) {
+    let n = d.len();
+    let (it, sd, si) = (&mut it[..n], &mut sd[..n], &si[..n]);
+    let mut dc = d.chunks_exact_mut(MERGE_RUN);
+    let mut ic = it.chunks_exact_mut(MERGE_RUN);
+    let mut sdc = sd.chunks_exact_mut(MERGE_RUN);
+    let mut sic = si.chunks_exact(MERGE_RUN);
+    for (((d, it), sd), si) in (&mut dc).zip(&mut ic).zip(&mut sdc).zip(&mut sic) {
+        // Not an early-exit search: a fold over the run that the compiler vectorizes.
+        let drawn = sd.iter().fold(false, |drawn, &s| drawn | (s != crate::CLEAR_DEPTH));
+        if drawn {
+            merge_run(d, it, sd, si, mode);
+        }
+    }
+    merge_run(
+        dc.into_remainder(),
+        ic.into_remainder(),
+        sdc.into_remainder(),
+        sic.remainder(),
+        mode,
+    );
+}
+
+/// Merges one run of private pixels into the frame's, branch-free, and clears their depths.
+#[inline(always)]
+fn merge_run(d: &mut [f32], it: &mut [ItemId], sd: &mut [f32], si: &[ItemId], mode: RasterMode) {
     let n = d.len();
     let (it, sd, si) = (&mut it[..n], &mut sd[..n], &si[..n]);
     if mode == RasterMode::Full {
@@ -868,6 +895,10 @@ fn merge_row(d: &mut [f32], it: &mut [ItemId], sd: &mut [f32], si: &[ItemId], mo
     // so stale items are never read.
     sd.fill(crate::CLEAR_DEPTH);
 }
+
+/// Pixels of a sort-last merge run: a run the worker left clear is skipped (see `merge_row`).
+/// Sixteen: one cache line of depths.
+const MERGE_RUN: usize = 16;
 
 /// Most vertices of whole-mesh draws projected ahead in one pass of a draw (16 bytes each).
 const MAX_PROJECTED_VERTICES: usize = 1 << 22;
@@ -2033,6 +2064,71 @@ unsafe fn scan_triangle<const AVX2: bool>(
 mod tests {
     use super::*;
     use occult_core::{Affine3A, Camera};
+
+    #[test]
+    fn merge_skips_clear_runs_and_keeps_the_rule() {
+        // Rows of every length around the run size, private pixels drawn in stretches (with
+        // depth ties) between long clear ones, against the rule applied pixel by pixel.
+        use crate::CLEAR_DEPTH;
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(5);
+        for n in (0..70).chain([333, 1000]) {
+            for mode in [RasterMode::Full, RasterMode::DepthOnly] {
+                let depths = [0.25f32, 0.5, 0.75];
+                let d: Vec<f32> = (0..n)
+                    .map(|_| {
+                        if rng.random_bool(0.3) {
+                            CLEAR_DEPTH
+                        } else {
+                            depths[rng.random_range(0..3)]
+                        }
+                    })
+                    .collect();
+                let it: Vec<ItemId> = (0..n).map(|_| rng.random_range(0..4)).collect();
+                let mut drawn = rng.random_bool(0.5);
+                let sd: Vec<f32> = (0..n)
+                    .map(|_| {
+                        drawn ^= rng.random_bool(0.05);
+                        if drawn {
+                            depths[rng.random_range(0..3)]
+                        } else {
+                            CLEAR_DEPTH
+                        }
+                    })
+                    .collect();
+                // Stale items under clear private depths must never win.
+                let si: Vec<ItemId> = (0..n).map(|_| rng.random_range(0..4)).collect();
+                for isa in [Isa::select(false), Isa::select(true)] {
+                    let (mut got_d, mut got_it, mut got_sd) = (d.clone(), it.clone(), sd.clone());
+                    isa.merge_row(&mut got_d, &mut got_it, &mut got_sd, &si, mode);
+                    for x in 0..n {
+                        let (mut want_d, mut want_it) = (d[x], it[x]);
+                        if sd[x] != CLEAR_DEPTH {
+                            let wins = match mode {
+                                RasterMode::Full => sd[x] > d[x] || (sd[x] == d[x] && si[x] < it[x]),
+                                RasterMode::DepthOnly => sd[x] > d[x],
+                            };
+                            if wins {
+                                want_d = sd[x];
+                                if mode == RasterMode::Full {
+                                    want_it = si[x];
+                                }
+                            }
+                        }
+                        assert_eq!(
+                            (got_d[x], got_it[x]),
+                            (want_d, want_it),
+                            "{isa:?}, {mode:?}, row {n}, pixel {x}"
+                        );
+                    }
+                    assert!(
+                        got_sd.iter().all(|&s| s == CLEAR_DEPTH),
+                        "{isa:?}: private depths reset"
+                    );
+                }
+            }
+        }
+    }
 
     /// An `n × n` grid of quads of side `side`, centred on the origin in the plane z = 0.
     fn grid(n: u32, side: f32) -> Mesh {
