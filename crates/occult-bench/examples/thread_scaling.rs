@@ -7,6 +7,11 @@
 //! `... thread_scaling one-thread N` instead draws N times with one thread only, for counting
 //! instructions under a profiler (`valgrind --tool=callgrind
 //! --toggle-collect='occult_raster::raster::Rasterizer::draw'`).
+//! `... thread_scaling machine N` asks what the machine gives one thread, N times: before
+//! each 1-thread draw, the clock (a chain of dependent additions runs one per cycle) and the
+//! share of the core's peak that four independent chains reach (four additions per cycle on
+//! an idle core; less when a neighbour on the same physical core takes its ports); then the
+//! draw's time, and the correlation of draw times with that share.
 //! `... thread_scaling contention N` measures what the machine itself allows: N rounds of a
 //! 1-thread draw alone, then two independent 1-thread draws at once on two OS threads (own
 //! rasterizer, own frame, nothing shared but the mesh). With no cost to running both cores,
@@ -22,6 +27,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mode = args.first().map(String::as_str);
     let one_thread = mode == Some("one-thread");
     let contention = mode == Some("contention");
+    let machine = mode == Some("machine");
     let count = |a: Option<&String>| -> Result<usize, String> {
         match a {
             Some(a) => match a.parse() {
@@ -31,7 +37,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             None => Ok(15),
         }
     };
-    let pairs = count(args.get(usize::from(one_thread || contention)))?;
+    let pairs = count(args.get(usize::from(one_thread || contention || machine)))?;
     let (scene, view) = occult_bench::terrain_view();
     let mesh = scene.node(scene.root()).mesh().ok_or("terrain is one mesh")?;
     let draw = Draw {
@@ -67,6 +73,32 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let (ms, counts) = timed(&mut r, &mut frame);
             println!("1 thread: {ms:.1} ms, {counts:?}");
         }
+        return Ok(());
+    }
+    if machine {
+        let mut r = one()?;
+        let mut frame = Frame::new(view.width(), view.height())?;
+        let (mut shares, mut times) = (Vec::new(), Vec::new());
+        for round in 1..=pairs {
+            let Some((ghz, share)) = core_probe() else {
+                return Err("the machine probe needs x86_64".into());
+            };
+            let (ms, counts) = timed(&mut r, &mut frame);
+            println!(
+                "round {round}: clock {ghz:.2} GHz, four chains at {:.0} % of the core's peak; draw {ms:.1} ms \
+                 = {:.0} cycles per triangle at that clock",
+                share * 100.0,
+                ms * 1e6 * ghz / counts.triangles_submitted as f64
+            );
+            shares.push(share);
+            times.push(ms);
+        }
+        println!(
+            "draw time: min {:.1} ms, median {:.1} ms; correlation of draw time with the core's share: {:+.2}",
+            min(&times),
+            median(&times),
+            correlation(&shares, &times)
+        );
         return Ok(());
     }
     if contention {
@@ -121,4 +153,69 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         median(&ratios)
     );
     Ok(())
+}
+
+/// Pearson's correlation of two equally long samples (0 when either is constant).
+fn correlation(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len() as f64;
+    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+    let cov: f64 = a.iter().zip(b).map(|(x, y)| (x - ma) * (y - mb)).sum();
+    let (va, vb) = (
+        a.iter().map(|x| (x - ma).powi(2)).sum::<f64>(),
+        b.iter().map(|y| (y - mb).powi(2)).sum::<f64>(),
+    );
+    if va == 0.0 || vb == 0.0 {
+        0.0
+    } else {
+        cov / (va * vb).sqrt()
+    }
+}
+
+/// The clock this thread runs at now, in GHz, and the share of the core's peak (four
+/// additions per cycle) that four independent chains of additions reach at that clock.
+#[cfg(target_arch = "x86_64")]
+fn core_probe() -> Option<(f64, f64)> {
+    const ROUNDS: u64 = 5_000_000;
+    // Eight additions per round, each waiting for the one before: one per cycle.
+    let start = Instant::now();
+    let mut x = 0u64;
+    for _ in 0..ROUNDS {
+        // SAFETY: additions to a register the block owns; no memory.
+        unsafe {
+            std::arch::asm!(
+                "add {0}, 1", "add {0}, 1", "add {0}, 1", "add {0}, 1",
+                "add {0}, 1", "add {0}, 1", "add {0}, 1", "add {0}, 1",
+                inout(reg) x,
+                options(nomem, nostack),
+            );
+        }
+    }
+    let hz = 8.0 * ROUNDS as f64 / start.elapsed().as_secs_f64();
+    // Four chains of eight: 32 additions per round, four per cycle at most.
+    let start = Instant::now();
+    let (mut a, mut b, mut c, mut d) = (0u64, 0u64, 0u64, 0u64);
+    for _ in 0..ROUNDS {
+        // SAFETY: as above.
+        unsafe {
+            std::arch::asm!(
+                "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1",
+                "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1",
+                "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1",
+                "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1",
+                "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1",
+                "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1",
+                "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1",
+                "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1",
+                inout(reg) a, inout(reg) b, inout(reg) c, inout(reg) d,
+                options(nomem, nostack),
+            );
+        }
+    }
+    let wide = 32.0 * ROUNDS as f64 / start.elapsed().as_secs_f64();
+    (x == 8 * ROUNDS && a + b + c + d == 32 * ROUNDS).then(|| (hz / 1e9, wide / (4.0 * hz)))
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+fn core_probe() -> Option<(f64, f64)> {
+    None
 }
