@@ -8,10 +8,11 @@
 //! instructions under a profiler (`valgrind --tool=callgrind
 //! --toggle-collect='occult_raster::raster::Rasterizer::draw'`).
 //! `... thread_scaling machine N` asks what the machine gives one thread, N times: before
-//! each 1-thread draw, the clock (a chain of dependent additions runs one per cycle) and the
-//! share of the core's peak that four independent chains reach (four additions per cycle on
-//! an idle core; less when a neighbour on the same physical core takes its ports); then the
-//! draw's time, and the correlation of draw times with that share.
+//! each 1-thread draw (after one untimed draw), the clock (a chain of dependent additions runs
+//! one per cycle) and the share of four additions per cycle that four independent chains reach
+//! at that clock (all of it on an idle core with four integer ALUs; less when a neighbour on the
+//! same physical core takes its ports); then the draw's time, and the correlation of draw times
+//! with each probe.
 //! `... thread_scaling contention N` measures what the machine itself allows: N rounds of a
 //! 1-thread draw alone, then two independent 1-thread draws at once on two OS threads (own
 //! rasterizer, own frame, nothing shared but the mesh). With no cost to running both cores,
@@ -78,25 +79,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if machine {
         let mut r = one()?;
         let mut frame = Frame::new(view.width(), view.height())?;
-        let (mut shares, mut times) = (Vec::new(), Vec::new());
+        // The first draw pays for first touches of the frame and the rasterizer's buffers.
+        timed(&mut r, &mut frame);
+        let (mut clocks, mut shares, mut times) = (Vec::new(), Vec::new(), Vec::new());
         for round in 1..=pairs {
             let Some((ghz, share)) = core_probe() else {
                 return Err("the machine probe needs x86_64".into());
             };
             let (ms, counts) = timed(&mut r, &mut frame);
             println!(
-                "round {round}: clock {ghz:.2} GHz, four chains at {:.0} % of the core's peak; draw {ms:.1} ms \
-                 = {:.0} cycles per triangle at that clock",
+                "round {round}: clock {ghz:.2} GHz, four chains at {:.0} % of four additions per cycle; \
+                 draw {ms:.1} ms = {:.0} cycles per triangle at that clock",
                 share * 100.0,
                 ms * 1e6 * ghz / counts.triangles_submitted as f64
             );
+            clocks.push(ghz);
             shares.push(share);
             times.push(ms);
         }
         println!(
-            "draw time: min {:.1} ms, median {:.1} ms; correlation of draw time with the core's share: {:+.2}",
+            "draw time: min {:.1} ms, median {:.1} ms; its correlation with the clock {:+.2}, with the four \
+             chains' share {:+.2}",
             min(&times),
             median(&times),
+            correlation(&clocks, &times),
             correlation(&shares, &times)
         );
         return Ok(());
@@ -171,48 +177,37 @@ fn correlation(a: &[f64], b: &[f64]) -> f64 {
     }
 }
 
-/// The clock this thread runs at now, in GHz, and the share of the core's peak (four
-/// additions per cycle) that four independent chains of additions reach at that clock.
+/// The clock this thread runs at now, in GHz, and the share of four additions per cycle that
+/// four independent chains of additions reach at that clock. Each round of a loop runs 64
+/// additions, so that the loop's own counter and branch hardly count.
 #[cfg(target_arch = "x86_64")]
 fn core_probe() -> Option<(f64, f64)> {
-    const ROUNDS: u64 = 5_000_000;
-    // Eight additions per round, each waiting for the one before: one per cycle.
+    const ROUNDS: u64 = 2_000_000;
+    // One chain: each addition waits for the one before, one per cycle.
     let start = Instant::now();
     let mut x = 0u64;
     for _ in 0..ROUNDS {
-        // SAFETY: additions to a register the block owns; no memory.
+        // SAFETY: additions to a register the block owns; no memory, no stack.
         unsafe {
-            std::arch::asm!(
-                "add {0}, 1", "add {0}, 1", "add {0}, 1", "add {0}, 1",
-                "add {0}, 1", "add {0}, 1", "add {0}, 1", "add {0}, 1",
-                inout(reg) x,
-                options(nomem, nostack),
-            );
+            std::arch::asm!(".rept 64", "add {0}, 1", ".endr", inout(reg) x, options(nomem, nostack));
         }
     }
-    let hz = 8.0 * ROUNDS as f64 / start.elapsed().as_secs_f64();
-    // Four chains of eight: 32 additions per round, four per cycle at most.
+    let hz = 64.0 * ROUNDS as f64 / start.elapsed().as_secs_f64();
+    // Four chains of 16 each.
     let start = Instant::now();
     let (mut a, mut b, mut c, mut d) = (0u64, 0u64, 0u64, 0u64);
     for _ in 0..ROUNDS {
         // SAFETY: as above.
         unsafe {
             std::arch::asm!(
-                "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1",
-                "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1",
-                "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1",
-                "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1",
-                "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1",
-                "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1",
-                "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1",
-                "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1",
+                ".rept 16", "add {0}, 1", "add {1}, 1", "add {2}, 1", "add {3}, 1", ".endr",
                 inout(reg) a, inout(reg) b, inout(reg) c, inout(reg) d,
                 options(nomem, nostack),
             );
         }
     }
-    let wide = 32.0 * ROUNDS as f64 / start.elapsed().as_secs_f64();
-    (x == 8 * ROUNDS && a + b + c + d == 32 * ROUNDS).then(|| (hz / 1e9, wide / (4.0 * hz)))
+    let wide = 64.0 * ROUNDS as f64 / start.elapsed().as_secs_f64();
+    (x == 64 * ROUNDS && a + b + c + d == 64 * ROUNDS).then(|| (hz / 1e9, wide / (4.0 * hz)))
 }
 
 #[cfg(not(target_arch = "x86_64"))]
