@@ -1768,7 +1768,7 @@ unsafe fn scan_small<const AVX2: bool>(
         step_y,
         mask: tiny,
     } = edges;
-    let mut mask = if let Some(tiny) = tiny {
+    let mask = if let Some(tiny) = tiny {
         debug_assert_eq!(
             (x0, y0),
             (t.px0 as u32, t.py0 as u32),
@@ -1792,6 +1792,28 @@ unsafe fn scan_small<const AVX2: bool>(
         }
         mask
     };
+    // SAFETY: the mask's centres lie in the caller's rectangle, owned by this task.
+    match mode {
+        RasterMode::Full => unsafe { write_mask::<true>(vp, t, x0, y0, mask, target) },
+        RasterMode::DepthOnly => unsafe { write_mask::<false>(vp, t, x0, y0, mask, target) },
+    }
+}
+
+/// The per-pixel loop of [`scan_small`]: depth-tests and writes the fragments of `t` at the
+/// centres of `mask` (bit `8·j + i` for pixel `(x0 + i, y0 + j)`), items too when `FULL`.
+///
+/// # Safety
+/// Those pixels lie in the frame, and the caller owns them.
+#[inline(always)]
+unsafe fn write_mask<const FULL: bool>(
+    vp: &Viewport,
+    t: &TriSetup,
+    x0: u32,
+    y0: u32,
+    mut mask: u64,
+    target: &FrameTarget,
+) -> u64 {
+    let mode = if FULL { RasterMode::Full } else { RasterMode::DepthOnly };
     let mut written = 0;
     while mask != 0 {
         let k = mask.trailing_zeros();
@@ -1801,7 +1823,7 @@ unsafe fn scan_small<const AVX2: bool>(
         let z = depth_at(t, row_depth, x);
         if z >= vp.far_depth {
             let i = y as usize * target.width + x as usize;
-            // SAFETY: (x, y) lies in the caller's rectangle, owned by this task.
+            // SAFETY: forwarded from the caller.
             let (d, it) = unsafe { (&mut *target.depth.add(i), &mut *target.items.add(i)) };
             written += write_fragment(d, it, z, t.item, mode) as u64;
         }
@@ -1847,28 +1869,23 @@ mod simd {
     }
 }
 
-/// Writes a covered fragment under the visibility rule, without branching on the outcome.
+/// Writes a covered fragment under the visibility rule (`keep_fragment`'s). The stored item is
+/// read only on a depth tie (rare and predictable): where the fragment wins, its item line is
+/// written without being waited for.
 #[inline(always)]
 fn write_fragment(d: &mut f32, it: &mut ItemId, z: f32, item: ItemId, mode: RasterMode) -> bool {
     let stored = *d;
-    // Same rule as `keep_fragment`. The stored item is read only on a depth tie (rare and
-    // predictable), and the writes go to a scratch slot when the fragment loses, so neither
-    // an unpredictable branch nor a load of the item buffer (a cache miss on first touch)
-    // stands in the way.
     let keep = if z == stored {
         mode == RasterMode::Full && item < *it
     } else {
         z > stored
     };
-    let mut scratch_depth = 0.0f32;
-    let mut scratch_item: ItemId = 0;
-    let d_out: &mut f32 = if keep { d } else { &mut scratch_depth };
-    *d_out = z;
-    if mode == RasterMode::Full {
-        let it_out: &mut ItemId = if keep { it } else { &mut scratch_item };
-        *it_out = item;
+    if keep {
+        *d = z;
+        if mode == RasterMode::Full {
+            *it = item;
+        }
     }
-    std::hint::black_box((scratch_depth, scratch_item));
     keep
 }
 
