@@ -1207,7 +1207,7 @@ fn setup_range<const AVX2: bool>(
             {
                 return;
             }
-            batch.push(v, indices, d, item);
+            batch.push(v, d, item);
             if batch.is_full() {
                 // SAFETY: the AVX2 instantiation only runs where `Isa::select` found AVX2.
                 unsafe { setup8::setup8_avx2(vp, draws, &mut batch, out) };

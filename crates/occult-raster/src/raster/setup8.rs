@@ -33,9 +33,8 @@ pub(super) const LANES: usize = 8;
 pub(super) struct Batch {
     /// `corners[c][k]`: corner `c` of the triangle in lane `k`, as projected.
     corners: [[ProjVertex; LANES]; 3],
-    /// Mesh vertex indices of each lane's corners and the draw they belong to: a triangle
-    /// that needs clipping is transformed again from them.
-    indices: [[u32; 3]; LANES],
+    /// The draw of each lane and its item, `first_item` plus the triangle's index in the
+    /// draw's mesh: a triangle that needs clipping is transformed again from its corners there.
     draw: [u32; LANES],
     item: [ItemId; LANES],
     len: usize,
@@ -48,7 +47,6 @@ impl Batch {
     pub(super) fn new() -> Self {
         Self {
             corners: [[ProjVertex::default(); LANES]; 3],
-            indices: [[0; 3]; LANES],
             draw: [0; LANES],
             item: [0; LANES],
             len: 0,
@@ -59,7 +57,7 @@ impl Batch {
     /// Appends a triangle. The batch must not be full (callers set a full batch up before the
     /// next push): in release builds a push into a full one would overwrite lane 0.
     #[inline(always)]
-    pub(super) fn push(&mut self, v: [&ProjVertex; 3], indices: [u32; 3], draw: usize, item: ItemId) {
+    pub(super) fn push(&mut self, v: [&ProjVertex; 3], draw: usize, item: ItemId) {
         debug_assert!(self.len < LANES, "a full batch is set up before the next push");
         // The mask only spares the bounds checks: a full batch never takes a push.
         let k = self.len % LANES;
@@ -75,7 +73,6 @@ impl Batch {
                 _mm_storeu_si128(dst, _mm_loadu_si128((v as *const ProjVertex).cast()));
             }
         }
-        self.indices[k] = indices;
         self.draw[k] = draw as u32;
         self.item[k] = item;
         self.len = k + 1;
@@ -360,7 +357,8 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
         if clipped & (1 << k) != 0 {
             let d = &draws[batch.draw[k] as usize];
             let pos = d.mesh.positions();
-            let corners = batch.indices[k].map(|i| pos[i as usize]);
+            let triangle = (batch.item[k] - d.first_item) as usize;
+            let corners = d.mesh.triangles()[triangle].map(|i| pos[i as usize]);
             clip_and_setup(vp, &d.clip_from_object, corners, batch.item[k], out);
             continue;
         }
@@ -749,7 +747,8 @@ mod tests {
                 )
             })
             .collect();
-        let mesh = Mesh::new(positions, vec![[0, 1, 2]]).expect("64 finite positions, indices in range");
+        let triangles: Vec<[u32; 3]> = (0..512).map(|_| [0; 3].map(|_| rng.random_range(0..64u32))).collect();
+        let mesh = Mesh::new(positions, triangles).expect("64 finite positions, indices in range");
         let draws = [Draw {
             mesh: &mesh,
             triangles: DrawTriangles::All,
@@ -768,9 +767,10 @@ mod tests {
             let mut scalar = Recorder::default();
             for k in 0..n {
                 let v = corners(&mut rng, &vp);
-                let indices = [0, 1, 2].map(|_| rng.random_range(0..64u32));
-                let item = (round * LANES + k) as ItemId;
-                batch.push([&v[0], &v[1], &v[2]], indices, 0, item);
+                // The item names the mesh triangle whose corners a clipped lane is cut from.
+                let item = rng.random_range(0..512) as ItemId;
+                let indices = mesh.triangles()[item as usize];
+                batch.push([&v[0], &v[1], &v[2]], 0, item);
                 let codes = v.map(|p| p.code);
                 if (codes[0] | codes[1] | codes[2]) & (NEEDS_CLIP | NOT_FINITE) == NEEDS_CLIP
                     && codes[0] & codes[1] & codes[2] & OUT_OF_VIEW == 0
