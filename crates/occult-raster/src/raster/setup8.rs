@@ -765,7 +765,7 @@ mod tests {
             let vp = viewport(&mut rng);
             let n = rng.random_range(1..=LANES);
             let mut scalar = Recorder::default();
-            for k in 0..n {
+            for _ in 0..n {
                 let v = corners(&mut rng, &vp);
                 // The item names the mesh triangle whose corners a clipped lane is cut from.
                 let item = rng.random_range(0..512) as ItemId;
