@@ -749,13 +749,14 @@ mod tests {
             .collect();
         let triangles: Vec<[u32; 3]> = (0..512).map(|_| [0; 3].map(|_| rng.random_range(0..64u32))).collect();
         let mesh = Mesh::new(positions, triangles).expect("64 finite positions, indices in range");
+        const FIRST_ITEM: ItemId = 1000;
         let draws = [Draw {
             mesh: &mesh,
             triangles: DrawTriangles::All,
             clip_from_object: View::new(Camera::look_at(Vec3::new(0.0, 2.0, 10.0), Vec3::ZERO), 640, 480)
                 .expect("a valid camera and size")
                 .clip_from_object(&Affine3A::IDENTITY),
-            first_item: 0,
+            first_item: FIRST_ITEM,
         }];
         let (mut small, mut large, mut clipped, mut tiny, mut uncovered) = (0, 0, 0, 0, 0);
         // One batch for every round, as the draws use it: lanes spilled by a round are
@@ -767,9 +768,11 @@ mod tests {
             let mut scalar = Recorder::default();
             for _ in 0..n {
                 let v = corners(&mut rng, &vp);
-                // The item names the mesh triangle whose corners a clipped lane is cut from.
-                let item = rng.random_range(0..512) as ItemId;
-                let indices = mesh.triangles()[item as usize];
+                // The item names the mesh triangle whose corners a clipped lane is cut from,
+                // counted from the draw's first item.
+                let triangle = rng.random_range(0..512);
+                let item = FIRST_ITEM + triangle as ItemId;
+                let indices = mesh.triangles()[triangle];
                 batch.push([&v[0], &v[1], &v[2]], 0, item);
                 let codes = v.map(|p| p.code);
                 if (codes[0] | codes[1] | codes[2]) & (NEEDS_CLIP | NOT_FINITE) == NEEDS_CLIP
