@@ -76,15 +76,20 @@ pub fn assert_identical_on_every_generator(spec: &AlgoSpec, threads: usize) {
     let options = options(threads);
     for scene_spec in SCENES {
         let scene = Arc::new(build_scene(scene_spec).scene);
-        let mut reference = Algorithm::ZBUFFER.build(scene.clone(), &options).unwrap();
+        let mut reference = Algorithm::ZBUFFER
+            .build(scene.clone(), &options)
+            .unwrap_or_else(|e| panic!("zbuffer on {scene_spec}: {e}"));
         let mut renderer = spec
             .build(scene.clone(), &options)
             .unwrap_or_else(|e| panic!("{spec} on {scene_spec}: {e}"));
-        let (mut a, mut b) = (Frame::new(96, 64).unwrap(), Frame::new(96, 64).unwrap());
+        let frame = || Frame::new(96, 64).unwrap_or_else(|e| panic!("a 96 × 64 frame: {e}"));
+        let (mut a, mut b) = (frame(), frame());
         let mut covered_views = 0;
         for i in 0..VIEWS_PER_SCENE {
             let view = random_view(&mut rng, &scene);
-            reference.render(&view, &mut a).unwrap();
+            reference
+                .render(&view, &mut a)
+                .unwrap_or_else(|e| panic!("zbuffer on {scene_spec}, view {i}: {e}"));
             renderer
                 .render(&view, &mut b)
                 .unwrap_or_else(|e| panic!("{spec} on {scene_spec}, view {i}: {e}"));
@@ -115,14 +120,18 @@ pub fn assert_identical_on_path(spec: &AlgoSpec, scene_spec: &str, path_spec: &s
         .unwrap_or_else(|e| panic!("{path_spec}: {e}"));
     let scene = Arc::new(built.scene);
     let options = RenderOptions::default();
-    let mut z = Algorithm::ZBUFFER.build(scene.clone(), &options).unwrap();
+    let mut z = Algorithm::ZBUFFER
+        .build(scene.clone(), &options)
+        .unwrap_or_else(|e| panic!("zbuffer on {scene_spec}: {e}"));
     let mut r = spec
         .build(scene.clone(), &options)
         .unwrap_or_else(|e| panic!("{spec} on {scene_spec}: {e}"));
-    let (mut a, mut b) = (Frame::new(width, height).unwrap(), Frame::new(width, height).unwrap());
+    let frame = || Frame::new(width, height).unwrap_or_else(|e| panic!("a {width} × {height} frame: {e}"));
+    let (mut a, mut b) = (frame(), frame());
     for (i, cam) in cams.iter().chain([&built.default_camera]).enumerate() {
-        let view = View::new(*cam, width, height).unwrap();
-        z.render(&view, &mut a).unwrap();
+        let view = View::new(*cam, width, height).unwrap_or_else(|e| panic!("{path_spec}, frame {i}: {e}"));
+        z.render(&view, &mut a)
+            .unwrap_or_else(|e| panic!("zbuffer on {scene_spec}, frame {i}: {e}"));
         r.render(&view, &mut b)
             .unwrap_or_else(|e| panic!("{spec} on {scene_spec}, frame {i}: {e}"));
         assert!(
