@@ -1,9 +1,13 @@
-//! Two threads against one on the `terrain` anchor view, measured as pairs: one draw with a
-//! 1-thread rasterizer, then one with a 2-thread rasterizer, alternating in one process, so
-//! that both see the same machine load. Prints the minimum and median of each and the median
-//! of the per-pair ratios, which drift on a noisy machine affects least.
+//! Two threads against one on the `terrain` anchor view, measured in rounds: one draw with a
+//! 1-thread rasterizer, then two with a 2-thread rasterizer, alternating in one process, so
+//! that all see the same machine load. The first 2-thread draw of a round starts after its
+//! pool sat idle through the 1-thread draw; the second right after the first, as in a stream
+//! of frames (or criterion's back-to-back iterations). On this project's VMs the two differ:
+//! a thread woken on a core that has been idle for 20 ms starts milliseconds late (see `wake`
+//! below), which no split of the draw can avoid. Prints the minimum and median of each and
+//! the median of the per-round ratios, which drift on a noisy machine affects least.
 //!
-//! `cargo run --release -p occult-bench --example thread_scaling [pairs]` (default 15).
+//! `cargo run --release -p occult-bench --example thread_scaling [rounds]` (default 15).
 //! `... thread_scaling one-thread N` instead draws N times with one thread only, for counting
 //! instructions under a profiler (`valgrind --tool=callgrind
 //! --toggle-collect='occult_raster::raster::Rasterizer::draw'`).
@@ -18,6 +22,14 @@
 //! rasterizer, own frame, nothing shared but the mesh). With no cost to running both cores,
 //! a pair takes as long as a draw alone; the ratio of the medians, doubled, bounds what any
 //! split of one draw over two threads can reach.
+//! `... thread_scaling wake N` measures what starting a second thread costs on this machine,
+//! N times each: (1) after the waking thread slept 1, 5 and 20 ms (so that the cores idled that
+//! long), it wakes a thread blocked on a condition variable and stays busy for 3 ms, as a
+//! draw's first worker would, and times how late the woken thread runs; (2) after a
+//! two-thread pool idled 20 ms, how late the second of two 3 ms jobs starts, counted from the
+//! call, when they are the halves of a `rayon::join` inside the pool (`install`) and when they
+//! are two tasks spawned from outside it (`in_place_scope`, as the rasterizer's parallel
+//! phases are), and how often both ran on one thread.
 
 use occult_core::glam::Affine3A;
 use occult_raster::{Draw, DrawTriangles, Frame, RasterConfig, RasterMode, Rasterizer};
@@ -29,6 +41,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let one_thread = mode == Some("one-thread");
     let contention = mode == Some("contention");
     let machine = mode == Some("machine");
+    let wake = mode == Some("wake");
     let count = |a: Option<&String>| -> Result<usize, String> {
         match a {
             Some(a) => match a.parse() {
@@ -38,7 +51,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             None => Ok(15),
         }
     };
-    let pairs = count(args.get(usize::from(one_thread || contention || machine)))?;
+    let pairs = count(args.get(usize::from(one_thread || contention || machine || wake)))?;
+    if wake {
+        return wake_latency(pairs);
+    }
     let (scene, view) = occult_bench::terrain_view();
     let mesh = scene.node(scene.root()).mesh().ok_or("terrain is one mesh")?;
     let draw = Draw {
@@ -139,26 +155,133 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
         return Ok(());
     }
-    let mut rasterizers = [1, 2].map(raster);
+    let (mut r1, mut r2) = (one()?, raster(2)?);
     let mut frame = Frame::new(view.width(), view.height())?;
-    let mut times = [Vec::new(), Vec::new()];
+    // One thread; two threads after the pool idled; two threads right after that.
+    let mut times = [Vec::new(), Vec::new(), Vec::new()];
     for _ in 0..pairs {
-        for (r, t) in rasterizers.iter_mut().zip(&mut times) {
-            let r = r.as_mut().map_err(|e| e.to_string())?;
-            t.push(timed(r, &mut frame).0);
-        }
+        times[0].push(timed(&mut r1, &mut frame).0);
+        times[1].push(timed(&mut r2, &mut frame).0);
+        times[2].push(timed(&mut r2, &mut frame).0);
     }
-    let ratios: Vec<f64> = times[0].iter().zip(&times[1]).map(|(a, b)| a / b).collect();
+    let ratio = |k: usize| median(&times[0].iter().zip(&times[k]).map(|(a, b)| a / b).collect::<Vec<_>>());
     println!(
-        "1 thread: min {:.1} ms, median {:.1} ms; 2 threads: min {:.1} ms, median {:.1} ms; \
-         2 over 1, median of {pairs} pairs: {:.2}x",
+        "1 thread: min {:.1} ms, median {:.1} ms; 2 threads, pool idle before: min {:.1} ms, median {:.1} ms \
+         ({:.2}x one thread); 2 threads, right after another 2-thread draw: min {:.1} ms, median {:.1} ms \
+         ({:.2}x); ratios are medians over {pairs} rounds",
         min(&times[0]),
         median(&times[0]),
         min(&times[1]),
         median(&times[1]),
-        median(&ratios)
+        ratio(1),
+        min(&times[2]),
+        median(&times[2]),
+        ratio(2)
     );
     Ok(())
+}
+
+/// `wake` mode (see the module doc): medians and maxima, in microseconds, of how late a thread
+/// blocked on a condition variable runs after it is woken, for three idle times before.
+fn wake_latency(rounds: usize) -> Result<(), Box<dyn std::error::Error>> {
+    use std::sync::{Arc, Condvar, Mutex};
+    use std::time::Duration;
+    let busy = |d: Duration| {
+        let t = Instant::now();
+        while t.elapsed() < d {
+            std::hint::spin_loop();
+        }
+    };
+    for idle_ms in [1, 5, 20] {
+        // The time the woken thread should start from, and the delays it saw.
+        let shared = Arc::new((Mutex::new((None::<Instant>, Vec::new())), Condvar::new()));
+        let woken = {
+            let shared = Arc::clone(&shared);
+            std::thread::spawn(move || -> Result<Vec<f64>, String> {
+                let (lock, ready) = &*shared;
+                let mut state = lock.lock().map_err(|e| e.to_string())?;
+                for _ in 0..rounds {
+                    while state.0.is_none() {
+                        state = ready.wait(state).map_err(|e| e.to_string())?;
+                    }
+                    if let Some(sent) = state.0.take() {
+                        state.1.push(sent.elapsed().as_secs_f64() * 1e6);
+                    }
+                }
+                Ok(std::mem::take(&mut state.1))
+            })
+        };
+        for _ in 0..rounds {
+            std::thread::sleep(Duration::from_millis(idle_ms));
+            let (lock, ready) = &*shared;
+            lock.lock().map_err(|e| e.to_string())?.0 = Some(Instant::now());
+            ready.notify_one();
+            busy(Duration::from_millis(3));
+        }
+        let late = woken.join().map_err(|_| "the woken thread panicked")??;
+        println!(
+            "cores idle {idle_ms:>2} ms before: the woken thread ran {} after it was woken",
+            spread(late)
+        );
+    }
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build()?;
+    let (mut joined, mut spawned) = (Vec::new(), Vec::new());
+    let (mut joined_alone, mut spawned_alone) = (0, 0);
+    for _ in 0..rounds {
+        std::thread::sleep(Duration::from_millis(20));
+        let start = Instant::now();
+        let (first, second) = pool.install(|| {
+            rayon::join(
+                || {
+                    let at = (start.elapsed(), rayon::current_thread_index());
+                    busy(Duration::from_millis(3));
+                    at
+                },
+                || (start.elapsed(), rayon::current_thread_index()),
+            )
+        });
+        joined.push(first.0.max(second.0).as_secs_f64() * 1e6);
+        joined_alone += usize::from(first.1 == second.1);
+        std::thread::sleep(Duration::from_millis(20));
+        let start = Instant::now();
+        let starts = Mutex::new(Vec::new());
+        pool.in_place_scope(|scope| {
+            for _ in 0..2 {
+                scope.spawn(|_| {
+                    let at = (start.elapsed(), rayon::current_thread_index());
+                    if let Ok(mut s) = starts.lock() {
+                        s.push(at);
+                    }
+                    busy(Duration::from_millis(3));
+                });
+            }
+        });
+        let starts = starts.into_inner().map_err(|e| e.to_string())?;
+        if let [a, b] = starts[..] {
+            spawned.push(a.0.max(b.0).as_secs_f64() * 1e6);
+            spawned_alone += usize::from(a.1 == b.1);
+        }
+    }
+    println!(
+        "two-thread pool idle 20 ms before: the later half of a join started {} after the call \
+         ({joined_alone} of {rounds} both on one thread); the later of two tasks spawned from outside {} \
+         ({spawned_alone} of {rounds} on one thread)",
+        spread(joined),
+        spread(spawned)
+    );
+    Ok(())
+}
+
+/// "median M us (90th percentile P, max X, of N)" of microsecond samples.
+fn spread(mut us: Vec<f64>) -> String {
+    us.sort_by(f64::total_cmp);
+    let n = us.len();
+    format!(
+        "median {:.0} us (90th percentile {:.0}, max {:.0}, of {n})",
+        us[n / 2],
+        us[n * 9 / 10],
+        us[n - 1]
+    )
 }
 
 /// Pearson's correlation of two equally long samples (0 when either is constant).

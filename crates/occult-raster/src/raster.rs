@@ -42,7 +42,6 @@
 use crate::frame::Frame;
 use occult_core::glam::DVec4;
 use occult_core::{ItemId, Mat4, Mesh, Vec3, Vec4, View};
-use rayon::prelude::*;
 use std::ops::Range;
 
 #[cfg(target_arch = "x86_64")]
@@ -72,7 +71,8 @@ const NOT_FINITE: u32 = 64;
 /// Rasterizer configuration. Results never depend on it, only speed does.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct RasterConfig {
-    /// Worker threads; 0 uses rayon's global pool (all cores).
+    /// Worker threads; 0 uses the pool the caller runs in (outside any, rayon's global pool:
+    /// all cores).
     pub threads: usize,
     /// Tile side in pixels, a power of two in 8..=1024, of the tile-binned path (forced, or
     /// sort-last's fallback): smaller balances load better, larger bins less.
@@ -378,9 +378,10 @@ pub struct Rasterizer {
     /// False while a sort-last draw is in flight (a panic there leaves the scratch drawn).
     scratch_clean: bool,
     isa: Isa,
-    /// The thread and the strategy of the last pass drawn, for tests of the choice.
+    /// Whether the last pass drawn ran on the calling thread alone, and its strategy, for
+    /// tests of the choice.
     #[cfg(test)]
-    last_pass: Option<(std::thread::ThreadId, Strategy)>,
+    last_pass: Option<(bool, Strategy)>,
 }
 
 impl std::fmt::Debug for Rasterizer {
@@ -495,10 +496,20 @@ impl Rasterizer {
             items.fill(occult_core::NO_ITEM);
             return;
         }
-        self.install(|| {
-            depth.par_chunks_mut(1 << 16).for_each(|c| c.fill(crate::CLEAR_DEPTH));
-            items.par_chunks_mut(1 << 15).for_each(|c| c.fill(occult_core::NO_ITEM));
+        let jobs = depth.chunks_mut(1 << 16).zip(items.chunks_mut(1 << 16)).collect();
+        self.workers(self.thread_count()).share(jobs, |(d, i)| {
+            d.fill(crate::CLEAR_DEPTH);
+            i.fill(occult_core::NO_ITEM);
         });
+    }
+
+    /// The threads that parallel phases of a draw spread over: this rasterizer's pool, or the
+    /// current one (see [`RasterConfig::threads`]).
+    fn workers(&self, threads: usize) -> Workers<'_> {
+        Workers {
+            pool: self.pool.as_deref(),
+            threads,
+        }
     }
 
     /// Rasterizes `draws` into `frame` (not cleared first).
@@ -512,14 +523,8 @@ impl Rasterizer {
             "frame and view sizes differ"
         );
         let vp = Viewport::new(view, &self.config);
-        if self.on_caller(draws) {
-            return self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES, true);
-        }
-        // A handle of our own: the pool stays in place even if the draw panics.
-        match self.pool.clone() {
-            Some(p) => p.install(|| self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES, false)),
-            None => self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES, false),
-        }
+        let single = self.on_caller(draws);
+        self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES, single)
     }
 
     /// True when `draws` run directly on the calling thread, never handed to the pool:
@@ -586,8 +591,8 @@ impl Rasterizer {
         }
     }
 
-    /// Draws one pass: on the calling thread alone when `single`, else over the pool the
-    /// caller runs in.
+    /// Draws one pass: on the calling thread alone when `single`, else over this rasterizer's
+    /// threads (see [`Workers`]).
     fn draw_in_pool(
         &mut self,
         vp: &Viewport,
@@ -596,7 +601,13 @@ impl Rasterizer {
         mode: RasterMode,
         single: bool,
     ) -> RasterCounts {
-        let threads = if single { 1 } else { rayon::current_num_threads() };
+        let threads = if single { 1 } else { self.thread_count() };
+        // A handle of our own, apart from `self`'s fields that the phases borrow.
+        let pool = self.pool.clone();
+        let workers = Workers {
+            pool: pool.as_deref(),
+            threads,
+        };
         let mut counts = RasterCounts::default();
         // Pre-transform the vertices of whole-mesh draws, in parallel.
         let mut vertex_offsets = Vec::with_capacity(draws.len());
@@ -623,10 +634,12 @@ impl Rasterizer {
                     isa.project_all(vp, &d.clip_from_object, d.mesh.positions(), out);
                 }
             } else {
-                jobs.into_par_iter().for_each(|(d, out)| {
-                    out.par_chunks_mut(4096).enumerate().for_each(|(ci, out)| {
-                        isa.project_all(vp, &d.clip_from_object, &d.mesh.positions()[ci * 4096..], out);
-                    });
+                let chunks = jobs
+                    .into_iter()
+                    .flat_map(|(d, out)| out.chunks_mut(4096).enumerate().map(move |(ci, out)| (d, ci, out)))
+                    .collect();
+                workers.share(chunks, |(d, ci, out)| {
+                    isa.project_all(vp, &d.clip_from_object, &d.mesh.positions()[ci * 4096..], out);
                 });
             }
         }
@@ -649,7 +662,7 @@ impl Rasterizer {
         };
         #[cfg(test)]
         {
-            self.last_pass = Some((std::thread::current().id(), strategy));
+            self.last_pass = Some((threads == 1, strategy));
         }
         if strategy == Strategy::Direct {
             let target = FrameTarget::new(frame);
@@ -672,7 +685,7 @@ impl Rasterizer {
         }
         if strategy == Strategy::SortLast {
             if let Some((rasterized, written)) =
-                self.draw_sort_last(vp, frame, draws, &draw_starts, &vertex_offsets, total, mode)
+                self.draw_sort_last(&workers, vp, frame, draws, &draw_starts, &vertex_offsets, total, mode)
             {
                 counts.triangles_rasterized = rasterized;
                 counts.fragments_written = written;
@@ -680,7 +693,7 @@ impl Rasterizer {
             }
         }
         let tile_count = (vp.tiles_x * vp.tiles_y) as usize;
-        let chunks_per_round = rayon::current_num_threads().max(1) * 2;
+        let chunks_per_round = threads.max(1) * 2;
         if self.chunks.len() < chunks_per_round {
             self.chunks.resize_with(chunks_per_round, ChunkBins::default);
         }
@@ -694,7 +707,8 @@ impl Rasterizer {
             let round_end = (start + chunks_per_round * CHUNK_TRIANGLES).min(total);
             let used = (round_end - start).div_ceil(CHUNK_TRIANGLES);
             // Phase 1: setup and binning.
-            self.chunks[..used].par_iter_mut().enumerate().for_each(|(ci, ch)| {
+            let jobs = self.chunks[..used].iter_mut().enumerate().collect();
+            workers.share(jobs, |(ci, ch)| {
                 let lo = start + ci * CHUNK_TRIANGLES;
                 let hi = (lo + CHUNK_TRIANGLES).min(round_end);
                 ch.records.clear();
@@ -708,9 +722,8 @@ impl Rasterizer {
             // Phase 2: rasterize tile by tile.
             let chunks = &self.chunks[..used];
             let target = &target;
-            let fragments: u64 = (0..tile_count)
-                .into_par_iter()
-                .map(|tile| {
+            let fragments: u64 = workers
+                .share((0..tile_count).collect(), |tile| {
                     let tx = tile as u32 % vp.tiles_x;
                     let ty = tile as u32 / vp.tiles_x;
                     let rect = [
@@ -722,6 +735,7 @@ impl Rasterizer {
                     // SAFETY: tiles are disjoint and each is scanned by exactly one task.
                     unsafe { isa.scan_tile(vp, chunks, tile, rect, target, mode) }
                 })
+                .into_iter()
                 .sum();
             counts.fragments_written += fragments;
             start = round_end;
@@ -738,6 +752,7 @@ impl Rasterizer {
     #[allow(clippy::too_many_arguments)]
     fn draw_sort_last(
         &mut self,
+        workers: &Workers<'_>,
         vp: &Viewport,
         frame: &mut Frame,
         draws: &[Draw<'_>],
@@ -746,7 +761,7 @@ impl Rasterizer {
         total: usize,
         mode: RasterMode,
     ) -> Option<(u64, u64)> {
-        let parts = rayon::current_num_threads() * SORT_LAST_PARTS_PER_THREAD;
+        let parts = workers.threads;
         let (w, h) = (vp.width as usize, vp.height as usize);
         // Private frames are kept cleared between draws; one a panic left drawn is dropped.
         if !self.scratch_clean {
@@ -773,28 +788,24 @@ impl Rasterizer {
                 width: w,
             });
         }
-        let results: Vec<(u64, u64, Vec<[u32; 4]>)> = targets
-            .par_iter()
-            .enumerate()
-            .map(|(k, target)| {
-                // Worker k takes every parts-th block: each gets a share of near and far, large
-                // and small triangles, and a block is long enough to keep the frame in cache.
-                let (mut rasterized, mut written, mut boxes) = (0, 0, Vec::new());
-                for start in (k * SORT_LAST_BLOCK..total).step_by(parts * SORT_LAST_BLOCK) {
-                    let range = start..(start + SORT_LAST_BLOCK).min(total);
-                    // SAFETY: each worker owns its own frame (the real one or a scratch one).
-                    let (r, f, d) = unsafe {
-                        isa.draw_direct(vp, draws, draw_starts, vertex_offsets, vertices, range, target, mode)
-                    };
-                    rasterized += r;
-                    written += f;
-                    if d[0] <= d[2] && d[1] <= d[3] {
-                        boxes.push(d);
-                    }
+        let results: Vec<(u64, u64, Vec<[u32; 4]>)> = workers.share((0..parts).collect(), |k| {
+            let target = &targets[k];
+            // Worker k takes every parts-th block: each gets a share of near and far, large
+            // and small triangles, and a block is long enough to keep the frame in cache.
+            let (mut rasterized, mut written, mut boxes) = (0, 0, Vec::new());
+            for start in (k * SORT_LAST_BLOCK..total).step_by(parts * SORT_LAST_BLOCK) {
+                let range = start..(start + SORT_LAST_BLOCK).min(total);
+                // SAFETY: each worker owns its own frame (the real one or a scratch one).
+                let (r, f, d) =
+                    unsafe { isa.draw_direct(vp, draws, draw_starts, vertex_offsets, vertices, range, target, mode) };
+                rasterized += r;
+                written += f;
+                if d[0] <= d[2] && d[1] <= d[3] {
+                    boxes.push(d);
                 }
-                (rasterized, written, boxes)
-            })
-            .collect();
+            }
+            (rasterized, written, boxes)
+        });
         let (depth, items) = frame.buffers_mut();
         for (k, (_, _, boxes)) in results.iter().enumerate().skip(1) {
             // The merge reads and resets only each row's span of the boxes of this worker's
@@ -802,20 +813,94 @@ impl Rasterizer {
             // of the frame, the merge (memory bound) skips the rows between them.
             let Some(spans) = row_spans(boxes, h) else { continue };
             let (sd, si) = &mut self.scratch[k - 1];
-            depth
-                .par_chunks_mut(w)
-                .zip(items.par_chunks_mut(w))
-                .zip(sd.par_chunks_mut(w))
-                .zip(si.par_chunks_mut(w))
-                .zip(spans.par_iter())
-                .filter(|(_, &(x0, x1))| x0 < x1)
-                .for_each(|((((d, it), sd), si), &(x0, x1))| {
+            let rows = MERGE_ROWS * w;
+            let jobs = depth
+                .chunks_mut(rows)
+                .zip(items.chunks_mut(rows))
+                .zip(sd.chunks_mut(rows))
+                .zip(si.chunks_mut(rows))
+                .zip(spans.chunks(MERGE_ROWS))
+                .collect();
+            workers.share(jobs, |((((d, it), sd), si), spans)| {
+                let rows = d
+                    .chunks_mut(w)
+                    .zip(it.chunks_mut(w))
+                    .zip(sd.chunks_mut(w))
+                    .zip(si.chunks(w));
+                for ((((d, it), sd), si), &(x0, x1)) in rows.zip(spans) {
                     let (x0, x1) = (x0 as usize, x1 as usize);
-                    isa.merge_row(&mut d[x0..x1], &mut it[x0..x1], &mut sd[x0..x1], &si[x0..x1], mode);
-                });
+                    if x0 < x1 {
+                        isa.merge_row(&mut d[x0..x1], &mut it[x0..x1], &mut sd[x0..x1], &si[x0..x1], mode);
+                    }
+                }
+            });
         }
         self.scratch_clean = true;
         Some(results.iter().fold((0, 0), |(r, f), &(rr, ff, _)| (r + rr, f + ff)))
+    }
+}
+
+/// The threads a draw's parallel phases run on: a rasterizer's own pool, or (`None`) the pool
+/// the caller runs in, rayon's global one outside any.
+struct Workers<'a> {
+    pool: Option<&'a rayon::ThreadPool>,
+    threads: usize,
+}
+
+impl Workers<'_> {
+    /// Runs `job` on each of `jobs` and returns the results in the jobs' order. On one thread,
+    /// or for a single job, on the calling thread; else on up to `threads` tasks spawned into
+    /// the pool, each taking the next job from a counter when it finishes one, so any thread
+    /// may run any job (callers' jobs give the same results on any thread, in any order), and
+    /// a thread that is slow, busy or blocked elsewhere only means another runs more.
+    ///
+    /// The tasks are spawned from the calling thread, which (outside the pool) injects them,
+    /// waking a sleeping thread per task, where a `rayon::join` inside the pool leaves its
+    /// second half to be stolen. On the two-core VMs this project is measured on, after a
+    /// two-thread pool had idled 20 ms, the later half of a join started a median 2.4–2.8 ms
+    /// after the call (both halves ran on one thread in a third of the rounds), the later of
+    /// two tasks spawned from outside 0.11–0.24 ms after it (`cargo run --release -p
+    /// occult-bench --example thread_scaling wake 60`, three runs). A caller inside the pool
+    /// spawns onto its own queue and runs the jobs itself while it waits, as a join does.
+    fn share<T: Send, R: Send>(&self, jobs: Vec<T>, job: impl Fn(T) -> R + Sync) -> Vec<R> {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        use std::sync::{Mutex, PoisonError};
+        if self.threads <= 1 || jobs.len() <= 1 {
+            return jobs.into_iter().map(job).collect();
+        }
+        let tasks = self.threads.min(jobs.len());
+        // No job runs while a slot is locked, so no slot is poisoned; a poisoned one would
+        // still be read.
+        let slots: Vec<Mutex<(Option<T>, Option<R>)>> = jobs.into_iter().map(|j| Mutex::new((Some(j), None))).collect();
+        let lock = |i: usize| slots[i].lock().unwrap_or_else(PoisonError::into_inner);
+        let next = AtomicUsize::new(0);
+        let work = || loop {
+            let i = next.fetch_add(1, Ordering::Relaxed);
+            if i >= slots.len() {
+                break;
+            }
+            // The counter hands each index out once.
+            let taken = lock(i).0.take();
+            if let Some(j) = taken {
+                let r = job(j);
+                lock(i).1 = Some(r);
+            }
+        };
+        let work = &work;
+        match self.pool {
+            Some(p) => p.in_place_scope(|scope| (0..tasks).for_each(|_| scope.spawn(move |_| work()))),
+            None => rayon::in_place_scope(|scope| (0..tasks).for_each(|_| scope.spawn(move |_| work()))),
+        }
+        // A job that panicked ended the scope above with its panic: every slot has its result.
+        slots
+            .into_iter()
+            .map(|s| {
+                s.into_inner()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .1
+                    .expect("every job ran: a panic in one ends the scope with it")
+            })
+            .collect()
     }
 }
 
@@ -910,8 +995,8 @@ const MAX_PROJECTED_VERTICES: usize = 1 << 22;
 /// draws them directly: see `Rasterizer::on_caller`).
 const SORT_LAST_MIN_TRIANGLES: usize = 200_000;
 
-/// Parts per thread in sort-last draws: more balance the load, each adds a merge.
-const SORT_LAST_PARTS_PER_THREAD: usize = 1;
+/// Rows of the frame per job of a sort-last merge.
+const MERGE_ROWS: usize = 8;
 
 /// Triangles per block handed round-robin to the workers of a sort-last draw.
 const SORT_LAST_BLOCK: usize = 16 * 1024;
@@ -2184,7 +2269,6 @@ mod tests {
             triangles: DrawTriangles::List(&many),
             ..whole(&tiny)
         };
-        let caller = std::thread::current().id();
         let pass = |strategy, draws: &[Draw<'_>]| {
             let mut frame = Frame::new(1280, 960).unwrap();
             let mut r = Rasterizer::new(RasterConfig {
@@ -2194,8 +2278,8 @@ mod tests {
             })
             .unwrap();
             let counts = r.draw(&view, &mut frame, draws, RasterMode::Full);
-            let (thread, used) = r.last_pass.unwrap();
-            (thread == caller, used, counts)
+            let (on_caller, used) = r.last_pass.unwrap();
+            (on_caller, used, counts)
         };
         for mesh in [&tiny, &large] {
             let draw = [whole(mesh)];
@@ -2235,6 +2319,71 @@ mod tests {
             .iter()
             .zip(frames[1].depth())
             .all(|(x, y)| x.to_bits() == y.to_bits()));
+    }
+
+    /// A sort-last draw and a clear finish, with the frame and counts of one thread, while one
+    /// of the rasterizer's two threads is blocked elsewhere: the other runs every job.
+    #[test]
+    fn draws_finish_while_a_pool_thread_is_blocked() {
+        use std::sync::mpsc::channel;
+        use std::time::Duration;
+        let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 320, 240).unwrap();
+        // 2 · 320² triangles: above the sort-last threshold.
+        let mesh = grid(320, 0.03);
+        assert!(mesh.triangle_count() >= SORT_LAST_MIN_TRIANGLES);
+        let draw = [Draw {
+            mesh: &mesh,
+            triangles: DrawTriangles::All,
+            clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
+            first_item: 0,
+        }];
+        let drawn = |r: &mut Rasterizer| {
+            let mut frame = Frame::new(320, 240).unwrap();
+            r.clear(&mut frame);
+            let counts = r.draw(&view, &mut frame, &draw, RasterMode::Full);
+            (counts, frame)
+        };
+        let (one, one_frame) = drawn(
+            &mut Rasterizer::new(RasterConfig {
+                threads: 1,
+                ..RasterConfig::default()
+            })
+            .unwrap(),
+        );
+        let mut r = Rasterizer::new(RasterConfig {
+            threads: 2,
+            ..RasterConfig::default()
+        })
+        .unwrap();
+        let (release, blocked) = channel::<()>();
+        let (started, has_started) = channel();
+        r.install(|| {
+            rayon::spawn(move || {
+                let _ = started.send(());
+                let _ = blocked.recv();
+            })
+        });
+        has_started.recv().unwrap();
+        let (done, finished) = channel();
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                let result = drawn(&mut r);
+                let _ = done.send((result, r.last_pass));
+            });
+            let result = finished.recv_timeout(Duration::from_secs(120));
+            // Release the blocked thread whatever happened, so that a hung draw ends too.
+            drop(release);
+            let ((counts, frame), pass) = result.expect("the draw finished with one pool thread blocked");
+            assert_eq!(pass, Some((false, Strategy::SortLast)));
+            assert_eq!(counts.triangles_rasterized, one.triangles_rasterized);
+            assert!(counts.fragments_written > 1000);
+            assert_eq!(frame.items(), one_frame.items());
+            assert!(frame
+                .depth()
+                .iter()
+                .zip(one_frame.depth())
+                .all(|(a, b)| a.to_bits() == b.to_bits()));
+        });
     }
 
     /// Draws split into passes to bound the projected vertices give the frame and counts of
