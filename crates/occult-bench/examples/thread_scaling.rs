@@ -24,12 +24,13 @@
 //! split of one draw over two threads can reach.
 //! `... thread_scaling wake N` measures what starting a second thread costs on this machine,
 //! N times each: (1) after the waking thread slept 1, 5 and 20 ms (so that the cores idled that
-//! long), it wakes a thread blocked on a condition variable and stays busy for 3 ms, as a
+//! long), it wakes a thread blocked on a channel and stays busy for 3 ms, as a
 //! draw's first worker would, and times how late the woken thread runs; (2) after a
 //! two-thread pool idled 20 ms, how late the second of two 3 ms jobs starts, counted from the
-//! call, when they are the halves of a `rayon::join` inside the pool (`install`) and when they
-//! are two tasks spawned from outside it (`in_place_scope`, as the rasterizer's parallel
-//! phases are), and how often both ran on one thread.
+//! call, and how often both ran on one thread: as the halves of a `rayon::join` run inside the
+//! pool by `install` (the rasterizer's draws until 2026-12-02: one hand-off into the pool,
+//! then the second half waits on the first thread's queue to be stolen), and as two tasks
+//! spawned from outside by `in_place_scope` (how its parallel phases start now).
 
 use occult_core::glam::Affine3A;
 use occult_raster::{Draw, DrawTriangles, Frame, RasterConfig, RasterMode, Rasterizer};
@@ -70,9 +71,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         })
     };
     let one = || raster(1);
+    // Frames are cleared on this thread, so that a clear does not wake the pool of the
+    // rasterizer timed next.
+    let clearer = one()?;
     // One timed draw into a cleared frame, in milliseconds.
     let timed = |r: &mut Rasterizer, frame: &mut Frame| {
-        r.clear(frame);
+        clearer.clear(frame);
         let start = Instant::now();
         let counts = r.draw(&view, frame, std::slice::from_ref(&draw), RasterMode::Full);
         (start.elapsed().as_secs_f64() * 1e3, counts)
@@ -182,9 +186,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 }
 
 /// `wake` mode (see the module doc): medians and maxima, in microseconds, of how late a thread
-/// blocked on a condition variable runs after it is woken, for three idle times before.
+/// blocked on a channel runs after it is woken, for three idle times before.
 fn wake_latency(rounds: usize) -> Result<(), Box<dyn std::error::Error>> {
-    use std::sync::{Arc, Condvar, Mutex};
+    use std::sync::{mpsc, Mutex};
     use std::time::Duration;
     let busy = |d: Duration| {
         let t = Instant::now();
@@ -193,32 +197,17 @@ fn wake_latency(rounds: usize) -> Result<(), Box<dyn std::error::Error>> {
         }
     };
     for idle_ms in [1, 5, 20] {
-        // The time the woken thread should start from, and the delays it saw.
-        let shared = Arc::new((Mutex::new((None::<Instant>, Vec::new())), Condvar::new()));
-        let woken = {
-            let shared = Arc::clone(&shared);
-            std::thread::spawn(move || -> Result<Vec<f64>, String> {
-                let (lock, ready) = &*shared;
-                let mut state = lock.lock().map_err(|e| e.to_string())?;
-                for _ in 0..rounds {
-                    while state.0.is_none() {
-                        state = ready.wait(state).map_err(|e| e.to_string())?;
-                    }
-                    if let Some(sent) = state.0.take() {
-                        state.1.push(sent.elapsed().as_secs_f64() * 1e6);
-                    }
-                }
-                Ok(std::mem::take(&mut state.1))
-            })
-        };
+        // Each message is the time it was sent; the woken thread keeps how late it got each
+        // (a channel loses none, however late the thread runs).
+        let (send, receive) = mpsc::channel::<Instant>();
+        let woken = std::thread::spawn(move || receive.iter().map(|sent| sent.elapsed().as_secs_f64() * 1e6).collect());
         for _ in 0..rounds {
             std::thread::sleep(Duration::from_millis(idle_ms));
-            let (lock, ready) = &*shared;
-            lock.lock().map_err(|e| e.to_string())?.0 = Some(Instant::now());
-            ready.notify_one();
+            send.send(Instant::now())?;
             busy(Duration::from_millis(3));
         }
-        let late = woken.join().map_err(|_| "the woken thread panicked")??;
+        drop(send);
+        let late: Vec<f64> = woken.join().map_err(|_| "the woken thread panicked")?;
         println!(
             "cores idle {idle_ms:>2} ms before: the woken thread ran {} after it was woken",
             spread(late)

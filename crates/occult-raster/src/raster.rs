@@ -2,10 +2,10 @@
 //!
 //! - **Direct** (one thread): each triangle is set up and scanned at once, in submission order;
 //!   consecutive triangles of a mesh touch neighbouring pixels, so the frame stays in cache.
-//! - **Sort-last** (several threads, draws of at least 200,000 triangles): thread `k` draws the
-//!   blocks `k, k + threads, …` of the triangle stream directly into its own frame (thread 0
-//!   into the real one);
-//!   the other frames are merged under the (depth, item) rule over the pixels each touched.
+//! - **Sort-last** (several threads, draws of at least 200,000 triangles): worker `k` of
+//!   `threads` (a job any thread of the pool may run) draws the blocks `k, k + threads, …` of
+//!   the triangle stream directly into its own frame (worker 0 into the real one); the other
+//!   frames are merged under the (depth, item) rule over the pixels each touched.
 //! - **Tile-binned** (several threads, when asked for, or when sort-last cannot allocate its
 //!   private frames), in rounds of `threads × 2` chunks of [`CHUNK_TRIANGLES`] triangles:
 //!   1. *setup and binning* (parallel over chunks): each set-up triangle is appended to the bin
@@ -16,9 +16,10 @@
 //!   thread: binning it cost more than it saved in every renderer measured (see
 //!   `Rasterizer::on_caller`).
 //!
-//! With `threads: 1` and a direct strategy a draw runs on the calling thread: the rasterizer's
-//! one-thread pool serves only [`Rasterizer::install`] and forced tile-binned draws, as handing
-//! every small draw to another thread and back costs more than the draw.
+//! The calling thread drives every draw. On one thread it does all the work itself (the
+//! rasterizer's one-thread pool serves only [`Rasterizer::install`] and the stencil pass); on
+//! several it hands each parallel phase to the pool as jobs that any thread may take (see
+//! `Workers::share`) and waits for them.
 //!
 //! Setup, shared by all three: transform vertices (whole meshes: each vertex once per draw, in
 //! parallel; index lists and ranges: per triangle, through a small per-draw cache so that the
@@ -415,7 +416,8 @@ impl Rasterizer {
         self.vertices.capacity() * size_of::<ProjVertex>() + chunks + scratch
     }
 
-    /// A rasterizer with its own pool of `config.threads` threads (or rayon's global pool).
+    /// A rasterizer with its own pool of `config.threads` threads (with 0, it uses the pool
+    /// each call runs in: rayon's global pool outside any).
     ///
     /// # Errors
     /// [`crate::RasterError::BadConfig`] for a tile size that is not a power of two in 8..=1024, or a thread pool
@@ -527,9 +529,9 @@ impl Rasterizer {
         self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES, single)
     }
 
-    /// True when `draws` run directly on the calling thread, never handed to the pool:
-    /// - on a one-thread rasterizer unless tile binning is forced: handing each draw to a
-    ///   one-thread pool and back would cost more than a small draw;
+    /// True when `draws` run directly on the calling thread, without binning or private
+    /// frames (a one-thread rasterizer never hands work to its pool, whatever the strategy):
+    /// - on a one-thread rasterizer unless tile binning is forced;
     /// - under [`Strategy::Direct`], as it says;
     /// - under [`Strategy::Auto`], draws of fewer than [`SORT_LAST_MIN_TRIANGLES`] triangles.
     ///   Tile binning would share them over the threads, but its fixed cost (waking them for
@@ -583,7 +585,7 @@ impl Rasterizer {
                 n += 1;
             }
             let (pass, tail) = rest.split_at(n);
-            counts += self.draw_in_pool(vp, frame, pass, mode, single);
+            counts += self.draw_pass(vp, frame, pass, mode, single);
             rest = tail;
             if rest.is_empty() {
                 return counts;
@@ -593,7 +595,7 @@ impl Rasterizer {
 
     /// Draws one pass: on the calling thread alone when `single`, else over this rasterizer's
     /// threads (see [`Workers`]).
-    fn draw_in_pool(
+    fn draw_pass(
         &mut self,
         vp: &Viewport,
         frame: &mut Frame,
@@ -852,16 +854,19 @@ impl Workers<'_> {
     /// or for a single job, on the calling thread; else on up to `threads` tasks spawned into
     /// the pool, each taking the next job from a counter when it finishes one, so any thread
     /// may run any job (callers' jobs give the same results on any thread, in any order), and
-    /// a thread that is slow, busy or blocked elsewhere only means another runs more.
+    /// a thread that is busy or blocked elsewhere only means another runs more. (With as many
+    /// jobs as threads, as sort-last's workers are, a thread that runs slower still holds up
+    /// the end by its share.)
     ///
     /// The tasks are spawned from the calling thread, which (outside the pool) injects them,
-    /// waking a sleeping thread per task, where a `rayon::join` inside the pool leaves its
-    /// second half to be stolen. On the two-core VMs this project is measured on, after a
-    /// two-thread pool had idled 20 ms, the later half of a join started a median 2.4–2.8 ms
-    /// after the call (both halves ran on one thread in a third of the rounds), the later of
-    /// two tasks spawned from outside 0.11–0.24 ms after it (`cargo run --release -p
-    /// occult-bench --example thread_scaling wake 60`, three runs). A caller inside the pool
-    /// spawns onto its own queue and runs the jobs itself while it waits, as a join does.
+    /// waking a sleeping thread per task. Draws used to run inside the pool (`install`) and
+    /// split with `rayon::join`, whose second half waits on the first thread's queue to be
+    /// stolen. On the two-core VMs this project is measured on, after a two-thread pool had
+    /// idled 20 ms, that second half started a median 2.4–2.8 ms after the call (both halves
+    /// ran on one thread in a third of the rounds), the later of two tasks spawned from
+    /// outside 0.11–0.24 ms after it (`cargo run --release -p occult-bench --example
+    /// thread_scaling wake 60`, three runs). A caller inside the pool spawns onto its own
+    /// queue and runs the jobs itself while it waits, as a join does.
     fn share<T: Send, R: Send>(&self, jobs: Vec<T>, job: impl Fn(T) -> R + Sync) -> Vec<R> {
         use std::sync::atomic::{AtomicUsize, Ordering};
         use std::sync::{Mutex, PoisonError};
