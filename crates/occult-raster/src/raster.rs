@@ -16,8 +16,8 @@
 //!   thread: binning it cost more than it saved in every renderer measured (see
 //!   `Rasterizer::on_caller`).
 //!
-//! The calling thread drives every draw. On one thread it does all the work itself (the
-//! rasterizer's one-thread pool serves only [`Rasterizer::install`] and the stencil pass); on
+//! The calling thread drives every draw (and the stencil pass). On one thread it does all the
+//! work itself (the rasterizer's one-thread pool serves only [`Rasterizer::install`]); on
 //! several it hands each parallel phase to the pool as jobs that any thread may take (see
 //! `Workers::share`) and waits for them.
 //!

@@ -38,7 +38,6 @@
 use super::{setup_range, Draw, DrawTriangles, Rasterizer, SetupSink, TriSetup, Viewport};
 use crate::{Frame, RasterError, CLEAR_DEPTH};
 use occult_core::{glam::DMat4, glam::DVec4, ItemId, View};
-use rayon::prelude::*;
 
 /// A `width × height` buffer of signed stencil counts, row-major, kept beside a [`Frame`]
 /// (allocated only by the passes that need it).
@@ -281,32 +280,26 @@ impl Rasterizer {
         let threads = self.thread_count().max(1);
         let band_rows = (size.1 as usize).div_ceil(threads).max(1);
         let depth = frame.depth();
-        let counts = self.install(|| {
-            stencil
-                .values
-                .par_chunks_mut(band_rows * width)
-                .enumerate()
-                .map(|(band, values)| {
-                    let y0 = (band * band_rows) as u32;
-                    let y1 = y0 + (values.len() / width) as u32 - 1;
-                    let mut sink = StencilSink {
-                        rect: [0, y0, size.0 - 1, y1],
-                        tables: &tables,
-                        depth,
-                        values,
-                        width,
-                        counts: StencilCounts::default(),
-                    };
-                    if total > 0 {
-                        setup_range::<false>(&vp, &plain, &draw_starts, &vertex_offsets, &[], 0..total, &mut sink);
-                    }
-                    sink.counts
-                })
-                .reduce(StencilCounts::default, |mut a, b| {
-                    a += b;
-                    a
-                })
-        });
+        let bands = stencil.values.chunks_mut(band_rows * width).enumerate().collect();
+        let mut counts = StencilCounts::default();
+        for band in self.workers(threads).share(bands, |(band, values)| {
+            let y0 = (band * band_rows) as u32;
+            let y1 = y0 + (values.len() / width) as u32 - 1;
+            let mut sink = StencilSink {
+                rect: [0, y0, size.0 - 1, y1],
+                tables: &tables,
+                depth,
+                values,
+                width,
+                counts: StencilCounts::default(),
+            };
+            if total > 0 {
+                setup_range::<false>(&vp, &plain, &draw_starts, &vertex_offsets, &[], 0..total, &mut sink);
+            }
+            sink.counts
+        }) {
+            counts += band;
+        }
         Ok(StencilCounts {
             triangles_submitted: total as u64,
             ..counts
