@@ -864,8 +864,8 @@ impl Workers<'_> {
     /// stolen. On the two-core VMs this project is measured on, after a two-thread pool had
     /// idled 20 ms, that second half started a median 2.4–2.8 ms after the call (both halves
     /// ran on one thread in a third of the rounds), the later of two tasks spawned from
-    /// outside 0.11–0.24 ms after it (`cargo run --release -p occult-bench --example
-    /// thread_scaling wake 60`, three runs). A caller inside the pool spawns onto its own
+    /// outside 0.09–0.24 ms after it (`cargo run --release -p occult-bench --example
+    /// thread_scaling wake 60`, four runs). A caller inside the pool spawns onto its own
     /// queue and runs the jobs itself while it waits, as a join does.
     fn share<T: Send, R: Send>(&self, jobs: Vec<T>, job: impl Fn(T) -> R + Sync) -> Vec<R> {
         use std::sync::atomic::{AtomicUsize, Ordering};
@@ -2283,7 +2283,7 @@ mod tests {
             })
             .unwrap();
             let counts = r.draw(&view, &mut frame, draws, RasterMode::Full);
-            let (on_caller, used) = r.last_pass.unwrap();
+            let (on_caller, used) = r.last_pass.expect("the draw recorded its pass");
             (on_caller, used, counts)
         };
         for mesh in [&tiny, &large] {
@@ -2332,7 +2332,8 @@ mod tests {
     fn draws_finish_while_a_pool_thread_is_blocked() {
         use std::sync::mpsc::channel;
         use std::time::Duration;
-        let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 320, 240).unwrap();
+        let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 320, 240)
+            .expect("a valid 320 × 240 view");
         // 2 · 320² triangles: above the sort-last threshold.
         let mesh = grid(320, 0.03);
         assert!(mesh.triangle_count() >= SORT_LAST_MIN_TRIANGLES);
@@ -2343,7 +2344,7 @@ mod tests {
             first_item: 0,
         }];
         let drawn = |r: &mut Rasterizer| {
-            let mut frame = Frame::new(320, 240).unwrap();
+            let mut frame = Frame::new(320, 240).expect("a 320 × 240 frame");
             r.clear(&mut frame);
             let counts = r.draw(&view, &mut frame, &draw, RasterMode::Full);
             (counts, frame)
@@ -2353,13 +2354,13 @@ mod tests {
                 threads: 1,
                 ..RasterConfig::default()
             })
-            .unwrap(),
+            .expect("a one-thread rasterizer"),
         );
         let mut r = Rasterizer::new(RasterConfig {
             threads: 2,
             ..RasterConfig::default()
         })
-        .unwrap();
+        .expect("a two-thread rasterizer");
         let (release, blocked) = channel::<()>();
         let (started, has_started) = channel();
         r.install(|| {
@@ -2368,7 +2369,7 @@ mod tests {
                 let _ = blocked.recv();
             })
         });
-        has_started.recv().unwrap();
+        has_started.recv().expect("the blocking task started");
         let (done, finished) = channel();
         std::thread::scope(|s| {
             s.spawn(|| {
