@@ -1655,36 +1655,50 @@ fn max_f32(a: f32, b: f32) -> f32 {
     }
 }
 
-/// Edge functions of a triangle the small scan takes (see [`scan_small`]), as
-/// [`scan_triangle`] derives them: their values at the centre of pixel `(px0, py0)` and their
-/// steps per pixel right and down.
+/// How [`scan_small`] finds the covered centres of a triangle it takes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct SmallEdges {
-    row: [i32; 3],
-    step_x: [i32; 3],
-    step_y: [i32; 3],
-    /// For boxes of at most [`TINY`] × [`TINY`] pixels, the covered centres as
+enum SmallCover {
+    /// The edge functions as [`scan_triangle`] derives them: their values at the centre of
+    /// pixel `(px0, py0)` and their steps per pixel right and down.
+    Edges {
+        row: [i32; 3],
+        step_x: [i32; 3],
+        step_y: [i32; 3],
+    },
+    /// For boxes of at most [`TINY`] × [`TINY`] pixels, the covered centres themselves as
     /// [`scan_small`]'s mask (bit `8·j + i` for centre `(i, j)` from the box's corner),
-    /// derived in lanes with the edge functions.
-    mask: Option<u32>,
+    /// derived in lanes by the 8-lane setup, which then reads no edge functions back.
+    Mask(u32),
 }
 
 /// Where set-up triangles go: bins for the tile pass, or straight to the scan.
 trait SetupSink {
     fn push(&mut self, vp: &Viewport, t: TriSetup);
-    /// Whether [`Self::push_small`] uses the edge functions it is given: the 8-lane setup
-    /// derives them only for sinks that do.
+    /// Whether [`Self::push_small`] uses the cover it is given: the 8-lane setup derives edge
+    /// functions and masks only for sinks that do.
     const TAKES_EDGES: bool = false;
     /// [`Self::push`] for a triangle whose box the small scan takes, with its edge functions
-    /// already derived (by the 8-lane setup).
+    /// or, for a tiny box, its mask of covered centres already derived (by the 8-lane setup).
     #[inline(always)]
-    fn push_small(&mut self, vp: &Viewport, t: TriSetup, _edges: SmallEdges) {
+    fn push_small(&mut self, vp: &Viewport, t: TriSetup, _cover: SmallCover) {
         self.push(vp, t);
     }
     /// `n` triangles the 8-lane setup found to cover no pixel centre of a box of at most
     /// [`TINY`] × [`TINY`] pixels (only sinks that take edge functions get them): they count
     /// as set up; scanning them would write nothing.
     fn count_uncovered(&mut self, n: u32);
+    /// Whether the 8-lane setup counts the lanes it hands over, a batch at a time, by
+    /// [`Self::count_lanes`]: [`Self::push_lane`] and [`Self::push_small`] then count nothing.
+    const COUNTS_LANES: bool = false;
+    /// `n` lanes of a batch are about to be handed over (scanned), all within the inclusive
+    /// pixel box `bounds` ([`EMPTY_RECT`] when `n` is 0); only called where `COUNTS_LANES`.
+    #[inline(always)]
+    fn count_lanes(&mut self, _n: u32, _bounds: [u32; 4]) {}
+    /// [`Self::push`] for a lane of the 8-lane setup that the small scan does not take.
+    #[inline(always)]
+    fn push_lane(&mut self, vp: &Viewport, t: TriSetup) {
+        self.push(vp, t);
+    }
     /// `n` of the triangles pushed were further pieces of one that clipping cut: a triangle
     /// counts once as rasterized, however many pieces it was cut into.
     fn uncount(&mut self, n: u32);
@@ -1771,12 +1785,32 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
     #[inline(always)]
     fn push(&mut self, vp: &Viewport, t: TriSetup) {
         self.count(&t);
+        self.push_lane(vp, t);
+    }
+
+    #[inline(always)]
+    fn push_lane(&mut self, vp: &Viewport, t: TriSetup) {
         // SAFETY: a DirectSink is only made by `Isa::draw_direct`, whose caller guarantees that
         // no other thread touches the frame during the draw.
         self.written += unsafe { scan_triangle::<AVX2>(vp, &t, self.rect, self.target, self.mode) };
     }
 
     const TAKES_EDGES: bool = true;
+
+    // Per batch in lanes, where counting each triangle was a load, compare and store of the
+    // box's four sides per triangle.
+    const COUNTS_LANES: bool = true;
+
+    #[inline(always)]
+    fn count_lanes(&mut self, n: u32, bounds: [u32; 4]) {
+        self.rasterized += n as u64;
+        self.dirty = [
+            self.dirty[0].min(bounds[0]),
+            self.dirty[1].min(bounds[1]),
+            self.dirty[2].max(bounds[2]),
+            self.dirty[3].max(bounds[3]),
+        ];
+    }
 
     #[inline(always)]
     fn count_uncovered(&mut self, n: u32) {
@@ -1789,13 +1823,13 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
     }
 
     #[inline(always)]
-    fn push_small(&mut self, vp: &Viewport, t: TriSetup, edges: SmallEdges) {
-        self.count(&t);
+    fn push_small(&mut self, vp: &Viewport, t: TriSetup, cover: SmallCover) {
+        // Counted with its batch (`count_lanes`).
         // The direct sink's rectangle is the whole frame, which holds the box: `scan_triangle`
         // would scan the box itself, small, from these edge functions.
         let rect = [t.px0 as u32, t.py0 as u32, t.px1 as u32, t.py1 as u32];
         // SAFETY: as in `push`.
-        self.written += unsafe { scan_small::<AVX2>(vp, &t, rect, edges, self.target, self.mode) };
+        self.written += unsafe { scan_small::<AVX2>(vp, &t, rect, cover, self.target, self.mode) };
     }
 }
 
@@ -1830,7 +1864,7 @@ const MASKED: u32 = 56;
 
 /// Scans a box of at most `SMALL × SMALL` pixels: the inside mask of each row is formed
 /// without branches in 32-bit lanes (tiny triangles make per-pixel branches mispredict), or
-/// taken from `edges.mask` where the 8-lane setup formed it already (anchored at the box's
+/// taken from a [`SmallCover::Mask`] the 8-lane setup formed already (anchored at the box's
 /// corner, which is then `rect`'s), then only the covered pixels are depth-tested.
 /// Bit-identical to the general scan.
 ///
@@ -1846,41 +1880,42 @@ unsafe fn scan_small<const AVX2: bool>(
     vp: &Viewport,
     t: &TriSetup,
     rect: [u32; 4],
-    edges: SmallEdges,
+    cover: SmallCover,
     target: &FrameTarget,
     mode: RasterMode,
 ) -> u64 {
     let [x0, y0, x1, y1] = rect;
     let w = x1 - x0 + 1;
-    let SmallEdges {
-        mut row,
-        step_x: sx,
-        step_y,
-        mask: tiny,
-    } = edges;
-    let mask = if let Some(tiny) = tiny {
-        debug_assert_eq!(
-            (x0, y0),
-            (t.px0 as u32, t.py0 as u32),
-            "a lane mask is anchored at the box"
-        );
-        tiny as u64
-    } else {
-        let mut mask = 0u64;
-        let valid = (1u64 << w) - 1;
-        for j in 0..=(y1 - y0) {
-            let bits = if AVX2 {
-                // SAFETY: the AVX2 instantiation only runs where `Isa::select` found AVX2.
-                unsafe { simd::row_mask_avx2(row, sx) }
-            } else {
-                row_mask(row, sx)
-            };
-            mask |= (bits & valid) << (j * SMALL);
-            row[0] += step_y[0];
-            row[1] += step_y[1];
-            row[2] += step_y[2];
+    let mask = match cover {
+        SmallCover::Mask(tiny) => {
+            debug_assert_eq!(
+                (x0, y0),
+                (t.px0 as u32, t.py0 as u32),
+                "a lane mask is anchored at the box"
+            );
+            tiny as u64
         }
-        mask
+        SmallCover::Edges {
+            mut row,
+            step_x: sx,
+            step_y,
+        } => {
+            let mut mask = 0u64;
+            let valid = (1u64 << w) - 1;
+            for j in 0..=(y1 - y0) {
+                let bits = if AVX2 {
+                    // SAFETY: the AVX2 instantiation only runs where `Isa::select` found AVX2.
+                    unsafe { simd::row_mask_avx2(row, sx) }
+                } else {
+                    row_mask(row, sx)
+                };
+                mask |= (bits & valid) << (j * SMALL);
+                row[0] += step_y[0];
+                row[1] += step_y[1];
+                row[2] += step_y[2];
+            }
+            mask
+        }
     };
     // SAFETY: the mask's centres lie in the caller's rectangle, owned by this task.
     match mode {
@@ -1905,6 +1940,9 @@ unsafe fn write_mask<const FULL: bool>(
 ) -> u64 {
     let mode = if FULL { RasterMode::Full } else { RasterMode::DepthOnly };
     let mut written = 0;
+    // In locals: the compiler cannot tell that the fragment writes leave `target` unchanged,
+    // and would load these again for every fragment.
+    let (depth, items, width) = (target.depth, target.items, target.width);
     while mask != 0 {
         let k = mask.trailing_zeros();
         mask &= mask - 1;
@@ -1912,9 +1950,9 @@ unsafe fn write_mask<const FULL: bool>(
         let row_depth = row_depth(t, y);
         let z = depth_at(t, row_depth, x);
         if z >= vp.far_depth {
-            let i = y as usize * target.width + x as usize;
+            let i = y as usize * width + x as usize;
             // SAFETY: forwarded from the caller.
-            let (d, it) = unsafe { (&mut *target.depth.add(i), &mut *target.items.add(i)) };
+            let (d, it) = unsafe { (&mut *depth.add(i), &mut *items.add(i)) };
             written += write_fragment(d, it, z, t.item, mode) as u64;
         }
     }
@@ -2088,11 +2126,10 @@ unsafe fn scan_triangle<const AVX2: bool>(
     }
     let (mut row, step_x, step_y) = edge_functions(t, x0, y0);
     if (t.extent as u32) < MASKED && x1 - x0 < SMALL && y1 - y0 < SMALL {
-        let edges = SmallEdges {
+        let edges = SmallCover::Edges {
             row: row.map(|e| e as i32),
             step_x: step_x.map(|e| e as i32),
             step_y: step_y.map(|e| e as i32),
-            mask: None,
         };
         // SAFETY: forwarded from the caller.
         return unsafe { scan_small::<AVX2>(vp, t, [x0, y0, x1, y1], edges, target, mode) };

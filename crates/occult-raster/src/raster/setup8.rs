@@ -21,7 +21,7 @@
 //! clipping leave the batch for the scalar path.
 
 use super::{
-    clip_and_setup, Draw, ProjVertex, SetupSink, SmallEdges, TriSetup, Viewport, HALF, MASKED, NEEDS_CLIP, NOT_FINITE,
+    clip_and_setup, Draw, ProjVertex, SetupSink, SmallCover, TriSetup, Viewport, HALF, MASKED, NEEDS_CLIP, NOT_FINITE,
     OUT_BOTTOM, OUT_LEFT, OUT_NEAR, OUT_OF_VIEW, OUT_RIGHT, OUT_TOP, SMALL, SUB, SUBPIXEL_BITS, TINY,
 };
 use occult_core::{ItemId, Mat4, Vec3, Vec4};
@@ -350,6 +350,29 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
     }
     // In stream order: the set-up lanes, and the clipped ones through the scalar path.
     out.count_uncovered(uncovered.count_ones());
+    if S::COUNTS_LANES {
+        // The lanes about to be scanned (clipped ones count themselves) and their box.
+        let scanned = live & !uncovered;
+        let on = lane_mask(scanned);
+        // Boxes lie in the frame (no lane is negative): unsigned, u32::MAX stands for no lane
+        // in a minimum and 0 in a maximum, as in `EMPTY_RECT`.
+        let least = |v: __m256i| {
+            let v = _mm256_or_si256(v, _mm256_xor_si256(on, _mm256_set1_epi32(-1)));
+            let v = _mm256_min_epu32(v, _mm256_permute2x128_si256::<0x01>(v, v));
+            let v = _mm256_min_epu32(v, _mm256_shuffle_epi32::<0b01_00_11_10>(v));
+            _mm256_extract_epi32::<0>(_mm256_min_epu32(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v)))
+        };
+        let most = |v: __m256i| {
+            let v = _mm256_and_si256(v, on);
+            let v = _mm256_max_epi32(v, _mm256_permute2x128_si256::<0x01>(v, v));
+            let v = _mm256_max_epi32(v, _mm256_shuffle_epi32::<0b01_00_11_10>(v));
+            _mm256_extract_epi32::<0>(_mm256_max_epi32(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v)))
+        };
+        out.count_lanes(
+            scanned.count_ones(),
+            [least(px0) as u32, least(py0) as u32, most(px1) as u32, most(py1) as u32],
+        );
+    }
     let mut m = (live | clipped) & !uncovered;
     while m != 0 {
         let k = m.trailing_zeros() as usize;
@@ -379,19 +402,18 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
             item: batch.item[k],
         };
         if small & (1 << k) != 0 {
-            let edges = SmallEdges {
-                row: [l.row[0][k], l.row[1][k], l.row[2][k]],
-                step_x: [l.step_x[0][k], l.step_x[1][k], l.step_x[2][k]],
-                step_y: [l.step_y[0][k], l.step_y[1][k], l.step_y[2][k]],
-                mask: if tiny & (1 << k) != 0 {
-                    Some(l.mask[k] as u32)
-                } else {
-                    None
-                },
+            let cover = if tiny & (1 << k) != 0 {
+                SmallCover::Mask(l.mask[k] as u32)
+            } else {
+                SmallCover::Edges {
+                    row: [l.row[0][k], l.row[1][k], l.row[2][k]],
+                    step_x: [l.step_x[0][k], l.step_x[1][k], l.step_x[2][k]],
+                    step_y: [l.step_y[0][k], l.step_y[1][k], l.step_y[2][k]],
+                }
             };
-            out.push_small(vp, t, edges);
+            out.push_small(vp, t, cover);
         } else {
-            out.push(vp, t);
+            out.push_lane(vp, t);
         }
     }
 }
@@ -618,8 +640,8 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_pcg::Pcg64Mcg;
 
-    /// A set-up record as comparable bits, and the edge functions it came with.
-    type Entry = (ItemId, [u64; 16], Option<SmallEdges>);
+    /// A set-up record as comparable bits, and how the small scan was to find its centres.
+    type Entry = (ItemId, [u64; 16], Option<SmallCover>);
 
     #[derive(Default)]
     struct Recorder {
@@ -656,8 +678,8 @@ mod tests {
         fn push(&mut self, _vp: &Viewport, t: TriSetup) {
             self.records.push((t.item, key(&t), None));
         }
-        fn push_small(&mut self, _vp: &Viewport, t: TriSetup, edges: SmallEdges) {
-            self.records.push((t.item, key(&t), Some(edges)));
+        fn push_small(&mut self, _vp: &Viewport, t: TriSetup, cover: SmallCover) {
+            self.records.push((t.item, key(&t), Some(cover)));
         }
         fn count_uncovered(&mut self, n: u32) {
             self.uncovered += n as usize;
@@ -820,15 +842,17 @@ mod tests {
                     .unwrap_or_else(|| panic!("round {round}: item {} missing", s.0));
                 assert_eq!(s.1, l.1, "round {round}: record of item {}", s.0);
                 match l.2 {
-                    Some(edges) => {
+                    Some(cover) => {
                         assert!(takes_small, "round {round}: item {} is not small", s.0);
-                        let want = SmallEdges {
-                            row: row.map(|e| e as i32),
-                            step_x: sx.map(|e| e as i32),
-                            step_y: sy.map(|e| e as i32),
-                            mask: want_mask,
+                        let want = match want_mask {
+                            Some(mask) => SmallCover::Mask(mask),
+                            None => SmallCover::Edges {
+                                row: row.map(|e| e as i32),
+                                step_x: sx.map(|e| e as i32),
+                                step_y: sy.map(|e| e as i32),
+                            },
                         };
-                        assert_eq!(edges, want, "round {round}: edges of item {}", s.0);
+                        assert_eq!(cover, want, "round {round}: cover of item {}", s.0);
                         assert!(row.iter().all(|&e| e == e as i32 as i64), "edges fit i32");
                         small += 1;
                         tiny += want_mask.is_some() as usize;
