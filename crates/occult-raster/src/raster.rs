@@ -1688,7 +1688,8 @@ trait SetupSink {
     /// as set up; scanning them would write nothing.
     fn count_uncovered(&mut self, n: u32);
     /// Whether the 8-lane setup counts the lanes it hands over, a batch at a time, by
-    /// [`Self::count_lanes`]: [`Self::push_lane`] and [`Self::push_small`] then count nothing.
+    /// [`Self::count_lanes`]: [`Self::push_lane`] and [`Self::push_small`] then count nothing
+    /// (the pieces of a clipped lane still come through [`Self::push`], and count there).
     const COUNTS_LANES: bool = false;
     /// `n` lanes of a batch are about to be handed over (scanned), all within the inclusive
     /// pixel box `bounds` ([`EMPTY_RECT`] when `n` is 0); only called where `COUNTS_LANES`.
@@ -1824,9 +1825,9 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
 
     #[inline(always)]
     fn push_small(&mut self, vp: &Viewport, t: TriSetup, cover: SmallCover) {
-        // Counted with its batch (`count_lanes`).
-        // The direct sink's rectangle is the whole frame, which holds the box: `scan_triangle`
-        // would scan the box itself, small, from these edge functions.
+        // Counted with its batch (`count_lanes`). The direct sink's rectangle is the whole
+        // frame, which holds the box: `scan_triangle` would scan the box itself, small, from
+        // these edge functions, or from the mask that the 8-lane setup formed from them.
         let rect = [t.px0 as u32, t.py0 as u32, t.px1 as u32, t.py1 as u32];
         // SAFETY: as in `push`.
         self.written += unsafe { scan_small::<AVX2>(vp, &t, rect, cover, self.target, self.mode) };

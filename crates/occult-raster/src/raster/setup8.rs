@@ -647,6 +647,10 @@ mod tests {
     struct Recorder {
         records: Vec<Entry>,
         uncovered: usize,
+        /// Boxes of the triangles handed over as lanes (`push_lane`, `push_small`), and what
+        /// `count_lanes` reported for them.
+        lane_boxes: Vec<[u32; 4]>,
+        lanes_counted: Vec<(u32, [u32; 4])>,
     }
 
     fn key(t: &TriSetup) -> [u64; 16] {
@@ -672,14 +676,27 @@ mod tests {
         ]
     }
 
+    fn bounds(t: &TriSetup) -> [u32; 4] {
+        [t.px0, t.py0, t.px1, t.py1].map(u32::from)
+    }
+
     impl SetupSink for Recorder {
         const TAKES_EDGES: bool = true;
+        const COUNTS_LANES: bool = true;
 
         fn push(&mut self, _vp: &Viewport, t: TriSetup) {
             self.records.push((t.item, key(&t), None));
         }
+        fn push_lane(&mut self, vp: &Viewport, t: TriSetup) {
+            self.lane_boxes.push(bounds(&t));
+            self.push(vp, t);
+        }
         fn push_small(&mut self, _vp: &Viewport, t: TriSetup, cover: SmallCover) {
+            self.lane_boxes.push(bounds(&t));
             self.records.push((t.item, key(&t), Some(cover)));
+        }
+        fn count_lanes(&mut self, n: u32, bounds: [u32; 4]) {
+            self.lanes_counted.push((n, bounds));
         }
         fn count_uncovered(&mut self, n: u32) {
             self.uncovered += n as usize;
@@ -862,6 +879,18 @@ mod tests {
             }
             assert!(next.next().is_none(), "round {round}: records beyond the scalar path's");
             assert_eq!(lanes.uncovered, skipped, "round {round}: uncovered triangles counted");
+            // The batch's count and box are those of the lanes it handed over.
+            let union = |boxes: &mut dyn Iterator<Item = [u32; 4]>| {
+                boxes.fold(super::super::EMPTY_RECT, |u, b| {
+                    [u[0].min(b[0]), u[1].min(b[1]), u[2].max(b[2]), u[3].max(b[3])]
+                })
+            };
+            let counted: u32 = lanes.lanes_counted.iter().map(|c| c.0).sum();
+            assert_eq!(
+                (counted as usize, union(&mut lanes.lanes_counted.iter().map(|c| c.1))),
+                (lanes.lane_boxes.len(), union(&mut lanes.lane_boxes.iter().copied())),
+                "round {round}: lanes counted and their box"
+            );
         }
         assert!(tiny > 300 && uncovered > 200, "{tiny} tiny, {uncovered} uncovered");
         assert!(
