@@ -1009,6 +1009,13 @@ const SORT_LAST_BLOCK: usize = 16 * 1024;
 /// An empty pixel box.
 const EMPTY_RECT: [u32; 4] = [u32::MAX, u32::MAX, 0, 0];
 
+/// The smallest inclusive pixel box holding boxes `a` and `b` (either may be empty, as
+/// [`EMPTY_RECT`]).
+#[inline(always)]
+fn union_rect(a: [u32; 4], b: [u32; 4]) -> [u32; 4] {
+    [a[0].min(b[0]), a[1].min(b[1]), a[2].max(b[2]), a[3].max(b[3])]
+}
+
 /// Raw access to a frame's buffers, shared by tile tasks that write disjoint pixels.
 struct FrameTarget {
     depth: *mut f32,
@@ -1762,12 +1769,7 @@ impl<const AVX2: bool> DirectSink<'_, AVX2> {
     #[inline(always)]
     fn count(&mut self, t: &TriSetup) {
         self.rasterized += 1;
-        self.dirty = [
-            self.dirty[0].min(t.px0 as u32),
-            self.dirty[1].min(t.py0 as u32),
-            self.dirty[2].max(t.px1 as u32),
-            self.dirty[3].max(t.py1 as u32),
-        ];
+        self.dirty = union_rect(self.dirty, [t.px0, t.py0, t.px1, t.py1].map(u32::from));
     }
 }
 
@@ -1805,12 +1807,7 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
     #[inline(always)]
     fn count_lanes(&mut self, n: u32, bounds: [u32; 4]) {
         self.rasterized += n as u64;
-        self.dirty = [
-            self.dirty[0].min(bounds[0]),
-            self.dirty[1].min(bounds[1]),
-            self.dirty[2].max(bounds[2]),
-            self.dirty[3].max(bounds[3]),
-        ];
+        self.dirty = union_rect(self.dirty, bounds);
     }
 
     #[inline(always)]

@@ -881,9 +881,7 @@ mod tests {
             assert_eq!(lanes.uncovered, skipped, "round {round}: uncovered triangles counted");
             // The batch's count and box are those of the lanes it handed over.
             let union = |boxes: &mut dyn Iterator<Item = [u32; 4]>| {
-                boxes.fold(super::super::EMPTY_RECT, |u, b| {
-                    [u[0].min(b[0]), u[1].min(b[1]), u[2].max(b[2]), u[3].max(b[3])]
-                })
+                boxes.fold(super::super::EMPTY_RECT, super::super::union_rect)
             };
             let counted: u32 = lanes.lanes_counted.iter().map(|c| c.0).sum();
             assert_eq!(
