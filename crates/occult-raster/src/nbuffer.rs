@@ -277,7 +277,7 @@ impl NBuffer {
     /// As [`NBuffer::with_levels`]; on error the N-buffer is left empty (every query answers
     /// the identity).
     pub fn rebuild(&mut self, depth: &[f32], width: u32, height: u32, level_count: u32) -> Result<(), RasterError> {
-        self.rebuild_with(Isa::detect(), depth, width, height, level_count)
+        self.rebuild_with(Isa::detected(), depth, width, height, level_count)
     }
 
     /// [`NBuffer::rebuild`] with the row kernels of `isa`.
@@ -339,7 +339,7 @@ impl NBuffer {
             .zip(depth.par_chunks(BAND_ROWS * w))
             .for_each(|(dst, src)| {
                 for (d, s) in dst.chunks_exact_mut(w).zip(src.chunks_exact(w)) {
-                    isa.keys_row(ext, d, s, unknown);
+                    kernels::keys_row(isa, ext, d, s, unknown);
                 }
             });
         for level in 1..level_count {
@@ -364,7 +364,7 @@ impl NBuffer {
                 let y = y0 + r;
                 let a = &prev[y * w..(y + 1) * w];
                 let b = (y + step < h).then(|| &prev[(y + step) * w..(y + step + 1) * w]);
-                isa.combine(ext, out_row, a, b, step);
+                kernels::combine(isa, ext, out_row, a, b, step);
             }
         });
     }
@@ -753,7 +753,7 @@ impl NBuffer {
             level_count: self.level_count,
             whole_index,
         };
-        let isa = Isa::detect();
+        let isa = Isa::detected();
         let empty_rect = PixelRect {
             x0: 0,
             y0: 0,
@@ -763,11 +763,11 @@ impl NBuffer {
         let block = |start: usize, idx: &mut [[u32; LANES]; 4], lookups: &mut [u32; LANES]| {
             let end = (start + LANES).min(rects.len());
             match rects[start..end].try_into() {
-                Ok(rs) => isa.cover_block(&map, rs, idx, lookups),
+                Ok(rs) => kernels::cover_block(isa, &map, rs, idx, lookups),
                 Err(_) => {
                     let mut rs = [empty_rect; LANES];
                     rs[..end - start].copy_from_slice(&rects[start..end]);
-                    isa.cover_block(&map, &rs, idx, lookups);
+                    kernels::cover_block(isa, &map, &rs, idx, lookups);
                 }
             }
         };
@@ -1267,7 +1267,7 @@ mod tests {
                 let rects: [PixelRect; LANES] = std::array::from_fn(|_| random_rect(&mut rng, w, h));
                 for isa in Isa::available() {
                     let (mut idx, mut lookups) = ([[0u32; LANES]; 4], [0u32; LANES]);
-                    isa.cover_block(&map, &rects, &mut idx, &mut lookups);
+                    kernels::cover_block(isa, &map, &rects, &mut idx, &mut lookups);
                     for (k, &r) in rects.iter().enumerate() {
                         match nb.four_indices(r) {
                             None => assert_eq!(lookups[k], 0, "{isa:?} {w}x{h} {r:?}"),

@@ -1,6 +1,7 @@
 //! Sort-last drawing: workers draw parts of the triangle stream into private frames, which are
 //! then merged into the frame under the (depth, item) rule, scalar or with AVX2.
 
+use super::dispatch;
 use super::project::Viewport;
 use super::scan::FrameTarget;
 use super::threads::Workers;
@@ -60,8 +61,19 @@ impl Rasterizer {
             for start in (k * SORT_LAST_BLOCK..total).step_by(parts * SORT_LAST_BLOCK) {
                 let range = start..(start + SORT_LAST_BLOCK).min(total);
                 // SAFETY: each worker owns its own frame (the real one or a scratch one).
-                let (r, f, d) =
-                    unsafe { isa.draw_direct(vp, draws, draw_starts, vertex_offsets, vertices, range, target, mode) };
+                let (r, f, d) = unsafe {
+                    dispatch::draw_direct(
+                        isa,
+                        vp,
+                        draws,
+                        draw_starts,
+                        vertex_offsets,
+                        vertices,
+                        range,
+                        target,
+                        mode,
+                    )
+                };
                 rasterized += r;
                 written += f;
                 if d[0] <= d[2] && d[1] <= d[3] {
@@ -94,7 +106,7 @@ impl Rasterizer {
                 for ((((d, it), sd), si), &(x0, x1)) in rows.zip(spans) {
                     let (x0, x1) = (x0 as usize, x1 as usize);
                     if x0 < x1 {
-                        isa.merge_row(&mut d[x0..x1], &mut it[x0..x1], &mut sd[x0..x1], &si[x0..x1], mode);
+                        dispatch::merge_row(isa, &mut d[x0..x1], &mut it[x0..x1], &mut sd[x0..x1], &si[x0..x1], mode);
                     }
                 }
             });
@@ -122,7 +134,7 @@ pub(super) fn row_spans(boxes: &[[u32; 4]], height: usize) -> Option<Vec<(u32, u
     Some(spans)
 }
 
-/// See [`Isa::merge_row`]. The row goes by runs of [`MERGE_RUN`] pixels: a run the worker
+/// See [`dispatch::merge_row`]. The row goes by runs of [`MERGE_RUN`] pixels: a run the worker
 /// left clear (the rows between its triangles, the parts of the frame the other workers drew)
 /// costs only the read of its private depths; the others are merged branch-free, so that the
 /// compiler vectorizes them (a branch per pixel on whether the worker drew it mispredicts
@@ -191,7 +203,7 @@ pub(super) const SORT_LAST_BLOCK: usize = 16 * 1024;
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::raster::isa::Isa;
+    use occult_core::simd::Isa;
 
     #[test]
     fn merge_keeps_the_rule_on_rows_with_clear_runs() {
@@ -222,7 +234,7 @@ mod tests {
                 let si: Vec<ItemId> = (0..n).map(|_| rng.random_range(0..4)).collect();
                 for isa in [Isa::select(false), Isa::select(true)] {
                     let (mut got_d, mut got_it, mut got_sd) = (d.clone(), it.clone(), sd.clone());
-                    isa.merge_row(&mut got_d, &mut got_it, &mut got_sd, &si, mode);
+                    dispatch::merge_row(isa, &mut got_d, &mut got_it, &mut got_sd, &si, mode);
                     for x in 0..n {
                         let (mut want_d, mut want_it) = (d[x], it[x]);
                         if sd[x] != CLEAR_DEPTH {

@@ -50,10 +50,10 @@
 //! - `scan`: coverage and fragment writes;
 //! - `threads`: the job system the parallel phases share (`Workers`);
 //! - `merge`: sort-last drawing and its merge of private frames;
-//! - `isa`: the instruction set of the hot loops and their entry points;
+//! - `dispatch`: the entry points of the hot loops, compiled once per instruction set;
 //! - `stencil`: the stencil pass (shadow volumes), on the same setup and coverage.
 
-mod isa;
+mod dispatch;
 mod merge;
 mod project;
 mod scan;
@@ -67,10 +67,10 @@ mod tests;
 mod threads;
 
 use crate::frame::Frame;
+use occult_core::simd::Isa;
 use occult_core::{ItemId, Mat4, Mesh, View};
 use std::ops::Range;
 
-use isa::Isa;
 use project::{
     clip_and_setup, ProjVertex, Viewport, NEEDS_CLIP, NOT_FINITE, OUT_BOTTOM, OUT_LEFT, OUT_NEAR, OUT_OF_VIEW,
     OUT_RIGHT, OUT_TOP,
@@ -322,10 +322,11 @@ impl Rasterizer {
 
     /// The instruction set the hot loops run with.
     pub fn isa_name(&self) -> &'static str {
-        match self.isa {
-            Isa::Baseline => "baseline",
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx2 => "avx2",
+        // The rasterizer has one wide path (AVX2); a wider processor runs it too.
+        if self.isa.has_avx2() {
+            "avx2"
+        } else {
+            "baseline"
         }
     }
 
@@ -488,7 +489,7 @@ impl Rasterizer {
             }
             if threads == 1 {
                 for (d, out) in jobs {
-                    isa.project_all(vp, &d.clip_from_object, d.mesh.positions(), out);
+                    dispatch::project_all(isa, vp, &d.clip_from_object, d.mesh.positions(), out);
                 }
             } else {
                 let chunks = jobs
@@ -496,7 +497,7 @@ impl Rasterizer {
                     .flat_map(|(d, out)| out.chunks_mut(4096).enumerate().map(move |(ci, out)| (d, ci, out)))
                     .collect();
                 workers.share(chunks, |(d, ci, out)| {
-                    isa.project_all(vp, &d.clip_from_object, &d.mesh.positions()[ci * 4096..], out);
+                    dispatch::project_all(isa, vp, &d.clip_from_object, &d.mesh.positions()[ci * 4096..], out);
                 });
             }
         }
@@ -525,7 +526,8 @@ impl Rasterizer {
             let target = FrameTarget::new(frame);
             // SAFETY: only this thread touches the frame while it is drawn.
             let (rasterized, written, _) = unsafe {
-                self.isa.draw_direct(
+                dispatch::draw_direct(
+                    self.isa,
                     vp,
                     draws,
                     &draw_starts,
@@ -573,7 +575,7 @@ impl Rasterizer {
                     b.clear();
                 }
                 ch.rasterized = 0;
-                isa.setup_range(vp, draws, &draw_starts, &vertex_offsets, vertices, lo..hi, ch);
+                dispatch::setup_range(isa, vp, draws, &draw_starts, &vertex_offsets, vertices, lo..hi, ch);
             });
             counts.triangles_rasterized += self.chunks[..used].iter().map(|c| c.rasterized).sum::<u64>();
             // Phase 2: rasterize tile by tile.
@@ -590,7 +592,7 @@ impl Rasterizer {
                         ((ty + 1) * vp.tile_size).min(vp.height) - 1,
                     ];
                     // SAFETY: tiles are disjoint and each is scanned by exactly one task.
-                    unsafe { isa.scan_tile(vp, chunks, tile, rect, target, mode) }
+                    unsafe { dispatch::scan_tile(isa, vp, chunks, tile, rect, target, mode) }
                 })
                 .into_iter()
                 .sum();

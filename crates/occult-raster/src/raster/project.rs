@@ -150,31 +150,32 @@ pub(super) fn snap64(v: f64) -> i32 {
     ((v * SUB as f64 + MAGIC) - MAGIC) as i32
 }
 
+/// Projects `positions` into `out` (as many as `out` holds): one by one, or with `AVX2` (only
+/// inside the AVX2 entry point, [`super::dispatch::project_all`]) eight at a time in lanes.
 #[inline(always)]
-pub(super) fn project_all(vp: &Viewport, clip_from_object: &Mat4, positions: &[Vec3], out: &mut [ProjVertex]) {
-    for (o, &p) in out.iter_mut().zip(positions) {
-        *o = vp.project(clip_from_object, p);
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,bmi1,bmi2,popcnt,lzcnt")]
-pub(super) unsafe fn project_all_avx2(
+pub(super) fn project_all<const AVX2: bool>(
     vp: &Viewport,
     clip_from_object: &Mat4,
     positions: &[Vec3],
     out: &mut [ProjVertex],
 ) {
-    let n = out.len().min(positions.len());
-    let whole = n - n % setup8::LANES;
-    for (o, p) in out[..whole]
-        .chunks_exact_mut(setup8::LANES)
-        .zip(positions.chunks_exact(setup8::LANES))
-    {
-        // SAFETY: `select` checked the processor's features; the chunks hold eight each.
-        unsafe { setup8::project8_avx2(vp, clip_from_object, p, o) };
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        let n = out.len().min(positions.len());
+        let whole = n - n % setup8::LANES;
+        for (o, p) in out[..whole]
+            .chunks_exact_mut(setup8::LANES)
+            .zip(positions.chunks_exact(setup8::LANES))
+        {
+            // SAFETY: the AVX2 instantiation only runs where the dispatcher found AVX2; the
+            // chunks hold eight each.
+            unsafe { setup8::project8_avx2(vp, clip_from_object, p, o) };
+        }
+        return project_all::<false>(vp, clip_from_object, &positions[whole..n], &mut out[whole..n]);
     }
-    project_all(vp, clip_from_object, &positions[whole..n], &mut out[whole..n])
+    for (o, &p) in out.iter_mut().zip(positions) {
+        *o = vp.project(clip_from_object, p);
+    }
 }
 
 /// Entries of [`VertexCache`] (a power of two).

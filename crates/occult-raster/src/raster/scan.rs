@@ -141,12 +141,7 @@ pub(super) unsafe fn scan_small<const AVX2: bool>(
             let mut mask = 0u64;
             let valid = (1u64 << w) - 1;
             for j in 0..=(y1 - y0) {
-                let bits = if AVX2 {
-                    // SAFETY: the AVX2 instantiation only runs where `Isa::select` found AVX2.
-                    unsafe { simd::row_mask_avx2(row, sx) }
-                } else {
-                    row_mask(row, sx)
-                };
+                let bits = row_mask_in::<AVX2>(row, sx);
                 mask |= (bits & valid) << (j * SMALL);
                 row[0] += step_y[0];
                 row[1] += step_y[1];
@@ -209,30 +204,21 @@ pub(super) fn row_mask(row: [i32; 3], sx: [i32; 3]) -> u64 {
     bits
 }
 
-/// The one place with processor-specific intrinsics; each has a scalar twin above that the
-/// tests hold bit-identical.
-#[cfg(target_arch = "x86_64")]
-mod simd {
-    use std::arch::x86_64::*;
-
-    /// [`super::row_mask`] in eight 32-bit lanes.
-    ///
-    /// # Safety
-    /// The processor must support AVX2.
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    pub(super) unsafe fn row_mask_avx2(row: [i32; 3], sx: [i32; 3]) -> u64 {
-        let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-        let e = |k: usize| {
-            _mm256_add_epi32(
-                _mm256_set1_epi32(row[k]),
-                _mm256_mullo_epi32(_mm256_set1_epi32(sx[k]), lane),
-            )
-        };
-        let or = _mm256_or_si256(_mm256_or_si256(e(0), e(1)), e(2));
+/// [`row_mask`] in the instruction set of the scan's instantiation: with `AVX2`, in eight 32-bit
+/// lanes (the same bits, tested).
+#[inline(always)]
+fn row_mask_in<const AVX2: bool>(row: [i32; 3], sx: [i32; 3]) -> u64 {
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        use occult_core::simd::{Avx2, I32x8};
+        // SAFETY: the AVX2 instantiation only runs where the dispatcher found AVX2.
+        let avx2 = unsafe { Avx2::new_unchecked() };
+        let lane = I32x8::lane_index(avx2);
+        let e = |k: usize| I32x8::splat(avx2, row[k]).wrapping_add(I32x8::splat(avx2, sx[k]).wrapping_mul(lane));
         // Sign bit set means some edge function is negative: outside.
-        (!(_mm256_movemask_ps(_mm256_castsi256_ps(or)) as u32) & 0xff) as u64
+        return (!e(0).or(e(1)).or(e(2)).sign_mask() & 0xff) as u64;
     }
+    row_mask(row, sx)
 }
 
 /// Writes a covered fragment under the visibility rule (`keep_fragment`'s). The stored item is
@@ -391,12 +377,7 @@ pub(super) unsafe fn scan_triangle<const AVX2: bool>(
                     row[1] as i32 + sx[1] * base as i32,
                     row[2] as i32 + sx[2] * base as i32,
                 ];
-                let bits = if AVX2 {
-                    // SAFETY: the AVX2 instantiation only runs where `Isa::select` found AVX2.
-                    unsafe { simd::row_mask_avx2(r, sx) }
-                } else {
-                    row_mask(r, sx)
-                };
+                let bits = row_mask_in::<AVX2>(r, sx);
                 let bits = bits
                     & if width - base >= SMALL {
                         0xff

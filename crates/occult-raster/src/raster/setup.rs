@@ -74,7 +74,7 @@ pub(super) fn setup_range<const AVX2: bool>(
             }
             batch.push(v, d, item);
             if batch.is_full() {
-                // SAFETY: the AVX2 instantiation only runs where `Isa::select` found AVX2.
+                // SAFETY: the AVX2 instantiation only runs where the dispatcher found AVX2.
                 unsafe { setup8::setup8_avx2(vp, draws, &mut batch, out) };
             }
             return;
@@ -137,7 +137,7 @@ pub(super) fn setup_range<const AVX2: bool>(
                     }
                     let mut v = [[ProjVertex::default(); setup8::LANES]; 3];
                     for c in 0..3 {
-                        // SAFETY: the AVX2 instantiation only runs where `Isa::select` found AVX2.
+                        // SAFETY: the AVX2 instantiation only runs where the dispatcher found AVX2.
                         unsafe { setup8::project8_avx2(vp, m, &corners[c], &mut v[c]) };
                     }
                     for k in 0..n {

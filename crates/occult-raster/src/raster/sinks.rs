@@ -25,7 +25,7 @@ pub(super) fn union_rect(a: [u32; 4], b: [u32; 4]) -> [u32; 4] {
     [a[0].min(b[0]), a[1].min(b[1]), a[2].max(b[2]), a[3].max(b[3])]
 }
 
-/// The body of [`Isa::draw_direct`], compiled once per instruction set.
+/// The body of [`super::dispatch::draw_direct`], compiled once per instruction set.
 ///
 /// # Safety
 /// No other thread may access `target` during the call.
@@ -169,7 +169,7 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
 
     #[inline(always)]
     fn push_lane(&mut self, vp: &Viewport, t: TriSetup) {
-        // SAFETY: a DirectSink is only made by `Isa::draw_direct`, whose caller guarantees that
+        // SAFETY: a DirectSink is only made by `draw_direct`, whose caller guarantees that
         // no other thread touches the frame during the draw.
         self.written += unsafe { scan_triangle::<AVX2>(vp, &t, self.rect, self.target, self.mode) };
     }
