@@ -71,7 +71,7 @@ hot_loop! {
         vertex_offsets: &[usize],
         vertices: &[ProjVertex],
         range: Range<usize>,
-        target: &FrameTarget,
+        target: &FrameTarget<'_>,
         mode: RasterMode,
     ) -> (u64, u64, [u32; 4]) = super::sinks::draw_direct::<false>, super::sinks::draw_direct::<true>;
 }
@@ -86,7 +86,7 @@ hot_loop! {
         chunks: &[ChunkBins],
         tile: usize,
         rect: [u32; 4],
-        target: &FrameTarget,
+        target: &FrameTarget<'_>,
         mode: RasterMode,
     ) -> u64 = super::scan::scan_tile::<false>, super::scan::scan_tile::<true>;
 }

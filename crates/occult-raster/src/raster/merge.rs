@@ -45,13 +45,9 @@ impl Rasterizer {
         self.scratch_clean = false;
         let isa = self.isa;
         let vertices = &self.vertices[..];
-        let mut targets: Vec<FrameTarget> = vec![FrameTarget::new(frame)];
+        let mut targets: Vec<FrameTarget<'_>> = vec![FrameTarget::new(frame)];
         for (d, i) in self.scratch.iter_mut().take(parts - 1) {
-            targets.push(FrameTarget {
-                depth: d.as_mut_ptr(),
-                items: i.as_mut_ptr(),
-                width: w,
-            });
+            targets.push(FrameTarget::from_buffers(d, i, w));
         }
         let results: Vec<(u64, u64, Vec<[u32; 4]>)> = workers.share((0..parts).collect(), |k| {
             let target = &targets[k];

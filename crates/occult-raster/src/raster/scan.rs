@@ -7,27 +7,46 @@ use super::sinks::ChunkBins;
 use super::{RasterMode, HALF, SUB};
 use crate::frame::Frame;
 use occult_core::ItemId;
+use std::marker::PhantomData;
 
-/// Raw access to a frame's buffers, shared by tile tasks that write disjoint pixels.
-pub(super) struct FrameTarget {
+/// Raw access to a frame's buffers (or a private frame's), shared by the tasks of one draw
+/// that write disjoint pixels: tiles of the binned pass, or each sort-last worker its own frame.
+/// It borrows the buffers mutably for `'a`, so they outlive every write through it and nothing
+/// else touches them meanwhile; which task writes which pixels is the scan's callers' contract
+/// (`# Safety` of [`scan_triangle`]).
+pub(super) struct FrameTarget<'a> {
     pub(super) depth: *mut f32,
     pub(super) items: *mut ItemId,
     pub(super) width: usize,
+    _buffers: PhantomData<(&'a mut [f32], &'a mut [ItemId])>,
 }
 
-// SAFETY: the pointers are only written through `scan_triangle`, whose callers guarantee that
-// concurrent calls touch disjoint pixels (one task per tile), and the frame outlives the draw.
-unsafe impl Sync for FrameTarget {}
-unsafe impl Send for FrameTarget {}
+// SAFETY: the buffers are borrowed for `'a` (no one else reads or writes them meanwhile), and
+// the pointers are only written through `scan_triangle` and `write_mask`, whose callers
+// guarantee that concurrent calls touch disjoint pixels (one task per tile or per frame).
+unsafe impl Sync for FrameTarget<'_> {}
+// SAFETY: as for `Sync`: the target owns its borrow of the buffers.
+unsafe impl Send for FrameTarget<'_> {}
 
-impl FrameTarget {
-    pub(super) fn new(frame: &mut Frame) -> Self {
+impl<'a> FrameTarget<'a> {
+    /// The depth and item buffers of `frame`.
+    pub(super) fn new(frame: &'a mut Frame) -> Self {
         let width = frame.width() as usize;
         let (depth, items) = frame.buffers_mut();
+        Self::from_buffers(depth, items, width)
+    }
+
+    /// Depth and item buffers of rows of `width` pixels.
+    ///
+    /// # Panics
+    /// If the buffers' lengths differ (a programmer error).
+    pub(super) fn from_buffers(depth: &'a mut [f32], items: &'a mut [ItemId], width: usize) -> Self {
+        assert_eq!(depth.len(), items.len(), "depth and item buffers of one frame");
         Self {
             depth: depth.as_mut_ptr(),
             items: items.as_mut_ptr(),
             width,
+            _buffers: PhantomData,
         }
     }
 }
@@ -42,7 +61,7 @@ pub(super) unsafe fn scan_tile<const AVX2: bool>(
     chunks: &[ChunkBins],
     tile: usize,
     rect: [u32; 4],
-    target: &FrameTarget,
+    target: &FrameTarget<'_>,
     mode: RasterMode,
 ) -> u64 {
     let mut written = 0;
@@ -77,7 +96,7 @@ pub(super) const SHORT_SPAN: usize = 16;
 /// Hints the processor to fetch the depth and item of pixel `i`; never faults, never changes
 /// results.
 #[inline(always)]
-pub(super) fn prefetch(target: &FrameTarget, i: usize) {
+pub(super) fn prefetch(target: &FrameTarget<'_>, i: usize) {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: a prefetch is a hint: it never faults, whatever the address.
     unsafe {
@@ -119,7 +138,7 @@ pub(super) unsafe fn scan_small<const AVX2: bool>(
     t: &TriSetup,
     rect: [u32; 4],
     cover: SmallCover,
-    target: &FrameTarget,
+    target: &FrameTarget<'_>,
     mode: RasterMode,
 ) -> u64 {
     let [x0, y0, x1, y1] = rect;
@@ -169,7 +188,7 @@ pub(super) unsafe fn write_mask<const FULL: bool>(
     x0: u32,
     y0: u32,
     mut mask: u64,
-    target: &FrameTarget,
+    target: &FrameTarget<'_>,
 ) -> u64 {
     let mode = if FULL { RasterMode::Full } else { RasterMode::DepthOnly };
     let mut written = 0;
@@ -338,7 +357,7 @@ pub(super) unsafe fn scan_triangle<const AVX2: bool>(
     vp: &Viewport,
     t: &TriSetup,
     rect: [u32; 4],
-    target: &FrameTarget,
+    target: &FrameTarget<'_>,
     mode: RasterMode,
 ) -> u64 {
     let x0 = (t.px0 as u32).max(rect[0]);

@@ -38,7 +38,7 @@ pub(super) unsafe fn draw_direct<const AVX2: bool>(
     vertex_offsets: &[usize],
     vertices: &[ProjVertex],
     range: Range<usize>,
-    target: &FrameTarget,
+    target: &FrameTarget<'_>,
     mode: RasterMode,
 ) -> (u64, u64, [u32; 4]) {
     let rect = [0, 0, vp.width - 1, vp.height - 1];
@@ -131,7 +131,7 @@ impl SetupSink for ChunkBins {
 /// Scans each triangle as soon as it is set up, over the whole frame: the single-threaded path,
 /// where binning would only add work. Same scan, same results.
 pub(super) struct DirectSink<'a, const AVX2: bool> {
-    pub(super) target: &'a FrameTarget,
+    pub(super) target: &'a FrameTarget<'a>,
     pub(super) rect: [u32; 4],
     pub(super) mode: RasterMode,
     pub(super) rasterized: u64,
