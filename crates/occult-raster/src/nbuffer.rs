@@ -48,9 +48,9 @@
 //!   key conversion and the four-way extremum) are compiled for the baseline target, AVX2 and
 //!   AVX-512BW and chosen at run time (`kernels`); the levels are bit-identical on each
 //!   (tested). Computing all levels in one pass over the rows (each level's row as soon as
-//!   the two rows it reads are done) was measured and not kept: slower at 1024² (1.6 against
-//!   1.0 ms on one core with AVX2), no faster at 640×480; one pass per level streams data that stays
-//!   in the L3 cache at the sizes of Table 1.
+//!   the two rows it reads are done) was tried and not kept: slower on large maps, no faster
+//!   on small ones; one pass per level streams data that stays in the L3 cache at the sizes
+//!   of Table 1.
 //! - By default the levels stop at `⌈log2 max(w, h)⌉ - 1`, the highest the four-square
 //!   query uses (this gives the level counts of the paper's Table 1); a one-square query
 //!   above it answers the whole map's extremum.
@@ -75,10 +75,9 @@
 //!
 //! # Cost
 //! Memory: `levels × w × h × 2` bytes (20 MB at 1024² with the default 10 levels, 6 MB at
-//! 640×480). Build: one streaming pass per level (about 1 ms at 1024² on one core of the
-//! 2-core test machine). A query: O(1), at most four lookups; on maps larger than the L2
-//! cache a lone query costs its cache misses (about 20 ns at 640×480 for random rectangles),
-//! a batched one a fraction of that (about 5 ns).
+//! 640×480). Build: one streaming pass per level, bound by memory bandwidth. A query: O(1), at
+//! most four lookups; on maps larger than the L2 cache a lone query costs its cache misses, a
+//! batched one a fraction of that (its misses overlap).
 //! Not worth it when few rectangles are tested per depth map (rasterizing them is cheaper).
 
 use rayon::prelude::*;

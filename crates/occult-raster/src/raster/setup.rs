@@ -103,8 +103,8 @@ pub(super) fn setup_range<const AVX2: bool>(
                     // SAFETY: `verts` holds one entry per position of the mesh (sliced with a
                     // check above), and `Mesh` guarantees that every index names a position
                     // (checked by `Mesh::new`, its only constructor; fields private, see its
-                    // doc). The loop runs once per triangle of the scene: three bounds checks
-                    // were a tenth of its instructions.
+                    // doc). The loop runs once per triangle of the scene, where three bounds
+                    // checks are a sizeable share of its instructions.
                     debug_assert!([i0, i1, i2].iter().all(|&i| (i as usize) < verts.len()));
                     let v = unsafe {
                         [

@@ -17,14 +17,12 @@ impl Workers<'_> {
     /// the end by its share.)
     ///
     /// The tasks are spawned from the calling thread, which (outside the pool) injects them,
-    /// waking a sleeping thread per task. Draws used to run inside the pool (`install`) and
-    /// split with `rayon::join`, whose second half waits on the first thread's queue to be
-    /// stolen. On the two-core VMs this project is measured on, after a two-thread pool had
-    /// idled 20 ms, that second half started a median 2.4–2.8 ms after the call (both halves
-    /// ran on one thread in a third of the rounds), the later of two tasks spawned from
-    /// outside 0.09–0.24 ms after it (`cargo run --release -p occult-bench --example
-    /// thread_scaling wake 60`, four runs). A caller inside the pool spawns onto its own
-    /// queue and runs the jobs itself while it waits, as a join does.
+    /// waking a sleeping thread per task. Not `install` plus `rayon::join`: a join's second
+    /// half waits on the first thread's queue to be stolen, which after the pool has idled
+    /// starts it late (often on the same thread), while tasks spawned from outside start at
+    /// once (`cargo run --release -p occult-bench --example thread_scaling wake 60` shows
+    /// both). A caller inside the pool spawns onto its own queue and runs the jobs itself while
+    /// it waits, as a join does.
     pub(super) fn share<T: Send, R: Send>(&self, jobs: Vec<T>, job: impl Fn(T) -> R + Sync) -> Vec<R> {
         use std::sync::atomic::{AtomicUsize, Ordering};
         use std::sync::{Mutex, PoisonError};
