@@ -932,6 +932,16 @@ mod tests {
         PixelRect { x0, y0, x1, y1 }
     }
 
+    /// A min N-buffer of random depths, of random size (below 300 × 300) and level count;
+    /// with its width, height and level count.
+    fn random_min_map(rng: &mut Pcg64) -> (NBuffer, u32, u32, u32) {
+        let (w, h) = (rng.random_range(1..300u32), rng.random_range(1..300u32));
+        let depth: Vec<f32> = (0..w * h).map(|_| rng.random::<f32>()).collect();
+        let levels = rng.random_range(1..=NBuffer::full_level_count(w, h));
+        let nb = NBuffer::with_levels(Extremum::Min, &depth, w, h, levels).unwrap();
+        (nb, w, h, levels)
+    }
+
     #[test]
     fn keys_round_in_the_safe_direction() {
         let mut rng = Pcg64::seed_from_u64(4);
@@ -965,10 +975,7 @@ mod tests {
     fn arithmetic_cover_matches_the_five_cases() {
         let mut rng = Pcg64::seed_from_u64(5);
         for _ in 0..20 {
-            let (w, h) = (rng.random_range(1..300u32), rng.random_range(1..300u32));
-            let depth: Vec<f32> = (0..w * h).map(|_| rng.random::<f32>()).collect();
-            let levels = rng.random_range(1..=NBuffer::full_level_count(w, h));
-            let nb = NBuffer::with_levels(Extremum::Min, &depth, w, h, levels).unwrap();
+            let (nb, w, h, _) = random_min_map(&mut rng);
             for _ in 0..2000 {
                 let (x0, y0) = (rng.random_range(0..w + 4), rng.random_range(0..h + 4));
                 let r = rect(x0, y0, x0 + rng.random_range(0..w + 8), y0 + rng.random_range(0..h + 8));
@@ -1252,10 +1259,7 @@ mod tests {
     fn vector_covers_equal_the_scalar_cover() {
         let mut rng = Pcg64::seed_from_u64(7);
         for _ in 0..30 {
-            let (w, h) = (rng.random_range(1..300u32), rng.random_range(1..300u32));
-            let depth: Vec<f32> = (0..w * h).map(|_| rng.random::<f32>()).collect();
-            let levels = rng.random_range(1..=NBuffer::full_level_count(w, h));
-            let nb = NBuffer::with_levels(Extremum::Min, &depth, w, h, levels).unwrap();
+            let (nb, w, h, levels) = random_min_map(&mut rng);
             let map = kernels::CoverMap {
                 width: w,
                 height: h,

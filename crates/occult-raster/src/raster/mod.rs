@@ -53,6 +53,18 @@
 //! - `dispatch`: the entry points of the hot loops, compiled once per instruction set;
 //! - `stencil`: the stencil pass (shadow volumes), on the same setup and coverage.
 
+/// `impl AddAssign` for a struct of counters, field by field (the counts of draws and passes
+/// add up).
+macro_rules! add_assign_fields {
+    ($ty:ty { $($field:ident),* $(,)? }) => {
+        impl std::ops::AddAssign for $ty {
+            fn add_assign(&mut self, o: Self) {
+                $(self.$field += o.$field;)*
+            }
+        }
+    };
+}
+
 mod dispatch;
 mod merge;
 mod project;
@@ -77,10 +89,10 @@ use project::{
 };
 #[cfg(all(test, target_arch = "x86_64"))]
 use scan::row_mask;
-use scan::{depth_at, edge_functions, row_depth, FrameTarget, SmallCover, MASKED, SMALL, TINY};
+use scan::{box_in, depth_at, edge_functions, row_depth, solve_span, FrameTarget, SmallCover, MASKED, SMALL, TINY};
 #[cfg(all(test, target_arch = "x86_64"))]
 use setup::setup_triangle;
-use setup::{setup_range, TriSetup};
+use setup::{draw_starts, setup_range, TriSetup};
 #[cfg(all(test, target_arch = "x86_64"))]
 use sinks::{union_rect, EMPTY_RECT};
 use sinks::{ChunkBins, SetupSink};
@@ -215,13 +227,11 @@ pub struct RasterCounts {
     pub fragments_written: u64,
 }
 
-impl std::ops::AddAssign for RasterCounts {
-    fn add_assign(&mut self, o: Self) {
-        self.triangles_submitted += o.triangles_submitted;
-        self.triangles_rasterized += o.triangles_rasterized;
-        self.fragments_written += o.fragments_written;
-    }
-}
+add_assign_fields!(RasterCounts {
+    triangles_submitted,
+    triangles_rasterized,
+    fragments_written,
+});
 
 /// The rasterizer: configuration, thread pool and reusable scratch memory.
 pub struct Rasterizer {
@@ -502,13 +512,8 @@ impl Rasterizer {
             }
         }
 
-        let mut draw_starts = Vec::with_capacity(draws.len() + 1);
-        let mut total = 0usize;
-        for d in draws {
-            draw_starts.push(total);
-            total += d.triangles.len(d.mesh);
-        }
-        draw_starts.push(total);
+        let draw_starts = draw_starts(draws);
+        let total = draw_starts[draws.len()];
         counts.triangles_submitted = total as u64;
 
         let strategy = match self.config.strategy {

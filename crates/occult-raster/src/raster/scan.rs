@@ -348,6 +348,39 @@ pub(super) fn edge_functions(t: &TriSetup, x0: u32, y0: u32) -> ([i64; 3], [i64;
     (row, step_x, step_y)
 }
 
+/// The pixel box of `t` within the inclusive pixel rectangle `rect` (inclusive), `None` when
+/// they do not meet.
+#[inline(always)]
+pub(super) fn box_in(t: &TriSetup, rect: [u32; 4]) -> Option<[u32; 4]> {
+    let x0 = (t.px0 as u32).max(rect[0]);
+    let y0 = (t.py0 as u32).max(rect[1]);
+    let x1 = (t.px1 as u32).min(rect[2]);
+    let y1 = (t.py1 as u32).min(rect[3]);
+    if x0 > x1 || y0 > y1 {
+        None
+    } else {
+        Some([x0, y0, x1, y1])
+    }
+}
+
+/// The pixels `lo..=hi` of a row, narrowed to those where every edge function (`row` at pixel
+/// 0, growing by `step_x` per pixel) is `>= 0`, each edge solved for its bound by a division
+/// (empty: `lo > hi`).
+#[inline(always)]
+pub(super) fn solve_span(row: [i64; 3], step_x: [i64; 3], mut lo: i64, mut hi: i64) -> (i64, i64) {
+    for k in 0..3 {
+        let (e, s) = (row[k], step_x[k]);
+        if s > 0 {
+            lo = lo.max(if e >= 0 { 0 } else { (-e + s - 1) / s });
+        } else if s < 0 {
+            hi = hi.min(if e < 0 { -1 } else { e / -s });
+        } else if e < 0 {
+            hi = -1;
+        }
+    }
+    (lo, hi)
+}
+
 /// Scans triangle `t` inside the inclusive pixel rectangle `rect`; returns fragments written.
 ///
 /// # Safety
@@ -360,13 +393,9 @@ pub(super) unsafe fn scan_triangle<const AVX2: bool>(
     target: &FrameTarget<'_>,
     mode: RasterMode,
 ) -> u64 {
-    let x0 = (t.px0 as u32).max(rect[0]);
-    let y0 = (t.py0 as u32).max(rect[1]);
-    let x1 = (t.px1 as u32).min(rect[2]);
-    let y1 = (t.py1 as u32).min(rect[3]);
-    if x0 > x1 || y0 > y1 {
+    let Some([x0, y0, x1, y1]) = box_in(t, rect) else {
         return 0;
-    }
+    };
     let (mut row, step_x, step_y) = edge_functions(t, x0, y0);
     if (t.extent as u32) < MASKED && x1 - x0 < SMALL && y1 - y0 < SMALL {
         let edges = SmallCover::Edges {
@@ -414,16 +443,7 @@ pub(super) unsafe fn scan_triangle<const AVX2: bool>(
             lo = first;
             hi = last;
         } else {
-            for k in 0..3 {
-                let (e, s) = (row[k], step_x[k]);
-                if s > 0 {
-                    lo = lo.max(if e >= 0 { 0 } else { (-e + s - 1) / s });
-                } else if s < 0 {
-                    hi = hi.min(if e < 0 { -1 } else { e / -s });
-                } else if e < 0 {
-                    hi = -1;
-                }
-            }
+            (lo, hi) = solve_span(row, step_x, lo, hi);
         }
         if lo <= hi {
             let row_depth = row_depth(t, y);

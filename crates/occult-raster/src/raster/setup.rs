@@ -44,8 +44,23 @@ const _: () = assert!(std::mem::size_of::<TriSetup>() == 64);
 // Pixel boxes are stored in u16.
 const _: () = assert!(occult_core::MAX_RESOLUTION <= u16::MAX as u32);
 
-/// Sets up and bins the triangles `range` of the global stream: one by one, or with `AVX2`
-/// (only where the processor has it) eight at a time through [`setup8::Batch`].
+/// Index in the stream of each draw's first triangle, then the stream's length (one more entry
+/// than draws).
+pub(super) fn draw_starts(draws: &[Draw<'_>]) -> Vec<usize> {
+    let mut starts = Vec::with_capacity(draws.len() + 1);
+    let mut total = 0usize;
+    for d in draws {
+        starts.push(total);
+        total += d.triangles.len(d.mesh);
+    }
+    starts.push(total);
+    starts
+}
+
+/// Sets up the triangles `range` of the pass's stream (`draws` one after the other, starting at
+/// `draw_starts` (see [`draw_starts`]); whole-mesh draws with their vertices projected ahead in
+/// `vertices`, from `vertex_offsets`) and hands them to `out`: one by one, or with `AVX2` (only
+/// where the processor has it) eight at a time through [`setup8::Batch`].
 #[inline(always)]
 pub(super) fn setup_range<const AVX2: bool>(
     vp: &Viewport,
