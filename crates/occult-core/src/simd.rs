@@ -94,19 +94,21 @@ impl Isa {
     /// Whether this level includes [`Isa::Avx2`]'s features.
     #[inline]
     pub fn has_avx2(self) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        return self >= Isa::Avx2;
-        #[cfg(not(target_arch = "x86_64"))]
-        return false;
+        match self {
+            Isa::Baseline => false,
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 | Isa::Avx512 => true,
+        }
     }
 
     /// Whether this level includes [`Isa::Avx512`]'s features.
     #[inline]
     pub fn has_avx512(self) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        return self >= Isa::Avx512;
-        #[cfg(not(target_arch = "x86_64"))]
-        return false;
+        match self {
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => true,
+            _ => false,
+        }
     }
 
     /// The token that AVX2 lane types need, where this level has AVX2.

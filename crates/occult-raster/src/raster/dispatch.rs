@@ -1,7 +1,7 @@
 //! The entry points of the hot loops, each compiled once per instruction set by
-//! [`occult_core::isa_dispatch!`] and run for the [`occult_core::simd::Isa`] a rasterizer chose once
-//! ([`occult_core::simd::Isa::select`] of [`super::RasterConfig::simd`]). Each takes that
-//! `Isa` first. The const-generic bodies (`AVX2 = true`) are the ones that may use AVX2
+//! [`occult_core::isa_dispatch!`] and run for the [`occult_core::simd::Isa`] a rasterizer
+//! chose once ([`occult_core::simd::Isa::select`] of [`super::RasterConfig::simd`]). Each
+//! takes that `Isa` first. The const-generic bodies (`AVX2 = true`) are the ones that may use AVX2
 //! intrinsics: they only run inside the AVX2 wrappers written here.
 
 use super::project::{ProjVertex, Viewport};
