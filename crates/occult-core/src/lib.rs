@@ -3,7 +3,8 @@
 //! Geometry and the scene model shared by every layer of occult: math types (re-exported from
 //! [`glam`]), [`Aabb`], [`Plane`], [`Frustum`], [`Camera`]/[`View`], [`Ray`], [`Mesh`], and the
 //! instancing DAG [`Scene`], plus the two exact primitive tests the hierarchies need
-//! ([`tri_box_overlap`], [`intersect_ray_triangle`]).
+//! ([`tri_box_overlap`], [`intersect_ray_triangle`]), and the one SIMD module ([`simd`]: the
+//! instruction set detected once, the per-instruction-set kernel dispatch, lane types).
 //!
 //! ## Conventions (fixed here, once, for the whole engine)
 //! - **Handedness**: right-handed world, `+y` up; a camera looks down its `-z` axis.
@@ -37,6 +38,7 @@ mod geom;
 mod mesh;
 mod ray;
 mod scene;
+pub mod simd;
 mod tri_box;
 
 pub use camera::{check_resolution, Camera, View, MAX_PIXEL_COUNT, MAX_RESOLUTION};

@@ -48,9 +48,9 @@
 //!   key conversion and the four-way extremum) are compiled for the baseline target, AVX2 and
 //!   AVX-512BW and chosen at run time (`kernels`); the levels are bit-identical on each
 //!   (tested). Computing all levels in one pass over the rows (each level's row as soon as
-//!   the two rows it reads are done) was measured and not kept: slower at 1024² (1.6 against
-//!   1.0 ms on one core with AVX2), no faster at 640×480; one pass per level streams data that stays
-//!   in the L3 cache at the sizes of Table 1.
+//!   the two rows it reads are done) was tried and not kept: slower on large maps, no faster
+//!   on small ones; one pass per level streams data that stays in the L3 cache at the sizes
+//!   of Table 1.
 //! - By default the levels stop at `⌈log2 max(w, h)⌉ - 1`, the highest the four-square
 //!   query uses (this gives the level counts of the paper's Table 1); a one-square query
 //!   above it answers the whole map's extremum.
@@ -75,10 +75,9 @@
 //!
 //! # Cost
 //! Memory: `levels × w × h × 2` bytes (20 MB at 1024² with the default 10 levels, 6 MB at
-//! 640×480). Build: one streaming pass per level (about 1 ms at 1024² on one core of the
-//! 2-core test machine). A query: O(1), at most four lookups; on maps larger than the L2
-//! cache a lone query costs its cache misses (about 20 ns at 640×480 for random rectangles),
-//! a batched one a fraction of that (about 5 ns).
+//! 640×480). Build: one streaming pass per level, bound by memory bandwidth. A query: O(1), at
+//! most four lookups; on maps larger than the L2 cache a lone query costs its cache misses, a
+//! batched one a fraction of that (its misses overlap).
 //! Not worth it when few rectangles are tested per depth map (rasterizing them is cheaper).
 
 use rayon::prelude::*;
@@ -277,7 +276,7 @@ impl NBuffer {
     /// As [`NBuffer::with_levels`]; on error the N-buffer is left empty (every query answers
     /// the identity).
     pub fn rebuild(&mut self, depth: &[f32], width: u32, height: u32, level_count: u32) -> Result<(), RasterError> {
-        self.rebuild_with(Isa::detect(), depth, width, height, level_count)
+        self.rebuild_with(Isa::detected(), depth, width, height, level_count)
     }
 
     /// [`NBuffer::rebuild`] with the row kernels of `isa`.
@@ -339,7 +338,7 @@ impl NBuffer {
             .zip(depth.par_chunks(BAND_ROWS * w))
             .for_each(|(dst, src)| {
                 for (d, s) in dst.chunks_exact_mut(w).zip(src.chunks_exact(w)) {
-                    isa.keys_row(ext, d, s, unknown);
+                    kernels::keys_row(isa, ext, d, s, unknown);
                 }
             });
         for level in 1..level_count {
@@ -364,7 +363,7 @@ impl NBuffer {
                 let y = y0 + r;
                 let a = &prev[y * w..(y + 1) * w];
                 let b = (y + step < h).then(|| &prev[(y + step) * w..(y + step + 1) * w]);
-                isa.combine(ext, out_row, a, b, step);
+                kernels::combine(isa, ext, out_row, a, b, step);
             }
         });
     }
@@ -753,7 +752,7 @@ impl NBuffer {
             level_count: self.level_count,
             whole_index,
         };
-        let isa = Isa::detect();
+        let isa = Isa::detected();
         let empty_rect = PixelRect {
             x0: 0,
             y0: 0,
@@ -763,11 +762,11 @@ impl NBuffer {
         let block = |start: usize, idx: &mut [[u32; LANES]; 4], lookups: &mut [u32; LANES]| {
             let end = (start + LANES).min(rects.len());
             match rects[start..end].try_into() {
-                Ok(rs) => isa.cover_block(&map, rs, idx, lookups),
+                Ok(rs) => kernels::cover_block(isa, &map, rs, idx, lookups),
                 Err(_) => {
                     let mut rs = [empty_rect; LANES];
                     rs[..end - start].copy_from_slice(&rects[start..end]);
-                    isa.cover_block(&map, &rs, idx, lookups);
+                    kernels::cover_block(isa, &map, &rs, idx, lookups);
                 }
             }
         };
@@ -933,6 +932,16 @@ mod tests {
         PixelRect { x0, y0, x1, y1 }
     }
 
+    /// A min N-buffer of random depths, of random size (below 300 × 300) and level count;
+    /// with its width, height and level count.
+    fn random_min_map(rng: &mut Pcg64) -> (NBuffer, u32, u32, u32) {
+        let (w, h) = (rng.random_range(1..300u32), rng.random_range(1..300u32));
+        let depth: Vec<f32> = (0..w * h).map(|_| rng.random::<f32>()).collect();
+        let levels = rng.random_range(1..=NBuffer::full_level_count(w, h));
+        let nb = NBuffer::with_levels(Extremum::Min, &depth, w, h, levels).unwrap();
+        (nb, w, h, levels)
+    }
+
     #[test]
     fn keys_round_in_the_safe_direction() {
         let mut rng = Pcg64::seed_from_u64(4);
@@ -966,10 +975,7 @@ mod tests {
     fn arithmetic_cover_matches_the_five_cases() {
         let mut rng = Pcg64::seed_from_u64(5);
         for _ in 0..20 {
-            let (w, h) = (rng.random_range(1..300u32), rng.random_range(1..300u32));
-            let depth: Vec<f32> = (0..w * h).map(|_| rng.random::<f32>()).collect();
-            let levels = rng.random_range(1..=NBuffer::full_level_count(w, h));
-            let nb = NBuffer::with_levels(Extremum::Min, &depth, w, h, levels).unwrap();
+            let (nb, w, h, _) = random_min_map(&mut rng);
             for _ in 0..2000 {
                 let (x0, y0) = (rng.random_range(0..w + 4), rng.random_range(0..h + 4));
                 let r = rect(x0, y0, x0 + rng.random_range(0..w + 8), y0 + rng.random_range(0..h + 8));
@@ -1253,10 +1259,7 @@ mod tests {
     fn vector_covers_equal_the_scalar_cover() {
         let mut rng = Pcg64::seed_from_u64(7);
         for _ in 0..30 {
-            let (w, h) = (rng.random_range(1..300u32), rng.random_range(1..300u32));
-            let depth: Vec<f32> = (0..w * h).map(|_| rng.random::<f32>()).collect();
-            let levels = rng.random_range(1..=NBuffer::full_level_count(w, h));
-            let nb = NBuffer::with_levels(Extremum::Min, &depth, w, h, levels).unwrap();
+            let (nb, w, h, levels) = random_min_map(&mut rng);
             let map = kernels::CoverMap {
                 width: w,
                 height: h,
@@ -1267,7 +1270,7 @@ mod tests {
                 let rects: [PixelRect; LANES] = std::array::from_fn(|_| random_rect(&mut rng, w, h));
                 for isa in Isa::available() {
                     let (mut idx, mut lookups) = ([[0u32; LANES]; 4], [0u32; LANES]);
-                    isa.cover_block(&map, &rects, &mut idx, &mut lookups);
+                    kernels::cover_block(isa, &map, &rects, &mut idx, &mut lookups);
                     for (k, &r) in rects.iter().enumerate() {
                         match nb.four_indices(r) {
                             None => assert_eq!(lookups[k], 0, "{isa:?} {w}x{h} {r:?}"),

@@ -210,70 +210,16 @@ mod tests {
     #[test]
     fn rect_query_edge_cases() {
         let f = Frame::new(8, 8).unwrap();
-        assert_eq!(
-            query_rect(
-                &f,
-                PixelRect {
-                    x0: 0,
-                    y0: 0,
-                    x1: 8,
-                    y1: 8
-                },
-                0.5
-            ),
-            64
-        );
-        assert_eq!(
-            query_rect(
-                &f,
-                PixelRect {
-                    x0: 5,
-                    y0: 5,
-                    x1: 2,
-                    y1: 2
-                },
-                0.5
-            ),
-            0
-        );
-        assert_eq!(
-            query_rect(
-                &f,
-                PixelRect {
-                    x0: 6,
-                    y0: 6,
-                    x1: 100,
-                    y1: 100
-                },
-                0.5
-            ),
-            4
-        );
-        assert_eq!(
-            query_rect(
-                &f,
-                PixelRect {
-                    x0: 100,
-                    y0: 100,
-                    x1: 200,
-                    y1: 200
-                },
-                0.5
-            ),
-            0
-        );
-        assert_eq!(
-            query_rect(
-                &f,
-                PixelRect {
-                    x0: 0,
-                    y0: 0,
-                    x1: 8,
-                    y1: 8
-                },
-                f32::NAN
-            ),
-            64
-        );
+        let rect = |x0, y0, x1, y1| PixelRect { x0, y0, x1, y1 };
+        // (rectangle, depth, samples): whole frame, empty, clipped, outside, NaN depth.
+        for (r, depth, want) in [
+            (rect(0, 0, 8, 8), 0.5, 64),
+            (rect(5, 5, 2, 2), 0.5, 0),
+            (rect(6, 6, 100, 100), 0.5, 4),
+            (rect(100, 100, 200, 200), 0.5, 0),
+            (rect(0, 0, 8, 8), f32::NAN, 64),
+        ] {
+            assert_eq!(query_rect(&f, r, depth), want, "{r:?} at {depth}");
+        }
     }
 }

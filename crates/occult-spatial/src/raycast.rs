@@ -195,7 +195,7 @@ impl ShearedRay {
             return (0, [0.0; 8]);
         }
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if occult_core::simd::Isa::detected().has_avx2() {
             // SAFETY: AVX2 is present; `active` names only lanes below `tris.len()`.
             return unsafe { self.intersect8_avx2(tris, active, t_min, t_max) };
         }
@@ -387,7 +387,7 @@ pub fn traverse(
     leaf: impl FnMut(u32, f32, f32, &mut f32),
 ) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
+    if occult_core::simd::Isa::detected().has_avx2() {
         // SAFETY: AVX2 is present.
         unsafe { traverse_avx2(octree, ray, t_limit, counters, leaf) };
         return;

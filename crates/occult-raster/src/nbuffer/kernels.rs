@@ -3,112 +3,36 @@
 //! The same Rust code is compiled for the baseline target and, chosen at run time, with AVX2
 //! (and AVX-512BW where the CPU has it): the kernels are integer `min` / `max` over 16-bit keys
 //! and bit manipulation of f32 depths, so every instruction set gives bit-identical levels
-//! (held by tests against the baseline path). All `unsafe` of the N-buffer is here: the calls
-//! into `#[target_feature]` functions, each made only after the feature was detected.
+//! (held by tests against the baseline path). The instruction set is [`occult_core::simd`]'s,
+//! detected once; its `isa_dispatch!` writes the `#[target_feature]` wrappers. The only
+//! `unsafe` left here is a prefetch hint.
 
 use super::{order_bits, Extremum, Key};
 
-/// The instruction set of the build's row kernels.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Isa {
-    /// Whatever the compilation target has (SSE2 on x86-64).
-    Baseline,
-    /// AVX2: 16 keys per instruction.
-    #[cfg(target_arch = "x86_64")]
-    Avx2,
-    /// AVX-512BW: 32 keys per instruction.
-    #[cfg(target_arch = "x86_64")]
-    Avx512,
-}
+/// The instruction sets the kernels are compiled for (see [`occult_core::simd`]).
+pub(super) use occult_core::simd::Isa;
 
-impl Isa {
-    /// The widest instruction set this CPU has.
-    pub(super) fn detect() -> Self {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if is_x86_feature_detected!("avx512bw") && is_x86_feature_detected!("avx512f") {
-                return Isa::Avx512;
-            }
-            if is_x86_feature_detected!("avx2") {
-                return Isa::Avx2;
-            }
-        }
-        Isa::Baseline
-    }
-
-    /// Every instruction set this CPU can run (for tests: each must equal the baseline).
-    #[cfg(test)]
-    pub(super) fn available() -> Vec<Self> {
-        let mut v = vec![Isa::Baseline];
-        #[cfg(target_arch = "x86_64")]
-        {
-            if is_x86_feature_detected!("avx2") {
-                v.push(Isa::Avx2);
-            }
-            if is_x86_feature_detected!("avx512bw") && is_x86_feature_detected!("avx512f") {
-                v.push(Isa::Avx512);
-            }
-        }
-        v
-    }
-
+occult_core::isa_dispatch! {
     /// Level 0 of one row: the storage key of each depth ([`Extremum::key_of`]), NaN read as
     /// `unknown` (the key of the variant's worst case).
-    #[inline]
-    pub(super) fn keys_row(self, ext: Extremum, out: &mut [Key], src: &[f32], unknown: Key) {
-        match self {
-            Isa::Baseline => keys_row(ext, out, src, unknown),
-            // SAFETY: `Isa::Avx2` / `Isa::Avx512` are only made by `detect` / `available` after
-            // the features were detected on this CPU.
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx2 => unsafe { keys_row_avx2(ext, out, src, unknown) },
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx512 => unsafe { keys_row_avx512(ext, out, src, unknown) },
-        }
-    }
+    pub(super) fn keys_row(ext: Extremum, out: &mut [Key], src: &[f32], unknown: Key) -> ();
+    baseline => keys_row_kernel,
+    avx512("avx512f,avx512bw") => keys_row_kernel,
+    avx2("avx2") => keys_row_kernel,
+}
 
+occult_core::isa_dispatch! {
     /// One row of level `i + 1` from rows `y` (`a`) and `y + step` (`b`) of level `i`
     /// (`step = 2^i`): the extremum of `a[x], a[x + step], b[x], b[x + step]`, the neighbours
     /// at `x + step ≥ width` skipped. `b` is `None` on the last `step` rows (no row below).
-    #[inline]
-    pub(super) fn combine(self, ext: Extremum, out: &mut [Key], a: &[Key], b: Option<&[Key]>, step: usize) {
-        match self {
-            Isa::Baseline => combine(ext, out, a, b, step),
-            // SAFETY: as in `keys_row`.
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx2 => unsafe { combine_avx2(ext, out, a, b, step) },
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx512 => unsafe { combine_avx512(ext, out, a, b, step) },
-        }
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn keys_row_avx2(ext: Extremum, out: &mut [Key], src: &[f32], unknown: Key) {
-    keys_row(ext, out, src, unknown)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw")]
-unsafe fn keys_row_avx512(ext: Extremum, out: &mut [Key], src: &[f32], unknown: Key) {
-    keys_row(ext, out, src, unknown)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn combine_avx2(ext: Extremum, out: &mut [Key], a: &[Key], b: Option<&[Key]>, step: usize) {
-    combine(ext, out, a, b, step)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw")]
-unsafe fn combine_avx512(ext: Extremum, out: &mut [Key], a: &[Key], b: Option<&[Key]>, step: usize) {
-    combine(ext, out, a, b, step)
+    pub(super) fn combine(ext: Extremum, out: &mut [Key], a: &[Key], b: Option<&[Key]>, step: usize) -> ();
+    baseline => combine_kernel,
+    avx512("avx512f,avx512bw") => combine_kernel,
+    avx2("avx2") => combine_kernel,
 }
 
 #[inline(always)]
-fn keys_row(ext: Extremum, out: &mut [Key], src: &[f32], unknown: Key) {
+fn keys_row_kernel(ext: Extremum, out: &mut [Key], src: &[f32], unknown: Key) {
     // Branch-free forms of `Extremum::key_of` (one loop per variant, so each vectorizes).
     match ext {
         Extremum::Min => {
@@ -137,7 +61,7 @@ fn order_bits_branchless(f: f32) -> u32 {
 }
 
 #[inline(always)]
-fn combine(ext: Extremum, out: &mut [Key], a: &[Key], b: Option<&[Key]>, step: usize) {
+fn combine_kernel(ext: Extremum, out: &mut [Key], a: &[Key], b: Option<&[Key]>, step: usize) {
     match (ext, b) {
         (Extremum::Min, Some(b)) => combine2(out, a, b, step, Key::min),
         (Extremum::Max, Some(b)) => combine2(out, a, b, step, Key::max),
@@ -206,57 +130,27 @@ pub(super) struct CoverMap {
     pub(super) whole_index: u32,
 }
 
-impl Isa {
+occult_core::isa_dispatch! {
     /// The four key indices of the Fig. 3 cover of each of `rects` (as
     /// `NBuffer::four_indices`), lane by lane: `idx[j][k]` is the `j`-th lookup of rectangle
     /// `k`, `lookups[k]` its lookup count, 0 for an empty rectangle (whose indices then point
     /// to the whole map's extremum, a valid index never read).
-    #[inline]
     pub(super) fn cover_block(
-        self,
         map: &CoverMap,
         rects: &[crate::PixelRect; LANES],
         idx: &mut [[u32; LANES]; 4],
         lookups: &mut [u32; LANES],
-    ) {
-        match self {
-            Isa::Baseline => cover_block(map, rects, idx, lookups),
-            // SAFETY: as in `keys_row`.
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx2 => unsafe { cover_block_avx2(map, rects, idx, lookups) },
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx512 => unsafe { cover_block_avx512(map, rects, idx, lookups) },
-        }
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,bmi1,lzcnt")]
-unsafe fn cover_block_avx2(
-    map: &CoverMap,
-    rects: &[crate::PixelRect; LANES],
-    idx: &mut [[u32; LANES]; 4],
-    lookups: &mut [u32; LANES],
-) {
-    cover_block(map, rects, idx, lookups)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512cd,bmi1,lzcnt")]
-unsafe fn cover_block_avx512(
-    map: &CoverMap,
-    rects: &[crate::PixelRect; LANES],
-    idx: &mut [[u32; LANES]; 4],
-    lookups: &mut [u32; LANES],
-) {
-    cover_block(map, rects, idx, lookups)
+    ) -> ();
+    baseline => cover_block_kernel,
+    avx512("avx512f,avx512bw,avx512cd,bmi1,lzcnt") => cover_block_kernel,
+    avx2("avx2,bmi1,lzcnt") => cover_block_kernel,
 }
 
 /// The cover of `NBuffer::four_indices` written lane-wise without branches (selects and
 /// wrapping 32-bit arithmetic, so that the loop vectorizes); the values of lanes that a select
 /// discards may wrap and are never used.
 #[inline(always)]
-fn cover_block(
+fn cover_block_kernel(
     map: &CoverMap,
     rects: &[crate::PixelRect; LANES],
     idx: &mut [[u32; LANES]; 4],

@@ -771,7 +771,7 @@ mod tests {
 
     #[test]
     fn eight_lane_setup_matches_the_scalar_one() {
-        if !is_x86_feature_detected!("avx2") {
+        if !occult_core::simd::Isa::detected().has_avx2() {
             eprintln!("no AVX2 on this processor: the 8-lane setup is not exercised");
             return;
         }
@@ -899,7 +899,7 @@ mod tests {
 
     #[test]
     fn eight_lane_projection_matches_the_scalar_one() {
-        if !is_x86_feature_detected!("avx2") {
+        if !occult_core::simd::Isa::detected().has_avx2() {
             eprintln!("no AVX2 on this processor: the 8-lane projection is not exercised");
             return;
         }

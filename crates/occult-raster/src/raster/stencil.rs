@@ -35,7 +35,7 @@
 //! Cost: O(faces × bands + covered pixels); rows are split into one band per thread and each
 //! band sets up every face (setup is cheap next to the fill of shadow volumes).
 
-use super::{setup_range, Draw, DrawTriangles, Rasterizer, SetupSink, TriSetup, Viewport};
+use super::{draw_starts, setup_range, Draw, DrawTriangles, Rasterizer, SetupSink, TriSetup, Viewport};
 use crate::{Frame, RasterError, CLEAR_DEPTH};
 use occult_core::{glam::DMat4, glam::DVec4, ItemId, View};
 
@@ -119,14 +119,12 @@ pub struct StencilCounts {
     pub updates: u64,
 }
 
-impl std::ops::AddAssign for StencilCounts {
-    fn add_assign(&mut self, o: Self) {
-        self.triangles_submitted += o.triangles_submitted;
-        self.triangles_rasterized += o.triangles_rasterized;
-        self.fragments += o.fragments;
-        self.updates += o.updates;
-    }
-}
+add_assign_fields!(StencilCounts {
+    triangles_submitted,
+    triangles_rasterized,
+    fragments,
+    updates,
+});
 
 /// A face's depth as an affine function of the pixel centre, `z = a·x + b·y + c`
 /// (`x`, `y` in pixels, centres at `+ 0.5`); not `exact` for a plane through the eye (seen
@@ -265,13 +263,8 @@ impl Rasterizer {
                 d
             })
             .collect();
-        let mut draw_starts = Vec::with_capacity(plain.len() + 1);
-        let mut total = 0usize;
-        for d in &plain {
-            draw_starts.push(total);
-            total += d.triangles.len(d.mesh);
-        }
-        draw_starts.push(total);
+        let draw_starts = draw_starts(&plain);
+        let total = draw_starts[plain.len()];
         let vertex_offsets = vec![0usize; plain.len()];
         let mut vp = Viewport::new(view, &self.config);
         vp.cull_backfaces = false;
@@ -377,27 +370,13 @@ impl SetupSink for StencilSink<'_> {
 /// pixel centres `xa..=xb`: the coverage of [`super::scan_triangle`] (same edge functions, same
 /// top-left bias), found per row by solving each edge for its span.
 fn covered_spans(t: &TriSetup, rect: [u32; 4], mut f: impl FnMut(u32, u32, u32)) {
-    let x0 = (t.px0 as u32).max(rect[0]);
-    let y0 = (t.py0 as u32).max(rect[1]);
-    let x1 = (t.px1 as u32).min(rect[2]);
-    let y1 = (t.py1 as u32).min(rect[3]);
-    if x0 > x1 || y0 > y1 {
+    let Some([x0, y0, x1, y1]) = super::box_in(t, rect) else {
         return;
-    }
+    };
     let (mut row, step_x, step_y) = super::edge_functions(t, x0, y0);
     let width = (x1 - x0 + 1) as i64;
     for y in y0..=y1 {
-        let (mut lo, mut hi) = (0i64, width - 1);
-        for k in 0..3 {
-            let (e, s) = (row[k], step_x[k]);
-            if s > 0 {
-                lo = lo.max(if e >= 0 { 0 } else { (-e + s - 1) / s });
-            } else if s < 0 {
-                hi = hi.min(if e < 0 { -1 } else { e / -s });
-            } else if e < 0 {
-                hi = -1;
-            }
-        }
+        let (lo, hi) = super::solve_span(row, step_x, 0, width - 1);
         if lo <= hi {
             f(y, x0 + lo as u32, x0 + hi as u32);
         }

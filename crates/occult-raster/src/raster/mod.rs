@@ -1,0 +1,616 @@
+//! The exact triangle rasterizer: one triangle setup and one scan, driven three ways.
+//!
+//! - **Direct** (one thread): each triangle is set up and scanned at once, in submission order;
+//!   consecutive triangles of a mesh touch neighbouring pixels, so the frame stays in cache.
+//! - **Sort-last** (several threads, draws of at least 200,000 triangles): worker `k` of
+//!   `threads` (a job any thread of the pool may run) draws the blocks `k, k + threads, …` of
+//!   the triangle stream directly into its own frame (worker 0 into the real one); the other
+//!   frames are merged under the (depth, item) rule over the pixels each touched.
+//! - **Tile-binned** (several threads, when asked for, or when sort-last cannot allocate its
+//!   private frames), in rounds of `threads × 2` chunks of [`CHUNK_TRIANGLES`] triangles:
+//!   1. *setup and binning* (parallel over chunks): each set-up triangle is appended to the bin
+//!      of each tile its box touches;
+//!   2. *rasterization* (parallel over tiles): each tile scans the triangles of its bins.
+//!
+//!   The automatic strategy draws a draw too small for sort-last directly on the calling
+//!   thread: binning it cost more than it saved in every renderer measured (see
+//!   `Rasterizer::on_caller`).
+//!
+//! The calling thread drives every draw (and the stencil pass). On one thread it does all the
+//! work itself (the rasterizer's one-thread pool serves only [`Rasterizer::install`]); on
+//! several it hands each parallel phase to the pool as jobs that any thread may take (see
+//! `Workers::share`) and waits for them.
+//!
+//! Setup, shared by all three: transform vertices (whole meshes: each vertex once per draw, in
+//! parallel; index lists and ranges: per triangle, through a small per-draw cache so that the
+//! corners neighbouring triangles share are mostly transformed once, or with AVX2 every corner,
+//! eight at a time, which costs less), trivially reject by
+//! outcodes, clip the rare triangle that crosses the near plane or the guard band, snap to fixed
+//! point, reject empty boxes and zero areas, and fix the depth plane. Where the processor has
+//! AVX2, vertices are projected and triangles set up eight at a time, in lanes
+//! ([`setup8`]), with the same operations in the same order as the scalar path (tested bit
+//! for bit). The scan derives exact integer edge functions (the 8-lane setup hands them over
+//! for small boxes) and finds covered pixels with branch-free 8-pixel masks (boxes up to 64
+//! pixels) or per-row integer span solving (larger ones).
+//!
+//! The result cannot depend on the strategy, the split or the thread count: every fragment's
+//! depth is a function of the triangle and the pixel alone, and pixels keep the nearest
+//! `(depth, item)` (invariant 1; tested for every strategy).
+//!
+//! Cost: O(triangles + covered pixels of their boxes). For scenes where most triangles are
+//! hidden, that is what the culling renderers avoid.
+//!
+//! ## Files, by stage
+//! - this file: the public API ([`Rasterizer`], [`RasterConfig`], [`Draw`]) and the choice of
+//!   strategy per pass;
+//! - `project`: vertices to clip space, outcodes, snapping, the vertex cache, clipping;
+//! - `setup` (scalar) and `setup8` (eight triangles in lanes): projected corners to
+//!   [`TriSetup`] records;
+//! - `sinks`: where set-up triangles go (tile bins, or the scan at once);
+//! - `scan`: coverage and fragment writes;
+//! - `threads`: the job system the parallel phases share (`Workers`);
+//! - `merge`: sort-last drawing and its merge of private frames;
+//! - `dispatch`: the entry points of the hot loops, compiled once per instruction set;
+//! - `stencil`: the stencil pass (shadow volumes), on the same setup and coverage.
+
+/// `impl AddAssign` for a struct of counters, field by field (the counts of draws and passes
+/// add up).
+macro_rules! add_assign_fields {
+    ($ty:ty { $($field:ident),* $(,)? }) => {
+        impl std::ops::AddAssign for $ty {
+            fn add_assign(&mut self, o: Self) {
+                $(self.$field += o.$field;)*
+            }
+        }
+    };
+}
+
+mod dispatch;
+mod merge;
+mod project;
+mod scan;
+mod setup;
+#[cfg(target_arch = "x86_64")]
+mod setup8;
+mod sinks;
+pub(crate) mod stencil;
+#[cfg(test)]
+mod tests;
+mod threads;
+
+use crate::frame::Frame;
+use occult_core::simd::Isa;
+use occult_core::{ItemId, Mat4, Mesh, View};
+use std::ops::Range;
+
+use project::{
+    clip_and_setup, ProjVertex, Viewport, NEEDS_CLIP, NOT_FINITE, OUT_BOTTOM, OUT_LEFT, OUT_NEAR, OUT_OF_VIEW,
+    OUT_RIGHT, OUT_TOP,
+};
+#[cfg(all(test, target_arch = "x86_64"))]
+use scan::row_mask;
+use scan::{box_in, depth_at, edge_functions, row_depth, solve_span, FrameTarget, SmallCover, MASKED, SMALL, TINY};
+#[cfg(all(test, target_arch = "x86_64"))]
+use setup::setup_triangle;
+use setup::{draw_starts, setup_range, TriSetup};
+#[cfg(all(test, target_arch = "x86_64"))]
+use sinks::{union_rect, EMPTY_RECT};
+use sinks::{ChunkBins, SetupSink};
+use threads::Workers;
+
+/// Sub-pixel precision of snapped vertices, in bits.
+pub const SUBPIXEL_BITS: u32 = 8;
+const SUB: i64 = 1 << SUBPIXEL_BITS;
+const HALF: i64 = SUB / 2;
+/// Guard band half-width in pixels: vertices beyond it are clipped, so fixed-point coordinates
+/// stay below 2^24 and edge products below 2^50.
+const GUARD_PIXELS: f32 = 32768.0;
+/// Triangles per setup chunk of the tile-binned strategy: a chunk's setup records (64 B each)
+/// stay in L2.
+pub const CHUNK_TRIANGLES: usize = 2 * 1024;
+
+/// Rasterizer configuration. Results never depend on it, only speed does.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RasterConfig {
+    /// Worker threads; 0 uses the pool the caller runs in (outside any, rayon's global pool:
+    /// all cores).
+    pub threads: usize,
+    /// Tile side in pixels, a power of two in 8..=1024, of the tile-binned path (forced, or
+    /// sort-last's fallback): smaller balances load better, larger bins less.
+    pub tile_size: u32,
+    /// Skip back faces (clockwise on screen). Off by default: open meshes stay visible from
+    /// behind. Every renderer compared against another must use the same setting.
+    pub cull_backfaces: bool,
+    /// Use the widest instruction set the processor offers (chosen at run time); `false`
+    /// forces the baseline path. Frames are bit-identical either way (tested).
+    pub simd: bool,
+    /// How triangles are spread over threads (see the module doc). Frames are bit-identical
+    /// whichever is used (tested); only speed differs.
+    pub strategy: Strategy,
+}
+
+/// How a draw is spread over threads.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Strategy {
+    /// Direct on the calling thread on one thread, and on several for draws of fewer than
+    /// 200,000 triangles; sort-last over the threads for larger ones (of which a pass of fewer,
+    /// split off to bound memory, is drawn directly by one thread). The split was measured on
+    /// two cores: on many, draws of large triangles may gain from [`Strategy::Binned`].
+    #[default]
+    Auto,
+    /// Set up and scan each triangle at once, on the calling thread, whatever the thread
+    /// count.
+    Direct,
+    /// Tile-binned setup and scan, on all threads.
+    Binned,
+    /// Direct workers into private frames, merged (falls back to tile-binned when the private
+    /// frames cannot be allocated).
+    SortLast,
+}
+
+impl Default for RasterConfig {
+    fn default() -> Self {
+        Self {
+            threads: 0,
+            tile_size: 64,
+            cull_backfaces: false,
+            simd: true,
+            strategy: Strategy::Auto,
+        }
+    }
+}
+
+/// Which triangles of a mesh a [`Draw`] sends.
+#[derive(Clone, Debug)]
+pub enum DrawTriangles<'a> {
+    /// All of them (vertices are transformed once, shared by their triangles).
+    All,
+    /// A contiguous range of triangle indices.
+    Range(Range<u32>),
+    /// An explicit list of triangle indices (corners transformed eight at a time where the
+    /// processor has AVX2, else through a small per-draw cache: shared corners of neighbouring
+    /// triangles mostly once).
+    List(&'a [u32]),
+}
+
+impl DrawTriangles<'_> {
+    fn len(&self, mesh: &Mesh) -> usize {
+        match self {
+            Self::All => mesh.triangle_count(),
+            Self::Range(r) => r.len(),
+            Self::List(l) => l.len(),
+        }
+    }
+    #[inline]
+    fn triangle_index(&self, j: usize) -> u32 {
+        match self {
+            Self::All => j as u32,
+            Self::Range(r) => r.start + j as u32,
+            Self::List(l) => l[j],
+        }
+    }
+}
+
+/// One mesh instance (or part of it) to rasterize.
+#[derive(Clone, Debug)]
+pub struct Draw<'a> {
+    /// The mesh.
+    pub mesh: &'a Mesh,
+    /// Which of its triangles.
+    pub triangles: DrawTriangles<'a>,
+    /// Object to clip space, formed by [`View::clip_from_object`].
+    pub clip_from_object: Mat4,
+    /// Item id of the mesh's triangle 0 in this instance; triangle `i` is `first_item + i`.
+    pub first_item: ItemId,
+}
+
+/// What to write.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RasterMode {
+    /// Depth and item id, under the (depth, item) rule.
+    Full,
+    /// Depth only (for occluders and depth structures); items are left untouched.
+    DepthOnly,
+}
+
+/// Counts from one [`Rasterizer::draw`] call.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RasterCounts {
+    /// Triangles handed in.
+    pub triangles_submitted: u64,
+    /// Triangles whose box held a pixel centre, with non-zero area, facing right, not beyond
+    /// the far plane: the ones scanned, or for a box of at most 4 × 4 pixels whose centres
+    /// all lie outside, found to cover none. A triangle that clipping cut into pieces counts
+    /// once if any piece is (so never more than were submitted).
+    pub triangles_rasterized: u64,
+    /// Fragments that won their pixel when written.
+    pub fragments_written: u64,
+}
+
+add_assign_fields!(RasterCounts {
+    triangles_submitted,
+    triangles_rasterized,
+    fragments_written,
+});
+
+/// The rasterizer: configuration, thread pool and reusable scratch memory.
+pub struct Rasterizer {
+    config: RasterConfig,
+    pool: Option<std::sync::Arc<rayon::ThreadPool>>,
+    vertices: Vec<ProjVertex>,
+    chunks: Vec<ChunkBins>,
+    /// Depth and item buffers of the extra workers of sort-last draws, kept cleared.
+    scratch: Vec<(Vec<f32>, Vec<ItemId>)>,
+    /// False while a sort-last draw is in flight (a panic there leaves the scratch drawn).
+    scratch_clean: bool,
+    isa: Isa,
+    /// Whether the last pass drawn ran on the calling thread alone, and its strategy, for
+    /// tests of the choice.
+    #[cfg(test)]
+    last_pass: Option<(bool, Strategy)>,
+}
+
+impl std::fmt::Debug for Rasterizer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Rasterizer")
+            .field("config", &self.config)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Rasterizer {
+    /// Bytes of the scratch memory it keeps between draws: the projected vertices of whole
+    /// meshes, the tile bins and set-up records, and the private frames of sort-last draws
+    /// (each as big as a frame). Grows with the largest draw so far; not the frame drawn into.
+    pub fn memory_bytes(&self) -> usize {
+        use std::mem::size_of;
+        let chunks: usize = self
+            .chunks
+            .iter()
+            .map(|c| {
+                c.records.capacity() * size_of::<TriSetup>()
+                    + c.bins.capacity() * size_of::<Vec<u32>>()
+                    + c.bins.iter().map(|b| b.capacity() * size_of::<u32>()).sum::<usize>()
+            })
+            .sum();
+        let scratch: usize = self
+            .scratch
+            .iter()
+            .map(|(d, i)| d.capacity() * size_of::<f32>() + i.capacity() * size_of::<ItemId>())
+            .sum();
+        self.vertices.capacity() * size_of::<ProjVertex>() + chunks + scratch
+    }
+
+    /// A rasterizer with its own pool of `config.threads` threads (with 0, it uses the pool
+    /// each call runs in: rayon's global pool outside any).
+    ///
+    /// # Errors
+    /// [`crate::RasterError::BadConfig`] for a tile size that is not a power of two in 8..=1024, or a thread pool
+    /// that cannot be started.
+    pub fn new(config: RasterConfig) -> Result<Self, crate::RasterError> {
+        if !(8..=1024).contains(&config.tile_size) || !config.tile_size.is_power_of_two() {
+            return Err(crate::RasterError::BadConfig(format!(
+                "tile size {} is not a power of two in 8..=1024",
+                config.tile_size
+            )));
+        }
+        if config.threads > 1024 {
+            return Err(crate::RasterError::BadConfig(format!(
+                "{} threads is absurd",
+                config.threads
+            )));
+        }
+        let pool = if config.threads > 0 {
+            Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(config.threads)
+                    .build()
+                    .map(std::sync::Arc::new)
+                    .map_err(|e| crate::RasterError::BadConfig(format!("thread pool: {e}")))?,
+            )
+        } else {
+            None
+        };
+        let isa = Isa::select(config.simd);
+        Ok(Self {
+            config,
+            pool,
+            vertices: Vec::new(),
+            chunks: Vec::new(),
+            scratch: Vec::new(),
+            scratch_clean: true,
+            #[cfg(test)]
+            last_pass: None,
+            isa,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &RasterConfig {
+        &self.config
+    }
+
+    /// The instruction set the hot loops run with.
+    pub fn isa_name(&self) -> &'static str {
+        // The rasterizer has one wide path (AVX2); a wider processor runs it too.
+        if self.isa.has_avx2() {
+            "avx2"
+        } else {
+            "baseline"
+        }
+    }
+
+    /// Worker threads used.
+    pub fn thread_count(&self) -> usize {
+        self.pool
+            .as_ref()
+            .map_or_else(rayon::current_num_threads, |p| p.current_num_threads())
+    }
+
+    /// Runs `f` on this rasterizer's thread pool (so that callers' own parallel work uses the
+    /// same threads).
+    pub fn install<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
+        match &self.pool {
+            Some(p) => p.install(f),
+            None => f(),
+        }
+    }
+
+    /// Clears `frame`'s depth and items, in parallel on this rasterizer's threads.
+    pub fn clear(&self, frame: &mut Frame) {
+        let (depth, items) = frame.buffers_mut();
+        if self.config.threads == 1 {
+            depth.fill(crate::CLEAR_DEPTH);
+            items.fill(occult_core::NO_ITEM);
+            return;
+        }
+        let jobs = depth.chunks_mut(1 << 16).zip(items.chunks_mut(1 << 16)).collect();
+        self.workers(self.thread_count()).share(jobs, |(d, i)| {
+            d.fill(crate::CLEAR_DEPTH);
+            i.fill(occult_core::NO_ITEM);
+        });
+    }
+
+    /// The threads that parallel phases of a draw spread over: this rasterizer's pool, or the
+    /// current one (see [`RasterConfig::threads`]).
+    fn workers(&self, threads: usize) -> Workers<'_> {
+        Workers {
+            pool: self.pool.as_deref(),
+            threads,
+        }
+    }
+
+    /// Rasterizes `draws` into `frame` (not cleared first).
+    ///
+    /// # Panics
+    /// If the frame's size differs from the view's (a programmer error).
+    pub fn draw(&mut self, view: &View, frame: &mut Frame, draws: &[Draw<'_>], mode: RasterMode) -> RasterCounts {
+        assert_eq!(
+            (frame.width(), frame.height()),
+            (view.width(), view.height()),
+            "frame and view sizes differ"
+        );
+        let vp = Viewport::new(view, &self.config);
+        let single = self.on_caller(draws);
+        self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES, single)
+    }
+
+    /// True when `draws` run directly on the calling thread, without binning or private
+    /// frames (a one-thread rasterizer never hands work to its pool, whatever the strategy):
+    /// - on a one-thread rasterizer unless tile binning is forced;
+    /// - under [`Strategy::Direct`], as it says;
+    /// - under [`Strategy::Auto`], draws of fewer than [`SORT_LAST_MIN_TRIANGLES`] triangles.
+    ///   Tile binning would share them over the threads, but its fixed cost (waking them for
+    ///   two parallel phases, each set-up triangle stored and read back, a large triangle's
+    ///   spans found again in every tile it touches) was more than it saved for every
+    ///   renderer's draws measured on two cores, even a few large triangles. Frames and
+    ///   counts are those of the binned path (both scan each pixel's fragments in stream
+    ///   order).
+    fn on_caller(&self, draws: &[Draw<'_>]) -> bool {
+        match self.config.strategy {
+            Strategy::Direct => true,
+            Strategy::Binned => false,
+            Strategy::SortLast => self.config.threads == 1,
+            Strategy::Auto => {
+                let mut total = 0;
+                self.config.threads == 1
+                    || draws.iter().all(|d| {
+                        total += d.triangles.len(d.mesh);
+                        total < SORT_LAST_MIN_TRIANGLES
+                    })
+            }
+        }
+    }
+
+    /// Draws in passes of consecutive draws whose whole meshes have at most `max_vertices`
+    /// vertices together (a larger mesh goes alone): each pass projects those vertices ahead
+    /// into one buffer, which thus stays bounded however many instances a scene draws. The
+    /// frame is the same (order independence).
+    fn draw_in_passes(
+        &mut self,
+        vp: &Viewport,
+        frame: &mut Frame,
+        draws: &[Draw<'_>],
+        mode: RasterMode,
+        max_vertices: usize,
+        single: bool,
+    ) -> RasterCounts {
+        let mut counts = RasterCounts::default();
+        let mut rest = draws;
+        loop {
+            let (mut n, mut vertices) = (0, 0);
+            while let Some(d) = rest.get(n) {
+                let v = match d.triangles {
+                    DrawTriangles::All => d.mesh.positions().len(),
+                    _ => 0,
+                };
+                if n > 0 && vertices + v > max_vertices {
+                    break;
+                }
+                vertices += v;
+                n += 1;
+            }
+            let (pass, tail) = rest.split_at(n);
+            counts += self.draw_pass(vp, frame, pass, mode, single);
+            rest = tail;
+            if rest.is_empty() {
+                return counts;
+            }
+        }
+    }
+
+    /// Draws one pass: on the calling thread alone when `single`, else over this rasterizer's
+    /// threads (see [`Workers`]).
+    fn draw_pass(
+        &mut self,
+        vp: &Viewport,
+        frame: &mut Frame,
+        draws: &[Draw<'_>],
+        mode: RasterMode,
+        single: bool,
+    ) -> RasterCounts {
+        let threads = if single { 1 } else { self.thread_count() };
+        // A handle of our own, apart from `self`'s fields that the phases borrow.
+        let pool = self.pool.clone();
+        let workers = Workers {
+            pool: pool.as_deref(),
+            threads,
+        };
+        let mut counts = RasterCounts::default();
+        // Pre-transform the vertices of whole-mesh draws, in parallel.
+        let mut vertex_offsets = Vec::with_capacity(draws.len());
+        let mut vertex_total = 0usize;
+        for d in draws {
+            vertex_offsets.push(vertex_total);
+            if matches!(d.triangles, DrawTriangles::All) {
+                vertex_total += d.mesh.positions().len();
+            }
+        }
+        // Every entry is overwritten below; resizing only writes entries the buffer never had.
+        self.vertices.resize(vertex_total, ProjVertex::default());
+        let isa = self.isa;
+        {
+            let mut rest = &mut self.vertices[..];
+            let mut jobs = Vec::new();
+            for d in draws.iter().filter(|d| matches!(d.triangles, DrawTriangles::All)) {
+                let (head, tail) = rest.split_at_mut(d.mesh.positions().len());
+                rest = tail;
+                jobs.push((d, head));
+            }
+            if threads == 1 {
+                for (d, out) in jobs {
+                    dispatch::project_all(isa, vp, &d.clip_from_object, d.mesh.positions(), out);
+                }
+            } else {
+                let chunks = jobs
+                    .into_iter()
+                    .flat_map(|(d, out)| out.chunks_mut(4096).enumerate().map(move |(ci, out)| (d, ci, out)))
+                    .collect();
+                workers.share(chunks, |(d, ci, out)| {
+                    dispatch::project_all(isa, vp, &d.clip_from_object, &d.mesh.positions()[ci * 4096..], out);
+                });
+            }
+        }
+
+        let draw_starts = draw_starts(draws);
+        let total = draw_starts[draws.len()];
+        counts.triangles_submitted = total as u64;
+
+        let strategy = match self.config.strategy {
+            // A smaller pass of a large draw (see `draw_in_passes`) is drawn directly too.
+            Strategy::Auto if threads > 1 && total >= SORT_LAST_MIN_TRIANGLES => Strategy::SortLast,
+            Strategy::Auto => Strategy::Direct,
+            Strategy::SortLast if threads == 1 => Strategy::Direct,
+            s => s,
+        };
+        #[cfg(test)]
+        {
+            self.last_pass = Some((threads == 1, strategy));
+        }
+        if strategy == Strategy::Direct {
+            let target = FrameTarget::new(frame);
+            // SAFETY: only this thread touches the frame while it is drawn.
+            let (rasterized, written, _) = unsafe {
+                dispatch::draw_direct(
+                    self.isa,
+                    vp,
+                    draws,
+                    &draw_starts,
+                    &vertex_offsets,
+                    &self.vertices,
+                    0..total,
+                    &target,
+                    mode,
+                )
+            };
+            counts.triangles_rasterized = rasterized;
+            counts.fragments_written = written;
+            return counts;
+        }
+        if strategy == Strategy::SortLast {
+            if let Some((rasterized, written)) =
+                self.draw_sort_last(&workers, vp, frame, draws, &draw_starts, &vertex_offsets, total, mode)
+            {
+                counts.triangles_rasterized = rasterized;
+                counts.fragments_written = written;
+                return counts;
+            }
+        }
+        let tile_count = (vp.tiles_x * vp.tiles_y) as usize;
+        let chunks_per_round = threads.max(1) * 2;
+        if self.chunks.len() < chunks_per_round {
+            self.chunks.resize_with(chunks_per_round, ChunkBins::default);
+        }
+        for ch in &mut self.chunks {
+            ch.bins.resize_with(tile_count, Vec::new);
+        }
+        let vertices = &self.vertices[..];
+        let target = FrameTarget::new(frame);
+        let mut start = 0;
+        while start < total {
+            let round_end = (start + chunks_per_round * CHUNK_TRIANGLES).min(total);
+            let used = (round_end - start).div_ceil(CHUNK_TRIANGLES);
+            // Phase 1: setup and binning.
+            let jobs = self.chunks[..used].iter_mut().enumerate().collect();
+            workers.share(jobs, |(ci, ch)| {
+                let lo = start + ci * CHUNK_TRIANGLES;
+                let hi = (lo + CHUNK_TRIANGLES).min(round_end);
+                ch.records.clear();
+                for b in &mut ch.bins {
+                    b.clear();
+                }
+                ch.rasterized = 0;
+                dispatch::setup_range(isa, vp, draws, &draw_starts, &vertex_offsets, vertices, lo..hi, ch);
+            });
+            counts.triangles_rasterized += self.chunks[..used].iter().map(|c| c.rasterized).sum::<u64>();
+            // Phase 2: rasterize tile by tile.
+            let chunks = &self.chunks[..used];
+            let target = &target;
+            let fragments: u64 = workers
+                .share((0..tile_count).collect(), |tile| {
+                    let tx = tile as u32 % vp.tiles_x;
+                    let ty = tile as u32 / vp.tiles_x;
+                    let rect = [
+                        tx * vp.tile_size,
+                        ty * vp.tile_size,
+                        ((tx + 1) * vp.tile_size).min(vp.width) - 1,
+                        ((ty + 1) * vp.tile_size).min(vp.height) - 1,
+                    ];
+                    // SAFETY: tiles are disjoint and each is scanned by exactly one task.
+                    unsafe { dispatch::scan_tile(isa, vp, chunks, tile, rect, target, mode) }
+                })
+                .into_iter()
+                .sum();
+            counts.fragments_written += fragments;
+            start = round_end;
+        }
+        counts
+    }
+}
+
+/// Most vertices of whole-mesh draws projected ahead in one pass of a draw (16 bytes each).
+const MAX_PROJECTED_VERTICES: usize = 1 << 22;
+
+/// Draws at least this large go sort-last on several threads (below it, the calling thread
+/// draws them directly: see `Rasterizer::on_caller`).
+const SORT_LAST_MIN_TRIANGLES: usize = 200_000;

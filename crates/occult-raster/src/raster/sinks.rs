@@ -1,0 +1,208 @@
+//! Where set-up triangles go: the tile bins of the binned strategy, or the scan at once (the
+//! direct path of one thread and of each sort-last worker).
+
+use super::project::{ProjVertex, Viewport};
+use super::scan::{prefetch, scan_small, scan_triangle, FrameTarget, SmallCover};
+use super::setup::{setup_range, TriSetup};
+use super::{Draw, RasterMode};
+use std::ops::Range;
+
+/// Reusable per-chunk storage.
+#[derive(Default)]
+pub(super) struct ChunkBins {
+    pub(super) records: Vec<TriSetup>,
+    pub(super) bins: Vec<Vec<u32>>,
+    pub(super) rasterized: u64,
+}
+
+/// An empty pixel box.
+pub(super) const EMPTY_RECT: [u32; 4] = [u32::MAX, u32::MAX, 0, 0];
+
+/// The smallest inclusive pixel box holding boxes `a` and `b` (either may be empty, as
+/// [`EMPTY_RECT`]).
+#[inline(always)]
+pub(super) fn union_rect(a: [u32; 4], b: [u32; 4]) -> [u32; 4] {
+    [a[0].min(b[0]), a[1].min(b[1]), a[2].max(b[2]), a[3].max(b[3])]
+}
+
+/// The body of [`super::dispatch::draw_direct`], compiled once per instruction set.
+///
+/// # Safety
+/// No other thread may access `target` during the call.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(super) unsafe fn draw_direct<const AVX2: bool>(
+    vp: &Viewport,
+    draws: &[Draw<'_>],
+    draw_starts: &[usize],
+    vertex_offsets: &[usize],
+    vertices: &[ProjVertex],
+    range: Range<usize>,
+    target: &FrameTarget<'_>,
+    mode: RasterMode,
+) -> (u64, u64, [u32; 4]) {
+    let rect = [0, 0, vp.width - 1, vp.height - 1];
+    let mut sink = DirectSink::<AVX2> {
+        target,
+        rect,
+        mode,
+        rasterized: 0,
+        written: 0,
+        dirty: EMPTY_RECT,
+    };
+    setup_range::<AVX2>(vp, draws, draw_starts, vertex_offsets, vertices, range, &mut sink);
+    (sink.rasterized, sink.written, sink.dirty)
+}
+
+/// Where set-up triangles go: bins for the tile pass, or straight to the scan.
+pub(super) trait SetupSink {
+    fn push(&mut self, vp: &Viewport, t: TriSetup);
+    /// Whether [`Self::push_small`] uses the cover it is given: the 8-lane setup derives edge
+    /// functions and masks only for sinks that do.
+    const TAKES_EDGES: bool = false;
+    /// [`Self::push`] for a triangle whose box the small scan takes, with its edge functions
+    /// or, for a tiny box, its mask of covered centres already derived (by the 8-lane setup).
+    #[inline(always)]
+    fn push_small(&mut self, vp: &Viewport, t: TriSetup, _cover: SmallCover) {
+        self.push(vp, t);
+    }
+    /// `n` triangles the 8-lane setup found to cover no pixel centre of a box of at most
+    /// [`TINY`] × [`TINY`] pixels (only sinks that take edge functions get them): they count
+    /// as set up; scanning them would write nothing.
+    fn count_uncovered(&mut self, n: u32);
+    /// Whether the 8-lane setup counts the lanes it hands over, a batch at a time, by
+    /// [`Self::count_lanes`]: [`Self::push_lane`] and [`Self::push_small`] then count nothing
+    /// (the pieces of a clipped lane still come through [`Self::push`], and count there).
+    const COUNTS_LANES: bool = false;
+    /// `n` lanes of a batch are about to be handed over (scanned), all within the inclusive
+    /// pixel box `bounds` ([`EMPTY_RECT`] when `n` is 0); only called where `COUNTS_LANES`.
+    #[inline(always)]
+    fn count_lanes(&mut self, _n: u32, _bounds: [u32; 4]) {}
+    /// [`Self::push`] for a lane of the 8-lane setup that the small scan does not take.
+    #[inline(always)]
+    fn push_lane(&mut self, vp: &Viewport, t: TriSetup) {
+        self.push(vp, t);
+    }
+    /// `n` of the triangles pushed were further pieces of one that clipping cut: a triangle
+    /// counts once as rasterized, however many pieces it was cut into.
+    fn uncount(&mut self, n: u32);
+    /// A hint: a triangle whose box starts at pixel `(x, y)` (and covers row `y + 1` if
+    /// `two_rows`) is being set up, and a sink that scans at once may start fetching those
+    /// pixels. The 8-lane setup hints all eight lanes, a lane without a triangle as (0, 0), so
+    /// it must have no effect beyond the fetch.
+    #[inline(always)]
+    fn will_touch(&mut self, _x: u32, _y: u32, _two_rows: bool) {}
+}
+
+impl SetupSink for ChunkBins {
+    #[inline(always)]
+    fn count_uncovered(&mut self, n: u32) {
+        self.rasterized += n as u64;
+    }
+
+    fn uncount(&mut self, n: u32) {
+        self.rasterized -= n as u64;
+    }
+
+    #[inline(always)]
+    fn push(&mut self, vp: &Viewport, t: TriSetup) {
+        self.rasterized += 1;
+        let r = self.records.len() as u32;
+        let sh = vp.tile_shift;
+        let (tx0, tx1, ty0, ty1) = (
+            t.px0 as u32 >> sh,
+            t.px1 as u32 >> sh,
+            t.py0 as u32 >> sh,
+            t.py1 as u32 >> sh,
+        );
+        self.records.push(t);
+        if tx0 == tx1 && ty0 == ty1 {
+            self.bins[(ty0 * vp.tiles_x + tx0) as usize].push(r);
+            return;
+        }
+        for ty in ty0..=ty1 {
+            for tx in tx0..=tx1 {
+                self.bins[(ty * vp.tiles_x + tx) as usize].push(r);
+            }
+        }
+    }
+}
+
+/// Scans each triangle as soon as it is set up, over the whole frame: the single-threaded path,
+/// where binning would only add work. Same scan, same results.
+pub(super) struct DirectSink<'a, const AVX2: bool> {
+    pub(super) target: &'a FrameTarget<'a>,
+    pub(super) rect: [u32; 4],
+    pub(super) mode: RasterMode,
+    pub(super) rasterized: u64,
+    pub(super) written: u64,
+    /// Inclusive pixel box of everything scanned (empty while `dirty[0] > dirty[2]`).
+    pub(super) dirty: [u32; 4],
+}
+
+impl<const AVX2: bool> DirectSink<'_, AVX2> {
+    /// Counts a triangle about to be scanned and grows the box of what was drawn by its box.
+    #[inline(always)]
+    pub(super) fn count(&mut self, t: &TriSetup) {
+        self.rasterized += 1;
+        self.dirty = union_rect(self.dirty, [t.px0, t.py0, t.px1, t.py1].map(u32::from));
+    }
+}
+
+impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
+    #[inline(always)]
+    fn will_touch(&mut self, x: u32, y: u32, two_rows: bool) {
+        // The rest of the setup (area, depth plane) overlaps with the fetch of pixels the scan
+        // is about to test: first touches of the frame are this loop's main stall.
+        let i = y as usize * self.target.width + x as usize;
+        prefetch(self.target, i);
+        // Without a branch (it mispredicts on tiny triangles): the first row again when the
+        // box has one.
+        prefetch(self.target, i + if two_rows { self.target.width } else { 0 });
+    }
+
+    #[inline(always)]
+    fn push(&mut self, vp: &Viewport, t: TriSetup) {
+        self.count(&t);
+        self.push_lane(vp, t);
+    }
+
+    #[inline(always)]
+    fn push_lane(&mut self, vp: &Viewport, t: TriSetup) {
+        // SAFETY: a DirectSink is only made by `draw_direct`, whose caller guarantees that
+        // no other thread touches the frame during the draw.
+        self.written += unsafe { scan_triangle::<AVX2>(vp, &t, self.rect, self.target, self.mode) };
+    }
+
+    const TAKES_EDGES: bool = true;
+
+    // Per batch in lanes, where counting each triangle was a load, compare and store of the
+    // box's four sides per triangle.
+    const COUNTS_LANES: bool = true;
+
+    #[inline(always)]
+    fn count_lanes(&mut self, n: u32, bounds: [u32; 4]) {
+        self.rasterized += n as u64;
+        self.dirty = union_rect(self.dirty, bounds);
+    }
+
+    #[inline(always)]
+    fn count_uncovered(&mut self, n: u32) {
+        // Counted like any other; nothing drawn, so the box of what was drawn stays.
+        self.rasterized += n as u64;
+    }
+
+    fn uncount(&mut self, n: u32) {
+        self.rasterized -= n as u64;
+    }
+
+    #[inline(always)]
+    fn push_small(&mut self, vp: &Viewport, t: TriSetup, cover: SmallCover) {
+        // Counted with its batch (`count_lanes`). The direct sink's rectangle is the whole
+        // frame, which holds the box: `scan_triangle` would scan the box itself, small, from
+        // these edge functions, or from the mask that the 8-lane setup formed from them.
+        let rect = [t.px0 as u32, t.py0 as u32, t.px1 as u32, t.py1 as u32];
+        // SAFETY: as in `push`.
+        self.written += unsafe { scan_small::<AVX2>(vp, &t, rect, cover, self.target, self.mode) };
+    }
+}

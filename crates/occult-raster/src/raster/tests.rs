@@ -1,0 +1,252 @@
+//! Tests of the strategy choice and of the passes of a draw.
+
+use super::*;
+use occult_core::{Affine3A, Camera, Vec3};
+
+/// An `n × n` grid of quads of side `side`, centred on the origin in the plane z = 0.
+fn grid(n: u32, side: f32) -> Mesh {
+    let c = n as f32 * side / 2.0;
+    let positions = (0..=n)
+        .flat_map(|j| (0..=n).map(move |i| Vec3::new(i as f32 * side - c, j as f32 * side - c, 0.0)))
+        .collect();
+    let v = |i: u32, j: u32| j * (n + 1) + i;
+    let triangles = (0..n)
+        .flat_map(|j| {
+            (0..n).flat_map(move |i| {
+                [
+                    [v(i, j), v(i + 1, j), v(i, j + 1)],
+                    [v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)],
+                ]
+            })
+        })
+        .collect();
+    Mesh::new(positions, triangles).unwrap()
+}
+
+/// On several threads, the automatic strategy draws fewer than
+/// [`SORT_LAST_MIN_TRIANGLES`] triangles directly on the calling thread, small or large,
+/// with the binned path's frame and counts; larger draws go sort-last over the pool, and
+/// forced strategies do what they say.
+#[test]
+fn small_draws_stay_on_the_calling_thread() {
+    // One pixel is 2·10·tan 30° / 960 ≈ 0.012 units at the grid's distance.
+    let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 1280, 960).unwrap();
+    let (tiny, large) = (grid(60, 0.012), grid(20, 0.5));
+    let whole = |mesh| Draw {
+        mesh,
+        triangles: DrawTriangles::All,
+        clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
+        first_item: 0,
+    };
+    let many: Vec<u32> = (0..SORT_LAST_MIN_TRIANGLES as u32).map(|i| i % 7200).collect();
+    let sort_last = Draw {
+        triangles: DrawTriangles::List(&many),
+        ..whole(&tiny)
+    };
+    let pass = |strategy, draws: &[Draw<'_>]| {
+        let mut frame = Frame::new(1280, 960).unwrap();
+        let mut r = Rasterizer::new(RasterConfig {
+            threads: 2,
+            strategy,
+            ..RasterConfig::default()
+        })
+        .unwrap();
+        let counts = r.draw(&view, &mut frame, draws, RasterMode::Full);
+        let (on_caller, used) = r.last_pass.expect("the draw recorded its pass");
+        (on_caller, used, counts)
+    };
+    for mesh in [&tiny, &large] {
+        let draw = [whole(mesh)];
+        let (on_caller, used, auto) = pass(Strategy::Auto, &draw);
+        assert!(
+            on_caller && used == Strategy::Direct,
+            "{} triangles",
+            mesh.triangle_count()
+        );
+        let (on_caller, used, binned) = pass(Strategy::Binned, &draw);
+        assert!(!on_caller && used == Strategy::Binned);
+        assert!(auto.fragments_written > 1000);
+        assert_eq!(auto, binned, "{} triangles", mesh.triangle_count());
+    }
+    let (on_caller, used, _) = pass(Strategy::Auto, std::slice::from_ref(&sort_last));
+    assert!(!on_caller && used == Strategy::SortLast, "large draws are shared");
+    let (on_caller, used, _) = pass(Strategy::Direct, &[sort_last]);
+    assert!(
+        on_caller && used == Strategy::Direct,
+        "forced direct stays on the caller"
+    );
+    // Frames: the same draw, automatic and binned.
+    let draw = [whole(&tiny), whole(&large)];
+    let mut frames = [Frame::new(1280, 960).unwrap(), Frame::new(1280, 960).unwrap()];
+    for (f, strategy) in frames.iter_mut().zip([Strategy::Auto, Strategy::Binned]) {
+        let mut r = Rasterizer::new(RasterConfig {
+            threads: 2,
+            strategy,
+            ..RasterConfig::default()
+        })
+        .unwrap();
+        r.draw(&view, f, &draw, RasterMode::Full);
+    }
+    assert_eq!(frames[0].items(), frames[1].items());
+    assert!(frames[0]
+        .depth()
+        .iter()
+        .zip(frames[1].depth())
+        .all(|(x, y)| x.to_bits() == y.to_bits()));
+}
+
+/// A sort-last draw and a clear finish, with the frame and counts of one thread, while one
+/// of the rasterizer's two threads is blocked elsewhere: the other runs every job.
+#[test]
+fn draws_finish_while_a_pool_thread_is_blocked() {
+    use std::sync::mpsc::channel;
+    use std::time::Duration;
+    let view =
+        View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 320, 240).expect("a valid 320 × 240 view");
+    // 2 · 320² triangles: above the sort-last threshold.
+    let mesh = grid(320, 0.03);
+    assert!(mesh.triangle_count() >= SORT_LAST_MIN_TRIANGLES);
+    let draw = [Draw {
+        mesh: &mesh,
+        triangles: DrawTriangles::All,
+        clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
+        first_item: 0,
+    }];
+    let drawn = |r: &mut Rasterizer| {
+        let mut frame = Frame::new(320, 240).expect("a 320 × 240 frame");
+        r.clear(&mut frame);
+        let counts = r.draw(&view, &mut frame, &draw, RasterMode::Full);
+        (counts, frame)
+    };
+    let (one, one_frame) = drawn(
+        &mut Rasterizer::new(RasterConfig {
+            threads: 1,
+            ..RasterConfig::default()
+        })
+        .expect("a one-thread rasterizer"),
+    );
+    let mut r = Rasterizer::new(RasterConfig {
+        threads: 2,
+        ..RasterConfig::default()
+    })
+    .expect("a two-thread rasterizer");
+    let (release, blocked) = channel::<()>();
+    let (started, has_started) = channel();
+    r.install(|| {
+        rayon::spawn(move || {
+            let _ = started.send(());
+            let _ = blocked.recv();
+        })
+    });
+    has_started.recv().expect("the blocking task started");
+    let (done, finished) = channel();
+    std::thread::scope(|s| {
+        s.spawn(|| {
+            let result = drawn(&mut r);
+            let _ = done.send((result, r.last_pass));
+        });
+        let result = finished.recv_timeout(Duration::from_secs(120));
+        // Release the blocked thread whatever happened, so that a hung draw ends too.
+        drop(release);
+        let ((counts, frame), pass) = result.expect("the draw finished with one pool thread blocked");
+        assert_eq!(pass, Some((false, Strategy::SortLast)));
+        assert_eq!(counts.triangles_rasterized, one.triangles_rasterized);
+        assert!(counts.fragments_written > 1000);
+        assert_eq!(frame.items(), one_frame.items());
+        assert!(frame
+            .depth()
+            .iter()
+            .zip(one_frame.depth())
+            .all(|(a, b)| a.to_bits() == b.to_bits()));
+    });
+}
+
+/// Draws split into passes to bound the projected vertices give the frame and counts of
+/// one pass.
+#[test]
+fn passes_bounding_projected_vertices_change_nothing() {
+    let (w, h) = (96, 64);
+    let view = View::new(
+        Camera::look_at(Vec3::new(0.5, 1.0, 6.0), Vec3::new(0.0, 0.0, 0.0)),
+        w,
+        h,
+    )
+    .unwrap();
+    // A strip of 40 quads (82 vertices) and a fan (11 vertices), each instanced thrice,
+    // with an index-list draw between them.
+    let strip = Mesh::new(
+        (0..=40)
+            .flat_map(|i| {
+                [
+                    Vec3::new(i as f32 * 0.1 - 2.0, 0.0, 0.0),
+                    Vec3::new(i as f32 * 0.1 - 2.0, 1.0, 0.3),
+                ]
+            })
+            .collect(),
+        (0..40u32)
+            .flat_map(|i| [[2 * i, 2 * i + 2, 2 * i + 1], [2 * i + 1, 2 * i + 2, 2 * i + 3]])
+            .collect(),
+    )
+    .unwrap();
+    let fan = Mesh::new(
+        std::iter::once(Vec3::ZERO)
+            .chain((0..10).map(|i| {
+                let a = i as f32 * 0.6;
+                Vec3::new(a.cos(), a.sin(), 0.2)
+            }))
+            .collect(),
+        (1..10u32).map(|i| [0, i, i + 1]).collect(),
+    )
+    .unwrap();
+    let list = [1u32, 5, 7, 30, 31];
+    let mut draws = Vec::new();
+    for k in 0..3 {
+        let m = Affine3A::from_translation(Vec3::new(0.0, k as f32 * 0.4 - 0.6, -(k as f32)));
+        for (mesh, triangles) in [
+            (&strip, DrawTriangles::All),
+            (&fan, DrawTriangles::All),
+            (&strip, DrawTriangles::List(&list)),
+        ] {
+            draws.push(Draw {
+                mesh,
+                triangles,
+                clip_from_object: view.clip_from_object(&m),
+                first_item: draws.len() as u64 * 1000,
+            });
+        }
+    }
+    // Two threads bin: the automatic strategy would draw these small passes directly.
+    for (threads, strategy) in [(1, Strategy::Auto), (2, Strategy::Binned)] {
+        let mut r = Rasterizer::new(RasterConfig {
+            threads,
+            strategy,
+            ..RasterConfig::default()
+        })
+        .unwrap();
+        let vp = Viewport::new(&view, r.config());
+        let pool = r.pool.clone();
+        let mut runs = Vec::new();
+        // One pass; each whole mesh alone (82 > 50 goes alone, two fans fit); every draw alone.
+        for max_vertices in [usize::MAX, 50, 1] {
+            let mut f = Frame::new(w, h).unwrap();
+            let single = threads == 1;
+            let mut pass = || r.draw_in_passes(&vp, &mut f, &draws, RasterMode::Full, max_vertices, single);
+            let counts = match pool.clone() {
+                Some(p) => p.install(pass),
+                None => pass(),
+            };
+            runs.push((counts, f));
+        }
+        assert!(runs[0].0.fragments_written > 500, "the view shows the draws");
+        for (counts, f) in &runs[1..] {
+            assert_eq!(counts.triangles_submitted, runs[0].0.triangles_submitted);
+            assert_eq!(counts.triangles_rasterized, runs[0].0.triangles_rasterized);
+            assert_eq!(f.items(), runs[0].1.items(), "{threads} threads");
+            assert!(f
+                .depth()
+                .iter()
+                .zip(runs[0].1.depth())
+                .all(|(a, b)| a.to_bits() == b.to_bits()));
+        }
+    }
+}
