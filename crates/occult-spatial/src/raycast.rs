@@ -22,7 +22,7 @@
 //! ([`traverse`]'s `t_limit`): the descent then prunes everything behind it from the start.
 
 use crate::octree::{Octree, MAX_OCTREE_DEPTH};
-use occult_core::{Aabb, Vec3};
+use occult_core::{sheared_edge_functions, Aabb, Vec3};
 
 /// A ray with a thickness growing linearly with `t` (see the module doc).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -80,8 +80,9 @@ impl FatRay {
 /// A ray prepared for the watertight ray–triangle test (Woop, Benthin & Wald, "Watertight
 /// Ray/Triangle Intersection", JCGT 2(1), 2013, §2–3): the axis permutation and shear that
 /// depend on the ray only, computed once per ray instead of once per triangle. The arithmetic
-/// is [`occult_core::intersect_ray_triangle`]'s, operation for operation, so the results are
-/// the same bits (tested).
+/// is [`occult_core::intersect_ray_triangle`]'s, operation for operation (the edge functions
+/// are the same function, [`occult_core::sheared_edge_functions`]), so the results are the
+/// same bits (tested).
 #[derive(Clone, Copy, Debug)]
 pub struct ShearedRay {
     /// The origin's coordinates in the permuted order `kx, ky, kz`.
@@ -128,23 +129,7 @@ impl ShearedRay {
         let by = b.1 - sy * b.2;
         let cx = c.0 - sx * c.2;
         let cy = c.1 - sy * c.2;
-        let mut u = cx * by - cy * bx;
-        let mut v = ax * cy - ay * cx;
-        let mut w = bx * ay - by * ax;
-        // §3: recompute in double precision when an edge function rounds to zero.
-        if u == 0.0 || v == 0.0 || w == 0.0 {
-            let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
-            u = (cx * by - cy * bx) as f32;
-            v = (ax * cy - ay * cx) as f32;
-            w = (bx * ay - by * ax) as f32;
-        }
-        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
-            return None;
-        }
-        let det = u + v + w;
-        if det == 0.0 {
-            return None;
-        }
+        let (u, v, w, det) = sheared_edge_functions([ax, ay], [bx, by], [cx, cy])?;
         let t_scaled = u * (sz * a.2) + v * (sz * b.2) + w * (sz * c.2);
         let t = t_scaled * (1.0 / det);
         (t >= t_min && t <= t_max).then_some(t)
