@@ -1,5 +1,5 @@
-//! An octree with shortcuts and extended boxes whose nodes own sections of one global
-//! distribution list: the sample-selection structure of the randomized z-buffer.
+//! The sample octree of the randomized z-buffer: an octree with shortcuts and extended boxes
+//! whose nodes own sections of one global distribution list, the sample-selection structure.
 //!
 //! # References
 //! - Wand et al. 2001 (`papers/randomized-z-buffer-wand-2001.txt`):
@@ -24,18 +24,35 @@
 //! entry (index + prefix sum) and one 84-byte node per stored node, at most about 2n/leaf_size
 //! nodes thanks to shortcuts.
 
+use super::cell::{self, child_min, octant_of, stops_splitting, OctreeConfigError};
 use occult_core::{Aabb, Vec3};
 
 /// Tunables of [`SampleOctree::build`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct SampleOctreeConfig {
-    /// Entries a leaf may hold (≥ 1): smaller gives finer depth classification, more nodes.
+    /// Entries a leaf may hold (1..=[`cell::MAX_LEAF_SIZE`]): smaller gives finer depth
+    /// classification, more nodes.
     pub leaf_size: usize,
     /// Growth of a child's cell into its extended box, as a fraction of the cell side on each
-    /// side (≥ 0; §5.3.1 "enlarged by a constant factor"). 0.5 doubles the side.
+    /// side (finite, ≥ 0; §5.3.1 "enlarged by a constant factor"). 0.5 doubles the side.
     pub extension: f32,
-    /// Deepest level (cells halved this many times), a guard against coincident entries.
+    /// Deepest level (cells halved this many times, 0..=[`cell::MAX_OCTREE_DEPTH`]), a guard
+    /// against coincident entries.
     pub max_depth: u32,
+}
+
+impl SampleOctreeConfig {
+    /// Checks the leaf size, the extension (finite, ≥ 0), then the depth, by the rules of
+    /// [`super::cell`] (the build calls it first; nothing is clamped).
+    ///
+    /// # Errors
+    /// [`OctreeConfigError`] naming `leaf_size`, `extension` or `max_depth` and the value out
+    /// of range.
+    pub fn validate(&self) -> Result<(), OctreeConfigError> {
+        cell::check_leaf_size("leaf_size", self.leaf_size)?;
+        cell::check_fraction("extension", self.extension, 0.0, f32::MAX)?;
+        cell::check_depth("max_depth", self.max_depth, 0)
+    }
 }
 
 impl Default for SampleOctreeConfig {
@@ -51,7 +68,7 @@ impl Default for SampleOctreeConfig {
 /// A stored node (§5.3.1). `first..own_first` is the children's part of its section,
 /// `own_first..end` its own entries.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct OctreeNode {
+pub struct SampleOctreeNode {
     /// Tight bounds of every entry of the section.
     pub bounds: Aabb,
     /// Tight bounds of the node's own entries (empty when none).
@@ -72,9 +89,9 @@ pub struct OctreeNode {
     pub child_count: u32,
 }
 
-const _: () = assert!(std::mem::size_of::<OctreeNode>() == 84);
+const _: () = assert!(std::mem::size_of::<SampleOctreeNode>() == 84);
 
-impl OctreeNode {
+impl SampleOctreeNode {
     /// True when it has no stored child.
     #[inline]
     pub fn is_leaf(&self) -> bool {
@@ -100,7 +117,7 @@ impl OctreeNode {
 /// Octrees (one per class) over one global distribution list.
 #[derive(Clone, Debug, Default)]
 pub struct SampleOctree {
-    nodes: Vec<OctreeNode>,
+    nodes: Vec<SampleOctreeNode>,
     /// Entry index at each list position.
     entries: Vec<u32>,
     /// `prefix[i]`: summed area of positions `0..i` (length `entries + 1`).
@@ -115,6 +132,9 @@ impl SampleOctree {
     /// class `classes[i]` (`< class_count`). Entries of zero or non-finite area, or with an
     /// empty box, are left out (they can never be sampled).
     ///
+    /// # Errors
+    /// [`OctreeConfigError`] for a configuration out of range ([`SampleOctreeConfig::validate`]).
+    ///
     /// # Panics
     /// If the slices differ in length or a class is out of range (programmer errors).
     pub fn build(
@@ -123,12 +143,13 @@ impl SampleOctree {
         classes: &[u32],
         class_count: usize,
         config: &SampleOctreeConfig,
-    ) -> Self {
+    ) -> Result<Self, OctreeConfigError> {
         assert!(
             boxes.len() == areas.len() && areas.len() == classes.len(),
             "entry slices differ in length"
         );
         assert!(boxes.len() < u32::MAX as usize, "too many entries");
+        config.validate()?;
         let mut per_class: Vec<Vec<u32>> = vec![Vec::new(); class_count];
         for i in 0..boxes.len() {
             let a = areas[i];
@@ -137,13 +158,9 @@ impl SampleOctree {
                 per_class[classes[i] as usize].push(i as u32);
             }
         }
-        let config = SampleOctreeConfig {
-            leaf_size: config.leaf_size.max(1),
-            ..config.clone()
-        };
         let mut b = Builder {
             boxes,
-            config: &config,
+            config,
             nodes: Vec::new(),
             entries: Vec::with_capacity(boxes.len()),
         };
@@ -167,18 +184,18 @@ impl SampleOctree {
             sum += areas[e as usize];
             prefix.push(sum);
         }
-        Self {
+        Ok(Self {
             nodes: b.nodes,
             entries: b.entries,
             prefix,
             roots,
-            config,
-        }
+            config: config.clone(),
+        })
     }
 
     /// All nodes.
     #[inline]
-    pub fn nodes(&self) -> &[OctreeNode] {
+    pub fn nodes(&self) -> &[SampleOctreeNode] {
         &self.nodes
     }
     /// The root of each class.
@@ -244,12 +261,12 @@ impl SampleOctree {
 
     /// Bytes held.
     pub fn memory_bytes(&self) -> usize {
-        self.nodes.len() * std::mem::size_of::<OctreeNode>() + self.entries.len() * 4 + self.prefix.len() * 8
+        self.nodes.len() * std::mem::size_of::<SampleOctreeNode>() + self.entries.len() * 4 + self.prefix.len() * 8
     }
 }
 
-fn placeholder() -> OctreeNode {
-    OctreeNode {
+fn placeholder() -> SampleOctreeNode {
+    SampleOctreeNode {
         bounds: Aabb::EMPTY,
         own_bounds: Aabb::EMPTY,
         cell_min: Vec3::ZERO,
@@ -265,16 +282,9 @@ fn placeholder() -> OctreeNode {
 /// The octant of `p` in the cell `(min, side)`, and that child's cell minimum.
 #[inline]
 fn octant(min: Vec3, side: f32, p: Vec3) -> (usize, Vec3) {
-    let h = 0.5 * side;
-    let c = min + Vec3::splat(h);
-    let (bx, by, bz) = (p.x >= c.x, p.y >= c.y, p.z >= c.z);
-    let k = bx as usize | (by as usize) << 1 | (bz as usize) << 2;
-    let cmin = Vec3::new(
-        if bx { c.x } else { min.x },
-        if by { c.y } else { min.y },
-        if bz { c.z } else { min.z },
-    );
-    (k, cmin)
+    let center = min + Vec3::splat(0.5 * side);
+    let k = octant_of(center, p);
+    (k, child_min(min, center, k))
 }
 
 /// The extended box of the cell `(min, side)` (§5.3.1).
@@ -292,7 +302,7 @@ fn contains(outer: &Aabb, inner: &Aabb) -> bool {
 struct Builder<'a> {
     boxes: &'a [Aabb],
     config: &'a SampleOctreeConfig,
-    nodes: Vec<OctreeNode>,
+    nodes: Vec<SampleOctreeNode>,
     entries: Vec<u32>,
 }
 
@@ -304,7 +314,7 @@ impl Builder<'_> {
             .fold(Aabb::EMPTY, |acc, &i| acc.union(self.boxes[i as usize]));
         let first = self.entries.len() as u32;
         let (mut own, buckets) = loop {
-            if ents.len() <= self.config.leaf_size || depth >= self.config.max_depth {
+            if stops_splitting(ents.len(), self.config.leaf_size, depth, self.config.max_depth) {
                 break (ents, Vec::new());
             }
             let mut own = Vec::new();
@@ -347,7 +357,7 @@ impl Builder<'_> {
             .iter()
             .fold(Aabb::EMPTY, |acc, &i| acc.union(self.boxes[i as usize]));
         self.entries.extend_from_slice(&own);
-        self.nodes[slot as usize] = OctreeNode {
+        self.nodes[slot as usize] = SampleOctreeNode {
             bounds,
             own_bounds,
             cell_min: min,
@@ -772,7 +782,7 @@ mod tests {
     fn sections_partition_the_list_and_entries_fit_their_extended_cells() {
         let (boxes, areas) = random_triangles(5000, 1);
         let classes = vec![0; boxes.len()];
-        let t = SampleOctree::build(&boxes, &areas, &classes, 1, &SampleOctreeConfig::default());
+        let t = SampleOctree::build(&boxes, &areas, &classes, 1, &SampleOctreeConfig::default()).unwrap();
         assert_eq!(t.entries().len(), 5000);
         let mut seen = vec![false; 5000];
         for &e in t.entries() {
@@ -809,7 +819,7 @@ mod tests {
         let (boxes, mut areas) = random_triangles(300, 2);
         areas[7] = 0.0; // never sampled
         let classes: Vec<u32> = (0..300).map(|i| (i % 3) as u32).collect();
-        let t = SampleOctree::build(&boxes, &areas, &classes, 3, &SampleOctreeConfig::default());
+        let t = SampleOctree::build(&boxes, &areas, &classes, 3, &SampleOctreeConfig::default()).unwrap();
         assert_eq!(t.entries().len(), 299);
         for n in t.nodes() {
             let r = n.section();
@@ -837,18 +847,62 @@ mod tests {
     fn coincident_entries_and_empty_input_terminate() {
         let boxes = vec![Aabb::new(Vec3::ONE, Vec3::ONE); 1000];
         let areas = vec![1.0; 1000];
-        let t = SampleOctree::build(&boxes, &areas, &[0; 1000], 1, &SampleOctreeConfig::default());
+        let build = |boxes: &[Aabb], areas: &[f64], classes: &[u32], class_count: usize| {
+            SampleOctree::build(boxes, areas, classes, class_count, &SampleOctreeConfig::default()).unwrap()
+        };
+        let t = build(&boxes, &areas, &[0; 1000], 1);
         assert_eq!(t.entries().len(), 1000);
-        let e = SampleOctree::build(&[], &[], &[], 2, &SampleOctreeConfig::default());
+        let e = build(&[], &[], &[], 2);
         assert_eq!(e.roots(), &[None, None]);
-        let nan = SampleOctree::build(
-            &[Aabb::new(Vec3::NAN, Vec3::NAN)],
-            &[1.0],
-            &[0],
-            1,
-            &SampleOctreeConfig::default(),
-        );
+        let nan = build(&[Aabb::new(Vec3::NAN, Vec3::NAN)], &[1.0], &[0], 1);
         assert!(nan.entries().is_empty());
+    }
+
+    /// A leaf size the build used to clamp, and absurd extensions and depths, are errors naming
+    /// the field; the deepest limit builds.
+    #[test]
+    fn bad_configs_are_errors() {
+        let (boxes, areas) = random_triangles(100, 6);
+        let d = SampleOctreeConfig::default();
+        for (bad, field) in [
+            (
+                SampleOctreeConfig {
+                    leaf_size: 0,
+                    ..d.clone()
+                },
+                "leaf_size",
+            ),
+            (
+                SampleOctreeConfig {
+                    extension: -0.25,
+                    ..d.clone()
+                },
+                "extension",
+            ),
+            (
+                SampleOctreeConfig {
+                    extension: f32::INFINITY,
+                    ..d.clone()
+                },
+                "extension",
+            ),
+            (
+                SampleOctreeConfig {
+                    max_depth: cell::MAX_OCTREE_DEPTH + 1,
+                    ..d.clone()
+                },
+                "max_depth",
+            ),
+        ] {
+            let e = SampleOctree::build(&boxes, &areas, &[0; 100], 1, &bad).unwrap_err();
+            assert_eq!(e.field, field);
+        }
+        let deepest = SampleOctreeConfig {
+            max_depth: cell::MAX_OCTREE_DEPTH,
+            ..d
+        };
+        assert_eq!(d.max_depth, cell::MAX_OCTREE_DEPTH);
+        assert!(SampleOctree::build(&boxes, &areas, &[0; 100], 1, &deepest).is_ok());
     }
 
     fn histogram(t: &DistributionTree, n: usize, bins: usize, seed: u64) -> Vec<u32> {
@@ -887,7 +941,8 @@ mod tests {
                 leaf_size: 8,
                 ..Default::default()
             },
-        );
+        )
+        .unwrap();
         let mut d = DistributionTree::from_octree(&t, &areas, &[]);
         let before_total = d.total_area();
         let samples = 400_000;
