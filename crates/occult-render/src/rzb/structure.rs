@@ -141,8 +141,8 @@ impl Structure {
     #[inline]
     pub fn section_area(&self, sec: &Section) -> f64 {
         match &self.tree {
-            Some(t) if sec.own => t.own_area(sec.node),
-            Some(t) => t.subtree_area(sec.node),
+            Some(t) if sec.own => t.own_sums(sec.node).area,
+            Some(t) => t.subtree_sums(sec.node).area,
             None => self.octree.area(sec.range.clone()),
         }
     }
@@ -151,8 +151,8 @@ impl Structure {
     #[inline]
     pub fn section_items(&self, sec: &Section) -> u64 {
         match &self.tree {
-            Some(t) if sec.own => t.own_weight(sec.node),
-            Some(t) => t.subtree_weight(sec.node),
+            Some(t) if sec.own => t.own_sums(sec.node).weight,
+            Some(t) => t.subtree_sums(sec.node).weight,
             None => self.items(sec.range.clone()),
         }
     }

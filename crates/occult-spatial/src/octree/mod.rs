@@ -32,4 +32,4 @@ pub mod sample;
 pub use cell::{OctreeConfigError, MAX_OCTREE_DEPTH};
 pub use hybrid::{HybridOctree, HybridOctreeConfig, HybridOctreeNode};
 pub use ray::{RayOctree, RayOctreeConfig, RayOctreeError, RayOctreeNode};
-pub use sample::{DistributionTree, SampleOctree, SampleOctreeConfig, SampleOctreeNode};
+pub use sample::{DistributionTree, SampleOctree, SampleOctreeConfig, SampleOctreeNode, Sums};

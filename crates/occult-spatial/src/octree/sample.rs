@@ -401,6 +401,26 @@ pub struct DistributionTree {
     extension: f32,
 }
 
+/// Summed area and weight of a set of entries of a [`DistributionTree`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Sums {
+    /// Summed area.
+    pub area: f64,
+    /// Summed weight (saturating).
+    pub weight: u64,
+}
+
+impl Sums {
+    /// These sums and one more term, added in that order (the order fixes the bits).
+    #[inline]
+    fn add(self, area: f64, weight: u64) -> Self {
+        Self {
+            area: self.area + area,
+            weight: self.weight.saturating_add(weight),
+        }
+    }
+}
+
 #[derive(Clone, Debug)]
 struct DynNode {
     cell_min: Vec3,
@@ -408,10 +428,8 @@ struct DynNode {
     parent: u32,
     children: std::ops::Range<u32>,
     own: Vec<u32>,
-    own_area: f64,
-    own_weight: u64,
-    subtree_area: f64,
-    subtree_weight: u64,
+    own_sums: Sums,
+    subtree_sums: Sums,
 }
 
 impl DistributionTree {
@@ -444,10 +462,8 @@ impl DistributionTree {
                 parent: u32::MAX,
                 children: on.children(),
                 own,
-                own_area: 0.0,
-                own_weight: 0,
-                subtree_area: 0.0,
-                subtree_weight: 0,
+                own_sums: Sums::default(),
+                subtree_sums: Sums::default(),
             });
         }
         for i in 0..t.nodes.len() {
@@ -457,42 +473,35 @@ impl DistributionTree {
         }
         // Children are stored after their parent: sum from the back.
         for i in (0..t.nodes.len()).rev() {
-            t.own_sums(i);
-            t.subtree_sums(i);
+            t.recompute_own(i);
+            t.recompute_subtree(i);
         }
         t
     }
 
-    fn own_sums(&mut self, n: usize) {
+    fn recompute_own(&mut self, n: usize) {
         let node = &self.nodes[n];
-        let mut a = 0.0;
-        let mut w = 0u64;
-        for &e in &node.own {
-            a += self.area[e as usize];
-            w = w.saturating_add(self.weight[e as usize]);
-        }
-        let node = &mut self.nodes[n];
-        node.own_area = a;
-        node.own_weight = w;
+        let sums = node.own.iter().fold(Sums::default(), |s, &e| {
+            s.add(self.area[e as usize], self.weight[e as usize])
+        });
+        self.nodes[n].own_sums = sums;
     }
 
-    fn subtree_sums(&mut self, n: usize) {
-        let mut a = self.nodes[n].own_area;
-        let mut w = self.nodes[n].own_weight;
-        for c in self.nodes[n].children.clone() {
-            a += self.nodes[c as usize].subtree_area;
-            w = w.saturating_add(self.nodes[c as usize].subtree_weight);
-        }
-        self.nodes[n].subtree_area = a;
-        self.nodes[n].subtree_weight = w;
+    fn recompute_subtree(&mut self, n: usize) {
+        let node = &self.nodes[n];
+        let sums = node.children.clone().fold(node.own_sums, |s, c| {
+            let child = self.nodes[c as usize].subtree_sums;
+            s.add(child.area, child.weight)
+        });
+        self.nodes[n].subtree_sums = sums;
     }
 
     /// Recomputes the sums of node `n` and its ancestors, O(height · (own + 8)).
     fn update_path(&mut self, n: u32) {
-        self.own_sums(n as usize);
+        self.recompute_own(n as usize);
         let mut m = n;
         while m != u32::MAX {
-            self.subtree_sums(m as usize);
+            self.recompute_subtree(m as usize);
             m = self.nodes[m as usize].parent;
         }
     }
@@ -506,35 +515,24 @@ impl DistributionTree {
         self.roots
             .iter()
             .flatten()
-            .map(|&r| self.nodes[r as usize].subtree_area)
+            .map(|&r| self.nodes[r as usize].subtree_sums.area)
             .sum()
     }
     /// Summed weight of all classes.
     pub fn total_weight(&self) -> u64 {
-        self.roots
-            .iter()
-            .flatten()
-            .fold(0u64, |a, &r| a.saturating_add(self.nodes[r as usize].subtree_weight))
+        self.roots.iter().flatten().fold(0u64, |a, &r| {
+            a.saturating_add(self.nodes[r as usize].subtree_sums.weight)
+        })
     }
-    /// Summed area of node `n`'s subtree.
+    /// Summed area and weight of node `n`'s subtree.
     #[inline]
-    pub fn subtree_area(&self, n: u32) -> f64 {
-        self.nodes[n as usize].subtree_area
+    pub fn subtree_sums(&self, n: u32) -> Sums {
+        self.nodes[n as usize].subtree_sums
     }
-    /// Summed weight of node `n`'s subtree.
+    /// Summed area and weight of node `n`'s own entries.
     #[inline]
-    pub fn subtree_weight(&self, n: u32) -> u64 {
-        self.nodes[n as usize].subtree_weight
-    }
-    /// Summed area of node `n`'s own entries.
-    #[inline]
-    pub fn own_area(&self, n: u32) -> f64 {
-        self.nodes[n as usize].own_area
-    }
-    /// Summed weight of node `n`'s own entries.
-    #[inline]
-    pub fn own_weight(&self, n: u32) -> u64 {
-        self.nodes[n as usize].own_weight
+    pub fn own_sums(&self, n: u32) -> Sums {
+        self.nodes[n as usize].own_sums
     }
     /// The entries stored at node `n`, sorted by id.
     #[inline]
@@ -675,16 +673,16 @@ impl DistributionTree {
     /// `None` when the subtree has no area.
     pub fn sample(&self, node: u32, u: f64) -> Option<u32> {
         let n = self.nodes.get(node as usize)?;
-        if n.subtree_area <= 0.0 {
+        if n.subtree_sums.area <= 0.0 {
             return None;
         }
-        Some(self.descend(node, u * n.subtree_area))
+        Some(self.descend(node, u * n.subtree_sums.area))
     }
 
     /// An entry stored at `node` itself (not below), chosen by area from `u ∈ [0, 1)`.
     pub fn sample_own(&self, node: u32, u: f64) -> Option<u32> {
         let n = self.nodes.get(node as usize)?;
-        let mut r = u * n.own_area;
+        let mut r = u * n.own_sums.area;
         let mut last = None;
         for &e in &n.own {
             let a = self.area[e as usize];
@@ -708,7 +706,7 @@ impl DistributionTree {
         let mut r = u * total;
         let mut last = None;
         for &root in self.roots.iter().flatten() {
-            let a = self.nodes[root as usize].subtree_area;
+            let a = self.nodes[root as usize].subtree_sums.area;
             if a > 0.0 {
                 if r < a {
                     return Some(self.descend(root, r));
@@ -738,7 +736,7 @@ impl DistributionTree {
             }
             let mut next = None;
             for c in node.children.clone() {
-                let a = self.nodes[c as usize].subtree_area;
+                let a = self.nodes[c as usize].subtree_sums.area;
                 if a > 0.0 {
                     if r < a {
                         next = Some(c as usize);
@@ -969,7 +967,7 @@ mod tests {
         // nodes restores the sums bit for bit, hence the very same samples for a seed.
         let sums = |d: &DistributionTree| {
             (0..d.node_count() as u32)
-                .map(|n| d.subtree_area(n).to_bits())
+                .map(|n| d.subtree_sums(n).area.to_bits())
                 .collect::<Vec<_>>()
         };
         let before = sums(&d);
