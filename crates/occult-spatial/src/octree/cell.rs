@@ -20,9 +20,6 @@ use occult_core::{Aabb, Vec3};
 /// value). Renderers document narrower ranges of their own where their structures need them.
 pub const MAX_OCTREE_DEPTH: u32 = 48;
 
-/// Largest leaf size accepted: node counts are stored as `u32`.
-pub const MAX_LEAF_SIZE: usize = u32::MAX as usize;
-
 /// A configuration value out of range: the field, the value given and the range accepted.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error("bad octree configuration: {field}={value} is not in {expected}")]
@@ -45,19 +42,16 @@ impl OctreeConfigError {
     }
 }
 
-/// Checks a leaf size: `1..=`[`MAX_LEAF_SIZE`] primitives.
+/// Checks a leaf size: at least 1 primitive. There is no upper bound: a leaf size at or above
+/// the primitive count only makes the root a leaf.
 ///
 /// # Errors
-/// [`OctreeConfigError`] naming `field` for 0 or a size over [`MAX_LEAF_SIZE`].
+/// [`OctreeConfigError`] naming `field` for 0.
 pub fn check_leaf_size(field: &'static str, value: usize) -> Result<(), OctreeConfigError> {
-    if (1..=MAX_LEAF_SIZE).contains(&value) {
+    if value >= 1 {
         Ok(())
     } else {
-        Err(OctreeConfigError::new(
-            field,
-            value,
-            format_args!("1..={MAX_LEAF_SIZE}"),
-        ))
+        Err(OctreeConfigError::new(field, value, "1.."))
     }
 }
 
@@ -157,7 +151,7 @@ mod tests {
 
     #[test]
     fn every_rule_names_the_field_and_value() {
-        assert!(check_leaf_size("leaf_size", 1).is_ok());
+        assert!(check_leaf_size("leaf_size", 1).is_ok() && check_leaf_size("leaf_size", usize::MAX).is_ok());
         let e = check_leaf_size("leaf_size", 0).unwrap_err();
         assert_eq!((e.field, e.value.as_str()), ("leaf_size", "0"));
         assert!(e.to_string().contains("leaf_size=0"), "{e}");

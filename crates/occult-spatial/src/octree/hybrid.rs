@@ -38,7 +38,7 @@ pub const MAX_DUPLICATION: usize = 4;
 /// How to build a [`HybridOctree`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HybridOctreeConfig {
-    /// A cell with at most this many primitives is a leaf (1..=[`cell::MAX_LEAF_SIZE`]).
+    /// A cell with at most this many primitives is a leaf (≥ 1).
     pub leaf_size: usize,
     /// Levels at most, the root being level 1 (1..=[`cell::MAX_OCTREE_DEPTH`]).
     pub max_depth: u32,

@@ -40,7 +40,7 @@ const INTERNAL: u32 = u32::MAX;
 pub struct RayOctreeConfig {
     /// Deepest level (root = 0), 0..=[`cell::MAX_OCTREE_DEPTH`].
     pub max_depth: u32,
-    /// A node with at most this many primitives is a leaf (1..=[`cell::MAX_LEAF_SIZE`]).
+    /// A node with at most this many primitives is a leaf (≥ 1).
     pub max_leaf_size: usize,
 }
 

@@ -30,8 +30,7 @@ use occult_core::{Aabb, Vec3};
 /// Tunables of [`SampleOctree::build`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct SampleOctreeConfig {
-    /// Entries a leaf may hold (1..=[`cell::MAX_LEAF_SIZE`]): smaller gives finer depth
-    /// classification, more nodes.
+    /// Entries a leaf may hold (≥ 1): smaller gives finer depth classification, more nodes.
     pub leaf_size: usize,
     /// Growth of a child's cell into its extended box, as a fraction of the cell side on each
     /// side (finite, ≥ 0; §5.3.1 "enlarged by a constant factor"). 0.5 doubles the side.
