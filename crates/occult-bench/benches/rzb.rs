@@ -8,7 +8,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use occult_core::{Aabb, Vec3, View};
 use occult_raster::Frame;
 use occult_render::{AlgoSpec, RenderOptions};
-use occult_spatial::sample_octree::{DistributionTree, SampleOctree, SampleOctreeConfig};
+use occult_spatial::{DistributionTree, SampleOctree, SampleOctreeConfig};
 use rand::{Rng, SeedableRng};
 
 fn path_bench(c: &mut Criterion, scene_spec: &str, path: &str, specs: &[&str]) {
@@ -60,7 +60,8 @@ fn dynamic_updates(c: &mut Criterion) {
         boxes.push(Aabb::new(p, p + Vec3::splat(s)));
         areas.push((s * s) as f64);
     }
-    let octree = SampleOctree::build(&boxes[..n], &areas[..n], &vec![0; n], 1, &SampleOctreeConfig::default());
+    let octree = SampleOctree::build(&boxes[..n], &areas[..n], &vec![0; n], 1, &SampleOctreeConfig::default())
+        .expect("default config");
     let mut tree = DistributionTree::from_octree(&octree, &areas[..n], &[]);
     c.bench_function("distribution_tree_insert_remove_5804", |b| {
         b.iter(|| {

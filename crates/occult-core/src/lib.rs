@@ -46,7 +46,7 @@ pub use error::{CoreError, Result};
 pub use geom::{Aabb, Containment, Frustum, Plane};
 pub use glam::{self, Affine3A, Mat3, Mat4, Vec2, Vec3, Vec3A, Vec4};
 pub use mesh::{Mesh, MeshColors, Rgba8};
-pub use ray::{intersect_ray_triangle, Ray, RayHit};
+pub use ray::{intersect_ray_triangle, sheared_edge_functions, Ray, RayHit};
 pub use scene::{
     compose, Instance, ItemId, ItemLocation, Node, NodeId, NodeKind, Scene, SceneBuilder, MAX_FLATTEN_TRIANGLES,
     NO_ITEM,

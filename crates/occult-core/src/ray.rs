@@ -84,23 +84,7 @@ pub fn intersect_ray_triangle(ray: &Ray, p0: Vec3, p1: Vec3, p2: Vec3) -> Option
     let by = b[ky] - sy * b[kz];
     let cx = c[kx] - sx * c[kz];
     let cy = c[ky] - sy * c[kz];
-    let mut u = cx * by - cy * bx;
-    let mut v = ax * cy - ay * cx;
-    let mut w = bx * ay - by * ax;
-    // Woop §3: recompute in double precision when an edge function rounds to zero.
-    if u == 0.0 || v == 0.0 || w == 0.0 {
-        let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
-        u = (cx * by - cy * bx) as f32;
-        v = (ax * cy - ay * cx) as f32;
-        w = (bx * ay - by * ax) as f32;
-    }
-    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
-        return None;
-    }
-    let det = u + v + w;
-    if det == 0.0 {
-        return None;
-    }
+    let (u, v, w, det) = sheared_edge_functions([ax, ay], [bx, by], [cx, cy])?;
     let az = sz * a[kz];
     let bz = sz * b[kz];
     let cz = sz * c[kz];
@@ -115,6 +99,32 @@ pub fn intersect_ray_triangle(ray: &Ray, p0: Vec3, p1: Vec3, p2: Vec3) -> Option
         u: v * inv_det,
         v: w * inv_det,
     })
+}
+
+/// Woop et al. §2–3, the part after the shear: the edge functions `(u, v, w)` of a triangle
+/// whose corners, relative to the ray's origin and sheared so that the ray runs along +z, have
+/// the (x, y) coordinates `a`, `b`, `c`, and their sum `det`. `None` when the ray misses the
+/// triangle (edge functions of both signs) or sees it edge-on (`det` 0). An edge function that
+/// rounds to zero is recomputed in double precision (§3), which is what makes the test
+/// watertight. Shared by [`intersect_ray_triangle`] and callers that shear once per ray.
+#[inline]
+pub fn sheared_edge_functions(a: [f32; 2], b: [f32; 2], c: [f32; 2]) -> Option<(f32, f32, f32, f32)> {
+    let ([ax, ay], [bx, by], [cx, cy]) = (a, b, c);
+    let mut u = cx * by - cy * bx;
+    let mut v = ax * cy - ay * cx;
+    let mut w = bx * ay - by * ax;
+    // Woop §3: recompute in double precision when an edge function rounds to zero.
+    if u == 0.0 || v == 0.0 || w == 0.0 {
+        let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
+        u = (cx * by - cy * bx) as f32;
+        v = (ax * cy - ay * cx) as f32;
+        w = (bx * ay - by * ax) as f32;
+    }
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return None;
+    }
+    let det = u + v + w;
+    (det != 0.0).then_some((u, v, w, det))
 }
 
 #[cfg(test)]

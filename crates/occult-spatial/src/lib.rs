@@ -1,9 +1,18 @@
 //! # occult-spatial
 //!
-//! Spatial hierarchies over scene elements: a bounding volume hierarchy ([`Bvh`]) over boxes
-//! (triangles of a mesh, instances of a group), with flat node arrays and `u32` indices.
-//! Octrees, uniform and nested grids, traversal orders and ray traversal join it as the
-//! renderers that need them arrive.
+//! Spatial hierarchies over scene elements, one per renderer that needs one:
+//!
+//! | structure | module | used by |
+//! | --- | --- | --- |
+//! | [`Bvh`]: bounding volume hierarchy over boxes | `bvh` | `frustum`, `nbuffer` |
+//! | [`RayOctree`] and fat-ray traversal ([`traverse`]) | [`octree::ray`], [`raycast`] | `lzb` |
+//! | [`HybridOctree`]: hybrid redistribution of straddlers | [`octree::hybrid`] | `hzb` |
+//! | [`SampleOctree`] and [`DistributionTree`]: distribution lists | [`octree::sample`] | `rzb` |
+//! | uniform and nested grids | [`grid`] | `oqgrid` |
+//!
+//! The three octrees share their cell arithmetic, their depth limit and their configuration
+//! rules ([`octree::cell`]); [`octree`] says how they differ. All are flat node arrays with
+//! `u32` indices.
 //!
 //! ```
 //! use occult_core::{Aabb, Vec3};
@@ -18,11 +27,12 @@
 mod bvh;
 pub mod grid;
 pub mod octree;
-pub mod octree_hybrid;
 pub mod raycast;
-pub mod sample_octree;
 
 pub use bvh::{Bvh, BvhNode};
-pub use octree::{Octree, OctreeConfig, OctreeError, OctreeNode};
-pub use octree_hybrid::HybridOctree;
+pub use octree::{
+    DistributionTree, HybridOctree, HybridOctreeConfig, HybridOctreeNode, OctreeConfigError, RayOctree,
+    RayOctreeConfig, RayOctreeError, RayOctreeNode, SampleOctree, SampleOctreeConfig, SampleOctreeNode,
+    MAX_OCTREE_DEPTH,
+};
 pub use raycast::{prefetch_triangles, traverse, traverse_scalar, FatRay, LeafTriangle, ShearedRay, TraversalCounters};

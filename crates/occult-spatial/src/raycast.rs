@@ -1,4 +1,4 @@
-//! Front-to-back ray traversal of an [`Octree`], for rays with a thickness.
+//! Front-to-back ray traversal of a [`RayOctree`], for rays with a thickness.
 //!
 //! # References
 //! - Han & Zeiger, "The Local Z-Buffering Rendering", §III.A (a ray path: the leaves a ray
@@ -21,8 +21,8 @@
 //! all of them), a caller passes the bound its neighbour's first hit gives
 //! ([`traverse`]'s `t_limit`): the descent then prunes everything behind it from the start.
 
-use crate::octree::{Octree, MAX_OCTREE_DEPTH};
-use occult_core::{Aabb, Vec3};
+use crate::octree::{ray::lower_max, RayOctree, MAX_OCTREE_DEPTH};
+use occult_core::{sheared_edge_functions, Aabb, Vec3};
 
 /// A ray with a thickness growing linearly with `t` (see the module doc).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -80,8 +80,9 @@ impl FatRay {
 /// A ray prepared for the watertight ray–triangle test (Woop, Benthin & Wald, "Watertight
 /// Ray/Triangle Intersection", JCGT 2(1), 2013, §2–3): the axis permutation and shear that
 /// depend on the ray only, computed once per ray instead of once per triangle. The arithmetic
-/// is [`occult_core::intersect_ray_triangle`]'s, operation for operation, so the results are
-/// the same bits (tested).
+/// is [`occult_core::intersect_ray_triangle`]'s, operation for operation (the edge functions
+/// are the same function, [`occult_core::sheared_edge_functions`]), so the results are the
+/// same bits (tested).
 #[derive(Clone, Copy, Debug)]
 pub struct ShearedRay {
     /// The origin's coordinates in the permuted order `kx, ky, kz`.
@@ -128,23 +129,7 @@ impl ShearedRay {
         let by = b.1 - sy * b.2;
         let cx = c.0 - sx * c.2;
         let cy = c.1 - sy * c.2;
-        let mut u = cx * by - cy * bx;
-        let mut v = ax * cy - ay * cx;
-        let mut w = bx * ay - by * ax;
-        // §3: recompute in double precision when an edge function rounds to zero.
-        if u == 0.0 || v == 0.0 || w == 0.0 {
-            let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
-            u = (cx * by - cy * bx) as f32;
-            v = (ax * cy - ay * cx) as f32;
-            w = (bx * ay - by * ax) as f32;
-        }
-        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
-            return None;
-        }
-        let det = u + v + w;
-        if det == 0.0 {
-            return None;
-        }
+        let (u, v, w, det) = sheared_edge_functions([ax, ay], [bx, by], [cx, cy])?;
         let t_scaled = u * (sz * a.2) + v * (sz * b.2) + w * (sz * c.2);
         let t = t_scaled * (1.0 / det);
         (t >= t_min && t <= t_max).then_some(t)
@@ -316,17 +301,10 @@ pub struct TraversalCounters {
 /// The two halves of internal node box `b` along each axis, as `(lower, upper)` pairs of
 /// `(min, max)` corners: `[lo0, hi0, lo1, hi1]`. A flat axis (bit `8 + a` of `split_info`) is not
 /// split: its lower half spans the whole axis. These are exactly the children's stored boxes
-/// (the build's `b.center()` split).
+/// (the build's split, [`lower_max`]).
 #[inline]
 fn halves(b: &Aabb, split_info: u16) -> [Vec3; 4] {
-    let mid = b.center();
-    let flat = |a: usize| split_info & (1 << (8 + a)) != 0;
-    let low_max = Vec3::new(
-        if flat(0) { b.max.x } else { mid.x },
-        if flat(1) { b.max.y } else { mid.y },
-        if flat(2) { b.max.z } else { mid.z },
-    );
-    [b.min, low_max, mid, b.max]
+    [b.min, lower_max(b, split_info >> 8), b.center(), b.max]
 }
 
 impl FatRay {
@@ -376,11 +354,11 @@ impl FatRay {
 /// direction signs give (child `i ^ mask`, `mask` = the axes the ray runs down): front to back
 /// for a thin ray, and nearly so for a cone. A leaf is then tested against its own grown box,
 /// so the leaves visited are exactly those whose grown box the cone enters before the bound
-/// (on a tree whose leaves were tightened, [`Octree::tighten_leaves`], those whose own box the
+/// (on a tree whose leaves were tightened, [`RayOctree::tighten_leaves`], those whose own box the
 /// cone enters inside their parent's grown octant: the part of a tight box outside its octant
 /// belongs to neighbouring leaves).
 pub fn traverse(
-    octree: &Octree,
+    octree: &RayOctree,
     ray: &FatRay,
     t_limit: &mut f32,
     counters: &mut TraversalCounters,
@@ -398,7 +376,7 @@ pub fn traverse(
 /// [`traverse`] on the scalar path whatever the machine: the reference the AVX2 path is held
 /// to (same leaves, same order, same bounds).
 pub fn traverse_scalar(
-    octree: &Octree,
+    octree: &RayOctree,
     ray: &FatRay,
     t_limit: &mut f32,
     counters: &mut TraversalCounters,
@@ -410,7 +388,7 @@ pub fn traverse_scalar(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn traverse_avx2(
-    octree: &Octree,
+    octree: &RayOctree,
     ray: &FatRay,
     t_limit: &mut f32,
     counters: &mut TraversalCounters,
@@ -499,7 +477,7 @@ unsafe fn children_avx2(ray: &FatRay, b: &Aabb, split_info: u16, grow: f32, t_li
 /// The body of [`traverse`], compiled once per instruction set.
 #[inline(always)]
 fn traverse_body<const AVX2: bool>(
-    octree: &Octree,
+    octree: &RayOctree,
     ray: &FatRay,
     t_limit: &mut f32,
     counters: &mut TraversalCounters,
@@ -515,8 +493,9 @@ fn traverse_body<const AVX2: bool>(
         | ((ray.direction.y < 0.0) as usize) << 1
         | ((ray.direction.z < 0.0) as usize) << 2;
     const STACK: usize = 8 * MAX_OCTREE_DEPTH as usize + 8;
-    // Uninitialized: a traversal runs per ray and per mesh instance met, and clearing 1.6 KB
-    // each time cost more than a shallow traversal.
+    // Room for the deepest tree any build accepts (each level pops one node and pushes at most
+    // 8). Uninitialized: a traversal runs per ray and per mesh instance met, and clearing the
+    // whole stack each time costs more than a shallow traversal.
     let mut stack = [const { std::mem::MaybeUninit::<(u32, f32)>::uninit() }; STACK];
     stack[0].write((0, t0));
     let mut top = 1;
@@ -584,7 +563,7 @@ fn traverse_body<const AVX2: bool>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::octree::OctreeConfig;
+    use crate::octree::RayOctreeConfig;
     use occult_core::{intersect_ray_triangle, Ray};
 
     /// Uniform numbers in [0, 1) from a xorshift generator.
@@ -616,11 +595,11 @@ mod tests {
     #[test]
     fn nearest_hit_matches_linear_scan() {
         let (p, t) = soup(400, 7);
-        let cfg = OctreeConfig {
+        let cfg = RayOctreeConfig {
             max_depth: 6,
             max_leaf_size: 8,
         };
-        let plain = Octree::build_triangles(&p, &t, cfg).unwrap();
+        let plain = RayOctree::build_triangles(&p, &t, cfg).unwrap();
         // And with leaves tightened to their triangles' bounds clipped to the octant, as lzb
         // does: the same nearest hits.
         let mut tight = plain.clone();
@@ -666,10 +645,10 @@ mod tests {
     #[test]
     fn cone_visits_every_leaf_it_touches() {
         let (p, t) = soup(300, 3);
-        let o = Octree::build_triangles(
+        let o = RayOctree::build_triangles(
             &p,
             &t,
-            OctreeConfig {
+            RayOctreeConfig {
                 max_depth: 5,
                 max_leaf_size: 4,
             },
@@ -710,10 +689,10 @@ mod tests {
         let mut rnd = xorshift(5);
         let mut leaves = 0;
         for pos in [&p, &flat] {
-            let o = Octree::build_triangles(
+            let o = RayOctree::build_triangles(
                 pos,
                 &t,
-                OctreeConfig {
+                RayOctreeConfig {
                     max_depth: 7,
                     max_leaf_size: 4,
                 },
@@ -866,10 +845,10 @@ mod tests {
         // A flat layer too: its flat axis is not split.
         let flat: Vec<Vec3> = p.iter().map(|v| Vec3::new(v.x, 2.0, v.z)).collect();
         for pos in [&p, &flat] {
-            let o = Octree::build_triangles(
+            let o = RayOctree::build_triangles(
                 pos,
                 &t,
-                OctreeConfig {
+                RayOctreeConfig {
                     max_depth: 6,
                     max_leaf_size: 4,
                 },
@@ -907,7 +886,7 @@ mod tests {
 
     #[test]
     fn empty_tree_and_missing_ray() {
-        let o = Octree::default();
+        let o = RayOctree::default();
         let mut limit = f32::INFINITY;
         traverse(
             &o,

@@ -97,8 +97,7 @@ use std::time::Instant;
 
 use occult_core::{Aabb, Affine3A, NodeId, NodeKind, Scene, View};
 use occult_raster::{Frame, Rasterizer, ZPyramid};
-use occult_spatial::octree_hybrid::{OctreeConfig, MAX_OCTREE_DEPTH};
-use occult_spatial::HybridOctree;
+use occult_spatial::{HybridOctree, HybridOctreeConfig};
 
 use crate::{
     check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result,
@@ -128,6 +127,10 @@ pub enum Distribution {
     Hybrid,
 }
 
+/// Deepest octree `hzb` accepts, in levels with the root as level 1 (its documented `depth`
+/// range is 1..=32).
+const MAX_DEPTH: u32 = 32;
+
 /// Most workers of a distribution.
 pub const MAX_WORKERS: usize = 8;
 
@@ -135,7 +138,7 @@ pub const MAX_WORKERS: usize = 8;
 #[derive(Clone, Debug, PartialEq)]
 pub struct HzbOptions {
     /// Octree build (§3.1): leaf size (triangles or instances), depth, small-straddler fraction.
-    pub octree: OctreeConfig,
+    pub octree: HybridOctreeConfig,
     /// Triangles gathered before rasterizing and updating the pyramid (≥ 1).
     pub batch_triangles: usize,
     /// Occlusion tests at all (off: octree frustum culling only, and no visible list).
@@ -169,7 +172,7 @@ pub struct HzbOptions {
 impl Default for HzbOptions {
     fn default() -> Self {
         Self {
-            octree: OctreeConfig {
+            octree: HybridOctreeConfig {
                 leaf_size: 256,
                 max_depth: 10,
                 small_fraction: 0.25,
@@ -204,10 +207,8 @@ impl HzbOptions {
             return bad("leaf=0: a leaf holds at least 1 primitive".into());
         }
         let max_depth: u32 = p.get("depth", d.octree.max_depth)?;
-        if max_depth == 0 || max_depth > MAX_OCTREE_DEPTH {
-            return bad(format!(
-                "depth={max_depth}: octree depth must be in 1..={MAX_OCTREE_DEPTH}"
-            ));
+        if max_depth == 0 || max_depth > MAX_DEPTH {
+            return bad(format!("depth={max_depth}: octree depth must be in 1..={MAX_DEPTH}"));
         }
         let small_fraction: f32 = p.get("small", d.octree.small_fraction)?;
         if !(0.0..=1.0).contains(&small_fraction) {
@@ -246,7 +247,7 @@ impl HzbOptions {
                 _ => Distribution::Off,
             },
             workers,
-            octree: OctreeConfig {
+            octree: HybridOctreeConfig {
                 leaf_size,
                 max_depth,
                 small_fraction,
@@ -467,11 +468,7 @@ impl Hzb {
     /// [`RenderError::BadParameter`] for out-of-range options; raster configuration errors.
     pub fn new(scene: Arc<Scene>, options: &RenderOptions, hzb: &HzbOptions) -> Result<Self> {
         let o = &hzb.octree;
-        if o.leaf_size == 0
-            || o.max_depth == 0
-            || o.max_depth > MAX_OCTREE_DEPTH
-            || !(0.0..=1.0).contains(&o.small_fraction)
-        {
+        if o.leaf_size == 0 || o.max_depth == 0 || o.max_depth > MAX_DEPTH || !(0.0..=1.0).contains(&o.small_fraction) {
             return Err(RenderError::BadParameter(format!(
                 "hzb: bad octree configuration {o:?}"
             )));
@@ -482,7 +479,7 @@ impl Hzb {
             ));
         }
         let raster = Rasterizer::new(options.raster.clone())?;
-        let octrees: Vec<Option<HybridOctree>> = raster.install(|| {
+        let octrees: std::result::Result<Vec<Option<HybridOctree>>, _> = raster.install(|| {
             use rayon::prelude::*;
             scene
                 .nodes()
@@ -492,19 +489,20 @@ impl Hzb {
                         let boxes: Vec<Aabb> = (0..m.triangle_count())
                             .map(|t| Aabb::from_points(m.triangle_positions(t)))
                             .collect();
-                        Some(HybridOctree::build(&boxes, o))
+                        HybridOctree::build(&boxes, o).map(Some)
                     }
                     NodeKind::Group(g) if !g.is_empty() => {
                         let boxes: Vec<Aabb> = g
                             .iter()
                             .map(|i| scene.node(i.child).bounds().transformed(&i.parent_from_child))
                             .collect();
-                        Some(HybridOctree::build(&boxes, o))
+                        HybridOctree::build(&boxes, o).map(Some)
                     }
-                    _ => None,
+                    _ => Ok(None),
                 })
                 .collect()
         });
+        let octrees = octrees.map_err(|e| RenderError::BadParameter(format!("hzb: {e}")))?;
         let workers = if hzb.distribution == Distribution::Off {
             vec![Worker {
                 raster,

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use occult_core::{compose, Affine3A, Containment, Frustum, Mat4, Mesh, NodeId, NodeKind, Scene, Vec3, View};
 use occult_raster::{Draw, DrawTriangles, Frame, PixelRect, PyramidCounts, PyramidTest, Rasterizer, ZPyramid};
-use occult_spatial::{octree_hybrid::NO_CHILD, HybridOctree};
+use occult_spatial::{octree::hybrid::NO_CHILD, HybridOctree};
 
 use super::boxtest::{screen_rect, Occlusion};
 use super::{ChildOrder, Distribution, HzbOptions, VisEntry};
@@ -479,7 +479,7 @@ impl<'a> Walk<'a> {
             })
     }
 
-    fn node_of(&self, e: &VisEntry) -> &'a occult_spatial::octree_hybrid::OctreeNode {
+    fn node_of(&self, e: &VisEntry) -> &'a occult_spatial::HybridOctreeNode {
         let octrees: &'a [Option<HybridOctree>] = self.octrees;
         match &octrees[e.dag_node.index()] {
             Some(o) => &o.nodes()[e.octree_node as usize],

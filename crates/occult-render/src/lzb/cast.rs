@@ -319,7 +319,7 @@ impl<'a> Caster<'a> {
                 let mut recorded = false;
                 let sheared = ShearedRay::new(o, d);
                 // Deviation: the leaves' boxes are their tight boxes, not their octants
-                // (`Octree::tighten_leaves`): the traversal hands over only leaves whose tight
+                // (`RayOctree::tighten_leaves`): the traversal hands over only leaves whose tight
                 // box the cone enters before the bound.
                 traverse(octree, &ray, t_limit, &mut counters, |leaf, _, _, t_limit| {
                     let tb = &octree.nodes()[leaf as usize].bounds;

@@ -3,7 +3,7 @@
 //!
 //! # References
 //! Han & Zeiger, "The Local Z-Buffering Rendering" (`papers/local-z-buffering-han-zeiger.txt`):
-//! - §II.A preprocessing: an octree per node of the scene DAG ([`occult_spatial::Octree`], the
+//! - §II.A preprocessing: an octree per node of the scene DAG ([`occult_spatial::RayOctree`], the
 //!   Akenine-Möller triangle–box test, max depth and max triangles per leaf); real-time steps
 //!   1–5: hierarchical view-frustum culling collecting leaves, the partition plane, local
 //!   rendering of `S_near` with the z-buffer, the unfinished pixels read back from the frame,
@@ -72,8 +72,12 @@ use occult_core::{
     compose, Aabb, Affine3A, Camera, Containment, ItemId, Mat4, NodeId, NodeKind, Scene, Vec3, Vec4, View,
 };
 use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
-use occult_spatial::{Octree, OctreeConfig};
+use occult_spatial::{RayOctree, RayOctreeConfig, RayOctreeError};
 use rayon::prelude::*;
+
+/// Deepest octree `lzb` accepts (its documented `depth` range is 0..=24): an `f32` octant of
+/// the node's bounds halved more often than its mantissa has bits no longer splits it.
+const MAX_DEPTH: u32 = 24;
 
 use crate::zbuffer::MAX_BRUTE_FORCE_ITEMS as MAX_FRAME_TRIANGLES;
 use crate::{
@@ -283,12 +287,8 @@ impl LzbOptions {
         if self.leaf == 0 {
             return bad("leaf=0: an octree leaf must hold at least 1 triangle".into());
         }
-        if self.depth > occult_spatial::octree::MAX_OCTREE_DEPTH {
-            return bad(format!(
-                "depth={} exceeds {}",
-                self.depth,
-                occult_spatial::octree::MAX_OCTREE_DEPTH
-            ));
+        if self.depth > MAX_DEPTH {
+            return bad(format!("depth={} exceeds {MAX_DEPTH}", self.depth));
         }
         if self.group_leaf == 0 {
             return bad("group_leaf=0: a group leaf must hold at least 1 instance".into());
@@ -322,7 +322,7 @@ pub(crate) enum Accel {
     /// A mesh: octree over its triangles.
     Mesh {
         /// Leaves sorted by triangle area, largest first (Octree-o).
-        octree: Octree,
+        octree: RayOctree,
         /// Per leaf-list entry (parallel to `octree.primitives()`): the triangle's corners and
         /// area-scaled normal, so that a ray reads a leaf's triangles contiguously.
         refs: Vec<RefTriangle>,
@@ -331,7 +331,7 @@ pub(crate) enum Accel {
     },
     /// A group: octree over its instances' boxes.
     Group {
-        octree: Octree,
+        octree: RayOctree,
         /// Instance boxes in the group's space.
         bounds: Vec<Aabb>,
         /// Inverse placements.
@@ -466,11 +466,11 @@ impl Lzb {
         opts.check()?;
         let start = Instant::now();
         let raster = Rasterizer::new(options.raster.clone())?;
-        let mesh_cfg = OctreeConfig {
+        let mesh_cfg = RayOctreeConfig {
             max_depth: opts.depth,
             max_leaf_size: opts.leaf,
         };
-        let group_cfg = OctreeConfig {
+        let group_cfg = RayOctreeConfig {
             max_depth: opts.depth,
             max_leaf_size: opts.group_leaf,
         };
@@ -480,7 +480,7 @@ impl Lzb {
                 .nodes()
                 .par_iter()
                 .map(|node| {
-                    let err = |e: occult_spatial::OctreeError| {
+                    let err = |e: RayOctreeError| {
                         RenderError::BadParameter(format!("lzb: octree of node '{}': {e}", node.name()))
                     };
                     if node.item_count() == 0 {
@@ -489,7 +489,7 @@ impl Lzb {
                     Ok(match node.kind() {
                         NodeKind::Mesh(m) => {
                             let mut octree =
-                                Octree::build_triangles(m.positions(), m.triangles(), mesh_cfg).map_err(err)?;
+                                RayOctree::build_triangles(m.positions(), m.triangles(), mesh_cfg).map_err(err)?;
                             let normals: Vec<Vec3> = (0..m.triangle_count())
                                 .map(|t| {
                                     let [a, b, c] = m.triangle_positions(t);
@@ -550,7 +550,7 @@ impl Lzb {
                                     }
                                 })
                                 .collect();
-                            let octree = Octree::build_boxes(&bounds, group_cfg).map_err(err)?;
+                            let octree = RayOctree::build_boxes(&bounds, group_cfg).map_err(err)?;
                             let child_from_parent: Vec<Affine3A> =
                                 instances.iter().map(|i| i.parent_from_child.inverse()).collect();
                             let stretch = child_from_parent
@@ -792,7 +792,7 @@ impl Walk<'_> {
                         any = true;
                         self.triangles += on.count as u64;
                         self.too_many |= self.triangles > MAX_FRAME_TRIANGLES;
-                        // The leaf's tight box (`Octree::tighten_leaves`).
+                        // The leaf's tight box (`RayOctree::tighten_leaves`).
                         if self.ctx.is_near(w_row, &on.bounds) {
                             self.near.push((inst, n));
                         } else {

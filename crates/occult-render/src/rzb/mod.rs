@@ -5,7 +5,7 @@
 //! Interactive Rendering of Highly Complex Scenes*, SIGGRAPH 2001
 //! (`papers/randomized-z-buffer-wand-2001.txt`):
 //! - §5.2 distribution lists and §5.3.1 octree with shortcuts and extended boxes, one global
-//!   list per structure: [`occult_spatial::sample_octree`]; §7.1 area classes (one octree per
+//!   list per structure: [`occult_spatial::octree::sample`]; §7.1 area classes (one octree per
 //!   class in the same list) and §7.3 instancing (one structure per DAG node, instances as
 //!   entries with their transform, recursively): [`structure`];
 //! - §5.3.2 box selection by depth accuracy ε, sample counts from area × maximum projection
@@ -20,7 +20,7 @@
 //!   §4.1 per-pixel reconstruction and §4.2 splatting with side `d`: [`sample`]; §4.2
 //!   Gaussian reconstruction (`recon=gauss`): [`recon`];
 //! - §5.4 dynamic updates (`dynamic=on`): sampling from distribution trees
-//!   ([`occult_spatial::sample_octree::DistributionTree`]), entries removed and inserted through
+//!   ([`occult_spatial::DistributionTree`]), entries removed and inserted through
 //!   [`Rzb::remove`] and [`Rzb::insert`];
 //! - §7.2 sample caches per selected box, quantized to an object-space grid whose cells project
 //!   to at most one splat, reused while the box's distance stays within a factor, LRU under a
@@ -84,7 +84,7 @@ use std::time::Instant;
 
 use occult_core::{ItemId, Scene, View, NO_ITEM};
 use occult_raster::{keep_fragment, Frame, Rasterizer};
-use occult_spatial::sample_octree::SampleOctreeConfig;
+use occult_spatial::SampleOctreeConfig;
 use rayon::prelude::*;
 
 use crate::{
@@ -426,8 +426,9 @@ impl Rzb {
             extension: opts.extension,
             ..SampleOctreeConfig::default()
         };
-        let structures =
-            raster.install(|| structure::build_all(&scene, &config, opts.area_ratio, opts.orientation, opts.dynamic));
+        let structures = raster
+            .install(|| structure::build_all(&scene, &config, opts.area_ratio, opts.orientation, opts.dynamic))
+            .map_err(|e| RenderError::BadParameter(format!("rzb: {e}")))?;
         let referrers = if opts.dynamic {
             let mut r = vec![Vec::new(); scene.nodes().len()];
             for (g, n) in scene.nodes().iter().enumerate() {

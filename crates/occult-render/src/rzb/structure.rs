@@ -1,7 +1,7 @@
 //! Precomputed sampling structures, one per node of the scene DAG (§5.3.1, §7.1, §7.3).
 
 use occult_core::{Aabb, Affine3A, NodeId, NodeKind, Scene, Vec3};
-use occult_spatial::sample_octree::{DistributionTree, SampleOctree, SampleOctreeConfig};
+use occult_spatial::{DistributionTree, OctreeConfigError, SampleOctree, SampleOctreeConfig};
 
 /// Most area classes per mesh (§7.1): with ratio ≥ 1.01 this covers area ratios far beyond
 /// `f32`'s range.
@@ -141,8 +141,8 @@ impl Structure {
     #[inline]
     pub fn section_area(&self, sec: &Section) -> f64 {
         match &self.tree {
-            Some(t) if sec.own => t.own_area(sec.node),
-            Some(t) => t.subtree_area(sec.node),
+            Some(t) if sec.own => t.own_sums(sec.node).area,
+            Some(t) => t.subtree_sums(sec.node).area,
             None => self.octree.area(sec.range.clone()),
         }
     }
@@ -151,8 +151,8 @@ impl Structure {
     #[inline]
     pub fn section_items(&self, sec: &Section) -> u64 {
         match &self.tree {
-            Some(t) if sec.own => t.own_weight(sec.node),
-            Some(t) => t.subtree_weight(sec.node),
+            Some(t) if sec.own => t.own_sums(sec.node).weight,
+            Some(t) => t.subtree_sums(sec.node).weight,
             None => self.items(sec.range.clone()),
         }
     }
@@ -202,13 +202,16 @@ pub fn triangle_area(p: [Vec3; 3]) -> f64 {
 ///
 /// `orientation` (§5.3.4): bands of the polar grid of orientation classes, 0 for none.
 /// `dynamic` (§5.4): also build each node's distribution tree.
+///
+/// # Errors
+/// [`OctreeConfigError`] for an octree configuration out of range.
 pub fn build_all(
     scene: &Scene,
     config: &SampleOctreeConfig,
     area_ratio: f64,
     orientation: u32,
     dynamic: bool,
-) -> Vec<Structure> {
+) -> Result<Vec<Structure>, OctreeConfigError> {
     use rayon::prelude::*;
     // Node areas first (groups need their children's), then the octrees in parallel.
     let mut areas = vec![0.0f64; scene.nodes().len()];
@@ -235,7 +238,7 @@ pub fn build_all(
     (0..scene.nodes().len())
         .into_par_iter()
         .map(|i| {
-            let mut st = build_one(scene, NodeId(i as u32), &areas, config, area_ratio, orientation);
+            let mut st = build_one(scene, NodeId(i as u32), &areas, config, area_ratio, orientation)?;
             let o = &st.octree;
             st.alias = AliasTable::new((0..o.entries().len() as u32).map(|p| o.area(p..p + 1)));
             if let NodeKind::Mesh(m) = scene.node(NodeId(i as u32)).kind() {
@@ -245,7 +248,7 @@ pub fn build_all(
                 let (areas, weights) = entry_areas(scene, NodeId(i as u32), &areas);
                 st.tree = Some(DistributionTree::from_octree(&st.octree, &areas, &weights));
             }
-            st
+            Ok(st)
         })
         .collect()
 }
@@ -276,7 +279,7 @@ fn build_one(
     config: &SampleOctreeConfig,
     area_ratio: f64,
     orientation: u32,
-) -> Structure {
+) -> Result<Structure, OctreeConfigError> {
     let node = scene.node(id);
     match node.kind() {
         NodeKind::Mesh(m) => {
@@ -309,9 +312,9 @@ fn build_one(
                 .collect();
             let area_classes = classes.iter().copied().max().map_or(0, |c| c as usize + 1);
             if orientation == 0 {
-                let octree = SampleOctree::build(&boxes, &tri_areas, &classes, area_classes, config);
+                let octree = SampleOctree::build(&boxes, &tri_areas, &classes, area_classes, config)?;
                 let area = octree.total_area();
-                return Structure {
+                return Ok(Structure {
                     octree,
                     area,
                     item_prefix: Vec::new(),
@@ -319,7 +322,7 @@ fn build_one(
                     tree: None,
                     alias: AliasTable::default(),
                     soup: Vec::new(),
-                };
+                });
             }
             // §5.3.4: class = area class × orientation class; each class's cone bounds the
             // normals of its triangles.
@@ -360,9 +363,9 @@ fn build_one(
                     half_angle: half_angle.min(std::f32::consts::PI),
                 })
                 .collect();
-            let octree = SampleOctree::build(&boxes, &tri_areas, &classes, class_count, config);
+            let octree = SampleOctree::build(&boxes, &tri_areas, &classes, class_count, config)?;
             let area = octree.total_area();
-            Structure {
+            Ok(Structure {
                 octree,
                 area,
                 item_prefix: Vec::new(),
@@ -370,7 +373,7 @@ fn build_one(
                 tree: None,
                 alias: AliasTable::default(),
                 soup: Vec::new(),
-            }
+            })
         }
         NodeKind::Group(g) => {
             let boxes: Vec<Aabb> = g
@@ -381,7 +384,7 @@ fn build_one(
                 .iter()
                 .map(|inst| areas[inst.child.index()] * area_scale(&inst.parent_from_child))
                 .collect();
-            let octree = SampleOctree::build(&boxes, &inst_areas, &vec![0; g.len()], 1, config);
+            let octree = SampleOctree::build(&boxes, &inst_areas, &vec![0; g.len()], 1, config)?;
             let mut item_prefix = Vec::with_capacity(octree.entries().len() + 1);
             let mut sum = 0u64;
             item_prefix.push(0);
@@ -390,7 +393,7 @@ fn build_one(
                 item_prefix.push(sum);
             }
             let area = octree.total_area();
-            Structure {
+            Ok(Structure {
                 octree,
                 area,
                 item_prefix,
@@ -398,7 +401,7 @@ fn build_one(
                 tree: None,
                 alias: AliasTable::default(),
                 soup: Vec::new(),
-            }
+            })
         }
     }
 }

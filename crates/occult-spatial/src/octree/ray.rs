@@ -1,4 +1,5 @@
-//! An octree over primitives (triangles of a mesh, or boxes of instances), flat and `u32`-indexed.
+//! The ray octree of local z-buffering: an octree over primitives (triangles of a mesh, or
+//! boxes of instances), flat and `u32`-indexed, that [`crate::traverse`] walks with fat rays.
 //!
 //! # References
 //! - Han & Zeiger, "The Local Z-Buffering Rendering", §II.A: the octree of the preprocessing
@@ -9,19 +10,19 @@
 //!
 //! A primitive is referenced by every leaf it overlaps (no splitting), so a leaf's list is
 //! complete: every point of a primitive lies in some leaf that references it (the overlap test
-//! counts touching, and runs on the octant grown by a relative 10⁻⁵ against rounding). Each node box is the octant of its parent (the root box is the primitives'
-//! bounds, not made cubic; an axis along which a node is flat is not split). A node stops
-//! splitting at the maximum depth, at or below the leaf size, or when splitting would not
-//! separate its primitives (every child would hold them all, or they would be referenced more
-//! than 4 times each on average).
+//! counts touching, and runs on the octant grown by a relative 10⁻⁵ against rounding). Each
+//! node box is the octant of its parent ([`super::cell::child_bounds`]; the root box is the
+//! primitives' bounds, not made cubic; an axis along which a node is flat is not split). A
+//! node stops splitting at the maximum depth, at or below the leaf size, or when splitting
+//! would not separate its primitives (every child would hold them all, or they would be
+//! referenced more than 4 times each on average).
 //!
 //! Cost: O(references · depth) overlap tests to build; memory 32 bytes per node plus 4 bytes per
 //! reference. Building refuses to exceed [`MAX_REFERENCES`] references in one tree.
 
+use super::cell::{self, child_bounds, stops_splitting, OctreeConfigError};
 use occult_core::{tri_box_overlap, Aabb, Vec3};
 
-/// Deepest octree accepted (root is depth 0).
-pub const MAX_OCTREE_DEPTH: u32 = 24;
 /// Most primitive references one octree may hold (about 1 GiB of lists).
 pub const MAX_REFERENCES: usize = 1 << 28;
 /// References allowed per primitive (plus [`REFERENCE_SLACK`]) before the build gives up: a
@@ -31,19 +32,31 @@ pub const REFERENCES_PER_PRIMITIVE: usize = 32;
 /// Extra references allowed whatever the primitive count.
 pub const REFERENCE_SLACK: usize = 1 << 16;
 
-/// Marks an internal node in [`OctreeNode::count`].
+/// Marks an internal node in [`RayOctreeNode::count`].
 const INTERNAL: u32 = u32::MAX;
 
 /// Termination of the build (§II.A).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct OctreeConfig {
-    /// Deepest level (root = 0), 0..=[`MAX_OCTREE_DEPTH`].
+pub struct RayOctreeConfig {
+    /// Deepest level (root = 0), 0..=[`cell::MAX_OCTREE_DEPTH`].
     pub max_depth: u32,
     /// A node with at most this many primitives is a leaf (≥ 1).
     pub max_leaf_size: usize,
 }
 
-impl Default for OctreeConfig {
+impl RayOctreeConfig {
+    /// Checks the leaf size, then the depth, by the rules of [`super::cell`] (the build calls
+    /// it first).
+    ///
+    /// # Errors
+    /// [`OctreeConfigError`] naming `max_leaf_size` or `max_depth` and the value out of range.
+    pub fn validate(&self) -> Result<(), OctreeConfigError> {
+        cell::check_leaf_size("max_leaf_size", self.max_leaf_size)?;
+        cell::check_depth("max_depth", self.max_depth, 0)
+    }
+}
+
+impl Default for RayOctreeConfig {
     /// The paper's setting for Octree-o: 150 triangles per leaf (§III.B.1); depth 12.
     fn default() -> Self {
         Self {
@@ -53,36 +66,24 @@ impl Default for OctreeConfig {
     }
 }
 
-/// Why an octree was not built.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum OctreeError {
-    /// A configuration value out of range; the message names it.
-    BadConfig(String),
+/// Why a ray octree was not built.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum RayOctreeError {
+    /// A configuration value out of range ([`RayOctreeConfig::validate`]).
+    #[error(transparent)]
+    BadConfig(#[from] OctreeConfigError),
     /// The tree would hold more than this many primitive references
     /// ([`REFERENCES_PER_PRIMITIVE`] per primitive plus [`REFERENCE_SLACK`], at most
     /// [`MAX_REFERENCES`]): raise the leaf size or lower the depth.
+    #[error("octree would hold more than {0} primitive references (raise the leaf size or lower the depth)")]
     TooLarge(usize),
 }
-
-impl std::fmt::Display for OctreeError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Self::BadConfig(m) => write!(f, "bad octree configuration: {m}"),
-            Self::TooLarge(n) => write!(
-                f,
-                "octree would hold more than {n} primitive references (raise the leaf size or lower the depth)"
-            ),
-        }
-    }
-}
-
-impl std::error::Error for OctreeError {}
 
 /// A node: its box, and either 8 children (`first..first + 8`) or a leaf list
 /// (`primitives[first..first + count]`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C)]
-pub struct OctreeNode {
+pub struct RayOctreeNode {
     /// The node's octant box.
     pub bounds: Aabb,
     /// First child (internal) or first list entry (leaf).
@@ -91,9 +92,9 @@ pub struct OctreeNode {
     pub count: u32,
 }
 
-const _: () = assert!(std::mem::size_of::<OctreeNode>() == 32);
+const _: () = assert!(std::mem::size_of::<RayOctreeNode>() == 32);
 
-impl OctreeNode {
+impl RayOctreeNode {
     /// True for a leaf.
     #[inline]
     pub fn is_leaf(&self) -> bool {
@@ -112,10 +113,10 @@ impl OctreeNode {
     }
 }
 
-/// The octree.
+/// The ray octree (see the module doc).
 #[derive(Clone, Debug, Default)]
-pub struct Octree {
-    nodes: Vec<OctreeNode>,
+pub struct RayOctree {
+    nodes: Vec<RayOctreeNode>,
     /// Per node (internal nodes only meaningful): bit `i` set when child `i` is not an empty
     /// leaf; bit `8 + a` set when the node is not split along axis `a` (flat).
     split_info: Vec<u16>,
@@ -124,18 +125,18 @@ pub struct Octree {
     depth: u32,
 }
 
-impl Octree {
+impl RayOctree {
     /// An octree over the triangles `triangles` (indices into `positions`), overlap by the
     /// Akenine-Möller test. Empty for no triangles.
     ///
     /// # Errors
-    /// [`OctreeError::BadConfig`] for a zero leaf size or a depth over [`MAX_OCTREE_DEPTH`];
-    /// [`OctreeError::TooLarge`].
+    /// [`RayOctreeError::BadConfig`] for a configuration out of range
+    /// ([`RayOctreeConfig::validate`]); [`RayOctreeError::TooLarge`].
     pub fn build_triangles(
         positions: &[Vec3],
         triangles: &[[u32; 3]],
-        config: OctreeConfig,
-    ) -> Result<Self, OctreeError> {
+        config: RayOctreeConfig,
+    ) -> Result<Self, RayOctreeError> {
         let corners = |t: u32| triangles[t as usize].map(|i| positions[i as usize]);
         let boxes: Vec<Aabb> = (0..triangles.len() as u32)
             .map(|t| Aabb::from_points(corners(t)))
@@ -146,8 +147,8 @@ impl Octree {
     /// An octree over boxes (overlap = boxes share a point).
     ///
     /// # Errors
-    /// As [`Octree::build_triangles`].
-    pub fn build_boxes(boxes: &[Aabb], config: OctreeConfig) -> Result<Self, OctreeError> {
+    /// As [`RayOctree::build_triangles`].
+    pub fn build_boxes(boxes: &[Aabb], config: RayOctreeConfig) -> Result<Self, RayOctreeError> {
         Self::build_with(boxes, config, |i, b| boxes[i as usize].overlaps(b))
     }
 
@@ -155,33 +156,25 @@ impl Octree {
     /// test (called only when primitive `i`'s box overlaps `node_box`). Empty boxes are left out.
     ///
     /// # Errors
-    /// As [`Octree::build_triangles`].
+    /// As [`RayOctree::build_triangles`].
     pub fn build_with(
         boxes: &[Aabb],
-        config: OctreeConfig,
+        config: RayOctreeConfig,
         overlaps: impl Fn(u32, &Aabb) -> bool,
-    ) -> Result<Self, OctreeError> {
-        if config.max_leaf_size == 0 {
-            return Err(OctreeError::BadConfig("the leaf size must be at least 1".into()));
-        }
-        if config.max_depth > MAX_OCTREE_DEPTH {
-            return Err(OctreeError::BadConfig(format!(
-                "depth {} exceeds {MAX_OCTREE_DEPTH}",
-                config.max_depth
-            )));
-        }
+    ) -> Result<Self, RayOctreeError> {
+        config.validate()?;
         if boxes.len() > u32::MAX as usize - 1 {
-            return Err(OctreeError::TooLarge(MAX_REFERENCES));
+            return Err(RayOctreeError::TooLarge(MAX_REFERENCES));
         }
         let all: Vec<u32> = (0..boxes.len() as u32)
             .filter(|&i| !boxes[i as usize].is_empty())
             .collect();
         let bounds = all.iter().fold(Aabb::EMPTY, |b, &i| b.union(boxes[i as usize]));
-        let mut tree = Octree::default();
+        let mut tree = RayOctree::default();
         if all.is_empty() {
             return Ok(tree);
         }
-        tree.nodes.push(OctreeNode {
+        tree.nodes.push(RayOctreeNode {
             bounds,
             first: 0,
             count: 0,
@@ -215,7 +208,7 @@ impl Octree {
     /// must hold every point of those primitives that lies in the leaf's octant (for example
     /// their bounds clipped to it): rays and culling then test that box instead. Internal nodes
     /// keep their octants, from which [`crate::traverse`] derives their children's.
-    pub fn tighten_leaves(&mut self, mut tight: impl FnMut(&OctreeNode, &[u32]) -> Aabb) {
+    pub fn tighten_leaves(&mut self, mut tight: impl FnMut(&RayOctreeNode, &[u32]) -> Aabb) {
         for n in self.nodes.iter_mut().skip(1) {
             if n.is_leaf() {
                 n.bounds = tight(n, &self.primitives[n.range()]);
@@ -225,7 +218,7 @@ impl Octree {
 
     /// All nodes; node 0 is the root (absent for an empty tree).
     #[inline]
-    pub fn nodes(&self) -> &[OctreeNode] {
+    pub fn nodes(&self) -> &[RayOctreeNode] {
         &self.nodes
     }
     /// Per node: bit `i` (0..8) set when child `i` of an internal node is not an empty leaf,
@@ -263,7 +256,7 @@ impl Octree {
     }
     /// Bytes held.
     pub fn memory_bytes(&self) -> usize {
-        self.nodes.capacity() * std::mem::size_of::<OctreeNode>()
+        self.nodes.capacity() * std::mem::size_of::<RayOctreeNode>()
             + self.split_info.capacity() * 2
             + self.primitives.capacity() * 4
     }
@@ -279,18 +272,27 @@ impl Octree {
     }
 }
 
+/// The maximum corner of the lower children of a node with box `b` (the split point of
+/// [`child_bounds`]): the centre, except on the axes flagged in bits 0..3 of `flat`, which are
+/// not split and which the lower children span whole. The build and [`crate::traverse`] derive
+/// children from it alike, so the traversal's boxes are the stored ones.
+#[inline]
+pub(crate) fn lower_max(b: &Aabb, flat: u16) -> Vec3 {
+    cell::select(flat as usize & 7, b.center(), b.max)
+}
+
 struct Builder<'a, F> {
     budget: usize,
     boxes: &'a [Aabb],
     overlaps: &'a F,
-    config: OctreeConfig,
-    tree: &'a mut Octree,
+    config: RayOctreeConfig,
+    tree: &'a mut RayOctree,
 }
 
 impl<F: Fn(u32, &Aabb) -> bool> Builder<'_, F> {
-    fn make_leaf(&mut self, node: usize, list: &[u32]) -> Result<(), OctreeError> {
+    fn make_leaf(&mut self, node: usize, list: &[u32]) -> Result<(), RayOctreeError> {
         if self.tree.primitives.len() + list.len() > self.budget {
-            return Err(OctreeError::TooLarge(self.budget));
+            return Err(RayOctreeError::TooLarge(self.budget));
         }
         let n = &mut self.tree.nodes[node];
         n.first = self.tree.primitives.len() as u32;
@@ -300,33 +302,21 @@ impl<F: Fn(u32, &Aabb) -> bool> Builder<'_, F> {
         Ok(())
     }
 
-    fn split(&mut self, node: usize, list: Vec<u32>, depth: u32) -> Result<(), OctreeError> {
+    fn split(&mut self, node: usize, list: Vec<u32>, depth: u32) -> Result<(), RayOctreeError> {
         self.tree.depth = self.tree.depth.max(depth);
-        if list.len() <= self.config.max_leaf_size || depth >= self.config.max_depth {
+        if stops_splitting(list.len(), self.config.max_leaf_size, depth, self.config.max_depth) {
             return self.make_leaf(node, &list);
         }
         let b = self.tree.nodes[node].bounds;
-        let mid = b.center();
         // An axis along which the node is flat (a planar mesh) is not split: its upper children
-        // are empty, instead of two copies of everything.
+        // are empty, instead of two copies of everything, and its lower ones span it whole.
         let flat = (b.size() - Vec3::splat(b.size().max_element() * 1e-3)).cmple(Vec3::ZERO);
+        let split = lower_max(&b, flat.bitmask() as u16);
         let child_box = |i: usize| {
-            if (0..3).any(|a| i & (1 << a) != 0 && flat.test(a)) {
+            if i & flat.bitmask() as usize != 0 {
                 return Aabb::EMPTY;
             }
-            let pick = |a: usize, lo: f32, m: f32, hi: f32| {
-                if flat.test(a) {
-                    (lo, hi)
-                } else if i & (1 << a) != 0 {
-                    (m, hi)
-                } else {
-                    (lo, m)
-                }
-            };
-            let (x0, x1) = pick(0, b.min.x, mid.x, b.max.x);
-            let (y0, y1) = pick(1, b.min.y, mid.y, b.max.y);
-            let (z0, z1) = pick(2, b.min.z, mid.z, b.max.z);
-            Aabb::new(Vec3::new(x0, y0, z0), Vec3::new(x1, y1, z1))
+            child_bounds(&b, split, i)
         };
         let lists: Vec<Vec<u32>> = (0..8)
             .map(|i| {
@@ -359,7 +349,7 @@ impl<F: Fn(u32, &Aabb) -> bool> Builder<'_, F> {
         self.tree.nodes[node].first = first as u32;
         self.tree.nodes[node].count = INTERNAL;
         for i in 0..8 {
-            self.tree.nodes.push(OctreeNode {
+            self.tree.nodes.push(RayOctreeNode {
                 bounds: child_box(i),
                 first: 0,
                 count: 0,
@@ -374,6 +364,7 @@ impl<F: Fn(u32, &Aabb) -> bool> Builder<'_, F> {
 
 #[cfg(test)]
 mod tests {
+    use super::super::cell::MAX_OCTREE_DEPTH;
     use super::*;
 
     fn grid_mesh(n: usize) -> (Vec<Vec3>, Vec<[u32; 3]>) {
@@ -398,11 +389,11 @@ mod tests {
     #[test]
     fn every_triangle_is_in_a_leaf_and_leaves_respect_the_limits() {
         let (p, t) = grid_mesh(40);
-        let cfg = OctreeConfig {
+        let cfg = RayOctreeConfig {
             max_depth: 8,
             max_leaf_size: 16,
         };
-        let o = Octree::build_triangles(&p, &t, cfg).unwrap();
+        let o = RayOctree::build_triangles(&p, &t, cfg).unwrap();
         let mut seen = vec![false; t.len()];
         for (i, n) in o.nodes().iter().enumerate() {
             if n.is_leaf() {
@@ -421,44 +412,47 @@ mod tests {
 
     #[test]
     fn empty_degenerate_and_bad_configs() {
-        let o = Octree::build_triangles(&[], &[], OctreeConfig::default()).unwrap();
+        let o = RayOctree::build_triangles(&[], &[], RayOctreeConfig::default()).unwrap();
         assert!(o.is_empty());
-        let bad = OctreeConfig {
+        let bad = RayOctreeConfig {
             max_depth: 3,
             max_leaf_size: 0,
         };
-        assert!(matches!(Octree::build_boxes(&[], bad), Err(OctreeError::BadConfig(_))));
-        let deep = OctreeConfig {
+        assert!(matches!(
+            RayOctree::build_boxes(&[], bad),
+            Err(RayOctreeError::BadConfig(_))
+        ));
+        let deep = RayOctreeConfig {
             max_depth: MAX_OCTREE_DEPTH + 1,
             max_leaf_size: 1,
         };
-        assert!(Octree::build_boxes(&[], deep).is_err());
+        assert!(RayOctree::build_boxes(&[], deep).is_err());
         // Many triangles meeting in one point: no progress, one leaf, no endless split.
         let p = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z];
         let t = vec![[0, 1, 2], [0, 2, 3], [0, 3, 1], [0, 1, 3]];
-        let cfg = OctreeConfig {
+        let cfg = RayOctreeConfig {
             max_depth: 5,
             max_leaf_size: 1,
         };
-        let o = Octree::build_triangles(&p, &t, cfg).unwrap();
+        let o = RayOctree::build_triangles(&p, &t, cfg).unwrap();
         assert!(o.leaf_count() >= 1);
         // The same split to depth 20: stopped early or refused by the reference budget, never
         // an unbounded build.
-        let deep = OctreeConfig {
+        let deep = RayOctreeConfig {
             max_depth: 20,
             max_leaf_size: 1,
         };
-        match Octree::build_triangles(&p, &t, deep) {
+        match RayOctree::build_triangles(&p, &t, deep) {
             Ok(o) => assert!(o.primitives().len() <= 4 * REFERENCES_PER_PRIMITIVE + REFERENCE_SLACK),
-            Err(e) => assert!(matches!(e, OctreeError::TooLarge(_))),
+            Err(e) => assert!(matches!(e, RayOctreeError::TooLarge(_))),
         }
         // A flat mesh is not split along its flat axis.
         let (gp, gt) = grid_mesh(30);
         let flat: Vec<Vec3> = gp.iter().map(|v| Vec3::new(v.x, 0.0, v.z)).collect();
-        let o = Octree::build_triangles(
+        let o = RayOctree::build_triangles(
             &flat,
             &gt,
-            OctreeConfig {
+            RayOctreeConfig {
                 max_depth: 8,
                 max_leaf_size: 4,
             },
@@ -471,7 +465,7 @@ mod tests {
             }
         }
         // A zero-area (collinear) triangle still lands somewhere.
-        let o = Octree::build_triangles(&[Vec3::ZERO, Vec3::X, Vec3::X * 2.0], &[[0, 1, 2]], cfg).unwrap();
+        let o = RayOctree::build_triangles(&[Vec3::ZERO, Vec3::X, Vec3::X * 2.0], &[[0, 1, 2]], cfg).unwrap();
         assert_eq!(o.primitives(), &[0]);
     }
 
@@ -496,10 +490,10 @@ mod tests {
             ]);
             t.push([3 * i + 3, 3 * i + 4, 3 * i + 5]);
         }
-        let o = Octree::build_triangles(
+        let o = RayOctree::build_triangles(
             &p,
             &t,
-            OctreeConfig {
+            RayOctreeConfig {
                 max_depth: 8,
                 max_leaf_size: 4,
             },
@@ -516,7 +510,7 @@ mod tests {
     #[test]
     fn leaves_sorted_by_key() {
         let (p, t) = grid_mesh(10);
-        let mut o = Octree::build_triangles(&p, &t, OctreeConfig::default()).unwrap();
+        let mut o = RayOctree::build_triangles(&p, &t, RayOctreeConfig::default()).unwrap();
         o.sort_leaves_by_key_descending(|i| i as f32);
         for (i, n) in o.nodes().iter().enumerate() {
             if n.is_leaf() {

@@ -1,4 +1,5 @@
-//! An octree over boxes with the hybrid redistribution of hierarchical z-buffer visibility.
+//! The hybrid octree of hierarchical z-buffer visibility: an octree over boxes with the hybrid
+//! redistribution of straddling primitives.
 //!
 //! # References
 //! - C. Georges, *Obscuration Culling on Parallel Graphics Architectures*, UNC TR95-017 (1995),
@@ -6,11 +7,12 @@
 //!
 //! Built top-down (§3.1): a cell whose primitive count exceeds the leaf size, and which is not
 //! at the depth limit, is split into eight equal octants by the three axis-aligned planes that
-//! bisect it. A primitive wholly inside one octant goes to that child. A primitive that
-//! straddles a splitting plane stays at the cell ("associated with the cube itself") unless it
-//! is *small* compared to the cell (its largest extent at most `small_fraction` × the cell's
-//! side): then it goes to every child it overlaps and is flagged [`HybridOctree::is_shared`],
-//! so that a renderer draws it once per frame (a frame stamp) although several nodes hold it.
+//! bisect it ([`super::cell`]). A primitive wholly inside one octant goes to that child. A
+//! primitive that straddles a splitting plane stays at the cell ("associated with the cube
+//! itself") unless it is *small* compared to the cell (its largest extent at most
+//! `small_fraction` × the cell's side): then it goes to every child it overlaps and is flagged
+//! [`HybridOctree::is_shared`], so that a renderer draws it once per frame (a frame stamp)
+//! although several nodes hold it.
 //!
 //! Primitives are boxes in one object space: the triangles of a mesh, or the instances of a
 //! group (an instance whose prototype has its own octree is a primitive with a transform; the
@@ -27,27 +29,40 @@
 //! times its size, and the total is capped at [`MAX_DUPLICATION`] × n, past which straddling
 //! primitives stay at their cell).
 
+use super::cell::{self, child_min, octant_of, stops_splitting, OctreeConfigError};
 use occult_core::{Aabb, Vec3};
 
 /// Hard cap on index entries per primitive (duplicates from redistribution included).
 pub const MAX_DUPLICATION: usize = 4;
-/// Deepest octree accepted (levels, root included).
-pub const MAX_OCTREE_DEPTH: u32 = 32;
 
 /// How to build a [`HybridOctree`].
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct OctreeConfig {
+pub struct HybridOctreeConfig {
     /// A cell with at most this many primitives is a leaf (≥ 1).
     pub leaf_size: usize,
-    /// Levels at most, the root being level 1 (1 ..= [`MAX_OCTREE_DEPTH`]).
+    /// Levels at most, the root being level 1 (1..=[`cell::MAX_OCTREE_DEPTH`]).
     pub max_depth: u32,
     /// A straddling primitive whose largest extent is at most this fraction of the cell's side
     /// is passed to every child it overlaps; 0 keeps every straddler at its cell (§3.1's
-    /// "associate with the parent" strategy alone).
+    /// "associate with the parent" strategy alone). In [0, 1].
     pub small_fraction: f32,
 }
 
-impl Default for OctreeConfig {
+impl HybridOctreeConfig {
+    /// Checks the leaf size, the depth in levels, then the fraction, by the rules of
+    /// [`super::cell`] (the build calls it first; nothing is clamped).
+    ///
+    /// # Errors
+    /// [`OctreeConfigError`] naming `leaf_size`, `max_depth` or `small_fraction` and the value
+    /// out of range.
+    pub fn validate(&self) -> Result<(), OctreeConfigError> {
+        cell::check_leaf_size("leaf_size", self.leaf_size)?;
+        cell::check_depth("max_depth", self.max_depth, 1)?;
+        cell::check_fraction("small_fraction", self.small_fraction, 0.0, 1.0)
+    }
+}
+
+impl Default for HybridOctreeConfig {
     fn default() -> Self {
         Self {
             leaf_size: 64,
@@ -60,9 +75,9 @@ impl Default for OctreeConfig {
 /// Marks an absent child.
 pub const NO_CHILD: u32 = u32::MAX;
 
-/// A node of the octree.
+/// A node of the hybrid octree.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct OctreeNode {
+pub struct HybridOctreeNode {
     /// Union of the boxes of every primitive in the subtree.
     pub bounds: Aabb,
     /// Union of the boxes of this node's own primitives (empty when it has none).
@@ -79,9 +94,9 @@ pub struct OctreeNode {
     pub subtree_count: u32,
 }
 
-const _: () = assert!(std::mem::size_of::<OctreeNode>() == 104);
+const _: () = assert!(std::mem::size_of::<HybridOctreeNode>() == 104);
 
-impl OctreeNode {
+impl HybridOctreeNode {
     /// The range of this node's own primitives in [`HybridOctree::indices`].
     #[inline]
     pub fn range(&self) -> std::ops::Range<usize> {
@@ -97,15 +112,15 @@ impl OctreeNode {
 /// The octree: flat nodes (root at 0, none when there are no primitives), own-primitive lists.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct HybridOctree {
-    nodes: Vec<OctreeNode>,
+    nodes: Vec<HybridOctreeNode>,
     indices: Vec<u32>,
     shared: Vec<bool>,
 }
 
 struct Builder<'a> {
     boxes: &'a [Aabb],
-    config: OctreeConfig,
-    nodes: Vec<OctreeNode>,
+    config: HybridOctreeConfig,
+    nodes: Vec<HybridOctreeNode>,
     indices: Vec<u32>,
     shared: Vec<bool>,
     /// Index entries still allowed beyond one per primitive.
@@ -114,31 +129,25 @@ struct Builder<'a> {
 
 impl HybridOctree {
     /// Builds over `boxes` (one per primitive, in one object space). Empty boxes (primitives with
-    /// no points) stay at the root. `config` values out of range are clamped (leaf size to ≥ 1,
-    /// depth to 1 ..= [`MAX_OCTREE_DEPTH`], fraction to [0, 1]); renderers validate them first.
+    /// no points) stay at the root.
+    ///
+    /// # Errors
+    /// [`OctreeConfigError`] for a configuration out of range ([`HybridOctreeConfig::validate`]).
     ///
     /// # Panics
     /// If there are more than `u32::MAX / MAX_DUPLICATION` boxes (meshes index with `u32`).
-    pub fn build(boxes: &[Aabb], config: &OctreeConfig) -> Self {
+    pub fn build(boxes: &[Aabb], config: &HybridOctreeConfig) -> Result<Self, OctreeConfigError> {
         assert!(
             boxes.len() <= (u32::MAX as usize) / MAX_DUPLICATION,
             "too many primitives for a u32 octree"
         );
-        let config = OctreeConfig {
-            leaf_size: config.leaf_size.max(1),
-            max_depth: config.max_depth.clamp(1, MAX_OCTREE_DEPTH),
-            small_fraction: if config.small_fraction.is_finite() {
-                config.small_fraction.clamp(0.0, 1.0)
-            } else {
-                0.0
-            },
-        };
+        config.validate()?;
         if boxes.is_empty() {
-            return Self::default();
+            return Ok(Self::default());
         }
         let mut b = Builder {
             boxes,
-            config,
+            config: *config,
             nodes: Vec::new(),
             indices: Vec::with_capacity(boxes.len()),
             shared: vec![false; boxes.len()],
@@ -154,19 +163,19 @@ impl HybridOctree {
         };
         let (empty, prims): (Vec<u32>, Vec<u32>) = (0..boxes.len() as u32).partition(|&i| boxes[i as usize].is_empty());
         b.node(root_cell_min, side, prims, 1, &empty);
-        Self {
+        Ok(Self {
             nodes: b.nodes,
             indices: b.indices,
             shared: b.shared,
-        }
+        })
     }
 
     /// The nodes, root first (empty for no primitives).
-    pub fn nodes(&self) -> &[OctreeNode] {
+    pub fn nodes(&self) -> &[HybridOctreeNode] {
         &self.nodes
     }
 
-    /// Own-primitive lists of all nodes, concatenated (see [`OctreeNode::range`]).
+    /// Own-primitive lists of all nodes, concatenated (see [`HybridOctreeNode::range`]).
     pub fn indices(&self) -> &[u32] {
         &self.indices
     }
@@ -199,9 +208,7 @@ impl HybridOctree {
     /// for the tight bounds). Returns the array and how many of its entries are valid.
     pub fn children_front_to_back(&self, node_index: u32, eye: Vec3) -> ([u32; 8], usize) {
         let n = &self.nodes[node_index as usize];
-        let mask = (eye.x >= n.center.x) as usize
-            | ((eye.y >= n.center.y) as usize) << 1
-            | ((eye.z >= n.center.z) as usize) << 2;
+        let mask = octant_of(n.center, eye);
         let mut out = [NO_CHILD; 8];
         let mut k = 0;
         // Octants in order of the number of planes separating them from the eye's octant.
@@ -217,7 +224,9 @@ impl HybridOctree {
 
     /// Bytes held.
     pub fn memory_bytes(&self) -> usize {
-        self.nodes.capacity() * std::mem::size_of::<OctreeNode>() + self.indices.capacity() * 4 + self.shared.capacity()
+        self.nodes.capacity() * std::mem::size_of::<HybridOctreeNode>()
+            + self.indices.capacity() * 4
+            + self.shared.capacity()
     }
 }
 
@@ -227,7 +236,7 @@ impl Builder<'_> {
     fn node(&mut self, cell_min: Vec3, side: f32, prims: Vec<u32>, level: u32, extra: &[u32]) -> u32 {
         let index = self.nodes.len() as u32;
         let center = cell_min + Vec3::splat(0.5 * side);
-        self.nodes.push(OctreeNode {
+        self.nodes.push(HybridOctreeNode {
             bounds: Aabb::EMPTY,
             own_bounds: Aabb::EMPTY,
             center,
@@ -238,7 +247,7 @@ impl Builder<'_> {
         });
         let mut own: Vec<u32> = extra.to_vec();
         let mut parts: [Vec<u32>; 8] = Default::default();
-        if prims.len() <= self.config.leaf_size || level >= self.config.max_depth || side <= 0.0 {
+        if stops_splitting(prims.len(), self.config.leaf_size, level, self.config.max_depth) || side <= 0.0 {
             own.extend_from_slice(&prims);
         } else {
             let small = self.config.small_fraction * side;
@@ -285,13 +294,8 @@ impl Builder<'_> {
             if part.is_empty() {
                 continue;
             }
-            let child_min = cell_min
-                + Vec3::new(
-                    if o & 1 != 0 { half } else { 0.0 },
-                    if o & 2 != 0 { half } else { 0.0 },
-                    if o & 4 != 0 { half } else { 0.0 },
-                );
-            let c = self.node(child_min, half, part, level + 1, &[]);
+            // The centre is `cell_min + half` to the bit: the upper octants start there.
+            let c = self.node(child_min(cell_min, center, o), half, part, level + 1, &[]);
             let cn = self.nodes[c as usize];
             bounds = bounds.union(cn.bounds);
             subtree_count += cn.subtree_count;
@@ -322,7 +326,7 @@ mod tests {
 
     /// Every primitive is held at least once, unshared ones exactly once, each by nodes whose
     /// bounds contain it; subtree bounds contain the children's; counts add up.
-    fn check(t: &HybridOctree, boxes: &[Aabb], config: &OctreeConfig) {
+    fn check(t: &HybridOctree, boxes: &[Aabb], config: &HybridOctreeConfig) {
         let mut held = vec![0usize; boxes.len()];
         for (i, n) in t.nodes().iter().enumerate() {
             let mut sub = n.count;
@@ -358,6 +362,18 @@ mod tests {
         assert!(depth <= config.max_depth);
     }
 
+    /// The octree of `boxes` with that configuration, checked by [`check`].
+    fn build_checked(boxes: &[Aabb], leaf_size: usize, max_depth: u32, small_fraction: f32) -> HybridOctree {
+        let config = HybridOctreeConfig {
+            leaf_size,
+            max_depth,
+            small_fraction,
+        };
+        let t = HybridOctree::build(boxes, &config).unwrap();
+        check(&t, boxes, &config);
+        t
+    }
+
     fn depth_of(t: &HybridOctree, n: u32) -> u32 {
         1 + t.nodes()[n as usize]
             .children
@@ -370,7 +386,7 @@ mod tests {
 
     #[test]
     fn empty_input_has_no_nodes() {
-        let t = HybridOctree::build(&[], &OctreeConfig::default());
+        let t = HybridOctree::build(&[], &HybridOctreeConfig::default()).unwrap();
         assert!(t.nodes().is_empty());
         assert!(t.indices().is_empty());
     }
@@ -378,7 +394,7 @@ mod tests {
     #[test]
     fn small_input_is_one_leaf() {
         let boxes = grid_boxes(10, 0.5);
-        let t = HybridOctree::build(&boxes, &OctreeConfig::default());
+        let t = HybridOctree::build(&boxes, &HybridOctreeConfig::default()).unwrap();
         assert_eq!(t.nodes().len(), 1);
         assert!(t.nodes()[0].is_leaf());
         assert_eq!(t.nodes()[0].count, 10);
@@ -389,14 +405,7 @@ mod tests {
         for small in [0.0, 0.1, 0.25, 1.0] {
             for leaf in [1, 4, 64] {
                 for size in [0.1, 1.0, 3.0] {
-                    let boxes = grid_boxes(1000, size);
-                    let config = OctreeConfig {
-                        leaf_size: leaf,
-                        max_depth: 8,
-                        small_fraction: small,
-                    };
-                    let t = HybridOctree::build(&boxes, &config);
-                    check(&t, &boxes, &config);
+                    let t = build_checked(&grid_boxes(1000, size), leaf, 8, small);
                     if leaf < 1000 {
                         assert!(t.nodes().len() > 1);
                     }
@@ -417,13 +426,7 @@ mod tests {
         boxes.push(Aabb::new(c - Vec3::splat(0.01), c + Vec3::splat(0.01)));
         let huge = boxes.len() as u32;
         boxes.push(Aabb::new(c - Vec3::splat(5.0), c + Vec3::splat(5.0)));
-        let config = OctreeConfig {
-            leaf_size: 8,
-            max_depth: 6,
-            small_fraction: 0.25,
-        };
-        let t = HybridOctree::build(&boxes, &config);
-        check(&t, &boxes, &config);
+        let t = build_checked(&boxes, 8, 6, 0.25);
         assert!(t.is_shared(tiny));
         assert!(!t.is_shared(huge));
         assert!(t.node_primitives(0).contains(&huge));
@@ -435,30 +438,53 @@ mod tests {
         // All primitives at one point (zero size, on every splitting plane), and empty boxes.
         let mut boxes = vec![Aabb::new(Vec3::ONE, Vec3::ONE); 500];
         boxes.push(Aabb::EMPTY);
-        let config = OctreeConfig {
-            leaf_size: 1,
-            max_depth: 32,
-            small_fraction: 1.0,
-        };
-        let t = HybridOctree::build(&boxes, &config);
-        check(&t, &boxes, &config);
+        let t = build_checked(&boxes, 1, 32, 1.0);
         assert!(t.node_primitives(0).contains(&500));
         // Depth 1 is a single leaf.
-        let t = HybridOctree::build(
-            &grid_boxes(300, 0.3),
-            &OctreeConfig {
-                leaf_size: 1,
-                max_depth: 1,
-                small_fraction: 0.5,
-            },
-        );
+        let t = build_checked(&grid_boxes(300, 0.3), 1, 1, 0.5);
         assert_eq!(t.nodes().len(), 1);
+    }
+
+    /// Values the build used to clamp are errors naming the field; the deepest limit builds.
+    #[test]
+    fn bad_configs_are_errors() {
+        let boxes = grid_boxes(50, 0.5);
+        let d = HybridOctreeConfig::default();
+        for (bad, field) in [
+            (HybridOctreeConfig { leaf_size: 0, ..d }, "leaf_size"),
+            (HybridOctreeConfig { max_depth: 0, ..d }, "max_depth"),
+            (
+                HybridOctreeConfig {
+                    max_depth: cell::MAX_OCTREE_DEPTH + 1,
+                    ..d
+                },
+                "max_depth",
+            ),
+            (
+                HybridOctreeConfig {
+                    small_fraction: -0.1,
+                    ..d
+                },
+                "small_fraction",
+            ),
+            (
+                HybridOctreeConfig {
+                    small_fraction: f32::NAN,
+                    ..d
+                },
+                "small_fraction",
+            ),
+        ] {
+            assert_eq!(HybridOctree::build(&boxes, &bad).unwrap_err().field, field);
+            assert_eq!(HybridOctree::build(&[], &bad).unwrap_err().field, field);
+        }
+        build_checked(&boxes, 1, cell::MAX_OCTREE_DEPTH, 1.0);
     }
 
     #[test]
     fn children_order_starts_at_the_eye() {
         let boxes = grid_boxes(2000, 0.2);
-        let t = HybridOctree::build(&boxes, &OctreeConfig::default());
+        let t = HybridOctree::build(&boxes, &HybridOctreeConfig::default()).unwrap();
         let root = &t.nodes()[0];
         let eye = root.center + Vec3::new(-100.0, -100.0, -100.0);
         let (order, k) = t.children_front_to_back(0, eye);

@@ -1,5 +1,5 @@
-//! An octree with shortcuts and extended boxes whose nodes own sections of one global
-//! distribution list: the sample-selection structure of the randomized z-buffer.
+//! The sample octree of the randomized z-buffer: an octree with shortcuts and extended boxes
+//! whose nodes own sections of one global distribution list, the sample-selection structure.
 //!
 //! # References
 //! - Wand et al. 2001 (`papers/randomized-z-buffer-wand-2001.txt`):
@@ -24,6 +24,7 @@
 //! entry (index + prefix sum) and one 84-byte node per stored node, at most about 2n/leaf_size
 //! nodes thanks to shortcuts.
 
+use super::cell::{self, child_min, octant_of, stops_splitting, OctreeConfigError};
 use occult_core::{Aabb, Vec3};
 
 /// Tunables of [`SampleOctree::build`].
@@ -32,10 +33,25 @@ pub struct SampleOctreeConfig {
     /// Entries a leaf may hold (≥ 1): smaller gives finer depth classification, more nodes.
     pub leaf_size: usize,
     /// Growth of a child's cell into its extended box, as a fraction of the cell side on each
-    /// side (≥ 0; §5.3.1 "enlarged by a constant factor"). 0.5 doubles the side.
+    /// side (finite, ≥ 0; §5.3.1 "enlarged by a constant factor"). 0.5 doubles the side.
     pub extension: f32,
-    /// Deepest level (cells halved this many times), a guard against coincident entries.
+    /// Deepest level (cells halved this many times, 0..=[`cell::MAX_OCTREE_DEPTH`]), a guard
+    /// against coincident entries.
     pub max_depth: u32,
+}
+
+impl SampleOctreeConfig {
+    /// Checks the leaf size, the extension (finite, ≥ 0), then the depth, by the rules of
+    /// [`super::cell`] (the build calls it first; nothing is clamped).
+    ///
+    /// # Errors
+    /// [`OctreeConfigError`] naming `leaf_size`, `extension` or `max_depth` and the value out
+    /// of range.
+    pub fn validate(&self) -> Result<(), OctreeConfigError> {
+        cell::check_leaf_size("leaf_size", self.leaf_size)?;
+        cell::check_fraction("extension", self.extension, 0.0, f32::MAX)?;
+        cell::check_depth("max_depth", self.max_depth, 0)
+    }
 }
 
 impl Default for SampleOctreeConfig {
@@ -51,7 +67,7 @@ impl Default for SampleOctreeConfig {
 /// A stored node (§5.3.1). `first..own_first` is the children's part of its section,
 /// `own_first..end` its own entries.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct OctreeNode {
+pub struct SampleOctreeNode {
     /// Tight bounds of every entry of the section.
     pub bounds: Aabb,
     /// Tight bounds of the node's own entries (empty when none).
@@ -72,9 +88,9 @@ pub struct OctreeNode {
     pub child_count: u32,
 }
 
-const _: () = assert!(std::mem::size_of::<OctreeNode>() == 84);
+const _: () = assert!(std::mem::size_of::<SampleOctreeNode>() == 84);
 
-impl OctreeNode {
+impl SampleOctreeNode {
     /// True when it has no stored child.
     #[inline]
     pub fn is_leaf(&self) -> bool {
@@ -100,7 +116,7 @@ impl OctreeNode {
 /// Octrees (one per class) over one global distribution list.
 #[derive(Clone, Debug, Default)]
 pub struct SampleOctree {
-    nodes: Vec<OctreeNode>,
+    nodes: Vec<SampleOctreeNode>,
     /// Entry index at each list position.
     entries: Vec<u32>,
     /// `prefix[i]`: summed area of positions `0..i` (length `entries + 1`).
@@ -115,6 +131,9 @@ impl SampleOctree {
     /// class `classes[i]` (`< class_count`). Entries of zero or non-finite area, or with an
     /// empty box, are left out (they can never be sampled).
     ///
+    /// # Errors
+    /// [`OctreeConfigError`] for a configuration out of range ([`SampleOctreeConfig::validate`]).
+    ///
     /// # Panics
     /// If the slices differ in length or a class is out of range (programmer errors).
     pub fn build(
@@ -123,12 +142,13 @@ impl SampleOctree {
         classes: &[u32],
         class_count: usize,
         config: &SampleOctreeConfig,
-    ) -> Self {
+    ) -> Result<Self, OctreeConfigError> {
         assert!(
             boxes.len() == areas.len() && areas.len() == classes.len(),
             "entry slices differ in length"
         );
         assert!(boxes.len() < u32::MAX as usize, "too many entries");
+        config.validate()?;
         let mut per_class: Vec<Vec<u32>> = vec![Vec::new(); class_count];
         for i in 0..boxes.len() {
             let a = areas[i];
@@ -137,13 +157,9 @@ impl SampleOctree {
                 per_class[classes[i] as usize].push(i as u32);
             }
         }
-        let config = SampleOctreeConfig {
-            leaf_size: config.leaf_size.max(1),
-            ..config.clone()
-        };
         let mut b = Builder {
             boxes,
-            config: &config,
+            config,
             nodes: Vec::new(),
             entries: Vec::with_capacity(boxes.len()),
         };
@@ -167,18 +183,18 @@ impl SampleOctree {
             sum += areas[e as usize];
             prefix.push(sum);
         }
-        Self {
+        Ok(Self {
             nodes: b.nodes,
             entries: b.entries,
             prefix,
             roots,
-            config,
-        }
+            config: config.clone(),
+        })
     }
 
     /// All nodes.
     #[inline]
-    pub fn nodes(&self) -> &[OctreeNode] {
+    pub fn nodes(&self) -> &[SampleOctreeNode] {
         &self.nodes
     }
     /// The root of each class.
@@ -244,12 +260,12 @@ impl SampleOctree {
 
     /// Bytes held.
     pub fn memory_bytes(&self) -> usize {
-        self.nodes.len() * std::mem::size_of::<OctreeNode>() + self.entries.len() * 4 + self.prefix.len() * 8
+        self.nodes.len() * std::mem::size_of::<SampleOctreeNode>() + self.entries.len() * 4 + self.prefix.len() * 8
     }
 }
 
-fn placeholder() -> OctreeNode {
-    OctreeNode {
+fn placeholder() -> SampleOctreeNode {
+    SampleOctreeNode {
         bounds: Aabb::EMPTY,
         own_bounds: Aabb::EMPTY,
         cell_min: Vec3::ZERO,
@@ -265,16 +281,9 @@ fn placeholder() -> OctreeNode {
 /// The octant of `p` in the cell `(min, side)`, and that child's cell minimum.
 #[inline]
 fn octant(min: Vec3, side: f32, p: Vec3) -> (usize, Vec3) {
-    let h = 0.5 * side;
-    let c = min + Vec3::splat(h);
-    let (bx, by, bz) = (p.x >= c.x, p.y >= c.y, p.z >= c.z);
-    let k = bx as usize | (by as usize) << 1 | (bz as usize) << 2;
-    let cmin = Vec3::new(
-        if bx { c.x } else { min.x },
-        if by { c.y } else { min.y },
-        if bz { c.z } else { min.z },
-    );
-    (k, cmin)
+    let center = min + Vec3::splat(0.5 * side);
+    let k = octant_of(center, p);
+    (k, child_min(min, center, k))
 }
 
 /// The extended box of the cell `(min, side)` (§5.3.1).
@@ -292,7 +301,7 @@ fn contains(outer: &Aabb, inner: &Aabb) -> bool {
 struct Builder<'a> {
     boxes: &'a [Aabb],
     config: &'a SampleOctreeConfig,
-    nodes: Vec<OctreeNode>,
+    nodes: Vec<SampleOctreeNode>,
     entries: Vec<u32>,
 }
 
@@ -304,7 +313,7 @@ impl Builder<'_> {
             .fold(Aabb::EMPTY, |acc, &i| acc.union(self.boxes[i as usize]));
         let first = self.entries.len() as u32;
         let (mut own, buckets) = loop {
-            if ents.len() <= self.config.leaf_size || depth >= self.config.max_depth {
+            if stops_splitting(ents.len(), self.config.leaf_size, depth, self.config.max_depth) {
                 break (ents, Vec::new());
             }
             let mut own = Vec::new();
@@ -347,7 +356,7 @@ impl Builder<'_> {
             .iter()
             .fold(Aabb::EMPTY, |acc, &i| acc.union(self.boxes[i as usize]));
         self.entries.extend_from_slice(&own);
-        self.nodes[slot as usize] = OctreeNode {
+        self.nodes[slot as usize] = SampleOctreeNode {
             bounds,
             own_bounds,
             cell_min: min,
@@ -391,6 +400,26 @@ pub struct DistributionTree {
     extension: f32,
 }
 
+/// Summed area and weight of a set of entries of a [`DistributionTree`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Sums {
+    /// Summed area.
+    pub area: f64,
+    /// Summed weight (saturating).
+    pub weight: u64,
+}
+
+impl Sums {
+    /// These sums and one more term, added in that order (the order fixes the bits).
+    #[inline]
+    fn add(self, area: f64, weight: u64) -> Self {
+        Self {
+            area: self.area + area,
+            weight: self.weight.saturating_add(weight),
+        }
+    }
+}
+
 #[derive(Clone, Debug)]
 struct DynNode {
     cell_min: Vec3,
@@ -398,10 +427,8 @@ struct DynNode {
     parent: u32,
     children: std::ops::Range<u32>,
     own: Vec<u32>,
-    own_area: f64,
-    own_weight: u64,
-    subtree_area: f64,
-    subtree_weight: u64,
+    own_sums: Sums,
+    subtree_sums: Sums,
 }
 
 impl DistributionTree {
@@ -434,10 +461,8 @@ impl DistributionTree {
                 parent: u32::MAX,
                 children: on.children(),
                 own,
-                own_area: 0.0,
-                own_weight: 0,
-                subtree_area: 0.0,
-                subtree_weight: 0,
+                own_sums: Sums::default(),
+                subtree_sums: Sums::default(),
             });
         }
         for i in 0..t.nodes.len() {
@@ -447,42 +472,35 @@ impl DistributionTree {
         }
         // Children are stored after their parent: sum from the back.
         for i in (0..t.nodes.len()).rev() {
-            t.own_sums(i);
-            t.subtree_sums(i);
+            t.recompute_own(i);
+            t.recompute_subtree(i);
         }
         t
     }
 
-    fn own_sums(&mut self, n: usize) {
+    fn recompute_own(&mut self, n: usize) {
         let node = &self.nodes[n];
-        let mut a = 0.0;
-        let mut w = 0u64;
-        for &e in &node.own {
-            a += self.area[e as usize];
-            w = w.saturating_add(self.weight[e as usize]);
-        }
-        let node = &mut self.nodes[n];
-        node.own_area = a;
-        node.own_weight = w;
+        let sums = node.own.iter().fold(Sums::default(), |s, &e| {
+            s.add(self.area[e as usize], self.weight[e as usize])
+        });
+        self.nodes[n].own_sums = sums;
     }
 
-    fn subtree_sums(&mut self, n: usize) {
-        let mut a = self.nodes[n].own_area;
-        let mut w = self.nodes[n].own_weight;
-        for c in self.nodes[n].children.clone() {
-            a += self.nodes[c as usize].subtree_area;
-            w = w.saturating_add(self.nodes[c as usize].subtree_weight);
-        }
-        self.nodes[n].subtree_area = a;
-        self.nodes[n].subtree_weight = w;
+    fn recompute_subtree(&mut self, n: usize) {
+        let node = &self.nodes[n];
+        let sums = node.children.clone().fold(node.own_sums, |s, c| {
+            let child = self.nodes[c as usize].subtree_sums;
+            s.add(child.area, child.weight)
+        });
+        self.nodes[n].subtree_sums = sums;
     }
 
     /// Recomputes the sums of node `n` and its ancestors, O(height · (own + 8)).
     fn update_path(&mut self, n: u32) {
-        self.own_sums(n as usize);
+        self.recompute_own(n as usize);
         let mut m = n;
         while m != u32::MAX {
-            self.subtree_sums(m as usize);
+            self.recompute_subtree(m as usize);
             m = self.nodes[m as usize].parent;
         }
     }
@@ -496,35 +514,24 @@ impl DistributionTree {
         self.roots
             .iter()
             .flatten()
-            .map(|&r| self.nodes[r as usize].subtree_area)
+            .map(|&r| self.nodes[r as usize].subtree_sums.area)
             .sum()
     }
     /// Summed weight of all classes.
     pub fn total_weight(&self) -> u64 {
-        self.roots
-            .iter()
-            .flatten()
-            .fold(0u64, |a, &r| a.saturating_add(self.nodes[r as usize].subtree_weight))
+        self.roots.iter().flatten().fold(0u64, |a, &r| {
+            a.saturating_add(self.nodes[r as usize].subtree_sums.weight)
+        })
     }
-    /// Summed area of node `n`'s subtree.
+    /// Summed area and weight of node `n`'s subtree.
     #[inline]
-    pub fn subtree_area(&self, n: u32) -> f64 {
-        self.nodes[n as usize].subtree_area
+    pub fn subtree_sums(&self, n: u32) -> Sums {
+        self.nodes[n as usize].subtree_sums
     }
-    /// Summed weight of node `n`'s subtree.
+    /// Summed area and weight of node `n`'s own entries.
     #[inline]
-    pub fn subtree_weight(&self, n: u32) -> u64 {
-        self.nodes[n as usize].subtree_weight
-    }
-    /// Summed area of node `n`'s own entries.
-    #[inline]
-    pub fn own_area(&self, n: u32) -> f64 {
-        self.nodes[n as usize].own_area
-    }
-    /// Summed weight of node `n`'s own entries.
-    #[inline]
-    pub fn own_weight(&self, n: u32) -> u64 {
-        self.nodes[n as usize].own_weight
+    pub fn own_sums(&self, n: u32) -> Sums {
+        self.nodes[n as usize].own_sums
     }
     /// The entries stored at node `n`, sorted by id.
     #[inline]
@@ -665,16 +672,16 @@ impl DistributionTree {
     /// `None` when the subtree has no area.
     pub fn sample(&self, node: u32, u: f64) -> Option<u32> {
         let n = self.nodes.get(node as usize)?;
-        if n.subtree_area <= 0.0 {
+        if n.subtree_sums.area <= 0.0 {
             return None;
         }
-        Some(self.descend(node, u * n.subtree_area))
+        Some(self.descend(node, u * n.subtree_sums.area))
     }
 
     /// An entry stored at `node` itself (not below), chosen by area from `u ∈ [0, 1)`.
     pub fn sample_own(&self, node: u32, u: f64) -> Option<u32> {
         let n = self.nodes.get(node as usize)?;
-        let mut r = u * n.own_area;
+        let mut r = u * n.own_sums.area;
         let mut last = None;
         for &e in &n.own {
             let a = self.area[e as usize];
@@ -698,7 +705,7 @@ impl DistributionTree {
         let mut r = u * total;
         let mut last = None;
         for &root in self.roots.iter().flatten() {
-            let a = self.nodes[root as usize].subtree_area;
+            let a = self.nodes[root as usize].subtree_sums.area;
             if a > 0.0 {
                 if r < a {
                     return Some(self.descend(root, r));
@@ -728,7 +735,7 @@ impl DistributionTree {
             }
             let mut next = None;
             for c in node.children.clone() {
-                let a = self.nodes[c as usize].subtree_area;
+                let a = self.nodes[c as usize].subtree_sums.area;
                 if a > 0.0 {
                     if r < a {
                         next = Some(c as usize);
@@ -772,7 +779,7 @@ mod tests {
     fn sections_partition_the_list_and_entries_fit_their_extended_cells() {
         let (boxes, areas) = random_triangles(5000, 1);
         let classes = vec![0; boxes.len()];
-        let t = SampleOctree::build(&boxes, &areas, &classes, 1, &SampleOctreeConfig::default());
+        let t = SampleOctree::build(&boxes, &areas, &classes, 1, &SampleOctreeConfig::default()).unwrap();
         assert_eq!(t.entries().len(), 5000);
         let mut seen = vec![false; 5000];
         for &e in t.entries() {
@@ -809,7 +816,7 @@ mod tests {
         let (boxes, mut areas) = random_triangles(300, 2);
         areas[7] = 0.0; // never sampled
         let classes: Vec<u32> = (0..300).map(|i| (i % 3) as u32).collect();
-        let t = SampleOctree::build(&boxes, &areas, &classes, 3, &SampleOctreeConfig::default());
+        let t = SampleOctree::build(&boxes, &areas, &classes, 3, &SampleOctreeConfig::default()).unwrap();
         assert_eq!(t.entries().len(), 299);
         for n in t.nodes() {
             let r = n.section();
@@ -837,18 +844,62 @@ mod tests {
     fn coincident_entries_and_empty_input_terminate() {
         let boxes = vec![Aabb::new(Vec3::ONE, Vec3::ONE); 1000];
         let areas = vec![1.0; 1000];
-        let t = SampleOctree::build(&boxes, &areas, &[0; 1000], 1, &SampleOctreeConfig::default());
+        let build = |boxes: &[Aabb], areas: &[f64], classes: &[u32], class_count: usize| {
+            SampleOctree::build(boxes, areas, classes, class_count, &SampleOctreeConfig::default()).unwrap()
+        };
+        let t = build(&boxes, &areas, &[0; 1000], 1);
         assert_eq!(t.entries().len(), 1000);
-        let e = SampleOctree::build(&[], &[], &[], 2, &SampleOctreeConfig::default());
+        let e = build(&[], &[], &[], 2);
         assert_eq!(e.roots(), &[None, None]);
-        let nan = SampleOctree::build(
-            &[Aabb::new(Vec3::NAN, Vec3::NAN)],
-            &[1.0],
-            &[0],
-            1,
-            &SampleOctreeConfig::default(),
-        );
+        let nan = build(&[Aabb::new(Vec3::NAN, Vec3::NAN)], &[1.0], &[0], 1);
         assert!(nan.entries().is_empty());
+    }
+
+    /// A leaf size the build used to clamp, and absurd extensions and depths, are errors naming
+    /// the field; the deepest limit builds.
+    #[test]
+    fn bad_configs_are_errors() {
+        let (boxes, areas) = random_triangles(100, 6);
+        let d = SampleOctreeConfig::default();
+        for (bad, field) in [
+            (
+                SampleOctreeConfig {
+                    leaf_size: 0,
+                    ..d.clone()
+                },
+                "leaf_size",
+            ),
+            (
+                SampleOctreeConfig {
+                    extension: -0.25,
+                    ..d.clone()
+                },
+                "extension",
+            ),
+            (
+                SampleOctreeConfig {
+                    extension: f32::INFINITY,
+                    ..d.clone()
+                },
+                "extension",
+            ),
+            (
+                SampleOctreeConfig {
+                    max_depth: cell::MAX_OCTREE_DEPTH + 1,
+                    ..d.clone()
+                },
+                "max_depth",
+            ),
+        ] {
+            let e = SampleOctree::build(&boxes, &areas, &[0; 100], 1, &bad).unwrap_err();
+            assert_eq!(e.field, field);
+        }
+        let deepest = SampleOctreeConfig {
+            max_depth: cell::MAX_OCTREE_DEPTH,
+            ..d
+        };
+        assert_eq!(d.max_depth, cell::MAX_OCTREE_DEPTH);
+        assert!(SampleOctree::build(&boxes, &areas, &[0; 100], 1, &deepest).is_ok());
     }
 
     fn histogram(t: &DistributionTree, n: usize, bins: usize, seed: u64) -> Vec<u32> {
@@ -887,7 +938,8 @@ mod tests {
                 leaf_size: 8,
                 ..Default::default()
             },
-        );
+        )
+        .unwrap();
         let mut d = DistributionTree::from_octree(&t, &areas, &[]);
         let before_total = d.total_area();
         let samples = 400_000;
@@ -914,7 +966,7 @@ mod tests {
         // nodes restores the sums bit for bit, hence the very same samples for a seed.
         let sums = |d: &DistributionTree| {
             (0..d.node_count() as u32)
-                .map(|n| d.subtree_area(n).to_bits())
+                .map(|n| d.subtree_sums(n).area.to_bits())
                 .collect::<Vec<_>>()
         };
         let before = sums(&d);
