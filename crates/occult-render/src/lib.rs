@@ -30,6 +30,7 @@
 
 pub mod compare;
 pub mod frustum;
+mod hash;
 pub mod hzb;
 pub mod lzb;
 pub mod nbuffer;

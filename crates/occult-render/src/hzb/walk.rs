@@ -1,7 +1,7 @@
 //! One frame of [`super::Hzb`]: the visible list, the tested traversal, batches, the recheck.
 
 use std::collections::HashSet;
-use std::hash::{BuildHasherDefault, Hasher};
+use std::hash::Hasher;
 use std::time::Instant;
 
 use occult_core::{Affine3A, Containment, Frustum, Mat4, Mesh, NodeId, NodeKind, Scene, Vec3, View};
@@ -10,31 +10,11 @@ use occult_spatial::{octree_hybrid::NO_CHILD, HybridOctree};
 
 use super::boxtest::{screen_rect, Occlusion};
 use super::{ChildOrder, Distribution, HzbOptions, VisEntry};
+use crate::hash::{FxBuild, FxHasher};
 use crate::walk::{NodeAt, NodeTest, Placed, SceneWalk, Visitor};
 use crate::{FrameStats, Phase};
 
-/// A small multiplicative hasher for the frame's stamp sets (keys are ids, not attacker data).
-#[derive(Default)]
-struct IdHasher(u64);
-
-impl Hasher for IdHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(b as u64);
-        }
-    }
-    fn write_u64(&mut self, v: u64) {
-        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
-    }
-    fn write_u32(&mut self, v: u32) {
-        self.write_u64(v as u64);
-    }
-}
-
-type IdSet<K> = HashSet<K, BuildHasherDefault<IdHasher>>;
+type IdSet<K> = HashSet<K, FxBuild>;
 
 /// Names one octree node of one instance of a DAG node: (DAG node, octree node, first item).
 type NodeKey = (u32, u32, u64);
@@ -57,7 +37,7 @@ pub(super) struct Stamps {
     /// Per DAG node: words of one instance's bit set.
     words: Vec<u32>,
     /// Instance (DAG node, first item) → offset of its bit set in `bits`, this frame.
-    slots: std::collections::HashMap<(u32, u64), usize, BuildHasherDefault<IdHasher>>,
+    slots: std::collections::HashMap<(u32, u64), usize, FxBuild>,
     bits: Vec<u64>,
     /// The last instance looked up and its offset.
     last: Option<((u32, u64), usize)>,
@@ -163,7 +143,7 @@ impl Share {
     };
 
     fn mix(key: NodeKey) -> u64 {
-        let mut h = IdHasher::default();
+        let mut h = FxHasher::default();
         h.write_u32(key.0);
         h.write_u32(key.1);
         h.write_u64(key.2);
@@ -245,7 +225,7 @@ pub(super) struct Walk<'a> {
     /// The next visible list, and its keys.
     visible: Vec<VisEntry>,
     listed: IdSet<NodeKey>,
-    placements: std::collections::HashMap<(u32, u64), Placement, BuildHasherDefault<IdHasher>>,
+    placements: std::collections::HashMap<(u32, u64), Placement, FxBuild>,
     /// Whether the last instance visited was a small mesh queued whole.
     queued_whole: bool,
     pc: PyramidCounts,
@@ -392,7 +372,7 @@ impl<'a> Walk<'a> {
             return out;
         }
         let scene: &'a Scene = self.walk.scene();
-        let mut listed: std::collections::HashMap<(u32, u64), u64, BuildHasherDefault<IdHasher>> = Default::default();
+        let mut listed: std::collections::HashMap<(u32, u64), u64, FxBuild> = Default::default();
         for e in list {
             if !e.stale && matches!(scene.node(e.dag_node).kind(), NodeKind::Mesh(_)) {
                 *listed.entry((e.dag_node.0, e.first_item)).or_default() += self.node_of(e).count as u64;

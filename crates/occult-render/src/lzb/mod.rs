@@ -978,7 +978,7 @@ impl Renderer for Lzb {
                 .collect()
         });
         let mut pairs: Vec<(ItemId, u32)> = Vec::new();
-        let mut recs = std::collections::HashMap::<ItemId, InstanceRec, cast::FxBuild>::default();
+        let mut recs = std::collections::HashMap::<ItemId, InstanceRec, crate::hash::FxBuild>::default();
         let mut hits = Vec::new();
         let (mut rays, mut tests, mut coherent, mut leaves, mut resolved, mut ray_nodes) = (0, 0, 0, 0, 0, 0);
         for c in results {
