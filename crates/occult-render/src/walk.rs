@@ -349,3 +349,146 @@ pub fn cull_bvh<C: Counts>(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use occult_core::{Camera, NodeKind, Vec3};
+
+    /// Counts the mesh instances entered and the triangles met.
+    struct Meshes<'s> {
+        walk: SceneWalk<'s>,
+        entered: Vec<Placed>,
+    }
+
+    impl<'s> Visitor<'s> for Meshes<'s> {
+        fn walk(&mut self) -> &mut SceneWalk<'s> {
+            &mut self.walk
+        }
+        fn visit(&mut self, at: &NodeAt<'s>) {
+            match at.node.kind() {
+                NodeKind::Mesh(m) => {
+                    self.entered.push(at.place);
+                    self.walk.meet_triangles(m.triangle_count() as u64);
+                }
+                NodeKind::Group(instances) => {
+                    for i in 0..instances.len() {
+                        self.enter(at.child(i), at.inside);
+                    }
+                }
+            }
+        }
+    }
+
+    fn run<'s>(scene: &'s Scene, view: &'s View) -> Meshes<'s> {
+        let mut m = Meshes {
+            walk: SceneWalk::new(scene, view),
+            entered: Vec::new(),
+        };
+        m.run();
+        m
+    }
+
+    fn view_from(eye: Vec3, target: Vec3) -> View {
+        View::new(Camera::look_at(eye, target), 64, 48).unwrap()
+    }
+
+    #[test]
+    fn children_are_placed_as_compose_places_them_with_their_item_offsets() {
+        let scene = crate::tests::cubes_on_ground([-9.0, 9.0, -20.0, 2.0], [Vec3::ZERO, Vec3::new(2.0, 0.0, 0.0)]);
+        let root = Placed::root(&scene);
+        let node = scene.node(root.id);
+        for (i, inst) in node.instances().iter().enumerate() {
+            let child = root.child(&scene, i);
+            assert_eq!(child.id, inst.child);
+            assert_eq!(
+                child.world_from_node,
+                compose(&Affine3A::IDENTITY, &inst.parent_from_child)
+            );
+            assert_eq!(child.first_item, node.item_offset(i));
+        }
+    }
+
+    #[test]
+    fn a_scene_in_view_is_entered_whole_and_tested_once_when_inside() {
+        let scene = crate::tests::cubes_on_ground([-1.0, 1.0, -1.0, 1.0], [Vec3::ZERO]);
+        let view = view_from(Vec3::new(0.0, 2.0, 12.0), Vec3::ZERO);
+        let m = run(&scene, &view);
+        assert_eq!(m.entered.len(), 2, "ground and cube");
+        assert_eq!(m.entered[0].first_item, 0);
+        assert_eq!(m.entered[1].first_item, 2, "after the ground's 2 triangles");
+        // The root lies wholly inside: its children are neither tested nor culled.
+        let stats = m.walk.finish("test").unwrap();
+        assert_eq!((stats.nodes_visited, stats.boxes_tested, stats.boxes_culled), (3, 1, 0));
+    }
+
+    #[test]
+    fn a_scene_behind_the_camera_is_culled_at_the_root() {
+        let scene = crate::tests::cubes_on_ground([-1.0, 1.0, -1.0, 1.0], [Vec3::ZERO]);
+        let view = view_from(Vec3::new(0.0, 0.0, 5.0), Vec3::new(0.0, 0.0, 10.0));
+        let m = run(&scene, &view);
+        assert!(m.entered.is_empty());
+        let stats = m.walk.finish("test").unwrap();
+        assert_eq!((stats.nodes_visited, stats.boxes_tested, stats.boxes_culled), (1, 1, 1));
+    }
+
+    #[test]
+    fn an_empty_box_is_outside_and_counted() {
+        let view = view_from(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO);
+        let mut stats = FrameStats::default();
+        let frustum = view.frustum(&Affine3A::IDENTITY);
+        assert_eq!(test_box(&mut stats, &frustum, &Aabb::EMPTY), Containment::Outside);
+        assert_eq!((stats.boxes_tested, stats.boxes_culled), (1, 1));
+    }
+
+    #[test]
+    fn past_the_triangle_cap_the_walk_stops_and_fails() {
+        let scene = crate::tests::cubes_on_ground([-1.0, 1.0, -1.0, 1.0], [Vec3::ZERO]);
+        let view = view_from(Vec3::new(0.0, 2.0, 12.0), Vec3::ZERO);
+        let mut m = Meshes {
+            walk: SceneWalk::new(&scene, &view),
+            entered: Vec::new(),
+        };
+        m.walk.meet_triangles(MAX_FRAME_TRIANGLES);
+        assert!(!m.walk.stopped(), "the cap itself is allowed");
+        m.run();
+        assert!(m.walk.stopped());
+        assert_eq!(m.entered.len(), 1, "nothing entered after the ground passed the cap");
+        assert!(matches!(
+            m.walk.finish("test"),
+            Err(RenderError::TooManyInView {
+                renderer: "test",
+                limit: MAX_FRAME_TRIANGLES
+            })
+        ));
+    }
+
+    #[test]
+    fn cull_bvh_visits_nothing_of_an_empty_hierarchy_and_counts_every_node_reached() {
+        let view = view_from(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO);
+        let frustum = view.frustum(&Affine3A::IDENTITY);
+        let mut stats = FrameStats::default();
+        cull_bvh(&mut stats, &Bvh::build(&[], 1), &frustum, |_, _, _, _| {
+            panic!("no node")
+        });
+        assert_eq!(stats, FrameStats::default());
+        // Two boxes in view, one behind the camera: leaves of one box each.
+        let boxes = [
+            Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5)),
+            Aabb::new(Vec3::new(1.0, 0.0, 0.0), Vec3::new(1.5, 0.5, 0.5)),
+            Aabb::new(Vec3::new(0.0, 0.0, 20.0), Vec3::new(0.5, 0.5, 21.0)),
+        ];
+        let bvh = Bvh::build(&boxes, 1);
+        let mut leaves = Vec::new();
+        cull_bvh(&mut stats, &bvh, &frustum, |_, _, node, _| {
+            if node.is_leaf() {
+                leaves.extend_from_slice(&bvh.primitive_indices()[node.range()]);
+            }
+            true
+        });
+        leaves.sort_unstable();
+        assert_eq!(leaves, [0, 1]);
+        assert!(stats.boxes_tested <= stats.nodes_visited);
+        assert!(stats.boxes_culled >= 1, "the box behind the camera");
+    }
+}
