@@ -2,10 +2,11 @@
 //!
 //! Preprocessing builds a [`Bvh`] per node of the scene DAG: over the triangles of each mesh
 //! with more than [`FrustumOptions::mesh_leaf_size`] triangles, and over the instances of each
-//! group with more than a few. A frame walks the DAG from the root without flattening it: at
-//! each node instance it forms the frustum in that node's space (planes of
-//! `clip_from_object`), descends the node's hierarchy, skips subtrees outside, stops testing
-//! inside subtrees wholly inside, and hands the surviving triangles to the rasterizer as
+//! group with more than a few. A frame walks the DAG from the root without flattening it, with
+//! the crate's scene walk ([`crate::walk`]): at each node instance it forms the frustum in that
+//! node's space (planes of `clip_from_object`), descends the node's hierarchy
+//! ([`crate::walk::cull_bvh`]), skips subtrees outside, stops testing inside subtrees wholly
+//! inside, and hands the surviving triangles to the rasterizer as
 //! index lists (whole meshes when entirely inside, so their vertices are shared).
 //!
 //! Cost: O(visited nodes + triangles in the frustum). It removes nothing that is in the frustum
@@ -14,12 +15,12 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use occult_core::{compose, Affine3A, Containment, ItemId, NodeId, NodeKind, Scene, View};
+use occult_core::{NodeKind, Scene, View};
 use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 use occult_spatial::Bvh;
 
-use crate::zbuffer::MAX_BRUTE_FORCE_ITEMS as MAX_FRAME_TRIANGLES;
-use crate::{check_frame, AlgorithmInfo, FrameStats, ParamDoc, Phase, RenderError, RenderOptions, Renderer, Result};
+use crate::walk::{cull_bvh, Counts, NodeAt, SceneWalk, Visitor};
+use crate::{AlgorithmInfo, FrameStats, ParamDoc, Phase, RenderError, RenderOptions, Renderer, Result};
 
 /// Tunables of [`FrustumCulling`].
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -64,6 +65,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             help: "draws handed to the rasterizer at a time (>= 1; about 100 bytes each): a frame with more walks the hierarchy again per batch",
         },
     ],
+    counters: &[],
     conservative: true,
     build: |scene, options, params| {
         let defaults = FrustumOptions::default();
@@ -141,34 +143,41 @@ impl FrustumCulling {
     }
 }
 
-/// Per-frame traversal state.
+/// Per-frame traversal state: the scene walk, and the draws of this walk's batch.
 struct Walk<'a> {
-    scene: &'a Scene,
+    walk: SceneWalk<'a>,
     hierarchies: &'a [Option<Bvh>],
-    view: &'a View,
     /// Draws of this walk's batch: those after the first `skip` in traversal order, at most
     /// `cap` of them.
     draws: Vec<Draw<'a>>,
     skip: usize,
     cap: usize,
-    /// Draws met so far in traversal order, and their triangles.
+    /// Draws met so far in traversal order.
     met: usize,
-    triangles: u64,
     /// Draws met beyond the batch.
     more: bool,
-    /// The triangles met passed [`MAX_FRAME_TRIANGLES`]: the walk stops.
-    too_many: bool,
     /// Index lists of the leaves kept in the mesh being walked.
     leaves: Vec<&'a [u32]>,
-    stats: FrameStats,
 }
 
 impl<'a> Walk<'a> {
-    /// Visits node `id` placed by `world_from_node`; `inside` when an ancestor was wholly inside.
+    /// A walk that keeps the draws after the first `skip`, at most `cap` of them.
+    fn new(scene: &'a Scene, hierarchies: &'a [Option<Bvh>], view: &'a View, skip: usize, cap: usize) -> Self {
+        Self {
+            walk: SceneWalk::new(scene, view),
+            hierarchies,
+            draws: Vec::new(),
+            skip,
+            cap,
+            met: 0,
+            more: false,
+            leaves: Vec::new(),
+        }
+    }
+
     /// Meets a draw of `triangles` triangles, in traversal order.
     fn draw(&mut self, draw: Draw<'a>, triangles: usize) {
-        self.triangles += triangles as u64;
-        self.too_many |= self.triangles > MAX_FRAME_TRIANGLES;
+        self.walk.meet_triangles(triangles as u64);
         self.met += 1;
         if self.met <= self.skip {
             return;
@@ -179,34 +188,25 @@ impl<'a> Walk<'a> {
             self.more = true;
         }
     }
+}
 
-    fn node(&mut self, id: NodeId, world_from_node: &Affine3A, first_item: ItemId, inside: bool) {
-        if self.too_many {
-            return;
-        }
-        let node = self.scene.node(id);
-        let frustum = self.view.frustum(world_from_node);
-        let test = |stats: &mut FrameStats, b: &occult_core::Aabb| -> Containment {
-            stats.boxes_tested += 1;
-            let c = if b.is_empty() {
-                Containment::Outside
-            } else {
-                frustum.classify_aabb(b)
-            };
-            if c == Containment::Outside {
-                stats.boxes_culled += 1;
-            }
-            c
-        };
-        self.stats.nodes_visited += 1;
-        let inside = inside || {
-            match test(&mut self.stats, &node.bounds()) {
-                Containment::Outside => return,
-                c => c == Containment::Inside,
-            }
-        };
-        let clip_from_object = self.view.clip_from_object(world_from_node);
-        match node.kind() {
+impl Counts for Walk<'_> {
+    fn counts(&mut self) -> &mut FrameStats {
+        &mut self.walk.stats
+    }
+}
+
+impl<'a> Visitor<'a> for Walk<'a> {
+    fn walk(&mut self) -> &mut SceneWalk<'a> {
+        &mut self.walk
+    }
+
+    /// A mesh: whole when inside or small, else the leaves of its BVH in the frustum. A group:
+    /// the instances in the leaves of its BVH in the frustum (all of them when inside).
+    fn visit(&mut self, at: &NodeAt<'a>) {
+        let hierarchies: &'a [Option<Bvh>] = self.hierarchies;
+        let hierarchy = hierarchies[at.place.id.index()].as_ref();
+        match at.node.kind() {
             NodeKind::Mesh(mesh) => {
                 if mesh.triangle_count() == 0 {
                     return;
@@ -214,85 +214,60 @@ impl<'a> Walk<'a> {
                 let whole = Draw {
                     mesh,
                     triangles: DrawTriangles::All,
-                    clip_from_object,
-                    first_item,
+                    clip_from_object: self.walk.view().clip_from_object(&at.place.world_from_node),
+                    first_item: at.place.first_item,
                 };
-                let bvh = match (&self.hierarchies[id.index()], inside) {
+                let bvh = match (hierarchy, at.inside) {
                     (Some(bvh), false) => bvh,
                     _ => return self.draw(whole, mesh.triangle_count()),
                 };
-                self.leaves.clear();
+                let mut leaves = std::mem::take(&mut self.leaves);
+                leaves.clear();
                 let mut kept = 0usize;
-                let mut stack = vec![(0u32, false)];
-                while let Some((n, inside)) = stack.pop() {
-                    let bn = &bvh.nodes()[n as usize];
-                    self.stats.nodes_visited += 1;
-                    let inside = inside
-                        || match test(&mut self.stats, &bn.bounds) {
-                            Containment::Outside => continue,
-                            c => c == Containment::Inside,
-                        };
+                cull_bvh(self, bvh, &at.frustum, |_, _, bn, inside| {
                     if inside || bn.is_leaf() {
                         let list = &bvh.primitive_indices()[bn.range()];
                         kept += list.len();
-                        self.leaves.push(list);
-                    } else {
-                        stack.push((bn.second_child, false));
-                        stack.push((n + 1, false));
+                        leaves.push(list);
+                        return false;
                     }
-                }
+                    true
+                });
                 // Index lists transform each corner once per triangle; a whole mesh shares its
                 // vertices. When most of the mesh survived, drawing it whole is cheaper (the
                 // rasterizer's outcode test drops the rest at a few ns each).
                 if kept * 2 > mesh.triangle_count() {
-                    return self.draw(whole, mesh.triangle_count());
-                }
-                let leaves = std::mem::take(&mut self.leaves);
-                for &list in &leaves {
-                    let triangles = DrawTriangles::List(list);
-                    self.draw(
-                        Draw {
-                            triangles,
-                            ..whole.clone()
-                        },
-                        list.len(),
-                    );
+                    self.draw(whole, mesh.triangle_count());
+                } else {
+                    for &list in &leaves {
+                        let triangles = DrawTriangles::List(list);
+                        self.draw(
+                            Draw {
+                                triangles,
+                                ..whole.clone()
+                            },
+                            list.len(),
+                        );
+                    }
                 }
                 self.leaves = leaves;
             }
-            NodeKind::Group(instances) => {
-                let visit = |w: &mut Self, i: usize, inside: bool| {
-                    let inst = &instances[i];
-                    let world_from_child = compose(world_from_node, &inst.parent_from_child);
-                    w.node(inst.child, &world_from_child, first_item + node.item_offset(i), inside);
-                };
-                match &self.hierarchies[id.index()] {
-                    Some(bvh) if !inside => {
-                        let mut stack = vec![0u32];
-                        while let Some(n) = stack.pop() {
-                            let bn = &bvh.nodes()[n as usize];
-                            self.stats.nodes_visited += 1;
-                            let c = test(&mut self.stats, &bn.bounds);
-                            if c == Containment::Outside {
-                                continue;
-                            }
-                            if c == Containment::Inside || bn.is_leaf() {
-                                for &i in &bvh.primitive_indices()[bn.range()] {
-                                    visit(self, i as usize, c == Containment::Inside);
-                                }
-                            } else {
-                                stack.push(bn.second_child);
-                                stack.push(n + 1);
-                            }
+            NodeKind::Group(instances) => match hierarchy {
+                Some(bvh) if !at.inside => cull_bvh(self, bvh, &at.frustum, |w, _, bn, inside| {
+                    if inside || bn.is_leaf() {
+                        for &i in &bvh.primitive_indices()[bn.range()] {
+                            w.enter(at.child(i as usize), inside);
                         }
+                        return false;
                     }
-                    _ => {
-                        for i in 0..instances.len() {
-                            visit(self, i, inside);
-                        }
+                    true
+                }),
+                _ => {
+                    for i in 0..instances.len() {
+                        self.enter(at.child(i), at.inside);
                     }
                 }
-            }
+            },
         }
     }
 }
@@ -303,47 +278,22 @@ impl Renderer for FrustumCulling {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        check_frame(view, frame)?;
-        let start = Instant::now();
-        self.raster.clear(frame);
-        let clear = start.elapsed();
+        let (start, cleared) = crate::begin_frame(&mut self.raster, view, frame)?;
         let t = Instant::now();
-        let walk = |skip: usize, cap: usize| {
-            let mut walk = Walk {
-                scene: &self.scene,
-                hierarchies: &self.hierarchies,
-                view,
-                draws: Vec::new(),
-                skip,
-                cap,
-                met: 0,
-                triangles: 0,
-                more: false,
-                too_many: false,
-                leaves: Vec::new(),
-                stats: FrameStats::default(),
-            };
-            walk.node(self.scene.root(), &Affine3A::IDENTITY, 0, false);
-            walk
-        };
         // The first walk meets every draw (keeping the first batch) and gives the statistics.
+        let mut first = Walk::new(&self.scene, &self.hierarchies, view, 0, self.batch_draws);
+        first.walk.stats = cleared;
+        first.run();
         let Walk {
+            walk,
             mut draws,
-            mut stats,
             met,
-            triangles,
             mut more,
-            too_many,
             ..
-        } = walk(0, self.batch_draws);
-        stats.phases.add(Phase::Clear, clear);
+        } = first;
+        let triangles = walk.triangles_met();
+        let mut stats = walk.finish("frustum")?;
         stats.phases.add(Phase::Cull, t.elapsed());
-        if too_many {
-            return Err(RenderError::TooManyInView {
-                renderer: "frustum",
-                limit: MAX_FRAME_TRIANGLES,
-            });
-        }
         let mut done = 0;
         loop {
             crate::rasterize(&mut self.raster, view, frame, &draws, &mut stats);
@@ -352,7 +302,8 @@ impl Renderer for FrustumCulling {
                 break;
             }
             let t = Instant::now();
-            let next = walk(done, self.batch_draws);
+            let mut next = Walk::new(&self.scene, &self.hierarchies, view, done, self.batch_draws);
+            next.run();
             stats.phases.add(Phase::Cull, t.elapsed());
             (draws, more) = (next.draws, next.more);
         }
@@ -369,7 +320,8 @@ impl Renderer for FrustumCulling {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use occult_core::{Camera, Instance, Mesh, SceneBuilder, Vec3};
+    use crate::walk::MAX_FRAME_TRIANGLES;
+    use occult_core::{Affine3A, Camera, Instance, Mesh, SceneBuilder, Vec3};
 
     /// A `g` × `g`-quad grid over the unit square at z = 0.
     fn grid(g: u32) -> Mesh {

@@ -9,6 +9,7 @@
 //! | [`zbuffer`] | brute force: every triangle instance rasterized; the reference |
 //! | [`frustum`] | hierarchical view-frustum culling only: the baseline the papers compare to |
 //! | [`params`] | algorithm specs (`name:key=value,...`) and their parameters |
+//! | [`walk`] | the one walk over the scene DAG every renderer uses (placements, counted frustum tests) |
 //! | [`compare`] | runs several renderers over one camera path and measures them against each other |
 //!
 //! ```
@@ -29,6 +30,7 @@
 
 pub mod compare;
 pub mod frustum;
+mod hash;
 pub mod hzb;
 pub mod lzb;
 pub mod nbuffer;
@@ -36,12 +38,14 @@ pub mod oqgrid;
 pub mod params;
 pub mod rzb;
 mod stats;
+pub mod walk;
 pub mod zbuffer;
 
 use std::sync::Arc;
+use std::time::Instant;
 
 use occult_core::{Scene, View};
-use occult_raster::{Frame, RasterConfig, RasterError};
+use occult_raster::{Frame, RasterConfig, RasterError, Rasterizer};
 pub use params::{AlgoSpec, ParamDoc, Params};
 pub use stats::{Counters, FrameStats, Phase, PhaseTimes};
 use thiserror::Error;
@@ -127,6 +131,10 @@ pub struct AlgorithmInfo {
     pub summary: &'static str,
     /// Its settings, as `name:key=value` on the command line.
     pub params: &'static [ParamDoc],
+    /// The names of the counters ([`FrameStats::counters`]) its frames may report, whichever
+    /// its settings (a frame reports some only in some configurations); empty for renderers
+    /// without counters of their own.
+    pub counters: &'static [&'static str],
     /// Whether its frames are bit-identical to `zbuffer`'s (DESIGN invariant 2) or approximate
     /// (invariant 3).
     pub conservative: bool,
@@ -219,22 +227,7 @@ impl Algorithm {
     /// settings (a frame reports some only in some configurations); empty for renderers
     /// without counters of their own.
     pub fn counter_names(self) -> Vec<&'static str> {
-        let own: &[&'static str] = match self.0.name {
-            "hzb" => {
-                return hzb::COUNTERS
-                    .iter()
-                    .chain(&hzb::BUSY)
-                    .chain(&hzb::IDLE)
-                    .copied()
-                    .collect()
-            }
-            "lzb" => &lzb::COUNTERS,
-            "nbuffer" => &nbuffer::COUNTERS,
-            "oqgrid" => &oqgrid::COUNTERS,
-            "rzb" => &rzb::COUNTERS,
-            _ => &[],
-        };
-        own.to_vec()
+        self.0.counters.to_vec()
     }
 
     /// Builds the renderer for `scene` with default settings, doing its preprocessing (time
@@ -271,6 +264,21 @@ pub(crate) fn rasterize(
     let counts = raster.draw(view, frame, draws, occult_raster::RasterMode::Full);
     stats.phases.add(Phase::Raster, t.elapsed());
     stats.add_raster(counts);
+}
+
+/// Starts a frame as every renderer does: checks that `frame` matches `view`, clears it with
+/// `raster`, and returns when the frame started with statistics holding the clear's time
+/// ([`Phase::Clear`]).
+///
+/// # Errors
+/// [`RenderError::FrameSizeMismatch`].
+pub(crate) fn begin_frame(raster: &mut Rasterizer, view: &View, frame: &mut Frame) -> Result<(Instant, FrameStats)> {
+    check_frame(view, frame)?;
+    let start = Instant::now();
+    let mut stats = FrameStats::default();
+    raster.clear(frame);
+    stats.phases.add(Phase::Clear, start.elapsed());
+    Ok((start, stats))
 }
 
 /// Checks that `frame` matches `view`.

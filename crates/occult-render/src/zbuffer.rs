@@ -11,7 +11,7 @@ use std::time::Instant;
 use occult_core::{Scene, View};
 use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 
-use crate::{check_frame, AlgorithmInfo, FrameStats, Phase, RenderError, RenderOptions, Renderer, Result};
+use crate::{AlgorithmInfo, FrameStats, Phase, RenderError, RenderOptions, Renderer, Result};
 
 /// Largest scene (in triangle instances) the brute-force renderer accepts.
 pub const MAX_BRUTE_FORCE_ITEMS: u64 = 2_000_000_000;
@@ -21,6 +21,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
     name: "zbuffer",
     summary: "brute force: every triangle instance sent to the rasterizer; the reference",
     params: &[],
+    counters: &[],
     conservative: true,
     build: |scene, options, _| Ok(Box::new(ZBuffer::new(scene, options)?)),
 };
@@ -57,11 +58,7 @@ impl Renderer for ZBuffer {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        check_frame(view, frame)?;
-        let start = Instant::now();
-        let mut stats = FrameStats::default();
-        self.raster.clear(frame);
-        stats.phases.add(Phase::Clear, start.elapsed());
+        let (start, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
         let t = Instant::now();
         let mut draws = Vec::new();
         self.scene

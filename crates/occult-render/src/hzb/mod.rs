@@ -85,6 +85,10 @@
 //! - The box test reads the frame's depth (conservatively) rather than rasterizing the faces;
 //!   a face is compared over its screen bounding box, as the paper's Fig. 2 starts.
 //!
+//! The tested traversal is the crate's scene walk ([`crate::walk`]) without a test of a DAG
+//! node's own box: an instance with an octree starts at its octree's root (tested there), a
+//! small mesh is tested as one box; transforms and item ids come from the walk.
+//!
 //! Cost per frame: O(visible list + visited nodes × test + pyramid updates over drawn regions)
 //! plus rasterizing what survives. It pays off on scenes of high depth complexity (cities,
 //! plants); on open terrain almost everything is visible and the tests are pure overhead.
@@ -273,8 +277,7 @@ impl HzbOptions {
 
 /// Every counter ([`FrameStats::counters`](crate::FrameStats::counters)) a frame may report,
 /// whichever the settings, except the per-worker ones of `parallel=on` (`worker<k>_busy_us`,
-/// `worker<k>_idle_us`); [`Algorithm::counter_names`](crate::Algorithm::counter_names) lists
-/// those too.
+/// `worker<k>_idle_us`); [`INFO`]'s counters list those too.
 pub const COUNTERS: [&str; 13] = [
     "occlusion_tests",
     "occlusion_culled",
@@ -290,6 +293,23 @@ pub const COUNTERS: [&str; 13] = [
     "whole_drawn",
     "visible_list_retested",
 ];
+
+/// Every counter a frame may report: [`COUNTERS`], then the workers' busy and idle times.
+const DECLARED: [&str; COUNTERS.len() + 2 * MAX_WORKERS] = {
+    let mut all = [""; COUNTERS.len() + 2 * MAX_WORKERS];
+    let mut i = 0;
+    while i < COUNTERS.len() {
+        all[i] = COUNTERS[i];
+        i += 1;
+    }
+    let mut k = 0;
+    while k < MAX_WORKERS {
+        all[COUNTERS.len() + k] = BUSY[k];
+        all[COUNTERS.len() + MAX_WORKERS + k] = IDLE[k];
+        k += 1;
+    }
+    all
+};
 
 /// Registry entry of [`Hzb`].
 pub static INFO: AlgorithmInfo = AlgorithmInfo {
@@ -378,6 +398,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             help: "workers of the distribution, 1..=8 (each rasterizes on one thread)",
         },
     ],
+    counters: &DECLARED,
     conservative: true,
     build: |scene, options, params| Ok(Box::new(Hzb::new(scene, options, &HzbOptions::from_params(params)?)?)),
 };
@@ -690,9 +711,7 @@ impl Renderer for Hzb {
         let (scene, octrees, options) = (&*self.scene, &self.octrees[..], &self.options);
         let mut stats = if options.distribution == Distribution::Off {
             let w = &mut self.workers[0];
-            let t = Instant::now();
-            w.raster.clear(frame);
-            let clear = t.elapsed();
+            let (_, cleared) = crate::begin_frame(&mut w.raster, view, frame)?;
             let pyramid = ready_pyramid(&mut w.pyramid, frame.width(), frame.height())?;
             let mut stats = walk_frame(
                 scene,
@@ -707,7 +726,7 @@ impl Renderer for Hzb {
                 recheck,
                 &mut w.stamps,
             );
-            stats.phases.add(Phase::Clear, clear);
+            stats.phases.merge(&cleared.phases);
             stats
         } else {
             self.render_distributed(view, frame, recheck)?

@@ -1,39 +1,20 @@
 //! One frame of [`super::Hzb`]: the visible list, the tested traversal, batches, the recheck.
 
 use std::collections::HashSet;
-use std::hash::{BuildHasherDefault, Hasher};
+use std::hash::Hasher;
 use std::time::Instant;
 
-use occult_core::{compose, Affine3A, Containment, Frustum, Mat4, Mesh, NodeId, NodeKind, Scene, Vec3, View};
+use occult_core::{Affine3A, Containment, Frustum, Mat4, Mesh, NodeId, NodeKind, Scene, Vec3, View};
 use occult_raster::{Draw, DrawTriangles, Frame, PixelRect, PyramidCounts, PyramidTest, Rasterizer, ZPyramid};
 use occult_spatial::{octree::hybrid::NO_CHILD, HybridOctree};
 
 use super::boxtest::{screen_rect, Occlusion};
 use super::{ChildOrder, Distribution, HzbOptions, VisEntry};
+use crate::hash::{FxBuild, FxHasher};
+use crate::walk::{NodeAt, NodeTest, Placed, SceneWalk, Visitor};
 use crate::{FrameStats, Phase};
 
-/// A small multiplicative hasher for the frame's stamp sets (keys are ids, not attacker data).
-#[derive(Default)]
-struct IdHasher(u64);
-
-impl Hasher for IdHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(b as u64);
-        }
-    }
-    fn write_u64(&mut self, v: u64) {
-        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
-    }
-    fn write_u32(&mut self, v: u32) {
-        self.write_u64(v as u64);
-    }
-}
-
-type IdSet<K> = HashSet<K, BuildHasherDefault<IdHasher>>;
+type IdSet<K> = HashSet<K, FxBuild>;
 
 /// Names one octree node of one instance of a DAG node: (DAG node, octree node, first item).
 type NodeKey = (u32, u32, u64);
@@ -56,7 +37,7 @@ pub(super) struct Stamps {
     /// Per DAG node: words of one instance's bit set.
     words: Vec<u32>,
     /// Instance (DAG node, first item) → offset of its bit set in `bits`, this frame.
-    slots: std::collections::HashMap<(u32, u64), usize, BuildHasherDefault<IdHasher>>,
+    slots: std::collections::HashMap<(u32, u64), usize, FxBuild>,
     bits: Vec<u64>,
     /// The last instance looked up and its offset.
     last: Option<((u32, u64), usize)>,
@@ -162,7 +143,7 @@ impl Share {
     };
 
     fn mix(key: NodeKey) -> u64 {
-        let mut h = IdHasher::default();
+        let mut h = FxHasher::default();
         h.write_u32(key.0);
         h.write_u32(key.1);
         h.write_u64(key.2);
@@ -215,20 +196,17 @@ struct Pending<'a> {
 
 /// The DAG instance whose octree is being walked.
 struct Instance<'a> {
-    id: NodeId,
+    place: Placed,
     octree: &'a HybridOctree,
-    world_from_node: Affine3A,
-    first_item: u64,
     frustum: Frustum,
     clip_from_object: Mat4,
     eye: Vec3,
 }
 
 pub(super) struct Walk<'a> {
-    scene: &'a Scene,
+    walk: SceneWalk<'a>,
     octrees: &'a [Option<HybridOctree>],
     options: &'a HzbOptions,
-    view: &'a View,
     raster: &'a mut Rasterizer,
     frame: &'a mut Frame,
     pyramid: &'a mut ZPyramid,
@@ -247,8 +225,9 @@ pub(super) struct Walk<'a> {
     /// The next visible list, and its keys.
     visible: Vec<VisEntry>,
     listed: IdSet<NodeKey>,
-    placements: std::collections::HashMap<(u32, u64), Placement, BuildHasherDefault<IdHasher>>,
-    stats: FrameStats,
+    placements: std::collections::HashMap<(u32, u64), Placement, FxBuild>,
+    /// Whether the last instance visited was a small mesh queued whole.
+    queued_whole: bool,
     pc: PyramidCounts,
     occlusion_tests: u64,
     occlusion_culled: u64,
@@ -276,10 +255,9 @@ impl<'a> Walk<'a> {
     ) -> Self {
         stamps.begin_frame();
         Self {
-            scene,
+            walk: SceneWalk::new(scene, view),
             octrees,
             options,
-            view,
             raster,
             frame,
             pyramid,
@@ -298,7 +276,7 @@ impl<'a> Walk<'a> {
             visible: Vec::new(),
             listed: IdSet::default(),
             placements: Default::default(),
-            stats: FrameStats::default(),
+            queued_whole: false,
             pc: PyramidCounts::default(),
             occlusion_tests: 0,
             occlusion_culled: 0,
@@ -337,7 +315,7 @@ impl<'a> Walk<'a> {
                 // Drawn whole (once, at its first entry); its entries stay listed, so that the
                 // recheck keeps measuring how much of it is visible.
                 if self.whole.insert((e.dag_node.0, e.first_item)) {
-                    let scene: &'a Scene = self.scene;
+                    let scene: &'a Scene = self.walk.scene();
                     if let NodeKind::Mesh(mesh) = scene.node(e.dag_node).kind() {
                         let b = mesh.bounds();
                         if pl.frustum.classify_aabb(&b) != Containment::Outside {
@@ -393,8 +371,8 @@ impl<'a> Walk<'a> {
         if fraction <= 0.0 {
             return out;
         }
-        let scene: &'a Scene = self.scene;
-        let mut listed: std::collections::HashMap<(u32, u64), u64, BuildHasherDefault<IdHasher>> = Default::default();
+        let scene: &'a Scene = self.walk.scene();
+        let mut listed: std::collections::HashMap<(u32, u64), u64, FxBuild> = Default::default();
         for e in list {
             if !e.stale && matches!(scene.node(e.dag_node).kind(), NodeKind::Mesh(_)) {
                 *listed.entry((e.dag_node.0, e.first_item)).or_default() += self.node_of(e).count as u64;
@@ -412,8 +390,7 @@ impl<'a> Walk<'a> {
 
     /// The tested front-to-back traversal of the whole scene (§3.2).
     pub fn traverse(&mut self) {
-        let root = self.scene.root();
-        let _ = self.instance(root, &Affine3A::IDENTITY, 0, false);
+        self.run();
         self.flush();
     }
 
@@ -422,7 +399,7 @@ impl<'a> Walk<'a> {
     pub fn recheck(&mut self) {
         let t = Instant::now();
         self.pyramid.rebuild(self.frame);
-        self.stats.phases.add(Phase::DepthStructure, t.elapsed());
+        self.walk.stats.phases.add(Phase::DepthStructure, t.elapsed());
         let list = std::mem::take(&mut self.visible);
         let mut kept = Vec::with_capacity(list.len());
         for e in list {
@@ -449,7 +426,7 @@ impl<'a> Walk<'a> {
 
     /// The next visible list and the frame's statistics.
     pub fn finish(mut self) -> (Vec<VisEntry>, FrameStats) {
-        let c = &mut self.stats.counters;
+        let c = &mut self.walk.stats.counters;
         c.add("occlusion_tests", self.occlusion_tests);
         c.add("occlusion_culled", self.occlusion_culled);
         c.add("frustum_culled", self.frustum_culled);
@@ -463,12 +440,12 @@ impl<'a> Walk<'a> {
         c.add("batches", self.batches);
         c.add("whole_drawn", self.whole_drawn);
         c.add("visible_list_retested", self.list_retested);
-        (self.visible, self.stats)
+        (self.visible, self.walk.stats)
     }
 
     /// The placement of a visible-list entry's instance (cached: many entries share one).
     fn placement(&mut self, e: &VisEntry) -> Placement {
-        let view = self.view;
+        let view = self.walk.view();
         *self
             .placements
             .entry((e.dag_node.0, e.first_item))
@@ -492,7 +469,7 @@ impl<'a> Walk<'a> {
             frame: self.frame,
             pyramid: self.pyramid,
             how: self.how,
-            far_depth: self.view.far_depth(),
+            far_depth: self.walk.view().far_depth(),
         }
     }
 
@@ -506,69 +483,83 @@ impl<'a> Walk<'a> {
             self.visible.push(e);
         }
     }
+}
 
-    /// Visits an instance of DAG node `id`: through its octree, or as one box (a small mesh).
-    /// Returns whether a small mesh was queued whole (false for an instance walked through
-    /// its octree).
-    fn instance(&mut self, id: NodeId, world_from_node: &Affine3A, first_item: u64, inside: bool) -> bool {
+impl<'a> Visitor<'a> for Walk<'a> {
+    /// No test of the node's own box: an instance with an octree starts at its octree's root,
+    /// a small mesh is tested (and counted) in [`Walk::small_mesh`].
+    const NODE_TEST: NodeTest = NodeTest::None;
+
+    fn walk(&mut self) -> &mut SceneWalk<'a> {
+        &mut self.walk
+    }
+
+    /// Visits an instance: through its octree, or as one box (a small mesh). Sets
+    /// `queued_whole` to whether a small mesh was queued whole (false for an instance walked
+    /// through its octree).
+    fn visit(&mut self, at: &NodeAt<'a>) {
         let octrees: &'a [Option<HybridOctree>] = self.octrees;
-        match &octrees[id.index()] {
+        let (id, first_item) = (at.place.id, at.place.first_item);
+        self.queued_whole = match &octrees[id.index()] {
             Some(_) if self.whole.contains(&(id.0, first_item)) => false, // drawn whole
             Some(octree) if !octree.nodes().is_empty() => {
+                let view = self.walk.view();
                 let inst = Instance {
-                    id,
+                    place: at.place,
                     octree,
-                    world_from_node: *world_from_node,
-                    first_item,
-                    frustum: self.view.frustum(world_from_node),
-                    clip_from_object: self.view.clip_from_object(world_from_node),
-                    eye: world_from_node.inverse().transform_point3(self.view.camera().eye),
+                    frustum: at.frustum,
+                    clip_from_object: view.clip_from_object(&at.place.world_from_node),
+                    eye: at.place.world_from_node.inverse().transform_point3(view.camera().eye),
                 };
-                self.octree_node(&inst, 0, inside);
+                self.octree_node(&inst, 0, at.inside);
                 false
             }
             Some(_) => false,
-            None => {
-                let scene: &'a Scene = self.scene;
-                let node = scene.node(id);
-                let NodeKind::Mesh(mesh) = node.kind() else {
-                    return false; // an empty group
-                };
-                if mesh.triangle_count() == 0 || (id == scene.root() && self.share.index != 0) {
-                    return false; // a small mesh as the whole scene: the first worker draws it
-                }
-                let b = node.bounds();
-                self.stats.nodes_visited += 1;
-                if !inside {
-                    self.stats.boxes_tested += 1;
-                    if self.view.frustum(world_from_node).classify_aabb(&b) == Containment::Outside {
-                        self.stats.boxes_culled += 1;
-                        self.frustum_culled += 1;
-                        return false;
-                    }
-                }
-                let clip = self.view.clip_from_object(world_from_node);
-                if self.options.occlusion {
-                    let eye = world_from_node.inverse().transform_point3(self.view.camera().eye);
-                    if self.hidden(&clip, &b, eye) {
-                        return false;
-                    }
-                }
-                self.push(mesh, None, clip, first_item, &b);
-                true
+            None => self.small_mesh(at),
+        };
+    }
+}
+
+impl<'a> Walk<'a> {
+    /// A node without an octree (a small mesh, or an empty group): tested as one box, then
+    /// queued whole. Returns whether it was queued.
+    fn small_mesh(&mut self, at: &NodeAt<'a>) -> bool {
+        let scene: &'a Scene = self.walk.scene();
+        let NodeKind::Mesh(mesh) = at.node.kind() else {
+            return false; // an empty group
+        };
+        if mesh.triangle_count() == 0 || (at.place.id == scene.root() && self.share.index != 0) {
+            return false; // a small mesh as the whole scene: the first worker draws it
+        }
+        let b = at.node.bounds();
+        self.walk.stats.nodes_visited += 1;
+        // `b` is not empty (the mesh has a triangle): the walk's test is the plain one.
+        if !at.inside && self.walk.test(&at.frustum, &b) == Containment::Outside {
+            self.frustum_culled += 1;
+            return false;
+        }
+        let world_from_node = &at.place.world_from_node;
+        let view = self.walk.view();
+        let clip = view.clip_from_object(world_from_node);
+        if self.options.occlusion {
+            let eye = world_from_node.inverse().transform_point3(view.camera().eye);
+            if self.hidden(&clip, &b, eye) {
+                return false;
             }
         }
+        self.push(mesh, None, clip, at.place.first_item, &b);
+        true
     }
 
     /// The occlusion test of one box, counted.
     fn hidden(&mut self, clip: &Mat4, b: &occult_core::Aabb, eye: Vec3) -> bool {
-        self.stats.boxes_tested += 1;
+        self.walk.stats.boxes_tested += 1;
         self.occlusion_tests += 1;
         let mut pc = self.pc;
         let hidden = self.occlusion().box_hidden(clip, b, eye, &mut pc);
         self.pc = pc;
         if hidden {
-            self.stats.boxes_culled += 1;
+            self.walk.stats.boxes_culled += 1;
             self.occlusion_culled += 1;
         }
         hidden
@@ -577,12 +568,15 @@ impl<'a> Walk<'a> {
     /// §3.2: test the node's box, draw its own primitives, then its children front to back.
     fn octree_node(&mut self, inst: &Instance<'a>, n: u32, inside: bool) {
         let node = &inst.octree.nodes()[n as usize];
-        self.stats.nodes_visited += 1;
+        let stats = &mut self.walk.stats;
+        stats.nodes_visited += 1;
+        // Not `SceneWalk::test`: a cell holding only empty instances has an empty box, which
+        // this test has always let through (and counted so); the counts must not move.
         let inside = inside || {
-            self.stats.boxes_tested += 1;
+            stats.boxes_tested += 1;
             match inst.frustum.classify_aabb(&node.bounds) {
                 Containment::Outside => {
-                    self.stats.boxes_culled += 1;
+                    stats.boxes_culled += 1;
                     self.frustum_culled += 1;
                     return;
                 }
@@ -590,8 +584,8 @@ impl<'a> Walk<'a> {
             }
         };
         if node.is_leaf()
-            && matches!(self.scene.node(inst.id).kind(), NodeKind::Mesh(_))
-            && self.drawn_nodes.contains(&(inst.id.0, n, inst.first_item))
+            && matches!(self.walk.scene().node(inst.place.id).kind(), NodeKind::Mesh(_))
+            && self.drawn_nodes.contains(&(inst.place.id.0, n, inst.place.first_item))
         {
             return; // a leaf the visible list drew: nothing left to test for
         }
@@ -599,9 +593,9 @@ impl<'a> Walk<'a> {
             return;
         }
         if node.count > 0 {
-            let key = (inst.id.0, n, inst.first_item);
-            let scene: &'a Scene = self.scene;
-            match scene.node(inst.id).kind() {
+            let key = (inst.place.id.0, n, inst.place.first_item);
+            let scene: &'a Scene = self.walk.scene();
+            match scene.node(inst.place.id).kind() {
                 NodeKind::Mesh(_) => {
                     // Deviation: an inner node's own primitives (its straddlers) get their own,
                     // tighter box test: the subtree's box passing says little about them.
@@ -613,10 +607,10 @@ impl<'a> Walk<'a> {
                     if !self.drawn_nodes.contains(&key) && !own_hidden(self) {
                         let own = node.own_bounds;
                         let drew = self.draw_own(
-                            inst.id,
+                            inst.place.id,
                             n,
-                            &inst.world_from_node,
-                            inst.first_item,
+                            &inst.place.world_from_node,
+                            inst.place.first_item,
                             inst.clip_from_object,
                             &own,
                         );
@@ -646,26 +640,25 @@ impl<'a> Walk<'a> {
                     prims.sort_by(|a, b| a.0.total_cmp(&b.0));
                     for &(_, p) in &prims {
                         let i = &instances[p as usize];
-                        if !self.share.enters(inst.id, root, p) {
+                        if !self.share.enters(inst.place.id, root, p) {
                             continue;
                         }
-                        let child_first = inst.first_item + scene.node(inst.id).item_offset(p as usize);
                         let has_octree = self.octrees[i.child.index()].is_some();
                         if !has_octree
                             && (drawn
                                 || !self.share.owns_node(key)
-                                || !self.share.owns_primitive(inst.id, root, key, p))
+                                || !self.share.owns_primitive(inst.place.id, root, key, p))
                         {
                             continue; // the visible list drew it, or another worker does
                         }
-                        if !self.stamp(inst.id, p, inst.first_item) {
+                        if !self.stamp(inst.place.id, p, inst.place.first_item) {
                             continue;
                         }
-                        let world_from_child = compose(&inst.world_from_node, &i.parent_from_child);
                         // The node joins the visible list only when one of its small meshes was
                         // drawn: a node whose small meshes were all culled would otherwise be
                         // drawn untested next frame.
-                        direct |= self.instance(i.child, &world_from_child, child_first, inside);
+                        self.enter(inst.place.child_of(scene.node(inst.place.id), p as usize), inside);
+                        direct |= self.queued_whole;
                     }
                     if direct && !drawn && self.options.temporal {
                         self.list_new(inst, n);
@@ -696,10 +689,10 @@ impl<'a> Walk<'a> {
 
     fn list_new(&mut self, inst: &Instance<'a>, n: u32) {
         self.list(VisEntry {
-            dag_node: inst.id,
+            dag_node: inst.place.id,
             octree_node: n,
-            first_item: inst.first_item,
-            world_from_node: inst.world_from_node,
+            first_item: inst.place.first_item,
+            world_from_node: inst.place.world_from_node,
             stale: false,
         });
     }
@@ -717,7 +710,7 @@ impl<'a> Walk<'a> {
         clip: Mat4,
         own: &occult_core::Aabb,
     ) -> bool {
-        let scene: &'a Scene = self.scene;
+        let scene: &'a Scene = self.walk.scene();
         let octrees: &'a [Option<HybridOctree>] = self.octrees;
         let Some(octree) = &octrees[id.index()] else {
             return false;
@@ -755,14 +748,18 @@ impl<'a> Walk<'a> {
                     let NodeKind::Mesh(mesh) = scene.node(i.child).kind() else {
                         continue;
                     };
-                    let child_first = first_item + scene.node(id).item_offset(p as usize);
                     if !self.stamp(id, p, first_item) {
                         continue;
                     }
-                    let world_from_child = compose(world_from_node, &i.parent_from_child);
-                    let clip = self.view.clip_from_object(&world_from_child);
+                    let child = Placed {
+                        id,
+                        world_from_node: *world_from_node,
+                        first_item,
+                    }
+                    .child_of(scene.node(id), p as usize);
+                    let clip = self.walk.view().clip_from_object(&child.world_from_node);
                     let b = scene.node(i.child).bounds();
-                    self.push(mesh, None, clip, child_first, &b);
+                    self.push(mesh, None, clip, child.first_item, &b);
                 }
             }
         }
@@ -815,14 +812,14 @@ impl<'a> Walk<'a> {
                 first_item: p.first_item,
             })
             .collect();
-        crate::rasterize(self.raster, self.view, self.frame, &draws, &mut self.stats);
+        crate::rasterize(self.raster, self.walk.view(), self.frame, &draws, &mut self.walk.stats);
         drop(draws);
         self.batches += 1;
         if let Some(d) = self.dirty.take() {
             if self.options.occlusion {
                 let t = Instant::now();
                 self.pyramid.update(self.frame, d);
-                self.stats.phases.add(Phase::DepthStructure, t.elapsed());
+                self.walk.stats.phases.add(Phase::DepthStructure, t.elapsed());
             }
         }
         self.pending.clear();

@@ -3,35 +3,12 @@
 //! coherence start (§III.D).
 
 use std::collections::{HashMap, HashSet};
-use std::hash::BuildHasherDefault;
 
 use occult_core::{compose, Aabb, Affine3A, ItemId, Mat4, NodeId, Vec3, Vec4};
 use occult_spatial::{traverse, FatRay, ShearedRay, TraversalCounters};
 
 use super::{Accel, FrameCtx, Lzb, Mode, Selection};
-
-/// A fast hasher for integer keys (Fx, as in rustc).
-#[derive(Default, Clone, Copy)]
-pub(super) struct FxHasher(u64);
-
-impl std::hash::Hasher for FxHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(b as u64);
-        }
-    }
-    fn write_u32(&mut self, i: u32) {
-        self.write_u64(i as u64);
-    }
-    fn write_u64(&mut self, i: u64) {
-        self.0 = (self.0.rotate_left(5) ^ i).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
-    }
-}
-
-pub(super) type FxBuild = BuildHasherDefault<FxHasher>;
+use crate::hash::FxBuild;
 
 /// A mesh instance met during a frame: names its triangles' items and places them.
 #[derive(Clone, Copy, Debug)]

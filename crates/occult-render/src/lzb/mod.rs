@@ -68,9 +68,7 @@ mod oor;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use occult_core::{
-    compose, Aabb, Affine3A, Camera, Containment, ItemId, Mat4, NodeId, NodeKind, Scene, Vec3, Vec4, View,
-};
+use occult_core::{Aabb, Affine3A, Camera, Containment, Frustum, ItemId, Mat4, NodeKind, Scene, Vec3, Vec4, View};
 use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 use occult_spatial::{RayOctree, RayOctreeConfig, RayOctreeError};
 use rayon::prelude::*;
@@ -79,33 +77,9 @@ use rayon::prelude::*;
 /// the node's bounds halved more often than its mantissa has bits no longer splits it.
 const MAX_DEPTH: u32 = 24;
 
-use crate::zbuffer::MAX_BRUTE_FORCE_ITEMS as MAX_FRAME_TRIANGLES;
-use crate::{
-    check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result,
-};
+use crate::walk::{NodeAt, SceneWalk, Visitor};
+use crate::{AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
 use cast::{row_w, Caster, InstanceRec};
-
-/// Every counter ([`FrameStats::counters`](crate::FrameStats::counters)) a frame may report,
-/// whichever the settings.
-pub const COUNTERS: [&str; 17] = [
-    "plane_reused",
-    "coarse_rays",
-    "near_leaves",
-    "far_leaves",
-    "near_triangles",
-    "oor_polygons",
-    "rays",
-    "ray_tri_tests",
-    "ray_leaves_visited",
-    "ray_nodes_visited",
-    "coherent_starts",
-    "rays_resolved",
-    "unfinished_pixels",
-    "z_clip_permille_of_far",
-    "pvl_leaves",
-    "pvl_entries_triangles",
-    "pvl_triangles",
-];
 
 /// The registry entry of `lzb`.
 pub static INFO: AlgorithmInfo = AlgorithmInfo {
@@ -182,6 +156,25 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             default: "on",
             help: "start each ray from its neighbour's hit (§III.D)",
         },
+    ],
+    counters: &[
+        "plane_reused",
+        "coarse_rays",
+        "near_leaves",
+        "far_leaves",
+        "near_triangles",
+        "oor_polygons",
+        "rays",
+        "ray_tri_tests",
+        "ray_leaves_visited",
+        "ray_nodes_visited",
+        "coherent_starts",
+        "rays_resolved",
+        "unfinished_pixels",
+        "z_clip_permille_of_far",
+        "pvl_leaves",
+        "pvl_entries_triangles",
+        "pvl_triangles",
     ],
     conservative: true,
     build: |scene, options, params| Ok(Box::new(Lzb::new(scene, options, &LzbOptions::from_params(params)?)?)),
@@ -729,128 +722,103 @@ fn make_draws<'s>(
         .collect()
 }
 
-/// Step 1: hierarchical view-frustum culling over the octrees, collecting leaves near and far
-/// of the plane.
+/// Step 1: hierarchical view-frustum culling over the octrees (the crate's scene walk,
+/// [`crate::walk`]), collecting leaves near and far of the plane.
 struct Walk<'a> {
+    walk: SceneWalk<'a>,
     lzb: &'a Lzb,
     ctx: &'a FrameCtx,
     instances: Vec<(InstanceRec, ItemId, Mat4)>,
     near: Vec<(u32, u32)>,
     far: Vec<(u32, u32)>,
-    /// Triangle references of the leaves met (a triangle in several leaves counts in each).
-    triangles: u64,
-    /// `triangles` passed [`MAX_FRAME_TRIANGLES`]: the walk stops, its lists bounded.
-    too_many: bool,
-    stats: FrameStats,
 }
 
-impl Walk<'_> {
-    fn node(&mut self, id: NodeId, world_from_node: &Affine3A, base: ItemId, inside: bool) {
-        if self.too_many {
-            return;
+/// The frustum-culled descent of `octree` from its root, children in order (`inside`: the
+/// node occurrence lies wholly inside the frustum): empty leaves are skipped uncounted, every
+/// other node reached is counted visited and tested unless inside; `leaf(walk, node_index,
+/// inside)` is called for each leaf not outside.
+fn cull_octree<'s>(
+    walk: &mut SceneWalk<'s>,
+    octree: &RayOctree,
+    frustum: &Frustum,
+    inside: bool,
+    mut leaf: impl FnMut(&mut SceneWalk<'s>, u32, bool),
+) {
+    let mut stack = vec![(0u32, inside)];
+    while let Some((n, inside)) = stack.pop() {
+        let on = &octree.nodes()[n as usize];
+        if on.is_leaf() && on.count == 0 {
+            continue;
         }
-        let node = self.lzb.scene.node(id);
-        let frustum = self.ctx.view.frustum(world_from_node);
-        let test = |stats: &mut FrameStats, b: &Aabb| -> Containment {
-            stats.boxes_tested += 1;
-            let c = if b.is_empty() {
-                Containment::Outside
-            } else {
-                frustum.classify_aabb(b)
-            };
-            if c == Containment::Outside {
-                stats.boxes_culled += 1;
-            }
-            c
-        };
-        self.stats.nodes_visited += 1;
+        walk.stats.nodes_visited += 1;
         let inside = inside
-            || match test(&mut self.stats, &node.bounds()) {
-                Containment::Outside => return,
+            || match walk.test(frustum, &on.bounds) {
+                Containment::Outside => continue,
                 c => c == Containment::Inside,
             };
-        match &self.lzb.accel[id.index()] {
+        if on.is_leaf() {
+            leaf(walk, n, inside);
+        } else {
+            stack.extend(on.children().rev().map(|c| (c, inside)));
+        }
+    }
+}
+
+impl<'a> Visitor<'a> for Walk<'a> {
+    fn walk(&mut self) -> &mut SceneWalk<'a> {
+        &mut self.walk
+    }
+
+    /// A mesh: its leaves in the frustum, near or far of the plane. A group: the instances of
+    /// its leaves in the frustum, each tested with its own box.
+    fn visit(&mut self, at: &NodeAt<'a>) {
+        let lzb: &'a Lzb = self.lzb;
+        match &lzb.accel[at.place.id.index()] {
             Accel::Empty => {}
             Accel::Mesh { octree, .. } => {
-                let clip = self.ctx.view.clip_from_object(world_from_node);
+                let clip = self.ctx.view.clip_from_object(&at.place.world_from_node);
                 let w_row = row_w(&clip);
                 let inst = self.instances.len() as u32;
                 let mut any = false;
-                let mut stack = vec![(0u32, inside)];
-                while let Some((n, inside)) = stack.pop() {
+                let (ctx, near, far) = (self.ctx, &mut self.near, &mut self.far);
+                cull_octree(&mut self.walk, octree, &at.frustum, at.inside, |walk, n, _| {
                     let on = &octree.nodes()[n as usize];
-                    if on.is_leaf() && on.count == 0 {
-                        continue;
-                    }
-                    self.stats.nodes_visited += 1;
-                    let inside = inside
-                        || match test(&mut self.stats, &on.bounds) {
-                            Containment::Outside => continue,
-                            c => c == Containment::Inside,
-                        };
-                    if on.is_leaf() {
-                        any = true;
-                        self.triangles += on.count as u64;
-                        self.too_many |= self.triangles > MAX_FRAME_TRIANGLES;
-                        // The leaf's tight box (`RayOctree::tighten_leaves`).
-                        if self.ctx.is_near(w_row, &on.bounds) {
-                            self.near.push((inst, n));
-                        } else {
-                            self.far.push((inst, n));
-                        }
+                    any = true;
+                    walk.meet_triangles(on.count as u64);
+                    // The leaf's tight box (`RayOctree::tighten_leaves`).
+                    if ctx.is_near(w_row, &on.bounds) {
+                        near.push((inst, n));
                     } else {
-                        stack.extend(on.children().rev().map(|c| (c, inside)));
+                        far.push((inst, n));
                     }
-                }
+                });
                 if any {
                     self.instances.push((
                         InstanceRec {
-                            node: id,
-                            world_from_object: *world_from_node,
+                            node: at.place.id,
+                            world_from_object: at.place.world_from_node,
                         },
-                        base,
+                        at.place.first_item,
                         clip,
                     ));
                 }
             }
             Accel::Group { octree, bounds, .. } => {
-                let instances = node.instances();
                 let mut chosen: Vec<(u32, bool)> = Vec::new();
-                let mut stack = vec![(0u32, inside)];
-                while let Some((n, inside)) = stack.pop() {
-                    let on = &octree.nodes()[n as usize];
-                    if on.is_leaf() && on.count == 0 {
-                        continue;
-                    }
-                    self.stats.nodes_visited += 1;
-                    let inside = inside
-                        || match test(&mut self.stats, &on.bounds) {
-                            Containment::Outside => continue,
-                            c => c == Containment::Inside,
-                        };
-                    if on.is_leaf() {
-                        chosen.extend(octree.leaf_primitives(n).iter().map(|&i| (i, inside)));
-                    } else {
-                        stack.extend(on.children().rev().map(|c| (c, inside)));
-                    }
-                }
+                cull_octree(&mut self.walk, octree, &at.frustum, at.inside, |_, n, inside| {
+                    chosen.extend(octree.leaf_primitives(n).iter().map(|&i| (i, inside)));
+                });
                 // Instances span leaves: each once, "inside" if any of its leaves was.
                 chosen.sort_unstable_by_key(|&(i, inside)| (i, !inside));
                 chosen.dedup_by_key(|&mut (i, _)| i);
                 for (i, inside) in chosen {
                     let i = i as usize;
                     let inside = inside
-                        || match test(&mut self.stats, &bounds[i]) {
+                        || match self.walk.test(&at.frustum, &bounds[i]) {
                             Containment::Outside => continue,
                             c => c == Containment::Inside,
                         };
-                    let world_from_child = compose(world_from_node, &instances[i].parent_from_child);
-                    self.node(
-                        instances[i].child,
-                        &world_from_child,
-                        base + node.item_offset(i),
-                        inside,
-                    );
+                    self.enter(at.child(i), inside);
                 }
             }
         }
@@ -878,11 +846,7 @@ impl Renderer for Lzb {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        check_frame(view, frame)?;
-        let start = Instant::now();
-        let mut stats = FrameStats::default();
-        self.raster.clear(frame);
-        stats.phases.add(Phase::Clear, start.elapsed());
+        let (start, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
         let mut ctx = FrameCtx::new(view, self.cull_backfaces);
 
         // Step 2 (§II.B): the partition plane.
@@ -895,33 +859,23 @@ impl Renderer for Lzb {
         // Step 1: frustum culling collecting leaves, split by the plane.
         let t = Instant::now();
         let mut walk = Walk {
+            walk: SceneWalk::new(&self.scene, &ctx.view),
             lzb: self,
             ctx: &ctx,
             instances: Vec::new(),
             near: Vec::new(),
             far: Vec::new(),
-            triangles: 0,
-            too_many: false,
-            stats: FrameStats::default(),
         };
-        walk.node(self.scene.root(), &Affine3A::IDENTITY, 0, false);
+        walk.walk.stats = stats;
+        walk.run();
         let Walk {
+            walk,
             instances,
             near,
             far,
-            too_many,
-            stats: wstats,
             ..
         } = walk;
-        if too_many {
-            return Err(RenderError::TooManyInView {
-                renderer: "lzb",
-                limit: MAX_FRAME_TRIANGLES,
-            });
-        }
-        stats.nodes_visited += wstats.nodes_visited;
-        stats.boxes_tested += wstats.boxes_tested;
-        stats.boxes_culled += wstats.boxes_culled;
+        stats = walk.finish("lzb")?;
         stats.counters.add("near_leaves", near.len() as u64);
         stats.counters.add("far_leaves", far.len() as u64);
         stats.phases.add(Phase::Cull, t.elapsed());
@@ -1024,7 +978,7 @@ impl Renderer for Lzb {
                 .collect()
         });
         let mut pairs: Vec<(ItemId, u32)> = Vec::new();
-        let mut recs = std::collections::HashMap::<ItemId, InstanceRec, cast::FxBuild>::default();
+        let mut recs = std::collections::HashMap::<ItemId, InstanceRec, crate::hash::FxBuild>::default();
         let mut hits = Vec::new();
         let (mut rays, mut tests, mut coherent, mut leaves, mut resolved, mut ray_nodes) = (0, 0, 0, 0, 0, 0);
         for c in results {

@@ -20,6 +20,13 @@
 //! Objects are flattened at build time (refused above [`MAX_OBJECTS`]); the hierarchy is a
 //! BVH over their world boxes.
 //!
+//! Why not the crate's scene walk ([`crate::walk::Visitor`]): §3.1 marks *objects* visible
+//! from one frame to the next, so objects are numbered once, at build time, by
+//! [`Scene::for_each_mesh_instance`] (occult-core's walk, composing transforms from the root
+//! as every renderer does); a frame then walks the flat BVH over them in world space, with the
+//! walk's counted frustum test ([`crate::walk::test_box`]) and BVH descent
+//! ([`crate::walk::cull_bvh`]).
+//!
 //! # First frame
 //! With no previous frame (and after a resolution change) the occluder set is empty: the
 //! N-buffer of an empty depth buffer culls nothing, so the first frame is frustum culling.
@@ -55,20 +62,11 @@ use occult_core::{Aabb, Affine3A, Containment, ItemId, NodeId, NodeKind, Scene, 
 use occult_raster::{query_box_counted, Draw, DrawTriangles, Extremum, Frame, NBuffer, PixelRect, Rasterizer};
 use occult_spatial::Bvh;
 
-use crate::{check_frame, AlgorithmInfo, FrameStats, ParamDoc, Phase, RenderError, RenderOptions, Renderer, Result};
+use crate::walk::{cull_bvh, test_box};
+use crate::{AlgorithmInfo, FrameStats, ParamDoc, Phase, RenderError, RenderOptions, Renderer, Result};
 
 /// Largest number of objects (mesh instances × triangle chunks) the renderer flattens.
 pub const MAX_OBJECTS: u64 = 1 << 24;
-
-/// Every counter ([`FrameStats::counters`](crate::FrameStats::counters)) a frame may report,
-/// whichever the settings.
-pub const COUNTERS: [&str; 5] = [
-    "occluders_drawn",
-    "depth_comparisons",
-    "nbuffer_lookups",
-    "rect_pixels",
-    "survivors_drawn",
-];
 
 /// Registry entry of [`NBufferCulling`].
 pub static INFO: AlgorithmInfo = AlgorithmInfo {
@@ -100,6 +98,13 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             default: "4",
             help: "objects per leaf of the hierarchy over objects (>= 1)",
         },
+    ],
+    counters: &[
+        "occluders_drawn",
+        "depth_comparisons",
+        "nbuffer_lookups",
+        "rect_pixels",
+        "survivors_drawn",
     ],
     conservative: true,
     build: |scene, options, params| {
@@ -561,11 +566,7 @@ impl Renderer for NBufferCulling {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        check_frame(view, frame)?;
-        let start = Instant::now();
-        let mut stats = FrameStats::default();
-        self.raster.clear(frame);
-        stats.phases.add(Phase::Clear, start.elapsed());
+        let (start, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
         if self.last_size != (view.width(), view.height()) {
             self.visible.fill(false);
             self.last_size = (view.width(), view.height());
@@ -578,9 +579,7 @@ impl Renderer for NBufferCulling {
         let mut occluders = Vec::new();
         for i in 0..self.objects.len() {
             if self.visible[i] {
-                stats.boxes_tested += 1;
-                if frustum.classify_aabb(&self.objects[i].bounds) == Containment::Outside {
-                    stats.boxes_culled += 1;
+                if test_box(&mut stats, &frustum, &self.objects[i].bounds) == Containment::Outside {
                     continue;
                 }
                 self.drawn[i] = true;
@@ -630,12 +629,8 @@ impl Renderer for NBufferCulling {
                 return;
             }
             let b = &objects[i].bounds;
-            if !inside {
-                stats.boxes_tested += 1;
-                if frustum.classify_aabb(b) == Containment::Outside {
-                    stats.boxes_culled += 1;
-                    return;
-                }
+            if !inside && test_box(stats, &frustum, b) == Containment::Outside {
+                return;
             }
             stats.rects_tested += 1;
             if test.hidden(b, tally) {
@@ -645,36 +640,21 @@ impl Renderer for NBufferCulling {
             }
         };
         match &self.hierarchy {
-            Some(bvh) if !bvh.nodes().is_empty() => {
-                let mut stack = vec![(0u32, false)];
-                while let Some((n, inside)) = stack.pop() {
-                    let node = &bvh.nodes()[n as usize];
-                    stats.nodes_visited += 1;
-                    let inside = inside || {
-                        stats.boxes_tested += 1;
-                        match frustum.classify_aabb(&node.bounds) {
-                            Containment::Outside => {
-                                stats.boxes_culled += 1;
-                                continue;
-                            }
-                            c => c == Containment::Inside,
-                        }
-                    };
-                    if node.is_leaf() {
-                        for &i in &bvh.primitive_indices()[node.range()] {
-                            test_object(i as usize, inside, &mut stats, &mut tally);
-                        }
-                        continue;
+            Some(bvh) if !bvh.nodes().is_empty() => cull_bvh(&mut stats, bvh, &frustum, |stats, _, node, inside| {
+                if node.is_leaf() {
+                    for &i in &bvh.primitive_indices()[node.range()] {
+                        test_object(i as usize, inside, stats, &mut tally);
                     }
-                    stats.rects_tested += 1;
-                    if test.hidden(&node.bounds, &mut tally) {
-                        stats.rects_culled += 1;
-                        continue;
-                    }
-                    stack.push((node.second_child, inside));
-                    stack.push((n + 1, inside));
+                    return false;
                 }
-            }
+                // §4.2: an inner node is tested like an object; a hidden one hides its subtree.
+                stats.rects_tested += 1;
+                if test.hidden(&node.bounds, &mut tally) {
+                    stats.rects_culled += 1;
+                    return false;
+                }
+                true
+            }),
             _ => match test.against {
                 Against::NBuffer(nbuffer, true) => {
                     // §3.1 over the flat list: every object's rectangle first, then one
@@ -682,12 +662,7 @@ impl Renderer for NBufferCulling {
                     let batch = &mut self.batch;
                     batch.clear();
                     for (i, object) in objects.iter().enumerate() {
-                        if drawn[i] {
-                            continue;
-                        }
-                        stats.boxes_tested += 1;
-                        if frustum.classify_aabb(&object.bounds) == Containment::Outside {
-                            stats.boxes_culled += 1;
+                        if drawn[i] || test_box(&mut stats, &frustum, &object.bounds) == Containment::Outside {
                             continue;
                         }
                         stats.rects_tested += 1;

@@ -25,8 +25,9 @@
 //! # Instanced scenes
 //! The scene DAG is not flattened. A grid is built per *unique* node, in the node's own space:
 //! a mesh node's grid holds triangle indices, a group node's grid holds instance indices
-//! (assigned by their placed bounds). A frame walks the DAG from the root composing transforms
-//! exactly as `frustum` does (so item ids and transforms are the same as `zbuffer`'s); at each
+//! (assigned by their placed bounds). A frame walks the DAG with the crate's scene walk
+//! ([`crate::walk`]: item ids and transforms the same as `zbuffer`'s; the node's box tested but
+//! not counted as a box test, the queries being this renderer's box tests); at each
 //! node occurrence it traverses that node's grid with the cells placed by `clip_from_object`.
 //! A visible cell of a group grid visits its instances (each once per occurrence of the group,
 //! by stamp), recursing into their grids. Memory is the sum over unique nodes: linear in the
@@ -71,27 +72,13 @@ pub use query::any_sample_passes;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use occult_core::{compose, Affine3A, Containment, Frustum, ItemId, Mat4, NodeId, NodeKind, Scene, Vec3, View};
+use occult_core::{Containment, Mat4, NodeId, NodeKind, Scene, Vec3, View};
 use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 pub use occult_spatial::grid::Resolution;
 use occult_spatial::grid::{GridCell, GridConfig, GridError, MeshTriangles, NestedGrid, WeightedBoxes, NO_CHILD};
 
-use crate::{
-    check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result,
-};
-
-/// Every counter ([`FrameStats::counters`](crate::FrameStats::counters)) a frame may report,
-/// whichever the settings.
-pub const COUNTERS: [&str; 8] = [
-    "cells_visited",
-    "cells_in_frustum",
-    "queries",
-    "queries_hidden",
-    "queries_skipped",
-    "cells_visible",
-    "node_occurrences",
-    "parallel_batches",
-];
+use crate::walk::{NodeAt, NodeTest, SceneWalk, Visitor};
+use crate::{AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
 
 /// Registry entry: every [`OqGridOptions`] field is a parameter.
 pub static INFO: AlgorithmInfo = AlgorithmInfo {
@@ -153,6 +140,16 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             default: "4096",
             help: "bound on all grids, MiB, checked before allocating (>= 1)",
         },
+    ],
+    counters: &[
+        "cells_visited",
+        "cells_in_frustum",
+        "queries",
+        "queries_hidden",
+        "queries_skipped",
+        "cells_visible",
+        "node_occurrences",
+        "parallel_batches",
     ],
     conservative: true,
     build: |scene, options, params| {
@@ -458,29 +455,24 @@ pub struct OqGridCounts {
 
 /// A node occurrence being traversed.
 struct Occurrence<'a> {
-    id: NodeId,
-    world_from_node: Affine3A,
+    at: NodeAt<'a>,
     clip_from_object: Mat4,
-    frustum: Frustum,
     /// The camera in the node's space, for slab keys.
     eye: Vec3,
     dir: Vec3,
-    first_item: ItemId,
     epoch: u32,
     grid: &'a NestedGrid,
 }
 
 /// Per-frame traversal state.
 struct Walk<'a> {
-    scene: &'a Scene,
+    walk: SceneWalk<'a>,
     grids: &'a [NestedGrid],
     stamps: &'a mut [Vec<u32>],
     epoch: &'a mut u32,
     raster: &'a mut Rasterizer,
     options: &'a OqGridOptions,
-    view: &'a View,
     frame: &'a mut Frame,
-    stats: FrameStats,
     counts: OqGridCounts,
     query_time: Duration,
     raster_time: Duration,
@@ -488,15 +480,16 @@ struct Walk<'a> {
     list: Vec<u32>,
 }
 
-impl<'a> Walk<'a> {
-    /// Visits the occurrence of node `id` placed by `world_from_node`.
-    fn node(&mut self, id: NodeId, world_from_node: Affine3A, first_item: ItemId) {
-        let node = self.scene.node(id);
-        let frustum = self.view.frustum(&world_from_node);
-        self.stats.nodes_visited += 1;
-        if node.bounds().is_empty() || frustum.classify_aabb(&node.bounds()) == Containment::Outside {
-            return;
-        }
+impl<'a> Visitor<'a> for Walk<'a> {
+    /// The node's box is tested but not counted: this renderer's box tests are its queries.
+    const NODE_TEST: NodeTest = NodeTest::Uncounted;
+
+    fn walk(&mut self) -> &mut SceneWalk<'a> {
+        &mut self.walk
+    }
+
+    /// Traverses the occurrence's grid from its top level.
+    fn visit(&mut self, at: &NodeAt<'a>) {
         self.counts.node_occurrences += 1;
         *self.epoch = self.epoch.wrapping_add(1);
         if *self.epoch == 0 {
@@ -504,22 +497,22 @@ impl<'a> Walk<'a> {
             self.stamps.iter_mut().for_each(|s| s.fill(0));
             *self.epoch = 1;
         }
-        let node_from_world = world_from_node.inverse();
-        let camera = self.view.camera();
+        let view = self.walk.view();
+        let node_from_world = at.place.world_from_node.inverse();
+        let camera = view.camera();
         let occ = Occurrence {
-            id,
-            world_from_node,
-            clip_from_object: self.view.clip_from_object(&world_from_node),
-            frustum,
+            at: *at,
+            clip_from_object: view.clip_from_object(&at.place.world_from_node),
             eye: node_from_world.transform_point3(camera.eye),
             dir: node_from_world.transform_vector3(camera.direction()),
-            first_item,
             epoch: *self.epoch,
-            grid: &self.grids[id.index()],
+            grid: &self.grids[at.place.id.index()],
         };
         self.level(&occ, 0);
     }
+}
 
+impl<'a> Walk<'a> {
     /// Traverses level `level_index` of the occurrence's grid: §3.3 slabs, §3.4 batches.
     fn level(&mut self, occ: &Occurrence<'a>, level_index: u32) {
         let level = &occ.grid.levels()[level_index as usize];
@@ -532,7 +525,7 @@ impl<'a> Walk<'a> {
         let mut order: Vec<(i64, u32)> = Vec::with_capacity(level.cells.len());
         for (i, cell) in level.cells.iter().enumerate() {
             self.counts.cells_visited += 1;
-            if occ.frustum.classify_aabb(&cell.tight) == Containment::Outside {
+            if occ.at.frustum.classify_aabb(&cell.tight) == Containment::Outside {
                 continue;
             }
             let key = match self.options.order {
@@ -564,15 +557,16 @@ impl<'a> Walk<'a> {
     fn batch(&mut self, occ: &Occurrence<'a>, cells: &'a [GridCell], batch: &[(i64, u32)]) {
         let options = self.options;
         let needs_query = |c: &GridCell| options.queries && c.weight >= options.query_threshold;
+        let view = self.walk.view();
         let t = Instant::now();
         let query = |c: &GridCell| -> bool {
-            !needs_query(c) || any_sample_passes(self.frame, self.view, &occ.clip_from_object, &c.tight)
+            !needs_query(c) || any_sample_passes(self.frame, view, &occ.clip_from_object, &c.tight)
         };
         let queried = batch.iter().filter(|(_, i)| needs_query(&cells[*i as usize])).count() as u64;
         // Deviation (§3.4): a batch's queries run in parallel only when their screen area makes
         // it pay; small queries cost less than handing them to other threads.
         let parallel = queried > 1 && {
-            let (w, h) = (self.view.width() as f32, self.view.height() as f32);
+            let (w, h) = (view.width() as f32, view.height() as f32);
             let area: f32 = batch
                 .iter()
                 .filter(|(_, i)| needs_query(&cells[*i as usize]))
@@ -604,9 +598,8 @@ impl<'a> Walk<'a> {
         if visible_count == 0 {
             return;
         }
-        let node = self.scene.node(occ.id);
         let elements = occ.grid.elements();
-        match node.kind() {
+        match occ.at.node.kind() {
             NodeKind::Mesh(mesh) => {
                 // The visible leaf cells' triangles, each once per occurrence (§3.1 stamps).
                 self.list.clear();
@@ -617,7 +610,7 @@ impl<'a> Walk<'a> {
                     }
                     let tris = &elements[cell.range()];
                     if options.stamps {
-                        let stamps = &mut self.stamps[occ.id.index()];
+                        let stamps = &mut self.stamps[occ.at.place.id.index()];
                         for &t in tris {
                             if stamps[t as usize] != occ.epoch {
                                 stamps[t as usize] = occ.epoch;
@@ -633,10 +626,10 @@ impl<'a> Walk<'a> {
                         mesh,
                         triangles: DrawTriangles::List(&self.list),
                         clip_from_object: occ.clip_from_object,
-                        first_item: occ.first_item,
+                        first_item: occ.at.place.first_item,
                     };
                     let t = Instant::now();
-                    crate::rasterize(self.raster, self.view, self.frame, &[draw], &mut self.stats);
+                    crate::rasterize(self.raster, view, self.frame, &[draw], &mut self.walk.stats);
                     self.raster_time += t.elapsed();
                 }
                 for (&(_, i), _) in batch.iter().zip(&visible).filter(|(_, v)| **v) {
@@ -646,7 +639,7 @@ impl<'a> Walk<'a> {
                     }
                 }
             }
-            NodeKind::Group(instances) => {
+            NodeKind::Group(_) => {
                 for (&(_, i), _) in batch.iter().zip(&visible).filter(|(_, v)| **v) {
                     let cell = &cells[i as usize];
                     if cell.child != NO_CHILD {
@@ -655,19 +648,13 @@ impl<'a> Walk<'a> {
                     }
                     for &e in &elements[cell.range()] {
                         if options.stamps {
-                            let s = &mut self.stamps[occ.id.index()][e as usize];
+                            let s = &mut self.stamps[occ.at.place.id.index()][e as usize];
                             if *s == occ.epoch {
                                 continue;
                             }
                             *s = occ.epoch;
                         }
-                        let inst = &instances[e as usize];
-                        let world_from_child = compose(&occ.world_from_node, &inst.parent_from_child);
-                        self.node(
-                            inst.child,
-                            world_from_child,
-                            occ.first_item + node.item_offset(e as usize),
-                        );
+                        self.enter(occ.at.child(e as usize), false);
                     }
                 }
             }
@@ -681,36 +668,32 @@ impl Renderer for OqGrid {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        check_frame(view, frame)?;
-        let start = Instant::now();
-        self.raster.clear(frame);
-        let clear = start.elapsed();
+        let (start, cleared) = crate::begin_frame(&mut self.raster, view, frame)?;
         let t = Instant::now();
         let mut walk = Walk {
-            scene: &self.scene,
+            walk: SceneWalk::new(&self.scene, view),
             grids: &self.grids,
             stamps: &mut self.stamps,
             epoch: &mut self.epoch,
             raster: &mut self.raster,
             options: &self.options,
-            view,
             frame,
-            stats: FrameStats::default(),
             counts: OqGridCounts::default(),
             query_time: Duration::ZERO,
             raster_time: Duration::ZERO,
             list: Vec::new(),
         };
-        walk.node(self.scene.root(), Affine3A::IDENTITY, 0);
+        walk.walk.stats = cleared;
+        walk.run();
         let walked = t.elapsed();
         let Walk {
-            mut stats,
+            walk,
             counts,
             query_time,
             raster_time,
             ..
         } = walk;
-        stats.phases.add(Phase::Clear, clear);
+        let mut stats = walk.finish("oqgrid")?;
         stats.phases.add(Phase::Query, query_time);
         stats
             .phases

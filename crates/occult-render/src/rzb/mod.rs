@@ -29,8 +29,8 @@
 //!   (`eps=auto`).
 //!
 //! The frame receives depth and item ids like every renderer: a sample of triangle `t` of a
-//! mesh instance writes item `first_item + t`, with transforms composed from the root exactly
-//! as `frustum.rs` does, so the fallback's triangles land bit-identical to `zbuffer`'s and
+//! mesh instance writes item `first_item + t`, with transforms composed from the root by the
+//! crate's scene walk ([`crate::walk`]), so the fallback's triangles land bit-identical to `zbuffer`'s and
 //! sampled pixels name real triangle instances. It is approximate (DESIGN invariant 3):
 //! `compare` measures the share of pixels whose item differs from `zbuffer` and the PSNR.
 //! Deterministic for a seed: each box's generator is seeded from the seed and the box alone,
@@ -87,31 +87,11 @@ use occult_raster::{keep_fragment, Frame, Rasterizer};
 use occult_spatial::SampleOctreeConfig;
 use rayon::prelude::*;
 
-use crate::{
-    check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result,
-};
+use crate::{AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
 use cache::{quantize, CachedSample, SampleCache};
 use sample::{box_rng, piece_rng, sample_count, SampleCounts, Sampler, Target};
 use select::Selection;
 use structure::Structure;
-
-/// Every counter ([`FrameStats::counters`](crate::FrameStats::counters)) a frame may report,
-/// whichever the settings.
-pub const COUNTERS: [&str; 13] = [
-    "boxes_selected",
-    "boxes_zbuffer",
-    "boxes_backfacing",
-    "instances_visited",
-    "samples_generated",
-    "samples_backfacing",
-    "samples_capped",
-    "samples_expected",
-    "cache_hits",
-    "cache_builds",
-    "cache_evictions",
-    "cache_kib",
-    "eps_milli",
-];
 
 /// Registry entry: `rzb:eps=1.5,d=2,cache=on,...`.
 pub static INFO: AlgorithmInfo = AlgorithmInfo {
@@ -137,6 +117,21 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc { key: "backface", default: "auto", help: "reject back-facing samples (5.3.3): auto follows the rasterizer's back-face culling, on, off" },
         ParamDoc { key: "dynamic", default: "off", help: "sample from distribution trees (5.4) so that entries can be removed and inserted through Rzb::remove/insert" },
         ParamDoc { key: "max_samples", default: "1e9", help: "most samples per frame; beyond, counts are scaled down (counter samples_capped)" },
+    ],
+    counters: &[
+        "boxes_selected",
+        "boxes_zbuffer",
+        "boxes_backfacing",
+        "instances_visited",
+        "samples_generated",
+        "samples_backfacing",
+        "samples_capped",
+        "samples_expected",
+        "cache_hits",
+        "cache_builds",
+        "cache_evictions",
+        "cache_kib",
+        "eps_milli",
     ],
     conservative: false,
     build: |scene, options, params| Ok(Box::new(Rzb::with_options(scene, options, &RzbOptions::from_params(params)?)?)),
@@ -632,11 +627,7 @@ impl Renderer for Rzb {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        check_frame(view, frame)?;
-        let start = Instant::now();
-        let mut stats = FrameStats::default();
-        self.raster.clear(frame);
-        stats.phases.add(Phase::Clear, start.elapsed());
+        let (start, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
         self.frame_index += 1;
         let eps = match (&self.auto, self.opts.eps) {
             (Some(a), _) => a.next(),

@@ -1,10 +1,13 @@
 //! Box selection (§5.3.2) with the large-triangle fallback (§7.1), walking the instancing DAG
-//! (§7.3) the way `frustum.rs` does, so transforms and item ids are composed identically.
+//! (§7.3) with the crate's scene walk ([`crate::walk`]), so transforms and item ids are
+//! composed as every renderer composes them. A structure instance is entered without a test of
+//! the node's box ([`NodeTest::None`]): its octree roots, one per area class, are what is
+//! tested, and only they count as tested boxes.
 
-use occult_core::{
-    compose, Aabb, Affine3A, Containment, Frustum, ItemId, Mat4, NodeId, NodeKind, Scene, Vec3, Vec4, View,
-};
+use occult_core::{Aabb, Affine3A, Containment, Frustum, ItemId, Mat4, NodeKind, Scene, Vec3, Vec4, View};
 use occult_raster::{Draw, DrawTriangles};
+
+use crate::walk::{NodeAt, NodeTest, Placed, SceneWalk, Visitor};
 
 use super::structure::{area_scale, Cone, Section, Structure};
 use super::RzbOptions;
@@ -74,9 +77,8 @@ pub struct Job {
 
 /// The result of selection for one frame.
 pub struct Selection<'a> {
-    scene: &'a Scene,
+    walk: SceneWalk<'a>,
     structures: &'a [Structure],
-    view: &'a View,
     consts: ViewConsts,
     eps: f64,
     large: Option<f64>,
@@ -101,14 +103,13 @@ pub struct Selection<'a> {
 }
 
 struct Place {
-    id: NodeId,
-    world_from_structure: Affine3A,
+    /// The structure instance: its node, placement and first item.
+    at: Placed,
     clip_from_structure: Mat4,
     frustum: Frustum,
     /// Rows 0, 1, 2 of `view_from_structure`.
     rows: [Vec4; 3],
     area_scale: f64,
-    base: ItemId,
     /// §5.3.4: the eye in structure space, when the placement is a similarity (angles kept).
     eye: Option<Vec3>,
     /// The placement mirrors (front faces are the other side).
@@ -145,9 +146,8 @@ impl<'a> Selection<'a> {
         backface: bool,
     ) -> Self {
         let mut s = Self {
-            scene,
+            walk: SceneWalk::new(scene, view),
             structures,
-            view,
             consts: ViewConsts::new(view, opts.splat),
             eps,
             large: opts.large.then_some(opts.large_threshold),
@@ -161,11 +161,24 @@ impl<'a> Selection<'a> {
             boxes_zbuffer: 0,
             boxes_backfacing: 0,
         };
-        s.structure(scene.root(), Affine3A::IDENTITY, 0);
+        Visitor::run(&mut s);
+        s.boxes_tested = s.walk.stats.boxes_tested;
+        s.boxes_culled = s.walk.stats.boxes_culled;
         s
     }
+}
 
-    fn structure(&mut self, id: NodeId, world_from_structure: Affine3A, base: ItemId) {
+impl<'a> Visitor<'a> for Selection<'a> {
+    const NODE_TEST: NodeTest = NodeTest::None;
+
+    fn walk(&mut self) -> &mut SceneWalk<'a> {
+        &mut self.walk
+    }
+
+    /// Enters a structure instance: its octree roots, one per area class.
+    fn visit(&mut self, at: &NodeAt<'a>) {
+        let id = at.place.id;
+        let world_from_structure = at.place.world_from_node;
         let st = &self.structures[id.index()];
         if st.area <= 0.0 {
             return;
@@ -174,13 +187,11 @@ impl<'a> Selection<'a> {
         let view_from_structure = self.consts.view_from_world * Mat4::from(world_from_structure);
         let t = view_from_structure.transpose();
         let place = Place {
-            id,
-            world_from_structure,
-            clip_from_structure: self.view.clip_from_object(&world_from_structure),
-            frustum: self.view.frustum(&world_from_structure),
+            at: at.place,
+            clip_from_structure: self.walk.view().clip_from_object(&world_from_structure),
+            frustum: at.frustum,
             rows: [t.x_axis, t.y_axis, t.z_axis],
             area_scale: area_scale(&world_from_structure),
-            base,
             eye: (!st.cones.is_empty() && is_similarity(&world_from_structure))
                 .then(|| world_from_structure.inverse().transform_point3(self.consts.eye)),
             mirrored: world_from_structure.matrix3.determinant() < 0.0,
@@ -191,7 +202,9 @@ impl<'a> Selection<'a> {
             }
         }
     }
+}
 
+impl Selection<'_> {
     /// §5.1/§5.3: (nearest view distance clamped to the near plane, farthest, largest lateral
     /// extent across the view direction, samples) of the list positions `range` bounded by `b`;
     /// with an orientation class (§5.3.4) the samples carry its bound of the orientation factor,
@@ -210,7 +223,7 @@ impl<'a> Selection<'a> {
         let inv_cos = (1.0 + (xm * xm + ym * ym) / (z_min * z_min))
             .sqrt()
             .min(self.consts.max_inv_cos);
-        let st = &self.structures[p.id.index()];
+        let st = &self.structures[p.at.id.index()];
         let area = st.section_area(sec) * p.area_scale;
         let prj = self.consts.focal_px * self.consts.focal_px / (z_min * z_min) * inv_cos;
         let d2 = (self.consts.splat * self.consts.splat) as f64;
@@ -230,19 +243,15 @@ impl<'a> Selection<'a> {
         Some((z_min, z_max, 2.0 * dx.max(dy) as f64, samples))
     }
 
+    /// The counted frustum test: false when `b` is outside.
     fn test(&mut self, p: &Place, b: &Aabb) -> bool {
-        self.boxes_tested += 1;
-        if b.is_empty() || p.frustum.classify_aabb(b) == Containment::Outside {
-            self.boxes_culled += 1;
-            return false;
-        }
-        true
+        self.walk.test(&p.frustum, b) != Containment::Outside
     }
 
     /// §5.3.2: select node `n` when its depth-factor ratio `(z_max / z_min)²` is within ε (and,
     /// with §7.1, its triangles are small enough to sample); otherwise descend.
     fn node(&mut self, p: &Place, n: u32, cone: Option<&Cone>) {
-        let st = &self.structures[p.id.index()];
+        let st = &self.structures[p.at.id.index()];
         let node = st.octree.nodes()[n as usize];
         if !self.test(p, &node.bounds) {
             return;
@@ -294,8 +303,9 @@ impl<'a> Selection<'a> {
         if test && !self.test(p, &bounds) {
             return;
         }
-        let st = &self.structures[p.id.index()];
-        match self.scene.node(p.id).kind() {
+        let st = &self.structures[p.at.id.index()];
+        let node = self.walk.scene().node(p.at.id);
+        match node.kind() {
             NodeKind::Mesh(mesh) => {
                 let Some((z_min, _, _, samples)) = self.estimate(p, &bounds, &sec, cone) else {
                     self.boxes_backfacing += 1;
@@ -318,23 +328,19 @@ impl<'a> Selection<'a> {
                         mesh,
                         triangles: DrawTriangles::List(list),
                         clip_from_object: p.clip_from_structure,
-                        first_item: p.base,
+                        first_item: p.at.first_item,
                     });
                 } else {
                     self.select(p, sec, samples, z_min);
                 }
             }
-            NodeKind::Group(instances) => {
-                let node = self.scene.node(p.id);
+            NodeKind::Group(_) => {
                 let present: &[u32] = match &st.tree {
                     Some(t) => t.own(sec.node),
                     None => &st.octree.entries()[sec.range.start as usize..sec.range.end as usize],
                 };
                 for &e in present {
-                    let e = e as usize;
-                    let inst = &instances[e];
-                    let world_from_child = compose(&p.world_from_structure, &inst.parent_from_child);
-                    self.structure(inst.child, world_from_child, p.base + node.item_offset(e));
+                    self.enter(p.at.child_of(node, e as usize), false);
                 }
             }
         }
@@ -345,13 +351,13 @@ impl<'a> Selection<'a> {
             return;
         }
         self.jobs.push(Job {
-            structure: p.id.0,
+            structure: p.at.id.0,
             range: sec.range,
             node: sec.node,
             own: sec.own,
-            world_from_structure: p.world_from_structure,
+            world_from_structure: p.at.world_from_node,
             clip_from_structure: p.clip_from_structure,
-            base: p.base,
+            base: p.at.first_item,
             samples,
             z_min: z_min as f32,
             scale: p.area_scale.sqrt() as f32,
