@@ -1,11 +1,10 @@
 //! # occult-bench
 //!
-//! Fixed workloads shared by the criterion benchmarks (`cargo bench -p occult-bench`) and by
-//! tests that check the workloads themselves: the `terrain` anchor view, random triangle sets
-//! of three sizes, and recorded camera paths on generated scenes.
+//! Fixed workloads shared by the criterion benchmarks (`cargo bench -p occult-bench`) and the
+//! examples: the `terrain` anchor view, random triangle sets of three sizes, and recorded
+//! camera paths on generated scenes. The cross-renderer invariant tests live in
+//! `occult-harness` (`tests/invariants/`).
 #![deny(missing_docs)]
-
-pub mod invariants;
 
 use occult_core::{Camera, Mesh, Scene, Vec3, View};
 use rand::{Rng, SeedableRng};

@@ -9,7 +9,6 @@
 //! | [`zbuffer`] | brute force: every triangle instance rasterized; the reference |
 //! | [`frustum`] | hierarchical view-frustum culling only: the baseline the papers compare to |
 //! | [`params`] | algorithm specs (`name:key=value,...`) and their parameters |
-//! | [`compare`] | runs several renderers over one camera path and measures them against each other |
 //!
 //! ```
 //! use std::sync::Arc;
@@ -27,7 +26,6 @@
 //! ```
 #![deny(missing_docs)]
 
-pub mod compare;
 pub mod frustum;
 pub mod hzb;
 pub mod lzb;

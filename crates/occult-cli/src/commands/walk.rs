@@ -4,8 +4,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use occult_core::View;
+use occult_harness::compare::TimeSummary;
 use occult_raster::{shade, Frame};
-use occult_render::compare::TimeSummary;
 use occult_render::RenderOptions;
 use serde::Serialize;
 

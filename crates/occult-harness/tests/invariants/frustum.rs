@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use occult_bench::invariants::{assert_identical_on_every_generator, assert_identical_on_path};
+use crate::support::{assert_identical_on_every_generator, assert_identical_on_path};
 use occult_core::View;
 use occult_raster::{Frame, RasterConfig, Strategy};
 use occult_render::{AlgoSpec, Algorithm, RenderOptions};
