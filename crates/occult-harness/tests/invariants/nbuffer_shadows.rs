@@ -1,6 +1,7 @@
 //! Shadow-volume clamping (Décoret 2005 §3.3): shadows identical with and without clamping on
 //! views of `city` and `terrain`; clamping saves fill; bad lights are errors.
 
+use crate::support::build_scene;
 use std::sync::Arc;
 
 use occult_core::{Aabb, Vec3, View};
@@ -18,9 +19,7 @@ struct Setup {
 }
 
 fn setup(scene_spec: &str, path: &str, leaf: usize) -> Setup {
-    let built = occult_scenes::spec::parse_spec(scene_spec)
-        .and_then(|s| s.build())
-        .unwrap();
+    let built = build_scene(scene_spec);
     let cams = occult_scenes::path::parse_path(path, &built.scene, &built.default_camera).unwrap();
     let scene = Arc::new(built.scene);
     Setup {
@@ -101,9 +100,7 @@ fn terrain_shadows_are_identical_with_and_without_clamping() {
 
 #[test]
 fn bad_lights_are_errors() {
-    let built = occult_scenes::spec::parse_spec("city:blocks=1,detail=0")
-        .and_then(|s| s.build())
-        .unwrap();
+    let built = build_scene("city:blocks=1,detail=0");
     let view = View::new(built.default_camera, 32, 24).unwrap();
     let scene = Arc::new(built.scene);
     assert!(ShadowCasters::new(scene.clone(), 0).is_err());
