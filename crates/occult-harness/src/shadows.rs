@@ -91,27 +91,42 @@ pub struct ShadowsConfig {
     pub modes: Modes,
 }
 
-/// The figures of one shadow pass (one view, one mode); times in ms.
+/// The figures of one shadow pass (one view, one mode): [`ShadowCounts`] flattened, times in ms.
 #[derive(Clone, Debug, PartialEq, Serialize)]
-#[allow(missing_docs)] // The fields are those of `ShadowCounts`, flattened.
 pub struct ShadowRun {
     /// Whether the volumes were clamped.
     pub clamp: bool,
+    /// Casters considered (with at least one lit triangle).
     pub casters: u64,
+    /// Casters culled (`z_max < z_min`, or every visible point nearer than the caster).
     pub casters_culled: u64,
+    /// Casters whose volume was clamped at the back or front plane.
     pub casters_clamped: u64,
+    /// Of those, front caps moved onto the `z_min` plane.
     pub front_caps_moved: u64,
+    /// Lit triangles of the drawn casters.
     pub lit_triangles: u64,
+    /// Extruded edges (silhouette and boundary edges, after cancellation).
     pub silhouette_edges: u64,
+    /// N-buffer lookups.
     pub lookups: u64,
+    /// Observer pixels reprojected into the litmaps.
     pub litmap_points: u64,
+    /// Shadow-volume triangles submitted to the stencil pass.
     pub volume_triangles: u64,
+    /// Stencil fragments rasterized (the fill that clamping saves).
     pub stencil_fragments: u64,
+    /// Stencil updates.
     pub stencil_updates: u64,
+    /// Pixels shadowed.
     pub shadowed_pixels: u64,
+    /// Litmaps (reprojection), ms.
     pub litmap_ms: f64,
+    /// The two N-buffer builds, ms.
     pub nbuffer_ms: f64,
+    /// Lookups and volume construction, ms.
     pub volumes_ms: f64,
+    /// The stencil pass, ms.
     pub stencil_ms: f64,
     /// The whole pass, wall time.
     pub total_ms: f64,
