@@ -45,7 +45,7 @@
 //! files, prints or touches process-wide state, except the `/proc/self` files above when
 //! [`CompareConfig::peak_rss`] asks for them (Linux); the CLI writes the report out.
 //!
-//! The work is done in named steps: [`Lineup::choose`] (reference and line-up), `build`
+//! The work is done in named steps: `Lineup::choose` (reference and line-up), `build`
 //! (preprocessing, timed), per view `render_view` (every renderer, interleaved),
 //! `check_view` (against the reference) and the oracle, then `report` (the summaries).
 //!
