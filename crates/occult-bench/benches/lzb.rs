@@ -3,12 +3,14 @@
 //! oor=off`), printed as rays per second per thread beside criterion's frame time; and `lzb`
 //! frames on `city` along a circle, beside `zbuffer`.
 
+mod common;
+
 use std::sync::Arc;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use occult_core::View;
 use occult_raster::{Frame, RasterConfig};
-use occult_render::{AlgoSpec, Algorithm, Phase, RenderOptions};
+use occult_render::{AlgoSpec, Phase, RenderOptions};
 
 fn one_thread() -> RenderOptions {
     RenderOptions {
@@ -44,37 +46,10 @@ fn terrain_rays(c: &mut Criterion) {
 }
 
 fn city_circle(c: &mut Criterion) {
-    let w = occult_bench::workload("city");
-    let cameras = occult_scenes::path::parse_path("circle:8", &w.scene, &w.camera).expect("circle path on city");
-    let views: Vec<View> = cameras
-        .iter()
-        .map(|c| View::new(*c, 512, 512).expect("valid view"))
-        .collect();
-    let scene = Arc::new(w.scene);
+    let (scene, views) = occult_bench::path_views("city", "circle:8", 512, 512);
     let mut group = c.benchmark_group("city_circle8_512x512");
     group.sample_size(10);
-    let lzb = AlgoSpec::parse("lzb").expect("valid spec");
-    for (name, mut r) in [
-        (
-            "zbuffer",
-            Algorithm::ZBUFFER
-                .build(scene.clone(), &RenderOptions::default())
-                .expect("builds"),
-        ),
-        (
-            "lzb",
-            lzb.build(scene.clone(), &RenderOptions::default()).expect("builds"),
-        ),
-    ] {
-        let mut frame = Frame::new(512, 512).expect("valid size");
-        group.bench_function(name, |b| {
-            b.iter(|| {
-                for v in &views {
-                    r.render(v, &mut frame).expect("render");
-                }
-            })
-        });
-    }
+    common::bench_specs(&mut group, &scene, &views, &["zbuffer", "lzb"]);
     group.finish();
 }
 

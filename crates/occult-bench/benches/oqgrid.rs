@@ -3,45 +3,29 @@
 //! 8, queries off (§4.2's throughput baseline). One iteration renders the whole path. Also the
 //! cost of one occlusion query of a mid-sized box against a drawn frame.
 
+mod common;
+
 use std::sync::Arc;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use occult_core::{Aabb, Affine3A, View};
 use occult_raster::Frame;
 use occult_render::oqgrid::any_sample_passes;
-use occult_render::{AlgoSpec, Algorithm, RenderOptions};
+use occult_render::{Algorithm, RenderOptions};
 
 fn paths(c: &mut Criterion) {
     for scene_spec in ["plant", "city"] {
-        let w = occult_bench::workload(scene_spec);
-        let cameras = occult_scenes::path::parse_path("street:8", &w.scene, &w.camera).expect("street path");
-        let views: Vec<View> = cameras
-            .iter()
-            .map(|c| View::new(*c, 640, 480).expect("valid view"))
-            .collect();
-        let scene = Arc::new(w.scene);
+        let (scene, views) = occult_bench::path_views(scene_spec, "street:8", 640, 480);
         let mut group = c.benchmark_group(format!("oqgrid_{scene_spec}_street8_640x480"));
         group.sample_size(10);
-        for spec in [
+        let specs = [
             "frustum",
             "oqgrid:grid=uniform,batch=1",
             "oqgrid:grid=uniform,batch=8",
             "oqgrid:grid=nested,resolution=8,split=1000",
             "oqgrid:queries=off",
-        ] {
-            let spec = AlgoSpec::parse(spec).expect("valid spec");
-            let mut r = spec
-                .build(scene.clone(), &RenderOptions::default())
-                .expect("renderer builds");
-            let mut frame = Frame::new(640, 480).expect("valid size");
-            group.bench_function(spec.label(), |b| {
-                b.iter(|| {
-                    for v in &views {
-                        r.render(v, &mut frame).expect("render");
-                    }
-                })
-            });
-        }
+        ];
+        common::bench_specs(&mut group, &scene, &views, &specs);
         group.finish();
     }
 }

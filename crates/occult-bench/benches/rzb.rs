@@ -2,38 +2,21 @@
 //! the large-triangle fallback; forest with sample caching), and dynamic updates of the
 //! distribution tree (§5.4: insertion then removal of triangles, per triangle).
 
+mod common;
+
 use std::sync::Arc;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use occult_core::{Aabb, Vec3, View};
-use occult_raster::Frame;
-use occult_render::{AlgoSpec, RenderOptions};
+use occult_core::{Aabb, Vec3};
+use occult_render::RenderOptions;
 use occult_spatial::{DistributionTree, SampleOctree, SampleOctreeConfig};
 use rand::{Rng, SeedableRng};
 
 fn path_bench(c: &mut Criterion, scene_spec: &str, path: &str, specs: &[&str]) {
-    let w = occult_bench::workload(scene_spec);
-    let cameras = occult_scenes::path::parse_path(path, &w.scene, &w.camera).expect("path");
-    let views: Vec<View> = cameras
-        .iter()
-        .map(|c| View::new(*c, 320, 240).expect("valid view"))
-        .collect();
-    let scene = Arc::new(w.scene);
+    let (scene, views) = occult_bench::path_views(scene_spec, path, 320, 240);
     let mut group = c.benchmark_group(format!("{scene_spec}_{path}_320x240"));
     group.sample_size(10);
-    for spec in specs {
-        let spec = AlgoSpec::parse(spec).expect("spec");
-        let mut r = (spec.algorithm.info().build)(scene.clone(), &RenderOptions::default(), &spec.params)
-            .expect("renderer builds");
-        let mut frame = Frame::new(320, 240).expect("valid size");
-        group.bench_function(spec.label(), |b| {
-            b.iter(|| {
-                for v in &views {
-                    r.render(v, &mut frame).expect("render");
-                }
-            })
-        });
-    }
+    common::bench_specs(&mut group, &scene, &views, specs);
     group.finish();
 }
 

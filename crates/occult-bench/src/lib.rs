@@ -1,11 +1,12 @@
 //! # occult-bench
 //!
-//! Fixed workloads shared by the criterion benchmarks (`cargo bench -p occult-bench`) and by
-//! tests that check the workloads themselves: the `terrain` anchor view, random triangle sets
-//! of three sizes, and recorded camera paths on generated scenes.
+//! Fixed workloads shared by the criterion benchmarks (`cargo bench -p occult-bench`) and the
+//! examples: the `terrain` anchor view, random triangle sets of three sizes, and recorded
+//! camera paths on generated scenes. The cross-renderer invariant tests live in
+//! `occult-harness` (`tests/invariants/`).
 #![deny(missing_docs)]
 
-pub mod invariants;
+use std::sync::Arc;
 
 use occult_core::{Camera, Mesh, Scene, Vec3, View};
 use rand::{Rng, SeedableRng};
@@ -31,6 +32,22 @@ pub fn workload(spec: &str) -> Workload {
         scene: built.scene,
         camera: built.default_camera,
     }
+}
+
+/// The scene of `spec` and the views of the camera path `path` through it (from its default
+/// camera) at `width × height`.
+///
+/// # Panics
+/// If the spec, the path or a view is invalid: benchmarks use fixed, known-good ones.
+pub fn path_views(spec: &str, path: &str, width: u32, height: u32) -> (Arc<Scene>, Vec<View>) {
+    let w = workload(spec);
+    let cameras = occult_scenes::path::parse_path(path, &w.scene, &w.camera)
+        .unwrap_or_else(|e| panic!("benchmark path {path} on {spec}: {e}"));
+    let views = cameras
+        .iter()
+        .map(|c| View::new(*c, width, height).expect("valid view"))
+        .collect();
+    (Arc::new(w.scene), views)
 }
 
 /// The anchor view: `terrain` from its default camera at 1920 × 1080.

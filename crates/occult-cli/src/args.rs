@@ -232,6 +232,13 @@ pub struct CompareArgs {
     /// view per view); reported in the text, JSON and CSV.
     #[arg(long)]
     pub complexity: bool,
+    /// Measure peak resident memory (Linux): per renderer, the peak RSS of the whole process
+    /// while it was built and rendered, and the process's own peak. It resets this process's
+    /// kernel high-water mark before every build and frame; each reading is of the whole
+    /// process (the scene and the other renderers' structures included). Off: the peak RSS
+    /// column, fields and CSV column are empty.
+    #[arg(long)]
+    pub peak_rss: bool,
     /// What frames are checked against: `auto` (zbuffer, or frustum on scenes too large for
     /// brute force), `none` (nothing checked, no oracle: for scenes too large even for frustum)
     /// or a conservative renderer's spec.
@@ -241,11 +248,11 @@ pub struct CompareArgs {
 
 /// A parsed `--reference`.
 #[derive(Clone, Debug)]
-pub struct ReferenceArg(pub occult_render::compare::Reference);
+pub struct ReferenceArg(pub occult_harness::compare::Reference);
 
 /// `auto`, `none` or an algorithm spec.
 pub fn parse_reference(s: &str) -> Result<ReferenceArg, String> {
-    use occult_render::compare::Reference;
+    use occult_harness::compare::Reference;
     Ok(ReferenceArg(match s.trim() {
         "auto" => Reference::Auto,
         "none" => Reference::None,
@@ -292,7 +299,7 @@ pub struct SweepArgs {
     /// The parameter and its values: `ALGO.KEY=V1,V2,...` (numbers), set on every spec of ALGO
     /// in --algos.
     #[arg(long, value_name = "ALGO.KEY=V1,V2,..", value_parser = crate::commands::sweep::parse_vary)]
-    pub vary: crate::commands::sweep::Vary,
+    pub vary: occult_harness::sweep::Vary,
     /// Frame size, WxH pixels.
     #[arg(long, value_name = "WxH", default_value = "640x480", value_parser = parse_size)]
     pub size: Size,

@@ -122,6 +122,35 @@ fn csv_field(f: &str) -> String {
     }
 }
 
+/// One parameter of a catalogue (`occult algos`, `occult scenes`), as JSON.
+#[derive(Serialize)]
+pub struct ParamOut {
+    name: &'static str,
+    default: &'static str,
+    meaning: &'static str,
+}
+
+impl ParamOut {
+    /// A parameter `name` with its default value and what it means.
+    pub fn new(name: &'static str, default: &'static str, meaning: &'static str) -> Self {
+        Self { name, default, meaning }
+    }
+}
+
+/// The parameters as lines `    name=default  meaning`, the meanings aligned; each line ends
+/// with a newline.
+pub fn param_lines(params: &[ParamOut]) -> String {
+    let width = params
+        .iter()
+        .map(|p| p.name.len() + p.default.len() + 1)
+        .max()
+        .unwrap_or(0);
+    params
+        .iter()
+        .map(|p| format!("    {:<width$}  {}\n", format!("{}={}", p.name, p.default), p.meaning))
+        .collect()
+}
+
 /// An optional number as a CSV field (empty when absent).
 pub fn opt_field<T: std::fmt::Display>(v: Option<T>) -> String {
     v.map_or_else(String::new, |v| format!("{v}"))

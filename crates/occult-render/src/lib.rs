@@ -28,7 +28,6 @@
 //! ```
 #![deny(missing_docs)]
 
-pub mod compare;
 pub mod frustum;
 mod hash;
 pub mod hzb;

@@ -3,7 +3,7 @@
 //!
 //! Cost: O(triangle instances) per frame, whatever is visible. It refuses scenes above
 //! [`MAX_BRUTE_FORCE_ITEMS`] triangle instances, where a frame would take hours;
-//! [`crate::compare`] then takes `frustum` as the reference.
+//! `occult-harness`'s `compare` then takes `frustum` as the reference.
 
 use std::sync::Arc;
 use std::time::Instant;

@@ -5,13 +5,7 @@ use occult_render::ALGORITHMS;
 use serde::Serialize;
 
 use crate::args::AlgosArgs;
-
-#[derive(Serialize)]
-struct ParamOut {
-    name: &'static str,
-    default: &'static str,
-    meaning: &'static str,
-}
+use crate::output::{self, ParamOut};
 
 #[derive(Serialize)]
 struct AlgorithmOut {
@@ -33,11 +27,7 @@ pub fn run(a: AlgosArgs) -> Result<()> {
                 parameters: i
                     .params
                     .iter()
-                    .map(|p| ParamOut {
-                        name: p.key,
-                        default: p.default,
-                        meaning: p.help,
-                    })
+                    .map(|p| ParamOut::new(p.key, p.default, p.help))
                     .collect(),
             })
             .collect();
@@ -48,17 +38,12 @@ pub fn run(a: AlgosArgs) -> Result<()> {
     for i in ALGORITHMS {
         let kind = if i.conservative { "exact" } else { "approximate" };
         say!("{}  ({kind}) {}", i.name, i.summary);
-        let width = i
+        let params: Vec<ParamOut> = i
             .params
             .iter()
-            .map(|p| p.key.len() + p.default.len() + 1)
-            .max()
-            .unwrap_or(0);
-        for p in i.params {
-            let kv = format!("{}={}", p.key, p.default);
-            say!("    {kv:<width$}  {}", p.help);
-        }
-        say!();
+            .map(|p| ParamOut::new(p.key, p.default, p.help))
+            .collect();
+        say!("{}", output::param_lines(&params));
     }
     Ok(())
 }

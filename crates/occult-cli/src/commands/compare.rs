@@ -1,10 +1,12 @@
 //! `occult compare`: several renderers, the same scenes and camera path, one process
-//! ([`occult_render::compare`] does the measuring; this writes it out).
+//! ([`occult_harness::compare`] does the measuring; this writes it out).
 
 use anyhow::{bail, Context, Result};
-use occult_render::compare::{
+use occult_harness::compare::{
     compare, CompareConfig, CompareProgress, CompareReport, FrameRecord, Reference, RendererReport,
 };
+use occult_harness::memory::PeakRss;
+use occult_harness::sweep::counter_names;
 use occult_render::{AlgoSpec, RenderOptions};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -75,6 +77,8 @@ pub fn run(a: CompareArgs) -> Result<()> {
         height: a.size.height,
         reference: a.reference.0.clone(),
         image_complexity: a.complexity || (a.plot_scaling.is_some() && axes.iter().any(|x| x.needs_image_complexity())),
+        // One handle for every scene, so that the process peak survives the resets.
+        peak_rss: a.peak_rss.then(PeakRss::new),
     };
     let mut runs: Vec<(SceneSummary, CompareReport)> = Vec::new();
     for spec in &a.scene {
@@ -160,7 +164,7 @@ fn check_plot_y(a: &CompareArgs) -> Result<()> {
     if let Reference::Spec(r) = &a.reference.0 {
         lineup.push(r);
     }
-    let known: Vec<&str> = lineup.iter().flat_map(|s| s.algorithm.counter_names()).collect();
+    let known = counter_names(lineup);
     if !known.contains(&a.plot_y.as_str()) {
         bail!(
             "--plot-y {}: not time, submitted, rasterized or a counter of these renderers ({})",
@@ -332,12 +336,12 @@ pub fn identical_text(x: &RendererReport) -> String {
 /// The CSV header: the fixed columns, then every renderer counter seen in `runs`.
 fn csv_header(runs: &[(SceneSummary, CompareReport)]) -> Vec<String> {
     let mut header: Vec<String> = CSV_HEADER.iter().map(|s| s.to_string()).collect();
-    header.extend(counter_names(runs).into_iter().map(str::to_string));
+    header.extend(reported_counters(runs).into_iter().map(str::to_string));
     header
 }
 
 /// Every renderer counter of `runs`, sorted.
-fn counter_names(runs: &[(SceneSummary, CompareReport)]) -> Vec<&'static str> {
+fn reported_counters(runs: &[(SceneSummary, CompareReport)]) -> Vec<&'static str> {
     let mut names: Vec<&'static str> = runs
         .iter()
         .flat_map(|(_, r)| r.renderers.iter())
@@ -349,7 +353,7 @@ fn counter_names(runs: &[(SceneSummary, CompareReport)]) -> Vec<&'static str> {
 }
 
 fn csv_rows(runs: &[(SceneSummary, CompareReport)]) -> Vec<Vec<String>> {
-    let counters = counter_names(runs);
+    let counters = reported_counters(runs);
     let mut rows = Vec::new();
     for (scene, r) in runs {
         let im = &r.image;

@@ -10,3 +10,25 @@ pub mod scenes;
 pub mod shadows;
 pub mod sweep;
 pub mod walk;
+
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use occult_render::{AlgoSpec, RenderOptions, Renderer};
+
+use crate::progress::Progress;
+use crate::scene::LoadedScene;
+
+/// Builds `algo` on `scene` behind a spinner (`preparing NAME`); returns the renderer, its
+/// preprocessing time in ms, and the spinner, still shown.
+///
+/// # Errors
+/// The renderer's build error, naming it.
+pub fn build_renderer(algo: &AlgoSpec, scene: &LoadedScene) -> Result<(Box<dyn Renderer>, f64, Progress)> {
+    let progress = Progress::spinner(format!("preparing {}", algo.label()));
+    let t = Instant::now();
+    let renderer = algo
+        .build(scene.scene.clone(), &RenderOptions::default())
+        .with_context(|| format!("building {}", algo.label()))?;
+    Ok((renderer, t.elapsed().as_secs_f64() * 1e3, progress))
+}

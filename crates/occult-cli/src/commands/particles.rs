@@ -3,14 +3,12 @@
 //! an N-buffer of the scene's depth (`--cull on`) or all drawn (`--cull off`).
 
 use std::path::PathBuf;
-use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use occult_core::{Camera, View};
-use occult_raster::{shade, Extremum, Frame, NBuffer, RasterConfig, Rasterizer};
-use occult_render::nbuffer::particles::{draw_particles, Particles, MAX_PARTICLES, MAX_SPRITE_SIZE};
-use occult_render::{Algorithm, RenderOptions};
+use occult_harness::particles::{particles, ParticlesConfig};
+use occult_render::nbuffer::particles::{MAX_PARTICLES, MAX_SPRITE_SIZE};
 use serde::Serialize;
 
 use crate::args::{parse_scene, parse_size, parse_view, CameraOverrides, SceneArg, Size, ViewArg};
@@ -141,42 +139,19 @@ pub fn run(a: ParticlesArgs) -> Result<()> {
     let scene = scene::load(&a.scene)?;
     let camera = scene::camera(&a.view, &a.camera, &scene)?;
     let view = View::new(camera, a.size.width, a.size.height).context("view")?;
-    let particles = Particles::scatter(
-        &scene.scene.bounds(),
-        a.count,
-        a.sizes.max,
-        a.sizes.power_of_two,
-        a.fill,
-        a.seed,
-    )?;
-    let mut z = Algorithm::ZBUFFER
-        .build(scene.scene.clone(), &RenderOptions::default())
-        .context("building zbuffer")?;
-    let mut frame = Frame::new(a.size.width, a.size.height)?;
-    let t = Instant::now();
-    z.render(&view, &mut frame).context("rendering the scene")?;
-    let scene_ms = t.elapsed().as_secs_f64() * 1e3;
-    let mut raster = Rasterizer::new(RasterConfig::default())?;
-    let t = Instant::now();
-    let nb = if a.cull {
-        Some(NBuffer::with_levels(
-            Extremum::Min,
-            frame.depth(),
-            a.size.width,
-            a.size.height,
-            particles.levels_needed(),
-        )?)
-    } else {
-        None
+    let config = ParticlesConfig {
+        count: a.count,
+        max_sprite: a.sizes.max,
+        power_of_two: a.sizes.power_of_two,
+        cull: a.cull,
+        batch: a.batch,
+        fill: a.fill,
+        seed: a.seed,
     };
-    let nbuffer_ms = t.elapsed().as_secs_f64() * 1e3;
-    let t = Instant::now();
-    let first = scene.scene.item_count();
-    let c = draw_particles(&mut raster, &view, &mut frame, &particles, first, nb.as_ref(), a.batch)?;
-    let draw_ms = t.elapsed().as_secs_f64() * 1e3;
-    let cull_ms = c.cull_time.as_secs_f64() * 1e3;
-    shade(&mut frame, &scene.scene, &view);
-    output::write_color_png(&frame, &a.out)?;
+    let run = particles(&scene.scene, &view, &config)?;
+    let c = &run.counts;
+    let (nbuffer_ms, draw_ms, cull_ms, scene_ms) = (run.nbuffer_ms, run.draw_ms, run.cull_ms, run.scene_ms);
+    output::write_color_png(&run.frame, &a.out)?;
 
     let summary = scene.summary();
     say!(
@@ -230,7 +205,7 @@ pub fn run(a: ParticlesArgs) -> Result<()> {
         "time",
         output::millis(nbuffer_ms + draw_ms),
         output::millis(nbuffer_ms),
-        nb.as_ref().map_or(0, |n| n.level_count()),
+        run.nbuffer_levels,
         output::millis(draw_ms),
         output::millis(cull_ms),
         if a.batch { ", batched" } else { ", one call each" },
@@ -254,7 +229,7 @@ pub fn run(a: ParticlesArgs) -> Result<()> {
             single_lookup_tests: c.single_lookup_tests,
             triangles_rasterized: c.raster.triangles_rasterized,
             fragments_written: c.raster.fragments_written,
-            nbuffer_levels: nb.as_ref().map_or(0, |n| n.level_count()),
+            nbuffer_levels: run.nbuffer_levels,
             nbuffer_ms,
             draw_ms,
             cull_ms,

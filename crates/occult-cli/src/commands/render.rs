@@ -5,12 +5,10 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use occult_core::{Camera, View};
 use occult_raster::{shade, Frame};
-use occult_render::RenderOptions;
 use serde::Serialize;
 
 use crate::args::RenderArgs;
 use crate::output::{self, StatsOut};
-use crate::progress::Progress;
 use crate::scene::{self, SceneSummary};
 
 /// What `--json` holds.
@@ -42,13 +40,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let camera = scene::camera(&a.view, &a.camera, &scene)?;
     let view = View::new(camera, a.size.width, a.size.height).context("view")?;
 
-    let progress = Progress::spinner(format!("preparing {}", a.algo.label()));
-    let t = Instant::now();
-    let mut renderer = a
-        .algo
-        .build(scene.scene.clone(), &RenderOptions::default())
-        .with_context(|| format!("building {}", a.algo.label()))?;
-    let prepare_ms = t.elapsed().as_secs_f64() * 1e3;
+    let (mut renderer, prepare_ms, progress) = super::build_renderer(&a.algo, &scene)?;
     progress.set_message(format!("rendering with {}", a.algo.label()));
     let mut frame = Frame::new(a.size.width, a.size.height)?;
     let t = Instant::now();

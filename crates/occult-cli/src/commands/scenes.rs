@@ -4,13 +4,7 @@ use anyhow::Result;
 use serde::Serialize;
 
 use crate::args::ScenesArgs;
-
-#[derive(Serialize)]
-struct ParamOut {
-    name: &'static str,
-    default: &'static str,
-    meaning: &'static str,
-}
+use crate::output::{self, ParamOut};
 
 #[derive(Serialize)]
 struct GeneratorOut {
@@ -31,11 +25,7 @@ pub fn run(a: ScenesArgs) -> Result<()> {
                 parameters: g
                     .params
                     .iter()
-                    .map(|p| ParamOut {
-                        name: p.name,
-                        default: p.default,
-                        meaning: p.meaning,
-                    })
+                    .map(|p| ParamOut::new(p.name, p.default, p.meaning))
                     .collect(),
             })
             .collect();
@@ -45,17 +35,12 @@ pub fn run(a: ScenesArgs) -> Result<()> {
     say!("Scene generators: use as --scene NAME or NAME:key=value,key=value (a file path loads .obj, .ply, .gltf, .glb)\n");
     for g in generators {
         say!("{}  {}", g.name, g.description);
-        let width = g
+        let params: Vec<ParamOut> = g
             .params
             .iter()
-            .map(|p| p.name.len() + p.default.len() + 1)
-            .max()
-            .unwrap_or(0);
-        for p in g.params {
-            let kv = format!("{}={}", p.name, p.default);
-            say!("    {kv:<width$}  {}", p.meaning);
-        }
-        say!();
+            .map(|p| ParamOut::new(p.name, p.default, p.meaning))
+            .collect();
+        say!("{}", output::param_lines(&params));
     }
     say!("Camera paths (--path, --view): circle:N, street:N, flyover:N, default, or a JSON file of cameras");
     Ok(())

@@ -3,14 +3,12 @@
 //! view or along a camera path (§4.4 measured "along recorded path").
 
 use std::path::PathBuf;
-use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use occult_core::{Aabb, Camera, Vec3, View};
-use occult_raster::{shade, Frame, RasterConfig, Rasterizer};
-use occult_render::nbuffer::shadows::{Clamping, ShadowCasters, ShadowCounts, ShadowFrame, SpotLight};
-use occult_render::{Algorithm, RenderOptions};
+use occult_core::{Camera, Vec3, View};
+use occult_harness::shadows::{shadows, LightSettings, Modes, ShadowsConfig, ShadowsFrame};
+use occult_raster::shade;
 use serde::Serialize;
 
 use crate::args::{
@@ -66,61 +64,6 @@ pub struct ShadowsArgs {
     pub json: Option<PathBuf>,
 }
 
-#[derive(Clone, Serialize)]
-struct Run {
-    clamp: bool,
-    casters: u64,
-    casters_culled: u64,
-    casters_clamped: u64,
-    front_caps_moved: u64,
-    lit_triangles: u64,
-    silhouette_edges: u64,
-    lookups: u64,
-    litmap_points: u64,
-    volume_triangles: u64,
-    stencil_fragments: u64,
-    stencil_updates: u64,
-    shadowed_pixels: u64,
-    litmap_ms: f64,
-    nbuffer_ms: f64,
-    volumes_ms: f64,
-    stencil_ms: f64,
-    total_ms: f64,
-}
-
-impl Run {
-    fn new(clamp: bool, c: &ShadowCounts, total_ms: f64) -> Self {
-        Self {
-            clamp,
-            casters: c.casters,
-            casters_culled: c.casters_culled,
-            casters_clamped: c.casters_clamped,
-            front_caps_moved: c.front_caps_moved,
-            lit_triangles: c.lit_triangles,
-            silhouette_edges: c.silhouette_edges,
-            lookups: c.lookups,
-            litmap_points: c.litmap_points,
-            volume_triangles: c.stencil.triangles_submitted,
-            stencil_fragments: c.stencil.fragments,
-            stencil_updates: c.stencil.updates,
-            shadowed_pixels: c.shadowed_pixels,
-            litmap_ms: c.litmap_ms,
-            nbuffer_ms: c.nbuffer_ms,
-            volumes_ms: c.volumes_ms,
-            stencil_ms: c.stencil_ms,
-            total_ms,
-        }
-    }
-}
-
-/// One camera of the path: its runs (one per clamping mode) and the pixels whose shadow differs.
-#[derive(Serialize)]
-struct FrameOut {
-    camera: Camera,
-    runs: Vec<Run>,
-    differing_pixels: Option<u64>,
-}
-
 #[derive(Serialize)]
 struct ShadowsOut {
     scene: SceneSummary,
@@ -141,22 +84,7 @@ struct ShadowsOut {
     /// With `--clamp both`: pixels whose shadow state differs, over all frames (always 0).
     differing_pixels: Option<u64>,
     /// Per frame.
-    frames: Vec<FrameOut>,
-}
-
-/// The mean of every numeric field of `runs` (serialized), other fields from the first.
-fn mean_run(runs: &[&Run]) -> Result<serde_json::Value> {
-    let values: Vec<serde_json::Value> = runs.iter().map(serde_json::to_value).collect::<Result<_, _>>()?;
-    let mut mean = values.first().cloned().context("no frame")?;
-    if let Some(fields) = mean.as_object_mut() {
-        for (key, field) in fields.iter_mut() {
-            if field.is_number() {
-                let sum: f64 = values.iter().filter_map(|v| v[key].as_f64()).sum();
-                *field = serde_json::json!(sum / values.len() as f64);
-            }
-        }
-    }
-    Ok(mean)
+    frames: Vec<ShadowsFrame>,
 }
 
 /// Runs the command.
@@ -165,12 +93,22 @@ pub fn run(a: ShadowsArgs) -> Result<()> {
     if a.leaf == 0 {
         bail!("--leaf must be at least 1");
     }
-    // The light's own checks on the values given, before the scene is built (a light about
-    // a unit box stands in for the scene's).
-    let mut probe = SpotLight::for_bounds(&Aabb::new(-Vec3::ONE, Vec3::ONE));
-    probe.cone_deg = a.cone.unwrap_or(probe.cone_deg);
-    probe.resolution = a.litmap;
-    probe.view()?;
+    let config = ShadowsConfig {
+        light: LightSettings {
+            position: a.light,
+            target: a.light_target,
+            cone_deg: a.cone,
+            resolution: a.litmap,
+        },
+        leaf: a.leaf,
+        modes: match a.clamp.as_str() {
+            "on" => Modes::Clamped,
+            "off" => Modes::Unclamped,
+            _ => Modes::Both,
+        },
+    };
+    // The light's own checks on the values given, before the scene is built.
+    config.light.check()?;
     a.camera.check()?;
     let scene = scene::load(&a.scene)?;
     let cameras = match &a.path {
@@ -182,59 +120,17 @@ pub fn run(a: ShadowsArgs) -> Result<()> {
         .enumerate()
         .map(|(i, c)| View::new(*c, a.size.width, a.size.height).with_context(|| format!("camera {i}")))
         .collect::<Result<Vec<_>>>()?;
-    let mut light = SpotLight::for_bounds(&scene.scene.bounds());
-    light.position = a.light.unwrap_or(light.position);
-    light.target = a.light_target.unwrap_or(light.target);
-    light.cone_deg = a.cone.unwrap_or(light.cone_deg);
-    light.resolution = a.litmap;
-    light.view()?;
-    let casters = ShadowCasters::new(scene.scene.clone(), a.leaf)?;
-    let mut z = Algorithm::ZBUFFER
-        .build(scene.scene.clone(), &RenderOptions::default())
-        .context("building zbuffer")?;
-    let mut frame = Frame::new(a.size.width, a.size.height)?;
-    let mut raster = Rasterizer::new(RasterConfig::default())?;
-    let modes: &[Clamping] = match a.clamp.as_str() {
-        "on" => &[Clamping::On],
-        "off" => &[Clamping::Off],
-        _ => &[Clamping::Off, Clamping::On],
-    };
-    let mut frames: Vec<FrameOut> = Vec::with_capacity(views.len());
-    let mut last: Option<ShadowFrame> = None;
-    for (i, view) in views.iter().enumerate() {
-        z.render(view, &mut frame)
-            .with_context(|| format!("rendering the scene, camera {i}"))?;
-        let mut results: Vec<(ShadowFrame, f64)> = Vec::new();
-        for &m in modes {
-            let t = Instant::now();
-            let r = casters.shadows(&mut raster, view, &frame, &light, m)?;
-            results.push((r, t.elapsed().as_secs_f64() * 1e3));
-        }
-        let differing = (results.len() == 2).then(|| {
-            results[0]
-                .0
-                .shades
-                .iter()
-                .zip(&results[1].0.shades)
-                .filter(|(x, y)| x != y)
-                .count() as u64
-        });
-        let runs = modes
-            .iter()
-            .zip(&results)
-            .map(|(&m, (r, ms))| Run::new(m == Clamping::On, &r.counts, *ms))
-            .collect();
-        frames.push(FrameOut {
-            camera: cameras[i],
-            runs,
-            differing_pixels: differing,
-        });
-        last = results.pop().map(|(r, _)| r);
-    }
+    let report = shadows(&scene.scene, &views, &config)?;
+    // Per clamping mode: the mean over the frames (the one frame's figures for one view).
+    let means = report.means()?;
+    let modes = means.len();
+    let differing = report.differing_pixels();
+    let (light, frames, caster_count) = (report.light, report.frames, report.caster_count);
+    let (mut frame, last) = report.last;
     let view = views.last().expect("one camera at least");
     shade(&mut frame, &scene.scene, view);
     let mut img = frame.color_image();
-    last.expect("one run at least").darken(&mut img);
+    last.darken(&mut img);
     img.save_with_format(&a.out, image::ImageFormat::Png)
         .with_context(|| format!("cannot write '{}'", a.out.display()))?;
 
@@ -243,7 +139,7 @@ pub fn run(a: ShadowsArgs) -> Result<()> {
         "scene {}: {} triangles, {} shadow casters (leaf {})",
         summary.label(),
         output::count(summary.triangles as f64),
-        output::count(casters.caster_count() as f64),
+        output::count(caster_count as f64),
         a.leaf
     );
     say!(
@@ -256,18 +152,13 @@ pub fn run(a: ShadowsArgs) -> Result<()> {
         a.size.width,
         a.size.height
     );
-    // Per clamping mode: the mean over the frames (the one frame's figures for one view).
-    let means: Vec<serde_json::Value> = (0..modes.len())
-        .map(|k| mean_run(&frames.iter().map(|f| &f.runs[k]).collect::<Vec<_>>()))
-        .collect::<Result<_>>()?;
     let num = |v: &serde_json::Value, key: &str| v[key].as_f64().unwrap_or(0.0);
-    let differing: Option<u64> = (modes.len() == 2).then(|| frames.iter().filter_map(|f| f.differing_pixels).sum());
     if frames.len() > 1 {
         say!(
             "path {}: {} frames{}",
             a.path.as_ref().map_or("", |p| p.text.as_str()),
             frames.len(),
-            if modes.len() == 2 {
+            if modes == 2 {
                 "; per frame, unclamped → clamped"
             } else {
                 ""
@@ -357,7 +248,7 @@ pub fn run(a: ShadowsArgs) -> Result<()> {
             light_target: light.target.to_array(),
             cone_deg: light.cone_deg,
             litmap: a.litmap,
-            casters: casters.caster_count(),
+            casters: caster_count,
             runs: means,
             differing_pixels: differing,
             frames,

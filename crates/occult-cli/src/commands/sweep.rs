@@ -3,9 +3,10 @@
 //! against the value: the figures of the papers that put a parameter on the x axis (grid
 //! resolution, depth accuracy ε, leaf size...).
 
-use anyhow::{bail, Context, Result};
-use occult_render::compare::{compare, CompareConfig, CompareProgress, CompareReport};
-use occult_render::{AlgoSpec, RenderOptions};
+use anyhow::{bail, Result};
+use occult_harness::compare::{CompareProgress, CompareReport};
+use occult_harness::sweep::{counter_names, sweep, SweepConfig, SweepError, Vary};
+use occult_render::RenderOptions;
 use serde::Serialize;
 
 use crate::args::SweepArgs;
@@ -14,17 +15,6 @@ use crate::output;
 use crate::plot::{self, Panel, Series};
 use crate::progress::Progress;
 use crate::scene::{self, SceneSummary};
-
-/// `--vary ALGO.KEY=V1,V2,...` parsed.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Vary {
-    /// Algorithm name whose specs get the key.
-    pub algorithm: String,
-    /// Parameter key.
-    pub key: String,
-    /// Values, in order (numbers, for the x axis).
-    pub values: Vec<String>,
-}
 
 /// Parses `algo.key=v1,v2,...`; every value must be a finite number (it is the x axis).
 pub fn parse_vary(s: &str) -> Result<Vary, String> {
@@ -70,68 +60,44 @@ struct PointOut<'a> {
 pub fn run(a: SweepArgs) -> Result<()> {
     output::check_outputs([&a.json, &a.csv, &a.plot])?;
     let vary = &a.vary;
-    if !a.algos.0.iter().any(|s| s.algorithm.name() == vary.algorithm) {
-        bail!(
-            "--vary names '{}', which is not in --algos ({})",
-            vary.algorithm,
-            a.algos.0.iter().map(AlgoSpec::label).collect::<Vec<_>>().join(", ")
-        );
-    }
-    // One line-up per value; the varied algorithm's specs get key=value, each checked before
-    // the scene is built.
-    let lineups: Vec<Vec<AlgoSpec>> = vary
-        .values
-        .iter()
-        .map(|v| {
-            a.algos
-                .0
-                .iter()
-                .map(|s| {
-                    let mut s = s.clone();
-                    if s.algorithm.name() == vary.algorithm {
-                        s.params.set(&vary.key, v);
-                        s.validate()?;
-                    }
-                    Ok(s)
-                })
-                .collect::<Result<Vec<_>, occult_render::RenderError>>()
-        })
-        .collect::<Result<_, _>>()?;
-    let known: Vec<&str> = a.algos.0.iter().flat_map(|s| s.algorithm.counter_names()).collect();
+    let config = SweepConfig {
+        algorithms: a.algos.0.clone(),
+        vary: vary.clone(),
+        options: RenderOptions::default(),
+        width: a.size.width,
+        height: a.size.height,
+        reference: a.reference.0.clone(),
+    };
+    // Every value is checked before the scene is built.
+    match config.lineups() {
+        Err(SweepError::NotInLineup { algorithm, lineup }) => {
+            bail!("--vary names '{algorithm}', which is not in --algos ({lineup})")
+        }
+        other => other?,
+    };
+    let known = counter_names(&a.algos.0);
     for c in &a.counter {
         if !known.contains(&c.as_str()) {
             bail!(
                 "--counter {c}: not a counter of {} ({})",
-                a.algos.0.iter().map(AlgoSpec::label).collect::<Vec<_>>().join(", "),
+                config.lineup_text(),
                 output::names_or_none(&known)
             );
         }
     }
     let scene = scene::load(&a.scene)?;
     let cameras = scene::path(&a.path, &scene)?;
-    let total = (cameras.len() * lineups.len()) as u64;
+    let total = (cameras.len() * vary.values.len()) as u64;
     let progress = Progress::bar(total, format!("{}: preparing", a.scene));
-    let mut reports = Vec::with_capacity(lineups.len());
-    for (value, algorithms) in vary.values.iter().zip(lineups) {
-        let config = CompareConfig {
-            algorithms,
-            options: RenderOptions::default(),
-            width: a.size.width,
-            height: a.size.height,
-            reference: a.reference.0.clone(),
-            image_complexity: false,
-        };
-        let report = compare(scene.scene.clone(), &cameras, &config, &mut |event| match event {
-            CompareProgress::Building { label, .. } => {
-                progress.set_message(format!("{}={value}: preparing {label}", vary.key))
-            }
-            CompareProgress::Built { .. } => progress.set_message(format!("{}={value}: rendering", vary.key)),
-            CompareProgress::Frame { .. } => progress.inc(),
-        })
-        .with_context(|| format!("sweeping {}.{}={value}", vary.algorithm, vary.key))?;
-        reports.push(report);
-    }
+    let report = sweep(&scene.scene, &cameras, &config, &mut |(value, event)| match event {
+        CompareProgress::Building { label, .. } => {
+            progress.set_message(format!("{}={value}: preparing {label}", vary.key))
+        }
+        CompareProgress::Built { .. } => progress.set_message(format!("{}={value}: rendering", vary.key)),
+        CompareProgress::Frame { .. } => progress.inc(),
+    })?;
     drop(progress);
+    let reports: Vec<&CompareReport> = report.points.iter().map(|p| &p.report).collect();
     let summary = scene.summary();
     let vary_text = format!("{}.{}", vary.algorithm, vary.key);
 
@@ -193,7 +159,7 @@ pub fn run(a: SweepArgs) -> Result<()> {
                 .values
                 .iter()
                 .zip(&reports)
-                .map(|(value, report)| PointOut { value, report })
+                .map(|(value, &report)| PointOut { value, report })
                 .collect(),
         };
         output::write_json(p, &out)?;
@@ -204,36 +170,15 @@ pub fn run(a: SweepArgs) -> Result<()> {
         say!("wrote {}", p.display());
     }
     if let Some(p) = &a.plot {
-        let xs: Vec<f64> = vary.values.iter().map(|v| v.parse().unwrap_or(f64::NAN)).collect();
-        let series_of = |y: &dyn Fn(&occult_render::compare::RendererReport) -> Option<f64>| -> Vec<Series> {
-            let mut names: Vec<String> = Vec::new();
-            for r in &reports {
-                for x in &r.renderers {
-                    // A renderer's points across values are one line.
-                    let name = base_label(&x.name, vary);
-                    if !names.contains(&name) {
-                        names.push(name);
-                    }
-                }
-            }
-            names
-                .iter()
-                .map(|name| Series {
-                    name: name.clone(),
-                    points: xs
-                        .iter()
-                        .zip(&reports)
-                        .filter_map(|(&x, r)| {
-                            r.renderers
-                                .iter()
-                                .find(|c| base_label(&c.name, vary) == *name)
-                                .and_then(y)
-                                .map(|y| (x, y))
-                        })
-                        .collect(),
+        let series_of = |y: &dyn Fn(&occult_harness::compare::RendererReport) -> Option<f64>| -> Vec<Series> {
+            report
+                .lines(vary, y)
+                .into_iter()
+                .map(|l| Series {
+                    name: l.name,
+                    points: l.points,
                     dashed: false,
                 })
-                .filter(|s| !s.points.is_empty())
                 .collect()
         };
         let title = format!("{} — {}, {} frames", summary.label(), a.path, cameras.len());
@@ -261,26 +206,6 @@ pub fn run(a: SweepArgs) -> Result<()> {
     Ok(())
 }
 
-/// `label` without the varied setting (`oqgrid:res=20,batch=4` → `oqgrid:batch=4`), so that one
-/// renderer's points across values form one line.
-fn base_label(label: &str, vary: &Vary) -> String {
-    let Some((name, settings)) = label.split_once(':') else {
-        return label.to_string();
-    };
-    if name != vary.algorithm {
-        return label.to_string();
-    }
-    let kept: Vec<&str> = settings
-        .split(',')
-        .filter(|s| s.split_once('=').map(|(k, _)| k) != Some(vary.key.as_str()))
-        .collect();
-    if kept.is_empty() {
-        name.to_string()
-    } else {
-        format!("{name}:{}", kept.join(","))
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -300,14 +225,5 @@ mod tests {
         ] {
             assert!(parse_vary(bad).is_err(), "{bad}");
         }
-    }
-
-    #[test]
-    fn lines_are_named_without_the_varied_value() {
-        let v = parse_vary("frustum.leaf=8,16").unwrap();
-        assert_eq!(base_label("frustum:leaf=8", &v), "frustum");
-        assert_eq!(base_label("frustum:group_leaf=2,leaf=8", &v), "frustum:group_leaf=2");
-        assert_eq!(base_label("zbuffer", &v), "zbuffer");
-        assert_eq!(base_label("frustum:group_leaf=2", &v), "frustum:group_leaf=2");
     }
 }

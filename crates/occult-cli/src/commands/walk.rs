@@ -4,9 +4,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use occult_core::View;
+use occult_harness::compare::TimeSummary;
 use occult_raster::{shade, Frame};
-use occult_render::compare::TimeSummary;
-use occult_render::RenderOptions;
 use serde::Serialize;
 
 use crate::args::WalkArgs;
@@ -79,13 +78,7 @@ pub fn run(a: WalkArgs) -> Result<()> {
         occult_scenes::path::write_path_json(p, &cameras)?;
     }
 
-    let progress = Progress::spinner(format!("preparing {}", a.algo.label()));
-    let t = Instant::now();
-    let mut renderer = a
-        .algo
-        .build(scene.scene.clone(), &RenderOptions::default())
-        .with_context(|| format!("building {}", a.algo.label()))?;
-    let prepare_ms = t.elapsed().as_secs_f64() * 1e3;
+    let (mut renderer, prepare_ms, progress) = super::build_renderer(&a.algo, &scene)?;
     drop(progress);
 
     let progress = Progress::bar(views.len() as u64, format!("{} on {}", a.algo.label(), a.path));

@@ -1,11 +1,14 @@
 //! DESIGN invariant 2 for `hzb`: frames bit-identical to `zbuffer` over every generator (50
-//! random views each, one renderer object per scene so the visible list carries over between
+//! random views each for the default, 20 for each other configuration, one renderer object per scene so the visible list carries over between
 //! unrelated views) and over whole camera paths (temporal coherence must never leak a stale
 //! result), for every configuration that claims to be conservative.
 
 use std::sync::Arc;
 
-use occult_bench::invariants::{assert_identical_on_every_generator, assert_identical_on_path};
+use crate::support::{
+    assert_identical_on_every_generator, assert_identical_on_path, assert_variant_identical_on_every_generator,
+    build_scene,
+};
 use occult_core::{Camera, Vec3, View};
 use occult_raster::Frame;
 use occult_render::{AlgoSpec, Algorithm, RenderError, RenderOptions};
@@ -46,7 +49,7 @@ fn hzb_single_threaded_is_identical_on_every_generator() {
 #[test]
 fn hzb_configurations_are_identical_on_every_generator() {
     for c in &CONFIGS[1..] {
-        assert_identical_on_every_generator(&spec(c), 0);
+        assert_variant_identical_on_every_generator(&spec(c), 0);
     }
 }
 
@@ -76,9 +79,7 @@ fn hzb_is_identical_on_paths_of_every_generator() {
 
 #[test]
 fn hzb_culls_on_a_city_street_and_keeps_a_visible_list() {
-    let built = occult_scenes::spec::parse_spec("city:blocks=6,detail=2")
-        .and_then(|s| s.build())
-        .unwrap();
+    let built = build_scene("city:blocks=6,detail=2");
     let cams = occult_scenes::path::parse_path("street:6", &built.scene, &built.default_camera).unwrap();
     let scene = Arc::new(built.scene);
     let mut h = Algorithm::parse("hzb")
@@ -111,9 +112,7 @@ fn hzb_culls_on_a_city_street_and_keeps_a_visible_list() {
 fn hzb_draws_mostly_visible_instances_whole() {
     // A city overview: most of each building is visible, so with a low `whole` fraction the
     // visible list draws instances whole (and the traversal skips them); frames stay exact.
-    let built = occult_scenes::spec::parse_spec("city:blocks=3,detail=2")
-        .and_then(|s| s.build())
-        .unwrap();
+    let built = build_scene("city:blocks=3,detail=2");
     let cams = occult_scenes::path::parse_path("circle:4", &built.scene, &built.default_camera).unwrap();
     let scene = Arc::new(built.scene);
     for (whole, expect) in [("0.05", true), ("0", false)] {
@@ -141,12 +140,7 @@ fn hzb_draws_mostly_visible_instances_whole() {
 
 #[test]
 fn hzb_bad_parameters_are_errors() {
-    let scene = Arc::new(
-        occult_scenes::spec::parse_spec("chessboard:n=4")
-            .and_then(|s| s.build())
-            .unwrap()
-            .scene,
-    );
+    let scene = Arc::new(build_scene("chessboard:n=4").scene);
     for bad in [
         "hzb:leaf=0",
         "hzb:depth=0",
@@ -169,9 +163,7 @@ fn hzb_bad_parameters_are_errors() {
 
 #[test]
 fn hzb_distributions_report_worker_idle_time() {
-    let built = occult_scenes::spec::parse_spec("city:blocks=3,detail=2")
-        .and_then(|s| s.build())
-        .unwrap();
+    let built = build_scene("city:blocks=3,detail=2");
     let scene = Arc::new(built.scene);
     for d in ["structure", "primitive", "hybrid"] {
         let s = spec(&format!("hzb:parallel={d},workers=3"));
@@ -189,12 +181,7 @@ fn hzb_distributions_report_worker_idle_time() {
 
 #[test]
 fn hzb_frame_size_changes_and_mismatches() {
-    let scene = Arc::new(
-        occult_scenes::spec::parse_spec("occluder:objects=3")
-            .and_then(|s| s.build())
-            .unwrap()
-            .scene,
-    );
+    let scene = Arc::new(build_scene("occluder:objects=3").scene);
     let mut h = Algorithm::parse("hzb")
         .unwrap()
         .build(scene.clone(), &RenderOptions::default())

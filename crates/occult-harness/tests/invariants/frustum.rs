@@ -4,7 +4,10 @@
 
 use std::sync::Arc;
 
-use occult_bench::invariants::{assert_identical_on_every_generator, assert_identical_on_path};
+use crate::support::{
+    assert_identical_on_every_generator, assert_identical_on_path, assert_variant_identical_on_every_generator,
+    build_scene,
+};
 use occult_core::View;
 use occult_raster::{Frame, RasterConfig, Strategy};
 use occult_render::{AlgoSpec, Algorithm, RenderOptions};
@@ -22,14 +25,14 @@ fn frustum_is_identical_to_zbuffer_single_threaded() {
 #[test]
 fn frustum_with_other_leaf_sizes_is_identical() {
     let spec = AlgoSpec::parse("frustum:leaf=7,group_leaf=1").unwrap();
-    assert_identical_on_every_generator(&spec, 0);
+    assert_variant_identical_on_every_generator(&spec, 0);
     assert_identical_on_path(&spec, "city:blocks=3,detail=2", "street:10", 160, 90);
 }
 
 #[test]
 fn default_views_and_paths_are_identical() {
     for spec in ["city:blocks=3,detail=2", "terrain:g=64"] {
-        let built = occult_scenes::spec::parse_spec(spec).and_then(|s| s.build()).unwrap();
+        let built = build_scene(spec);
         let cams = occult_scenes::path::parse_path("circle:12", &built.scene, &built.default_camera).unwrap();
         let scene = Arc::new(built.scene);
         let mut z = Algorithm::ZBUFFER
@@ -55,7 +58,7 @@ fn identical_when_zbuffer_and_frustum_take_different_raster_strategies() {
     // zbuffer sends ~2M triangles (sort-last on several threads), frustum far fewer, here
     // tile-binned (the automatic strategy would draw them directly); small frames make tiny
     // on-screen boxes of guard-band-sized triangles.
-    let built = occult_scenes::spec::parse_spec("city").and_then(|s| s.build()).unwrap();
+    let built = build_scene("city");
     let scene = Arc::new(built.scene);
     let options = RenderOptions {
         raster: RasterConfig {

@@ -1,51 +1,7 @@
 //! End-to-end tests of `occult particles` and `occult shadows` (Décoret 2005 §3.2, §3.3): small
 //! scenes and frames; bad arguments end in one line on stderr and a non-zero status.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
-
-use serde_json::Value;
-
-const CITY: &str = "city:blocks=1,detail=1,variants=2";
-
-fn occult(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_occult"))
-        .args(args)
-        .output()
-        .expect("the occult binary runs")
-}
-
-fn scratch(test: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-        .join("occult-nbuffer-cli-tests")
-        .join(test);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn ok(args: &[&str]) -> String {
-    let out = occult(args);
-    assert!(
-        out.status.success(),
-        "occult {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn fails(args: &[&str]) -> String {
-    let out = occult(args);
-    assert!(!out.status.success(), "occult {args:?} succeeded");
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!err.contains("panicked"), "{err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "not one line: {err}");
-    err
-}
-
-fn json(p: &std::path::Path) -> Value {
-    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
-}
+use super::*;
 
 #[test]
 fn particles_cull_and_report() {
@@ -68,7 +24,7 @@ fn particles_cull_and_report() {
         j,
     ]);
     assert!(out.contains("sprites culled"), "{out}");
-    let v = json(std::path::Path::new(j));
+    let v = read_json(std::path::Path::new(j));
     assert_eq!(v["cull"], true);
     assert!(v["sprites_culled"].as_u64().unwrap() > 0);
     assert!(v["lookups"].as_u64().unwrap() <= 4 * v["sprites_in_view"].as_u64().unwrap());
@@ -87,7 +43,7 @@ fn particles_cull_and_report() {
         "--json",
         j,
     ]);
-    assert_eq!(json(std::path::Path::new(j))["sprites_culled"], 0);
+    assert_eq!(read_json(std::path::Path::new(j))["sprites_culled"], 0);
     assert_eq!(image::open(png).unwrap().width(), 64);
 }
 
@@ -100,7 +56,7 @@ fn shadows_are_identical_with_and_without_clamping() {
         "shadows", "--scene", CITY, "--size", "96x64", "--litmap", "64", "--out", png, "--json", j,
     ]);
     assert!(out.contains("shadows identical: yes"), "{out}");
-    let v = json(std::path::Path::new(j));
+    let v = read_json(std::path::Path::new(j));
     assert_eq!(v["differing_pixels"], 0);
     let runs = v["runs"].as_array().unwrap();
     assert_eq!(runs.len(), 2);
@@ -113,7 +69,7 @@ fn shadows_are_identical_with_and_without_clamping() {
     ]);
     assert!(out.contains("shadows identical on every frame: yes"), "{out}");
     assert_eq!(out.matches("frame ").count(), 3 + 1, "{out}"); // 3 frames and the "frames" line
-    let v = json(std::path::Path::new(j));
+    let v = read_json(std::path::Path::new(j));
     let frames = v["frames"].as_array().unwrap();
     assert_eq!(frames.len(), 3);
     assert_eq!(v["differing_pixels"], 0);
@@ -143,7 +99,7 @@ fn shadows_are_identical_with_and_without_clamping() {
 
 #[test]
 fn bad_arguments_are_one_line_errors() {
-    let dir = scratch("bad");
+    let dir = scratch("nbuffer-bad");
     let png = dir.join("x.png");
     let png = png.to_str().unwrap();
     for args in [

@@ -614,28 +614,18 @@ fn obj_bad_input_names_file_and_line() {
         "{e}"
     );
     assert!(e.to_string().contains("coordinate is NaN"), "{e}");
-    assert!(matches!(
-        case("inf.obj", "v 0 0 0\nv 1 -inf 0\n"),
-        LoadError::NonFinite { .. }
-    ));
-    assert!(matches!(
-        case("overflow.obj", "v 0 0 1e39\n"),
-        LoadError::NonFinite { .. }
-    ));
+    for (name, text) in [("inf.obj", "v 0 0 0\nv 1 -inf 0\n"), ("overflow.obj", "v 0 0 1e39\n")] {
+        assert!(matches!(case(name, text), LoadError::NonFinite { .. }), "{name}");
+    }
 
     // What a cut file looks like: a face or vertex statement missing its tail.
-    assert!(matches!(
-        case("short_face.obj", &format!("{tri}f 1 2\n")),
-        LoadError::Parse { .. }
-    ));
-    assert!(matches!(
-        case("short_vertex.obj", "v 0 0 0\nv 1 0\n"),
-        LoadError::Parse { .. }
-    ));
-    assert!(matches!(
-        case("lone_sign.obj", &format!("{tri}f 1 2 -\n")),
-        LoadError::Parse { .. }
-    ));
+    for (name, text) in [
+        ("short_face.obj", format!("{tri}f 1 2\n")),
+        ("short_vertex.obj", "v 0 0 0\nv 1 0\n".to_string()),
+        ("lone_sign.obj", format!("{tri}f 1 2 -\n")),
+    ] {
+        assert!(matches!(case(name, &text), LoadError::Parse { .. }), "{name}");
+    }
     assert!(matches!(
         case("bad_number.obj", "v 0 0 zero\n"),
         LoadError::Parse {

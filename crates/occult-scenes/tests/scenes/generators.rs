@@ -2,9 +2,9 @@
 //! that see the scene, determinism, and errors (never panics) for bad parameters.
 //!
 //! Timings are printed (run with `--nocapture`), never asserted. The `measure_build_times`
-//! test is ignored by default: `cargo test -p occult-scenes --release --test generators --
-//! --ignored --nocapture` prints the build times of every generator at its default size and of
-//! a 10^7-triangle terrain.
+//! test is ignored by default: `cargo test -p occult-scenes --release --test scenes --
+//! generators:: --ignored --nocapture` prints the build times of every generator at its
+//! default size and of a 10^7-triangle terrain.
 
 use occult_core::{Scene, View};
 use occult_scenes::generate::{

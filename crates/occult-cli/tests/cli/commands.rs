@@ -1,50 +1,7 @@
 //! End-to-end tests of the `occult` binary: small generated scenes, small frames, and bad input
 //! that must end in one line on stderr and a non-zero status, never a panic.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
-
-use serde_json::Value;
-
-/// Small scenes: fast on two cores in CI.
-const TERRAIN: &str = "terrain:g=24";
-const CITY: &str = "city:blocks=1,detail=1,variants=2";
-
-fn occult(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_occult"))
-        .args(args)
-        .output()
-        .expect("the occult binary runs")
-}
-
-/// A fresh directory for one test's files.
-fn scratch(test: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-        .join("occult-cli-tests")
-        .join(test);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn path_arg(p: &std::path::Path) -> &str {
-    p.to_str().expect("test paths are UTF-8")
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
-
-/// Asserts success and returns stdout.
-fn ok(args: &[&str]) -> String {
-    let out = occult(args);
-    assert!(out.status.success(), "occult {args:?} failed: {}", text(&out.stderr));
-    text(&out.stdout)
-}
-
-fn read_json(p: &std::path::Path) -> Value {
-    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
-}
+use super::*;
 
 #[test]
 fn render_writes_color_and_depth_pngs_of_the_requested_size() {
@@ -139,6 +96,7 @@ fn compare_reports_frustum_identical_to_zbuffer() {
         path_arg(&csv),
         "--plot",
         path_arg(&plot),
+        "--peak-rss",
     ]);
     assert!(stdout.contains("oracle") && stdout.contains("4/4"), "{stdout}");
     let report = read_json(&json);
@@ -168,7 +126,7 @@ fn compare_reports_frustum_identical_to_zbuffer() {
         ] {
             assert!(r.get(field).is_some(), "{field} missing in {r}");
         }
-        // A measured peak of the whole process, or null where it cannot be measured.
+        // Asked for: a measured peak of the whole process, or null where it cannot be measured.
         let peak = &r["peak_rss_bytes"];
         assert!(peak.is_null() || peak.as_u64().is_some_and(|b| b > 0), "{peak}");
         if cfg!(target_os = "linux") && std::fs::write("/proc/self/clear_refs", "5").is_ok() {
@@ -433,15 +391,6 @@ fn info_describes_a_scene() {
         );
         assert!(unique <= all, "{spec}: {unique} unique of {all}");
     }
-}
-
-/// Status, stdout and stderr of a run that must fail.
-fn fails(args: &[&str]) -> (Option<i32>, String, String) {
-    let out = occult(args);
-    assert!(!out.status.success(), "occult {args:?} succeeded");
-    let stderr = text(&out.stderr);
-    assert_eq!(stderr.trim().lines().count(), 1, "occult {args:?}: {stderr}");
-    (out.status.code(), text(&out.stdout), stderr)
 }
 
 #[test]
@@ -761,7 +710,10 @@ fn compare_takes_several_configurations_of_one_renderer() {
     assert_eq!(names, ["zbuffer", "frustum", "frustum:leaf=8,group_leaf=1"]);
     for r in v["runs"][0]["renderers"].as_array().unwrap() {
         assert_eq!(r["frames_identical"], 3, "{}", r["name"]);
+        // Without --peak-rss the process's memory is not measured.
+        assert!(r["peak_rss_bytes"].is_null(), "{}", r["name"]);
     }
+    assert!(v["runs"][0]["process_peak_rss_bytes"].is_null());
 }
 
 #[test]

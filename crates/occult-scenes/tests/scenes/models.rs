@@ -3,7 +3,7 @@
 //! note and passes, so that the project's own tests never need the models.
 //!
 //! ```text
-//! OCCULT_MODELS=/work/shared/models cargo test -p occult-scenes --release --test models -- --nocapture
+//! OCCULT_MODELS=/work/shared/models cargo test -p occult-scenes --release --test scenes -- models:: --nocapture
 //! ```
 
 use std::path::{Path, PathBuf};

@@ -1,11 +1,12 @@
 //! Shadow-volume clamping (Décoret 2005 §3.3): shadows identical with and without clamping on
 //! views of `city` and `terrain`; clamping saves fill; bad lights are errors.
 
+use crate::support::build_scene;
 use std::sync::Arc;
 
 use occult_core::{Aabb, Vec3, View};
 use occult_raster::{Frame, RasterConfig, Rasterizer};
-use occult_render::nbuffer::shadows::{Clamping, Shade, ShadowCasters, SpotLight};
+use occult_render::nbuffer::shadows::{Clamping, Shade, ShadowCasters, ShadowFrame, SpotLight};
 use occult_render::{Algorithm, RenderOptions};
 
 /// A generated scene, the cameras of a path on it, its casters, a zbuffer and a rasterizer.
@@ -17,10 +18,22 @@ struct Setup {
     raster: Rasterizer,
 }
 
+impl Setup {
+    /// Renders the scene from `view`, then its shadows under `light` without and with clamping.
+    fn shadows_both_ways(&mut self, view: &View, light: &SpotLight) -> (ShadowFrame, ShadowFrame) {
+        let mut frame = Frame::new(view.width(), view.height()).unwrap();
+        self.z.render(view, &mut frame).unwrap();
+        let [off, on] = [Clamping::Off, Clamping::On].map(|clamping| {
+            self.casters
+                .shadows(&mut self.raster, view, &frame, light, clamping)
+                .unwrap()
+        });
+        (off, on)
+    }
+}
+
 fn setup(scene_spec: &str, path: &str, leaf: usize) -> Setup {
-    let built = occult_scenes::spec::parse_spec(scene_spec)
-        .and_then(|s| s.build())
-        .unwrap();
+    let built = build_scene(scene_spec);
     let cams = occult_scenes::path::parse_path(path, &built.scene, &built.default_camera).unwrap();
     let scene = Arc::new(built.scene);
     Setup {
@@ -37,30 +50,17 @@ fn setup(scene_spec: &str, path: &str, leaf: usize) -> Setup {
 /// Renders each camera of `path` on `scene_spec` and compares shadow flags with and without
 /// clamping; returns (unclamped, clamped) stencil fragments summed over the path.
 fn compare(scene_spec: &str, path: &str, leaf: usize, w: u32, h: u32, lights: &[SpotLight]) -> (u64, u64) {
-    let Setup {
-        scene,
-        cams,
-        casters,
-        mut z,
-        mut raster,
-    } = setup(scene_spec, path, leaf);
+    let mut setup = setup(scene_spec, path, leaf);
     let (mut off_fill, mut on_fill) = (0, 0);
     let mut shadowed = 0;
     let mut lights: Vec<SpotLight> = lights.to_vec();
-    let mut default = SpotLight::for_bounds(&scene.bounds());
+    let mut default = SpotLight::for_bounds(&setup.scene.bounds());
     default.resolution = 128;
     lights.push(default);
-    for (k, cam) in cams.iter().enumerate() {
+    for (k, cam) in setup.cams.clone().iter().enumerate() {
         let light = &lights[k % lights.len()];
         let view = View::new(*cam, w, h).unwrap();
-        let mut frame = Frame::new(w, h).unwrap();
-        z.render(&view, &mut frame).unwrap();
-        let off = casters
-            .shadows(&mut raster, &view, &frame, light, Clamping::Off)
-            .unwrap();
-        let on = casters
-            .shadows(&mut raster, &view, &frame, light, Clamping::On)
-            .unwrap();
+        let (off, on) = setup.shadows_both_ways(&view, light);
         let differ = off.shades.iter().zip(&on.shades).filter(|(a, b)| a != b).count();
         assert_eq!(differ, 0, "{scene_spec} view {k}: {differ} pixels differ with clamping");
         assert_eq!(off.counts.casters_culled, 0);
@@ -101,9 +101,7 @@ fn terrain_shadows_are_identical_with_and_without_clamping() {
 
 #[test]
 fn bad_lights_are_errors() {
-    let built = occult_scenes::spec::parse_spec("city:blocks=1,detail=0")
-        .and_then(|s| s.build())
-        .unwrap();
+    let built = build_scene("city:blocks=1,detail=0");
     let view = View::new(built.default_camera, 32, 24).unwrap();
     let scene = Arc::new(built.scene);
     assert!(ShadowCasters::new(scene.clone(), 0).is_err());
@@ -158,23 +156,10 @@ fn a_point_on_a_shadow_boundary_is_classified_alike_with_and_without_clamping() 
     // `terrain`, camera 7 of `flyover:8`, 640×480, the default light: one visible point lies on
     // a side face of a clamped caster's volume. When the unclamped sides ran to the far plane in
     // one quad, their snapped corners differed from the clamped ones and this pixel flipped.
-    let Setup {
-        scene,
-        cams,
-        casters,
-        mut z,
-        mut raster,
-    } = setup("terrain", "flyover:8", 4096);
-    let light = SpotLight::for_bounds(&scene.bounds());
-    let view = View::new(cams[7], 640, 480).unwrap();
-    let mut frame = Frame::new(640, 480).unwrap();
-    z.render(&view, &mut frame).unwrap();
-    let off = casters
-        .shadows(&mut raster, &view, &frame, &light, Clamping::Off)
-        .unwrap();
-    let on = casters
-        .shadows(&mut raster, &view, &frame, &light, Clamping::On)
-        .unwrap();
+    let mut setup = setup("terrain", "flyover:8", 4096);
+    let light = SpotLight::for_bounds(&setup.scene.bounds());
+    let view = View::new(setup.cams[7], 640, 480).unwrap();
+    let (off, on) = setup.shadows_both_ways(&view, &light);
     assert!(on.counts.casters_clamped > 0 && on.counts.shadowed_pixels > 10_000);
     let differ: Vec<usize> = (0..off.shades.len())
         .filter(|&i| off.shades[i] != on.shades[i])

@@ -1,10 +1,14 @@
 //! oqgrid (Hillesland et al. 2002): frames bit-identical to `zbuffer` (DESIGN invariant 2) over
-//! every generator with 50 random views and over whole camera paths, in every configuration
-//! that changes what is queried or drawn; bad parameters are errors.
+//! every generator with random views (50 per scene for the default, 20 for each other
+//! configuration) and over whole camera paths, in every configuration that changes what is
+//! queried or drawn; bad parameters are errors.
 
 use std::sync::Arc;
 
-use occult_bench::invariants::{assert_identical_on_every_generator, assert_identical_on_path};
+use crate::support::{
+    assert_identical_on_every_generator, assert_identical_on_path, assert_variant_identical_on_every_generator,
+    build_scene,
+};
 use occult_core::{Camera, Vec3, View};
 use occult_raster::Frame;
 use occult_render::{AlgoSpec, Algorithm, RenderError, RenderOptions};
@@ -20,18 +24,18 @@ fn nested_default_is_identical_on_every_generator() {
 
 #[test]
 fn uniform_batch_1_is_identical_on_every_generator() {
-    assert_identical_on_every_generator(&spec("oqgrid:grid=uniform,batch=1,resolution=16"), 0);
+    assert_variant_identical_on_every_generator(&spec("oqgrid:grid=uniform,batch=1,resolution=16"), 0);
 }
 
 #[test]
 fn uniform_batch_8_fine_grid_is_identical_on_every_generator() {
-    assert_identical_on_every_generator(&spec("oqgrid:grid=uniform,batch=8,resolution=40"), 2);
+    assert_variant_identical_on_every_generator(&spec("oqgrid:grid=uniform,batch=8,resolution=40"), 2);
 }
 
 #[test]
 fn nested_deep_small_split_is_identical_on_every_generator() {
     // Small split threshold and coarse top level: most cells have subgrids (§3.2 recursion).
-    assert_identical_on_every_generator(
+    assert_variant_identical_on_every_generator(
         &spec("oqgrid:grid=nested,resolution=3,split=8,branching=2,depth=4,batch=8"),
         0,
     );
@@ -41,8 +45,8 @@ fn nested_deep_small_split_is_identical_on_every_generator() {
 fn threshold_and_switches_are_identical_on_every_generator() {
     // Cells under 64 triangles drawn unqueried; no stamps (shared triangles drawn per cell);
     // storage order; one thread.
-    assert_identical_on_every_generator(&spec("oqgrid:threshold=64,stamps=off,order=none,batch=3"), 1);
-    assert_identical_on_every_generator(&spec("oqgrid:queries=off"), 0);
+    assert_variant_identical_on_every_generator(&spec("oqgrid:threshold=64,stamps=off,order=none,batch=3"), 1);
+    assert_variant_identical_on_every_generator(&spec("oqgrid:queries=off"), 0);
 }
 
 #[test]
@@ -75,12 +79,7 @@ fn build_err(s: &str) -> String {
 }
 
 fn build_err_on(scene_spec: &str, s: &str) -> String {
-    let scene = Arc::new(
-        occult_scenes::spec::parse_spec(scene_spec)
-            .and_then(|s| s.build())
-            .unwrap()
-            .scene,
-    );
+    let scene = Arc::new(build_scene(scene_spec).scene);
     match spec(s).build(scene, &RenderOptions::default()) {
         Err(RenderError::BadParameter(m)) => m,
         Err(e) => panic!("{s}: expected BadParameter, got {e}"),
@@ -127,9 +126,7 @@ fn absurd_resolution_is_refused_before_allocating() {
 /// The counters add up, and a wall in front of a hidden object culls the object's cells.
 #[test]
 fn counters_account_for_every_cell() {
-    let built = occult_scenes::spec::parse_spec("occluder:objects=3,tessellation=16")
-        .and_then(|s| s.build())
-        .unwrap();
+    let built = build_scene("occluder:objects=3,tessellation=16");
     let scene = Arc::new(built.scene);
     let opts = RenderOptions::default();
     let view = View::new(built.default_camera, 160, 120).unwrap();
@@ -164,9 +161,7 @@ fn counters_account_for_every_cell() {
 /// A view from far behind everything, looking away: nothing is queried or drawn.
 #[test]
 fn view_away_from_the_scene_draws_nothing() {
-    let built = occult_scenes::spec::parse_spec("city:blocks=1,detail=1")
-        .and_then(|s| s.build())
-        .unwrap();
+    let built = build_scene("city:blocks=1,detail=1");
     let scene = Arc::new(built.scene);
     let cam = Camera::look_at(Vec3::new(0.0, 10.0, 5000.0), Vec3::new(0.0, 10.0, 10000.0));
     let view = View::new(cam, 64, 48).unwrap();
@@ -182,9 +177,7 @@ fn view_away_from_the_scene_draws_nothing() {
 /// identical (the 96 x 64 views of the other tests are too small to take that path).
 #[test]
 fn parallel_query_batches_are_identical() {
-    let built = occult_scenes::spec::parse_spec("plant:units=2,floors=2,pipes=10")
-        .and_then(|s| s.build())
-        .unwrap();
+    let built = build_scene("plant:units=2,floors=2,pipes=10");
     let cams = occult_scenes::path::parse_path("street:6", &built.scene, &built.default_camera).unwrap();
     let scene = Arc::new(built.scene);
     let opts = RenderOptions::default();

@@ -141,10 +141,8 @@ fn same_frame_for_the_same_seed_whatever_the_threads() {
     }
 }
 
-/// §7.1: a scene of two large triangles is drawn entirely by the z-buffer fallback, hence
-/// exactly like zbuffer, from any view.
-#[test]
-fn large_triangle_fallback_renders_two_triangles_exactly() {
+/// Two large triangles, one of them tilted.
+fn two_large_triangles() -> Arc<Scene> {
     let mesh = Mesh::new(
         vec![
             Vec3::new(-1.0, 0.0, -1.0),
@@ -155,7 +153,14 @@ fn large_triangle_fallback_renders_two_triangles_exactly() {
         vec![[0, 2, 1], [0, 3, 2]],
     )
     .unwrap();
-    let scene = Arc::new(Scene::from_mesh("two", mesh).unwrap());
+    Arc::new(Scene::from_mesh("two", mesh).unwrap())
+}
+
+/// §7.1: a scene of two large triangles is drawn entirely by the z-buffer fallback, hence
+/// exactly like zbuffer, from any view.
+#[test]
+fn large_triangle_fallback_renders_two_triangles_exactly() {
+    let scene = two_large_triangles();
     let mut r = rzb(&scene, "rzb", 2);
     for (k, eye) in [
         Vec3::new(0.0, 2.0, 3.0),
@@ -319,17 +324,7 @@ fn gaussian_reconstruction_keeps_visibility_and_improves_psnr() {
         "Gaussian {pg:.2} dB vs per-pixel {pn:.2} dB"
     );
     // Two large triangles: everything is drawn by the fallback, colors exactly zbuffer's.
-    let mesh = Mesh::new(
-        vec![
-            Vec3::new(-1.0, 0.0, -1.0),
-            Vec3::new(1.0, 0.0, -1.0),
-            Vec3::new(1.0, 0.0, 1.0),
-            Vec3::new(-1.0, 0.3, 1.0),
-        ],
-        vec![[0, 2, 1], [0, 3, 2]],
-    )
-    .unwrap();
-    let two = Arc::new(Scene::from_mesh("two", mesh).unwrap());
+    let two = two_large_triangles();
     let view = View::new(Camera::look_at(Vec3::new(0.0, 2.0, 3.0), Vec3::ZERO), 96, 64).unwrap();
     let reference = shaded(zbuffer_frame(&two, &view), &two, &view);
     let mut r = rzb(&two, "rzb:recon=gauss", 2);

@@ -1,13 +1,17 @@
 //! DESIGN invariant 2 as reusable checks: a conservative renderer's frames are bit-identical to
-//! `zbuffer`'s (depth bits and item ids, hence colors). Every renderer's test file calls these
+//! `zbuffer`'s (depth bits and item ids, hence colors). Every renderer's module calls these
 //! with each of its configurations; they panic, naming the scene and the view, on the first
 //! frame that differs.
+//!
+//! A renderer's default configuration is checked over [`VIEWS_PER_SCENE`] random views of every
+//! scene; each other configuration changes one part of a renderer the default already runs
+//! over those views, so it is checked on every scene too, over [`VIEWS_PER_VARIANT`] views.
 
 use std::sync::Arc;
 
 use occult_core::{Camera, Scene, Vec3, View};
 use occult_raster::{Frame, RasterConfig};
-use occult_render::{AlgoSpec, Algorithm, RenderOptions};
+use occult_render::{AlgoSpec, Algorithm, RenderOptions, Renderer};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
@@ -24,6 +28,9 @@ pub const SCENES: &[&str] = &[
 
 /// Random views per scene in [`assert_identical_on_every_generator`].
 pub const VIEWS_PER_SCENE: usize = 50;
+
+/// Random views per scene in [`assert_variant_identical_on_every_generator`].
+pub const VIEWS_PER_VARIANT: usize = 20;
 
 /// A random view of `scene` at 96×64: eyes inside and around its bounds, random fields of view,
 /// near planes from tiny to large and far planes that may cut the scene.
@@ -62,7 +69,33 @@ fn options(threads: usize) -> RenderOptions {
     }
 }
 
-fn build_scene(spec: &str) -> occult_scenes::spec::BuiltScene {
+/// `zbuffer` and `spec` built on `scene` (called `scene_spec` in the panic messages).
+fn zbuffer_and(
+    spec: &AlgoSpec,
+    scene_spec: &str,
+    scene: &Arc<Scene>,
+    options: &RenderOptions,
+) -> (Box<dyn Renderer>, Box<dyn Renderer>) {
+    let reference = Algorithm::ZBUFFER
+        .build(scene.clone(), options)
+        .unwrap_or_else(|e| panic!("zbuffer on {scene_spec}: {e}"));
+    let renderer = spec
+        .build(scene.clone(), options)
+        .unwrap_or_else(|e| panic!("{spec} on {scene_spec}: {e}"));
+    (reference, renderer)
+}
+
+/// Two cleared `width × height` frames.
+pub fn two_frames(width: u32, height: u32) -> (Frame, Frame) {
+    let frame = || Frame::new(width, height).unwrap_or_else(|e| panic!("a {width} × {height} frame: {e}"));
+    (frame(), frame())
+}
+
+/// The generated scene of `spec`.
+///
+/// # Panics
+/// If the spec does not build.
+pub fn build_scene(spec: &str) -> occult_scenes::spec::BuiltScene {
     occult_scenes::spec::parse_spec(spec)
         .and_then(|s| s.build())
         .unwrap_or_else(|e| panic!("{spec}: {e}"))
@@ -70,22 +103,29 @@ fn build_scene(spec: &str) -> occult_scenes::spec::BuiltScene {
 
 /// Renders [`VIEWS_PER_SCENE`] random views of every scene of [`SCENES`] with `spec` and with
 /// `zbuffer` (`threads` rasterizer threads, 0 = all), one renderer object per scene so that
-/// state kept across frames is exercised, and panics on the first frame that differs.
+/// state kept across frames is exercised, and panics on the first frame that differs. For a
+/// renderer's default configuration.
 pub fn assert_identical_on_every_generator(spec: &AlgoSpec, threads: usize) {
+    assert_identical_on_generators(spec, threads, VIEWS_PER_SCENE);
+}
+
+/// [`assert_identical_on_every_generator`] over [`VIEWS_PER_VARIANT`] views per scene: for
+/// the configurations other than a renderer's default.
+pub fn assert_variant_identical_on_every_generator(spec: &AlgoSpec, threads: usize) {
+    assert_identical_on_generators(spec, threads, VIEWS_PER_VARIANT);
+}
+
+/// `view_count` random views of every scene of [`SCENES`] (see
+/// [`assert_identical_on_every_generator`]).
+fn assert_identical_on_generators(spec: &AlgoSpec, threads: usize, view_count: usize) {
     let mut rng = Pcg64Mcg::seed_from_u64(2026);
     let options = options(threads);
     for scene_spec in SCENES {
         let scene = Arc::new(build_scene(scene_spec).scene);
-        let mut reference = Algorithm::ZBUFFER
-            .build(scene.clone(), &options)
-            .unwrap_or_else(|e| panic!("zbuffer on {scene_spec}: {e}"));
-        let mut renderer = spec
-            .build(scene.clone(), &options)
-            .unwrap_or_else(|e| panic!("{spec} on {scene_spec}: {e}"));
-        let frame = || Frame::new(96, 64).unwrap_or_else(|e| panic!("a 96 × 64 frame: {e}"));
-        let (mut a, mut b) = (frame(), frame());
+        let (mut reference, mut renderer) = zbuffer_and(spec, scene_spec, &scene, &options);
+        let (mut a, mut b) = two_frames(96, 64);
         let mut covered_views = 0;
-        for i in 0..VIEWS_PER_SCENE {
+        for i in 0..view_count {
             let view = random_view(&mut rng, &scene);
             reference
                 .render(&view, &mut a)
@@ -104,7 +144,7 @@ pub fn assert_identical_on_every_generator(spec: &AlgoSpec, threads: usize) {
         }
         // The test must look at something: most random views see part of the scene.
         assert!(
-            covered_views >= VIEWS_PER_SCENE / 4,
+            covered_views >= view_count / 4,
             "{scene_spec}: only {covered_views} views saw anything"
         );
     }
@@ -119,15 +159,8 @@ pub fn assert_identical_on_path(spec: &AlgoSpec, scene_spec: &str, path_spec: &s
     let cams = occult_scenes::path::parse_path(path_spec, &built.scene, &built.default_camera)
         .unwrap_or_else(|e| panic!("{path_spec}: {e}"));
     let scene = Arc::new(built.scene);
-    let options = RenderOptions::default();
-    let mut z = Algorithm::ZBUFFER
-        .build(scene.clone(), &options)
-        .unwrap_or_else(|e| panic!("zbuffer on {scene_spec}: {e}"));
-    let mut r = spec
-        .build(scene.clone(), &options)
-        .unwrap_or_else(|e| panic!("{spec} on {scene_spec}: {e}"));
-    let frame = || Frame::new(width, height).unwrap_or_else(|e| panic!("a {width} × {height} frame: {e}"));
-    let (mut a, mut b) = (frame(), frame());
+    let (mut z, mut r) = zbuffer_and(spec, scene_spec, &scene, &RenderOptions::default());
+    let (mut a, mut b) = two_frames(width, height);
     for (i, cam) in cams.iter().chain([&built.default_camera]).enumerate() {
         let view = View::new(*cam, width, height).unwrap_or_else(|e| panic!("{path_spec}, frame {i}: {e}"));
         z.render(&view, &mut a)

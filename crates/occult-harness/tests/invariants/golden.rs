@@ -6,7 +6,7 @@
 //! numbering, a generator) passes every other test. This one catches it.
 //!
 //! Updating the table is an explicit step: when a change is meant to change frames, run
-//! `cargo test --release -p occult-bench --test golden`, paste the table the failure prints
+//! `cargo test --release -p occult-harness --test invariants golden`, paste the table the failure prints
 //! over [`GOLDEN`], and say in the commit message why the frames changed.
 
 use std::sync::Arc;

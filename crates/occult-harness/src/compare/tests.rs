@@ -1,0 +1,368 @@
+//! The comparison on a small scene of instanced cubes: line-ups, references, reports, errors.
+
+use super::*;
+use occult_core::{Affine3A, Camera, Instance, Mesh, SceneBuilder, Vec3, View};
+use occult_raster::Frame;
+
+/// A 6×6 grid of unit cubes (instanced) on a ground quad: cubes hide each other and the
+/// ground from most views.
+fn cubes() -> Arc<Scene> {
+    // The cube's corners are the bit patterns of 0..8 (x from bit 0, y bit 1, z bit 2); each
+    // face is two triangles wound outwards.
+    let corners = (0..8u32)
+        .map(|i| Vec3::new((i & 1) as f32, (i >> 1 & 1) as f32, (i >> 2 & 1) as f32) - 0.5)
+        .collect();
+    let faces = [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ];
+    let triangles = faces.iter().flat_map(|&[a, b, c, d]| [[a, b, c], [a, c, d]]).collect();
+    let mut builder = SceneBuilder::new();
+    let cube = builder
+        .add_mesh("cube", Mesh::new(corners, triangles).unwrap())
+        .unwrap();
+    let ground = [[-8.0, -8.0], [8.0, -8.0], [8.0, 8.0], [-8.0, 8.0]].map(|[x, z]| Vec3::new(x, -0.5, z));
+    let ground = Mesh::new(ground.to_vec(), vec![[0, 2, 1], [0, 3, 2]]).unwrap();
+    let ground = builder.add_mesh("ground", ground).unwrap();
+    let at = (0..36).map(|k| Vec3::new((k / 6) as f32 * 2.0 - 5.0, 0.0, (k % 6) as f32 * 2.0 - 5.0));
+    let mut instances = vec![Instance {
+        parent_from_child: Affine3A::IDENTITY,
+        child: ground,
+    }];
+    instances.extend(at.map(|at| Instance {
+        parent_from_child: Affine3A::from_translation(at),
+        child: cube,
+    }));
+    let root = builder.add_group("cubes", instances).unwrap();
+    Arc::new(builder.build(root).unwrap())
+}
+
+fn circle(n: usize) -> Vec<Camera> {
+    (0..n)
+        .map(|i| {
+            let a = i as f32 / n as f32 * std::f32::consts::TAU;
+            Camera::look_at(Vec3::new(9.0 * a.cos(), 2.0, 9.0 * a.sin()), Vec3::new(0.0, 0.0, 0.0))
+        })
+        .collect()
+}
+
+fn run(algorithms: Vec<Algorithm>, cameras: &[Camera]) -> Result<CompareReport> {
+    let mut config = CompareConfig::new(algorithms, 96, 64);
+    config.options.raster.threads = 2;
+    compare(cubes(), cameras, &config, &mut |_| {})
+}
+
+#[test]
+fn frustum_is_identical_to_zbuffer_on_every_frame() {
+    let cameras = circle(6);
+    let report = run(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], &cameras).unwrap();
+    assert_eq!(report.reference.as_deref(), Some("zbuffer"));
+    assert_eq!(report.frames, 6);
+    for r in &report.renderers {
+        assert_eq!(r.frames, 6);
+        assert_eq!(r.frames_identical, Some(6), "{} differs from the reference", r.name);
+        assert!(r
+            .per_frame
+            .iter()
+            .all(|f| f.identical && f.item_error.is_none() && f.psnr_db.is_none()));
+        assert_eq!(r.mean_item_error, 0.0);
+        assert!(r.min_psnr_db.is_none());
+    }
+    assert_eq!(
+        report.oracle.as_ref().unwrap().frames_identical,
+        6,
+        "rasterizing the visible set must reproduce the frame"
+    );
+}
+
+#[test]
+fn report_numbers_are_consistent() {
+    let cameras = circle(5);
+    let report = run(
+        vec![Algorithm::FRUSTUM, Algorithm::ZBUFFER, Algorithm::FRUSTUM],
+        &cameras,
+    )
+    .unwrap();
+    let names: Vec<_> = report.renderers.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(names, ["frustum", "zbuffer"], "requested order, duplicates dropped");
+    assert_eq!(report.scene_triangles, 2 + 36 * 12);
+    let z = report.renderer("zbuffer").unwrap();
+    let f = report.renderer("frustum").unwrap();
+    assert!(z.is_reference && !f.is_reference && z.requested && f.requested);
+    assert_eq!(z.speedup_vs_zbuffer, Some(1.0));
+    assert!((f.speedup_vs_zbuffer.unwrap() - z.mean_ms / f.mean_ms).abs() < 1e-9);
+    // zbuffer submits everything; frustum never more.
+    assert_eq!(z.stats.triangles_submitted, report.scene_triangles as f64);
+    for r in [z, f] {
+        assert_eq!(r.per_frame.len(), 5);
+        let total: u64 = r.per_frame.iter().map(|p| p.triangles_rasterized).sum();
+        assert_eq!(r.triangles_rasterized_total, total);
+        assert!((r.triangles_rasterized - total as f64 / 5.0).abs() < 1e-9);
+        assert_eq!(r.stats.triangles_rasterized, r.triangles_rasterized);
+        let mean_ms = r.per_frame.iter().map(|p| p.time_ms).sum::<f64>() / 5.0;
+        assert!((r.mean_ms - mean_ms).abs() < 1e-9);
+        assert!(r.time.min_ms <= r.time.median_ms && r.time.median_ms <= r.p95_ms && r.p95_ms <= r.time.max_ms);
+        assert!(r.vs_oracle.unwrap() > 0.0);
+        assert!(r.prepare_ms >= 0.0);
+        assert!(!r.phases.is_empty());
+    }
+    assert!(f.stats.triangles_submitted <= z.stats.triangles_submitted);
+    // Visible triangles: from the item buffer, never more than rasterized.
+    assert_eq!(report.oracle.as_ref().unwrap().triangles_visible.len(), 5);
+    let visible: u64 = report.oracle.as_ref().unwrap().triangles_visible.iter().sum();
+    assert_eq!(z.triangles_visible_total, visible);
+    assert!(visible > 0);
+    for (i, &v) in report.oracle.as_ref().unwrap().triangles_visible.iter().enumerate() {
+        assert!(v <= z.per_frame[i].triangles_rasterized && v < report.scene_triangles);
+    }
+    assert!(report.process_peak_rss_bytes.is_none_or(|b| b > 0));
+}
+
+#[test]
+fn peak_memory_is_measured_per_renderer_where_the_kernel_allows() {
+    let mut config = CompareConfig::new(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], 96, 64);
+    config.options.raster.threads = 2;
+    config.peak_rss = Some(PeakRss::new());
+    let report = compare(cubes(), &circle(2), &config, &mut |_| {}).unwrap();
+    let process = report.process_peak_rss_bytes;
+    let measurable = cfg!(target_os = "linux") && std::fs::write("/proc/self/clear_refs", "5").is_ok();
+    for r in &report.renderers {
+        match r.peak_rss_bytes {
+            Some(peak) => {
+                assert!(measurable, "{}: a peak where none can be measured", r.name);
+                assert!(peak > 0);
+                // Each reading is of the whole process, so never above its peak.
+                assert!(peak <= process.unwrap(), "{}: {peak} > {process:?}", r.name);
+            }
+            None => assert!(!measurable, "{}: no peak although the mark can be reset", r.name),
+        }
+    }
+}
+
+#[test]
+fn process_memory_is_left_alone_unless_asked_for() {
+    let report = run(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], &circle(2)).unwrap();
+    assert_eq!(report.process_peak_rss_bytes, None);
+    assert!(report.renderers.iter().all(|r| r.peak_rss_bytes.is_none()));
+}
+
+#[test]
+fn reference_is_added_when_not_requested() {
+    let report = run(vec![Algorithm::FRUSTUM], &circle(2)).unwrap();
+    let z = &report.renderers[0];
+    assert_eq!((z.name.as_str(), z.is_reference, z.requested), ("zbuffer", true, false));
+    assert!(report.reference_note.contains("not requested"));
+    assert_eq!(report.renderers[1].frames_identical, Some(2));
+}
+
+#[test]
+fn scenes_too_large_for_brute_force_use_frustum_as_reference() {
+    // 10^10 triangle instances along +x, ten times farther apart at each level; the camera
+    // sees only the first few.
+    let mut b = SceneBuilder::new();
+    let tri = Mesh::new(
+        vec![Vec3::ZERO, Vec3::new(0.8, 0.0, 0.0), Vec3::new(0.0, 0.8, 0.0)],
+        vec![[0, 1, 2]],
+    )
+    .unwrap();
+    let mut id = b.add_mesh("tri", tri).unwrap();
+    for level in 0..10 {
+        let pitch = 10f32.powi(level);
+        let row: Vec<_> = (0..10)
+            .map(|i| Instance {
+                parent_from_child: Affine3A::from_translation(Vec3::X * pitch * i as f32),
+                child: id,
+            })
+            .collect();
+        id = b.add_group(format!("level{level}"), row).unwrap();
+    }
+    let scene = Arc::new(b.build(id).unwrap());
+    assert!(scene.item_count() > MAX_BRUTE_FORCE_ITEMS);
+    let mut camera = Camera::look_at(Vec3::new(4.0, 0.5, 6.0), Vec3::new(4.0, 0.5, 0.0));
+    camera.far = 30.0;
+    let config = CompareConfig::new(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], 64, 48);
+    let report = compare(scene, &[camera, camera], &config, &mut |_| {}).unwrap();
+    assert_eq!(report.reference.as_deref(), Some("frustum"));
+    assert!(
+        report.reference_note.contains("more than brute force accepts"),
+        "{}",
+        report.reference_note
+    );
+    assert_eq!(report.skipped.len(), 1);
+    assert_eq!(report.skipped[0].name, "zbuffer");
+    assert_eq!(report.renderers.len(), 1);
+    let f = &report.renderers[0];
+    assert!(f.is_reference && f.requested && f.speedup_vs_zbuffer.is_none());
+    assert_eq!(f.frames_identical, Some(2));
+    assert!(report.oracle.as_ref().unwrap().triangles_visible[0] > 0);
+    assert_eq!(report.oracle.as_ref().unwrap().frames_identical, 2);
+}
+
+#[test]
+fn empty_inputs_are_errors() {
+    assert!(matches!(run(vec![Algorithm::FRUSTUM], &[]), Err(CompareError::NoViews)));
+    assert!(matches!(run(vec![], &circle(1)), Err(CompareError::NoAlgorithms)));
+}
+
+#[test]
+fn degenerate_camera_and_bad_size_are_errors() {
+    let mut cameras = circle(3);
+    cameras[1].target = cameras[1].eye;
+    assert!(matches!(
+        run(vec![Algorithm::FRUSTUM], &cameras),
+        Err(CompareError::BadView { view_index: 1, .. })
+    ));
+    let config = CompareConfig::new(vec![Algorithm::FRUSTUM], 0, 64);
+    assert!(matches!(
+        compare(cubes(), &circle(1), &config, &mut |_| {}),
+        Err(CompareError::BadView { .. })
+    ));
+}
+
+#[test]
+fn views_that_see_nothing_are_fine() {
+    let away = Camera::look_at(Vec3::new(0.0, 50.0, 0.0), Vec3::new(0.0, 100.0, 1.0));
+    let report = run(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], &[away]).unwrap();
+    assert_eq!(report.oracle.as_ref().unwrap().triangles_visible, vec![0]);
+    assert!(report.renderers.iter().all(|r| r.frames_identical == Some(1)));
+}
+
+#[test]
+fn differing_frames_are_measured() {
+    let scene = cubes();
+    let view = View::new(circle(1)[0], 32, 24).unwrap();
+    let mut a = Frame::new(32, 24).unwrap();
+    let mut r = Algorithm::ZBUFFER
+        .build(Arc::clone(&scene), &RenderOptions::default())
+        .unwrap();
+    r.render(&view, &mut a).unwrap();
+    let mut b = a.clone();
+    assert_eq!(item_error(&a, &b), 0.0);
+    b.clear();
+    assert_eq!(item_error(&b, &a), 1.0, "all covered pixels lost");
+    assert_eq!(item_error(&b, &b), 0.0);
+}
+
+#[test]
+fn reference_can_be_chosen_or_none() {
+    let cameras = circle(4);
+    let mut config = CompareConfig::new(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], 96, 64);
+    config.reference = Reference::Spec(AlgoSpec::from(Algorithm::FRUSTUM));
+    let report = compare(cubes(), &cameras, &config, &mut |_| {}).unwrap();
+    assert_eq!(report.reference.as_deref(), Some("frustum"));
+    assert!(report.renderer("frustum").unwrap().is_reference);
+    assert_eq!(report.renderer("zbuffer").unwrap().frames_identical, Some(4));
+    assert!(report.oracle.is_some());
+
+    config.algorithms = vec![AlgoSpec::from(Algorithm::FRUSTUM)];
+    config.reference = Reference::None;
+    let report = compare(cubes(), &cameras, &config, &mut |_| {}).unwrap();
+    assert_eq!(report.reference, None);
+    assert!(report.oracle.is_none());
+    assert_eq!(report.renderers.len(), 1, "no reference is added");
+    let f = report.renderer("frustum").unwrap();
+    assert!(!f.is_reference);
+    assert_eq!(f.frames_identical, None, "nothing is checked");
+    assert_eq!(f.vs_oracle, None);
+    assert_eq!(report.image.measured_on, "frustum");
+    assert_eq!(report.image.covered_pixels.len(), 4);
+    assert!(report.image.covered_pixels.iter().all(|&c| c > 0));
+    assert!(
+        f.triangles_visible > 0.0,
+        "visible triangles come from the first renderer's frames"
+    );
+}
+
+#[test]
+fn approximate_or_impossible_references_are_refused() {
+    let cameras = circle(1);
+    let mut config = CompareConfig::new(vec![Algorithm::FRUSTUM], 32, 32);
+    config.reference = Reference::Spec(AlgoSpec::parse("rzb").unwrap());
+    let e = compare(cubes(), &cameras, &config, &mut |_| {}).unwrap_err();
+    assert!(matches!(e, CompareError::BadReference { .. }), "{e}");
+    assert!(e.to_string().contains("conservative"), "{e}");
+    config.reference = Reference::Spec(AlgoSpec::parse("lzb:mode=naive").unwrap());
+    let e = compare(cubes(), &cameras, &config, &mut |_| {}).unwrap_err();
+    assert!(e.to_string().contains("approximate"), "{e}");
+}
+
+#[test]
+fn image_complexity_is_the_clipped_screen_area_of_every_layer() {
+    // Two full-screen squares, one behind the other, facing the camera: every pixel is
+    // covered twice, so image complexity is 2 w h and depth complexity 2.
+    let quad = |z: f32| {
+        Mesh::new(
+            vec![
+                Vec3::new(-100.0, -100.0, z),
+                Vec3::new(100.0, -100.0, z),
+                Vec3::new(100.0, 100.0, z),
+                Vec3::new(-100.0, 100.0, z),
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        )
+        .unwrap()
+    };
+    let mut b = SceneBuilder::new();
+    let near = b.add_mesh("near", quad(0.0)).unwrap();
+    let far = b.add_mesh("far", quad(-5.0)).unwrap();
+    let root = b
+        .add_group(
+            "layers",
+            [near, far]
+                .map(|child| Instance {
+                    parent_from_child: Affine3A::IDENTITY,
+                    child,
+                })
+                .to_vec(),
+        )
+        .unwrap();
+    let scene = Arc::new(b.build(root).unwrap());
+    let camera = Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO);
+    let view = View::new(camera, 64, 48).unwrap();
+    let area = image_complexity(&scene, &view);
+    assert!((area - 2.0 * 64.0 * 48.0).abs() < 1e-3 * area, "{area}");
+
+    // A triangle wholly inside the view: its projected area.
+    let tri = Mesh::new(
+        vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+        ],
+        vec![[0, 1, 2]],
+    )
+    .unwrap();
+    let scene = Arc::new(Scene::from_mesh("tri", tri).unwrap());
+    let view = View::new(camera, 100, 100).unwrap();
+    let c = view.clip_from_world();
+    let px = |p: Vec3| {
+        let v = c * p.extend(1.0);
+        (v.x as f64 / v.w as f64 * 50.0, v.y as f64 / v.w as f64 * 50.0)
+    };
+    let (a, b2, d) = (px(Vec3::ZERO), px(Vec3::X), px(Vec3::Y));
+    let expected = ((b2.0 - a.0) * (d.1 - a.1) - (d.0 - a.0) * (b2.1 - a.1)).abs() / 2.0;
+    let area = image_complexity(&scene, &view);
+    assert!((area - expected).abs() < 1e-3 * expected, "{area} vs {expected}");
+
+    let mut config = CompareConfig::new(vec![Algorithm::ZBUFFER], 64, 48);
+    config.image_complexity = true;
+    let report = compare(cubes(), &circle(2), &config, &mut |_| {}).unwrap();
+    let dc = report.image.mean_depth_complexity().unwrap();
+    assert!(dc >= 1.0, "depth complexity {dc}");
+}
+
+#[test]
+fn time_summary_uses_nearest_rank() {
+    let t: Vec<f64> = (1..=20).map(f64::from).collect();
+    let s = TimeSummary::of(&t);
+    assert_eq!(
+        (s.mean_ms, s.median_ms, s.p95_ms, s.min_ms, s.max_ms),
+        (10.5, 10.0, 19.0, 1.0, 20.0)
+    );
+    assert_eq!(TimeSummary::of(&[3.0]).p95_ms, 3.0);
+    assert_eq!(TimeSummary::of(&[]), TimeSummary::default());
+}
