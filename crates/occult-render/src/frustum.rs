@@ -68,12 +68,12 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
     counters: &[],
     conservative: true,
     build: |scene, options, params| {
-        let defaults = FrustumOptions::default();
-        let fo = FrustumOptions {
-            mesh_leaf_size: params.get("leaf", defaults.mesh_leaf_size)?,
-            group_leaf_size: params.get("group_leaf", defaults.group_leaf_size)?,
-            batch_draws: params.get("batch", defaults.batch_draws)?,
-        };
+        let mut fo = FrustumOptions::default();
+        crate::params::read_params!(params, fo, {
+            mesh_leaf_size: "leaf",
+            group_leaf_size: "group_leaf",
+            batch_draws: "batch",
+        });
         Ok(Box::new(FrustumCulling::with_options(scene, options, &fo)?))
     },
 };

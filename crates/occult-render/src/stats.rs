@@ -67,6 +67,12 @@ impl Counters {
             None => self.0.push((name, n)),
         }
     }
+    /// Adds each `(name, n)` of `counts`, in order (as [`Counters::add`] one by one).
+    pub fn add_all<const N: usize>(&mut self, counts: [(&'static str, u64); N]) {
+        for (name, n) in counts {
+            self.add(name, n);
+        }
+    }
     /// Value of counter `name` (0 if never added).
     pub fn get(&self, name: &str) -> u64 {
         self.0.iter().find(|(k, _)| *k == name).map_or(0, |(_, v)| *v)
