@@ -19,6 +19,7 @@ use occult_core::{NodeKind, Scene, View};
 use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 use occult_spatial::Bvh;
 
+use crate::nodes::{instance_boxes, per_node, triangle_boxes};
 use crate::walk::{cull_bvh, Counts, NodeAt, SceneWalk, Visitor};
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Phase, RenderError, RenderOptions, Renderer, Result};
 
@@ -111,28 +112,14 @@ impl FrustumCulling {
             return Err(RenderError::BadParameter("frustum: batch must be at least 1".into()));
         }
         let raster = Rasterizer::new(options.raster.clone())?;
-        let hierarchies = raster.install(|| {
-            use rayon::prelude::*;
-            scene
-                .nodes()
-                .par_iter()
-                .map(|node| match node.kind() {
-                    NodeKind::Mesh(m) if m.triangle_count() > fo.mesh_leaf_size => {
-                        let boxes: Vec<_> = (0..m.triangle_count())
-                            .map(|t| occult_core::Aabb::from_points(m.triangle_positions(t)))
-                            .collect();
-                        Some(Bvh::build(&boxes, fo.mesh_leaf_size))
-                    }
-                    NodeKind::Group(g) if g.len() > fo.group_leaf_size => {
-                        let boxes: Vec<_> = g
-                            .iter()
-                            .map(|i| scene.node(i.child).bounds().transformed(&i.parent_from_child))
-                            .collect();
-                        Some(Bvh::build(&boxes, fo.group_leaf_size))
-                    }
-                    _ => None,
-                })
-                .collect()
+        let hierarchies = per_node(&raster, &scene, |node| match node.kind() {
+            NodeKind::Mesh(m) if m.triangle_count() > fo.mesh_leaf_size => {
+                Some(Bvh::build(&triangle_boxes(m), fo.mesh_leaf_size))
+            }
+            NodeKind::Group(g) if g.len() > fo.group_leaf_size => {
+                Some(Bvh::build(&instance_boxes(&scene, g), fo.group_leaf_size))
+            }
+            _ => None,
         });
         Ok(Self {
             scene,

@@ -33,6 +33,7 @@ mod hash;
 pub mod hzb;
 pub mod lzb;
 pub mod nbuffer;
+mod nodes;
 pub mod oqgrid;
 pub mod params;
 pub mod rzb;

@@ -62,6 +62,7 @@ use occult_core::{Aabb, Affine3A, Containment, ItemId, NodeId, NodeKind, Scene, 
 use occult_raster::{query_box_counted, Draw, DrawTriangles, Extremum, Frame, NBuffer, PixelRect, Rasterizer};
 use occult_spatial::Bvh;
 
+use crate::nodes::{per_node, triangle_boxes};
 use crate::walk::{cull_bvh, test_box};
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Phase, RenderError, RenderOptions, Renderer, Result};
 
@@ -220,21 +221,9 @@ impl NBufferCulling {
         }
         let raster = Rasterizer::new(options.raster.clone())?;
         let leaf = no.leaf_size;
-        let mesh_bvhs: Vec<Option<Bvh>> = raster.install(|| {
-            use rayon::prelude::*;
-            scene
-                .nodes()
-                .par_iter()
-                .map(|node| match node.kind() {
-                    NodeKind::Mesh(m) if m.triangle_count() > leaf => {
-                        let boxes: Vec<Aabb> = (0..m.triangle_count())
-                            .map(|t| Aabb::from_points(m.triangle_positions(t)))
-                            .collect();
-                        Some(Bvh::build(&boxes, leaf))
-                    }
-                    _ => None,
-                })
-                .collect()
+        let mesh_bvhs: Vec<Option<Bvh>> = per_node(&raster, &scene, |node| match node.kind() {
+            NodeKind::Mesh(m) if m.triangle_count() > leaf => Some(Bvh::build(&triangle_boxes(m), leaf)),
+            _ => None,
         });
         let leaves_of = |bvh: &Bvh| -> Vec<u32> {
             (0..bvh.nodes().len() as u32)

@@ -495,9 +495,7 @@ impl ShadowCasters {
         for (i, node) in scene.nodes().iter().enumerate() {
             if let Some(m) = node.mesh() {
                 if m.triangle_count() > leaf {
-                    let boxes: Vec<Aabb> = (0..m.triangle_count())
-                        .map(|t| Aabb::from_points(m.triangle_positions(t)))
-                        .collect();
+                    let boxes = crate::nodes::triangle_boxes(m);
                     let bvh = Bvh::build(&boxes, leaf);
                     let order = bvh.primitive_indices().to_vec();
                     let leaves = bvh

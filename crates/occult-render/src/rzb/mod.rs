@@ -862,33 +862,17 @@ impl Renderer for Rzb {
                         };
                         for u in &units[run.clone()] {
                             let job = &sel.jobs[u.job];
-                            match sources[u.job] {
+                            let set = match sources[u.job] {
                                 Source::Direct => {
                                     let mut rng = piece_rng(sampler.seed, job, u.piece);
                                     sampler.project_job(job, u.len as u64, &mut rng, &mut counts, &mut emit);
+                                    None
                                 }
-                                Source::Hit => {
-                                    if let Some(c) = cache {
-                                        let set = &c.samples(&job_key(job))[u.first..u.first + u.len];
-                                        sampler.project_cached(
-                                            &job.clip_from_structure,
-                                            job.base,
-                                            set,
-                                            &mut counts,
-                                            &mut emit,
-                                        );
-                                    }
-                                }
-                                Source::Built(b) => {
-                                    let set = &built[b].0[u.first..u.first + u.len];
-                                    sampler.project_cached(
-                                        &job.clip_from_structure,
-                                        job.base,
-                                        set,
-                                        &mut counts,
-                                        &mut emit,
-                                    );
-                                }
+                                Source::Hit => cache.map(|c| &c.samples(&job_key(job))[u.first..u.first + u.len]),
+                                Source::Built(b) => Some(&built[b].0[u.first..u.first + u.len]),
+                            };
+                            if let Some(set) = set {
+                                sampler.project_cached(&job.clip_from_structure, job.base, set, &mut counts, &mut emit);
                             }
                         }
                         acc
