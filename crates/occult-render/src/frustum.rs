@@ -45,6 +45,24 @@ impl Default for FrustumOptions {
     }
 }
 
+impl FrustumOptions {
+    /// Checks the ranges.
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] for a zero leaf size or batch.
+    pub fn validate(&self) -> Result<()> {
+        if self.mesh_leaf_size == 0 || self.group_leaf_size == 0 {
+            return Err(RenderError::BadParameter(
+                "frustum: leaf sizes must be at least 1".into(),
+            ));
+        }
+        if self.batch_draws == 0 {
+            return Err(RenderError::BadParameter("frustum: batch must be at least 1".into()));
+        }
+        Ok(())
+    }
+}
+
 /// Registry entry of [`FrustumCulling`].
 pub static INFO: AlgorithmInfo = AlgorithmInfo {
     name: "frustum",
@@ -103,14 +121,7 @@ impl FrustumCulling {
     /// # Errors
     /// [`RenderError::BadParameter`] for a zero leaf size; raster configuration errors.
     pub fn with_options(scene: Arc<Scene>, options: &RenderOptions, fo: &FrustumOptions) -> Result<Self> {
-        if fo.mesh_leaf_size == 0 || fo.group_leaf_size == 0 {
-            return Err(RenderError::BadParameter(
-                "frustum: leaf sizes must be at least 1".into(),
-            ));
-        }
-        if fo.batch_draws == 0 {
-            return Err(RenderError::BadParameter("frustum: batch must be at least 1".into()));
-        }
+        fo.validate()?;
         let raster = Rasterizer::new(options.raster.clone())?;
         let hierarchies = per_node(&raster, &scene, |node| match node.kind() {
             NodeKind::Mesh(m) if m.triangle_count() > fo.mesh_leaf_size => {

@@ -150,6 +150,22 @@ impl Default for NBufferOptions {
     }
 }
 
+impl NBufferOptions {
+    /// Checks the ranges.
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] for a zero leaf size.
+    pub fn validate(&self) -> Result<()> {
+        if self.leaf_size == 0 || self.group_leaf_size == 0 {
+            return Err(RenderError::BadParameter(format!(
+                "nbuffer: leaf={} and group_leaf={} must be at least 1",
+                self.leaf_size, self.group_leaf_size
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// One object: a mesh instance or a leaf of its mesh's BVH.
 #[derive(Clone, Debug)]
 struct Object {
@@ -213,12 +229,7 @@ impl NBufferCulling {
     /// [`RenderError::BadParameter`] for a zero leaf size or more than [`MAX_OBJECTS`]
     /// objects (checked before allocating them); raster configuration errors.
     pub fn with_options(scene: Arc<Scene>, options: &RenderOptions, no: &NBufferOptions) -> Result<Self> {
-        if no.leaf_size == 0 || no.group_leaf_size == 0 {
-            return Err(RenderError::BadParameter(format!(
-                "nbuffer: leaf={} and group_leaf={} must be at least 1",
-                no.leaf_size, no.group_leaf_size
-            )));
-        }
+        no.validate()?;
         let raster = Rasterizer::new(options.raster.clone())?;
         let leaf = no.leaf_size;
         let mesh_bvhs: Vec<Option<Bvh>> = per_node(&raster, &scene, |node| match node.kind() {
