@@ -609,15 +609,13 @@ impl ShadowCasters {
         clamping: Clamping,
     ) -> Result<ShadowVolumes<'_>> {
         let light_view = light.view()?;
-        if (frame.width(), frame.height()) != (view.width(), view.height()) {
-            return Err(RenderError::BadParameter(format!(
-                "shadows: frame is {}x{} but the view is {}x{}",
-                frame.width(),
-                frame.height(),
-                view.width(),
-                view.height()
-            )));
-        }
+        crate::check_same_size(
+            "shadows",
+            "frame",
+            (frame.width(), frame.height()),
+            "view",
+            (view.width(), view.height()),
+        )?;
         let ls = LightSpace::new(light, &light_view);
         let mut counts = ShadowCounts::default();
         let (w, h) = (frame.width(), frame.height());
