@@ -47,7 +47,7 @@ use std::time::Instant;
 use occult_core::{Scene, View};
 use occult_raster::{Frame, RasterConfig, RasterError, Rasterizer};
 pub use params::{AlgoSpec, ParamDoc, Params};
-pub use stats::{Counters, FrameStats, Phase, PhaseTimes};
+pub use stats::{Counters, FrameStats, FrameStatsMs, Phase, PhaseTimes};
 use thiserror::Error;
 
 /// Errors of renderers.
