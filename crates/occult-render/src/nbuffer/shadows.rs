@@ -609,13 +609,8 @@ impl ShadowCasters {
         clamping: Clamping,
     ) -> Result<ShadowVolumes<'_>> {
         let light_view = light.view()?;
-        crate::check_same_size(
-            "shadows",
-            "frame",
-            (frame.width(), frame.height()),
-            "view",
-            (view.width(), view.height()),
-        )?;
+        let view_size = (view.width(), view.height());
+        crate::check_same_size("shadows", "frame", (frame.width(), frame.height()), "view", view_size)?;
         let ls = LightSpace::new(light, &light_view);
         let mut counts = ShadowCounts::default();
         let (w, h) = (frame.width(), frame.height());
