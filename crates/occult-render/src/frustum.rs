@@ -19,6 +19,7 @@ use occult_core::{NodeKind, Scene, View};
 use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 use occult_spatial::Bvh;
 
+use crate::nodes::{instance_boxes, per_node, triangle_boxes};
 use crate::walk::{cull_bvh, Counts, NodeAt, SceneWalk, Visitor};
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Phase, RenderError, RenderOptions, Renderer, Result};
 
@@ -41,6 +42,24 @@ impl Default for FrustumOptions {
             group_leaf_size: 4,
             batch_draws: 1 << 20,
         }
+    }
+}
+
+impl FrustumOptions {
+    /// Checks the ranges.
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] for a zero leaf size or batch.
+    pub fn validate(&self) -> Result<()> {
+        if self.mesh_leaf_size == 0 || self.group_leaf_size == 0 {
+            return Err(RenderError::BadParameter(
+                "frustum: leaf sizes must be at least 1".into(),
+            ));
+        }
+        if self.batch_draws == 0 {
+            return Err(RenderError::BadParameter("frustum: batch must be at least 1".into()));
+        }
+        Ok(())
     }
 }
 
@@ -68,12 +87,12 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
     counters: &[],
     conservative: true,
     build: |scene, options, params| {
-        let defaults = FrustumOptions::default();
-        let fo = FrustumOptions {
-            mesh_leaf_size: params.get("leaf", defaults.mesh_leaf_size)?,
-            group_leaf_size: params.get("group_leaf", defaults.group_leaf_size)?,
-            batch_draws: params.get("batch", defaults.batch_draws)?,
-        };
+        let mut fo = FrustumOptions::default();
+        crate::params::read_params!(params, fo, {
+            mesh_leaf_size: "leaf",
+            group_leaf_size: "group_leaf",
+            batch_draws: "batch",
+        });
         Ok(Box::new(FrustumCulling::with_options(scene, options, &fo)?))
     },
 };
@@ -102,37 +121,16 @@ impl FrustumCulling {
     /// # Errors
     /// [`RenderError::BadParameter`] for a zero leaf size; raster configuration errors.
     pub fn with_options(scene: Arc<Scene>, options: &RenderOptions, fo: &FrustumOptions) -> Result<Self> {
-        if fo.mesh_leaf_size == 0 || fo.group_leaf_size == 0 {
-            return Err(RenderError::BadParameter(
-                "frustum: leaf sizes must be at least 1".into(),
-            ));
-        }
-        if fo.batch_draws == 0 {
-            return Err(RenderError::BadParameter("frustum: batch must be at least 1".into()));
-        }
+        fo.validate()?;
         let raster = Rasterizer::new(options.raster.clone())?;
-        let hierarchies = raster.install(|| {
-            use rayon::prelude::*;
-            scene
-                .nodes()
-                .par_iter()
-                .map(|node| match node.kind() {
-                    NodeKind::Mesh(m) if m.triangle_count() > fo.mesh_leaf_size => {
-                        let boxes: Vec<_> = (0..m.triangle_count())
-                            .map(|t| occult_core::Aabb::from_points(m.triangle_positions(t)))
-                            .collect();
-                        Some(Bvh::build(&boxes, fo.mesh_leaf_size))
-                    }
-                    NodeKind::Group(g) if g.len() > fo.group_leaf_size => {
-                        let boxes: Vec<_> = g
-                            .iter()
-                            .map(|i| scene.node(i.child).bounds().transformed(&i.parent_from_child))
-                            .collect();
-                        Some(Bvh::build(&boxes, fo.group_leaf_size))
-                    }
-                    _ => None,
-                })
-                .collect()
+        let hierarchies = per_node(&raster, &scene, |node| match node.kind() {
+            NodeKind::Mesh(m) if m.triangle_count() > fo.mesh_leaf_size => {
+                Some(Bvh::build(&triangle_boxes(m), fo.mesh_leaf_size))
+            }
+            NodeKind::Group(g) if g.len() > fo.group_leaf_size => {
+                Some(Bvh::build(&instance_boxes(&scene, g), fo.group_leaf_size))
+            }
+            _ => None,
         });
         Ok(Self {
             scene,

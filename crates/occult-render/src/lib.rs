@@ -33,6 +33,7 @@ mod hash;
 pub mod hzb;
 pub mod lzb;
 pub mod nbuffer;
+mod nodes;
 pub mod oqgrid;
 pub mod params;
 pub mod rzb;
@@ -46,7 +47,7 @@ use std::time::Instant;
 use occult_core::{Scene, View};
 use occult_raster::{Frame, RasterConfig, RasterError, Rasterizer};
 pub use params::{AlgoSpec, ParamDoc, Params};
-pub use stats::{Counters, FrameStats, Phase, PhaseTimes};
+pub use stats::{Counters, FrameStats, FrameStatsMs, Phase, PhaseTimes};
 use thiserror::Error;
 
 /// Errors of renderers.
@@ -291,6 +292,35 @@ pub(crate) fn check_frame(view: &View, frame: &Frame) -> Result<()> {
         });
     }
     Ok(())
+}
+
+/// Checks that two images that must be the same size are: `a_size` of `a` equals `b_size` of `b`
+/// (both `(width, height)`, in pixels).
+///
+/// # Errors
+/// [`RenderError::BadParameter`]: `"{context}: {a} is WxH but the {b} is WxH"`.
+pub(crate) fn check_same_size(context: &str, a: &str, a_size: (u32, u32), b: &str, b_size: (u32, u32)) -> Result<()> {
+    if a_size != b_size {
+        return Err(RenderError::BadParameter(format!(
+            "{context}: {a} is {}x{} but the {b} is {}x{}",
+            a_size.0, a_size.1, b_size.0, b_size.1
+        )));
+    }
+    Ok(())
+}
+
+/// For unit tests: a `width` x `height` view from `eye` towards `target`, with its
+/// `clip_from_object` for objects placed at the world origin.
+#[cfg(test)]
+pub(crate) fn test_view(
+    eye: occult_core::Vec3,
+    target: occult_core::Vec3,
+    width: u32,
+    height: u32,
+) -> (View, occult_core::Mat4) {
+    let view = View::new(occult_core::Camera::look_at(eye, target), width, height).expect("a valid test view");
+    let clip_from_object = view.clip_from_object(&occult_core::Affine3A::IDENTITY);
+    (view, clip_from_object)
 }
 
 #[cfg(test)]

@@ -128,6 +128,28 @@ impl Params {
     }
 }
 
+/// Reads option fields from [`Params`], in the order listed: `field: "key"` parses the key with
+/// [`Params::get`], `field: flag "key"` with [`Params::flag`]; each absent key keeps the field's
+/// current value, so a target built from the options' `Default` keeps its defaults. The first
+/// value that does not parse is returned (`?`) from the enclosing function.
+///
+/// ```ignore
+/// let mut o = Options::default();
+/// read_params!(params, o, { leaf_size: "leaf", cache: flag "cache" });
+/// ```
+macro_rules! read_params {
+    ($params:expr, $target:ident, { $($field:ident: $($kind:ident)? $key:literal),* $(,)? }) => {
+        $( $crate::params::read_params!(@one $params, $target.$field, $($kind)? $key); )*
+    };
+    (@one $params:expr, $place:expr, flag $key:literal) => {
+        $place = $params.flag($key, $place)?
+    };
+    (@one $params:expr, $place:expr, $key:literal) => {
+        $place = $params.get($key, $place)?
+    };
+}
+pub(crate) use read_params;
+
 /// An algorithm with its settings: what `--algo` and each entry of `--algos` name.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct AlgoSpec {

@@ -1,6 +1,7 @@
 //! The accounting every renderer returns (DESIGN invariant 4).
 
 use serde::Serialize;
+use std::collections::BTreeMap;
 use std::time::Duration;
 
 /// A phase of a frame, for time accounting.
@@ -25,6 +26,23 @@ pub enum Phase {
     Samples,
     /// Anything else.
     Other,
+}
+
+impl Phase {
+    /// The name it serializes as (`depth_structure`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Clear => "clear",
+            Self::Cull => "cull",
+            Self::Setup => "setup",
+            Self::Raster => "raster",
+            Self::Query => "query",
+            Self::DepthStructure => "depth_structure",
+            Self::Rays => "rays",
+            Self::Samples => "samples",
+            Self::Other => "other",
+        }
+    }
 }
 
 /// Time spent per phase.
@@ -67,6 +85,12 @@ impl Counters {
             None => self.0.push((name, n)),
         }
     }
+    /// Adds each `(name, n)` of `counts`, in order (as [`Counters::add`] one by one).
+    pub fn add_all<const N: usize>(&mut self, counts: [(&'static str, u64); N]) {
+        for (name, n) in counts {
+            self.add(name, n);
+        }
+    }
     /// Value of counter `name` (0 if never added).
     pub fn get(&self, name: &str) -> u64 {
         self.0.iter().find(|(k, _)| *k == name).map_or(0, |(_, v)| *v)
@@ -91,6 +115,32 @@ impl Serialize for Counters {
 }
 
 impl FrameStats {
+    /// The fixed counts as `(field name, value)`, in field order (`triangles_submitted` to
+    /// `samples_drawn`).
+    pub fn fixed_counters(&self) -> [(&'static str, u64); 10] {
+        [
+            ("triangles_submitted", self.triangles_submitted),
+            ("triangles_rasterized", self.triangles_rasterized),
+            ("fragments_written", self.fragments_written),
+            ("nodes_visited", self.nodes_visited),
+            ("boxes_tested", self.boxes_tested),
+            ("boxes_culled", self.boxes_culled),
+            ("rects_tested", self.rects_tested),
+            ("rects_culled", self.rects_culled),
+            ("rays_cast", self.rays_cast),
+            ("samples_drawn", self.samples_drawn),
+        ]
+    }
+
+    /// Time per phase in milliseconds, by [`Phase::name`] (so in name order).
+    pub fn phases_ms(&self) -> BTreeMap<&'static str, f64> {
+        self.phases
+            .0
+            .iter()
+            .map(|&(p, d)| (p.name(), d.as_secs_f64() * 1e3))
+            .collect()
+    }
+
     /// Adds the counts of one rasterizer call.
     pub fn add_raster(&mut self, counts: occult_raster::RasterCounts) {
         self.triangles_submitted += counts.triangles_submitted;
@@ -129,4 +179,41 @@ pub struct FrameStats {
     pub phases: PhaseTimes,
     /// The renderer's own counters.
     pub counters: Counters,
+}
+
+/// [`FrameStats`] as reports show it: serializes as an object with the fixed counts
+/// ([`FrameStats::fixed_counters`]), `total_ms`, `phases_ms` ([`FrameStats::phases_ms`]) and
+/// `counters`, in that order; times in milliseconds.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FrameStatsMs(pub FrameStats);
+
+impl Serialize for FrameStatsMs {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let s = &self.0;
+        let mut map = serializer.serialize_map(Some(13))?;
+        for (name, v) in s.fixed_counters() {
+            map.serialize_entry(name, &v)?;
+        }
+        map.serialize_entry("total_ms", &(s.total.as_secs_f64() * 1e3))?;
+        map.serialize_entry("phases_ms", &s.phases_ms())?;
+        map.serialize_entry("counters", &s.counters)?;
+        map.end()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn phases_in_milliseconds_by_name() {
+        let mut s = FrameStats::default();
+        s.phases.add(Phase::DepthStructure, Duration::from_millis(3));
+        s.phases.add(Phase::Clear, Duration::from_micros(500));
+        let ms: Vec<_> = s.phases_ms().into_iter().collect();
+        assert_eq!(ms, [("clear", 0.5), ("depth_structure", 3.0)]);
+        assert_eq!(s.fixed_counters().len(), 10);
+        assert!(FrameStats::default().phases_ms().is_empty());
+    }
 }

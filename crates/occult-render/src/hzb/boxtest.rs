@@ -123,12 +123,10 @@ impl Occlusion<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use occult_core::{Affine3A, Camera, View};
 
     #[test]
     fn rect_covers_query_box_pixels() {
-        let view = View::new(Camera::look_at(Vec3::new(0.3, 0.2, 5.0), Vec3::ZERO), 64, 48).unwrap();
-        let clip = view.clip_from_object(&Affine3A::IDENTITY);
+        let (view, clip) = crate::test_view(Vec3::new(0.3, 0.2, 5.0), Vec3::ZERO, 64, 48);
         let frame = Frame::new(64, 48).unwrap();
         for b in [
             Aabb::new(Vec3::splat(-1.0), Vec3::splat(1.0)),
@@ -147,8 +145,7 @@ mod tests {
 
     #[test]
     fn hidden_only_behind_a_full_wall() {
-        let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO), 32, 32).unwrap();
-        let clip = view.clip_from_object(&Affine3A::IDENTITY);
+        let (view, clip) = crate::test_view(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, 32, 32);
         let mut frame = Frame::new(32, 32).unwrap();
         let mut pyramid = ZPyramid::new(32, 32).unwrap();
         let eye = Vec3::new(0.0, 0.0, 5.0);

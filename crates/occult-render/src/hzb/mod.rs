@@ -99,10 +99,11 @@ mod walk;
 use std::sync::Arc;
 use std::time::Instant;
 
-use occult_core::{Aabb, Affine3A, NodeId, NodeKind, Scene, View};
+use occult_core::{Affine3A, NodeId, NodeKind, Scene, View};
 use occult_raster::{Frame, Rasterizer, ZPyramid};
 use occult_spatial::{HybridOctree, HybridOctreeConfig};
 
+use crate::nodes::{instance_boxes, per_node, triangle_boxes};
 use crate::{
     check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result,
 };
@@ -500,29 +501,14 @@ impl Hzb {
             ));
         }
         let raster = Rasterizer::new(options.raster.clone())?;
-        let octrees: std::result::Result<Vec<Option<HybridOctree>>, _> = raster.install(|| {
-            use rayon::prelude::*;
-            scene
-                .nodes()
-                .par_iter()
-                .map(|node| match node.kind() {
-                    NodeKind::Mesh(m) if m.triangle_count() > o.leaf_size => {
-                        let boxes: Vec<Aabb> = (0..m.triangle_count())
-                            .map(|t| Aabb::from_points(m.triangle_positions(t)))
-                            .collect();
-                        HybridOctree::build(&boxes, o).map(Some)
-                    }
-                    NodeKind::Group(g) if !g.is_empty() => {
-                        let boxes: Vec<Aabb> = g
-                            .iter()
-                            .map(|i| scene.node(i.child).bounds().transformed(&i.parent_from_child))
-                            .collect();
-                        HybridOctree::build(&boxes, o).map(Some)
-                    }
-                    _ => Ok(None),
-                })
-                .collect()
-        });
+        let octrees: std::result::Result<Vec<Option<HybridOctree>>, _> =
+            per_node(&raster, &scene, |node| match node.kind() {
+                NodeKind::Mesh(m) if m.triangle_count() > o.leaf_size => {
+                    HybridOctree::build(&triangle_boxes(m), o).map(Some)
+                }
+                NodeKind::Group(g) if !g.is_empty() => HybridOctree::build(&instance_boxes(&scene, g), o).map(Some),
+                _ => Ok(None),
+            });
         let octrees = octrees.map_err(|e| RenderError::BadParameter(format!("hzb: {e}")))?;
         let workers = if hzb.distribution == Distribution::Off {
             vec![Worker {

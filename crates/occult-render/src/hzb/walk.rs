@@ -427,19 +427,21 @@ impl<'a> Walk<'a> {
     /// The next visible list and the frame's statistics.
     pub fn finish(mut self) -> (Vec<VisEntry>, FrameStats) {
         let c = &mut self.walk.stats.counters;
-        c.add("occlusion_tests", self.occlusion_tests);
-        c.add("occlusion_culled", self.occlusion_culled);
-        c.add("frustum_culled", self.frustum_culled);
-        c.add("pyramid_tests", self.pc.samples_tested);
-        c.add("pyramid_descents", self.pc.descents);
-        c.add("global_rejects", self.pc.global_rejects);
-        c.add("visible_list", self.visible.len() as u64);
-        c.add("visible_list_drawn", self.list_drawn);
-        c.add("visible_list_frustum_culled", self.list_culled);
-        c.add("recheck_dropped", self.recheck_dropped);
-        c.add("batches", self.batches);
-        c.add("whole_drawn", self.whole_drawn);
-        c.add("visible_list_retested", self.list_retested);
+        c.add_all([
+            ("occlusion_tests", self.occlusion_tests),
+            ("occlusion_culled", self.occlusion_culled),
+            ("frustum_culled", self.frustum_culled),
+            ("pyramid_tests", self.pc.samples_tested),
+            ("pyramid_descents", self.pc.descents),
+            ("global_rejects", self.pc.global_rejects),
+            ("visible_list", self.visible.len() as u64),
+            ("visible_list_drawn", self.list_drawn),
+            ("visible_list_frustum_culled", self.list_culled),
+            ("recheck_dropped", self.recheck_dropped),
+            ("batches", self.batches),
+            ("whole_drawn", self.whole_drawn),
+            ("visible_list_retested", self.list_retested),
+        ]);
         (self.visible, self.walk.stats)
     }
 

@@ -119,21 +119,17 @@ impl<'a> Caster<'a> {
         // Deviation: one pass that records as it goes would record, in an instance met early
         // whose box starts near, everything up to that instance's own hit, before an instance
         // met later (a wall) lowers the bound.
-        self.recording = false;
         let root = self.lzb.scene.root();
-        self.visit(
-            root,
-            origin,
-            dir,
-            spread,
-            &Affine3A::IDENTITY,
-            &Affine3A::IDENTITY,
-            0,
-            &mut t_limit,
-        );
-        if !self.naive && self.lzb.opts.mode == Mode::Lazy {
-            self.recording = true;
-            self.visited.clear();
+        let passes = if !self.naive && self.lzb.opts.mode == Mode::Lazy {
+            2
+        } else {
+            1
+        };
+        for pass in 0..passes {
+            self.recording = pass == 1;
+            if self.recording {
+                self.visited.clear();
+            }
             self.visit(
                 root,
                 origin,

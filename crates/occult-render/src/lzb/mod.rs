@@ -997,12 +997,14 @@ impl Renderer for Lzb {
         pairs.sort_unstable();
         pairs.dedup();
         stats.rays_cast += rays;
-        stats.counters.add("rays", rays);
-        stats.counters.add("ray_tri_tests", tests);
-        stats.counters.add("ray_leaves_visited", leaves);
-        stats.counters.add("ray_nodes_visited", ray_nodes);
-        stats.counters.add("coherent_starts", coherent);
-        stats.counters.add("rays_resolved", resolved);
+        stats.counters.add_all([
+            ("rays", rays),
+            ("ray_tri_tests", tests),
+            ("ray_leaves_visited", leaves),
+            ("ray_nodes_visited", ray_nodes),
+            ("coherent_starts", coherent),
+            ("rays_resolved", resolved),
+        ]);
         stats.phases.add(Phase::Rays, t.elapsed());
 
         if naive {

@@ -119,12 +119,11 @@ fn segment_distance(a: Vec2, b: Vec2, p: Vec2) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use occult_core::{Affine3A, Camera, Vec3, View};
+    use occult_core::Vec3;
 
     #[test]
     fn projected_box_holds_its_projected_points() {
-        let view = View::new(Camera::look_at(Vec3::new(3.0, 2.0, 5.0), Vec3::ZERO), 64, 48).unwrap();
-        let m = view.clip_from_object(&Affine3A::IDENTITY);
+        let (view, m) = crate::test_view(Vec3::new(3.0, 2.0, 5.0), Vec3::ZERO, 64, 48);
         let b = Aabb::new(Vec3::splat(-0.5), Vec3::new(0.5, 1.0, 0.25));
         let Projection::Polygon { hull, rect } = project_box(&m, &b, 64, 48, view.camera().near) else {
             panic!("box in view")
@@ -147,8 +146,7 @@ mod tests {
 
     #[test]
     fn box_around_the_eye_covers_the_screen_and_box_behind_covers_nothing_visible() {
-        let view = View::new(Camera::look_at(Vec3::ZERO, Vec3::new(0.0, 0.0, -1.0)), 64, 48).unwrap();
-        let m = view.clip_from_object(&Affine3A::IDENTITY);
+        let (_, m) = crate::test_view(Vec3::ZERO, Vec3::new(0.0, 0.0, -1.0), 64, 48);
         let around = Aabb::new(Vec3::splat(-1.0), Vec3::splat(1.0));
         assert!(matches!(project_box(&m, &around, 64, 48, 0.1), Projection::Screen));
         let aside = Aabb::new(Vec3::new(100.0, 0.0, -2.0), Vec3::new(101.0, 1.0, -1.0));

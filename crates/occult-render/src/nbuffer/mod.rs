@@ -62,6 +62,7 @@ use occult_core::{Aabb, Affine3A, Containment, ItemId, NodeId, NodeKind, Scene, 
 use occult_raster::{query_box_counted, Draw, DrawTriangles, Extremum, Frame, NBuffer, PixelRect, Rasterizer};
 use occult_spatial::Bvh;
 
+use crate::nodes::{per_node, triangle_boxes};
 use crate::walk::{cull_bvh, test_box};
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Phase, RenderError, RenderOptions, Renderer, Result};
 
@@ -149,6 +150,22 @@ impl Default for NBufferOptions {
     }
 }
 
+impl NBufferOptions {
+    /// Checks the ranges.
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] for a zero leaf size.
+    pub fn validate(&self) -> Result<()> {
+        if self.leaf_size == 0 || self.group_leaf_size == 0 {
+            return Err(RenderError::BadParameter(format!(
+                "nbuffer: leaf={} and group_leaf={} must be at least 1",
+                self.leaf_size, self.group_leaf_size
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// One object: a mesh instance or a leaf of its mesh's BVH.
 #[derive(Clone, Debug)]
 struct Object {
@@ -212,29 +229,12 @@ impl NBufferCulling {
     /// [`RenderError::BadParameter`] for a zero leaf size or more than [`MAX_OBJECTS`]
     /// objects (checked before allocating them); raster configuration errors.
     pub fn with_options(scene: Arc<Scene>, options: &RenderOptions, no: &NBufferOptions) -> Result<Self> {
-        if no.leaf_size == 0 || no.group_leaf_size == 0 {
-            return Err(RenderError::BadParameter(format!(
-                "nbuffer: leaf={} and group_leaf={} must be at least 1",
-                no.leaf_size, no.group_leaf_size
-            )));
-        }
+        no.validate()?;
         let raster = Rasterizer::new(options.raster.clone())?;
         let leaf = no.leaf_size;
-        let mesh_bvhs: Vec<Option<Bvh>> = raster.install(|| {
-            use rayon::prelude::*;
-            scene
-                .nodes()
-                .par_iter()
-                .map(|node| match node.kind() {
-                    NodeKind::Mesh(m) if m.triangle_count() > leaf => {
-                        let boxes: Vec<Aabb> = (0..m.triangle_count())
-                            .map(|t| Aabb::from_points(m.triangle_positions(t)))
-                            .collect();
-                        Some(Bvh::build(&boxes, leaf))
-                    }
-                    _ => None,
-                })
-                .collect()
+        let mesh_bvhs: Vec<Option<Bvh>> = per_node(&raster, &scene, |node| match node.kind() {
+            NodeKind::Mesh(m) if m.triangle_count() > leaf => Some(Bvh::build(&triangle_boxes(m), leaf)),
+            _ => None,
         });
         let leaves_of = |bvh: &Bvh| -> Vec<u32> {
             (0..bvh.nodes().len() as u32)

@@ -148,15 +148,8 @@ pub fn draw_particles(
     batched: bool,
 ) -> Result<ParticleCounts> {
     if let Some(nb) = cull {
-        if (nb.width(), nb.height()) != (frame.width(), frame.height()) {
-            return Err(RenderError::BadParameter(format!(
-                "particles: N-buffer is {}x{} but the frame is {}x{}",
-                nb.width(),
-                nb.height(),
-                frame.width(),
-                frame.height()
-            )));
-        }
+        let frame_size = (frame.width(), frame.height());
+        crate::check_same_size("particles", "N-buffer", (nb.width(), nb.height()), "frame", frame_size)?;
     }
     let (w, h) = (frame.width() as f32, frame.height() as f32);
     let clip_from_world = view.clip_from_object(&occult_core::Affine3A::IDENTITY);

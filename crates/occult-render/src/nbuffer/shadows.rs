@@ -495,9 +495,7 @@ impl ShadowCasters {
         for (i, node) in scene.nodes().iter().enumerate() {
             if let Some(m) = node.mesh() {
                 if m.triangle_count() > leaf {
-                    let boxes: Vec<Aabb> = (0..m.triangle_count())
-                        .map(|t| Aabb::from_points(m.triangle_positions(t)))
-                        .collect();
+                    let boxes = crate::nodes::triangle_boxes(m);
                     let bvh = Bvh::build(&boxes, leaf);
                     let order = bvh.primitive_indices().to_vec();
                     let leaves = bvh
@@ -611,15 +609,8 @@ impl ShadowCasters {
         clamping: Clamping,
     ) -> Result<ShadowVolumes<'_>> {
         let light_view = light.view()?;
-        if (frame.width(), frame.height()) != (view.width(), view.height()) {
-            return Err(RenderError::BadParameter(format!(
-                "shadows: frame is {}x{} but the view is {}x{}",
-                frame.width(),
-                frame.height(),
-                view.width(),
-                view.height()
-            )));
-        }
+        let view_size = (view.width(), view.height());
+        crate::check_same_size("shadows", "frame", (frame.width(), frame.height()), "view", view_size)?;
         let ls = LightSpace::new(light, &light_view);
         let mut counts = ShadowCounts::default();
         let (w, h) = (frame.width(), frame.height());

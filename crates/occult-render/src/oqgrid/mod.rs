@@ -77,6 +77,7 @@ use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 pub use occult_spatial::grid::Resolution;
 use occult_spatial::grid::{GridCell, GridConfig, GridError, MeshTriangles, NestedGrid, WeightedBoxes, NO_CHILD};
 
+use crate::params::read_params;
 use crate::walk::{NodeAt, NodeTest, SceneWalk, Visitor};
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
 
@@ -241,25 +242,28 @@ impl OqGridOptions {
                 "oqgrid: memory={memory_mib}: expected 1..=1073741824 MiB"
             )));
         }
-        let o = Self {
+        let mut o = Self {
             grid: match params.choice("grid", &["uniform", "nested"], "nested")? {
                 "uniform" => GridKind::Uniform,
                 _ => GridKind::Nested,
             },
             resolution,
-            branching: params.get("branching", d.branching)?,
-            split_threshold: params.get("split", d.split_threshold)?,
-            max_depth: params.get("depth", d.max_depth)?,
-            batch: params.get("batch", d.batch)?,
-            query_threshold: params.get("threshold", d.query_threshold)?,
-            queries: params.flag("queries", d.queries)?,
-            order: match params.choice("order", &["slabs", "none"], "slabs")? {
-                "none" => Order::Unordered,
-                _ => Order::Slabs,
-            },
-            stamps: params.flag("stamps", d.stamps)?,
             max_memory_bytes: memory_mib << 20,
+            ..d
         };
+        read_params!(params, o, {
+            branching: "branching",
+            split_threshold: "split",
+            max_depth: "depth",
+            batch: "batch",
+            query_threshold: "threshold",
+            queries: flag "queries",
+        });
+        o.order = match params.choice("order", &["slabs", "none"], "slabs")? {
+            "none" => Order::Unordered,
+            _ => Order::Slabs,
+        };
+        read_params!(params, o, { stamps: flag "stamps" });
         o.validate()?;
         Ok(o)
     }
@@ -451,6 +455,22 @@ pub struct OqGridCounts {
     pub node_occurrences: u64,
     /// Batches whose queries were evaluated in parallel.
     pub parallel_batches: u64,
+}
+
+impl OqGridCounts {
+    /// The counts in the order of [`INFO`]'s counter names.
+    fn values(&self) -> [u64; 8] {
+        [
+            self.cells_visited,
+            self.cells_in_frustum,
+            self.queries,
+            self.queries_hidden,
+            self.queries_skipped,
+            self.cells_visible,
+            self.node_occurrences,
+            self.parallel_batches,
+        ]
+    }
 }
 
 /// A node occurrence being traversed.
@@ -700,15 +720,11 @@ impl Renderer for OqGrid {
             .add(Phase::Cull, walked.saturating_sub(query_time + raster_time));
         stats.boxes_tested += counts.queries;
         stats.boxes_culled += counts.queries_hidden;
-        let c = &mut stats.counters;
-        c.add("cells_visited", counts.cells_visited);
-        c.add("cells_in_frustum", counts.cells_in_frustum);
-        c.add("queries", counts.queries);
-        c.add("queries_hidden", counts.queries_hidden);
-        c.add("queries_skipped", counts.queries_skipped);
-        c.add("cells_visible", counts.cells_visible);
-        c.add("node_occurrences", counts.node_occurrences);
-        c.add("parallel_batches", counts.parallel_batches);
+        // The counters are named in `INFO.counters`, in the order of `OqGridCounts::values`.
+        debug_assert_eq!(INFO.counters.len(), counts.values().len());
+        for (&name, n) in INFO.counters.iter().zip(counts.values()) {
+            stats.counters.add(name, n);
+        }
         stats.total = start.elapsed();
         self.last_counts = counts;
         Ok(stats)

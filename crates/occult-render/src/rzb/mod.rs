@@ -87,6 +87,7 @@ use occult_raster::{keep_fragment, Frame, Rasterizer};
 use occult_spatial::SampleOctreeConfig;
 use rayon::prelude::*;
 
+use crate::params::read_params;
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
 use cache::{quantize, CachedSample, SampleCache};
 use sample::{box_rng, piece_rng, sample_count, SampleCounts, Sampler, Target};
@@ -253,34 +254,32 @@ impl RzbOptions {
             Some("auto") => Epsilon::Auto,
             _ => Epsilon::Fixed(params.get("eps", 2.0f64)?),
         };
-        let o = Self {
-            seed: params.get("seed", d.seed)?,
-            eps,
-            splat: params.get("d", d.splat)?,
-            recon: match params.choice("recon", &["nearest", "gauss"], "nearest")? {
-                "gauss" => Recon::Gauss,
-                _ => Recon::Nearest,
-            },
-            sigma: params.get("sigma", d.sigma)?,
-            gauss_tolerance: params.get("gauss_tolerance", d.gauss_tolerance)?,
-            oversample: params.get("oversample", d.oversample)?,
-            large: params.flag("large", d.large)?,
-            large_threshold: params.get("threshold", d.large_threshold)?,
-            area_ratio: params.get("area_ratio", d.area_ratio)?,
-            orientation: params.get("orientation", d.orientation)?,
-            leaf_size: params.get("leaf", d.leaf_size)?,
-            extension: params.get("extension", d.extension)?,
-            cache: params.flag("cache", d.cache)?,
-            cache_mib: params.get("cache_mib", d.cache_mib)?,
-            cache_tolerance: params.get("cache_tolerance", d.cache_tolerance)?,
-            backface: match params.choice("backface", &["auto", "on", "off"], "auto")? {
-                "on" => Backface::On,
-                "off" => Backface::Off,
-                _ => Backface::Auto,
-            },
-            max_samples: params.get("max_samples", d.max_samples)?,
-            dynamic: params.flag("dynamic", d.dynamic)?,
+        let mut o = Self { eps, ..d };
+        read_params!(params, o, { seed: "seed", splat: "d" });
+        o.recon = match params.choice("recon", &["nearest", "gauss"], "nearest")? {
+            "gauss" => Recon::Gauss,
+            _ => Recon::Nearest,
         };
+        read_params!(params, o, {
+            sigma: "sigma",
+            gauss_tolerance: "gauss_tolerance",
+            oversample: "oversample",
+            large: flag "large",
+            large_threshold: "threshold",
+            area_ratio: "area_ratio",
+            orientation: "orientation",
+            leaf_size: "leaf",
+            extension: "extension",
+            cache: flag "cache",
+            cache_mib: "cache_mib",
+            cache_tolerance: "cache_tolerance",
+        });
+        o.backface = match params.choice("backface", &["auto", "on", "off"], "auto")? {
+            "on" => Backface::On,
+            "off" => Backface::Off,
+            _ => Backface::Auto,
+        };
+        read_params!(params, o, { max_samples: "max_samples", dynamic: flag "dynamic" });
         o.validate()?;
         Ok(o)
     }
@@ -863,33 +862,17 @@ impl Renderer for Rzb {
                         };
                         for u in &units[run.clone()] {
                             let job = &sel.jobs[u.job];
-                            match sources[u.job] {
+                            let set = match sources[u.job] {
                                 Source::Direct => {
                                     let mut rng = piece_rng(sampler.seed, job, u.piece);
                                     sampler.project_job(job, u.len as u64, &mut rng, &mut counts, &mut emit);
+                                    None
                                 }
-                                Source::Hit => {
-                                    if let Some(c) = cache {
-                                        let set = &c.samples(&job_key(job))[u.first..u.first + u.len];
-                                        sampler.project_cached(
-                                            &job.clip_from_structure,
-                                            job.base,
-                                            set,
-                                            &mut counts,
-                                            &mut emit,
-                                        );
-                                    }
-                                }
-                                Source::Built(b) => {
-                                    let set = &built[b].0[u.first..u.first + u.len];
-                                    sampler.project_cached(
-                                        &job.clip_from_structure,
-                                        job.base,
-                                        set,
-                                        &mut counts,
-                                        &mut emit,
-                                    );
-                                }
+                                Source::Hit => cache.map(|c| &c.samples(&job_key(job))[u.first..u.first + u.len]),
+                                Source::Built(b) => Some(&built[b].0[u.first..u.first + u.len]),
+                            };
+                            if let Some(set) = set {
+                                sampler.project_cached(&job.clip_from_structure, job.base, set, &mut counts, &mut emit);
                             }
                         }
                         acc
