@@ -108,14 +108,6 @@ pub struct FrustumCulling {
 }
 
 impl FrustumCulling {
-    /// Builds the per-node hierarchies of `scene` with default [`FrustumOptions`].
-    ///
-    /// # Errors
-    /// Raster configuration errors.
-    pub fn new(scene: Arc<Scene>, options: &RenderOptions) -> Result<Self> {
-        Self::with_options(scene, options, &FrustumOptions::default())
-    }
-
     /// Builds the per-node hierarchies of `scene`.
     ///
     /// # Errors

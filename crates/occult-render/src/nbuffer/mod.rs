@@ -215,14 +215,6 @@ pub struct NBufferCulling {
 }
 
 impl NBufferCulling {
-    /// Builds with default [`NBufferOptions`].
-    ///
-    /// # Errors
-    /// See [`NBufferCulling::with_options`].
-    pub fn new(scene: Arc<Scene>, options: &RenderOptions) -> Result<Self> {
-        Self::with_options(scene, options, &NBufferOptions::default())
-    }
-
     /// Flattens `scene` into objects and builds the hierarchy over them.
     ///
     /// # Errors

@@ -332,14 +332,6 @@ pub struct OqGrid {
 }
 
 impl OqGrid {
-    /// Builds the grids of `scene` with default [`OqGridOptions`].
-    ///
-    /// # Errors
-    /// As [`OqGrid::with_options`].
-    pub fn new(scene: Arc<Scene>, options: &RenderOptions) -> Result<Self> {
-        Self::with_options(scene, options, &OqGridOptions::default())
-    }
-
     /// Builds the grids of `scene` (one per unique node).
     ///
     /// # Errors
