@@ -44,6 +44,43 @@ const _: () = assert!(std::mem::size_of::<TriSetup>() == 64);
 // Pixel boxes are stored in u16.
 const _: () = assert!(occult_core::MAX_RESOLUTION <= u16::MAX as u32);
 
+/// The triangle stream of one pass: the triangles of `draws` one after the other, draw `d`'s
+/// first at index `draw_starts[d]` ([`draw_starts`]: one more entry than draws, the last the
+/// stream's length); the corners of whole-mesh draws projected ahead in `vertices`, draw `d`'s
+/// from `vertex_offsets[d]` (other draws project theirs as they are set up).
+#[derive(Clone, Copy)]
+pub(super) struct TriStream<'a> {
+    pub(super) draws: &'a [Draw<'a>],
+    pub(super) draw_starts: &'a [usize],
+    pub(super) vertex_offsets: &'a [usize],
+    pub(super) vertices: &'a [ProjVertex],
+}
+
+impl<'a> TriStream<'a> {
+    /// The stream of `draws`, with `draw_starts` from [`draw_starts`] and one entry of
+    /// `vertex_offsets` a draw.
+    pub(super) fn new(
+        draws: &'a [Draw<'a>],
+        draw_starts: &'a [usize],
+        vertex_offsets: &'a [usize],
+        vertices: &'a [ProjVertex],
+    ) -> Self {
+        debug_assert_eq!(draw_starts.len(), draws.len() + 1);
+        debug_assert_eq!(vertex_offsets.len(), draws.len());
+        Self {
+            draws,
+            draw_starts,
+            vertex_offsets,
+            vertices,
+        }
+    }
+
+    /// Triangles in the stream.
+    pub(super) fn len(&self) -> usize {
+        self.draw_starts[self.draws.len()]
+    }
+}
+
 /// Index in the stream of each draw's first triangle, then the stream's length (one more entry
 /// than draws).
 pub(super) fn draw_starts(draws: &[Draw<'_>]) -> Vec<usize> {
@@ -57,20 +94,21 @@ pub(super) fn draw_starts(draws: &[Draw<'_>]) -> Vec<usize> {
     starts
 }
 
-/// Sets up the triangles `range` of the pass's stream (`draws` one after the other, starting at
-/// `draw_starts` (see [`draw_starts`]); whole-mesh draws with their vertices projected ahead in
-/// `vertices`, from `vertex_offsets`) and hands them to `out`: one by one, or with `AVX2` (only
-/// where the processor has it) eight at a time through [`setup8::Batch`].
+/// Sets up the triangles `range` of the pass's `stream` and hands them to `out`: one by one, or
+/// with `AVX2` (only where the processor has it) eight at a time through [`setup8::Batch`].
 #[inline(always)]
 pub(super) fn setup_range<const AVX2: bool>(
     vp: &Viewport,
-    draws: &[Draw<'_>],
-    draw_starts: &[usize],
-    vertex_offsets: &[usize],
-    vertices: &[ProjVertex],
+    stream: &TriStream<'_>,
     range: Range<usize>,
     out: &mut impl SetupSink,
 ) {
+    let TriStream {
+        draws,
+        draw_starts,
+        vertex_offsets,
+        vertices,
+    } = *stream;
     let mut d = draw_starts.partition_point(|&s| s <= range.start) - 1;
     let mut t = range.start;
     let mut cache = VertexCache::new();
