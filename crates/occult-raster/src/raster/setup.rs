@@ -144,6 +144,9 @@ pub(super) fn setup_range<const AVX2: bool>(
         let end = draw_starts[d + 1].min(range.end);
         let mesh = draw.mesh;
         let tris = mesh.triangles();
+        // Read once a draw: the stream comes through a reference, so the compiler cannot tell
+        // that the sink's writes leave the draws be, and would reload it per triangle.
+        let first_item = draw.first_item;
         match &draw.triangles {
             DrawTriangles::All => {
                 let verts = &vertices[vertex_offsets[d]..vertex_offsets[d] + mesh.positions().len()];
@@ -166,7 +169,7 @@ pub(super) fn setup_range<const AVX2: bool>(
                             verts.get_unchecked(i2 as usize),
                         ]
                     };
-                    emit(v, [i0, i1, i2], d, draw.first_item + j as u64, out);
+                    emit(v, [i0, i1, i2], d, first_item + j as u64, out);
                 }
             }
             #[cfg(target_arch = "x86_64")]
@@ -194,7 +197,7 @@ pub(super) fn setup_range<const AVX2: bool>(
                         unsafe { setup8::project8_avx2(vp, m, &corners[c], &mut v[c]) };
                     }
                     for k in 0..n {
-                        let item = draw.first_item + triangle[k] as u64;
+                        let item = first_item + triangle[k] as u64;
                         emit([&v[0][k], &v[1][k], &v[2][k]], indices[k], d, item, out);
                     }
                     j += n;
@@ -212,7 +215,7 @@ pub(super) fn setup_range<const AVX2: bool>(
                         cache.project(vp, m, pos, i1),
                         cache.project(vp, m, pos, i2),
                     ];
-                    emit([&v[0], &v[1], &v[2]], [i0, i1, i2], d, draw.first_item + ti as u64, out);
+                    emit([&v[0], &v[1], &v[2]], [i0, i1, i2], d, first_item + ti as u64, out);
                 }
             }
         }
