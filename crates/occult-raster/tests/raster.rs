@@ -83,26 +83,32 @@ fn grid_on_pixel_lattice(seed: u64) -> (Mesh, View) {
     (Mesh::new(p, t).unwrap(), View::new(cam, 64, 64).unwrap())
 }
 
+/// How many times each pixel of `view` is covered when each triangle of `mesh` is drawn alone
+/// into a fresh frame.
+fn coverage_one_at_a_time(r: &mut Rasterizer, view: &View, mesh: &Mesh) -> Vec<u32> {
+    let mut coverage = vec![0u32; (view.width() * view.height()) as usize];
+    for t in 0..mesh.triangle_count() as u32 {
+        let mut f = Frame::new(view.width(), view.height()).unwrap();
+        let list = [t];
+        let d = Draw {
+            mesh,
+            triangles: DrawTriangles::List(&list),
+            clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
+            first_item: 0,
+        };
+        r.draw(view, &mut f, &[d], RasterMode::Full);
+        for (c, &i) in coverage.iter_mut().zip(f.items()) {
+            *c += (i != NO_ITEM) as u32;
+        }
+    }
+    coverage
+}
+
 #[test]
 fn watertight_grid_covers_each_pixel_exactly_once() {
     for seed in 0..32 {
         let (mesh, view) = grid_on_pixel_lattice(seed);
-        let mut coverage = vec![0u32; 64 * 64];
-        let mut r = raster(1, 16);
-        for t in 0..mesh.triangle_count() as u32 {
-            let mut f = Frame::new(64, 64).unwrap();
-            let list = [t];
-            let d = Draw {
-                mesh: &mesh,
-                triangles: DrawTriangles::List(&list),
-                clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
-                first_item: 0,
-            };
-            r.draw(&view, &mut f, &[d], RasterMode::Full);
-            for (c, &i) in coverage.iter_mut().zip(f.items()) {
-                *c += (i != NO_ITEM) as u32;
-            }
-        }
+        let coverage = coverage_one_at_a_time(&mut raster(1, 16), &view, &mesh);
         // The grid spans beyond the screen: every pixel is covered once, none twice.
         let mut histogram = [0; 4];
         coverage.iter().for_each(|&c| histogram[(c as usize).min(3)] += 1);
@@ -145,21 +151,7 @@ fn closed_sphere_front_faces_cover_once_with_backface_culling() {
         ..RasterConfig::default()
     })
     .unwrap();
-    let mut coverage = vec![0u32; 64 * 64];
-    for tri in 0..mesh.triangle_count() as u32 {
-        let mut f = Frame::new(64, 64).unwrap();
-        let list = [tri];
-        let d = Draw {
-            mesh: &mesh,
-            triangles: DrawTriangles::List(&list),
-            clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
-            first_item: 0,
-        };
-        culled.draw(&view, &mut f, &[d], RasterMode::Full);
-        for (c, &i) in coverage.iter_mut().zip(f.items()) {
-            *c += (i != NO_ITEM) as u32;
-        }
-    }
+    let coverage = coverage_one_at_a_time(&mut culled, &view, &mesh);
     let two_sided = draw_all(&mut raster(1, 64), &view, &mesh);
     for (c, &i) in coverage.iter().zip(two_sided.items()) {
         assert_eq!(*c, (i != NO_ITEM) as u32);
