@@ -33,15 +33,20 @@ fn draw_all(r: &mut Rasterizer, view: &View, mesh: &Mesh) -> Frame {
     draw_counted(r, view, mesh).0
 }
 
-/// [`draw_all`], with the draw's counts.
-fn draw_counted(r: &mut Rasterizer, view: &View, mesh: &Mesh) -> (Frame, RasterCounts) {
-    let mut f = Frame::new(view.width(), view.height()).unwrap();
-    let d = Draw {
+/// The draw of every triangle of `mesh` seen by `view` as it is (item ids from 0).
+fn whole_draw<'a>(mesh: &'a Mesh, view: &View) -> Draw<'a> {
+    Draw {
         mesh,
         triangles: DrawTriangles::All,
         clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
         first_item: 0,
-    };
+    }
+}
+
+/// [`draw_all`], with the draw's counts.
+fn draw_counted(r: &mut Rasterizer, view: &View, mesh: &Mesh) -> (Frame, RasterCounts) {
+    let mut f = Frame::new(view.width(), view.height()).unwrap();
+    let d = whole_draw(mesh, view);
     let counts = r.draw(view, &mut f, &[d], RasterMode::Full);
     (f, counts)
 }
@@ -342,12 +347,7 @@ fn large_draws_are_identical_across_strategies() {
             // Depth-only as well.
             let mut a = Frame::new(211, 133).unwrap();
             let mut b = Frame::new(211, 133).unwrap();
-            let d = Draw {
-                mesh: &mesh,
-                triangles: DrawTriangles::All,
-                clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
-                first_item: 0,
-            };
+            let d = whole_draw(&mesh, &view);
             r.draw(&view, &mut a, std::slice::from_ref(&d), RasterMode::DepthOnly);
             raster(1, 64).draw(&view, &mut b, std::slice::from_ref(&d), RasterMode::DepthOnly);
             assert!(a.depth().iter().zip(b.depth()).all(|(x, y)| x.to_bits() == y.to_bits()));
@@ -393,12 +393,7 @@ fn depth_only_matches_full_depth() {
     let view = random_view(&mut rng, 80, 60);
     let full = draw_all(&mut raster(0, 32), &view, &mesh);
     let mut f = Frame::new(80, 60).unwrap();
-    let d = Draw {
-        mesh: &mesh,
-        triangles: DrawTriangles::All,
-        clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
-        first_item: 0,
-    };
+    let d = whole_draw(&mesh, &view);
     raster(0, 32).draw(&view, &mut f, &[d], RasterMode::DepthOnly);
     assert!(f
         .depth()
@@ -864,12 +859,7 @@ fn dense_tiny_triangles_match_the_baseline() {
                 })
                 .unwrap();
                 let mut f = Frame::new(w, h).unwrap();
-                let d = Draw {
-                    mesh: &mesh,
-                    triangles: DrawTriangles::All,
-                    clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
-                    first_item: 0,
-                };
+                let d = whole_draw(&mesh, &view);
                 let c = r.draw(&view, &mut f, &[d], mode);
                 (c, f)
             });
