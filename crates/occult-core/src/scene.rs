@@ -295,24 +295,23 @@ impl Scene {
     /// however often it is instanced. Meshes that no instance reaches (a builder may hold
     /// them) are left out, so this never exceeds [`Scene::item_count`].
     pub fn unique_triangle_count(&self) -> u64 {
-        let reachable = self.reachable();
-        self.nodes
-            .iter()
-            .zip(&reachable)
-            .filter(|(_, &r)| r)
-            .filter_map(|(n, _)| n.mesh())
+        self.reachable_nodes()
+            .filter_map(|n| n.mesh())
             .map(|m| m.triangle_count() as u64)
             .sum()
     }
     /// Instances stored in the groups reachable from the root (each group counted once).
     pub fn instance_count(&self) -> u64 {
-        let reachable = self.reachable();
+        self.reachable_nodes().map(|n| n.instances().len() as u64).sum()
+    }
+
+    /// The nodes the root reaches, in storage order.
+    fn reachable_nodes(&self) -> impl Iterator<Item = &Node> {
         self.nodes
             .iter()
-            .zip(&reachable)
-            .filter(|(_, &r)| r)
-            .map(|(n, _)| n.instances().len() as u64)
-            .sum()
+            .zip(self.reachable())
+            .filter(|&(_, r)| r)
+            .map(|(n, _)| n)
     }
 
     /// Per node, whether the root reaches it. One pass from the root down: a group only
