@@ -295,24 +295,23 @@ impl Scene {
     /// however often it is instanced. Meshes that no instance reaches (a builder may hold
     /// them) are left out, so this never exceeds [`Scene::item_count`].
     pub fn unique_triangle_count(&self) -> u64 {
-        let reachable = self.reachable();
-        self.nodes
-            .iter()
-            .zip(&reachable)
-            .filter(|(_, &r)| r)
-            .filter_map(|(n, _)| n.mesh())
+        self.reachable_nodes()
+            .filter_map(|n| n.mesh())
             .map(|m| m.triangle_count() as u64)
             .sum()
     }
     /// Instances stored in the groups reachable from the root (each group counted once).
     pub fn instance_count(&self) -> u64 {
-        let reachable = self.reachable();
+        self.reachable_nodes().map(|n| n.instances().len() as u64).sum()
+    }
+
+    /// The nodes the root reaches, in storage order.
+    fn reachable_nodes(&self) -> impl Iterator<Item = &Node> {
         self.nodes
             .iter()
-            .zip(&reachable)
-            .filter(|(_, &r)| r)
-            .map(|(n, _)| n.instances().len() as u64)
-            .sum()
+            .zip(self.reachable())
+            .filter(|&(_, r)| r)
+            .map(|(n, _)| n)
     }
 
     /// Per node, whether the root reaches it. One pass from the root down: a group only
@@ -443,23 +442,21 @@ mod tests {
         Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).unwrap()
     }
 
+    /// `count` instances of `child`, the `i`-th moved by `i × step`.
+    fn row_of(child: NodeId, count: u32, step: Vec3) -> Vec<Instance> {
+        (0..count)
+            .map(|i| Instance {
+                parent_from_child: Affine3A::from_translation(step * i as f32),
+                child,
+            })
+            .collect()
+    }
+
     fn two_level() -> Scene {
         let mut b = SceneBuilder::new();
         let m = b.add_mesh("tri", tri()).unwrap();
-        let row: Vec<_> = (0..3)
-            .map(|i| Instance {
-                parent_from_child: Affine3A::from_translation(Vec3::X * i as f32 * 2.0),
-                child: m,
-            })
-            .collect();
-        let g = b.add_group("row", row).unwrap();
-        let rows: Vec<_> = (0..4)
-            .map(|j| Instance {
-                parent_from_child: Affine3A::from_translation(Vec3::Y * j as f32 * 2.0),
-                child: g,
-            })
-            .collect();
-        let root = b.add_group("grid", rows).unwrap();
+        let g = b.add_group("row", row_of(m, 3, Vec3::X * 2.0)).unwrap();
+        let root = b.add_group("grid", row_of(g, 4, Vec3::Y * 2.0)).unwrap();
         b.build(root).unwrap()
     }
 
@@ -475,16 +472,8 @@ mod tests {
         let used = b.add_mesh("used", tri()).unwrap();
         let unused = b.add_mesh("unused", big(1000)).unwrap();
         let _orphan = b.add_mesh("orphan", big(500)).unwrap();
-        let twice = |child| {
-            (0..2)
-                .map(|i| Instance {
-                    parent_from_child: Affine3A::from_translation(Vec3::Z * i as f32),
-                    child,
-                })
-                .collect::<Vec<_>>()
-        };
-        let _unused_group = b.add_group("unused group", twice(unused)).unwrap();
-        let root = b.add_group("root", twice(used)).unwrap();
+        let _unused_group = b.add_group("unused group", row_of(unused, 2, Vec3::Z)).unwrap();
+        let root = b.add_group("root", row_of(used, 2, Vec3::Z)).unwrap();
         let s = b.build(root).unwrap();
         assert_eq!(s.item_count(), 2);
         assert_eq!(s.unique_triangle_count(), 1);
@@ -570,13 +559,7 @@ mod tests {
         let mut b = SceneBuilder::new();
         let mut id = b.add_mesh("tri", tri()).unwrap();
         for level in 0..14 {
-            let inst: Vec<_> = (0..10)
-                .map(|i| Instance {
-                    parent_from_child: Affine3A::from_translation(Vec3::X * i as f32),
-                    child: id,
-                })
-                .collect();
-            id = b.add_group(format!("l{level}"), inst).unwrap();
+            id = b.add_group(format!("l{level}"), row_of(id, 10, Vec3::X)).unwrap();
         }
         let s = b.build(id).unwrap();
         assert_eq!(s.item_count(), 10u64.pow(14));

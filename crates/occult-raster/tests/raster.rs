@@ -33,15 +33,20 @@ fn draw_all(r: &mut Rasterizer, view: &View, mesh: &Mesh) -> Frame {
     draw_counted(r, view, mesh).0
 }
 
-/// [`draw_all`], with the draw's counts.
-fn draw_counted(r: &mut Rasterizer, view: &View, mesh: &Mesh) -> (Frame, RasterCounts) {
-    let mut f = Frame::new(view.width(), view.height()).unwrap();
-    let d = Draw {
+/// The draw of every triangle of `mesh` seen by `view` as it is (item ids from 0).
+fn whole_draw<'a>(mesh: &'a Mesh, view: &View) -> Draw<'a> {
+    Draw {
         mesh,
         triangles: DrawTriangles::All,
         clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
         first_item: 0,
-    };
+    }
+}
+
+/// [`draw_all`], with the draw's counts.
+fn draw_counted(r: &mut Rasterizer, view: &View, mesh: &Mesh) -> (Frame, RasterCounts) {
+    let mut f = Frame::new(view.width(), view.height()).unwrap();
+    let d = whole_draw(mesh, view);
     let counts = r.draw(view, &mut f, &[d], RasterMode::Full);
     (f, counts)
 }
@@ -83,26 +88,32 @@ fn grid_on_pixel_lattice(seed: u64) -> (Mesh, View) {
     (Mesh::new(p, t).unwrap(), View::new(cam, 64, 64).unwrap())
 }
 
+/// How many times each pixel of `view` is covered when each triangle of `mesh` is drawn alone
+/// into a fresh frame.
+fn coverage_one_at_a_time(r: &mut Rasterizer, view: &View, mesh: &Mesh) -> Vec<u32> {
+    let mut coverage = vec![0u32; (view.width() * view.height()) as usize];
+    for t in 0..mesh.triangle_count() as u32 {
+        let mut f = Frame::new(view.width(), view.height()).unwrap();
+        let list = [t];
+        let d = Draw {
+            mesh,
+            triangles: DrawTriangles::List(&list),
+            clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
+            first_item: 0,
+        };
+        r.draw(view, &mut f, &[d], RasterMode::Full);
+        for (c, &i) in coverage.iter_mut().zip(f.items()) {
+            *c += (i != NO_ITEM) as u32;
+        }
+    }
+    coverage
+}
+
 #[test]
 fn watertight_grid_covers_each_pixel_exactly_once() {
     for seed in 0..32 {
         let (mesh, view) = grid_on_pixel_lattice(seed);
-        let mut coverage = vec![0u32; 64 * 64];
-        let mut r = raster(1, 16);
-        for t in 0..mesh.triangle_count() as u32 {
-            let mut f = Frame::new(64, 64).unwrap();
-            let list = [t];
-            let d = Draw {
-                mesh: &mesh,
-                triangles: DrawTriangles::List(&list),
-                clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
-                first_item: 0,
-            };
-            r.draw(&view, &mut f, &[d], RasterMode::Full);
-            for (c, &i) in coverage.iter_mut().zip(f.items()) {
-                *c += (i != NO_ITEM) as u32;
-            }
-        }
+        let coverage = coverage_one_at_a_time(&mut raster(1, 16), &view, &mesh);
         // The grid spans beyond the screen: every pixel is covered once, none twice.
         let mut histogram = [0; 4];
         coverage.iter().for_each(|&c| histogram[(c as usize).min(3)] += 1);
@@ -145,21 +156,7 @@ fn closed_sphere_front_faces_cover_once_with_backface_culling() {
         ..RasterConfig::default()
     })
     .unwrap();
-    let mut coverage = vec![0u32; 64 * 64];
-    for tri in 0..mesh.triangle_count() as u32 {
-        let mut f = Frame::new(64, 64).unwrap();
-        let list = [tri];
-        let d = Draw {
-            mesh: &mesh,
-            triangles: DrawTriangles::List(&list),
-            clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
-            first_item: 0,
-        };
-        culled.draw(&view, &mut f, &[d], RasterMode::Full);
-        for (c, &i) in coverage.iter_mut().zip(f.items()) {
-            *c += (i != NO_ITEM) as u32;
-        }
-    }
+    let coverage = coverage_one_at_a_time(&mut culled, &view, &mesh);
     let two_sided = draw_all(&mut raster(1, 64), &view, &mesh);
     for (c, &i) in coverage.iter().zip(two_sided.items()) {
         assert_eq!(*c, (i != NO_ITEM) as u32);
@@ -350,12 +347,7 @@ fn large_draws_are_identical_across_strategies() {
             // Depth-only as well.
             let mut a = Frame::new(211, 133).unwrap();
             let mut b = Frame::new(211, 133).unwrap();
-            let d = Draw {
-                mesh: &mesh,
-                triangles: DrawTriangles::All,
-                clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
-                first_item: 0,
-            };
+            let d = whole_draw(&mesh, &view);
             r.draw(&view, &mut a, std::slice::from_ref(&d), RasterMode::DepthOnly);
             raster(1, 64).draw(&view, &mut b, std::slice::from_ref(&d), RasterMode::DepthOnly);
             assert!(a.depth().iter().zip(b.depth()).all(|(x, y)| x.to_bits() == y.to_bits()));
@@ -401,12 +393,7 @@ fn depth_only_matches_full_depth() {
     let view = random_view(&mut rng, 80, 60);
     let full = draw_all(&mut raster(0, 32), &view, &mesh);
     let mut f = Frame::new(80, 60).unwrap();
-    let d = Draw {
-        mesh: &mesh,
-        triangles: DrawTriangles::All,
-        clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
-        first_item: 0,
-    };
+    let d = whole_draw(&mesh, &view);
     raster(0, 32).draw(&view, &mut f, &[d], RasterMode::DepthOnly);
     assert!(f
         .depth()
@@ -872,12 +859,7 @@ fn dense_tiny_triangles_match_the_baseline() {
                 })
                 .unwrap();
                 let mut f = Frame::new(w, h).unwrap();
-                let d = Draw {
-                    mesh: &mesh,
-                    triangles: DrawTriangles::All,
-                    clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
-                    first_item: 0,
-                };
+                let d = whole_draw(&mesh, &view);
                 let c = r.draw(&view, &mut f, &[d], mode);
                 (c, f)
             });

@@ -6,8 +6,9 @@
 
 use super::project::{ProjVertex, Viewport};
 use super::scan::FrameTarget;
+use super::setup::TriStream;
 use super::sinks::ChunkBins;
-use super::{Draw, RasterMode};
+use super::RasterMode;
 use occult_core::{ItemId, Mat4, Vec3};
 use std::ops::Range;
 
@@ -41,15 +42,7 @@ hot_loop! {
 
 hot_loop! {
     /// Sets up and bins the triangles `range` of the stream into `out`.
-    pub(super) fn setup_range(
-        vp: &Viewport,
-        draws: &[Draw<'_>],
-        draw_starts: &[usize],
-        vertex_offsets: &[usize],
-        vertices: &[ProjVertex],
-        range: Range<usize>,
-        out: &mut ChunkBins,
-    ) -> () = super::setup::setup_range::<false>, super::setup::setup_range::<true>;
+    pub(super) fn setup_range(vp: &Viewport, stream: &TriStream<'_>, range: Range<usize>, out: &mut ChunkBins) -> () = super::setup::setup_range::<false>, super::setup::setup_range::<true>;
 }
 
 hot_loop! {
@@ -66,10 +59,7 @@ hot_loop! {
     /// No other thread may access `target` during the call.
     pub(super) unsafe fn draw_direct(
         vp: &Viewport,
-        draws: &[Draw<'_>],
-        draw_starts: &[usize],
-        vertex_offsets: &[usize],
-        vertices: &[ProjVertex],
+        stream: &TriStream<'_>,
         range: Range<usize>,
         target: &FrameTarget<'_>,
         mode: RasterMode,
@@ -77,16 +67,9 @@ hot_loop! {
 }
 
 hot_loop! {
-    /// Scans every triangle binned to `tile` (inclusive pixel rectangle `rect`).
+    /// Scans every triangle binned to `tile`.
     ///
     /// # Safety
     /// As [`super::scan::scan_tile`].
-    pub(super) unsafe fn scan_tile(
-        vp: &Viewport,
-        chunks: &[ChunkBins],
-        tile: usize,
-        rect: [u32; 4],
-        target: &FrameTarget<'_>,
-        mode: RasterMode,
-    ) -> u64 = super::scan::scan_tile::<false>, super::scan::scan_tile::<true>;
+    pub(super) unsafe fn scan_tile(vp: &Viewport, chunks: &[ChunkBins], tile: usize, target: &FrameTarget<'_>, mode: RasterMode) -> u64 = super::scan::scan_tile::<false>, super::scan::scan_tile::<true>;
 }

@@ -4,6 +4,7 @@
 use super::dispatch;
 use super::project::Viewport;
 use super::scan::FrameTarget;
+use super::setup::TriStream;
 use super::threads::Workers;
 use super::{Draw, RasterMode, Rasterizer};
 use crate::frame::Frame;
@@ -23,7 +24,6 @@ impl Rasterizer {
         draws: &[Draw<'_>],
         draw_starts: &[usize],
         vertex_offsets: &[usize],
-        total: usize,
         mode: RasterMode,
     ) -> Option<(u64, u64)> {
         let parts = workers.threads;
@@ -44,7 +44,8 @@ impl Rasterizer {
         }
         self.scratch_clean = false;
         let isa = self.isa;
-        let vertices = &self.vertices[..];
+        let stream = TriStream::new(draws, draw_starts, vertex_offsets, &self.vertices);
+        let total = stream.len();
         let mut targets: Vec<FrameTarget<'_>> = vec![FrameTarget::new(frame)];
         for (d, i) in self.scratch.iter_mut().take(parts - 1) {
             targets.push(FrameTarget::from_buffers(d, i, w));
@@ -57,19 +58,7 @@ impl Rasterizer {
             for start in (k * SORT_LAST_BLOCK..total).step_by(parts * SORT_LAST_BLOCK) {
                 let range = start..(start + SORT_LAST_BLOCK).min(total);
                 // SAFETY: each worker owns its own frame (the real one or a scratch one).
-                let (r, f, d) = unsafe {
-                    dispatch::draw_direct(
-                        isa,
-                        vp,
-                        draws,
-                        draw_starts,
-                        vertex_offsets,
-                        vertices,
-                        range,
-                        target,
-                        mode,
-                    )
-                };
+                let (r, f, d) = unsafe { dispatch::draw_direct(isa, vp, &stream, range, target, mode) };
                 rasterized += r;
                 written += f;
                 if d[0] <= d[2] && d[1] <= d[3] {

@@ -92,7 +92,7 @@ use scan::row_mask;
 use scan::{box_in, depth_at, edge_functions, row_depth, solve_span, FrameTarget, SmallCover, MASKED, SMALL, TINY};
 #[cfg(all(test, target_arch = "x86_64"))]
 use setup::setup_triangle;
-use setup::{draw_starts, setup_range, TriSetup};
+use setup::{draw_starts, setup_range, TriSetup, TriStream};
 #[cfg(all(test, target_arch = "x86_64"))]
 use sinks::{union_rect, EMPTY_RECT};
 use sinks::{ChunkBins, SetupSink};
@@ -531,17 +531,8 @@ impl Rasterizer {
             let target = FrameTarget::new(frame);
             // SAFETY: only this thread touches the frame while it is drawn.
             let (rasterized, written, _) = unsafe {
-                dispatch::draw_direct(
-                    self.isa,
-                    vp,
-                    draws,
-                    &draw_starts,
-                    &vertex_offsets,
-                    &self.vertices,
-                    0..total,
-                    &target,
-                    mode,
-                )
+                let stream = TriStream::new(draws, &draw_starts, &vertex_offsets, &self.vertices);
+                dispatch::draw_direct(self.isa, vp, &stream, 0..total, &target, mode)
             };
             counts.triangles_rasterized = rasterized;
             counts.fragments_written = written;
@@ -549,7 +540,7 @@ impl Rasterizer {
         }
         if strategy == Strategy::SortLast {
             if let Some((rasterized, written)) =
-                self.draw_sort_last(&workers, vp, frame, draws, &draw_starts, &vertex_offsets, total, mode)
+                self.draw_sort_last(&workers, vp, frame, draws, &draw_starts, &vertex_offsets, mode)
             {
                 counts.triangles_rasterized = rasterized;
                 counts.fragments_written = written;
@@ -564,7 +555,7 @@ impl Rasterizer {
         for ch in &mut self.chunks {
             ch.bins.resize_with(tile_count, Vec::new);
         }
-        let vertices = &self.vertices[..];
+        let stream = TriStream::new(draws, &draw_starts, &vertex_offsets, &self.vertices);
         let target = FrameTarget::new(frame);
         let mut start = 0;
         while start < total {
@@ -580,7 +571,7 @@ impl Rasterizer {
                     b.clear();
                 }
                 ch.rasterized = 0;
-                dispatch::setup_range(isa, vp, draws, &draw_starts, &vertex_offsets, vertices, lo..hi, ch);
+                dispatch::setup_range(isa, vp, &stream, lo..hi, ch);
             });
             counts.triangles_rasterized += self.chunks[..used].iter().map(|c| c.rasterized).sum::<u64>();
             // Phase 2: rasterize tile by tile.
@@ -588,16 +579,8 @@ impl Rasterizer {
             let target = &target;
             let fragments: u64 = workers
                 .share((0..tile_count).collect(), |tile| {
-                    let tx = tile as u32 % vp.tiles_x;
-                    let ty = tile as u32 / vp.tiles_x;
-                    let rect = [
-                        tx * vp.tile_size,
-                        ty * vp.tile_size,
-                        ((tx + 1) * vp.tile_size).min(vp.width) - 1,
-                        ((ty + 1) * vp.tile_size).min(vp.height) - 1,
-                    ];
                     // SAFETY: tiles are disjoint and each is scanned by exactly one task.
-                    unsafe { dispatch::scan_tile(isa, vp, chunks, tile, rect, target, mode) }
+                    unsafe { dispatch::scan_tile(isa, vp, chunks, tile, target, mode) }
                 })
                 .into_iter()
                 .sum();

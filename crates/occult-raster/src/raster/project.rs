@@ -69,6 +69,20 @@ impl Viewport {
         }
     }
 
+    /// The inclusive pixel rectangle of tile `tile` (tiles row-major, `tiles_x` a row; the
+    /// last row and column clipped to the frame).
+    #[inline(always)]
+    pub(super) fn tile_rect(&self, tile: usize) -> [u32; 4] {
+        let tx = tile as u32 % self.tiles_x;
+        let ty = tile as u32 / self.tiles_x;
+        [
+            tx * self.tile_size,
+            ty * self.tile_size,
+            ((tx + 1) * self.tile_size).min(self.width) - 1,
+            ((ty + 1) * self.tile_size).min(self.height) - 1,
+        ]
+    }
+
     #[inline(always)]
     pub(super) fn project(&self, clip_from_object: &Mat4, p: Vec3) -> ProjVertex {
         self.project_clip(to_clip(clip_from_object, p))

@@ -51,19 +51,19 @@ impl<'a> FrameTarget<'a> {
     }
 }
 
-/// Scans every triangle binned to `tile` (inclusive pixel rectangle `rect`).
+/// Scans every triangle binned to `tile` (the pixels of [`Viewport::tile_rect`]).
 ///
 /// # Safety
-/// No other thread may access the pixels of `rect` in `target` during the call.
+/// No other thread may access the pixels of the tile in `target` during the call.
 #[inline(always)]
 pub(super) unsafe fn scan_tile<const AVX2: bool>(
     vp: &Viewport,
     chunks: &[ChunkBins],
     tile: usize,
-    rect: [u32; 4],
     target: &FrameTarget<'_>,
     mode: RasterMode,
 ) -> u64 {
+    let rect = vp.tile_rect(tile);
     let mut written = 0;
     for ch in chunks {
         for &r in &ch.bins[tile] {

@@ -44,6 +44,43 @@ const _: () = assert!(std::mem::size_of::<TriSetup>() == 64);
 // Pixel boxes are stored in u16.
 const _: () = assert!(occult_core::MAX_RESOLUTION <= u16::MAX as u32);
 
+/// The triangle stream of one pass: the triangles of `draws` one after the other, draw `d`'s
+/// first at index `draw_starts[d]` ([`draw_starts`]: one more entry than draws, the last the
+/// stream's length); the corners of whole-mesh draws projected ahead in `vertices`, draw `d`'s
+/// from `vertex_offsets[d]` (other draws project theirs as they are set up).
+#[derive(Clone, Copy)]
+pub(super) struct TriStream<'a> {
+    pub(super) draws: &'a [Draw<'a>],
+    pub(super) draw_starts: &'a [usize],
+    pub(super) vertex_offsets: &'a [usize],
+    pub(super) vertices: &'a [ProjVertex],
+}
+
+impl<'a> TriStream<'a> {
+    /// The stream of `draws`, with `draw_starts` from [`draw_starts`] and one entry of
+    /// `vertex_offsets` a draw.
+    pub(super) fn new(
+        draws: &'a [Draw<'a>],
+        draw_starts: &'a [usize],
+        vertex_offsets: &'a [usize],
+        vertices: &'a [ProjVertex],
+    ) -> Self {
+        debug_assert_eq!(draw_starts.len(), draws.len() + 1);
+        debug_assert_eq!(vertex_offsets.len(), draws.len());
+        Self {
+            draws,
+            draw_starts,
+            vertex_offsets,
+            vertices,
+        }
+    }
+
+    /// Triangles in the stream.
+    pub(super) fn len(&self) -> usize {
+        self.draw_starts[self.draws.len()]
+    }
+}
+
 /// Index in the stream of each draw's first triangle, then the stream's length (one more entry
 /// than draws).
 pub(super) fn draw_starts(draws: &[Draw<'_>]) -> Vec<usize> {
@@ -57,20 +94,21 @@ pub(super) fn draw_starts(draws: &[Draw<'_>]) -> Vec<usize> {
     starts
 }
 
-/// Sets up the triangles `range` of the pass's stream (`draws` one after the other, starting at
-/// `draw_starts` (see [`draw_starts`]); whole-mesh draws with their vertices projected ahead in
-/// `vertices`, from `vertex_offsets`) and hands them to `out`: one by one, or with `AVX2` (only
-/// where the processor has it) eight at a time through [`setup8::Batch`].
+/// Sets up the triangles `range` of the pass's `stream` and hands them to `out`: one by one, or
+/// with `AVX2` (only where the processor has it) eight at a time through [`setup8::Batch`].
 #[inline(always)]
 pub(super) fn setup_range<const AVX2: bool>(
     vp: &Viewport,
-    draws: &[Draw<'_>],
-    draw_starts: &[usize],
-    vertex_offsets: &[usize],
-    vertices: &[ProjVertex],
+    stream: &TriStream<'_>,
     range: Range<usize>,
     out: &mut impl SetupSink,
 ) {
+    let TriStream {
+        draws,
+        draw_starts,
+        vertex_offsets,
+        vertices,
+    } = *stream;
     let mut d = draw_starts.partition_point(|&s| s <= range.start) - 1;
     let mut t = range.start;
     let mut cache = VertexCache::new();
@@ -106,6 +144,9 @@ pub(super) fn setup_range<const AVX2: bool>(
         let end = draw_starts[d + 1].min(range.end);
         let mesh = draw.mesh;
         let tris = mesh.triangles();
+        // Read once a draw: the stream comes through a reference, so the compiler cannot tell
+        // that the sink's writes leave the draws be, and would reload it per triangle.
+        let first_item = draw.first_item;
         match &draw.triangles {
             DrawTriangles::All => {
                 let verts = &vertices[vertex_offsets[d]..vertex_offsets[d] + mesh.positions().len()];
@@ -128,7 +169,7 @@ pub(super) fn setup_range<const AVX2: bool>(
                             verts.get_unchecked(i2 as usize),
                         ]
                     };
-                    emit(v, [i0, i1, i2], d, draw.first_item + j as u64, out);
+                    emit(v, [i0, i1, i2], d, first_item + j as u64, out);
                 }
             }
             #[cfg(target_arch = "x86_64")]
@@ -156,7 +197,7 @@ pub(super) fn setup_range<const AVX2: bool>(
                         unsafe { setup8::project8_avx2(vp, m, &corners[c], &mut v[c]) };
                     }
                     for k in 0..n {
-                        let item = draw.first_item + triangle[k] as u64;
+                        let item = first_item + triangle[k] as u64;
                         emit([&v[0][k], &v[1][k], &v[2][k]], indices[k], d, item, out);
                     }
                     j += n;
@@ -174,7 +215,7 @@ pub(super) fn setup_range<const AVX2: bool>(
                         cache.project(vp, m, pos, i1),
                         cache.project(vp, m, pos, i2),
                     ];
-                    emit([&v[0], &v[1], &v[2]], [i0, i1, i2], d, draw.first_item + ti as u64, out);
+                    emit([&v[0], &v[1], &v[2]], [i0, i1, i2], d, first_item + ti as u64, out);
                 }
             }
         }

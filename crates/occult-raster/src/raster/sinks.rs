@@ -1,10 +1,10 @@
 //! Where set-up triangles go: the tile bins of the binned strategy, or the scan at once (the
 //! direct path of one thread and of each sort-last worker).
 
-use super::project::{ProjVertex, Viewport};
+use super::project::Viewport;
 use super::scan::{prefetch, scan_small, scan_triangle, FrameTarget, SmallCover};
-use super::setup::{setup_range, TriSetup};
-use super::{Draw, RasterMode};
+use super::setup::{setup_range, TriSetup, TriStream};
+use super::RasterMode;
 use std::ops::Range;
 
 /// Reusable per-chunk storage.
@@ -29,14 +29,10 @@ pub(super) fn union_rect(a: [u32; 4], b: [u32; 4]) -> [u32; 4] {
 ///
 /// # Safety
 /// No other thread may access `target` during the call.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub(super) unsafe fn draw_direct<const AVX2: bool>(
     vp: &Viewport,
-    draws: &[Draw<'_>],
-    draw_starts: &[usize],
-    vertex_offsets: &[usize],
-    vertices: &[ProjVertex],
+    stream: &TriStream<'_>,
     range: Range<usize>,
     target: &FrameTarget<'_>,
     mode: RasterMode,
@@ -50,7 +46,7 @@ pub(super) unsafe fn draw_direct<const AVX2: bool>(
         written: 0,
         dirty: EMPTY_RECT,
     };
-    setup_range::<AVX2>(vp, draws, draw_starts, vertex_offsets, vertices, range, &mut sink);
+    setup_range::<AVX2>(vp, stream, range, &mut sink);
     (sink.rasterized, sink.written, sink.dirty)
 }
 

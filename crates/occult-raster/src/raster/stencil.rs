@@ -35,7 +35,7 @@
 //! Cost: O(faces × bands + covered pixels); rows are split into one band per thread and each
 //! band sets up every face (setup is cheap next to the fill of shadow volumes).
 
-use super::{draw_starts, setup_range, Draw, DrawTriangles, Rasterizer, SetupSink, TriSetup, Viewport};
+use super::{draw_starts, setup_range, Draw, DrawTriangles, Rasterizer, SetupSink, TriSetup, TriStream, Viewport};
 use crate::{Frame, RasterError, CLEAR_DEPTH};
 use occult_core::{glam::DMat4, glam::DVec4, ItemId, View};
 
@@ -266,6 +266,7 @@ impl Rasterizer {
         let draw_starts = draw_starts(&plain);
         let total = draw_starts[plain.len()];
         let vertex_offsets = vec![0usize; plain.len()];
+        let stream = TriStream::new(&plain, &draw_starts, &vertex_offsets, &[]);
         let mut vp = Viewport::new(view, &self.config);
         vp.cull_backfaces = false;
         vp.far_depth = f32::NEG_INFINITY;
@@ -287,7 +288,7 @@ impl Rasterizer {
                 counts: StencilCounts::default(),
             };
             if total > 0 {
-                setup_range::<false>(&vp, &plain, &draw_starts, &vertex_offsets, &[], 0..total, &mut sink);
+                setup_range::<false>(&vp, &stream, 0..total, &mut sink);
             }
             sink.counts
         }) {
