@@ -26,7 +26,7 @@ use occult_core::Vec3;
 use ply_rs_bw::parser::{ParseError, Parser, Reader};
 use ply_rs_bw::ply::{ElementDef, Encoding, Header, PropertyAccess, PropertyAccessResult, PropertyType, ScalarType};
 
-use super::{fan_triangulate, file_stem, read_bytes, scene_of_meshes, LoadError, LoadedScene, Location};
+use super::{fan_triangulate, file_stem, read_bytes, scene_of_meshes, warn_count, LoadError, LoadedScene, Location};
 
 /// Names of the vertex index list, in order of preference.
 const INDEX_LIST_NAMES: [&str; 2] = ["vertex_indices", "vertex_index"];
@@ -76,13 +76,12 @@ pub(super) fn ply_from_bytes(path: &Path, data: &[u8]) -> Result<LoadedScene, Lo
     }
 
     let mut warnings = Vec::new();
-    if sink.short_face_count > 0 {
-        warnings.push(format!(
-            "{}: {} faces with fewer than 3 corners skipped",
-            path.display(),
-            sink.short_face_count
-        ));
-    }
+    warn_count(
+        &mut warnings,
+        path,
+        sink.short_face_count,
+        "faces with fewer than 3 corners skipped",
+    );
     let name = file_stem(path);
     let mesh = occult_core::Mesh::new(sink.positions, sink.triangles).map_err(|source| LoadError::Core {
         path: path.to_path_buf(),
