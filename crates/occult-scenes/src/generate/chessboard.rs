@@ -23,6 +23,7 @@
 //! `n = 10^7` (2·10^14 triangles) builds in milliseconds in kilobytes. As in the paper, each
 //! instancing level adds one transform per sample/triangle to renderers that descend the DAG.
 
+use super::shapes::grid_quads;
 use super::{check_budget, check_range, scene_error, GenerateError, GeneratorInfo, ParamInfo, ParamSlot};
 use occult_core::glam::Quat;
 use occult_core::{Affine3A, Camera, CoreError, Instance, Mesh, MeshColors, NodeId, Rgba8, Scene, SceneBuilder, Vec3};
@@ -180,22 +181,10 @@ impl Board {
 
 /// One mesh of `w × h ≤ BLOCK²` squares, shared vertices, triangles row by row facing +y.
 fn leaf(w: u32, h: u32) -> Result<Mesh, CoreError> {
-    let n = w + 1;
     let positions = (0..=h)
         .flat_map(|j| (0..=w).map(move |i| Vec3::new(i as f32, 0.0, j as f32)))
         .collect();
-    let mut triangles = Vec::with_capacity(2 * (w * h) as usize);
-    let mut colors = Vec::with_capacity(2 * (w * h) as usize);
-    for j in 0..h {
-        for i in 0..w {
-            let v00 = j * n + i;
-            let (v10, v01, v11) = (v00 + 1, v00 + n, v00 + n + 1);
-            triangles.push([v00, v01, v10]);
-            triangles.push([v10, v01, v11]);
-            let color = if (i + j) % 2 == 0 { BLACK } else { WHITE };
-            colors.extend([color, color]);
-        }
-    }
+    let (triangles, colors) = grid_quads(w, h, |i, j| if (i + j) % 2 == 0 { BLACK } else { WHITE });
     Mesh::new(positions, triangles)?.with_colors(MeshColors::PerTriangle(colors))
 }
 

@@ -30,7 +30,7 @@
 //! terrain (the paper's replicated trees stand on a plain grid); the 1.4·10^14 total is reached
 //! with correspondingly more instances.
 
-use super::shapes::{grid, MeshBuilder, BYTES_PER_BUILT_TRIANGLE, BYTES_PER_INSTANCE};
+use super::shapes::{grid, grid_quads, MeshBuilder, BYTES_PER_BUILT_TRIANGLE, BYTES_PER_INSTANCE};
 use super::{camera_for, check_budget, check_range, scene_error, GenerateError, GeneratorInfo, ParamInfo, ParamSlot};
 use occult_core::glam::Quat;
 use occult_core::{Affine3A, Camera, CoreError, Instance, Mesh, MeshColors, Rgba8, Scene, SceneBuilder, Vec3};
@@ -391,24 +391,15 @@ impl Heightfield {
             .map(|(i, j)| Vec3::new(i as f32 * cell, self.sample(i, j), j as f32 * cell))
             .collect();
         let relief = (0.1 * self.side).clamp(1e-3, 40.0);
-        let mut triangles = Vec::with_capacity(2 * (g * g) as usize);
-        let mut colors = Vec::with_capacity(2 * (g * g) as usize);
-        for j in 0..g {
-            for i in 0..g {
-                let v00 = j * n + i;
-                let (v10, v01, v11) = (v00 + 1, v00 + n, v00 + n + 1);
-                triangles.push([v00, v01, v10]);
-                triangles.push([v10, v01, v11]);
-                let t = (self.sample(i, j) / relief).clamp(0.0, 1.0);
-                let c = [
-                    (70.0 + 60.0 * t) as u8,
-                    (95.0 + 20.0 * t) as u8,
-                    (45.0 + 20.0 * t) as u8,
-                    255,
-                ];
-                colors.extend([c, c]);
-            }
-        }
+        let (triangles, colors) = grid_quads(g, g, |i, j| {
+            let t = (self.sample(i, j) / relief).clamp(0.0, 1.0);
+            [
+                (70.0 + 60.0 * t) as u8,
+                (95.0 + 20.0 * t) as u8,
+                (45.0 + 20.0 * t) as u8,
+                255,
+            ]
+        });
         Mesh::new(positions, triangles)?.with_colors(MeshColors::PerTriangle(colors))
     }
 }
