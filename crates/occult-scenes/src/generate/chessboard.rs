@@ -24,7 +24,7 @@
 //! instancing level adds one transform per sample/triangle to renderers that descend the DAG.
 
 use super::shapes::grid_quads;
-use super::{check_budget, check_range, scene_error, GenerateError, GeneratorInfo, ParamInfo, ParamSlot};
+use super::{check_budget, check_range, scene_error, GenerateError, GeneratorInfo, ParamInfo};
 use occult_core::glam::Quat;
 use occult_core::{Affine3A, Camera, CoreError, Instance, Mesh, MeshColors, NodeId, Rgba8, Scene, SceneBuilder, Vec3};
 use std::collections::HashMap;
@@ -42,27 +42,16 @@ pub const BLACK: Rgba8 = [28, 28, 30, 255];
 /// Color of white squares.
 pub const WHITE: Rgba8 = [232, 230, 222, 255];
 
-/// Parameters of [`generate`].
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct ChessboardParams {
-    /// Squares per side, `1..=16,777,216` (default 1024: 2,097,152 triangles; 10^7: 2·10^14).
-    pub n: u32,
-}
-
-impl Default for ChessboardParams {
-    fn default() -> Self {
-        Self { n: 1024 }
+generator_params! {
+    /// Parameters of [`generate`].
+    #[derive(Clone, Debug, PartialEq, Eq)]
+    pub struct ChessboardParams {
+        /// Squares per side, `1..=16,777,216` (default 1024: 2,097,152 triangles; 10^7: 2·10^14).
+        pub n: u32 = 1024,
     }
 }
 
 impl ChessboardParams {
-    pub(crate) fn slot(&mut self, key: &str) -> ParamSlot<'_> {
-        match key {
-            "n" => ParamSlot::U32(&mut self.n),
-            _ => ParamSlot::Unknown,
-        }
-    }
-
     /// Triangle instances: `2·n²`.
     pub fn item_count(&self) -> u128 {
         2 * (self.n as u128).pow(2)
