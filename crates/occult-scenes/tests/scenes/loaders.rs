@@ -324,7 +324,9 @@ fn ply_binary(big_endian: bool, index_list: &str) -> Vec<u8> {
     bytes
 }
 
-fn check_ply_binary_scene(loaded: &LoadedScene) {
+/// Writes [`ply_binary`]`(big_endian, index_list)` as `dir/name`, loads it and checks the scene.
+fn check_ply_binary(dir: &Path, name: &str, big_endian: bool, index_list: &str) {
+    let loaded = load_ok(&write(dir, name, ply_binary(big_endian, index_list)));
     let scene = &loaded.scene;
     assert_eq!(scene.item_count(), 4);
     assert!(loaded.warnings.is_empty(), "{:?}", loaded.warnings);
@@ -338,30 +340,15 @@ fn check_ply_binary_scene(loaded: &LoadedScene) {
 #[test]
 fn ply_binary_little_endian_with_extra_properties() {
     let dir = scratch("ply_binary_little_endian_with_extra_properties");
-    let loaded = load_ok(&write(
-        &dir,
-        "le.ply",
-        ply_binary(false, "list uchar int vertex_indices"),
-    ));
-    check_ply_binary_scene(&loaded);
+    check_ply_binary(&dir, "le.ply", false, "list uchar int vertex_indices");
 }
 
 #[test]
 fn ply_binary_big_endian_with_extra_properties() {
     let dir = scratch("ply_binary_big_endian_with_extra_properties");
-    let loaded = load_ok(&write(
-        &dir,
-        "be.ply",
-        ply_binary(true, "list uchar uint vertex_indices"),
-    ));
-    check_ply_binary_scene(&loaded);
+    check_ply_binary(&dir, "be.ply", true, "list uchar uint vertex_indices");
     // Other index widths and the `vertex_index` spelling.
-    let loaded = load_ok(&write(
-        &dir,
-        "be16.ply",
-        ply_binary(true, "list uint8 ushort vertex_index"),
-    ));
-    check_ply_binary_scene(&loaded);
+    check_ply_binary(&dir, "be16.ply", true, "list uint8 ushort vertex_index");
 }
 
 #[test]
