@@ -382,51 +382,35 @@ impl PlyRecord {
     }
 }
 
+/// `PropertyAccess` setters for the stored PLY types: scalars widen to `f64` for
+/// [`PlyRecord::scalar`], integer lists go to [`PlyRecord::list`].
+macro_rules! forward_setters {
+    (scalars: $($scalar:ident($scalar_ty:ty)),+; lists: $($list:ident($list_ty:ty)),+;) => {
+        $(
+            fn $scalar(&mut self, name: &str, value: $scalar_ty) -> PropertyAccessResult {
+                self.scalar(name, value.into())
+            }
+        )+
+        $(
+            fn $list(&mut self, name: &str, value: Vec<$list_ty>) -> PropertyAccessResult {
+                self.list(name, value)
+            }
+        )+
+    };
+}
+
 impl PropertyAccess for PlyRecord {
     fn new() -> Self {
         Self::default()
     }
-    fn set_char(&mut self, name: &str, value: i8) -> PropertyAccessResult {
-        self.scalar(name, value.into())
-    }
-    fn set_uchar(&mut self, name: &str, value: u8) -> PropertyAccessResult {
-        self.scalar(name, value.into())
-    }
-    fn set_short(&mut self, name: &str, value: i16) -> PropertyAccessResult {
-        self.scalar(name, value.into())
-    }
-    fn set_ushort(&mut self, name: &str, value: u16) -> PropertyAccessResult {
-        self.scalar(name, value.into())
-    }
-    fn set_int(&mut self, name: &str, value: i32) -> PropertyAccessResult {
-        self.scalar(name, value.into())
-    }
-    fn set_uint(&mut self, name: &str, value: u32) -> PropertyAccessResult {
-        self.scalar(name, value.into())
-    }
-    fn set_float(&mut self, name: &str, value: f32) -> PropertyAccessResult {
-        self.scalar(name, value.into())
+    forward_setters! {
+        scalars: set_char(i8), set_uchar(u8), set_short(i16), set_ushort(u16), set_int(i32), set_uint(u32),
+            set_float(f32);
+        lists: set_list_char(i8), set_list_uchar(u8), set_list_short(i16), set_list_ushort(u16), set_list_int(i32),
+            set_list_uint(u32);
     }
     fn set_double(&mut self, name: &str, value: f64) -> PropertyAccessResult {
         self.scalar(name, value)
-    }
-    fn set_list_char(&mut self, name: &str, value: Vec<i8>) -> PropertyAccessResult {
-        self.list(name, value)
-    }
-    fn set_list_uchar(&mut self, name: &str, value: Vec<u8>) -> PropertyAccessResult {
-        self.list(name, value)
-    }
-    fn set_list_short(&mut self, name: &str, value: Vec<i16>) -> PropertyAccessResult {
-        self.list(name, value)
-    }
-    fn set_list_ushort(&mut self, name: &str, value: Vec<u16>) -> PropertyAccessResult {
-        self.list(name, value)
-    }
-    fn set_list_int(&mut self, name: &str, value: Vec<i32>) -> PropertyAccessResult {
-        self.list(name, value)
-    }
-    fn set_list_uint(&mut self, name: &str, value: Vec<u32>) -> PropertyAccessResult {
-        self.list(name, value)
     }
     // Float lists are ignored: `Layout::of` refused float index lists already.
 }
