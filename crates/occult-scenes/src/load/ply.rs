@@ -808,13 +808,18 @@ mod tests {
         ));
     }
 
-    #[test]
-    fn strips_restart_flip_and_drop_degenerates() {
+    /// A sink for `t.ply` with `vertex_count` vertices and no face element.
+    fn sink_of(vertex_count: usize) -> MeshSink<'static> {
         let layout = Layout {
-            vertex_count: 5,
+            vertex_count,
             polygons: None,
         };
-        let mut sink = MeshSink::new(Path::new("t.ply"), &layout);
+        MeshSink::new(Path::new("t.ply"), &layout)
+    }
+
+    #[test]
+    fn strips_restart_flip_and_drop_degenerates() {
+        let mut sink = sink_of(5);
         sink.strips(&[0, 1, 2, 3, -1, 4, 4, 1, 2], || Location::File).unwrap();
         // The second strip starts with a swap (4 4 1, dropped), so 4 1 2 is odd: flipped.
         assert_eq!(sink.triangles, vec![[0, 1, 2], [2, 1, 3], [1, 4, 2]]);
@@ -830,11 +835,7 @@ mod tests {
 
     #[test]
     fn faces_of_fewer_than_three_corners_are_counted_not_drawn() {
-        let layout = Layout {
-            vertex_count: 3,
-            polygons: None,
-        };
-        let mut sink = MeshSink::new(Path::new("t.ply"), &layout);
+        let mut sink = sink_of(3);
         sink.face(&[0, 1], || Location::File).unwrap();
         sink.face(&[], || Location::File).unwrap();
         assert!(sink.triangles.is_empty());
@@ -843,11 +844,7 @@ mod tests {
 
     #[test]
     fn non_finite_and_overflowing_coordinates_are_errors() {
-        let layout = Layout {
-            vertex_count: 1,
-            polygons: None,
-        };
-        let mut sink = MeshSink::new(Path::new("t.ply"), &layout);
+        let mut sink = sink_of(1);
         let at = || Location::element("vertex", 0);
         assert!(matches!(
             sink.vertex([0.0, f64::NAN, 0.0], at),
