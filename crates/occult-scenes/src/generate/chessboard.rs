@@ -23,7 +23,8 @@
 //! `n = 10^7` (2·10^14 triangles) builds in milliseconds in kilobytes. As in the paper, each
 //! instancing level adds one transform per sample/triangle to renderers that descend the DAG.
 
-use super::{check_budget, check_range, scene_error, GenerateError, GeneratorInfo, ParamInfo, ParamSlot};
+use super::shapes::grid_quads;
+use super::{check_budget, check_range, scene_error, GenerateError, GeneratorInfo, ParamInfo};
 use occult_core::glam::Quat;
 use occult_core::{Affine3A, Camera, CoreError, Instance, Mesh, MeshColors, NodeId, Rgba8, Scene, SceneBuilder, Vec3};
 use std::collections::HashMap;
@@ -41,27 +42,16 @@ pub const BLACK: Rgba8 = [28, 28, 30, 255];
 /// Color of white squares.
 pub const WHITE: Rgba8 = [232, 230, 222, 255];
 
-/// Parameters of [`generate`].
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct ChessboardParams {
-    /// Squares per side, `1..=16,777,216` (default 1024: 2,097,152 triangles; 10^7: 2·10^14).
-    pub n: u32,
-}
-
-impl Default for ChessboardParams {
-    fn default() -> Self {
-        Self { n: 1024 }
+generator_params! {
+    /// Parameters of [`generate`].
+    #[derive(Clone, Debug, PartialEq, Eq)]
+    pub struct ChessboardParams {
+        /// Squares per side, `1..=16,777,216` (default 1024: 2,097,152 triangles; 10^7: 2·10^14).
+        pub n: u32 = 1024,
     }
 }
 
 impl ChessboardParams {
-    pub(crate) fn slot(&mut self, key: &str) -> ParamSlot<'_> {
-        match key {
-            "n" => ParamSlot::U32(&mut self.n),
-            _ => ParamSlot::Unknown,
-        }
-    }
-
     /// Triangle instances: `2·n²`.
     pub fn item_count(&self) -> u128 {
         2 * (self.n as u128).pow(2)
@@ -180,22 +170,10 @@ impl Board {
 
 /// One mesh of `w × h ≤ BLOCK²` squares, shared vertices, triangles row by row facing +y.
 fn leaf(w: u32, h: u32) -> Result<Mesh, CoreError> {
-    let n = w + 1;
     let positions = (0..=h)
         .flat_map(|j| (0..=w).map(move |i| Vec3::new(i as f32, 0.0, j as f32)))
         .collect();
-    let mut triangles = Vec::with_capacity(2 * (w * h) as usize);
-    let mut colors = Vec::with_capacity(2 * (w * h) as usize);
-    for j in 0..h {
-        for i in 0..w {
-            let v00 = j * n + i;
-            let (v10, v01, v11) = (v00 + 1, v00 + n, v00 + n + 1);
-            triangles.push([v00, v01, v10]);
-            triangles.push([v10, v01, v11]);
-            let color = if (i + j) % 2 == 0 { BLACK } else { WHITE };
-            colors.extend([color, color]);
-        }
-    }
+    let (triangles, colors) = grid_quads(w, h, |i, j| if (i + j) % 2 == 0 { BLACK } else { WHITE });
     Mesh::new(positions, triangles)?.with_colors(MeshColors::PerTriangle(colors))
 }
 

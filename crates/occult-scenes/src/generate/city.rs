@@ -29,9 +29,7 @@
 //! `O(blocks)` instances: milliseconds at any size.
 
 use super::shapes::{grid, quarter_turn_y, MeshBuilder, BYTES_PER_BUILT_TRIANGLE, BYTES_PER_INSTANCE};
-use super::{
-    camera_for, check_budget, check_range, mix, scene_error, GenerateError, GeneratorInfo, ParamInfo, ParamSlot,
-};
+use super::{camera_for, check_budget, check_range, mix, scene_error, GenerateError, GeneratorInfo, ParamInfo};
 use occult_core::{Affine3A, Camera, Instance, Mesh, Rgba8, Scene, SceneBuilder, Vec3};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -81,41 +79,22 @@ const ROOF: Rgba8 = [95, 95, 100, 255];
 const ASPHALT: Rgba8 = [62, 62, 66, 255];
 const PAVEMENT: Rgba8 = [165, 160, 150, 255];
 
-/// Parameters of [`generate`].
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct CityParams {
-    /// Blocks per side, `1..=10,000` (default 8).
-    pub blocks: u32,
-    /// Window cells per facade storey, `0..=64` (default 8; 0 = plain boxes).
-    pub detail: u32,
-    /// Unique building meshes, `1..=256` (default 8).
-    pub variants: u32,
-    /// Random seed of heights, footprints and placement (default 1).
-    pub seed: u64,
-}
-
-impl Default for CityParams {
-    fn default() -> Self {
-        Self {
-            blocks: 8,
-            detail: 8,
-            variants: 8,
-            seed: 1,
-        }
+generator_params! {
+    /// Parameters of [`generate`].
+    #[derive(Clone, Debug, PartialEq, Eq)]
+    pub struct CityParams {
+        /// Blocks per side, `1..=10,000` (default 8).
+        pub blocks: u32 = 8,
+        /// Window cells per facade storey, `0..=64` (default 8; 0 = plain boxes).
+        pub detail: u32 = 8,
+        /// Unique building meshes, `1..=256` (default 8).
+        pub variants: u32 = 8,
+        /// Random seed of heights, footprints and placement (default 1).
+        pub seed: u64 = 1,
     }
 }
 
 impl CityParams {
-    pub(crate) fn slot(&mut self, key: &str) -> ParamSlot<'_> {
-        match key {
-            "blocks" => ParamSlot::U32(&mut self.blocks),
-            "detail" => ParamSlot::U32(&mut self.detail),
-            "variants" => ParamSlot::U32(&mut self.variants),
-            "seed" => ParamSlot::U64(&mut self.seed),
-            _ => ParamSlot::Unknown,
-        }
-    }
-
     /// Half the side of the city: it spans `[−H, H]²`.
     pub fn half_side(&self) -> f32 {
         0.5 * self.blocks as f32 * BLOCK_PITCH

@@ -30,8 +30,8 @@
 //! terrain (the paper's replicated trees stand on a plain grid); the 1.4·10^14 total is reached
 //! with correspondingly more instances.
 
-use super::shapes::{grid, MeshBuilder, BYTES_PER_BUILT_TRIANGLE, BYTES_PER_INSTANCE};
-use super::{camera_for, check_budget, check_range, scene_error, GenerateError, GeneratorInfo, ParamInfo, ParamSlot};
+use super::shapes::{grid, grid_quads, MeshBuilder, BYTES_PER_BUILT_TRIANGLE, BYTES_PER_INSTANCE};
+use super::{camera_for, check_budget, check_range, scene_error, GenerateError, GeneratorInfo, ParamInfo};
 use occult_core::glam::Quat;
 use occult_core::{Affine3A, Camera, CoreError, Instance, Mesh, MeshColors, Rgba8, Scene, SceneBuilder, Vec3};
 use rand::{Rng, SeedableRng};
@@ -77,49 +77,26 @@ const LEAF_GREENS: [Rgba8; 6] = [
     [130, 140, 50, 255],
 ];
 
-/// Parameters of [`generate`].
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct ForestParams {
-    /// Trees per side of a patch, `1..=64` (default 4).
-    pub trees: u32,
-    /// Patches per side of a tile, `1..=64`, with `trees·patches ≤ 1024` (default 4).
-    pub patches: u32,
-    /// Tiles per side of each replication level, `1..=1,000,000` (default 1).
-    pub replicate: u32,
-    /// Nested replication levels, `1..=8` (default 1; ignored when `replicate = 1`).
-    pub levels: u32,
-    /// Unique tree meshes, `1..=64` (default 4).
-    pub variants: u32,
-    /// Random seed of terrain, trees and placement (default 1).
-    pub seed: u64,
-}
-
-impl Default for ForestParams {
-    fn default() -> Self {
-        Self {
-            trees: 4,
-            patches: 4,
-            replicate: 1,
-            levels: 1,
-            variants: 4,
-            seed: 1,
-        }
+generator_params! {
+    /// Parameters of [`generate`].
+    #[derive(Clone, Debug, PartialEq, Eq)]
+    pub struct ForestParams {
+        /// Trees per side of a patch, `1..=64` (default 4).
+        pub trees: u32 = 4,
+        /// Patches per side of a tile, `1..=64`, with `trees·patches ≤ 1024` (default 4).
+        pub patches: u32 = 4,
+        /// Tiles per side of each replication level, `1..=1,000,000` (default 1).
+        pub replicate: u32 = 1,
+        /// Nested replication levels, `1..=8` (default 1; ignored when `replicate = 1`).
+        pub levels: u32 = 1,
+        /// Unique tree meshes, `1..=64` (default 4).
+        pub variants: u32 = 4,
+        /// Random seed of terrain, trees and placement (default 1).
+        pub seed: u64 = 1,
     }
 }
 
 impl ForestParams {
-    pub(crate) fn slot(&mut self, key: &str) -> ParamSlot<'_> {
-        match key {
-            "trees" => ParamSlot::U32(&mut self.trees),
-            "patches" => ParamSlot::U32(&mut self.patches),
-            "replicate" => ParamSlot::U32(&mut self.replicate),
-            "levels" => ParamSlot::U32(&mut self.levels),
-            "variants" => ParamSlot::U32(&mut self.variants),
-            "seed" => ParamSlot::U64(&mut self.seed),
-            _ => ParamSlot::Unknown,
-        }
-    }
-
     /// The setting with ≥ 1.4·10^14 triangle instances (Wand et al.'s replicated trees).
     pub fn replicated_1e14() -> Self {
         Self {
@@ -391,24 +368,15 @@ impl Heightfield {
             .map(|(i, j)| Vec3::new(i as f32 * cell, self.sample(i, j), j as f32 * cell))
             .collect();
         let relief = (0.1 * self.side).clamp(1e-3, 40.0);
-        let mut triangles = Vec::with_capacity(2 * (g * g) as usize);
-        let mut colors = Vec::with_capacity(2 * (g * g) as usize);
-        for j in 0..g {
-            for i in 0..g {
-                let v00 = j * n + i;
-                let (v10, v01, v11) = (v00 + 1, v00 + n, v00 + n + 1);
-                triangles.push([v00, v01, v10]);
-                triangles.push([v10, v01, v11]);
-                let t = (self.sample(i, j) / relief).clamp(0.0, 1.0);
-                let c = [
-                    (70.0 + 60.0 * t) as u8,
-                    (95.0 + 20.0 * t) as u8,
-                    (45.0 + 20.0 * t) as u8,
-                    255,
-                ];
-                colors.extend([c, c]);
-            }
-        }
+        let (triangles, colors) = grid_quads(g, g, |i, j| {
+            let t = (self.sample(i, j) / relief).clamp(0.0, 1.0);
+            [
+                (70.0 + 60.0 * t) as u8,
+                (95.0 + 20.0 * t) as u8,
+                (45.0 + 20.0 * t) as u8,
+                255,
+            ]
+        });
         Mesh::new(positions, triangles)?.with_colors(MeshColors::PerTriangle(colors))
     }
 }

@@ -30,6 +30,46 @@
 //! [`Generator`] is the closed set of generators, chosen at run time by name (`city`) with
 //! `key=value` settings; [`GENERATORS`] describes them for `occult scenes`.
 
+/// Declares a generator's parameter struct from one table, each field with its doc, its name
+/// (which is also its key in a spec), its type (`u32` or `u64`) and its default; implements
+/// `Default` from those defaults and `slot`, the [`ParamSlot`] lookup by key behind
+/// [`Generator::set`] and [`Generator::param`]. The struct's own attributes pass through.
+macro_rules! generator_params {
+    (
+        $(#[$struct_meta:meta])*
+        pub struct $name:ident {
+            $(
+                $(#[$field_meta:meta])*
+                pub $field:ident: $ty:ty = $default:expr,
+            )+
+        }
+    ) => {
+        $(#[$struct_meta])*
+        pub struct $name {
+            $(
+                $(#[$field_meta])*
+                pub $field: $ty,
+            )+
+        }
+
+        impl Default for $name {
+            fn default() -> Self {
+                Self { $($field: $default,)+ }
+            }
+        }
+
+        impl $name {
+            /// Where [`super::Generator::set`] writes parameter `key`.
+            pub(crate) fn slot(&mut self, key: &str) -> super::ParamSlot<'_> {
+                match key {
+                    $(stringify!($field) => super::ParamSlot::from(&mut self.$field),)+
+                    _ => super::ParamSlot::Unknown,
+                }
+            }
+        }
+    };
+}
+
 pub mod chessboard;
 pub mod city;
 pub mod forest;
@@ -276,6 +316,18 @@ pub(crate) enum ParamSlot<'a> {
     U32(&'a mut u32),
     U64(&'a mut u64),
     Unknown,
+}
+
+impl<'a> From<&'a mut u32> for ParamSlot<'a> {
+    fn from(value: &'a mut u32) -> Self {
+        Self::U32(value)
+    }
+}
+
+impl<'a> From<&'a mut u64> for ParamSlot<'a> {
+    fn from(value: &'a mut u64) -> Self {
+        Self::U64(value)
+    }
 }
 
 /// Parses an unsigned integer written as `1000000`, `1_000_000` or `1e6`.

@@ -18,7 +18,7 @@
 //! three sphere diameters and wider than the grid. The default camera stands there.
 
 use super::shapes::{grid, MeshBuilder, BYTES_PER_BUILT_TRIANGLE, BYTES_PER_INSTANCE};
-use super::{camera_for, check_budget, check_range, scene_error, GenerateError, GeneratorInfo, ParamInfo, ParamSlot};
+use super::{camera_for, check_budget, check_range, scene_error, GenerateError, GeneratorInfo, ParamInfo};
 use occult_core::{Affine3A, Camera, Instance, Scene, SceneBuilder, Vec3};
 use rayon::prelude::*;
 
@@ -41,34 +41,19 @@ const SPHERE_COLORS: [[u8; 4]; 4] = [
 ];
 const WALL_COLOR: [u8; 4] = [170, 170, 165, 255];
 
-/// Parameters of [`generate`].
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct OccluderParams {
-    /// Spheres per side of the grid behind the wall, `1..=100,000` (default 10).
-    pub objects: u32,
-    /// Latitude bands per sphere (with twice as many meridians), `2..=4096` (default 64:
-    /// 16,128 triangles per sphere).
-    pub tessellation: u32,
-}
-
-impl Default for OccluderParams {
-    fn default() -> Self {
-        Self {
-            objects: 10,
-            tessellation: 64,
-        }
+generator_params! {
+    /// Parameters of [`generate`].
+    #[derive(Clone, Debug, PartialEq, Eq)]
+    pub struct OccluderParams {
+        /// Spheres per side of the grid behind the wall, `1..=100,000` (default 10).
+        pub objects: u32 = 10,
+        /// Latitude bands per sphere (with twice as many meridians), `2..=4096` (default 64:
+        /// 16,128 triangles per sphere).
+        pub tessellation: u32 = 64,
     }
 }
 
 impl OccluderParams {
-    pub(crate) fn slot(&mut self, key: &str) -> ParamSlot<'_> {
-        match key {
-            "objects" => ParamSlot::U32(&mut self.objects),
-            "tessellation" => ParamSlot::U32(&mut self.tessellation),
-            _ => ParamSlot::Unknown,
-        }
-    }
-
     /// Triangles of one sphere: `4·t·(t − 1)`.
     pub fn sphere_triangle_count(&self) -> u128 {
         let t = self.tessellation as u128;

@@ -29,9 +29,7 @@
 //! (≈ 40 k triangles each by default), built in parallel.
 
 use super::shapes::{grid, quarter_turn_y, MeshBuilder, BYTES_PER_BUILT_TRIANGLE, BYTES_PER_INSTANCE};
-use super::{
-    camera_for, check_budget, check_range, mix, scene_error, GenerateError, GeneratorInfo, ParamInfo, ParamSlot,
-};
+use super::{camera_for, check_budget, check_range, mix, scene_error, GenerateError, GeneratorInfo, ParamInfo};
 use occult_core::{Affine3A, Camera, CoreError, Instance, Mesh, Rgba8, Scene, SceneBuilder, Vec3};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -76,49 +74,26 @@ const PIPE_COLORS: [Rgba8; 6] = [
     [220, 120, 40, 255],
 ];
 
-/// Parameters of [`generate`].
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct PlantParams {
-    /// Units per side of the hall, `1..=10,000` (default 4).
-    pub units: u32,
-    /// Storeys, `1..=50` (default 3).
-    pub floors: u32,
-    /// Pipe runs per unit storey, `0..=2000` (default 40).
-    pub pipes: u32,
-    /// Sides of a pipe's cross-section, `3..=256` (default 16).
-    pub sides: u32,
-    /// Unit variants, `1..=64` (default 3).
-    pub variants: u32,
-    /// Random seed of pipes, tanks and placement (default 1).
-    pub seed: u64,
-}
-
-impl Default for PlantParams {
-    fn default() -> Self {
-        Self {
-            units: 4,
-            floors: 3,
-            pipes: 40,
-            sides: 16,
-            variants: 3,
-            seed: 1,
-        }
+generator_params! {
+    /// Parameters of [`generate`].
+    #[derive(Clone, Debug, PartialEq, Eq)]
+    pub struct PlantParams {
+        /// Units per side of the hall, `1..=10,000` (default 4).
+        pub units: u32 = 4,
+        /// Storeys, `1..=50` (default 3).
+        pub floors: u32 = 3,
+        /// Pipe runs per unit storey, `0..=2000` (default 40).
+        pub pipes: u32 = 40,
+        /// Sides of a pipe's cross-section, `3..=256` (default 16).
+        pub sides: u32 = 16,
+        /// Unit variants, `1..=64` (default 3).
+        pub variants: u32 = 3,
+        /// Random seed of pipes, tanks and placement (default 1).
+        pub seed: u64 = 1,
     }
 }
 
 impl PlantParams {
-    pub(crate) fn slot(&mut self, key: &str) -> ParamSlot<'_> {
-        match key {
-            "units" => ParamSlot::U32(&mut self.units),
-            "floors" => ParamSlot::U32(&mut self.floors),
-            "pipes" => ParamSlot::U32(&mut self.pipes),
-            "sides" => ParamSlot::U32(&mut self.sides),
-            "variants" => ParamSlot::U32(&mut self.variants),
-            "seed" => ParamSlot::U64(&mut self.seed),
-            _ => ParamSlot::Unknown,
-        }
-    }
-
     /// Half the side of the hall (units only, walls excluded).
     pub fn half_side(&self) -> f32 {
         0.5 * self.units as f32 * UNIT_SIZE

@@ -221,6 +221,27 @@ impl MeshBuilder {
     }
 }
 
+/// Triangles and per-triangle colors of a `w × h` grid of quads whose `(w + 1) × (h + 1)` vertices
+/// are stored row by row (vertex `(i, j)` at index `j·(w + 1) + i`, rows along +z, columns along
+/// +x). Quads come row by row, each as `[v00, v01, v10]`, `[v10, v01, v11]` (counter-clockwise
+/// seen from +y), both triangles colored `color(i, j)`. The vertex count must fit `u32`.
+pub(crate) fn grid_quads(w: u32, h: u32, mut color: impl FnMut(u32, u32) -> Rgba8) -> (Vec<[u32; 3]>, Vec<Rgba8>) {
+    let n = w + 1;
+    let mut triangles = Vec::with_capacity(2 * (w * h) as usize);
+    let mut colors = Vec::with_capacity(2 * (w * h) as usize);
+    for j in 0..h {
+        for i in 0..w {
+            let v00 = j * n + i;
+            let (v10, v01, v11) = (v00 + 1, v00 + n, v00 + n + 1);
+            triangles.push([v00, v01, v10]);
+            triangles.push([v10, v01, v11]);
+            let c = color(i, j);
+            colors.extend([c, c]);
+        }
+    }
+    (triangles, colors)
+}
+
 /// Rotation about +y by `quarter_turns · 90°`, built exactly (no rounding of cos/sin), so that
 /// rotated footprints stay axis-aligned to the bit.
 pub(crate) fn quarter_turn_y(quarter_turns: u32) -> Mat3 {

@@ -23,7 +23,7 @@
 //! second on 2 cores. Memory ≈ 12·(g+1)² + 16·2g² bytes.
 
 use super::shapes::{grid, BYTES_PER_INSTANCE};
-use super::{check_budget, check_range, scene_error, GenerateError, GeneratorInfo, ParamInfo, ParamSlot};
+use super::{check_budget, check_range, scene_error, GenerateError, GeneratorInfo, ParamInfo};
 use occult_core::{Camera, Mesh, MeshColors, Rgba8, Scene, SceneBuilder, Vec3};
 use rayon::prelude::*;
 
@@ -36,30 +36,18 @@ pub const MAX_G: u32 = 65_534;
 /// Largest `tiles` (tiles per side): a 2000 km field; beyond, `f32` positions lose centimetres.
 pub const MAX_TILES: u32 = 10_000;
 
-/// Parameters of [`generate`].
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct TerrainParams {
-    /// Quads per side of the heightfield, `1..=65534` (default 724: 1,048,352 triangles).
-    pub g: u32,
-    /// Copies of the heightfield per side, `1..=10,000` (default 1).
-    pub tiles: u32,
-}
-
-impl Default for TerrainParams {
-    fn default() -> Self {
-        Self { g: 724, tiles: 1 }
+generator_params! {
+    /// Parameters of [`generate`].
+    #[derive(Clone, Debug, PartialEq, Eq)]
+    pub struct TerrainParams {
+        /// Quads per side of the heightfield, `1..=65534` (default 724: 1,048,352 triangles).
+        pub g: u32 = 724,
+        /// Copies of the heightfield per side, `1..=10,000` (default 1).
+        pub tiles: u32 = 1,
     }
 }
 
 impl TerrainParams {
-    pub(crate) fn slot(&mut self, key: &str) -> ParamSlot<'_> {
-        match key {
-            "g" => ParamSlot::U32(&mut self.g),
-            "tiles" => ParamSlot::U32(&mut self.tiles),
-            _ => ParamSlot::Unknown,
-        }
-    }
-
     /// Triangle instances the scene will hold: `2·g²·tiles²`.
     pub fn item_count(&self) -> u128 {
         2 * (self.g as u128).pow(2) * (self.tiles as u128).pow(2)

@@ -442,6 +442,14 @@ fn scene_of_meshes(path: &Path, root_name: &str, meshes: Vec<(String, Mesh)>) ->
     builder.build(root).map_err(core(root_name))
 }
 
+/// Adds the warning `"{path}: {count} {what}"` to `warnings` when `count` is not zero (`what`
+/// says what was passed over: "faces with fewer than 3 corners skipped").
+fn warn_count(warnings: &mut Vec<String>, path: &Path, count: u64, what: &str) {
+    if count > 0 {
+        warnings.push(format!("{}: {count} {what}", path.display()));
+    }
+}
+
 /// The file stem as a node name.
 fn file_stem(path: &Path) -> String {
     path.file_stem()

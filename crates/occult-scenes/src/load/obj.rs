@@ -27,7 +27,7 @@ use std::path::{Path, PathBuf};
 
 use occult_core::{MeshColors, Rgba8, Vec3};
 
-use super::{compact_mesh, fan_triangulate, file_stem, read_bytes, scene_of_meshes, unit_to_u8};
+use super::{compact_mesh, fan_triangulate, file_stem, read_bytes, scene_of_meshes, unit_to_u8, warn_count};
 use super::{LoadError, LoadedScene, Location};
 
 /// Textures named in a warning before "and N more".
@@ -120,14 +120,9 @@ impl<'p> ObjReader<'p> {
     }
 
     fn parse(&mut self, data: &[u8]) -> Result<(), LoadError> {
-        for (line_index, raw_line) in data.split(|&b| b == b'\n').enumerate() {
+        for (line_index, line) in statement_lines(data) {
             let line_number = line_index as u64 + 1;
-            let line = match raw_line.iter().position(|&b| b == b'#') {
-                Some(comment_start) => &raw_line[..comment_start],
-                None => raw_line,
-            };
-            let line = line.trim_ascii();
-            let mut tokens = line.split(|b| b.is_ascii_whitespace()).filter(|t| !t.is_empty());
+            let mut tokens = tokens_of(line);
             let Some(keyword) = tokens.next() else { continue };
             // What follows the keyword, for statements that take a name.
             let rest = || String::from_utf8_lossy(line[keyword.len()..].trim_ascii()).into_owned();
@@ -279,13 +274,12 @@ impl<'p> ObjReader<'p> {
         }
 
         let mut warnings = Vec::new();
-        if self.ignored_point_and_line_count > 0 {
-            warnings.push(format!(
-                "{}: {} point and line statements ignored",
-                path.display(),
-                self.ignored_point_and_line_count
-            ));
-        }
+        warn_count(
+            &mut warnings,
+            path,
+            self.ignored_point_and_line_count,
+            "point and line statements ignored",
+        );
         let colors = self.material_colors(&mut warnings);
 
         let mut chunks_per_object = vec![0usize; self.object_names.len()];
@@ -389,13 +383,8 @@ fn parse_mtl(mtl_path: &Path, data: &[u8], library: &mut HashMap<String, Option<
     let folder = mtl_path.parent().unwrap_or(Path::new(""));
     let mut current: Option<String> = None;
     let mut missing_textures: Vec<String> = Vec::new();
-    for (line_index, raw_line) in data.split(|&b| b == b'\n').enumerate() {
-        let line = match raw_line.iter().position(|&b| b == b'#') {
-            Some(comment_start) => &raw_line[..comment_start],
-            None => raw_line,
-        };
-        let line = line.trim_ascii();
-        let mut tokens = line.split(|b| b.is_ascii_whitespace()).filter(|t| !t.is_empty());
+    for (line_index, line) in statement_lines(data) {
+        let mut tokens = tokens_of(line);
         let Some(keyword) = tokens.next() else { continue };
         match keyword {
             b"newmtl" => {
@@ -450,6 +439,23 @@ fn parse_mtl(mtl_path: &Path, data: &[u8], library: &mut HashMap<String, Option<
             list_names(&names)
         ));
     }
+}
+
+/// The lines of an OBJ or MTL file with their 0-based indices, each cut at its `#` comment and
+/// trimmed of ASCII white space (an empty slice for a blank or comment-only line).
+fn statement_lines(data: &[u8]) -> impl Iterator<Item = (usize, &[u8])> {
+    data.split(|&b| b == b'\n').enumerate().map(|(line_index, raw_line)| {
+        let line = match raw_line.iter().position(|&b| b == b'#') {
+            Some(comment_start) => &raw_line[..comment_start],
+            None => raw_line,
+        };
+        (line_index, line.trim_ascii())
+    })
+}
+
+/// The white-space separated tokens of a statement line: the keyword first.
+fn tokens_of(line: &[u8]) -> impl DoubleEndedIterator<Item = &[u8]> {
+    line.split(|b| b.is_ascii_whitespace()).filter(|t| !t.is_empty())
 }
 
 fn is_texture_statement(keyword: &[u8]) -> bool {

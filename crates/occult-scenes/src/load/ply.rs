@@ -26,7 +26,7 @@ use occult_core::Vec3;
 use ply_rs_bw::parser::{ParseError, Parser, Reader};
 use ply_rs_bw::ply::{ElementDef, Encoding, Header, PropertyAccess, PropertyAccessResult, PropertyType, ScalarType};
 
-use super::{fan_triangulate, file_stem, read_bytes, scene_of_meshes, LoadError, LoadedScene, Location};
+use super::{fan_triangulate, file_stem, read_bytes, scene_of_meshes, warn_count, LoadError, LoadedScene, Location};
 
 /// Names of the vertex index list, in order of preference.
 const INDEX_LIST_NAMES: [&str; 2] = ["vertex_indices", "vertex_index"];
@@ -76,13 +76,12 @@ pub(super) fn ply_from_bytes(path: &Path, data: &[u8]) -> Result<LoadedScene, Lo
     }
 
     let mut warnings = Vec::new();
-    if sink.short_face_count > 0 {
-        warnings.push(format!(
-            "{}: {} faces with fewer than 3 corners skipped",
-            path.display(),
-            sink.short_face_count
-        ));
-    }
+    warn_count(
+        &mut warnings,
+        path,
+        sink.short_face_count,
+        "faces with fewer than 3 corners skipped",
+    );
     let name = file_stem(path);
     let mesh = occult_core::Mesh::new(sink.positions, sink.triangles).map_err(|source| LoadError::Core {
         path: path.to_path_buf(),
@@ -383,51 +382,35 @@ impl PlyRecord {
     }
 }
 
+/// `PropertyAccess` setters for the stored PLY types: scalars widen to `f64` for
+/// [`PlyRecord::scalar`], integer lists go to [`PlyRecord::list`].
+macro_rules! forward_setters {
+    (scalars: $($scalar:ident($scalar_ty:ty)),+; lists: $($list:ident($list_ty:ty)),+;) => {
+        $(
+            fn $scalar(&mut self, name: &str, value: $scalar_ty) -> PropertyAccessResult {
+                self.scalar(name, value.into())
+            }
+        )+
+        $(
+            fn $list(&mut self, name: &str, value: Vec<$list_ty>) -> PropertyAccessResult {
+                self.list(name, value)
+            }
+        )+
+    };
+}
+
 impl PropertyAccess for PlyRecord {
     fn new() -> Self {
         Self::default()
     }
-    fn set_char(&mut self, name: &str, value: i8) -> PropertyAccessResult {
-        self.scalar(name, value.into())
-    }
-    fn set_uchar(&mut self, name: &str, value: u8) -> PropertyAccessResult {
-        self.scalar(name, value.into())
-    }
-    fn set_short(&mut self, name: &str, value: i16) -> PropertyAccessResult {
-        self.scalar(name, value.into())
-    }
-    fn set_ushort(&mut self, name: &str, value: u16) -> PropertyAccessResult {
-        self.scalar(name, value.into())
-    }
-    fn set_int(&mut self, name: &str, value: i32) -> PropertyAccessResult {
-        self.scalar(name, value.into())
-    }
-    fn set_uint(&mut self, name: &str, value: u32) -> PropertyAccessResult {
-        self.scalar(name, value.into())
-    }
-    fn set_float(&mut self, name: &str, value: f32) -> PropertyAccessResult {
-        self.scalar(name, value.into())
+    forward_setters! {
+        scalars: set_char(i8), set_uchar(u8), set_short(i16), set_ushort(u16), set_int(i32), set_uint(u32),
+            set_float(f32);
+        lists: set_list_char(i8), set_list_uchar(u8), set_list_short(i16), set_list_ushort(u16), set_list_int(i32),
+            set_list_uint(u32);
     }
     fn set_double(&mut self, name: &str, value: f64) -> PropertyAccessResult {
         self.scalar(name, value)
-    }
-    fn set_list_char(&mut self, name: &str, value: Vec<i8>) -> PropertyAccessResult {
-        self.list(name, value)
-    }
-    fn set_list_uchar(&mut self, name: &str, value: Vec<u8>) -> PropertyAccessResult {
-        self.list(name, value)
-    }
-    fn set_list_short(&mut self, name: &str, value: Vec<i16>) -> PropertyAccessResult {
-        self.list(name, value)
-    }
-    fn set_list_ushort(&mut self, name: &str, value: Vec<u16>) -> PropertyAccessResult {
-        self.list(name, value)
-    }
-    fn set_list_int(&mut self, name: &str, value: Vec<i32>) -> PropertyAccessResult {
-        self.list(name, value)
-    }
-    fn set_list_uint(&mut self, name: &str, value: Vec<u32>) -> PropertyAccessResult {
-        self.list(name, value)
     }
     // Float lists are ignored: `Layout::of` refused float index lists already.
 }
@@ -825,13 +808,18 @@ mod tests {
         ));
     }
 
-    #[test]
-    fn strips_restart_flip_and_drop_degenerates() {
+    /// A sink for `t.ply` with `vertex_count` vertices and no face element.
+    fn sink_of(vertex_count: usize) -> MeshSink<'static> {
         let layout = Layout {
-            vertex_count: 5,
+            vertex_count,
             polygons: None,
         };
-        let mut sink = MeshSink::new(Path::new("t.ply"), &layout);
+        MeshSink::new(Path::new("t.ply"), &layout)
+    }
+
+    #[test]
+    fn strips_restart_flip_and_drop_degenerates() {
+        let mut sink = sink_of(5);
         sink.strips(&[0, 1, 2, 3, -1, 4, 4, 1, 2], || Location::File).unwrap();
         // The second strip starts with a swap (4 4 1, dropped), so 4 1 2 is odd: flipped.
         assert_eq!(sink.triangles, vec![[0, 1, 2], [2, 1, 3], [1, 4, 2]]);
@@ -847,11 +835,7 @@ mod tests {
 
     #[test]
     fn faces_of_fewer_than_three_corners_are_counted_not_drawn() {
-        let layout = Layout {
-            vertex_count: 3,
-            polygons: None,
-        };
-        let mut sink = MeshSink::new(Path::new("t.ply"), &layout);
+        let mut sink = sink_of(3);
         sink.face(&[0, 1], || Location::File).unwrap();
         sink.face(&[], || Location::File).unwrap();
         assert!(sink.triangles.is_empty());
@@ -860,11 +844,7 @@ mod tests {
 
     #[test]
     fn non_finite_and_overflowing_coordinates_are_errors() {
-        let layout = Layout {
-            vertex_count: 1,
-            polygons: None,
-        };
-        let mut sink = MeshSink::new(Path::new("t.ply"), &layout);
+        let mut sink = sink_of(1);
         let at = || Location::element("vertex", 0);
         assert!(matches!(
             sink.vertex([0.0, f64::NAN, 0.0], at),

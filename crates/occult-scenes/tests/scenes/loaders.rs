@@ -51,6 +51,18 @@ fn load_err(path: &Path) -> LoadError {
     }
 }
 
+/// Asserts that `e` is an index out of range naming `index` (as written in the file) and the
+/// `vertex_count` it may refer to.
+fn assert_index_out_of_range(e: &LoadError, index: i64, vertex_count: u64) {
+    assert!(
+        matches!(
+            e,
+            LoadError::IndexOutOfRange { index: i, vertex_count: n, .. } if *i == index && *n == vertex_count
+        ),
+        "{e}"
+    );
+}
+
 /// All triangles of a scene in world space, in item order.
 fn world_triangles(scene: &Scene) -> Vec<[Vec3; 3]> {
     let flat = scene.flatten(MAX_FLATTEN_TRIANGLES).expect("flatten");
@@ -312,7 +324,9 @@ fn ply_binary(big_endian: bool, index_list: &str) -> Vec<u8> {
     bytes
 }
 
-fn check_ply_binary_scene(loaded: &LoadedScene) {
+/// Writes [`ply_binary`]`(big_endian, index_list)` as `dir/name`, loads it and checks the scene.
+fn check_ply_binary(dir: &Path, name: &str, big_endian: bool, index_list: &str) {
+    let loaded = load_ok(&write(dir, name, ply_binary(big_endian, index_list)));
     let scene = &loaded.scene;
     assert_eq!(scene.item_count(), 4);
     assert!(loaded.warnings.is_empty(), "{:?}", loaded.warnings);
@@ -326,30 +340,15 @@ fn check_ply_binary_scene(loaded: &LoadedScene) {
 #[test]
 fn ply_binary_little_endian_with_extra_properties() {
     let dir = scratch("ply_binary_little_endian_with_extra_properties");
-    let loaded = load_ok(&write(
-        &dir,
-        "le.ply",
-        ply_binary(false, "list uchar int vertex_indices"),
-    ));
-    check_ply_binary_scene(&loaded);
+    check_ply_binary(&dir, "le.ply", false, "list uchar int vertex_indices");
 }
 
 #[test]
 fn ply_binary_big_endian_with_extra_properties() {
     let dir = scratch("ply_binary_big_endian_with_extra_properties");
-    let loaded = load_ok(&write(
-        &dir,
-        "be.ply",
-        ply_binary(true, "list uchar uint vertex_indices"),
-    ));
-    check_ply_binary_scene(&loaded);
+    check_ply_binary(&dir, "be.ply", true, "list uchar uint vertex_indices");
     // Other index widths and the `vertex_index` spelling.
-    let loaded = load_ok(&write(
-        &dir,
-        "be16.ply",
-        ply_binary(true, "list uint8 ushort vertex_index"),
-    ));
-    check_ply_binary_scene(&loaded);
+    check_ply_binary(&dir, "be16.ply", true, "list uint8 ushort vertex_index");
 }
 
 #[test]
@@ -581,17 +580,7 @@ fn obj_bad_input_names_file_and_line() {
     let case = |name: &str, text: &str| load_err(&write(&dir, name, text));
 
     let e = case("range.obj", &format!("{tri}f 1 2 3\nf 1 2 900\n"));
-    assert!(
-        matches!(
-            e,
-            LoadError::IndexOutOfRange {
-                index: 900,
-                vertex_count: 3,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert_index_out_of_range(&e, 900, 3);
     assert!(e.to_string().contains("range.obj line 5"), "{e}");
     assert!(matches!(
         case("zero.obj", &format!("{tri}f 0 1 2\n")),
@@ -708,17 +697,7 @@ fn ply_bad_input_names_file_and_element() {
 
     // Indices and coordinates.
     let e = ascii("range.ply", "3", "1", &format!("{verts}3 0 1 900\n"));
-    assert!(
-        matches!(
-            e,
-            LoadError::IndexOutOfRange {
-                index: 900,
-                vertex_count: 3,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert_index_out_of_range(&e, 900, 3);
     assert!(e.to_string().contains("face 0"), "{e}");
     assert!(matches!(
         ascii("negative.ply", "3", "1", &format!("{verts}3 0 -1 2\n")),
@@ -907,17 +886,7 @@ fn gltf_bad_input_names_file_and_part() {
     let mut bad_index = quad_buffer();
     bad_index[48 + 10..48 + 12].copy_from_slice(&9u16.to_le_bytes());
     let e = case("range.glb", &glb(&quad_gltf(r#"{"byteLength": 60}"#), &bad_index));
-    assert!(
-        matches!(
-            e,
-            LoadError::IndexOutOfRange {
-                index: 9,
-                vertex_count: 4,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert_index_out_of_range(&e, 9, 4);
     let mut nan = quad_buffer();
     nan[16..20].copy_from_slice(&f32::NAN.to_le_bytes());
     let e = case("nan.glb", &glb(&quad_gltf(r#"{"byteLength": 60}"#), &nan));
