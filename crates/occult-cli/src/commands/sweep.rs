@@ -138,13 +138,8 @@ pub fn run(a: SweepArgs) -> Result<()> {
         }
     }
     say_raw!(
-        "\nscene {}: {} triangles; path {}: {} frames at {}x{}; varying {vary_text}\n\n{}",
-        summary.label(),
-        output::count(summary.triangles as f64),
-        a.frames.path,
-        cameras.len(),
-        a.frames.size.width,
-        a.frames.size.height,
+        "\n{}; varying {vary_text}\n\n{}",
+        summary.walk_line(&a.frames, cameras.len()),
         output::table(&header, &rows)
     );
 

@@ -111,15 +111,7 @@ pub fn run(a: WalkArgs) -> Result<()> {
     let n = frames.len() as f64;
     let mean = |f: fn(&WalkFrame) -> u64| frames.iter().map(|x| f(x) as f64).sum::<f64>() / n;
     let summary = scene.summary();
-    say!(
-        "scene {}: {} triangles; path {}: {} frames at {}x{}",
-        summary.label(),
-        output::count(summary.triangles as f64),
-        a.frames.path,
-        frames.len(),
-        a.frames.size.width,
-        a.frames.size.height
-    );
+    say!("{}", summary.walk_line(&a.frames, frames.len()));
     say!(
         "{}: mean {} ms, p95 {} ms, min {} ms, max {} ms; prepared in {} ms, {} of its own structures",
         a.algo.label(),
