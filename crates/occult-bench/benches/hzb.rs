@@ -7,11 +7,8 @@ mod common;
 use criterion::{criterion_group, criterion_main, Criterion};
 
 fn path_bench(c: &mut Criterion, scene_spec: &str, path: &str, specs: &[&str]) {
-    let (scene, views) = occult_bench::path_views(scene_spec, path, 640, 480);
-    let mut group = c.benchmark_group(format!("hzb_{scene_spec}_{path}_640x480").replace([':', ','], "_"));
-    group.sample_size(10);
-    common::bench_specs(&mut group, &scene, &views, specs);
-    group.finish();
+    let group = format!("hzb_{scene_spec}_{path}_640x480").replace([':', ','], "_");
+    common::bench_path(c, group, scene_spec, path, (640, 480), specs);
 }
 
 fn city(c: &mut Criterion) {

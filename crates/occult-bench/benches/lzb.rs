@@ -46,11 +46,14 @@ fn terrain_rays(c: &mut Criterion) {
 }
 
 fn city_circle(c: &mut Criterion) {
-    let (scene, views) = occult_bench::path_views("city", "circle:8", 512, 512);
-    let mut group = c.benchmark_group("city_circle8_512x512");
-    group.sample_size(10);
-    common::bench_specs(&mut group, &scene, &views, &["zbuffer", "lzb"]);
-    group.finish();
+    common::bench_path(
+        c,
+        "city_circle8_512x512".into(),
+        "city",
+        "circle:8",
+        (512, 512),
+        &["zbuffer", "lzb"],
+    );
 }
 
 criterion_group!(benches, terrain_rays, city_circle);

@@ -14,7 +14,8 @@
 //! unclamped and clamped volumes of `terrain` and `city:detail=1` from their default views
 //! at 640×480, with the stencil fragments (the fill rate) printed beside.
 
-use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use criterion::measurement::WallTime;
+use criterion::{criterion_group, criterion_main, BenchmarkGroup, Criterion, Throughput};
 use occult_raster::{Extremum, NBuffer, PixelRect, RasterConfig, Rasterizer};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -40,9 +41,14 @@ fn depth_map(w: u32, h: u32) -> Vec<f32> {
     d
 }
 
-fn build(c: &mut Criterion) {
-    let mut group = c.benchmark_group("nbuffer_build");
-    group.sample_size(30);
+/// The build cases of `nbuffer_build` and `nbuffer_best`: every resolution of the paper's
+/// Table 1 on 1 and 2 threads, the default level count. Sets `group`'s throughput to the
+/// case's pixels, then calls `bench` with the group, the case's name
+/// (`WxH/levels=L/threads=T`) and one rebuild of the case's N-buffer.
+fn for_each_build_case(
+    group: &mut BenchmarkGroup<'_, WallTime>,
+    mut bench: impl FnMut(&mut BenchmarkGroup<'_, WallTime>, String, &mut dyn FnMut()),
+) {
     for (w, h) in [(256u32, 256u32), (512, 512), (640, 480), (1024, 1024)] {
         let depth = depth_map(w, h);
         let levels = NBuffer::default_level_count(w, h);
@@ -54,11 +60,35 @@ fn build(c: &mut Criterion) {
             .expect("valid config");
             let mut nb = NBuffer::new(Extremum::Min, &depth, w, h).expect("valid size");
             group.throughput(Throughput::Elements(u64::from(w * h)));
-            group.bench_function(format!("{w}x{h}/levels={levels}/threads={threads}"), |b| {
-                b.iter(|| raster.install(|| nb.rebuild(&depth, w, h, levels).expect("valid size")))
+            bench(group, format!("{w}x{h}/levels={levels}/threads={threads}"), &mut || {
+                raster.install(|| nb.rebuild(&depth, w, h, levels).expect("valid size"))
             });
         }
     }
+}
+
+/// The query workloads of `nbuffer_query` and `nbuffer_best`, one at a time: an N-buffer of
+/// two resolutions, each with random and coherent rectangles (see [`rects`]). Calls `bench`
+/// with the workload's name (`WxH/random` or `WxH/coherent`), the N-buffer and the
+/// rectangles with their nearest depths.
+fn for_each_query_workload(mut bench: impl FnMut(String, &NBuffer, &[(PixelRect, f32)])) {
+    for (w, h) in [(640u32, 480u32), (1024, 1024)] {
+        let depth = depth_map(w, h);
+        let nb = NBuffer::new(Extremum::Min, &depth, w, h).expect("valid size");
+        for coherent in [false, true] {
+            let rs = rects(w, h, coherent);
+            let kind = if coherent { "coherent" } else { "random" };
+            bench(format!("{w}x{h}/{kind}"), &nb, &rs);
+        }
+    }
+}
+
+fn build(c: &mut Criterion) {
+    let mut group = c.benchmark_group("nbuffer_build");
+    group.sample_size(30);
+    for_each_build_case(&mut group, |group, name, rebuild| {
+        group.bench_function(name, |b| b.iter(&mut *rebuild));
+    });
     group.finish();
 }
 
@@ -89,43 +119,37 @@ fn rects(w: u32, h: u32, coherent: bool) -> Vec<(PixelRect, f32)> {
 fn queries(c: &mut Criterion) {
     let mut group = c.benchmark_group("nbuffer_query");
     group.sample_size(20);
-    for (w, h) in [(640u32, 480u32), (1024, 1024)] {
-        let depth = depth_map(w, h);
-        let nb = NBuffer::new(Extremum::Min, &depth, w, h).expect("valid size");
-        for coherent in [false, true] {
-            let rs = rects(w, h, coherent);
-            let kind = if coherent { "coherent" } else { "random" };
-            group.throughput(Throughput::Elements(rs.len() as u64));
-            group.bench_function(format!("{w}x{h}/{kind}/query_four"), |b| {
-                b.iter(|| {
-                    rs.iter()
-                        .map(|&(r, _)| nb.query_four(r).depth)
-                        .fold(0.0f32, |a, d| a + d)
-                })
-            });
-            group.bench_function(format!("{w}x{h}/{kind}/query_one"), |b| {
-                b.iter(|| {
-                    rs.iter()
-                        .map(|&(r, _)| nb.query_one(r).depth)
-                        .fold(0.0f32, |a, d| a + d)
-                })
-            });
-            group.bench_function(format!("{w}x{h}/{kind}/occludes"), |b| {
-                b.iter(|| rs.iter().map(|&(r, z)| usize::from(nb.occludes(r, z).0)).sum::<usize>())
-            });
-            // The same rectangles through the batched API (same answers, lookups overlapped).
-            let rects: Vec<PixelRect> = rs.iter().map(|p| p.0).collect();
-            let nearest: Vec<f32> = rs.iter().map(|p| p.1).collect();
-            let mut out = vec![0.0f32; rs.len()];
-            let mut hidden = vec![false; rs.len()];
-            group.bench_function(format!("{w}x{h}/{kind}/query_four_batch"), |b| {
-                b.iter(|| nb.query_four_batch(&rects, &mut out).expect("equal lengths"))
-            });
-            group.bench_function(format!("{w}x{h}/{kind}/occludes_batch"), |b| {
-                b.iter(|| nb.occludes_batch(&rects, &nearest, &mut hidden).expect("equal lengths"))
-            });
-        }
-    }
+    for_each_query_workload(|workload, nb, rs| {
+        group.throughput(Throughput::Elements(rs.len() as u64));
+        group.bench_function(format!("{workload}/query_four"), |b| {
+            b.iter(|| {
+                rs.iter()
+                    .map(|&(r, _)| nb.query_four(r).depth)
+                    .fold(0.0f32, |a, d| a + d)
+            })
+        });
+        group.bench_function(format!("{workload}/query_one"), |b| {
+            b.iter(|| {
+                rs.iter()
+                    .map(|&(r, _)| nb.query_one(r).depth)
+                    .fold(0.0f32, |a, d| a + d)
+            })
+        });
+        group.bench_function(format!("{workload}/occludes"), |b| {
+            b.iter(|| rs.iter().map(|&(r, z)| usize::from(nb.occludes(r, z).0)).sum::<usize>())
+        });
+        // The same rectangles through the batched API (same answers, lookups overlapped).
+        let rects: Vec<PixelRect> = rs.iter().map(|p| p.0).collect();
+        let nearest: Vec<f32> = rs.iter().map(|p| p.1).collect();
+        let mut out = vec![0.0f32; rs.len()];
+        let mut hidden = vec![false; rs.len()];
+        group.bench_function(format!("{workload}/query_four_batch"), |b| {
+            b.iter(|| nb.query_four_batch(&rects, &mut out).expect("equal lengths"))
+        });
+        group.bench_function(format!("{workload}/occludes_batch"), |b| {
+            b.iter(|| nb.occludes_batch(&rects, &nearest, &mut hidden).expect("equal lengths"))
+        });
+    });
     group.finish();
 }
 
@@ -155,68 +179,51 @@ fn best_of_chunks<T>(items: &[T], passes: usize, mut work: impl FnMut(&[T]) -> u
 fn best(c: &mut Criterion) {
     let mut group = c.benchmark_group("nbuffer_best");
     group.sample_size(10);
-    for (w, h) in [(256u32, 256u32), (512, 512), (640, 480), (1024, 1024)] {
-        let depth = depth_map(w, h);
-        let levels = NBuffer::default_level_count(w, h);
-        for threads in [1, 2] {
-            let raster = Rasterizer::new(RasterConfig {
-                threads,
-                ..RasterConfig::default()
+    for_each_build_case(&mut group, |group, name, rebuild| {
+        group.bench_function(format!("build/{name}"), |b| {
+            b.iter_custom(|iters| {
+                let mut fastest = std::time::Duration::MAX;
+                for _ in 0..20 {
+                    let t = std::time::Instant::now();
+                    rebuild();
+                    fastest = fastest.min(t.elapsed());
+                }
+                fastest.mul_f64(iters as f64)
             })
-            .expect("valid config");
-            let mut nb = NBuffer::new(Extremum::Min, &depth, w, h).expect("valid size");
-            group.throughput(Throughput::Elements(u64::from(w * h)));
-            group.bench_function(format!("build/{w}x{h}/levels={levels}/threads={threads}"), |b| {
-                b.iter_custom(|iters| {
-                    let mut fastest = std::time::Duration::MAX;
-                    for _ in 0..20 {
-                        let t = std::time::Instant::now();
-                        raster.install(|| nb.rebuild(&depth, w, h, levels).expect("valid size"));
-                        fastest = fastest.min(t.elapsed());
-                    }
-                    fastest.mul_f64(iters as f64)
-                })
+        });
+    });
+    for_each_query_workload(|workload, nb, rs| {
+        let rects: Vec<PixelRect> = rs.iter().map(|p| p.0).collect();
+        let nearest: Vec<f32> = rs.iter().map(|p| p.1).collect();
+        let index: Vec<usize> = (0..rs.len()).collect();
+        let mut out = vec![0.0f32; rs.len()];
+        let mut hidden = vec![false; rs.len()];
+        group.throughput(Throughput::Elements(rs.len() as u64));
+        let mut run = |name: &str, work: &mut dyn FnMut(&[usize]) -> u64| {
+            group.bench_function(format!("query/{workload}/{name}"), |b| {
+                b.iter_custom(|iters| best_of_chunks(&index, 3, &mut *work).mul_f64(iters as f64))
             });
-        }
-    }
-    for (w, h) in [(640u32, 480u32), (1024, 1024)] {
-        let depth = depth_map(w, h);
-        let nb = NBuffer::new(Extremum::Min, &depth, w, h).expect("valid size");
-        for coherent in [false, true] {
-            let rs = rects(w, h, coherent);
-            let kind = if coherent { "coherent" } else { "random" };
-            let rects: Vec<PixelRect> = rs.iter().map(|p| p.0).collect();
-            let nearest: Vec<f32> = rs.iter().map(|p| p.1).collect();
-            let index: Vec<usize> = (0..rs.len()).collect();
-            let mut out = vec![0.0f32; rs.len()];
-            let mut hidden = vec![false; rs.len()];
-            group.throughput(Throughput::Elements(rs.len() as u64));
-            let mut run = |name: &str, work: &mut dyn FnMut(&[usize]) -> u64| {
-                group.bench_function(format!("query/{w}x{h}/{kind}/{name}"), |b| {
-                    b.iter_custom(|iters| best_of_chunks(&index, 3, &mut *work).mul_f64(iters as f64))
-                });
-            };
-            run("query_four", &mut |c| {
-                c.iter().map(|&i| nb.query_four(rs[i].0).depth.to_bits() as u64).sum()
-            });
-            run("query_one", &mut |c| {
-                c.iter().map(|&i| nb.query_one(rs[i].0).depth.to_bits() as u64).sum()
-            });
-            run("occludes", &mut |c| {
-                c.iter().map(|&i| u64::from(nb.occludes(rs[i].0, rs[i].1).0)).sum()
-            });
-            run("query_four_batch", &mut |c| {
-                let r = c[0]..c[0] + c.len();
-                nb.query_four_batch(&rects[r.clone()], &mut out[r])
-                    .expect("equal lengths")
-            });
-            run("occludes_batch", &mut |c| {
-                let r = c[0]..c[0] + c.len();
-                nb.occludes_batch(&rects[r.clone()], &nearest[r.clone()], &mut hidden[r])
-                    .expect("equal lengths")
-            });
-        }
-    }
+        };
+        run("query_four", &mut |c| {
+            c.iter().map(|&i| nb.query_four(rs[i].0).depth.to_bits() as u64).sum()
+        });
+        run("query_one", &mut |c| {
+            c.iter().map(|&i| nb.query_one(rs[i].0).depth.to_bits() as u64).sum()
+        });
+        run("occludes", &mut |c| {
+            c.iter().map(|&i| u64::from(nb.occludes(rs[i].0, rs[i].1).0)).sum()
+        });
+        run("query_four_batch", &mut |c| {
+            let r = c[0]..c[0] + c.len();
+            nb.query_four_batch(&rects[r.clone()], &mut out[r])
+                .expect("equal lengths")
+        });
+        run("occludes_batch", &mut |c| {
+            let r = c[0]..c[0] + c.len();
+            nb.occludes_batch(&rects[r.clone()], &nearest[r.clone()], &mut hidden[r])
+                .expect("equal lengths")
+        });
+    });
     group.finish();
 }
 

@@ -15,9 +15,6 @@ use occult_render::{Algorithm, RenderOptions};
 
 fn paths(c: &mut Criterion) {
     for scene_spec in ["plant", "city"] {
-        let (scene, views) = occult_bench::path_views(scene_spec, "street:8", 640, 480);
-        let mut group = c.benchmark_group(format!("oqgrid_{scene_spec}_street8_640x480"));
-        group.sample_size(10);
         let specs = [
             "frustum",
             "oqgrid:grid=uniform,batch=1",
@@ -25,8 +22,8 @@ fn paths(c: &mut Criterion) {
             "oqgrid:grid=nested,resolution=8,split=1000",
             "oqgrid:queries=off",
         ];
-        common::bench_specs(&mut group, &scene, &views, &specs);
-        group.finish();
+        let group = format!("oqgrid_{scene_spec}_street8_640x480");
+        common::bench_path(c, group, scene_spec, "street:8", (640, 480), &specs);
     }
 }
 

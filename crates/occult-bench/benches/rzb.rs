@@ -13,11 +13,14 @@ use occult_spatial::{DistributionTree, SampleOctree, SampleOctreeConfig};
 use rand::{Rng, SeedableRng};
 
 fn path_bench(c: &mut Criterion, scene_spec: &str, path: &str, specs: &[&str]) {
-    let (scene, views) = occult_bench::path_views(scene_spec, path, 320, 240);
-    let mut group = c.benchmark_group(format!("{scene_spec}_{path}_320x240"));
-    group.sample_size(10);
-    common::bench_specs(&mut group, &scene, &views, specs);
-    group.finish();
+    common::bench_path(
+        c,
+        format!("{scene_spec}_{path}_320x240"),
+        scene_spec,
+        path,
+        (320, 240),
+        specs,
+    );
 }
 
 fn renderers(c: &mut Criterion) {

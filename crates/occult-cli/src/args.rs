@@ -58,14 +58,8 @@ pub struct RenderArgs {
     /// .gltf, .glb).
     #[arg(long, value_name = "SPEC", value_parser = parse_scene)]
     pub scene: SceneArg,
-    /// Camera: `default` (the scene's), or camera `i` of a path, as `PATH:i` (`circle:8:3`,
-    /// `default:0`, `cams.json:2`); a path without index gives its first camera. `circle:3` is
-    /// the path of three views, as for `--path`: camera 3 of a bare `circle` is
-    /// `circle:120:3`.
-    #[arg(long, value_name = "VIEW", default_value = "default", value_parser = parse_view)]
-    pub view: ViewArg,
     #[command(flatten)]
-    pub camera: CameraOverrides,
+    pub camera: CameraArgs,
     /// Renderer with its settings, `name` or `name:key=value,...` (see `occult algos`).
     #[arg(long, value_name = "SPEC", default_value = "frustum", value_parser = parse_algorithm)]
     pub algo: AlgoSpec,
@@ -81,6 +75,30 @@ pub struct RenderArgs {
     /// Frame statistics out (JSON).
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
+}
+
+/// One camera: a view of the scene, with some of its fields overridden.
+#[derive(Debug, Args, Clone)]
+pub struct CameraArgs {
+    /// Camera: `default` (the scene's), or camera `i` of a path, as `PATH:i` (`circle:8:3`,
+    /// `default:0`, `cams.json:2`); a path without index gives its first camera. `circle:3` is
+    /// the path of three views, as for `--path`: camera 3 of a bare `circle` is
+    /// `circle:120:3`.
+    #[arg(long, value_name = "VIEW", default_value = "default", value_parser = parse_view)]
+    pub view: ViewArg,
+    #[command(flatten)]
+    pub overrides: CameraOverrides,
+}
+
+/// The frames of a command that flies a camera path: the path's cameras, at one frame size.
+#[derive(Debug, Args, Clone)]
+pub struct FramesArgs {
+    /// Camera path: `circle:N`, `street:N`, `flyover:N`, `default`, or a JSON file of cameras.
+    #[arg(long, value_name = "PATH", default_value = "circle:16", value_parser = parse_path)]
+    pub path: PathArg,
+    /// Frame size, WxH pixels.
+    #[arg(long, value_name = "WxH", default_value = "640x480", value_parser = parse_size)]
+    pub size: Size,
 }
 
 /// Camera fields that override the chosen view's.
@@ -160,15 +178,11 @@ pub struct WalkArgs {
     /// Scene spec or file (see `occult render --help`).
     #[arg(long, value_name = "SPEC", value_parser = parse_scene)]
     pub scene: SceneArg,
-    /// Camera path: `circle:N`, `street:N`, `flyover:N`, `default`, or a JSON file of cameras.
-    #[arg(long, value_name = "PATH", default_value = "circle:16", value_parser = parse_path)]
-    pub path: PathArg,
+    #[command(flatten)]
+    pub frames: FramesArgs,
     /// Renderer with its settings, `name` or `name:key=value,...` (see `occult algos`).
     #[arg(long, value_name = "SPEC", default_value = "frustum", value_parser = parse_algorithm)]
     pub algo: AlgoSpec,
-    /// Frame size, WxH pixels.
-    #[arg(long, value_name = "WxH", default_value = "640x480", value_parser = parse_size)]
-    pub size: Size,
     /// Write each frame as DIR/frame_00000.png (created if missing).
     #[arg(long, value_name = "DIR")]
     pub frames_out: Option<PathBuf>,
@@ -191,18 +205,14 @@ pub struct CompareArgs {
     /// `--plot-scaling`).
     #[arg(long, value_name = "SPEC", required = true, value_parser = parse_scene)]
     pub scene: Vec<SceneArg>,
-    /// Camera path: `circle:N`, `street:N`, `flyover:N`, `default`, or a JSON file of cameras.
-    #[arg(long, value_name = "PATH", default_value = "circle:16", value_parser = parse_path)]
-    pub path: PathArg,
+    #[command(flatten)]
+    pub frames: FramesArgs,
     /// Renderers, comma-separated, each with its settings, or `all` (every renderer with default
     /// settings). Settings follow their renderer: `zbuffer,hzb:leaf=64,temporal=off,hzb` is three
     /// renderers, reported by these labels. The reference (see --reference) is always rendered
     /// and reported.
     #[arg(long, value_name = "A,B,..", default_value = "all", value_parser = parse_algorithms)]
     pub algos: AlgorithmList,
-    /// Frame size, WxH pixels.
-    #[arg(long, value_name = "WxH", default_value = "640x480", value_parser = parse_size)]
-    pub size: Size,
     /// Full report out (JSON: per renderer summary and per-frame records).
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
@@ -289,9 +299,8 @@ pub struct SweepArgs {
     /// Scene spec or file.
     #[arg(long, value_name = "SPEC", value_parser = parse_scene)]
     pub scene: SceneArg,
-    /// Camera path: `circle:N`, `street:N`, `flyover:N`, `default`, or a JSON file of cameras.
-    #[arg(long, value_name = "PATH", default_value = "circle:16", value_parser = parse_path)]
-    pub path: PathArg,
+    #[command(flatten)]
+    pub frames: FramesArgs,
     /// Renderers compared at every value (as `occult compare --algos`); the varied one must be
     /// among them.
     #[arg(long, value_name = "A,B,..", value_parser = parse_algorithms)]
@@ -300,9 +309,6 @@ pub struct SweepArgs {
     /// in --algos.
     #[arg(long, value_name = "ALGO.KEY=V1,V2,..", value_parser = crate::commands::sweep::parse_vary)]
     pub vary: occult_harness::sweep::Vary,
-    /// Frame size, WxH pixels.
-    #[arg(long, value_name = "WxH", default_value = "640x480", value_parser = parse_size)]
-    pub size: Size,
     /// A renderer counter (see `occult compare` output) to tabulate and plot against the value;
     /// repeat for several.
     #[arg(long, value_name = "NAME")]
@@ -533,19 +539,19 @@ mod tests {
             let Command::Render(r) = cli.command else {
                 unreachable!()
             };
-            let e = r.camera.check().unwrap_err().to_string();
+            let e = r.camera.overrides.check().unwrap_err().to_string();
             assert!(e.contains(value), "{flag}: {e}");
         }
         let cli = parse(&["--eye", "-1,2,3", "--target", "-1,2,3"]).unwrap();
         let Command::Render(r) = cli.command else {
             unreachable!()
         };
-        assert!(r.camera.check().unwrap_err().to_string().contains("coincide"));
+        assert!(r.camera.overrides.check().unwrap_err().to_string().contains("coincide"));
         let cli = parse(&["--fov", "45", "--near", "0.5", "--eye", "0,5,0", "--target", "0,0,0"]).unwrap();
         let Command::Render(r) = cli.command else {
             unreachable!()
         };
-        r.camera.check().unwrap();
+        r.camera.overrides.check().unwrap();
     }
 
     #[test]

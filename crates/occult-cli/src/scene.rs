@@ -6,7 +6,7 @@ use std::time::Instant;
 use anyhow::{bail, Result};
 use occult_core::{Camera, Scene};
 
-use crate::args::{CameraOverrides, PathArg, SceneArg, ViewArg};
+use crate::args::{CameraOverrides, FramesArgs, PathArg, SceneArg, ViewArg};
 use crate::progress::Progress;
 
 /// A scene built from a spec, with what the CLI reports about it.
@@ -127,6 +127,19 @@ impl SceneSummary {
         } else {
             format!("{} ({})", self.spec, self.name)
         }
+    }
+
+    /// The line that opens the report of a walk along `frames` (`count` cameras):
+    /// `scene S: N triangles; path P: N frames at WxH`.
+    pub fn walk_line(&self, frames: &FramesArgs, count: usize) -> String {
+        format!(
+            "scene {}: {} triangles; path {}: {count} frames at {}x{}",
+            self.label(),
+            crate::output::count(self.triangles as f64),
+            frames.path,
+            frames.size.width,
+            frames.size.height
+        )
     }
 }
 

@@ -4,7 +4,7 @@
 use std::sync::Arc;
 
 use criterion::measurement::WallTime;
-use criterion::BenchmarkGroup;
+use criterion::{BenchmarkGroup, Criterion};
 use occult_core::{Scene, View};
 use occult_raster::Frame;
 use occult_render::{AlgoSpec, RenderOptions};
@@ -32,4 +32,25 @@ pub fn bench_specs(group: &mut BenchmarkGroup<'_, WallTime>, scene: &Arc<Scene>,
             })
         });
     }
+}
+
+/// The benchmark group `group_name` (10 samples) of [`bench_specs`] over every view of camera
+/// path `path` on the workload `scene_spec` (see [`occult_bench::path_views`]) at
+/// `width × height`.
+///
+/// # Panics
+/// As [`bench_specs`], and if the workload or the path does not build.
+pub fn bench_path(
+    c: &mut Criterion,
+    group_name: String,
+    scene_spec: &str,
+    path: &str,
+    (width, height): (u32, u32),
+    specs: &[&str],
+) {
+    let (scene, views) = occult_bench::path_views(scene_spec, path, width, height);
+    let mut group = c.benchmark_group(group_name);
+    group.sample_size(10);
+    bench_specs(&mut group, &scene, &views, specs);
+    group.finish();
 }

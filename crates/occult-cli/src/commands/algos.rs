@@ -17,33 +17,28 @@ struct AlgorithmOut {
 
 /// Runs the command.
 pub fn run(a: AlgosArgs) -> Result<()> {
+    let out: Vec<AlgorithmOut> = ALGORITHMS
+        .iter()
+        .map(|i| AlgorithmOut {
+            name: i.name,
+            description: i.summary,
+            conservative: i.conservative,
+            parameters: i
+                .params
+                .iter()
+                .map(|p| ParamOut::new(p.key, p.default, p.help))
+                .collect(),
+        })
+        .collect();
     if a.json {
-        let out: Vec<AlgorithmOut> = ALGORITHMS
-            .iter()
-            .map(|i| AlgorithmOut {
-                name: i.name,
-                description: i.summary,
-                conservative: i.conservative,
-                parameters: i
-                    .params
-                    .iter()
-                    .map(|p| ParamOut::new(p.key, p.default, p.help))
-                    .collect(),
-            })
-            .collect();
         say!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
     }
     say!("Renderers: use as --algo NAME or NAME:key=value,key=value; --algos takes a comma-separated list of these\n");
-    for i in ALGORITHMS {
+    for i in &out {
         let kind = if i.conservative { "exact" } else { "approximate" };
-        say!("{}  ({kind}) {}", i.name, i.summary);
-        let params: Vec<ParamOut> = i
-            .params
-            .iter()
-            .map(|p| ParamOut::new(p.key, p.default, p.help))
-            .collect();
-        say!("{}", output::param_lines(&params));
+        say!("{}  ({kind}) {}", i.name, i.description);
+        say!("{}", output::param_lines(&i.parameters));
     }
     Ok(())
 }

@@ -73,8 +73,8 @@ pub fn run(a: CompareArgs) -> Result<()> {
     let config = CompareConfig {
         algorithms: a.algos.0.clone(),
         options: RenderOptions::default(),
-        width: a.size.width,
-        height: a.size.height,
+        width: a.frames.size.width,
+        height: a.frames.size.height,
         reference: a.reference.0.clone(),
         image_complexity: a.complexity || (a.plot_scaling.is_some() && axes.iter().any(|x| x.needs_image_complexity())),
         // One handle for every scene, so that the process peak survives the resets.
@@ -83,7 +83,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
     let mut runs: Vec<(SceneSummary, CompareReport)> = Vec::new();
     for spec in &a.scene {
         let scene = scene::load(spec)?;
-        let cameras = scene::path(&a.path, &scene)?;
+        let cameras = scene::path(&a.frames.path, &scene)?;
         let progress = Progress::bar(cameras.len() as u64, format!("{spec}: preparing"));
         let report = compare(scene.scene.clone(), &cameras, &config, &mut |event| match event {
             CompareProgress::Building { label, .. } => progress.set_message(format!("{spec}: preparing {label}")),
@@ -93,7 +93,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
         .with_context(|| format!("comparing on scene '{spec}'"))?;
         drop(progress);
         let summary = scene.summary();
-        say_raw!("{}", report_text(&summary, &a.path.text, &report));
+        say_raw!("{}", report_text(&summary, &a.frames.path.text, &report));
         runs.push((summary, report));
     }
 
@@ -101,7 +101,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
         let out = CompareOut {
             tool: "occult",
             version: env!("CARGO_PKG_VERSION"),
-            path: &a.path.text,
+            path: &a.frames.path.text,
             algorithms: a.algos.0.iter().map(|a| a.label()).collect(),
             runs: runs
                 .iter()
@@ -137,14 +137,14 @@ pub fn run(a: CompareArgs) -> Result<()> {
         }
         let panels: Vec<Panel> = runs
             .iter()
-            .map(|(s, r)| frame_panel(s, &a.path.text, r, &a.plot_y))
+            .map(|(s, r)| frame_panel(s, &a.frames.path.text, r, &a.plot_y))
             .collect();
         plot::draw(p, &panels)?;
         say!("wrote {}", p.display());
     }
     for (axis, p) in &scaling_plots {
         if let Some(p) = p {
-            plot::draw(p, &[scaling_panel(&a.path.text, &runs, *axis)])?;
+            plot::draw(p, &[scaling_panel(&a.frames.path.text, &runs, *axis)])?;
             say!("wrote {}", p.display());
         }
     }

@@ -11,7 +11,7 @@ use occult_harness::particles::{particles, ParticlesConfig};
 use occult_render::nbuffer::particles::{MAX_PARTICLES, MAX_SPRITE_SIZE};
 use serde::Serialize;
 
-use crate::args::{parse_scene, parse_size, parse_view, CameraOverrides, SceneArg, Size, ViewArg};
+use crate::args::{parse_scene, parse_size, CameraArgs, SceneArg, Size};
 use crate::output;
 use crate::scene::{self, SceneSummary};
 
@@ -22,11 +22,8 @@ pub struct ParticlesArgs {
     /// among buildings or trees.
     #[arg(long, value_name = "SPEC", value_parser = parse_scene)]
     pub scene: SceneArg,
-    /// Camera: `default`, or camera `i` of a path as `PATH:i` (see `occult render --help`).
-    #[arg(long, value_name = "VIEW", default_value = "default", value_parser = parse_view)]
-    pub view: ViewArg,
     #[command(flatten)]
-    pub camera: CameraOverrides,
+    pub camera: CameraArgs,
     /// Frame size, WxH pixels.
     #[arg(long, value_name = "WxH", default_value = "640x480", value_parser = parse_size)]
     pub size: Size,
@@ -135,9 +132,9 @@ pub fn run(a: ParticlesArgs) -> Result<()> {
     if !(a.fill > 0.0 && a.fill <= 1.0) {
         bail!("--fill {} is not in (0, 1]", a.fill);
     }
-    a.camera.check()?;
+    a.camera.overrides.check()?;
     let scene = scene::load(&a.scene)?;
-    let camera = scene::camera(&a.view, &a.camera, &scene)?;
+    let camera = scene::camera(&a.camera.view, &a.camera.overrides, &scene)?;
     let view = View::new(camera, a.size.width, a.size.height).context("view")?;
     let config = ParticlesConfig {
         count: a.count,

@@ -35,9 +35,9 @@ struct RenderOut<'a> {
 /// Runs the command.
 pub fn run(a: RenderArgs) -> Result<()> {
     output::check_outputs([&Some(a.out.clone()), &a.depth_out, &a.json])?;
-    a.camera.check()?;
+    a.camera.overrides.check()?;
     let scene = scene::load(&a.scene)?;
-    let camera = scene::camera(&a.view, &a.camera, &scene)?;
+    let camera = scene::camera(&a.camera.view, &a.camera.overrides, &scene)?;
     let view = View::new(camera, a.size.width, a.size.height).context("view")?;
 
     let (mut renderer, prepare_ms, progress) = super::build_renderer(&a.algo, &scene)?;

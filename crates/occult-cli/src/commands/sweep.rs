@@ -64,8 +64,8 @@ pub fn run(a: SweepArgs) -> Result<()> {
         algorithms: a.algos.0.clone(),
         vary: vary.clone(),
         options: RenderOptions::default(),
-        width: a.size.width,
-        height: a.size.height,
+        width: a.frames.size.width,
+        height: a.frames.size.height,
         reference: a.reference.0.clone(),
     };
     // Every value is checked before the scene is built.
@@ -86,7 +86,7 @@ pub fn run(a: SweepArgs) -> Result<()> {
         }
     }
     let scene = scene::load(&a.scene)?;
-    let cameras = scene::path(&a.path, &scene)?;
+    let cameras = scene::path(&a.frames.path, &scene)?;
     let total = (cameras.len() * vary.values.len()) as u64;
     let progress = Progress::bar(total, format!("{}: preparing", a.scene));
     let report = sweep(&scene.scene, &cameras, &config, &mut |(value, event)| match event {
@@ -138,13 +138,8 @@ pub fn run(a: SweepArgs) -> Result<()> {
         }
     }
     say_raw!(
-        "\nscene {}: {} triangles; path {}: {} frames at {}x{}; varying {vary_text}\n\n{}",
-        summary.label(),
-        output::count(summary.triangles as f64),
-        a.path,
-        cameras.len(),
-        a.size.width,
-        a.size.height,
+        "\n{}; varying {vary_text}\n\n{}",
+        summary.walk_line(&a.frames, cameras.len()),
         output::table(&header, &rows)
     );
 
@@ -153,7 +148,7 @@ pub fn run(a: SweepArgs) -> Result<()> {
             tool: "occult",
             version: env!("CARGO_PKG_VERSION"),
             scene: summary.clone(),
-            path: &a.path.text,
+            path: &a.frames.path.text,
             vary: vary_text.clone(),
             points: vary
                 .values
@@ -181,7 +176,7 @@ pub fn run(a: SweepArgs) -> Result<()> {
                 })
                 .collect()
         };
-        let title = format!("{} — {}, {} frames", summary.label(), a.path, cameras.len());
+        let title = format!("{} — {}, {} frames", summary.label(), a.frames.path, cameras.len());
         let mut panels = vec![Panel {
             title: title.clone(),
             x_label: vary_text.clone(),

@@ -66,12 +66,13 @@ pub fn run(a: WalkArgs) -> Result<()> {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create directory '{}'", dir.display()))?;
     }
     let scene = scene::load(&a.scene)?;
-    let cameras = scene::path(&a.path, &scene)?;
+    let cameras = scene::path(&a.frames.path, &scene)?;
     let views = cameras
         .iter()
         .enumerate()
         .map(|(i, c)| {
-            View::new(*c, a.size.width, a.size.height).with_context(|| format!("camera {i} of path '{}'", a.path))
+            View::new(*c, a.frames.size.width, a.frames.size.height)
+                .with_context(|| format!("camera {i} of path '{}'", a.frames.path))
         })
         .collect::<Result<Vec<_>>>()?;
     if let Some(p) = &a.path_out {
@@ -81,8 +82,8 @@ pub fn run(a: WalkArgs) -> Result<()> {
     let (mut renderer, prepare_ms, progress) = super::build_renderer(&a.algo, &scene)?;
     drop(progress);
 
-    let progress = Progress::bar(views.len() as u64, format!("{} on {}", a.algo.label(), a.path));
-    let mut frame = Frame::new(a.size.width, a.size.height)?;
+    let progress = Progress::bar(views.len() as u64, format!("{} on {}", a.algo.label(), a.frames.path));
+    let mut frame = Frame::new(a.frames.size.width, a.frames.size.height)?;
     let mut frames = Vec::with_capacity(views.len());
     for (i, view) in views.iter().enumerate() {
         let t = Instant::now();
@@ -110,15 +111,7 @@ pub fn run(a: WalkArgs) -> Result<()> {
     let n = frames.len() as f64;
     let mean = |f: fn(&WalkFrame) -> u64| frames.iter().map(|x| f(x) as f64).sum::<f64>() / n;
     let summary = scene.summary();
-    say!(
-        "scene {}: {} triangles; path {}: {} frames at {}x{}",
-        summary.label(),
-        output::count(summary.triangles as f64),
-        a.path,
-        frames.len(),
-        a.size.width,
-        a.size.height
-    );
+    say!("{}", summary.walk_line(&a.frames, frames.len()));
     say!(
         "{}: mean {} ms, p95 {} ms, min {} ms, max {} ms; prepared in {} ms, {} of its own structures",
         a.algo.label(),
@@ -179,10 +172,10 @@ pub fn run(a: WalkArgs) -> Result<()> {
     if let Some(p) = &a.json {
         let out = WalkOut {
             scene: summary,
-            path: a.path.text.clone(),
+            path: a.frames.path.text.clone(),
             algorithm: &a.algo.label(),
-            width: a.size.width,
-            height: a.size.height,
+            width: a.frames.size.width,
+            height: a.frames.size.height,
             prepare_ms,
             renderer_memory_bytes: renderer.memory_bytes(),
             time,

@@ -36,6 +36,12 @@ fn path_arg(p: &std::path::Path) -> &str {
     p.to_str().expect("test paths are UTF-8")
 }
 
+/// The paths of files `names` in a fresh [`scratch`] directory for `test`, as text.
+fn scratch_files<const N: usize>(test: &str, names: [&str; N]) -> [String; N] {
+    let dir = scratch(test);
+    names.map(|name| path_arg(&dir.join(name)).to_string())
+}
+
 fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }

@@ -5,9 +5,8 @@ use super::*;
 
 #[test]
 fn particles_cull_and_report() {
-    let dir = scratch("particles");
-    let (png, j) = (dir.join("p.png"), dir.join("p.json"));
-    let (png, j) = (png.to_str().unwrap(), j.to_str().unwrap());
+    let [png, j] = scratch_files("particles", ["p.png", "p.json"]);
+    let (png, j) = (png.as_str(), j.as_str());
     let out = ok(&[
         "particles",
         "--scene",
@@ -49,9 +48,8 @@ fn particles_cull_and_report() {
 
 #[test]
 fn shadows_are_identical_with_and_without_clamping() {
-    let dir = scratch("shadows");
-    let (png, j) = (dir.join("s.png"), dir.join("s.json"));
-    let (png, j) = (png.to_str().unwrap(), j.to_str().unwrap());
+    let [png, j] = scratch_files("shadows", ["s.png", "s.json"]);
+    let (png, j) = (png.as_str(), j.as_str());
     let out = ok(&[
         "shadows", "--scene", CITY, "--size", "96x64", "--litmap", "64", "--out", png, "--json", j,
     ]);
@@ -99,9 +97,8 @@ fn shadows_are_identical_with_and_without_clamping() {
 
 #[test]
 fn bad_arguments_are_one_line_errors() {
-    let dir = scratch("nbuffer-bad");
-    let png = dir.join("x.png");
-    let png = png.to_str().unwrap();
+    let [png] = scratch_files("nbuffer-bad", ["x.png"]);
+    let png = png.as_str();
     for args in [
         vec!["particles", "--scene", CITY, "--sizes", "1-65", "--out", png],
         vec!["particles", "--scene", CITY, "--sizes", "pow3", "--out", png],

@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use crate::support::{
     assert_identical_on_every_generator, assert_identical_on_path, assert_variant_identical_on_every_generator,
-    build_scene,
+    build_scene, renderer,
 };
 use occult_core::View;
 use occult_raster::{Frame, RasterConfig, Strategy};
@@ -35,12 +35,8 @@ fn default_views_and_paths_are_identical() {
         let built = build_scene(spec);
         let cams = occult_scenes::path::parse_path("circle:12", &built.scene, &built.default_camera).unwrap();
         let scene = Arc::new(built.scene);
-        let mut z = Algorithm::ZBUFFER
-            .build(scene.clone(), &RenderOptions::default())
-            .unwrap();
-        let mut f = Algorithm::FRUSTUM
-            .build(scene.clone(), &RenderOptions::default())
-            .unwrap();
+        let mut z = renderer("zbuffer", &scene);
+        let mut f = renderer("frustum", &scene);
         let (mut a, mut b) = (Frame::new(160, 90).unwrap(), Frame::new(160, 90).unwrap());
         for cam in cams.iter().chain([&built.default_camera]) {
             let view = View::new(*cam, 160, 90).unwrap();

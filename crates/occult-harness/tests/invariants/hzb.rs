@@ -6,16 +6,12 @@
 use std::sync::Arc;
 
 use crate::support::{
-    assert_identical_on_every_generator, assert_identical_on_path, assert_variant_identical_on_every_generator,
-    build_scene,
+    assert_identical_on_path, assert_variant_identical_on_every_generator, build_scene, identical_on_every_generator,
+    renderer, spec,
 };
 use occult_core::{Camera, Vec3, View};
 use occult_raster::Frame;
-use occult_render::{AlgoSpec, Algorithm, RenderError, RenderOptions};
-
-fn spec(s: &str) -> AlgoSpec {
-    AlgoSpec::parse(s).unwrap_or_else(|e| panic!("{s}: {e}"))
-}
+use occult_render::{AlgoSpec, RenderError, RenderOptions};
 
 /// Configurations: defaults, each part switched off, extreme octrees and batches.
 const CONFIGS: &[&str] = &[
@@ -36,14 +32,9 @@ const CONFIGS: &[&str] = &[
     "hzb:retest=off,leaf=64",
 ];
 
-#[test]
-fn hzb_default_is_identical_on_every_generator() {
-    assert_identical_on_every_generator(&spec("hzb"), 0);
-}
-
-#[test]
-fn hzb_single_threaded_is_identical_on_every_generator() {
-    assert_identical_on_every_generator(&spec("hzb"), 1);
+identical_on_every_generator! {
+    hzb_default_is_identical_on_every_generator: assert_identical_on_every_generator("hzb", 0);
+    hzb_single_threaded_is_identical_on_every_generator: assert_identical_on_every_generator("hzb", 1);
 }
 
 #[test]
@@ -82,11 +73,8 @@ fn hzb_culls_on_a_city_street_and_keeps_a_visible_list() {
     let built = build_scene("city:blocks=6,detail=2");
     let cams = occult_scenes::path::parse_path("street:6", &built.scene, &built.default_camera).unwrap();
     let scene = Arc::new(built.scene);
-    let mut h = Algorithm::parse("hzb")
-        .unwrap()
-        .build(scene.clone(), &RenderOptions::default())
-        .unwrap();
-    let mut f = Algorithm::FRUSTUM.build(scene, &RenderOptions::default()).unwrap();
+    let mut h = renderer("hzb", &scene);
+    let mut f = renderer("frustum", &scene);
     let (mut fh, mut ff) = (Frame::new(160, 90).unwrap(), Frame::new(160, 90).unwrap());
     let (mut th, mut tf) = (0, 0);
     let (mut tests, mut samples, mut drawn) = (0, 0, 0);
@@ -119,9 +107,7 @@ fn hzb_draws_mostly_visible_instances_whole() {
         let mut h = spec(&format!("hzb:whole={whole}"))
             .build(scene.clone(), &RenderOptions::default())
             .unwrap();
-        let mut z = Algorithm::ZBUFFER
-            .build(scene.clone(), &RenderOptions::default())
-            .unwrap();
+        let mut z = renderer("zbuffer", &scene);
         let (mut fh, mut fz) = (Frame::new(160, 90).unwrap(), Frame::new(160, 90).unwrap());
         let mut drawn_whole = 0;
         for cam in &cams {
@@ -182,11 +168,8 @@ fn hzb_distributions_report_worker_idle_time() {
 #[test]
 fn hzb_frame_size_changes_and_mismatches() {
     let scene = Arc::new(build_scene("occluder:objects=3").scene);
-    let mut h = Algorithm::parse("hzb")
-        .unwrap()
-        .build(scene.clone(), &RenderOptions::default())
-        .unwrap();
-    let mut z = Algorithm::ZBUFFER.build(scene, &RenderOptions::default()).unwrap();
+    let mut h = renderer("hzb", &scene);
+    let mut z = renderer("zbuffer", &scene);
     let cam = Camera::look_at(Vec3::new(0.0, 3.0, 30.0), Vec3::ZERO);
     for (w, hh) in [(64, 48), (7, 3), (1, 1), (96, 64)] {
         let view = View::new(cam, w, hh).unwrap();

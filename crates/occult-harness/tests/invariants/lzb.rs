@@ -6,50 +6,27 @@
 
 use std::sync::Arc;
 
-use crate::support::{
-    assert_identical_on_every_generator, assert_identical_on_path, assert_variant_identical_on_every_generator,
-};
+use crate::support::{assert_identical_on_path, identical_on_every_generator, spec};
 use occult_core::{Affine3A, Camera, Instance, Mesh, Scene, SceneBuilder, Vec3, View};
 use occult_raster::Frame;
-use occult_render::{AlgoSpec, Algorithm, RenderError, RenderOptions};
+use occult_render::{Algorithm, RenderError, RenderOptions};
 
-fn spec(s: &str) -> AlgoSpec {
-    AlgoSpec::parse(s).unwrap()
-}
-
-#[test]
-fn default_is_identical_on_every_generator() {
-    assert_identical_on_every_generator(&spec("lzb"), 1);
-}
-
-#[test]
-fn lazy_all_triangles_static_plane_is_identical_on_every_generator() {
-    assert_variant_identical_on_every_generator(&spec("lzb:select=all,plane=static,plane_fraction=0.15,oor=off"), 2);
-}
-
-#[test]
-fn static_occluders_small_leaves_is_identical_on_every_generator() {
-    assert_variant_identical_on_every_generator(&spec("lzb:select=static,k=1,leaf=8,depth=6,coherence=off"), 0);
-}
-
-#[test]
-fn dynamic_selection_every_frame_plane_is_identical_on_every_generator() {
-    assert_variant_identical_on_every_generator(
-        &spec("lzb:select=dynamic,base_cos=0.9,plane_reuse=1,coarse_rays=16,group_leaf=1"),
-        1,
+identical_on_every_generator! {
+    default_is_identical_on_every_generator: assert_identical_on_every_generator("lzb", 1);
+    lazy_all_triangles_static_plane_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("lzb:select=all,plane=static,plane_fraction=0.15,oor=off", 2);
+    static_occluders_small_leaves_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("lzb:select=static,k=1,leaf=8,depth=6,coherence=off", 0);
+    dynamic_selection_every_frame_plane_is_identical_on_every_generator: assert_variant_identical_on_every_generator(
+        "lzb:select=dynamic,base_cos=0.9,plane_reuse=1,coarse_rays=16,group_leaf=1",
+        1
     );
-}
-
-#[test]
-fn hybrid_everything_behind_the_plane_is_identical_on_every_generator() {
-    // A tiny plane: almost nothing near, almost every pixel goes to the rays.
-    assert_variant_identical_on_every_generator(&spec("lzb:plane=static,plane_fraction=0.0001,leaf=32"), 2);
-}
-
-#[test]
-fn triangle_pvl_everything_behind_the_plane_is_identical_on_every_generator() {
-    // Rays record triangles, not leaves; almost every pixel goes to the rays.
-    assert_variant_identical_on_every_generator(&spec("lzb:pvl=triangles,plane=static,plane_fraction=0.0001"), 1);
+    /// A tiny plane: almost nothing near, almost every pixel goes to the rays.
+    hybrid_everything_behind_the_plane_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("lzb:plane=static,plane_fraction=0.0001,leaf=32", 2);
+    /// Rays record triangles, not leaves; almost every pixel goes to the rays.
+    triangle_pvl_everything_behind_the_plane_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("lzb:pvl=triangles,plane=static,plane_fraction=0.0001", 1);
 }
 
 #[test]

@@ -6,11 +6,11 @@ use std::sync::Arc;
 
 use crate::support::{
     assert_identical_on_every_generator, assert_identical_on_path, assert_variant_identical_on_every_generator,
-    build_scene,
+    build_scene, renderer,
 };
 use occult_core::View;
 use occult_raster::Frame;
-use occult_render::{AlgoSpec, Algorithm, RenderError, RenderOptions};
+use occult_render::{AlgoSpec, RenderError, RenderOptions};
 
 const CONFIGS: &[&str] = &[
     "nbuffer",
@@ -159,11 +159,8 @@ fn occlusion_queries_test_the_same_objects_and_cull_at_least_as_much() {
 fn resolution_change_and_frame_mismatch() {
     let built = build_scene("city:blocks=2,detail=1");
     let scene = Arc::new(built.scene);
-    let mut r = Algorithm::parse("nbuffer")
-        .unwrap()
-        .build(scene.clone(), &RenderOptions::default())
-        .unwrap();
-    let mut z = Algorithm::ZBUFFER.build(scene, &RenderOptions::default()).unwrap();
+    let mut r = renderer("nbuffer", &scene);
+    let mut z = renderer("zbuffer", &scene);
     for (w, h) in [(64, 48), (33, 97), (64, 48)] {
         let view = View::new(built.default_camera, w, h).unwrap();
         let (mut a, mut b) = (Frame::new(w, h).unwrap(), Frame::new(w, h).unwrap());
@@ -191,9 +188,7 @@ fn particle_frames_are_identical_with_and_without_culling() {
         let built = build_scene(scene_spec);
         let cams = occult_scenes::path::parse_path(path, &built.scene, &built.default_camera).unwrap();
         let scene = Arc::new(built.scene);
-        let mut z = Algorithm::ZBUFFER
-            .build(scene.clone(), &RenderOptions::default())
-            .unwrap();
+        let mut z = renderer("zbuffer", &scene);
         let mut raster = Rasterizer::new(RasterConfig::default()).unwrap();
         let (w, h) = (160, 120);
         let (mut culled_total, mut single) = (0, 0);

@@ -6,38 +6,23 @@
 use std::sync::Arc;
 
 use crate::support::{
-    assert_identical_on_every_generator, assert_identical_on_path, assert_variant_identical_on_every_generator,
-    build_scene,
+    assert_identical_on_path, assert_variant_identical_on_every_generator, build_scene, identical_on_every_generator,
+    spec,
 };
 use occult_core::{Camera, Vec3, View};
 use occult_raster::Frame;
-use occult_render::{AlgoSpec, Algorithm, RenderError, RenderOptions};
+use occult_render::{Algorithm, RenderError, RenderOptions};
 
-fn spec(s: &str) -> AlgoSpec {
-    AlgoSpec::parse(s).unwrap_or_else(|e| panic!("{s}: {e}"))
-}
-
-#[test]
-fn nested_default_is_identical_on_every_generator() {
-    assert_identical_on_every_generator(&spec("oqgrid"), 0);
-}
-
-#[test]
-fn uniform_batch_1_is_identical_on_every_generator() {
-    assert_variant_identical_on_every_generator(&spec("oqgrid:grid=uniform,batch=1,resolution=16"), 0);
-}
-
-#[test]
-fn uniform_batch_8_fine_grid_is_identical_on_every_generator() {
-    assert_variant_identical_on_every_generator(&spec("oqgrid:grid=uniform,batch=8,resolution=40"), 2);
-}
-
-#[test]
-fn nested_deep_small_split_is_identical_on_every_generator() {
-    // Small split threshold and coarse top level: most cells have subgrids (§3.2 recursion).
-    assert_variant_identical_on_every_generator(
-        &spec("oqgrid:grid=nested,resolution=3,split=8,branching=2,depth=4,batch=8"),
-        0,
+identical_on_every_generator! {
+    nested_default_is_identical_on_every_generator: assert_identical_on_every_generator("oqgrid", 0);
+    uniform_batch_1_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("oqgrid:grid=uniform,batch=1,resolution=16", 0);
+    uniform_batch_8_fine_grid_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("oqgrid:grid=uniform,batch=8,resolution=40", 2);
+    /// Small split threshold and coarse top level: most cells have subgrids (§3.2 recursion).
+    nested_deep_small_split_is_identical_on_every_generator: assert_variant_identical_on_every_generator(
+        "oqgrid:grid=nested,resolution=3,split=8,branching=2,depth=4,batch=8",
+        0
     );
 }
 

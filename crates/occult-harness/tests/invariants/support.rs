@@ -26,6 +26,48 @@ pub const SCENES: &[&str] = &[
     "occluder:objects=3",
 ];
 
+/// `s` parsed as a renderer spec.
+///
+/// # Panics
+/// If it does not parse, naming it.
+pub fn spec(s: &str) -> AlgoSpec {
+    AlgoSpec::parse(s).unwrap_or_else(|e| panic!("{s}: {e}"))
+}
+
+/// The renderer of spec `s` built on `scene` with the default options.
+///
+/// # Panics
+/// If the spec does not parse or the renderer does not build, naming the spec.
+pub fn renderer(s: &str, scene: &Arc<Scene>) -> Box<dyn Renderer> {
+    spec(s)
+        .build(scene.clone(), &RenderOptions::default())
+        .unwrap_or_else(|e| panic!("{s}: {e}"))
+}
+
+/// One `#[test]` per configuration of a table, each a single call of a check of this module
+/// ([`assert_identical_on_every_generator`] for a renderer's default configuration,
+/// [`assert_variant_identical_on_every_generator`] for the others) on a spec and a rasterizer
+/// thread count, so that every configuration fails on its own:
+///
+/// ```ignore
+/// identical_on_every_generator! {
+///     /// Why this configuration.
+///     test_name: assert_variant_identical_on_every_generator("algo:key=value", 2);
+/// }
+/// ```
+macro_rules! identical_on_every_generator {
+    ($($(#[$attr:meta])* $name:ident: $check:ident($spec:expr, $threads:expr);)+) => {
+        $(
+            $(#[$attr])*
+            #[test]
+            fn $name() {
+                $crate::support::$check(&$crate::support::spec($spec), $threads);
+            }
+        )+
+    };
+}
+pub(crate) use identical_on_every_generator;
+
 /// Random views per scene in [`assert_identical_on_every_generator`].
 pub const VIEWS_PER_SCENE: usize = 50;
 
