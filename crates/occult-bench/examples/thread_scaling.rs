@@ -28,7 +28,7 @@
 //! draw's first worker would, and times how late the woken thread runs; (2) after a
 //! two-thread pool idled 20 ms, how late the second of two 3 ms jobs starts, counted from the
 //! call, and how often both ran on one thread: as the halves of a `rayon::join` run inside the
-//! pool by `install` (the rasterizer's draws until 2026-12-02: one hand-off into the pool,
+//! pool by `install` (how the rasterizer once started its draws: one hand-off into the pool,
 //! then the second half waits on the first thread's queue to be stolen), and as two tasks
 //! spawned from outside by `in_place_scope` (how its parallel phases start now).
 
