@@ -16,7 +16,6 @@ macro_rules! say_raw {
     }};
 }
 
-use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -156,79 +155,6 @@ pub fn opt_field<T: std::fmt::Display>(v: Option<T>) -> String {
     v.map_or_else(String::new, |v| format!("{v}"))
 }
 
-/// [`FrameStats`] with times in milliseconds and phases by name, for JSON.
-#[derive(Clone, Debug, Serialize)]
-pub struct StatsOut {
-    /// Triangle instances handed to the rasterizer.
-    pub triangles_submitted: u64,
-    /// Triangles rasterized.
-    pub triangles_rasterized: u64,
-    /// Fragments that passed the depth test.
-    pub fragments_written: u64,
-    /// Hierarchy nodes visited.
-    pub nodes_visited: u64,
-    /// Bounding volumes tested.
-    pub boxes_tested: u64,
-    /// Bounding volumes culled.
-    pub boxes_culled: u64,
-    /// Screen rectangles tested.
-    pub rects_tested: u64,
-    /// Rectangles culled.
-    pub rects_culled: u64,
-    /// Rays cast.
-    pub rays_cast: u64,
-    /// Point samples drawn.
-    pub samples_drawn: u64,
-    /// The renderer's own frame time, ms.
-    pub total_ms: f64,
-    /// Time per phase, ms.
-    pub phases_ms: BTreeMap<String, f64>,
-    /// The renderer's own counters, by name.
-    pub counters: occult_render::Counters,
-}
-
-impl StatsOut {
-    /// Converts.
-    pub fn new(s: &FrameStats) -> Self {
-        Self {
-            triangles_submitted: s.triangles_submitted,
-            triangles_rasterized: s.triangles_rasterized,
-            fragments_written: s.fragments_written,
-            nodes_visited: s.nodes_visited,
-            boxes_tested: s.boxes_tested,
-            boxes_culled: s.boxes_culled,
-            rects_tested: s.rects_tested,
-            rects_culled: s.rects_culled,
-            rays_cast: s.rays_cast,
-            samples_drawn: s.samples_drawn,
-            total_ms: s.total.as_secs_f64() * 1e3,
-            phases_ms: s
-                .phases
-                .0
-                .iter()
-                .map(|(p, d)| (phase_name(p), d.as_secs_f64() * 1e3))
-                .collect(),
-            counters: s.counters.clone(),
-        }
-    }
-
-    /// The counters as (name, value), in display order.
-    pub fn fixed_counters(&self) -> [(&'static str, u64); 10] {
-        [
-            ("triangles submitted", self.triangles_submitted),
-            ("triangles rasterized", self.triangles_rasterized),
-            ("fragments written", self.fragments_written),
-            ("nodes visited", self.nodes_visited),
-            ("boxes tested", self.boxes_tested),
-            ("boxes culled", self.boxes_culled),
-            ("rects tested", self.rects_tested),
-            ("rects culled", self.rects_culled),
-            ("rays cast", self.rays_cast),
-            ("samples drawn", self.samples_drawn),
-        ]
-    }
-}
-
 /// A phase's name as it serializes (`depth_structure`).
 pub fn phase_name(p: &impl Serialize) -> String {
     match serde_json::to_value(p) {
@@ -238,22 +164,23 @@ pub fn phase_name(p: &impl Serialize) -> String {
 }
 
 /// Frame statistics as text lines: nonzero counters, then the phases.
-pub fn stats_text(s: &StatsOut) -> String {
+pub fn stats_text(s: &FrameStats) -> String {
     let mut out = String::new();
     for (name, v) in s.fixed_counters() {
         if v > 0 || name.starts_with("triangles") {
+            let name = name.replace('_', " ");
             let _ = writeln!(out, "  {name:<22} {}", count(v as f64));
         }
     }
     for &(name, v) in &s.counters.0 {
         let _ = writeln!(out, "  {name:<22} {}", count(v as f64));
     }
-    let phases: Vec<String> = s.phases_ms.iter().map(|(p, ms)| format!("{p} {ms:.2}")).collect();
+    let phases: Vec<String> = s.phases_ms().iter().map(|(p, ms)| format!("{p} {ms:.2}")).collect();
     let _ = writeln!(
         out,
         "  {:<22} {:.2} ms ({})",
         "frame time",
-        s.total_ms,
+        s.total.as_secs_f64() * 1e3,
         phases.join(", ")
     );
     out

@@ -8,7 +8,9 @@ use occult_raster::{shade, Frame};
 use serde::Serialize;
 
 use crate::args::RenderArgs;
-use crate::output::{self, StatsOut};
+use occult_render::FrameStatsMs;
+
+use crate::output;
 use crate::scene::{self, SceneSummary};
 
 /// What `--json` holds.
@@ -29,7 +31,7 @@ struct RenderOut<'a> {
     covered_pixels: u64,
     /// Renderer's own structures, bytes.
     renderer_memory_bytes: usize,
-    stats: StatsOut,
+    stats: FrameStatsMs,
 }
 
 /// Runs the command.
@@ -58,7 +60,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     drop(progress);
 
     let summary = scene.summary();
-    let stats = StatsOut::new(&stats);
+    let stats = FrameStatsMs(stats.clone());
     say!(
         "scene {}: {} triangles, built in {} ms",
         summary.label(),
@@ -77,7 +79,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         output::millis(prepare_ms),
         output::bytes(renderer.memory_bytes() as u64)
     );
-    say_raw!("{}", output::stats_text(&stats));
+    say_raw!("{}", output::stats_text(&stats.0));
     say!(
         "  {:<22} {}",
         "triangles visible",

@@ -9,7 +9,9 @@ use occult_raster::{shade, Frame};
 use serde::Serialize;
 
 use crate::args::WalkArgs;
-use crate::output::{self, StatsOut};
+use occult_render::FrameStatsMs;
+
+use crate::output;
 use crate::progress::Progress;
 use crate::scene::{self, SceneSummary};
 
@@ -24,7 +26,7 @@ struct WalkFrame {
     /// Pixels holding a triangle.
     covered_pixels: u64,
     #[serde(flatten)]
-    stats: StatsOut,
+    stats: FrameStatsMs,
 }
 
 /// What `--json` holds.
@@ -96,7 +98,7 @@ pub fn run(a: WalkArgs) -> Result<()> {
             time_ms,
             triangles_visible: frame.visible_items().len() as u64,
             covered_pixels: frame.covered_pixel_count(),
-            stats: StatsOut::new(&stats),
+            stats: FrameStatsMs(stats.clone()),
         });
         if let Some(dir) = &a.frames_out {
             shade(&mut frame, &scene.scene, view);
@@ -124,8 +126,8 @@ pub fn run(a: WalkArgs) -> Result<()> {
     );
     say!(
         "  per frame: {} triangles submitted, {} rasterized, {} visible",
-        output::count(mean(|f| f.stats.triangles_submitted)),
-        output::count(mean(|f| f.stats.triangles_rasterized)),
+        output::count(mean(|f| f.stats.0.triangles_submitted)),
+        output::count(mean(|f| f.stats.0.triangles_rasterized)),
         output::count(mean(|f| f.triangles_visible))
     );
     if let Some(dir) = &a.frames_out {
@@ -138,7 +140,7 @@ pub fn run(a: WalkArgs) -> Result<()> {
         // The renderer's own counters follow the fixed columns, in the order first reported.
         let mut own_counters: Vec<&'static str> = Vec::new();
         for f in &frames {
-            for &(k, _) in &f.stats.counters.0 {
+            for &(k, _) in &f.stats.0.counters.0 {
                 if !own_counters.contains(&k) {
                     own_counters.push(k);
                 }
@@ -147,7 +149,7 @@ pub fn run(a: WalkArgs) -> Result<()> {
         let rows: Vec<Vec<String>> = frames
             .iter()
             .map(|f| {
-                let s = &f.stats;
+                let s = &f.stats.0;
                 let mut row = vec![f.frame.to_string(), format!("{}", f.time_ms)];
                 row.extend(
                     [
@@ -160,7 +162,7 @@ pub fn run(a: WalkArgs) -> Result<()> {
                     .map(u64::to_string),
                 );
                 row.extend(s.fixed_counters()[2..].iter().map(|(_, v)| v.to_string()));
-                row.push(format!("{}", s.total_ms));
+                row.push(format!("{}", s.total.as_secs_f64() * 1e3));
                 row.extend(own_counters.iter().map(|k| s.counters.get(k).to_string()));
                 row
             })
