@@ -268,8 +268,7 @@ impl Renderer for FrustumCulling {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        let (start, cleared) = crate::begin_frame(&mut self.raster, view, frame)?;
-        let t = Instant::now();
+        let (start, t, cleared) = crate::begin_frame(&mut self.raster, view, frame)?;
         // The first walk meets every draw (keeping the first batch) and gives the statistics.
         let mut first = Walk::new(&self.scene, &self.hierarchies, view, 0, self.batch_draws);
         first.walk.stats = cleared;

@@ -267,18 +267,23 @@ pub(crate) fn rasterize(
 }
 
 /// Starts a frame as every renderer does: checks that `frame` matches `view`, clears it with
-/// `raster`, and returns when the frame started with statistics holding the clear's time
-/// ([`Phase::Clear`]).
+/// `raster`, and returns when the frame started, when the clear ended (where the timer of the
+/// renderer's next phase starts) and statistics holding the clear's time ([`Phase::Clear`]).
 ///
 /// # Errors
 /// [`RenderError::FrameSizeMismatch`].
-pub(crate) fn begin_frame(raster: &mut Rasterizer, view: &View, frame: &mut Frame) -> Result<(Instant, FrameStats)> {
+pub(crate) fn begin_frame(
+    raster: &mut Rasterizer,
+    view: &View,
+    frame: &mut Frame,
+) -> Result<(Instant, Instant, FrameStats)> {
     check_frame(view, frame)?;
     let start = Instant::now();
     let mut stats = FrameStats::default();
     raster.clear(frame);
-    stats.phases.add(Phase::Clear, start.elapsed());
-    Ok((start, stats))
+    let cleared_at = Instant::now();
+    stats.phases.add(Phase::Clear, cleared_at - start);
+    Ok((start, cleared_at, stats))
 }
 
 /// Checks that `frame` matches `view`.

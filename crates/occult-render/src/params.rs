@@ -133,7 +133,7 @@ impl Params {
 /// current value, so a target built from the options' `Default` keeps its defaults. The first
 /// value that does not parse is returned (`?`) from the enclosing function.
 ///
-/// ```ignore
+/// ```text
 /// let mut o = Options::default();
 /// read_params!(params, o, { leaf_size: "leaf", cache: flag "cache" });
 /// ```

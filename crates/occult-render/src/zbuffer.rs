@@ -6,7 +6,6 @@
 //! `occult-harness`'s `compare` then takes `frustum` as the reference.
 
 use std::sync::Arc;
-use std::time::Instant;
 
 use occult_core::{Scene, View};
 use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
@@ -58,8 +57,7 @@ impl Renderer for ZBuffer {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        let (start, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
-        let t = Instant::now();
+        let (start, t, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
         let mut draws = Vec::new();
         self.scene
             .for_each_mesh_instance(|world_from_object, _, mesh, first_item| {

@@ -697,7 +697,7 @@ impl Renderer for Hzb {
         let (scene, octrees, options) = (&*self.scene, &self.octrees[..], &self.options);
         let mut stats = if options.distribution == Distribution::Off {
             let w = &mut self.workers[0];
-            let (_, cleared) = crate::begin_frame(&mut w.raster, view, frame)?;
+            let (_, _, cleared) = crate::begin_frame(&mut w.raster, view, frame)?;
             let pyramid = ready_pyramid(&mut w.pyramid, frame.width(), frame.height())?;
             let mut stats = walk_frame(
                 scene,

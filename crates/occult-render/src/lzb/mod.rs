@@ -846,7 +846,7 @@ impl Renderer for Lzb {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        let (start, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
+        let (start, _, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
         let mut ctx = FrameCtx::new(view, self.cull_backfaces);
 
         // Step 2 (§II.B): the partition plane.

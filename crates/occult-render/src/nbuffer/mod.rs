@@ -558,7 +558,7 @@ impl Renderer for NBufferCulling {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        let (start, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
+        let (start, _, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
         if self.last_size != (view.width(), view.height()) {
             self.visible.fill(false);
             self.last_size = (view.width(), view.height());

@@ -680,8 +680,7 @@ impl Renderer for OqGrid {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        let (start, cleared) = crate::begin_frame(&mut self.raster, view, frame)?;
-        let t = Instant::now();
+        let (start, t, cleared) = crate::begin_frame(&mut self.raster, view, frame)?;
         let mut walk = Walk {
             walk: SceneWalk::new(&self.scene, view),
             grids: &self.grids,

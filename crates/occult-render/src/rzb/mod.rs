@@ -626,7 +626,7 @@ impl Renderer for Rzb {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        let (start, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
+        let (start, _, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
         self.frame_index += 1;
         let eps = match (&self.auto, self.opts.eps) {
             (Some(a), _) => a.next(),
