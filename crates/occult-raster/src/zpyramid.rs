@@ -24,9 +24,11 @@
 //!
 //! [`ZPyramid::occludes`] is the §3.2 test: a rectangle whose content is no nearer than
 //! `nearest` is hidden when every covered pixel is strictly nearer than `nearest` (a tie may
-//! still be won by a smaller item id). It starts at the finest level where one sample covers
-//! the rectangle, compares, and descends into the (up to four) samples below where the
-//! comparison fails, down to full resolution.
+//! still be won by a smaller item id). As Greene et al. do, it starts at the finest level where
+//! the rectangle meets at most 2×2 samples, compares, and descends into the (up to four)
+//! samples below where the comparison fails, down to full resolution; a failing sample whose
+//! pixels all lie in the rectangle ends the test at once (one of its pixels is not nearer).
+//! The answer is always the full-resolution scan's: the pyramid only saves reads.
 
 use crate::frame::Frame;
 use crate::query::PixelRect;
@@ -180,6 +182,11 @@ impl ZPyramid {
     /// `nearest`, as far as the pyramid (and the frame, at level 0) knows: then nothing at
     /// depth `nearest` or farther can appear there (§3.2). An empty rectangle is occluded.
     /// A NaN `nearest` is never occluded.
+    ///
+    /// When the pyramid is up to date over the rectangle (every change of the frame there was
+    /// followed by an [`update`](Self::update) over it), the answer is exactly the
+    /// full-resolution scan's. A stale pyramid may answer false where the scan would answer
+    /// true, never the reverse.
     pub fn occludes(
         &self,
         frame: &Frame,
@@ -213,12 +220,21 @@ impl ZPyramid {
         if !how.hierarchical {
             return self.scan(frame, r, nearest, counts);
         }
-        // §3.2: the finest level whose single sample covers the rectangle.
+        // Greene et al.: the finest level where the rectangle meets at most 2×2 samples (at
+        // most four reads), rather than the level where one sample covers it, which for a small
+        // rectangle across a coarse sample boundary is the top of the pyramid.
         let mut level = 0;
-        while (r.x0 >> level) != ((r.x1 - 1) >> level) || (r.y0 >> level) != ((r.y1 - 1) >> level) {
+        while ((r.x1 - 1) >> level) - (r.x0 >> level) > 1 || ((r.y1 - 1) >> level) - (r.y0 >> level) > 1 {
             level += 1;
         }
-        self.sample_occludes(frame, level, r.x0 >> level, r.y0 >> level, r, nearest, counts)
+        for j in r.y0 >> level..=(r.y1 - 1) >> level {
+            for i in r.x0 >> level..=(r.x1 - 1) >> level {
+                if !self.sample_occludes(frame, level, i, j, r, nearest, counts) {
+                    return false;
+                }
+            }
+        }
+        true
     }
 
     /// The §3.2 descent below sample `(i, j)` of `level`.
@@ -241,7 +257,16 @@ impl ZPyramid {
         if s[j as usize * *lw as usize + i as usize] > nearest {
             return true;
         }
-        // The comparison failed: descend into the samples below that meet the rectangle.
+        // The comparison failed: some pixel under the sample is not nearer than `nearest`. When
+        // every pixel under it lies in the rectangle, that pixel is one of the rectangle's, and
+        // the answer is known without descending (the full-resolution scan's answer exactly).
+        let (px0, py0) = (i << level, j << level);
+        let px1 = ((i + 1) << level).min(self.width);
+        let py1 = ((j + 1) << level).min(self.height);
+        if r.x0 <= px0 && px1 <= r.x1 && r.y0 <= py0 && py1 <= r.y1 {
+            return false;
+        }
+        // Otherwise descend into the samples below that meet the rectangle.
         counts.descents += 1;
         let l = level - 1;
         let (bx0, bx1) = ((r.x0 >> l).max(2 * i), ((r.x1 - 1) >> l).min(2 * i + 1));
@@ -383,9 +408,8 @@ mod tests {
                 frame.write_fragment(x, y, 0.5, 1);
             }
         }
-        // Not yet updated: the coarse levels are stale, the descent reaches the frame itself.
-        assert!(p.occludes(&frame, r, 0.3, how, &mut c));
-        assert!(c.descents > 0);
+        // Not yet updated: the coarse levels are stale and fail to reject (conservative).
+        assert!(!p.occludes(&frame, r, 0.3, how, &mut c));
         p.update(
             &frame,
             PixelRect {
@@ -430,7 +454,8 @@ mod tests {
         assert_eq!(c.global_rejects, 1);
         p.clear();
         let mut c = PyramidCounts::default();
-        assert!(p.occludes(&frame, r, 0.2, HOWS[3], &mut c)); // stale zeros: descends to level 0
+        // Stale zeros: no global reject, and the stale samples fail to reject (conservative).
+        assert!(!p.occludes(&frame, r, 0.2, HOWS[3], &mut c));
         assert_eq!(c.global_rejects, 0);
     }
 }
