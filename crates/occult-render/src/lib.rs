@@ -36,6 +36,7 @@ pub mod nbuffer;
 mod nodes;
 pub mod oqgrid;
 pub mod params;
+pub mod payoff;
 pub mod rzb;
 mod stats;
 pub mod walk;

@@ -15,9 +15,10 @@
 //!   per frame and instance: §3.1's frame stamp, kept as one bit per shared primitive in a bit
 //!   set per instance that draws one this frame.
 //! - **Max z-pyramid and the box-face test (§3.2)**, [`occult_raster::ZPyramid`] and
-//!   `boxtest`: each front face of a node's box is tested at the finest pyramid level whose one
-//!   sample covers the face's screen box, descending where the comparison fails down to the
-//!   frame's own depth. Our depth is reversed, so the paper's max pyramid is a min pyramid over
+//!   `boxtest`: each front face of a node's box is tested at the finest pyramid level where
+//!   the face's screen box meets at most 2×2 samples (Greene et al.), descending where the
+//!   comparison fails down to the frame's own depth (a failing sample wholly inside the box
+//!   ends the test). Our depth is reversed, so the paper's max pyramid is a min pyramid over
 //!   stored depth (see the pyramid's doc).
 //! - **Pyramid updates: per batch.** Visible geometry is gathered into batches of about `batch`
 //!   triangles; a full batch is rasterized (multi-threaded) and the pyramid is then recomputed
@@ -50,6 +51,11 @@
 //!   counters `worker<k>_busy_us` / `worker<k>_idle_us`; the phases are the slowest worker's,
 //!   the merge is `other`.
 //!
+//! - **Payoff** ([`crate::payoff`], `payoff`): a frame whose tests cost more than they save
+//!   stops testing and draws the rest directly: mesh instances wholly in view whole, in batches
+//!   large enough for the rasterizer's threads, without pyramid updates (only the recheck reads
+//!   the pyramid then, and it rebuilds it).
+//!
 //! Every part has a switch so its effect can be measured (`occult algos` lists them).
 //!
 //! # Deviations from the paper
@@ -67,6 +73,8 @@
 //!   rechecked there, so when it comes back into view (a street corner turned) its status is
 //!   many frames old; it is then box-tested before it is drawn (and stays off the list when
 //!   hidden). Entries seen last frame are still drawn untested (§3.3).
+//! - Addition, `payoff` (above): the paper tests everything; on views where little is hidden
+//!   that is slower than brute force.
 //! - Addition, `whole`: a mesh instance whose visible-list nodes hold at least this fraction of
 //!   its triangles is drawn whole, as one whole-mesh draw, and the tested traversal skips it
 //!   this frame; its entries stay listed and are rechecked, so when the visible share falls
@@ -104,6 +112,7 @@ use occult_raster::{Frame, Rasterizer, ZPyramid};
 use occult_spatial::{HybridOctree, HybridOctreeConfig};
 
 use crate::nodes::{instance_boxes, per_node, triangle_boxes};
+use crate::payoff::Payoff;
 use crate::{
     check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result,
 };
@@ -172,6 +181,9 @@ pub struct HzbOptions {
     pub distribution: Distribution,
     /// Workers of the distribution (1 ..= [`MAX_WORKERS`]); each rasterizes on one thread.
     pub workers: usize,
+    /// Stop testing for the rest of a frame once the tests cost more than they save, and draw
+    /// the rest directly ([`crate::payoff`]). Not in the paper.
+    pub payoff: bool,
 }
 
 impl Default for HzbOptions {
@@ -195,6 +207,7 @@ impl Default for HzbOptions {
             order: ChildOrder::FrontToBack,
             distribution: Distribution::Off,
             workers: 2,
+            payoff: true,
         }
     }
 }
@@ -252,6 +265,7 @@ impl HzbOptions {
                 _ => Distribution::Off,
             },
             workers,
+            payoff: p.flag("payoff", d.payoff)?,
             octree: HybridOctreeConfig {
                 leaf_size,
                 max_depth,
@@ -279,7 +293,7 @@ impl HzbOptions {
 /// Every counter ([`FrameStats::counters`](crate::FrameStats::counters)) a frame may report,
 /// whichever the settings, except the per-worker ones of `parallel=on` (`worker<k>_busy_us`,
 /// `worker<k>_idle_us`); [`INFO`]'s counters list those too.
-pub const COUNTERS: [&str; 13] = [
+pub const COUNTERS: [&str; 15] = [
     "occlusion_tests",
     "occlusion_culled",
     "frustum_culled",
@@ -293,6 +307,8 @@ pub const COUNTERS: [&str; 13] = [
     "batches",
     "whole_drawn",
     "visible_list_retested",
+    crate::payoff::COUNTERS[0],
+    crate::payoff::COUNTERS[1],
 ];
 
 /// Every counter a frame may report: [`COUNTERS`], then the workers' busy and idle times.
@@ -398,6 +414,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             default: "2",
             help: "workers of the distribution, 1..=8 (each rasterizes on one thread)",
         },
+        ParamDoc {
+            key: "payoff",
+            default: "on",
+            help: "stop testing for the rest of a frame once tests cost more than they save, and draw the rest directly (not in the paper)",
+        },
     ],
     counters: &DECLARED,
     conservative: true,
@@ -419,6 +440,7 @@ struct VisEntry {
 /// worker of a distribution, its own frame).
 struct Worker {
     raster: Rasterizer,
+    payoff: Payoff,
     stamps: walk::Stamps,
     frame: Option<Frame>,
     pyramid: Option<ZPyramid>,
@@ -441,6 +463,9 @@ pub struct Hzb {
     options: HzbOptions,
     /// Per DAG node: its octree (groups, and meshes over the leaf size).
     octrees: Vec<Option<HybridOctree>>,
+    /// Per DAG node with an octree: triangle instances below each of its nodes (what a test
+    /// that culls the node saves, [`crate::payoff`]).
+    subtree_items: Vec<Vec<u64>>,
     /// One walker, or one per worker of the distribution.
     workers: Vec<Worker>,
     frames_since_recheck: u32,
@@ -512,6 +537,7 @@ impl Hzb {
         let octrees = octrees.map_err(|e| RenderError::BadParameter(format!("hzb: {e}")))?;
         let workers = if hzb.distribution == Distribution::Off {
             vec![Worker {
+                payoff: Payoff::new(hzb.payoff, scene.item_count()),
                 raster,
                 frame: None,
                 pyramid: None,
@@ -527,6 +553,7 @@ impl Hzb {
                 .map(|_| {
                     Ok(Worker {
                         raster: Rasterizer::new(one.clone())?,
+                        payoff: Payoff::new(hzb.payoff, scene.item_count()),
                         frame: None,
                         pyramid: None,
                         visible: Vec::new(),
@@ -535,16 +562,54 @@ impl Hzb {
                 })
                 .collect::<Result<Vec<_>>>()?
         };
+        let subtree_items = octrees
+            .iter()
+            .enumerate()
+            .map(|(i, o)| {
+                o.as_ref()
+                    .map_or_else(Vec::new, |o| subtree_items(&scene, NodeId(i as u32), o))
+            })
+            .collect();
         let mut hzb = hzb.clone();
         hzb.temporal &= hzb.occlusion; // without tests a visible list changes nothing
         Ok(Self {
             scene,
             options: hzb,
+            subtree_items,
             octrees,
             workers,
             frames_since_recheck: 0,
         })
     }
+}
+
+/// Triangle instances below each node of `octree`, the octree of DAG node `id`: its own
+/// primitives' (triangles of a mesh, the instances' triangles of a group) and its children's.
+fn subtree_items(scene: &Scene, id: NodeId, octree: &HybridOctree) -> Vec<u64> {
+    let nodes = octree.nodes();
+    let per_primitive = |p: u32| match scene.node(id).kind() {
+        NodeKind::Mesh(_) => 1,
+        NodeKind::Group(g) => scene.node(g[p as usize].child).item_count(),
+    };
+    let mut items = vec![0u64; nodes.len()];
+    // Post-order without recursion: a node is summed after all its children.
+    let mut stack = vec![(0u32, false)];
+    while let Some((n, done)) = stack.pop() {
+        let node = &nodes[n as usize];
+        let children = node
+            .children
+            .iter()
+            .copied()
+            .filter(|&c| c != occult_spatial::octree::hybrid::NO_CHILD);
+        if done {
+            let own: u64 = octree.node_primitives(n).iter().map(|&p| per_primitive(p)).sum();
+            items[n as usize] = own + children.map(|c| items[c as usize]).sum::<u64>();
+        } else {
+            stack.push((n, true));
+            stack.extend(children.map(|c| (c, false)));
+        }
+    }
+    items
 }
 
 /// One walk over (the share of) the scene: visible list, tested traversal, recheck.
@@ -561,9 +626,23 @@ fn walk_frame(
     share: walk::Share,
     recheck: bool,
     stamps: &mut walk::Stamps,
+    subtree_items: &[Vec<u64>],
+    payoff: &mut Payoff,
 ) -> FrameStats {
     let old_visible = std::mem::take(visible);
-    let mut w = walk::Walk::new(scene, octrees, options, view, raster, frame, pyramid, share, stamps);
+    let mut w = walk::Walk::new(
+        scene,
+        octrees,
+        options,
+        view,
+        raster,
+        frame,
+        pyramid,
+        share,
+        stamps,
+        subtree_items,
+        payoff,
+    );
     if options.temporal {
         w.draw_visible_list(old_visible);
     }
@@ -584,6 +663,7 @@ impl Hzb {
     /// slowest before the merge (the load balance the paper discusses).
     fn render_distributed(&mut self, view: &View, frame: &mut Frame, recheck: bool) -> Result<FrameStats> {
         let (scene, octrees, options) = (&*self.scene, &self.octrees[..], &self.options);
+        let subtree_items = &self.subtree_items[..];
         let (width, height) = (frame.width(), frame.height());
         for w in &mut self.workers {
             if !matches!(&w.frame, Some(f) if f.width() == width && f.height() == height) {
@@ -621,6 +701,8 @@ impl Hzb {
                             share,
                             recheck,
                             &mut w.stamps,
+                            subtree_items,
+                            &mut w.payoff,
                         );
                         (stats, t.elapsed())
                     })
@@ -711,6 +793,8 @@ impl Renderer for Hzb {
                 walk::Share::ALL,
                 recheck,
                 &mut w.stamps,
+                &self.subtree_items,
+                &mut w.payoff,
             );
             stats.phases.merge(&cleared.phases);
             stats

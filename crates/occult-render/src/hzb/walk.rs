@@ -11,6 +11,7 @@ use occult_spatial::{octree::hybrid::NO_CHILD, HybridOctree};
 use super::boxtest::{screen_rect, Occlusion};
 use super::{ChildOrder, Distribution, HzbOptions, VisEntry};
 use crate::hash::{FxBuild, FxHasher};
+use crate::payoff::{FramePayoff, Payoff};
 use crate::walk::{NodeAt, NodeTest, Placed, SceneWalk, Visitor};
 use crate::{FrameStats, Phase};
 
@@ -21,6 +22,10 @@ type NodeKey = (u32, u32, u64);
 
 /// Marks a primitive that no other node shares in [`Stamps`]' numbering.
 const NOT_SHARED: u32 = u32::MAX;
+
+/// Triangles gathered per batch once the frame stopped testing ([`crate::payoff`]): large
+/// enough that the rasterizer shares each batch over its threads, as brute force does.
+const UNTESTED_BATCH: usize = 1 << 19;
 
 /// §3.1's frame stamps of shared primitives, kept per instance: every instance (DAG node, first
 /// item) that draws a shared primitive this frame gets a bit set over its octree's shared
@@ -206,6 +211,11 @@ struct Instance<'a> {
 pub(super) struct Walk<'a> {
     walk: SceneWalk<'a>,
     octrees: &'a [Option<HybridOctree>],
+    /// Per DAG node with an octree: triangle instances below each octree node.
+    subtree_items: &'a [Vec<u64>],
+    /// Whether the tests still pay this frame, and what the renderer learns from it.
+    payoff: FramePayoff,
+    payoff_state: &'a mut Payoff,
     options: &'a HzbOptions,
     raster: &'a mut Rasterizer,
     frame: &'a mut Frame,
@@ -252,11 +262,16 @@ impl<'a> Walk<'a> {
         pyramid: &'a mut ZPyramid,
         share: Share,
         stamps: &'a mut Stamps,
+        subtree_items: &'a [Vec<u64>],
+        payoff_state: &'a mut Payoff,
     ) -> Self {
         stamps.begin_frame();
         Self {
             walk: SceneWalk::new(scene, view),
             octrees,
+            subtree_items,
+            payoff: payoff_state.begin(Instant::now()),
+            payoff_state,
             options,
             raster,
             frame,
@@ -339,7 +354,8 @@ impl<'a> Walk<'a> {
             // back into view it is tested like a node of the traversal (`retest`).
             if e.stale && self.options.retest && self.options.occlusion {
                 self.list_retested += 1;
-                if self.hidden(&pl.clip_from_object, &own, pl.eye) {
+                let items = self.own_items(e.dag_node, e.octree_node);
+                if self.hidden(&pl.clip_from_object, &own, pl.eye, items) {
                     continue; // the traversal lists it again if it is drawn
                 }
             }
@@ -442,6 +458,8 @@ impl<'a> Walk<'a> {
             ("whole_drawn", self.whole_drawn),
             ("visible_list_retested", self.list_retested),
         ]);
+        c.add_all(self.payoff.counters());
+        self.payoff_state.end(&self.payoff);
         (self.visible, self.walk.stats)
     }
 
@@ -545,7 +563,7 @@ impl<'a> Walk<'a> {
         let clip = view.clip_from_object(world_from_node);
         if self.options.occlusion {
             let eye = world_from_node.inverse().transform_point3(view.camera().eye);
-            if self.hidden(&clip, &b, eye) {
+            if self.hidden(&clip, &b, eye, mesh.triangle_count() as u64) {
                 return false;
             }
         }
@@ -553,8 +571,28 @@ impl<'a> Walk<'a> {
         true
     }
 
-    /// The occlusion test of one box, counted.
-    fn hidden(&mut self, clip: &Mat4, b: &occult_core::Aabb, eye: Vec3) -> bool {
+    /// Triangle instances held by octree node `n`'s own primitives (not its children's).
+    fn own_items(&self, id: NodeId, n: u32) -> u64 {
+        let items = &self.subtree_items[id.index()];
+        let Some(octree) = &self.octrees[id.index()] else {
+            return 0;
+        };
+        let node = &octree.nodes()[n as usize];
+        let below: u64 = node
+            .children
+            .iter()
+            .filter(|&&c| c != NO_CHILD)
+            .map(|&c| items[c as usize])
+            .sum();
+        items[n as usize] - below
+    }
+
+    /// The occlusion test of one box holding `items` triangle instances, counted; false
+    /// without a test once tests stopped paying this frame.
+    fn hidden(&mut self, clip: &Mat4, b: &occult_core::Aabb, eye: Vec3, items: u64) -> bool {
+        if !self.payoff.test() {
+            return false;
+        }
         self.walk.stats.boxes_tested += 1;
         self.occlusion_tests += 1;
         let mut pc = self.pc;
@@ -563,6 +601,7 @@ impl<'a> Walk<'a> {
         if hidden {
             self.walk.stats.boxes_culled += 1;
             self.occlusion_culled += 1;
+            self.payoff.saved(items);
         }
         hidden
     }
@@ -591,7 +630,19 @@ impl<'a> Walk<'a> {
         {
             return; // a leaf the visible list drew: nothing left to test for
         }
-        if self.options.occlusion && self.hidden(&inst.clip_from_object, &node.bounds, inst.eye) {
+        if self.payoff.stopped() && n == 0 && inside && self.share == Share::ALL {
+            // Tests stopped paying: a mesh instance wholly in view is drawn whole, its vertices
+            // projected once, as brute force draws it (what the visible list drew of it this
+            // frame is drawn again, which changes no pixel).
+            if let NodeKind::Mesh(mesh) = self.walk.scene().node(inst.place.id).kind() {
+                let b = node.bounds;
+                self.push(mesh, None, inst.clip_from_object, inst.place.first_item, &b);
+                self.maybe_flush();
+                return;
+            }
+        }
+        let items = self.subtree_items[inst.place.id.index()][n as usize];
+        if self.options.occlusion && self.hidden(&inst.clip_from_object, &node.bounds, inst.eye, items) {
             return;
         }
         if node.count > 0 {
@@ -604,7 +655,7 @@ impl<'a> Walk<'a> {
                     let own_hidden = |w: &mut Self| {
                         w.options.occlusion
                             && !node.is_leaf()
-                            && w.hidden(&inst.clip_from_object, &node.own_bounds, inst.eye)
+                            && w.hidden(&inst.clip_from_object, &node.own_bounds, inst.eye, node.count as u64)
                     };
                     if !self.drawn_nodes.contains(&key) && !own_hidden(self) {
                         let own = node.own_bounds;
@@ -791,7 +842,12 @@ impl<'a> Walk<'a> {
     }
 
     fn maybe_flush(&mut self) {
-        if self.pending_triangles >= self.options.batch_triangles {
+        let batch = if self.payoff.stopped() {
+            UNTESTED_BATCH
+        } else {
+            self.options.batch_triangles
+        };
+        if self.pending_triangles >= batch {
             self.flush();
         }
     }
@@ -814,11 +870,14 @@ impl<'a> Walk<'a> {
                 first_item: p.first_item,
             })
             .collect();
+        let t = Instant::now();
         crate::rasterize(self.raster, self.walk.view(), self.frame, &draws, &mut self.walk.stats);
+        self.payoff.rasterized(self.pending_triangles as u64, t.elapsed());
         drop(draws);
         self.batches += 1;
         if let Some(d) = self.dirty.take() {
-            if self.options.occlusion {
+            // Once tests stopped, only the recheck reads the pyramid, and it rebuilds it.
+            if self.options.occlusion && !self.payoff.stopped() {
                 let t = Instant::now();
                 self.pyramid.update(self.frame, d);
                 self.walk.stats.phases.add(Phase::DepthStructure, t.elapsed());

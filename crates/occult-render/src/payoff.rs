@@ -1,0 +1,226 @@
+//! Whether occlusion tests pay, measured while a frame is drawn: a culling renderer stops
+//! testing for the rest of a frame once its tests cost more than they save, and draws the rest
+//! directly.
+//!
+//! A conservative renderer's tests are pure overhead on views where little is hidden (open
+//! terrain, sparse foliage seen from outside). [`Payoff`] gives every such renderer the same
+//! guarantee, measured rather than tuned. Within a frame it weighs
+//!
+//! - **cost**: the wall time spent so far outside rasterization (the tests, the walk that feeds
+//!   them, the depth-structure updates they need), against
+//! - **gain**: the triangles the tests removed, times the measured rasterization cost of a
+//!   triangle (the renderer's own batches, this frame or, before its first batch, the last),
+//!
+//! and tells the renderer to stop testing once the cost exceeds the gain by more than an
+//! allowance: a share of the frame's expected direct cost (the triangles the last frame drew or
+//! removed, times the cost of a triangle), and never less than [`MIN_ALLOWANCE_TIME`]. Tests
+//! pay late in a frame (what is hidden is reached
+//! after its occluders are drawn), so the allowance must cover the start of a frame; it adapts
+//! across frames: halved after a frame that stopped (down to [`MIN_ALLOWANCE`]), doubled after
+//! one whose tests paid (up to [`MAX_ALLOWANCE`]). On a view where nothing is hidden the
+//! renderer converges to testing a few percent of a frame, then drawing directly in large
+//! batches as brute force does. Frames do not change (stopping only draws more), only the time.
+//!
+//! Counters, registered by each renderer that uses it: `payoff_stopped` (1 when the frame
+//! stopped testing), `payoff_untested` (the tests then skipped).
+
+use std::time::{Duration, Instant};
+
+/// Smallest share of a frame's expected direct cost a frame may lose finding out.
+pub const MIN_ALLOWANCE: f64 = 1.0 / 64.0;
+/// Largest share.
+pub const MAX_ALLOWANCE: f64 = 0.25;
+/// The least allowance, whatever the share: frames shorter than this never stop testing, so
+/// small scenes keep their tests (and their counts) whatever the clock says.
+pub const MIN_ALLOWANCE_TIME: Duration = Duration::from_millis(2);
+/// Rasterization cost of a triangle before one was measured, ns (a typical software rate).
+const PRIOR_NS_PER_TRIANGLE: f64 = 20.0;
+/// Tests between two checks of the balance (a check reads the clock).
+const CHECK_EVERY: u32 = 32;
+
+/// What a renderer keeps across frames: the allowance, the measured cost of a triangle and
+/// the triangles last seen in view.
+#[derive(Clone, Debug)]
+pub struct Payoff {
+    enabled: bool,
+    allowance: f64,
+    ns_per_triangle: f64,
+    /// Triangles last frame drew or removed by tests: the work a direct frame would face.
+    in_view: u64,
+}
+
+impl Payoff {
+    /// A fresh state. `enabled` false: frames never stop testing. `scene_triangles` is the
+    /// first frame's estimate of the triangles in view (the whole scene).
+    pub fn new(enabled: bool, scene_triangles: u64) -> Self {
+        Self {
+            enabled,
+            allowance: MAX_ALLOWANCE,
+            ns_per_triangle: PRIOR_NS_PER_TRIANGLE,
+            in_view: scene_triangles,
+        }
+    }
+
+    /// Starts weighing a frame that began at `start`.
+    pub fn begin(&self, start: Instant) -> FramePayoff {
+        FramePayoff {
+            enabled: self.enabled,
+            start,
+            raster_time: Duration::ZERO,
+            raster_triangles: 0,
+            saved_triangles: 0,
+            last_ns_per_triangle: self.ns_per_triangle,
+            allowance_triangles: self.allowance * self.in_view as f64,
+            stopped: false,
+            since_check: 0,
+            untested: 0,
+        }
+    }
+
+    /// Learns from a finished frame: the allowance, the cost of a triangle, the work in view.
+    pub fn end(&mut self, f: &FramePayoff) {
+        self.ns_per_triangle = f.ns_per_triangle();
+        self.in_view = f.raster_triangles + f.saved_triangles;
+        if f.stopped {
+            self.allowance = (self.allowance * 0.5).max(MIN_ALLOWANCE);
+        } else if f.gain_ns() >= f.cost_ns(Instant::now()) {
+            self.allowance = (self.allowance * 2.0).min(MAX_ALLOWANCE);
+        }
+    }
+}
+
+/// One frame's balance of test cost against gain ([module doc](self)).
+#[derive(Clone, Debug)]
+pub struct FramePayoff {
+    enabled: bool,
+    start: Instant,
+    raster_time: Duration,
+    raster_triangles: u64,
+    saved_triangles: u64,
+    last_ns_per_triangle: f64,
+    allowance_triangles: f64,
+    stopped: bool,
+    since_check: u32,
+    untested: u64,
+}
+
+impl FramePayoff {
+    /// Rasterizing `triangles` (submitted) took `time`: not a cost of the tests.
+    pub fn rasterized(&mut self, triangles: u64, time: Duration) {
+        self.raster_triangles += triangles;
+        self.raster_time += time;
+    }
+
+    /// A test removed `triangles` triangle instances.
+    pub fn saved(&mut self, triangles: u64) {
+        self.saved_triangles += triangles;
+    }
+
+    /// Whether to run the next test; false once the frame stopped testing. Checks the balance
+    /// every few tests.
+    pub fn test(&mut self) -> bool {
+        if self.stopped {
+            self.untested += 1;
+            return false;
+        }
+        if !self.enabled {
+            return true;
+        }
+        self.since_check += 1;
+        if self.since_check >= CHECK_EVERY {
+            self.since_check = 0;
+            let allowance =
+                (self.allowance_triangles * self.ns_per_triangle()).max(MIN_ALLOWANCE_TIME.as_nanos() as f64);
+            if self.cost_ns(Instant::now()) > self.gain_ns() + allowance {
+                self.stopped = true;
+                self.untested += 1;
+                return false;
+            }
+        }
+        true
+    }
+
+    /// True once the frame stopped testing.
+    pub fn stopped(&self) -> bool {
+        self.stopped
+    }
+
+    /// The counters `payoff_stopped` and `payoff_untested`.
+    pub fn counters(&self) -> [(&'static str, u64); 2] {
+        [
+            ("payoff_stopped", self.stopped as u64),
+            ("payoff_untested", self.untested),
+        ]
+    }
+
+    /// This frame's rasterization cost of a triangle, ns; the last frame's before its first
+    /// batch.
+    fn ns_per_triangle(&self) -> f64 {
+        if self.raster_triangles == 0 {
+            return self.last_ns_per_triangle;
+        }
+        self.raster_time.as_nanos() as f64 / self.raster_triangles as f64
+    }
+
+    fn cost_ns(&self, now: Instant) -> f64 {
+        now.saturating_duration_since(self.start)
+            .saturating_sub(self.raster_time)
+            .as_nanos() as f64
+    }
+
+    fn gain_ns(&self) -> f64 {
+        self.saved_triangles as f64 * self.ns_per_triangle()
+    }
+}
+
+/// The counters of [`FramePayoff::counters`], for registries.
+pub const COUNTERS: [&str; 2] = ["payoff_stopped", "payoff_untested"];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn disabled_never_stops() {
+        let p = Payoff::new(false, 1_000_000);
+        let mut f = p.begin(Instant::now() - Duration::from_secs(10));
+        assert!((0..1000).all(|_| f.test()));
+        assert!(!f.stopped());
+    }
+
+    #[test]
+    fn stops_when_tests_cost_more_than_they_save() {
+        // A frame that began 50 ms ago, removed nothing and rasterized for 1 ms: 49 ms of
+        // tests against an allowance of a quarter of 1,000 triangles at 1 µs.
+        let mut p = Payoff::new(true, 1_000);
+        let mut f = p.begin(Instant::now() - Duration::from_millis(50));
+        f.rasterized(1_000, Duration::from_millis(1));
+        let ran = (0..1000).take_while(|_| f.test()).count();
+        assert_eq!(ran, CHECK_EVERY as usize - 1);
+        assert!(f.stopped());
+        assert!(!f.test());
+        assert_eq!(f.counters(), [("payoff_stopped", 1), ("payoff_untested", 2)]);
+        p.end(&f);
+        assert_eq!(p.allowance, MAX_ALLOWANCE * 0.5);
+        assert_eq!(p.ns_per_triangle, 1_000.0);
+        assert_eq!(p.in_view, 1_000);
+    }
+
+    #[test]
+    fn keeps_testing_while_tests_pay() {
+        let mut p = Payoff::new(true, 1_000);
+        p.allowance = MIN_ALLOWANCE;
+        let mut f = p.begin(Instant::now() - Duration::from_millis(1));
+        // A million triangles removed at 20 ns (the prior): 20 ms of gain against about 1 ms
+        // of cost.
+        f.saved(1_000_000);
+        assert!((0..10 * CHECK_EVERY).all(|_| f.test()));
+        // Time spent rasterizing is not a cost of the tests.
+        f.rasterized(1_000, Duration::from_micros(30));
+        assert!((0..10 * CHECK_EVERY).all(|_| f.test()));
+        p.end(&f);
+        assert_eq!(p.allowance, 2.0 * MIN_ALLOWANCE);
+        assert_eq!(p.ns_per_triangle, 30.0);
+        assert_eq!(p.in_view, 1_001_000);
+    }
+}
