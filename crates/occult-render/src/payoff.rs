@@ -12,14 +12,20 @@
 //!   triangle (the renderer's own batches, this frame or, before its first batch, the last),
 //!
 //! and tells the renderer to stop testing once the cost exceeds the gain by more than an
-//! allowance: a share of the frame's expected direct cost (the triangles the last frame drew or
-//! removed, times the cost of a triangle), and never less than [`MIN_ALLOWANCE_TIME`]. Tests
-//! pay late in a frame (what is hidden is reached
-//! after its occluders are drawn), so the allowance must cover the start of a frame; it adapts
-//! across frames: halved after a frame that stopped (down to [`MIN_ALLOWANCE`]), doubled after
-//! one whose tests paid (up to [`MAX_ALLOWANCE`]). On a view where nothing is hidden the
-//! renderer converges to testing a few percent of a frame, then drawing directly in large
-//! batches as brute force does. Frames do not change (stopping only draws more), only the time.
+//! allowance. Once the renderer has drawn directly (large batches shared over the
+//! rasterizer's threads), the rate of such draws is known, and a frame also stops when its
+//! whole time so far exceeds what drawing its work (the triangles drawn and removed) directly
+//! would have cost, by more than the allowance: small tested batches rasterize slower than
+//! shared ones, which is a cost of testing too.
+//!
+//! The allowance is a share of the frame's expected direct cost (the triangles the last frame
+//! drew or removed, times the cost of a triangle), and never less than [`MIN_ALLOWANCE_TIME`].
+//! Tests pay late in a frame (what is hidden is reached after its occluders are drawn), so the
+//! allowance must cover the start of a frame; it adapts across frames: halved after a frame
+//! that stopped (down to [`MIN_ALLOWANCE`]), doubled after one whose tests paid (up to
+//! [`MAX_ALLOWANCE`]). On a view where nothing is hidden the renderer converges to testing a
+//! few percent of a frame, then drawing directly in large batches as brute force does. Frames
+//! do not change (stopping only draws more), only the time.
 //!
 //! Counters, registered by each renderer that uses it: `payoff_stopped` (1 when the frame
 //! stopped testing), `payoff_untested` (the tests then skipped).
@@ -45,6 +51,9 @@ pub struct Payoff {
     enabled: bool,
     allowance: f64,
     ns_per_triangle: f64,
+    /// Cost of a triangle in a batch shared over the rasterizer's threads, ns: what drawing
+    /// directly costs; None until a frame drew such batches.
+    direct_ns: Option<f64>,
     /// Triangles last frame drew or removed by tests: the work a direct frame would face.
     in_view: u64,
 }
@@ -57,6 +66,7 @@ impl Payoff {
             enabled,
             allowance: MAX_ALLOWANCE,
             ns_per_triangle: PRIOR_NS_PER_TRIANGLE,
+            direct_ns: None,
             in_view: scene_triangles,
         }
     }
@@ -68,8 +78,10 @@ impl Payoff {
             start,
             raster_time: Duration::ZERO,
             raster_triangles: 0,
+            shared: (0, Duration::ZERO),
             saved_triangles: 0,
             last_ns_per_triangle: self.ns_per_triangle,
+            direct_ns: self.direct_ns,
             allowance_triangles: self.allowance * self.in_view as f64,
             stopped: false,
             since_check: 0,
@@ -80,6 +92,10 @@ impl Payoff {
     /// Learns from a finished frame: the allowance, the cost of a triangle, the work in view.
     pub fn end(&mut self, f: &FramePayoff) {
         self.ns_per_triangle = f.ns_per_triangle();
+        if f.shared.0 > 0 {
+            let measured = f.shared.1.as_nanos() as f64 / f.shared.0 as f64;
+            self.direct_ns = Some(self.direct_ns.map_or(measured, |d| 0.5 * d + 0.5 * measured));
+        }
         self.in_view = f.raster_triangles + f.saved_triangles;
         if f.stopped {
             self.allowance = (self.allowance * 0.5).max(MIN_ALLOWANCE);
@@ -96,8 +112,11 @@ pub struct FramePayoff {
     start: Instant,
     raster_time: Duration,
     raster_triangles: u64,
+    /// Triangles and time of the batches shared over the rasterizer's threads.
+    shared: (u64, Duration),
     saved_triangles: u64,
     last_ns_per_triangle: f64,
+    direct_ns: Option<f64>,
     allowance_triangles: f64,
     stopped: bool,
     since_check: u32,
@@ -105,10 +124,16 @@ pub struct FramePayoff {
 }
 
 impl FramePayoff {
-    /// Rasterizing `triangles` (submitted) took `time`: not a cost of the tests.
-    pub fn rasterized(&mut self, triangles: u64, time: Duration) {
+    /// Rasterizing `triangles` (submitted) took `time`: not a cost of the tests. `shared`:
+    /// the batch was large enough for the rasterizer to share over its threads, as a direct
+    /// draw is (its rate is then what drawing directly costs).
+    pub fn rasterized(&mut self, triangles: u64, time: Duration, shared: bool) {
         self.raster_triangles += triangles;
         self.raster_time += time;
+        if shared {
+            self.shared.0 += triangles;
+            self.shared.1 += time;
+        }
     }
 
     /// A test removed `triangles` triangle instances.
@@ -131,7 +156,15 @@ impl FramePayoff {
             self.since_check = 0;
             let allowance =
                 (self.allowance_triangles * self.ns_per_triangle()).max(MIN_ALLOWANCE_TIME.as_nanos() as f64);
-            if self.cost_ns(Instant::now()) > self.gain_ns() + allowance {
+            let now = Instant::now();
+            // Once the direct rate is known (a frame drew directly), the whole frame so far is
+            // weighed against drawing its work directly: small tested batches rasterize slower
+            // than shared ones, a cost of testing too.
+            let direct_too_slow = self.direct_ns.is_some_and(|d| {
+                let work = (self.raster_triangles + self.saved_triangles) as f64 * d;
+                now.saturating_duration_since(self.start).as_nanos() as f64 > work + allowance
+            });
+            if direct_too_slow || self.cost_ns(now) > self.gain_ns() + allowance {
                 self.stopped = true;
                 self.untested += 1;
                 return false;
@@ -194,7 +227,7 @@ mod tests {
         // tests against an allowance of a quarter of 1,000 triangles at 1 µs.
         let mut p = Payoff::new(true, 1_000);
         let mut f = p.begin(Instant::now() - Duration::from_millis(50));
-        f.rasterized(1_000, Duration::from_millis(1));
+        f.rasterized(1_000, Duration::from_millis(1), false);
         let ran = (0..1000).take_while(|_| f.test()).count();
         assert_eq!(ran, CHECK_EVERY as usize - 1);
         assert!(f.stopped());
@@ -216,11 +249,12 @@ mod tests {
         f.saved(1_000_000);
         assert!((0..10 * CHECK_EVERY).all(|_| f.test()));
         // Time spent rasterizing is not a cost of the tests.
-        f.rasterized(1_000, Duration::from_micros(30));
+        f.rasterized(1_000, Duration::from_micros(30), true);
         assert!((0..10 * CHECK_EVERY).all(|_| f.test()));
         p.end(&f);
         assert_eq!(p.allowance, 2.0 * MIN_ALLOWANCE);
         assert_eq!(p.ns_per_triangle, 30.0);
+        assert_eq!(p.direct_ns, Some(30.0));
         assert_eq!(p.in_view, 1_001_000);
     }
 }

@@ -413,6 +413,9 @@ impl<'a> Walk<'a> {
     /// §3.3: removes from the visible list the nodes whose own primitives are hidden in the
     /// final frame (frustum-culled ones stay when `keep_culled`, §5.1).
     pub fn recheck(&mut self) {
+        if self.payoff.stopped() {
+            return; // the list is dropped (`finish`): rechecking it would be testing again
+        }
         let t = Instant::now();
         self.pyramid.rebuild(self.frame);
         self.walk.stats.phases.add(Phase::DepthStructure, t.elapsed());
@@ -442,6 +445,14 @@ impl<'a> Walk<'a> {
 
     /// The next visible list and the frame's statistics.
     pub fn finish(mut self) -> (Vec<VisEntry>, FrameStats) {
+        if self.payoff.stopped() {
+            // A frame that stopped testing lists only what it drew before it stopped; drawn
+            // untested first next frame, in pieces, that costs more than it helps. The next
+            // frame starts from the root, and stops again after a short probe if tests still
+            // do not pay.
+            self.visible.clear();
+            self.listed.clear();
+        }
         let c = &mut self.walk.stats.counters;
         c.add_all([
             ("occlusion_tests", self.occlusion_tests),
@@ -872,7 +883,9 @@ impl<'a> Walk<'a> {
             .collect();
         let t = Instant::now();
         crate::rasterize(self.raster, self.walk.view(), self.frame, &draws, &mut self.walk.stats);
-        self.payoff.rasterized(self.pending_triangles as u64, t.elapsed());
+        let shared = self.pending_triangles >= UNTESTED_BATCH;
+        self.payoff
+            .rasterized(self.pending_triangles as u64, t.elapsed(), shared);
         drop(draws);
         self.batches += 1;
         if let Some(d) = self.dirty.take() {
