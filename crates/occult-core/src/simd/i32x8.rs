@@ -63,7 +63,7 @@ impl I32x8 {
     /// (a 4 × 4 transpose in each 128-bit half and four 32-byte stores).
     #[inline(always)]
     pub fn to_rows(columns: [Self; 4], rows: &mut [[i32; 4]; 8]) {
-        let [a, b, c, d] = columns.map(|v| v.0);
+        let [Self(a), Self(b), Self(c), Self(d)] = columns;
         // SAFETY: a lane value exists only where AVX2 was proven (its token); each store
         // writes two rows, 32 bytes inside `rows` (unaligned stores are allowed).
         unsafe {
