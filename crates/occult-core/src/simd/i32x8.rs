@@ -125,23 +125,25 @@ impl I32x8 {
     #[inline(always)]
     pub fn reduce_min_u32(self) -> u32 {
         // SAFETY: as in `wrapping_add`.
-        unsafe {
-            let v = self.0;
-            let v = _mm256_min_epu32(v, _mm256_permute2x128_si256::<0x01>(v, v));
-            let v = _mm256_min_epu32(v, _mm256_shuffle_epi32::<0b01_00_11_10>(v));
-            _mm256_extract_epi32::<0>(_mm256_min_epu32(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v))) as u32
-        }
+        self.reduce(|a, b| unsafe { _mm256_min_epu32(a, b) }) as u32
     }
 
     /// The greatest lane (three maxima over lane permutations and an extract).
     #[inline(always)]
     pub fn reduce_max(self) -> i32 {
         // SAFETY: as in `wrapping_add`.
+        self.reduce(|a, b| unsafe { _mm256_max_epi32(a, b) })
+    }
+
+    /// `op` (associative and commutative) over the eight lanes: three steps, each combining
+    /// every lane with another (halves, pairs, neighbours swapped), then lane 0.
+    #[inline(always)]
+    fn reduce(self, op: impl Fn(__m256i, __m256i) -> __m256i) -> i32 {
+        // SAFETY: as in `wrapping_add`.
         unsafe {
-            let v = self.0;
-            let v = _mm256_max_epi32(v, _mm256_permute2x128_si256::<0x01>(v, v));
-            let v = _mm256_max_epi32(v, _mm256_shuffle_epi32::<0b01_00_11_10>(v));
-            _mm256_extract_epi32::<0>(_mm256_max_epi32(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v)))
+            let v = op(self.0, _mm256_permute2x128_si256::<0x01>(self.0, self.0));
+            let v = op(v, _mm256_shuffle_epi32::<0b01_00_11_10>(v));
+            _mm256_extract_epi32::<0>(op(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v)))
         }
     }
 

@@ -34,22 +34,19 @@ impl M32x8 {
     /// Set where both are.
     #[inline(always)]
     pub fn and(self, o: Self) -> Self {
-        // SAFETY: as in `bits`.
-        Self(unsafe { _mm256_and_si256(self.0, o.0) })
+        Self(self.to_i32x8().and(o.to_i32x8()).0)
     }
 
     /// Set where either is.
     #[inline(always)]
     pub fn or(self, o: Self) -> Self {
-        // SAFETY: as in `bits`.
-        Self(unsafe { _mm256_or_si256(self.0, o.0) })
+        Self(self.to_i32x8().or(o.to_i32x8()).0)
     }
 
     /// Set where `self` is and `o` is not (one `andnot` instruction).
     #[inline(always)]
     pub fn and_not(self, o: Self) -> Self {
-        // SAFETY: as in `bits`.
-        Self(unsafe { _mm256_andnot_si256(o.0, self.0) })
+        Self(self.to_i32x8().and_not(o.to_i32x8()).0)
     }
 
     /// The flags as integers: -1 where set, 0 elsewhere (no instruction).
