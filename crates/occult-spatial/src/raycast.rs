@@ -22,6 +22,9 @@
 //! ([`traverse`]'s `t_limit`): the descent then prunes everything behind it from the start.
 
 use crate::octree::{ray::lower_max, RayOctree, MAX_OCTREE_DEPTH};
+use occult_core::simd::{Avx2, Isa};
+#[cfg(target_arch = "x86_64")]
+use occult_core::simd::{F32x4, F32x8, I32x8, M32x4, M32x8};
 use occult_core::{sheared_edge_functions, Aabb, Vec3};
 
 /// A ray with a thickness growing linearly with `t` (see the module doc).
@@ -180,9 +183,9 @@ impl ShearedRay {
             return (0, [0.0; 8]);
         }
         #[cfg(target_arch = "x86_64")]
-        if occult_core::simd::Isa::detected().has_avx2() {
-            // SAFETY: AVX2 is present; `active` names only lanes below `tris.len()`.
-            return unsafe { self.intersect8_avx2(tris, active, t_min, t_max) };
+        if let Some(avx2) = Isa::detected().avx2() {
+            // SAFETY: the token proves AVX2, the kernel's one feature.
+            return unsafe { self.intersect8_avx2(avx2, tris, active, t_min, t_max) };
         }
         self.intersect8_scalar(tris, active, t_min, t_max)
     }
@@ -202,80 +205,58 @@ impl ShearedRay {
         (hits, t)
     }
 
-    /// # Safety
-    /// AVX2 must be present, and `active` may only name lanes below `tris.len()`.
+    /// [`ShearedRay::intersect8`] in AVX2 lanes, for an `active` already limited to lanes
+    /// below `tris.len()`.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn intersect8_avx2(&self, tris: &[LeafTriangle], active: u32, t_min: f32, t_max: f32) -> (u32, [f32; 8]) {
-        use std::arch::x86_64::*;
+    fn intersect8_avx2(
+        &self,
+        avx2: Avx2,
+        tris: &[LeafTriangle],
+        active: u32,
+        t_min: f32,
+        t_max: f32,
+    ) -> (u32, [f32; 8]) {
         const STRIDE: i32 = (std::mem::size_of::<LeafTriangle>() / 4) as i32;
+        debug_assert!(active >> tris.len().min(8) == 0);
         let [kx, ky, kz] = self.k;
-        let [sx, sy, sz] = self.s.map(|v| _mm256_set1_ps(v));
-        let [ox, oy, oz] = self.origin.map(|v| _mm256_set1_ps(v));
+        let [sx, sy, sz] = self.s.map(|v| F32x8::splat(avx2, v));
+        let [ox, oy, oz] = self.origin.map(|v| F32x8::splat(avx2, v));
         let base = tris.as_ptr().cast::<f32>();
-        let lanes = _mm256_setr_epi32(
-            0,
-            STRIDE,
-            2 * STRIDE,
-            3 * STRIDE,
-            4 * STRIDE,
-            5 * STRIDE,
-            6 * STRIDE,
-            7 * STRIDE,
-        );
-        let bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-        let on = _mm256_castsi256_ps(_mm256_cmpeq_epi32(
-            _mm256_and_si256(_mm256_set1_epi32(active as i32), bits),
-            bits,
-        ));
+        let lanes = I32x8::lane_index(avx2).wrapping_mul(I32x8::splat(avx2, STRIDE));
+        let on = M32x8::from_bits(avx2, active);
         // Coordinate `axis` of corner `corner` of every active triangle, minus the origin's.
-        let rel = |corner: usize, axis: usize, o: __m256| {
-            // SAFETY: only active lanes are read, and they lie inside `tris`.
-            let v = unsafe {
-                _mm256_mask_i32gather_ps::<4>(_mm256_setzero_ps(), base.wrapping_add(3 * corner + axis), lanes, on)
-            };
-            _mm256_sub_ps(v, o)
+        let rel = |corner: usize, axis: usize, o: F32x8| {
+            // SAFETY: only active lanes are read, and the caller named only triangles of
+            // `tris`: lane `i` reads float `12 i + 3 corner + axis` of triangle `i`.
+            let v = unsafe { F32x8::gather_masked(avx2, base.wrapping_add(3 * corner + axis), lanes, on) };
+            v - o
         };
         let (a0, a1, a2) = (rel(0, kx, ox), rel(0, ky, oy), rel(0, kz, oz));
         let (b0, b1, b2) = (rel(1, kx, ox), rel(1, ky, oy), rel(1, kz, oz));
         let (c0, c1, c2) = (rel(2, kx, ox), rel(2, ky, oy), rel(2, kz, oz));
-        let shear = |p: __m256, q: __m256, s: __m256| _mm256_sub_ps(p, _mm256_mul_ps(s, q));
+        let shear = |p: F32x8, q: F32x8, s: F32x8| p - s * q;
         let (ax, ay) = (shear(a0, a2, sx), shear(a1, a2, sy));
         let (bx, by) = (shear(b0, b2, sx), shear(b1, b2, sy));
         let (cx, cy) = (shear(c0, c2, sx), shear(c1, c2, sy));
-        let cross =
-            |p: __m256, q: __m256, r: __m256, s: __m256| _mm256_sub_ps(_mm256_mul_ps(p, q), _mm256_mul_ps(r, s));
+        let cross = |p: F32x8, q: F32x8, r: F32x8, s: F32x8| p * q - r * s;
         let u = cross(cx, by, cy, bx);
         let v = cross(ax, cy, ay, cx);
         let w = cross(bx, ay, by, ax);
-        let zero = _mm256_setzero_ps();
-        let any = |f: &dyn Fn(__m256) -> __m256| _mm256_or_ps(_mm256_or_ps(f(u), f(v)), f(w));
+        let zero = F32x8::zero(avx2);
+        let any = |f: &dyn Fn(F32x8) -> M32x8| f(u).or(f(v)).or(f(w));
         // Lanes where an edge function rounded to zero take the scalar test's f64 path.
-        let exact = _mm256_movemask_ps(any(&|e| _mm256_cmp_ps::<_CMP_EQ_OQ>(e, zero))) as u32 & active;
-        let miss = _mm256_and_ps(
-            any(&|e| _mm256_cmp_ps::<_CMP_LT_OQ>(e, zero)),
-            any(&|e| _mm256_cmp_ps::<_CMP_GT_OQ>(e, zero)),
-        );
-        let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
-        let t_scaled = _mm256_add_ps(
-            _mm256_add_ps(
-                _mm256_mul_ps(u, _mm256_mul_ps(sz, a2)),
-                _mm256_mul_ps(v, _mm256_mul_ps(sz, b2)),
-            ),
-            _mm256_mul_ps(w, _mm256_mul_ps(sz, c2)),
-        );
-        let t = _mm256_mul_ps(t_scaled, _mm256_div_ps(_mm256_set1_ps(1.0), det));
-        let ok = _mm256_and_ps(
-            _mm256_andnot_ps(
-                _mm256_or_ps(miss, _mm256_cmp_ps::<_CMP_EQ_OQ>(det, zero)),
-                _mm256_cmp_ps::<_CMP_GE_OQ>(t, _mm256_set1_ps(t_min)),
-            ),
-            _mm256_cmp_ps::<_CMP_LE_OQ>(t, _mm256_set1_ps(t_max)),
-        );
-        let mut hits = _mm256_movemask_ps(ok) as u32 & active & !exact;
-        let mut out = [0f32; 8];
-        // SAFETY: 8 floats into an [f32; 8].
-        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), t) };
+        let exact = any(&|e| e.eq(zero)).bits() & active;
+        let miss = any(&|e| e.lt(zero)).and(any(&|e| e.gt(zero)));
+        let det = u + v + w;
+        let t_scaled = u * (sz * a2) + v * (sz * b2) + w * (sz * c2);
+        let t = t_scaled * (F32x8::splat(avx2, 1.0) / det);
+        let ok = t
+            .ge(F32x8::splat(avx2, t_min))
+            .and_not(miss.or(det.eq(zero)))
+            .and(t.le(F32x8::splat(avx2, t_max)));
+        let mut hits = ok.bits() & active & !exact;
+        let mut out = t.to_array();
         let mut rest = exact;
         while rest != 0 {
             let i = rest.trailing_zeros() as usize;
@@ -365,12 +346,12 @@ pub fn traverse(
     leaf: impl FnMut(u32, f32, f32, &mut f32),
 ) {
     #[cfg(target_arch = "x86_64")]
-    if occult_core::simd::Isa::detected().has_avx2() {
-        // SAFETY: AVX2 is present.
-        unsafe { traverse_avx2(octree, ray, t_limit, counters, leaf) };
+    if let Some(avx2) = Isa::detected().avx2() {
+        // SAFETY: the token proves AVX2, the kernel's one feature.
+        unsafe { traverse_avx2(avx2, octree, ray, t_limit, counters, leaf) };
         return;
     }
-    traverse_body::<false>(octree, ray, t_limit, counters, leaf);
+    traverse_body(None, octree, ray, t_limit, counters, leaf);
 }
 
 /// [`traverse`] on the scalar path whatever the machine: the reference the AVX2 path is held
@@ -382,19 +363,21 @@ pub fn traverse_scalar(
     counters: &mut TraversalCounters,
     leaf: impl FnMut(u32, f32, f32, &mut f32),
 ) {
-    traverse_body::<false>(octree, ray, t_limit, counters, leaf);
+    traverse_body(None, octree, ray, t_limit, counters, leaf);
 }
 
+/// [`traverse`] compiled for AVX2, the children tested in its lanes.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn traverse_avx2(
+fn traverse_avx2(
+    avx2: Avx2,
     octree: &RayOctree,
     ray: &FatRay,
     t_limit: &mut f32,
     counters: &mut TraversalCounters,
     leaf: impl FnMut(u32, f32, f32, &mut f32),
 ) {
-    traverse_body::<true>(octree, ray, t_limit, counters, leaf);
+    traverse_body(Some(avx2), octree, ray, t_limit, counters, leaf);
 }
 
 /// The children of internal node box `b` the ray enters no later than `t_limit`: a bit mask
@@ -413,70 +396,49 @@ fn children_scalar(ray: &FatRay, b: &Aabb, split_info: u16, grow: f32, t_limit: 
 
 /// [`children_scalar`] with the 8 children in the lanes of AVX2 registers: the same
 /// operations on the same values, so the same bits. The two halves' corners sit in the two
-/// 128-bit halves of one register (lane 3 of each unused); `min_ps`/`max_ps` are glam's
+/// halves of one [`F32x8`] (lane 3 of each unused); [`F32x8::min`]/[`F32x8::max`] are glam's
 /// `Vec3::min`/`max` lane for lane (`a < b ? a : b`), and f32::min/max's "a NaN operand yields
-/// the other" is reproduced by blends.
+/// the other" is reproduced by selects.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-unsafe fn children_avx2(ray: &FatRay, b: &Aabb, split_info: u16, grow: f32, t_limit: f32) -> (u32, [f32; 8]) {
-    use std::arch::x86_64::*;
-    // SAFETY: the caller runs with AVX2; the store writes 8 floats into an [f32; 8].
-    unsafe {
-        let lo = _mm_setr_ps(b.min.x, b.min.y, b.min.z, 0.0);
-        let hi = _mm_setr_ps(b.max.x, b.max.y, b.max.z, 0.0);
-        // `halves`: the centre (Aabb::center's arithmetic), the lower halves' max corner the
-        // box's own max on a flat axis.
-        let mid = _mm_mul_ps(_mm_add_ps(lo, hi), _mm_set1_ps(0.5));
-        let axes = _mm_setr_epi32(1, 2, 4, 0);
-        let flat = _mm_castsi128_ps(_mm_cmpeq_epi32(
-            _mm_and_si128(_mm_set1_epi32((split_info >> 8) as i32), axes),
-            axes,
-        ));
-        let low_max = _mm_blendv_ps(mid, hi, flat);
-        let g = _mm256_set1_ps(grow);
-        let o = _mm256_setr_ps(
-            ray.origin.x,
-            ray.origin.y,
-            ray.origin.z,
-            0.0,
-            ray.origin.x,
-            ray.origin.y,
-            ray.origin.z,
-            0.0,
-        );
-        let inv = ray.inv_direction;
-        let inv = _mm256_setr_ps(inv.x, inv.y, inv.z, 1.0, inv.x, inv.y, inv.z, 1.0);
-        // Low 128 bits: half 0, high: half 1; `(p ∓ g - o) · inv` as `t(p ∓ g)` computes it.
-        let a = _mm256_mul_ps(_mm256_sub_ps(_mm256_sub_ps(_mm256_set_m128(mid, lo), g), o), inv);
-        let c = _mm256_mul_ps(_mm256_sub_ps(_mm256_add_ps(_mm256_set_m128(hi, low_max), g), o), inv);
-        let e = _mm256_min_ps(a, c);
-        let x = _mm256_max_ps(a, c);
-        // Lane i is child i: half (i & 1) on x, (i >> 1) & 1 on y, (i >> 2) & 1 on z.
-        let px = _mm256_setr_epi32(0, 4, 0, 4, 0, 4, 0, 4);
-        let py = _mm256_setr_epi32(1, 1, 5, 5, 1, 1, 5, 5);
-        let pz = _mm256_setr_epi32(2, 2, 2, 2, 6, 6, 6, 6);
-        let lanes = |v: __m256, p: __m256i| _mm256_permutevar8x32_ps(v, p);
-        // f32::max / f32::min: a NaN operand yields the other one.
-        let max = |a: __m256, b: __m256| _mm256_blendv_ps(_mm256_max_ps(a, b), a, _mm256_cmp_ps::<_CMP_UNORD_Q>(b, b));
-        let min = |a: __m256, b: __m256| _mm256_blendv_ps(_mm256_min_ps(a, b), a, _mm256_cmp_ps::<_CMP_UNORD_Q>(b, b));
-        let near = max(max(lanes(e, px), lanes(e, py)), lanes(e, pz));
-        // max(NaN, 0) = 0 as in f32::max.
-        let near = _mm256_max_ps(near, _mm256_setzero_ps());
-        let far = min(min(lanes(x, px), lanes(x, py)), lanes(x, pz));
-        let enter = _mm256_and_ps(
-            _mm256_cmp_ps::<_CMP_LE_OQ>(near, far),
-            _mm256_cmp_ps::<_CMP_LE_OQ>(near, _mm256_set1_ps(t_limit)),
-        );
-        let hits = _mm256_movemask_ps(enter) as u32 & (split_info as u32 & 0xff);
-        let mut out = [0f32; 8];
-        _mm256_storeu_ps(out.as_mut_ptr(), near);
-        (hits, out)
-    }
+fn children_avx2(avx2: Avx2, ray: &FatRay, b: &Aabb, split_info: u16, grow: f32, t_limit: f32) -> (u32, [f32; 8]) {
+    let lo = F32x4::from_array(avx2, [b.min.x, b.min.y, b.min.z, 0.0]);
+    let hi = F32x4::from_array(avx2, [b.max.x, b.max.y, b.max.z, 0.0]);
+    // `halves`: the centre (Aabb::center's arithmetic), the lower halves' max corner the
+    // box's own max on a flat axis (lane 3, read from bit 11, is 0 either way).
+    let mid = (lo + hi) * F32x4::splat(avx2, 0.5);
+    let flat = M32x4::from_bits(avx2, (split_info >> 8) as u32);
+    let low_max = F32x4::select(flat, hi, mid);
+    let g = F32x8::splat(avx2, grow);
+    let o = ray.origin;
+    let o = F32x8::from_array(avx2, [o.x, o.y, o.z, 0.0, o.x, o.y, o.z, 0.0]);
+    let inv = ray.inv_direction;
+    let inv = F32x8::from_array(avx2, [inv.x, inv.y, inv.z, 1.0, inv.x, inv.y, inv.z, 1.0]);
+    // Lanes 0..4: half 0, 4..8: half 1; `(p ∓ g - o) · inv` as `t(p ∓ g)` computes it.
+    let a = (F32x8::from_halves(lo, mid) - g - o) * inv;
+    let c = (F32x8::from_halves(low_max, hi) + g - o) * inv;
+    let e = a.min(c);
+    let x = a.max(c);
+    // Lane i is child i: half (i & 1) on x, (i >> 1) & 1 on y, (i >> 2) & 1 on z.
+    let px = I32x8::from_array(avx2, [0, 4, 0, 4, 0, 4, 0, 4]);
+    let py = I32x8::from_array(avx2, [1, 1, 5, 5, 1, 1, 5, 5]);
+    let pz = I32x8::from_array(avx2, [2, 2, 2, 2, 6, 6, 6, 6]);
+    // f32::max / f32::min: a NaN operand yields the other one.
+    let max = |a: F32x8, b: F32x8| F32x8::select(b.is_nan(), a, a.max(b));
+    let min = |a: F32x8, b: F32x8| F32x8::select(b.is_nan(), a, a.min(b));
+    let near = max(max(e.permute(px), e.permute(py)), e.permute(pz));
+    // max(NaN, 0) = 0 as in f32::max.
+    let near = near.max(F32x8::zero(avx2));
+    let far = min(min(x.permute(px), x.permute(py)), x.permute(pz));
+    let enter = near.le(far).and(near.le(F32x8::splat(avx2, t_limit)));
+    let hits = enter.bits() & (split_info as u32 & 0xff);
+    (hits, near.to_array())
 }
 
 /// The body of [`traverse`], compiled once per instruction set.
 #[inline(always)]
-fn traverse_body<const AVX2: bool>(
+fn traverse_body(
+    avx2: Option<Avx2>,
     octree: &RayOctree,
     ray: &FatRay,
     t_limit: &mut f32,
@@ -524,18 +486,10 @@ fn traverse_body<const AVX2: bool>(
         }
         let si = info[index as usize];
         let grow = ray.grow(&node.bounds);
-        let (hits, near) = {
+        let (hits, near) = match avx2 {
             #[cfg(target_arch = "x86_64")]
-            {
-                if AVX2 {
-                    // SAFETY: `AVX2` is only set by `traverse_avx2`.
-                    unsafe { children_avx2(ray, &node.bounds, si, grow, *t_limit) }
-                } else {
-                    children_scalar(ray, &node.bounds, si, grow, *t_limit)
-                }
-            }
-            #[cfg(not(target_arch = "x86_64"))]
-            children_scalar(ray, &node.bounds, si, grow, *t_limit)
+            Some(avx2) => children_avx2(avx2, ray, &node.bounds, si, grow, *t_limit),
+            _ => children_scalar(ray, &node.bounds, si, grow, *t_limit),
         };
         // Farthest first onto the stack, so the nearest pops first: child `i` is pushed in
         // the order of `j = i ^ mask`, so the hit bits are permuted into that order (each
@@ -680,8 +634,7 @@ mod tests {
     /// direction components), origins on slab planes, flat layers, bounds lowered on the way.
     #[test]
     fn dispatched_traversal_matches_the_scalar_one() {
-        #[cfg(target_arch = "x86_64")]
-        if !std::arch::is_x86_feature_detected!("avx2") {
+        if !Isa::detected().has_avx2() {
             eprintln!("note: no AVX2 here; the dispatched path is the scalar one, compared with itself");
         }
         let (p, t) = soup(600, 13);
@@ -767,8 +720,7 @@ mod tests {
     /// (edge functions of zero: the f64 path), along axes, partial groups and masks.
     #[test]
     fn eight_triangle_test_matches_the_single_one() {
-        #[cfg(target_arch = "x86_64")]
-        if !std::arch::is_x86_feature_detected!("avx2") {
+        if !Isa::detected().has_avx2() {
             eprintln!("note: no AVX2 here; the dispatched path is the scalar one, compared with itself");
         }
         let (p, t) = soup(400, 21);

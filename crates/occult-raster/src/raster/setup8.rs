@@ -24,6 +24,8 @@ use super::{
     clip_and_setup, Draw, ProjVertex, SetupSink, SmallCover, TriSetup, Viewport, HALF, MASKED, NEEDS_CLIP, NOT_FINITE,
     OUT_BOTTOM, OUT_LEFT, OUT_NEAR, OUT_OF_VIEW, OUT_RIGHT, OUT_TOP, SMALL, SUB, SUBPIXEL_BITS, TINY,
 };
+#[cfg(target_arch = "x86_64")]
+use occult_core::simd::{Avx2, F32x4, F32x8, F64x4, I32x8, M32x8, M64x4};
 use occult_core::{ItemId, Mat4, Vec3, Vec4};
 
 /// Lanes of a batch.
@@ -114,115 +116,84 @@ struct Lanes {
 #[target_feature(enable = "avx2")]
 #[inline]
 pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>], batch: &mut Batch, out: &mut S) {
-    use std::arch::x86_64::*;
-
+    // SAFETY: the caller vouches for AVX2.
+    let avx2 = unsafe { Avx2::new_unchecked() };
+    const SHIFT: i32 = SUBPIXEL_BITS as i32;
     let n = batch.len;
     batch.len = 0;
     if n == 0 {
         return;
     }
     let in_batch = (1u32 << n) - 1;
-    // Corner c of the eight lanes, from eight 16-byte vertices: a 4 × 4 transpose per half.
+    // Corner c of the eight lanes, from eight 16-byte vertices.
     let corner = |c: usize| {
-        let v = &batch.corners[c];
-        let load = |k: usize| _mm_loadu_si128((&raw const v[k]).cast());
-        let pair = |a: usize, b: usize| _mm256_inserti128_si256::<1>(_mm256_castsi128_si256(load(a)), load(b));
-        let (t0, t1, t2, t3) = (pair(0, 4), pair(1, 5), pair(2, 6), pair(3, 7));
-        let (u0, u1) = (_mm256_unpacklo_epi32(t0, t1), _mm256_unpackhi_epi32(t0, t1));
-        let (u2, u3) = (_mm256_unpacklo_epi32(t2, t3), _mm256_unpackhi_epi32(t2, t3));
-        (
-            _mm256_unpacklo_epi64(u0, u2),
-            _mm256_unpackhi_epi64(u0, u2),
-            _mm256_castsi256_ps(_mm256_unpacklo_epi64(u1, u3)),
-            _mm256_unpackhi_epi64(u1, u3),
-        )
+        let [x, y, z, code] = I32x8::from_rows(avx2, as_rows(&batch.corners[c]));
+        (x, y, z.to_f32_bits(), code)
     };
     let (x0, y0, z0, c0) = corner(0);
     let (x1, y1, z1, c1) = corner(1);
     let (x2, y2, z2, c2) = corner(2);
-    let zero = _mm256_setzero_si256();
-    let bits = |m: __m256i| _mm256_movemask_ps(_mm256_castsi256_ps(m)) as u32;
-    let any = |c: __m256i, flags: u32| {
-        bits(_mm256_cmpgt_epi32(
-            _mm256_and_si256(c, _mm256_set1_epi32(flags as i32)),
-            zero,
-        ))
-    };
-    let all_codes = _mm256_and_si256(_mm256_and_si256(c0, c1), c2);
-    let any_codes = _mm256_or_si256(_mm256_or_si256(c0, c1), c2);
+    let splat = |v: i32| I32x8::splat(avx2, v);
+    let zero = I32x8::zero(avx2);
+    let any = |c: I32x8, flags: u32| c.and(splat(flags as i32)).gt(zero).bits();
+    let all_codes = c0.and(c1).and(c2);
+    let any_codes = c0.or(c1).or(c2);
     let rejected = any(all_codes, OUT_OF_VIEW) | any(any_codes, NOT_FINITE);
     let clipped = in_batch & !rejected & any(any_codes, NEEDS_CLIP);
     let mut live = in_batch & !rejected & !clipped;
 
     // Pixel boxes: centres (i + 1/2) inside [min, max] of the snapped corners.
-    let min3 = |a, b, c| _mm256_min_epi32(_mm256_min_epi32(a, b), c);
-    let max3 = |a, b, c| _mm256_max_epi32(_mm256_max_epi32(a, b), c);
+    let min3 = |a: I32x8, b, c| a.min(b).min(c);
+    let max3 = |a: I32x8, b, c| a.max(b).max(c);
     let (minx, maxx) = (min3(x0, x1, x2), max3(x0, x1, x2));
     let (miny, maxy) = (min3(y0, y1, y2), max3(y0, y1, y2));
-    let shift = |v: __m256i, add: i64| {
-        _mm256_srai_epi32::<{ SUBPIXEL_BITS as i32 }>(_mm256_add_epi32(v, _mm256_set1_epi32(add as i32)))
-    };
-    let px0 = _mm256_max_epi32(shift(minx, SUB - 1 - HALF), zero);
-    let py0 = _mm256_max_epi32(shift(miny, SUB - 1 - HALF), zero);
-    let px1 = _mm256_min_epi32(shift(maxx, -HALF), _mm256_set1_epi32(vp.width as i32 - 1));
-    let py1 = _mm256_min_epi32(shift(maxy, -HALF), _mm256_set1_epi32(vp.height as i32 - 1));
-    live &= !bits(_mm256_or_si256(
-        _mm256_cmpgt_epi32(px0, px1),
-        _mm256_cmpgt_epi32(py0, py1),
-    ));
+    let shift = |v: I32x8, add: i64| v.wrapping_add(splat(add as i32)).shr::<SHIFT>();
+    let px0 = shift(minx, SUB - 1 - HALF).max(zero);
+    let py0 = shift(miny, SUB - 1 - HALF).max(zero);
+    let px1 = shift(maxx, -HALF).min(splat(vp.width as i32 - 1));
+    let py1 = shift(maxy, -HALF).min(splat(vp.height as i32 - 1));
+    live &= !px0.gt(px1).or(py0.gt(py1)).bits();
     if live == 0 && clipped == 0 {
         return;
     }
     let l = &mut batch.lanes;
-    let store = |dst: &mut [i32; LANES], v: __m256i| _mm256_storeu_si256(dst.as_mut_ptr().cast(), v);
-    store(&mut l.px0, px0);
-    store(&mut l.py0, py0);
-    store(&mut l.py1, py1);
+    l.px0 = px0.to_array();
+    l.py0 = py0.to_array();
+    l.py1 = py1.to_array();
     // Every lane, without a branch on which are live (a loop over the live ones mispredicts
     // its exit): a dead lane's hint names pixel (0, 0).
-    let on = lane_mask(live);
-    let (hint_x, hint_y) = (_mm256_and_si256(px0, on), _mm256_and_si256(py0, on));
-    let two_rows = live & bits(_mm256_cmpgt_epi32(py1, py0));
-    let (mut xs, mut ys) = ([0i32; LANES], [0i32; LANES]);
-    store(&mut xs, hint_x);
-    store(&mut ys, hint_y);
+    let on = M32x8::from_bits(avx2, live);
+    let (xs, ys) = (px0.keep(on).to_array(), py0.keep(on).to_array());
+    let two_rows = live & py1.gt(py0).bits();
     for k in 0..LANES {
         out.will_touch(xs[k] as u32, ys[k] as u32, two_rows & (1 << k) != 0);
     }
 
     // Area, exact in f64 halves: |coordinates| < 2^24, so products < 2^50.
-    let (dx1, dy1) = (_mm256_sub_epi32(x1, x0), _mm256_sub_epi32(y1, y0));
-    let (dx2, dy2) = (_mm256_sub_epi32(x2, x0), _mm256_sub_epi32(y2, y0));
+    let (dx1, dy1) = (x1.wrapping_sub(x0), y1.wrapping_sub(y0));
+    let (dx2, dy2) = (x2.wrapping_sub(x0), y2.wrapping_sub(y0));
     let (area_lo, area_hi) = (
-        area(lo_pd(dx1), lo_pd(dy1), lo_pd(dx2), lo_pd(dy2)),
-        area(hi_pd(dx1), hi_pd(dy1), hi_pd(dx2), hi_pd(dy2)),
+        area(dx1.low_f64(), dy1.low_f64(), dx2.low_f64(), dy2.low_f64()),
+        area(dx1.high_f64(), dy1.high_f64(), dx2.high_f64(), dy2.high_f64()),
     );
-    let zd = _mm256_setzero_pd();
-    let signs = |lo: __m256d, hi: __m256d| (_mm256_movemask_pd(lo) | (_mm256_movemask_pd(hi) << 4)) as u32;
-    let negative = signs(
-        _mm256_cmp_pd::<_CMP_LT_OQ>(area_lo, zd),
-        _mm256_cmp_pd::<_CMP_LT_OQ>(area_hi, zd),
-    );
-    let positive = signs(
-        _mm256_cmp_pd::<_CMP_GT_OQ>(area_lo, zd),
-        _mm256_cmp_pd::<_CMP_GT_OQ>(area_hi, zd),
-    );
+    let zd = F64x4::zero(avx2);
+    let signs = |lo: M64x4, hi: M64x4| lo.bits() | (hi.bits() << 4);
+    let negative = signs(area_lo.lt(zd), area_hi.lt(zd));
+    let positive = signs(area_lo.gt(zd), area_hi.gt(zd));
     // Zero areas fail both.
     live &= negative | if vp.cull_backfaces { 0 } else { positive };
 
     // Orient counter-clockwise on screen (negative area) triangles like the others: swap 1, 2.
-    let swap = lane_mask(negative);
-    let swap_ps = _mm256_castsi256_ps(swap);
-    let (x1, x2) = (_mm256_blendv_epi8(x1, x2, swap), _mm256_blendv_epi8(x2, x1, swap));
-    let (y1, y2) = (_mm256_blendv_epi8(y1, y2, swap), _mm256_blendv_epi8(y2, y1, swap));
-    let (z1, z2) = (_mm256_blendv_ps(z1, z2, swap_ps), _mm256_blendv_ps(z2, z1, swap_ps));
-    let abs = _mm256_set1_pd(-0.0);
-    let (area_lo, area_hi) = (_mm256_andnot_pd(abs, area_lo), _mm256_andnot_pd(abs, area_hi));
+    let swap = M32x8::from_bits(avx2, negative);
+    let (x1, x2) = (I32x8::select(swap, x2, x1), I32x8::select(swap, x1, x2));
+    let (y1, y2) = (I32x8::select(swap, y2, y1), I32x8::select(swap, y1, y2));
+    let (z1, z2) = (F32x8::select(swap, z2, z1), F32x8::select(swap, z1, z2));
+    let (area_lo, area_hi) = (area_lo.abs(), area_hi.abs());
 
     // Depth range, as `min_f32` / `max_f32` (the instructions' own operand rule).
-    let zmin = _mm256_min_ps(_mm256_min_ps(z0, z1), z2);
-    let zmax = _mm256_max_ps(_mm256_max_ps(z0, z1), z2);
-    live &= !(_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(zmax, _mm256_set1_ps(vp.far_depth))) as u32);
+    let zmin = z0.min(z1).min(z2);
+    let zmax = z0.max(z1).max(z2);
+    live &= !zmax.lt(F32x8::splat(avx2, vp.far_depth)).bits();
 
     // Lanes whose box the small scan takes, with their edge functions in `l`; those of them
     // whose box is at most `TINY × TINY`, with their mask of covered centres in `l`; and
@@ -233,85 +204,73 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
     if live != 0 {
         // Depth plane in pixel units relative to corner 0, in f64, anchored at the centre of
         // pixel (px0, py0): the scalar expression, operation for operation.
-        let (dz1, dz2) = (_mm256_sub_ps(z1, z0), _mm256_sub_ps(z2, z0));
-        let (dx1, dy1) = (_mm256_sub_epi32(x1, x0), _mm256_sub_epi32(y1, y0));
-        let (dx2, dy2) = (_mm256_sub_epi32(x2, x0), _mm256_sub_epi32(y2, y0));
+        let (dz1, dz2) = (z1 - z0, z2 - z0);
+        let (dx1, dy1) = (x1.wrapping_sub(x0), y1.wrapping_sub(y0));
+        let (dx2, dy2) = (x2.wrapping_sub(x0), y2.wrapping_sub(y0));
         let (zc_lo, dzdx_lo, dzdy_lo) = plane(
+            avx2,
             area_lo,
-            [lo_pd(dx1), lo_pd(dy1), lo_pd(dx2), lo_pd(dy2)],
-            [lo_ps(dz1), lo_ps(dz2), lo_ps(z0)],
-            [lo_pd(px0), lo_pd(py0), lo_pd(x0), lo_pd(y0)],
+            [dx1.low_f64(), dy1.low_f64(), dx2.low_f64(), dy2.low_f64()],
+            [dz1.low_f64(), dz2.low_f64(), z0.low_f64()],
+            [px0.low_f64(), py0.low_f64(), x0.low_f64(), y0.low_f64()],
         );
         let (zc_hi, dzdx_hi, dzdy_hi) = plane(
+            avx2,
             area_hi,
-            [hi_pd(dx1), hi_pd(dy1), hi_pd(dx2), hi_pd(dy2)],
-            [hi_ps(dz1), hi_ps(dz2), hi_ps(z0)],
-            [hi_pd(px0), hi_pd(py0), hi_pd(x0), hi_pd(y0)],
+            [dx1.high_f64(), dy1.high_f64(), dx2.high_f64(), dy2.high_f64()],
+            [dz1.high_f64(), dz2.high_f64(), z0.high_f64()],
+            [px0.high_f64(), py0.high_f64(), x0.high_f64(), y0.high_f64()],
         );
-        let store_ps = |dst: &mut [f32; LANES], v: __m256| _mm256_storeu_ps(dst.as_mut_ptr(), v);
-        store_ps(&mut l.zc, _mm256_set_m128(zc_hi, zc_lo));
-        store_ps(&mut l.dzdx, _mm256_set_m128(dzdx_hi, dzdx_lo));
-        store_ps(&mut l.dzdy, _mm256_set_m128(dzdy_hi, dzdy_lo));
-        store_ps(&mut l.zmin, zmin);
-        store_ps(&mut l.zmax, zmax);
-        let extent = _mm256_add_epi32(
-            _mm256_srai_epi32::<{ SUBPIXEL_BITS as i32 }>(_mm256_max_epi32(
-                _mm256_sub_epi32(maxx, minx),
-                _mm256_sub_epi32(maxy, miny),
-            )),
-            _mm256_set1_epi32(1),
-        );
-        let extent = _mm256_min_epi32(extent, _mm256_set1_epi32(u16::MAX as i32));
-        store(&mut l.extent, extent);
-        store(&mut l.px1, px1);
+        l.zc = F32x8::from_halves(zc_lo, zc_hi).to_array();
+        l.dzdx = F32x8::from_halves(dzdx_lo, dzdx_hi).to_array();
+        l.dzdy = F32x8::from_halves(dzdy_lo, dzdy_hi).to_array();
+        l.zmin = zmin.to_array();
+        l.zmax = zmax.to_array();
+        let extent = maxx
+            .wrapping_sub(minx)
+            .max(maxy.wrapping_sub(miny))
+            .shr::<SHIFT>()
+            .wrapping_add(splat(1));
+        let extent = extent.min(splat(u16::MAX as i32));
+        l.extent = extent.to_array();
+        l.px1 = px1.to_array();
         let (xs, ys) = ([x0, x1, x2], [y0, y1, y2]);
         for c in 0..3 {
-            store(&mut l.x[c], xs[c]);
-            store(&mut l.y[c], ys[c]);
+            l.x[c] = xs[c].to_array();
+            l.y[c] = ys[c].to_array();
         }
         // Edge functions at the centre of pixel (px0, py0), for the small scan: exact in i32
         // for boxes it takes (see `scan_small`); other lanes are not read.
         // The box's width and height less one pixel.
-        let (w, h) = (_mm256_sub_epi32(px1, px0), _mm256_sub_epi32(py1, py0));
-        let small_box = _mm256_set1_epi32(SMALL as i32);
+        let (w, h) = (px1.wrapping_sub(px0), py1.wrapping_sub(py0));
+        let small_box = splat(SMALL as i32);
         small = if S::TAKES_EDGES { live } else { 0 }
-            & bits(_mm256_cmpgt_epi32(_mm256_set1_epi32(MASKED as i32), extent))
-            & bits(_mm256_cmpgt_epi32(small_box, w))
-            & bits(_mm256_cmpgt_epi32(small_box, h));
+            & splat(MASKED as i32).gt(extent).bits()
+            & small_box.gt(w).bits()
+            & small_box.gt(h).bits();
         // Edge functions at the first centre and their steps, kept for the masks below.
         let (mut rows, mut sxs, mut sys) = ([zero; 3], [zero; 3], [zero; 3]);
         if small != 0 {
-            let centre = |p: __m256i| {
-                _mm256_add_epi32(
-                    _mm256_slli_epi32::<{ SUBPIXEL_BITS as i32 }>(p),
-                    _mm256_set1_epi32(HALF as i32),
-                )
-            };
+            let centre = |p: I32x8| p.shl::<SHIFT>().wrapping_add(splat(HALF as i32));
             let (cx, cy) = (centre(px0), centre(py0));
             for i in 0..3 {
                 let j = (i + 1) % 3;
-                let ea = _mm256_sub_epi32(ys[i], ys[j]);
-                let eb = _mm256_sub_epi32(xs[j], xs[i]);
+                let ea = ys[i].wrapping_sub(ys[j]);
+                let eb = xs[j].wrapping_sub(xs[i]);
                 // Top-left rule as in `scan_triangle`: -1 unless A > 0, or A = 0 and B > 0.
-                let bias = _mm256_or_si256(
-                    _mm256_cmpgt_epi32(zero, ea),
-                    _mm256_andnot_si256(_mm256_cmpgt_epi32(eb, zero), _mm256_cmpeq_epi32(ea, zero)),
-                );
-                rows[i] = _mm256_add_epi32(
-                    _mm256_add_epi32(
-                        _mm256_mullo_epi32(ea, _mm256_sub_epi32(cx, xs[i])),
-                        _mm256_mullo_epi32(eb, _mm256_sub_epi32(cy, ys[i])),
-                    ),
-                    bias,
-                );
-                sxs[i] = _mm256_slli_epi32::<{ SUBPIXEL_BITS as i32 }>(ea);
-                sys[i] = _mm256_slli_epi32::<{ SUBPIXEL_BITS as i32 }>(eb);
-                store(&mut l.row[i], rows[i]);
-                store(&mut l.step_x[i], sxs[i]);
-                store(&mut l.step_y[i], sys[i]);
+                let bias = ea.lt(zero).or(ea.eq(zero).and_not(eb.gt(zero))).to_i32x8();
+                rows[i] = ea
+                    .wrapping_mul(cx.wrapping_sub(xs[i]))
+                    .wrapping_add(eb.wrapping_mul(cy.wrapping_sub(ys[i])))
+                    .wrapping_add(bias);
+                sxs[i] = ea.shl::<SHIFT>();
+                sys[i] = eb.shl::<SHIFT>();
+                l.row[i] = rows[i].to_array();
+                l.step_x[i] = sxs[i].to_array();
+                l.step_y[i] = sys[i].to_array();
             }
-            let tiny_box = _mm256_set1_epi32(TINY as i32);
-            tiny = small & bits(_mm256_cmpgt_epi32(tiny_box, w)) & bits(_mm256_cmpgt_epi32(tiny_box, h));
+            let tiny_box = splat(TINY as i32);
+            tiny = small & tiny_box.gt(w).bits() & tiny_box.gt(h).bits();
         }
         if tiny != 0 {
             // Inside bits of the first 4 × 4 centres of each box, bit `8·j + i` for centre
@@ -323,29 +282,29 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
             for j in 0..TINY {
                 let mut e = row;
                 for i in 0..TINY {
-                    let out = _mm256_or_si256(_mm256_or_si256(e[0], e[1]), e[2]);
-                    let bit = _mm256_set1_epi32(1 << (j * SMALL + i));
-                    inside = _mm256_or_si256(inside, _mm256_andnot_si256(_mm256_srai_epi32::<31>(out), bit));
+                    let out = e[0].or(e[1]).or(e[2]);
+                    let bit = splat(1 << (j * SMALL + i));
+                    inside = inside.or(bit.and_not(out.shr::<31>()));
                     for k in 0..3 {
-                        e[k] = _mm256_add_epi32(e[k], sxs[k]);
+                        e[k] = e[k].wrapping_add(sxs[k]);
                     }
                 }
                 for k in 0..3 {
-                    row[k] = _mm256_add_epi32(row[k], sys[k]);
+                    row[k] = row[k].wrapping_add(sys[k]);
                 }
             }
             // Only the centres inside the box: (1 << (w + 1)) - 1 per row, for its h + 1 rows.
-            let one = _mm256_set1_epi32(1);
-            let columns = _mm256_sub_epi32(_mm256_sllv_epi32(one, _mm256_add_epi32(w, one)), one);
+            let one = splat(1);
+            let columns = one.shl_var(w.wrapping_add(one)).wrapping_sub(one);
             let mut valid = columns;
             for j in 1..TINY {
-                let has_row = _mm256_cmpgt_epi32(h, _mm256_set1_epi32(j as i32 - 1));
-                let shifted = _mm256_sllv_epi32(columns, _mm256_set1_epi32((j * SMALL) as i32));
-                valid = _mm256_or_si256(valid, _mm256_and_si256(has_row, shifted));
+                let has_row = h.gt(splat(j as i32 - 1));
+                let shifted = columns.shl_var(splat((j * SMALL) as i32));
+                valid = valid.or(shifted.keep(has_row));
             }
-            let mask = _mm256_and_si256(inside, valid);
-            store(&mut l.mask, mask);
-            uncovered = tiny & bits(_mm256_cmpeq_epi32(mask, zero));
+            let mask = inside.and(valid);
+            l.mask = mask.to_array();
+            uncovered = tiny & mask.eq(zero).bits();
         }
     }
     // In stream order: the set-up lanes, and the clipped ones through the scalar path.
@@ -353,25 +312,12 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
     if S::COUNTS_LANES {
         // The lanes about to be scanned (clipped ones count themselves) and their box.
         let scanned = live & !uncovered;
-        let on = lane_mask(scanned);
+        let on = M32x8::from_bits(avx2, scanned);
         // Boxes lie in the frame (no lane is negative): unsigned, u32::MAX stands for no lane
         // in a minimum and 0 in a maximum, as in `EMPTY_RECT`.
-        let least = |v: __m256i| {
-            let v = _mm256_or_si256(v, _mm256_xor_si256(on, _mm256_set1_epi32(-1)));
-            let v = _mm256_min_epu32(v, _mm256_permute2x128_si256::<0x01>(v, v));
-            let v = _mm256_min_epu32(v, _mm256_shuffle_epi32::<0b01_00_11_10>(v));
-            _mm256_extract_epi32::<0>(_mm256_min_epu32(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v)))
-        };
-        let most = |v: __m256i| {
-            let v = _mm256_and_si256(v, on);
-            let v = _mm256_max_epi32(v, _mm256_permute2x128_si256::<0x01>(v, v));
-            let v = _mm256_max_epi32(v, _mm256_shuffle_epi32::<0b01_00_11_10>(v));
-            _mm256_extract_epi32::<0>(_mm256_max_epi32(v, _mm256_shuffle_epi32::<0b10_11_00_01>(v)))
-        };
-        out.count_lanes(
-            scanned.count_ones(),
-            [least(px0) as u32, least(py0) as u32, most(px1) as u32, most(py1) as u32],
-        );
+        let least = |v: I32x8| v.or((!on).to_i32x8()).reduce_min_u32();
+        let most = |v: I32x8| v.keep(on).reduce_max() as u32;
+        out.count_lanes(scanned.count_ones(), [least(px0), least(py0), most(px1), most(py1)]);
     }
     let mut m = (live | clipped) & !uncovered;
     while m != 0 {
@@ -424,210 +370,112 @@ pub(super) unsafe fn setup8_avx2<S: SetupSink>(vp: &Viewport, draws: &[Draw<'_>]
 /// which is what the scalar `snap` computes in f64.
 ///
 /// # Safety
-/// The processor must support AVX2; `positions` and `out` hold at least eight entries.
+/// The processor must support AVX2.
+///
+/// # Panics
+/// When `positions` or `out` holds fewer than eight entries.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[inline]
 pub(super) unsafe fn project8_avx2(vp: &Viewport, m: &Mat4, positions: &[Vec3], out: &mut [ProjVertex]) {
-    use std::arch::x86_64::*;
-    assert!(positions.len() >= LANES && out.len() >= LANES);
-    // Eight (x, y, z) as three vectors of x, y and z: six 4-float loads and five shuffles,
-    // a third less time than three gathers. `Vec3` is three `f32` without padding, so vertex
-    // k's coordinates are floats 3k..3k + 3 of the slice, and all 24 read lie in it.
-    let base: *const f32 = positions.as_ptr().cast();
-    let pair = |lo: usize, hi: usize| _mm256_loadu2_m128(base.add(hi), base.add(lo));
-    let m03 = pair(0, 12); // x0 y0 z0 x1 | x4 y4 z4 x5
-    let m14 = pair(4, 16); // y1 z1 x2 y2 | y5 z5 x6 y6
-    let m25 = pair(8, 20); // z2 x3 y3 z3 | z6 x7 y7 z7
-    let xy = _mm256_shuffle_ps::<0b10_01_11_10>(m14, m25); // x2 y2 x3 y3 | x6 y6 x7 y7
-    let yz = _mm256_shuffle_ps::<0b01_00_10_01>(m03, m14); // y0 z0 y1 z1 | y4 z4 y5 z5
-    let x = _mm256_shuffle_ps::<0b10_00_11_00>(m03, xy);
-    let y = _mm256_shuffle_ps::<0b11_01_10_00>(yz, xy);
-    let z = _mm256_shuffle_ps::<0b11_00_11_01>(yz, m25);
-    let one = _mm256_set1_ps(1.0);
+    // SAFETY: the caller vouches for AVX2.
+    let avx2 = unsafe { Avx2::new_unchecked() };
+    let (Some(positions), Some(out)) = (positions.first_chunk::<LANES>(), out.first_chunk_mut::<LANES>()) else {
+        panic!("eight positions and room for eight projected vertices");
+    };
+    // SAFETY: `Vec3` is three `f32` without padding (size asserted below), so eight of them
+    // are 24 floats in the layout of `[[f32; 3]; 8]`, with the same alignment.
+    let points = unsafe { &*positions.as_ptr().cast::<[[f32; 3]; LANES]>() };
+    let [x, y, z] = F32x8::deinterleave3(avx2, points);
+    let splat = |v: f32| F32x8::splat(avx2, v);
+    let one = splat(1.0);
     let row = |r: usize| {
-        let c = |axis: Vec4| _mm256_set1_ps(axis[r]);
-        _mm256_add_ps(
-            _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(c(m.x_axis), x), _mm256_mul_ps(c(m.y_axis), y)),
-                _mm256_mul_ps(c(m.z_axis), z),
-            ),
-            _mm256_mul_ps(c(m.w_axis), one),
-        )
+        let c = |axis: Vec4| splat(axis[r]);
+        c(m.x_axis) * x + c(m.y_axis) * y + c(m.z_axis) * z + c(m.w_axis) * one
     };
     let (cx, cy, cz, cw) = (row(0), row(1), row(2), row(3));
-    let sign = _mm256_set1_ps(-0.0);
-    let inf = _mm256_set1_ps(f32::INFINITY);
-    let finite = |v: __m256| _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_andnot_ps(sign, v), inf);
-    let flag = |mask: __m256, f: u32| _mm256_and_si256(_mm256_castps_si256(mask), _mm256_set1_epi32(f as i32));
-    let neg_w = _mm256_xor_ps(cw, sign);
-    let mut code = _mm256_or_si256(
-        _mm256_or_si256(
-            flag(_mm256_cmp_ps::<_CMP_LT_OQ>(cx, neg_w), OUT_LEFT),
-            flag(_mm256_cmp_ps::<_CMP_GT_OQ>(cx, cw), OUT_RIGHT),
-        ),
-        _mm256_or_si256(
-            flag(_mm256_cmp_ps::<_CMP_LT_OQ>(cy, neg_w), OUT_BOTTOM),
-            flag(_mm256_cmp_ps::<_CMP_GT_OQ>(cy, cw), OUT_TOP),
-        ),
-    );
-    let near = _mm256_or_ps(
-        _mm256_cmp_ps::<_CMP_GT_OQ>(cz, cw),
-        _mm256_cmp_ps::<_CMP_LE_OQ>(cw, _mm256_setzero_ps()),
-    );
-    code = _mm256_or_si256(code, flag(near, OUT_NEAR | NEEDS_CLIP));
-    let guard = _mm256_or_ps(
-        _mm256_cmp_ps::<_CMP_GT_OQ>(
-            _mm256_andnot_ps(sign, cx),
-            _mm256_mul_ps(_mm256_set1_ps(vp.guard_x), cw),
-        ),
-        _mm256_cmp_ps::<_CMP_GT_OQ>(
-            _mm256_andnot_ps(sign, cy),
-            _mm256_mul_ps(_mm256_set1_ps(vp.guard_y), cw),
-        ),
-    );
-    code = _mm256_or_si256(code, flag(guard, NEEDS_CLIP));
-    let inv_w = _mm256_div_ps(one, cw);
-    let half = _mm256_set1_ps(0.5);
-    let sx = _mm256_mul_ps(
-        _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(cx, inv_w), half), half),
-        _mm256_set1_ps(vp.fwidth),
-    );
-    let sy = _mm256_mul_ps(
-        _mm256_sub_ps(half, _mm256_mul_ps(_mm256_mul_ps(cy, inv_w), half)),
-        _mm256_set1_ps(vp.fheight),
-    );
-    let zs = _mm256_mul_ps(cz, inv_w);
-    let sub = _mm256_set1_ps(SUB as f32);
-    let (px, py) = (
-        _mm256_cvtps_epi32(_mm256_mul_ps(sx, sub)),
-        _mm256_cvtps_epi32(_mm256_mul_ps(sy, sub)),
-    );
+    let inf = splat(f32::INFINITY);
+    let finite = |v: F32x8| v.abs().lt(inf);
+    let flag = |mask: M32x8, f: u32| I32x8::splat(avx2, f as i32).keep(mask);
+    let neg_w = -cw;
+    let mut code = flag(cx.lt(neg_w), OUT_LEFT)
+        .or(flag(cx.gt(cw), OUT_RIGHT))
+        .or(flag(cy.lt(neg_w), OUT_BOTTOM).or(flag(cy.gt(cw), OUT_TOP)));
+    let near = cz.gt(cw).or(cw.le(F32x8::zero(avx2)));
+    code = code.or(flag(near, OUT_NEAR | NEEDS_CLIP));
+    let guard = cx
+        .abs()
+        .gt(splat(vp.guard_x) * cw)
+        .or(cy.abs().gt(splat(vp.guard_y) * cw));
+    code = code.or(flag(guard, NEEDS_CLIP));
+    let inv_w = one / cw;
+    let half = splat(0.5);
+    let sx = (cx * inv_w * half + half) * splat(vp.fwidth);
+    let sy = (half - cy * inv_w * half) * splat(vp.fheight);
+    let zs = cz * inv_w;
+    let sub = splat(SUB as f32);
+    let (px, py) = ((sx * sub).round_to_i32(), (sy * sub).round_to_i32());
     // Lanes that keep a position: finite clip coordinates, no clipping, a finite projection.
-    let clip_finite = _mm256_and_ps(
-        _mm256_and_ps(finite(cx), finite(cy)),
-        _mm256_and_ps(finite(cz), finite(cw)),
-    );
-    let needs_clip = _mm256_cmpgt_epi32(flag(_mm256_castsi256_ps(code), NEEDS_CLIP), _mm256_setzero_si256());
-    let projected = _mm256_and_ps(_mm256_and_ps(finite(sx), finite(sy)), finite(zs));
-    let keep = _mm256_andnot_si256(needs_clip, _mm256_castps_si256(_mm256_and_ps(clip_finite, projected)));
+    let clip_finite = finite(cx).and(finite(cy)).and(finite(cz).and(finite(cw)));
+    let needs_clip = code.and(I32x8::splat(avx2, NEEDS_CLIP as i32)).gt(I32x8::zero(avx2));
+    let projected = finite(sx).and(finite(sy)).and(finite(zs));
+    let keep = clip_finite.and(projected).and_not(needs_clip);
     // Not finite: the code alone; needing clipping: the codes, no position.
-    let not_finite = _mm256_castps_si256(_mm256_or_ps(
-        _mm256_xor_ps(clip_finite, _mm256_castsi256_ps(_mm256_set1_epi32(-1))),
-        _mm256_andnot_ps(
-            _mm256_castsi256_ps(needs_clip),
-            _mm256_xor_ps(projected, _mm256_castsi256_ps(_mm256_set1_epi32(-1))),
-        ),
-    ));
-    let code = _mm256_blendv_epi8(code, _mm256_set1_epi32(NOT_FINITE as i32), not_finite);
-    let px = _mm256_and_si256(px, keep);
-    let py = _mm256_and_si256(py, keep);
-    let zs = _mm256_castsi256_ps(_mm256_and_si256(_mm256_castps_si256(zs), keep));
-    // Eight (x, y, z, code) records: a 4 × 4 transpose per half.
-    let zi = _mm256_castps_si256(zs);
-    let (t0, t1) = (_mm256_unpacklo_epi32(px, py), _mm256_unpackhi_epi32(px, py));
-    let (t2, t3) = (_mm256_unpacklo_epi32(zi, code), _mm256_unpackhi_epi32(zi, code));
-    let (v0, v1) = (_mm256_unpacklo_epi64(t0, t2), _mm256_unpackhi_epi64(t0, t2));
-    let (v2, v3) = (_mm256_unpacklo_epi64(t1, t3), _mm256_unpackhi_epi64(t1, t3));
-    let dst: *mut __m256i = out.as_mut_ptr().cast();
-    _mm256_storeu_si256(dst, _mm256_permute2x128_si256::<0x20>(v0, v1));
-    _mm256_storeu_si256(dst.add(1), _mm256_permute2x128_si256::<0x20>(v2, v3));
-    _mm256_storeu_si256(dst.add(2), _mm256_permute2x128_si256::<0x31>(v0, v1));
-    _mm256_storeu_si256(dst.add(3), _mm256_permute2x128_si256::<0x31>(v2, v3));
+    let not_finite = (!clip_finite).or((!projected).and_not(needs_clip));
+    let code = I32x8::select(not_finite, I32x8::splat(avx2, NOT_FINITE as i32), code);
+    // Eight (x, y, z, code) records.
+    I32x8::to_rows(
+        [px.keep(keep), py.keep(keep), zs.to_bits().keep(keep), code],
+        as_rows_mut(out),
+    );
 }
 
-/// All bits set in the lanes whose bit is set in `mask`, none in the others.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-fn lane_mask(mask: u32) -> std::arch::x86_64::__m256i {
-    use std::arch::x86_64::*;
-    let lane_bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-    _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(mask as i32), lane_bit), lane_bit)
+// `project8_avx2` reads eight `Vec3` as 24 floats.
+const _: () = assert!(std::mem::size_of::<Vec3>() == 12);
+
+/// Eight projected vertices as rows of four 32-bit fields, the layout the lane transposes read.
+#[inline(always)]
+fn as_rows(v: &[ProjVertex; LANES]) -> &[[i32; 4]; LANES] {
+    // SAFETY: `ProjVertex` is `repr(C)` with four 4-byte fields and no padding (size
+    // asserted), so it has the size and alignment of `[i32; 4]`, and any field's bits are a
+    // valid `i32`.
+    unsafe { &*v.as_ptr().cast() }
 }
 
-/// Lanes 0..4 of eight i32 as f64.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-fn lo_pd(v: std::arch::x86_64::__m256i) -> std::arch::x86_64::__m256d {
-    use std::arch::x86_64::*;
-    _mm256_cvtepi32_pd(_mm256_castsi256_si128(v))
-}
-
-/// Lanes 4..8 of eight i32 as f64.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-fn hi_pd(v: std::arch::x86_64::__m256i) -> std::arch::x86_64::__m256d {
-    use std::arch::x86_64::*;
-    _mm256_cvtepi32_pd(_mm256_extracti128_si256::<1>(v))
-}
-
-/// Lanes 0..4 of eight f32 as f64.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-fn lo_ps(v: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256d {
-    use std::arch::x86_64::*;
-    _mm256_cvtps_pd(_mm256_castps256_ps128(v))
-}
-
-/// Lanes 4..8 of eight f32 as f64.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-fn hi_ps(v: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256d {
-    use std::arch::x86_64::*;
-    _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(v))
+/// [`as_rows`], to write.
+#[inline(always)]
+fn as_rows_mut(v: &mut [ProjVertex; LANES]) -> &mut [[i32; 4]; LANES] {
+    // SAFETY: as in `as_rows`; and any 32 bits are a valid value of each field (`i32`, `f32`,
+    // `u32`), so whatever is written leaves valid vertices.
+    unsafe { &mut *v.as_mut_ptr().cast() }
 }
 
 /// `(x1 - x0)(y2 - y0) - (x2 - x0)(y1 - y0)` from the differences `[dx1, dy1, dx2, dy2]`.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-fn area(
-    dx1: std::arch::x86_64::__m256d,
-    dy1: std::arch::x86_64::__m256d,
-    dx2: std::arch::x86_64::__m256d,
-    dy2: std::arch::x86_64::__m256d,
-) -> std::arch::x86_64::__m256d {
-    use std::arch::x86_64::*;
-    _mm256_sub_pd(_mm256_mul_pd(dx1, dy2), _mm256_mul_pd(dx2, dy1))
+#[inline(always)]
+fn area(dx1: F64x4, dy1: F64x4, dx2: F64x4, dy2: F64x4) -> F64x4 {
+    dx1 * dy2 - dx2 * dy1
 }
 
 /// The scalar setup's depth plane in four f64 lanes: `d = [dx1, dy1, dx2, dy2]` (oriented
 /// corners minus corner 0, in 1/256 pixel), `z = [z1 - z0, z2 - z0, z0]` (the differences taken
 /// in f32, as there), `o = [px0, py0, x0, y0]`; returns `(zc, dzdx, dzdy)` rounded to f32.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-fn plane(
-    area: std::arch::x86_64::__m256d,
-    d: [std::arch::x86_64::__m256d; 4],
-    z: [std::arch::x86_64::__m256d; 3],
-    o: [std::arch::x86_64::__m256d; 4],
-) -> (
-    std::arch::x86_64::__m128,
-    std::arch::x86_64::__m128,
-    std::arch::x86_64::__m128,
-) {
-    use std::arch::x86_64::*;
-    let sub = _mm256_set1_pd(SUB as f64);
-    let half = _mm256_set1_pd(0.5);
-    let inv = _mm256_div_pd(
-        _mm256_set1_pd(1.0),
-        _mm256_div_pd(area, _mm256_set1_pd((SUB * SUB) as f64)),
-    );
-    let (fx1, fy1) = (_mm256_div_pd(d[0], sub), _mm256_div_pd(d[1], sub));
-    let (fx2, fy2) = (_mm256_div_pd(d[2], sub), _mm256_div_pd(d[3], sub));
+#[inline(always)]
+fn plane(avx2: Avx2, area: F64x4, d: [F64x4; 4], z: [F64x4; 3], o: [F64x4; 4]) -> (F32x4, F32x4, F32x4) {
+    let splat = |v: f64| F64x4::splat(avx2, v);
+    let sub = splat(SUB as f64);
+    let half = splat(0.5);
+    let inv = splat(1.0) / (area / splat((SUB * SUB) as f64));
+    let (fx1, fy1) = (d[0] / sub, d[1] / sub);
+    let (fx2, fy2) = (d[2] / sub, d[3] / sub);
     let [dz1, dz2, z0] = z;
-    let dzdx = _mm256_mul_pd(_mm256_sub_pd(_mm256_mul_pd(dz1, fy2), _mm256_mul_pd(dz2, fy1)), inv);
-    let dzdy = _mm256_mul_pd(_mm256_sub_pd(_mm256_mul_pd(fx1, dz2), _mm256_mul_pd(fx2, dz1)), inv);
-    let ox = _mm256_sub_pd(_mm256_add_pd(o[0], half), _mm256_div_pd(o[2], sub));
-    let oy = _mm256_sub_pd(_mm256_add_pd(o[1], half), _mm256_div_pd(o[3], sub));
-    let zc = _mm256_add_pd(_mm256_add_pd(z0, _mm256_mul_pd(dzdx, ox)), _mm256_mul_pd(dzdy, oy));
-    (_mm256_cvtpd_ps(zc), _mm256_cvtpd_ps(dzdx), _mm256_cvtpd_ps(dzdy))
+    let dzdx = (dz1 * fy2 - dz2 * fy1) * inv;
+    let dzdy = (fx1 * dz2 - fx2 * dz1) * inv;
+    let ox = o[0] + half - o[2] / sub;
+    let oy = o[1] + half - o[3] / sub;
+    let zc = z0 + dzdx * ox + dzdy * oy;
+    (zc.to_f32(), dzdx.to_f32(), dzdy.to_f32())
 }
 
 #[cfg(all(test, target_arch = "x86_64"))]

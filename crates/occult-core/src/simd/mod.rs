@@ -9,15 +9,40 @@
 //!   [`Isa`] reaches among those listed (the scalar kernel otherwise). The same Rust code is
 //!   compiled for each level, and Rust never contracts floating-point operations, so every
 //!   level gives the bits of the scalar one; callers' tests hold them to that.
-//! - [`I32x8`] is eight `i32` lanes in one AVX2 register, made only with an [`Avx2`] token, so
-//!   that its operations are safe.
+//! - The lane types hold lanes in one register: [`I32x8`], [`F32x8`], [`F64x4`] and
+//!   [`F32x4`], with the masks their comparisons give ([`M32x8`], [`M64x4`], [`M32x4`]). Each
+//!   value is made (directly or from another lane value) with an [`Avx2`] token, which proves
+//!   the processor has AVX2, so that their operations are safe. Each operation is one
+//!   instruction (or a short fixed sequence, as its doc says), and each type's tests hold it
+//!   to the scalar arithmetic it stands for, bit for bit.
 //!
 //! A kernel that wants the instructions of a level must be `#[inline(always)]` (or small
 //! enough to be inlined) into the `#[target_feature]` wrapper the macro writes: it is the
-//! wrapper that is compiled for the level.
+//! wrapper that is compiled for the level. The lane operations are `#[inline(always)]` for the
+//! same reason: inside such a kernel each becomes its instruction; outside one (in a test, say)
+//! they still compute the same lanes, through calls.
 
 #[cfg(target_arch = "x86_64")]
-use std::arch::x86_64::*;
+mod f32x4;
+#[cfg(target_arch = "x86_64")]
+mod f32x8;
+#[cfg(target_arch = "x86_64")]
+mod f64x4;
+#[cfg(target_arch = "x86_64")]
+mod i32x8;
+#[cfg(target_arch = "x86_64")]
+mod mask;
+
+#[cfg(target_arch = "x86_64")]
+pub use f32x4::F32x4;
+#[cfg(target_arch = "x86_64")]
+pub use f32x8::F32x8;
+#[cfg(target_arch = "x86_64")]
+pub use f64x4::F64x4;
+#[cfg(target_arch = "x86_64")]
+pub use i32x8::I32x8;
+#[cfg(target_arch = "x86_64")]
+pub use mask::{M32x4, M32x8, M64x4};
 use std::sync::OnceLock;
 
 /// An instruction-set level of the hot loops, ordered from narrowest to widest.
@@ -245,71 +270,37 @@ impl Avx2 {
     }
 }
 
-/// Eight `i32` lanes in one AVX2 register. Every operation is one AVX2 instruction, inlined
-/// into the caller (which should itself be compiled for AVX2, e.g. a kernel of
-/// [`isa_dispatch!`](crate::isa_dispatch), for the instructions to be inlined too).
+/// `+ - * /` and unary `-` (a sign flip) for a float lane type `$t` wrapping one register:
+/// each operator is the one instruction named.
 #[cfg(target_arch = "x86_64")]
-#[derive(Clone, Copy, Debug)]
-pub struct I32x8(__m256i);
-
-#[cfg(target_arch = "x86_64")]
-impl I32x8 {
-    /// Every lane `v`.
-    #[inline(always)]
-    pub fn splat(_: Avx2, v: i32) -> Self {
-        // SAFETY: the token proves AVX2.
-        Self(unsafe { _mm256_set1_epi32(v) })
-    }
-
-    /// Lane `i` is `v[i]`.
-    #[inline(always)]
-    pub fn from_array(_: Avx2, v: [i32; 8]) -> Self {
-        // SAFETY: the token proves AVX2.
-        Self(unsafe { _mm256_setr_epi32(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7]) })
-    }
-
-    /// Lanes `0, 1, …, 7`.
-    #[inline(always)]
-    pub fn lane_index(avx2: Avx2) -> Self {
-        Self::from_array(avx2, [0, 1, 2, 3, 4, 5, 6, 7])
-    }
-
-    /// Lane-wise wrapping sum.
-    #[inline(always)]
-    pub fn wrapping_add(self, o: Self) -> Self {
-        // SAFETY: a lane value exists only where AVX2 was proven (its token).
-        Self(unsafe { _mm256_add_epi32(self.0, o.0) })
-    }
-
-    /// Lane-wise wrapping product (the low 32 bits).
-    #[inline(always)]
-    pub fn wrapping_mul(self, o: Self) -> Self {
-        // SAFETY: as in `wrapping_add`.
-        Self(unsafe { _mm256_mullo_epi32(self.0, o.0) })
-    }
-
-    /// Lane-wise bitwise or.
-    #[inline(always)]
-    pub fn or(self, o: Self) -> Self {
-        // SAFETY: as in `wrapping_add`.
-        Self(unsafe { _mm256_or_si256(self.0, o.0) })
-    }
-
-    /// The sign bit of each lane, lane `i` at bit `i`.
-    #[inline(always)]
-    pub fn sign_mask(self) -> u32 {
-        // SAFETY: as in `wrapping_add`.
-        unsafe { _mm256_movemask_ps(_mm256_castsi256_ps(self.0)) as u32 }
-    }
-
-    /// The lanes as an array.
-    #[inline(always)]
-    pub fn to_array(self) -> [i32; 8] {
-        // SAFETY: `__m256i` and `[i32; 8]` have the same size, and every bit pattern is valid
-        // for both.
-        unsafe { std::mem::transmute(self.0) }
-    }
+macro_rules! float_ops {
+    ($t:ident: $add:ident, $sub:ident, $mul:ident, $div:ident, $xor:ident, $splat:ident) => {
+        $crate::simd::float_ops!(@binary $t, Add, add, $add);
+        $crate::simd::float_ops!(@binary $t, Sub, sub, $sub);
+        $crate::simd::float_ops!(@binary $t, Mul, mul, $mul);
+        $crate::simd::float_ops!(@binary $t, Div, div, $div);
+        impl std::ops::Neg for $t {
+            type Output = Self;
+            #[inline(always)]
+            fn neg(self) -> Self {
+                // SAFETY: a lane value exists only where AVX2 was proven (its token).
+                Self(unsafe { $xor(self.0, $splat(-0.0)) })
+            }
+        }
+    };
+    (@binary $t:ident, $trait:ident, $method:ident, $intrinsic:ident) => {
+        impl std::ops::$trait for $t {
+            type Output = Self;
+            #[inline(always)]
+            fn $method(self, o: Self) -> Self {
+                // SAFETY: a lane value exists only where AVX2 was proven (its token).
+                Self(unsafe { $intrinsic(self.0, o.0) })
+            }
+        }
+    };
 }
+#[cfg(target_arch = "x86_64")]
+use float_ops;
 
 #[cfg(test)]
 mod tests {
@@ -351,25 +342,5 @@ mod tests {
             assert_eq!(add_one_any(isa, &mut v), 37, "{isa:?}");
             assert!(v.iter().all(|&x| x == 2), "{isa:?}");
         }
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[test]
-    fn lanes_match_scalar_arithmetic() {
-        let Some(avx2) = Isa::detected().avx2() else {
-            eprintln!("note: no AVX2 here; nothing to compare");
-            return;
-        };
-        let a = [i32::MAX, -1, 0, 7, i32::MIN, 3, -9, 100];
-        let b = [2, 3, -4, 5, 6, -7, 8, 9];
-        let (la, lb) = (I32x8::from_array(avx2, a), I32x8::from_array(avx2, b));
-        let want = |f: fn(i32, i32) -> i32| std::array::from_fn::<i32, 8, _>(|i| f(a[i], b[i]));
-        assert_eq!(la.wrapping_add(lb).to_array(), want(i32::wrapping_add));
-        assert_eq!(la.wrapping_mul(lb).to_array(), want(i32::wrapping_mul));
-        assert_eq!(la.or(lb).to_array(), want(|x, y| x | y));
-        let signs = (0..8).fold(0, |m, i| m | (((a[i] < 0) as u32) << i));
-        assert_eq!(la.sign_mask(), signs);
-        assert_eq!(I32x8::splat(avx2, -3).to_array(), [-3; 8]);
-        assert_eq!(I32x8::lane_index(avx2).to_array(), [0, 1, 2, 3, 4, 5, 6, 7]);
     }
 }
