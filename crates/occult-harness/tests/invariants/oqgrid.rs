@@ -24,6 +24,16 @@ identical_on_every_generator! {
         "oqgrid:grid=nested,resolution=3,split=8,branching=2,depth=4,batch=8",
         0
     );
+    /// The paper's query alone: no pyramid, no node queries, no whole draws.
+    paper_query_only_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("oqgrid:test=query,nodes=off,whole=0", 0);
+    /// Every mesh drawn whole once any of it was drawn; visible triangles gathered over
+    /// batches into large draws (queries meanwhile see a depth without them).
+    whole_and_flush_are_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("oqgrid:whole=1,flush=5000", 0);
+    /// The pyramid over a uniform grid, gathered draws, two threads.
+    pyramid_uniform_flush_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("oqgrid:grid=uniform,resolution=16,flush=300,whole=0", 2);
 }
 
 #[test]
@@ -52,6 +62,14 @@ fn identical_on_paths() {
         (
             "oqgrid:grid=nested,split=100,resolution=8",
             "occluder:objects=4",
+            "circle:10",
+        ),
+        // Shares remembered from frame to frame: whole draws, then a probe every 8th frame.
+        ("oqgrid:whole=1", "plant:units=2,floors=2,pipes=10", "circle:20"),
+        ("oqgrid:whole=100,flush=20000", "city:blocks=3,detail=3", "street:12"),
+        (
+            "oqgrid:test=query,whole=0,nodes=off",
+            "forest:trees=3,patches=2,levels=1",
             "circle:10",
         ),
     ] {
@@ -88,6 +106,10 @@ fn bad_parameters_are_clear_errors() {
         ("oqgrid:grid=octree", "grid=octree"),
         ("oqgrid:order=random", "order=random"),
         ("oqgrid:stamps=maybe", "stamps=maybe"),
+        ("oqgrid:test=hzb", "test=hzb"),
+        ("oqgrid:flush=0", "flush=0"),
+        ("oqgrid:whole=101", "whole=101"),
+        ("oqgrid:nodes=maybe", "nodes=maybe"),
     ] {
         let m = build_err(s);
         assert!(
@@ -123,13 +145,29 @@ fn counters_account_for_every_cell() {
     let c = |k: &str| s.counters.get(k);
     assert!(c("cells_visited") >= c("cells_in_frustum"));
     assert_eq!(c("cells_in_frustum"), c("queries") + c("queries_skipped"));
-    assert_eq!(c("queries"), s.boxes_tested);
-    assert_eq!(c("queries_hidden"), s.boxes_culled);
+    assert_eq!(c("queries") + c("node_queries"), s.boxes_tested);
+    assert_eq!(c("queries_hidden") + c("nodes_hidden"), s.boxes_culled);
+    assert!(c("pyramid_hidden") <= c("queries_hidden") + c("nodes_hidden"));
+    assert!(c("draws") > 0);
     assert_eq!(c("cells_visible"), c("cells_in_frustum") - c("queries_hidden"));
     assert_eq!(c("queries_skipped"), 0, "threshold 1 queries every cell");
-    assert!(c("queries_hidden") > 0, "the wall hides the spheres");
+    assert!(
+        c("queries_hidden") + c("nodes_hidden") > 0,
+        "the wall hides the spheres"
+    );
+    assert!(
+        c("pyramid_hidden") > 0,
+        "the pyramid alone finds hidden boxes behind the wall"
+    );
     assert!(s.triangles_submitted < zs.triangles_submitted);
     assert!(s.phases.get(occult_render::Phase::Query) > std::time::Duration::ZERO);
+    // The paper's query alone: the pyramid answers nothing, the same cells are found hidden.
+    let mut q = spec("oqgrid:threshold=1,test=query")
+        .build(scene.clone(), &opts)
+        .unwrap();
+    let qs = q.render(&view, &mut frame).unwrap();
+    assert_eq!(qs.counters.get("pyramid_hidden"), 0);
+    assert_eq!(qs.boxes_culled, s.boxes_culled, "the cheap test changes no answer");
     // A huge threshold skips every query; queries=off issues none.
     for algo in ["oqgrid:threshold=1000000000", "oqgrid:queries=off"] {
         let mut r = spec(algo).build(scene.clone(), &opts).unwrap();
@@ -180,4 +218,27 @@ fn parallel_query_batches_are_identical() {
         assert!(a.same_visibility(&b), "differs from zbuffer: {cam:?}");
     }
     assert!(parallel > 0, "no batch took the parallel path");
+}
+
+/// Meshes drawn whole once an earlier frame drew enough of them (and their grids traversed
+/// again every 8th frame): frames stay identical, and the whole draws do happen.
+#[test]
+fn whole_draws_from_earlier_frames_are_identical() {
+    let built = build_scene("plant:units=2,floors=2,pipes=10");
+    let cams = occult_scenes::path::parse_path("circle:12", &built.scene, &built.default_camera).unwrap();
+    let scene = Arc::new(built.scene);
+    let opts = RenderOptions::default();
+    let mut z = Algorithm::ZBUFFER.build(scene.clone(), &opts).unwrap();
+    let mut r = spec("oqgrid:whole=1").build(scene, &opts).unwrap();
+    let (mut a, mut b) = (Frame::new(160, 120).unwrap(), Frame::new(160, 120).unwrap());
+    let mut whole = Vec::new();
+    for cam in &cams {
+        let view = View::new(*cam, 160, 120).unwrap();
+        z.render(&view, &mut a).unwrap();
+        let s = r.render(&view, &mut b).unwrap();
+        whole.push(s.counters.get("whole_drawn"));
+        assert!(a.same_visibility(&b), "differs from zbuffer: {cam:?}");
+    }
+    assert_eq!(whole[0], 0, "nothing is known before the first frame");
+    assert!(whole.iter().sum::<u64>() > 0, "no mesh was drawn whole");
 }

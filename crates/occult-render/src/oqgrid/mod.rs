@@ -22,6 +22,34 @@
 //! - §4.2 "with and without queries": `queries=off` keeps the grid traversal and frustum test
 //!   and draws every cell in the frustum, the paper's throughput baseline.
 //!
+//! # Additions (options; `test=query,nodes=off,whole=0,flush=1` is the paper's algorithm)
+//! - Cheap test first ([`CellTest::Pyramid`], `test=pyramid`, the default): a max-depth pyramid
+//!   of the frame being drawn ([`occult_raster::ZPyramid`]) is asked about the query's screen
+//!   rectangle against the same nearest depth; the span-scanning query runs only where the
+//!   pyramid does not find it hidden ([`query_cell`]). The pyramid is brought up to date after
+//!   each draw over the screen rectangles of the drawn cells' boxes (of the whole mesh for a
+//!   whole draw); a triangle's pixels outside its cell's box are left to the cells they cross,
+//!   and a pyramid that misses drawn pixels is only stale there, which is conservative. Answers
+//!   are exactly those of the query alone; what changes is their cost (most hidden cells are
+//!   found by a few pyramid samples instead of a scan of their silhouette).
+//! - Node queries ([`OqGridOptions::node_queries`], `nodes=on`): each node occurrence's box is
+//!   queried before its grid is traversed, so a hidden building, tree or instanced unit costs
+//!   one query instead of one per top-level cell.
+//! - Whole draws ([`OqGridOptions::whole_percent`], `whole=50`): a mesh occurrence whose grid
+//!   traversal in an earlier frame drew at least that share of its triangles is drawn whole
+//!   (one `DrawTriangles::All` draw, each vertex transformed once, no grid, no stamps) after
+//!   its node query, its grid traversed again every [`WHOLE_PROBE_PERIOD`]th frame. This is
+//!   frame-to-frame coherence (§6 names it as future work), measured per occurrence: where the
+//!   queries cull little of a mesh (a forest's trees, a city seen from above), per-cell lists
+//!   and queries cost more than they save, and the renderer falls back to drawing as `zbuffer`
+//!   does.
+//! - Gathered draws ([`OqGridOptions::flush_triangles`], `flush=1`): visible triangles may be
+//!   gathered over batches (and node occurrences) into one draw of at least that many, which
+//!   the rasterizer shares over its threads past its sort-last size; queries meanwhile see a
+//!   depth without the gathered triangles and cull less. Drawing after every batch (1) measured
+//!   best on the plant, city and forest paths; larger values are there for slower queries or
+//!   more threads.
+//!
 //! # Instanced scenes
 //! The scene DAG is not flattened. A grid is built per *unique* node, in the node's own space:
 //! a mesh node's grid holds triangle indices, a group node's grid holds instance indices
@@ -45,9 +73,9 @@
 //!   them to other threads cost more than the queries, measured); there is no pipeline to keep
 //!   full, but the culling lost to a batch (cells of a batch do not see each other's geometry)
 //!   is the same as in §3.4.
-//! - A batch's visible triangles are one draw; the rasterizer draws it on the calling thread
-//!   unless it is large enough to share over its threads (sort-last). Frames do not depend on
-//!   it.
+//! - A batch's visible triangles are one draw (or gathered with later ones, `flush`); the
+//!   rasterizer draws it on the calling thread unless it is large enough to share over its
+//!   threads (sort-last). Frames do not depend on it.
 //! - Deviation: cells are queried with their *tight* box (cell ∩ bounds of its contents), never
 //!   larger than the cube of the paper, so at least as much is culled.
 //! - Deviation: slabs are bands of the cell centres' distance along the view direction, one
@@ -61,22 +89,29 @@
 //!   full to large meshes and small groups get small grids.
 //!
 //! Cost per frame: the non-empty cells of every grid visited (frustum test each), one query per
-//! cell in the frustum with at least `threshold` triangles, plus rasterizing the cells found
-//! visible. It pays when the depth complexity is high; with little occlusion the queries are
-//! pure overhead (§1).
+//! node occurrence and per cell in the frustum with at least `threshold` triangles (most hidden
+//! ones answered by a few pyramid samples, plus a pyramid update per draw over the drawn
+//! cells' rectangles), plus rasterizing the cells found visible. It pays when the depth
+//! complexity is high; with little occlusion the queries are overhead (§1), which whole draws
+//! bound: meshes mostly visible are drawn as `zbuffer` draws them. Triangles drawn from
+//! per-cell lists cost more each than a whole mesh's (their corners are transformed per
+//! triangle), and a batch's draw is usually below the size the rasterizer shares over its
+//! threads.
 
 mod query;
 
-pub use query::any_sample_passes;
+pub use query::{any_sample_passes, query_cell, QueryOutcome};
 
+use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use occult_core::{Containment, Mat4, NodeId, NodeKind, Scene, Vec3, View};
-use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
+use occult_core::{Containment, Mat4, Mesh, NodeId, NodeKind, Scene, Vec3, View};
+use occult_raster::{Draw, DrawTriangles, Frame, PixelRect, Rasterizer, ZPyramid};
 pub use occult_spatial::grid::Resolution;
 use occult_spatial::grid::{GridCell, GridConfig, GridError, MeshTriangles, NestedGrid, WeightedBoxes, NO_CHILD};
 
+use crate::hash::FxBuild;
 use crate::params::read_params;
 use crate::walk::{NodeAt, NodeTest, SceneWalk, Visitor};
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
@@ -122,6 +157,26 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             help: "cells with fewer triangles are drawn without a query (>= 1; 1 queries every cell)",
         },
         ParamDoc {
+            key: "test",
+            default: "pyramid",
+            help: "query: the span-scanning query only (the paper's); pyramid: a max-depth pyramid of the current depth first, the query where it is inconclusive",
+        },
+        ParamDoc {
+            key: "flush",
+            default: "1",
+            help: "visible triangles gathered before they are drawn (>= 1; 1 draws after every batch, as the paper)",
+        },
+        ParamDoc {
+            key: "nodes",
+            default: "on",
+            help: "query each node occurrence's box before traversing its grid (off: only cells are queried, as the paper)",
+        },
+        ParamDoc {
+            key: "whole",
+            default: "50",
+            help: "percent (0..=100, 0: never): a mesh occurrence whose grid traversal in an earlier frame drew at least this share of its triangles is drawn whole (box queried, vertices shared, no grid), its grid traversed again every 8th frame",
+        },
+        ParamDoc {
             key: "queries",
             default: "on",
             help: "off: draw every cell in the frustum (grid frustum culling only, the §4.2 baseline)",
@@ -151,6 +206,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "cells_visible",
         "node_occurrences",
         "parallel_batches",
+        "pyramid_hidden",
+        "draws",
+        "node_queries",
+        "nodes_hidden",
+        "whole_drawn",
     ],
     conservative: true,
     build: |scene, options, params| {
@@ -165,6 +225,16 @@ pub enum GridKind {
     Uniform,
     /// Cells over the split threshold subdivided, to the maximum depth.
     Nested,
+}
+
+/// How a cell's occlusion query is answered.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CellTest {
+    /// The span-scanning query alone ([`any_sample_passes`]), the paper's one query.
+    Query,
+    /// A max-depth pyramid of the current depth first, the query only where the pyramid does
+    /// not find the cell hidden ([`query_cell`]).
+    Pyramid,
 }
 
 /// Order in which a grid's cells are queried.
@@ -196,6 +266,22 @@ pub struct OqGridOptions {
     pub query_threshold: u64,
     /// Query cells at all (`false`: frustum culling over the grid only, §4.2's baseline).
     pub queries: bool,
+    /// How a query is answered.
+    pub test: CellTest,
+    /// Visible triangles gathered before they are drawn (≥ 1; 1 draws after every batch). More
+    /// makes fewer, larger draws (which the rasterizer shares over its threads past a size)
+    /// but queries meanwhile see a depth without the gathered triangles, so cull less.
+    pub flush_triangles: usize,
+    /// Percent (0..=100; 0: never): a mesh occurrence whose grid traversal in an earlier frame
+    /// drew at least this share of its triangles is drawn whole (every triangle, its vertices
+    /// transformed once; its box queried with [`OqGridOptions::node_queries`]) instead of
+    /// traversing its grid, which is traversed again every [`WHOLE_PROBE_PERIOD`]th frame to
+    /// measure the share anew (frame-to-frame coherence, the paper's §6 future work). Where
+    /// queries cull little of a mesh, they and the per-triangle lists cost more than drawing it
+    /// all.
+    pub whole_percent: u32,
+    /// Query each node occurrence's box before its grid (with [`OqGridOptions::queries`]).
+    pub node_queries: bool,
     /// Cell order.
     pub order: Order,
     /// Draw a triangle shared by several visible cells once (§3.1), or once per cell.
@@ -215,6 +301,10 @@ impl Default for OqGridOptions {
             batch: 4,
             query_threshold: 1,
             queries: true,
+            test: CellTest::Pyramid,
+            flush_triangles: 1,
+            whole_percent: 50,
+            node_queries: true,
             order: Order::Slabs,
             stamps: true,
             max_memory_bytes: 4 << 30,
@@ -257,8 +347,15 @@ impl OqGridOptions {
             max_depth: "depth",
             batch: "batch",
             query_threshold: "threshold",
+            flush_triangles: "flush",
+            whole_percent: "whole",
+            node_queries: flag "nodes",
             queries: flag "queries",
         });
+        o.test = match params.choice("test", &["query", "pyramid"], "pyramid")? {
+            "query" => CellTest::Query,
+            _ => CellTest::Pyramid,
+        };
         o.order = match params.choice("order", &["slabs", "none"], "slabs")? {
             "none" => Order::Unordered,
             _ => Order::Slabs,
@@ -294,6 +391,12 @@ impl OqGridOptions {
         if self.batch == 0 {
             return bad("batch=0: at least 1 query must be in flight".into());
         }
+        if self.whole_percent > 100 {
+            return bad(format!("whole={}: a percentage, 0..=100", self.whole_percent));
+        }
+        if self.flush_triangles == 0 {
+            return bad("flush=0: must be at least 1 (1 draws after every batch)".into());
+        }
         if self.query_threshold == 0 {
             return bad("threshold=0: must be at least 1 (1 queries every cell)".into());
         }
@@ -325,9 +428,14 @@ pub struct OqGrid {
     options: OqGridOptions,
     /// Per node of the scene: its grid, in the node's space.
     grids: Vec<NestedGrid>,
+    /// Max-depth pyramid of the frame being drawn ([`CellTest::Pyramid`]).
+    pyramid: ZPyramid,
     /// Per node: the epoch at which each element (triangle or instance) was last drawn.
     stamps: Vec<Vec<u32>>,
     epoch: u32,
+    /// Per mesh occurrence (by its first item id, unique to it): the share of its triangles the
+    /// last traversal of its grid drew, and the frames it was drawn whole since.
+    shares: HashMap<u64, (f32, u32), FxBuild>,
     last_counts: OqGridCounts,
 }
 
@@ -382,6 +490,8 @@ impl OqGrid {
             raster,
             options: oq.clone(),
             grids,
+            pyramid: ZPyramid::default(),
+            shares: HashMap::default(),
             stamps,
             epoch: 0,
             last_counts: OqGridCounts::default(),
@@ -403,6 +513,13 @@ impl OqGrid {
         &self.grids[id.index()]
     }
 }
+
+/// A mesh occurrence drawn whole (see [`OqGridOptions::whole_percent`]) has its grid traversed
+/// again every this many frames, to measure the share it draws anew.
+pub const WHOLE_PROBE_PERIOD: u32 = 8;
+
+/// Most mesh occurrences whose drawn share is remembered; past it, all are forgotten at once.
+const MAX_REMEMBERED_SHARES: usize = 1 << 20;
 
 /// Screen pixels below which a batch's queries are evaluated on the calling thread.
 pub const PARALLEL_QUERY_MIN_PIXELS: f32 = 131_072.0;
@@ -447,11 +564,22 @@ pub struct OqGridCounts {
     pub node_occurrences: u64,
     /// Batches whose queries were evaluated in parallel.
     pub parallel_batches: u64,
+    /// Queries (of cells and nodes) answered "hidden" by the pyramid alone, without scanning
+    /// pixels.
+    pub pyramid_hidden: u64,
+    /// Draws handed to the rasterizer.
+    pub draws: u64,
+    /// Node occurrences queried by their box before their grid (not counted in `queries`).
+    pub node_queries: u64,
+    /// Node occurrences found hidden by that query (not counted in `queries_hidden`).
+    pub nodes_hidden: u64,
+    /// Mesh occurrences drawn whole (see [`OqGridOptions::whole_percent`]).
+    pub whole_drawn: u64,
 }
 
 impl OqGridCounts {
     /// The counts in the order of [`INFO`]'s counter names.
-    fn values(&self) -> [u64; 8] {
+    fn values(&self) -> [u64; 13] {
         [
             self.cells_visited,
             self.cells_in_frustum,
@@ -461,6 +589,11 @@ impl OqGridCounts {
             self.cells_visible,
             self.node_occurrences,
             self.parallel_batches,
+            self.pyramid_hidden,
+            self.draws,
+            self.node_queries,
+            self.nodes_hidden,
+            self.whole_drawn,
         ]
     }
 }
@@ -476,20 +609,41 @@ struct Occurrence<'a> {
     grid: &'a NestedGrid,
 }
 
+/// Visible triangles of one mesh occurrence gathered for the next draw.
+struct Pending<'a> {
+    mesh: &'a Mesh,
+    /// Its triangle indices: `Walk::gathered[start..end]`; None: all of them.
+    gathered: Option<(usize, usize)>,
+    clip_from_object: Mat4,
+    first_item: u64,
+}
+
 /// Per-frame traversal state.
 struct Walk<'a> {
     walk: SceneWalk<'a>,
     grids: &'a [NestedGrid],
     stamps: &'a mut [Vec<u32>],
     epoch: &'a mut u32,
+    shares: &'a mut HashMap<u64, (f32, u32), FxBuild>,
+    /// Triangles gathered for drawing so far in the frame.
+    gathered_count: u64,
     raster: &'a mut Rasterizer,
     options: &'a OqGridOptions,
     frame: &'a mut Frame,
     counts: OqGridCounts,
     query_time: Duration,
     raster_time: Duration,
-    /// Triangle indices of the batch being drawn.
-    list: Vec<u32>,
+    /// Time spent bringing the pyramid up to date.
+    pyramid_time: Duration,
+    /// The pyramid of `frame` ([`CellTest::Pyramid`]), up to date but for the `dirty` rectangles.
+    pyramid: Option<&'a mut ZPyramid>,
+    /// Triangle indices of the pending draws.
+    gathered: Vec<u32>,
+    pending: Vec<Pending<'a>>,
+    /// Triangles of the pending draws.
+    pending_triangles: usize,
+    /// Where the pending draws may change the depth.
+    dirty: Vec<PixelRect>,
 }
 
 impl<'a> Visitor<'a> for Walk<'a> {
@@ -510,17 +664,41 @@ impl<'a> Visitor<'a> for Walk<'a> {
             *self.epoch = 1;
         }
         let view = self.walk.view();
+        let clip_from_object = view.clip_from_object(&at.place.world_from_node);
+        if self.options.queries && self.options.node_queries && !self.node_visible(at, &clip_from_object) {
+            return;
+        }
+        let whole = self.options.whole_percent;
+        if let (NodeKind::Mesh(mesh), true) = (at.node.kind(), whole > 0) {
+            if let Some((share, since)) = self.shares.get_mut(&at.place.first_item) {
+                if *share * 100.0 >= whole as f32 && *since + 1 < WHOLE_PROBE_PERIOD {
+                    *since += 1;
+                    self.counts.whole_drawn += 1;
+                    self.push_whole(mesh, at, clip_from_object);
+                    return;
+                }
+            }
+        }
+        let gathered_before = self.gathered_count;
         let node_from_world = at.place.world_from_node.inverse();
         let camera = view.camera();
         let occ = Occurrence {
             at: *at,
-            clip_from_object: view.clip_from_object(&at.place.world_from_node),
+            clip_from_object,
             eye: node_from_world.transform_point3(camera.eye),
             dir: node_from_world.transform_vector3(camera.direction()),
             epoch: *self.epoch,
             grid: &self.grids[at.place.id.index()],
         };
         self.level(&occ, 0);
+        if let (NodeKind::Mesh(mesh), true) = (at.node.kind(), whole > 0) {
+            let drawn = (self.gathered_count - gathered_before) as f32;
+            if self.shares.len() >= MAX_REMEMBERED_SHARES {
+                self.shares.clear(); // bounded memory on scenes of countless occurrences
+            }
+            self.shares
+                .insert(at.place.first_item, (drawn / mesh.triangle_count().max(1) as f32, 0));
+        }
     }
 }
 
@@ -558,7 +736,7 @@ impl<'a> Walk<'a> {
             // §3.4: the slab's cells n at a time; each batch drawn before the next is queried,
             // and the whole slab before the next slab.
             for batch in order[start..end].chunks(self.options.batch) {
-                self.batch(occ, &level.cells, batch);
+                self.batch(occ, level_index, batch);
             }
             start = end;
         }
@@ -566,13 +744,19 @@ impl<'a> Walk<'a> {
 
     /// Queries the cells of one batch against the same depth state, then draws the visible
     /// ones (§3.4) and recurses into the visible ones' subgrids (§3.2) and instances.
-    fn batch(&mut self, occ: &Occurrence<'a>, cells: &'a [GridCell], batch: &[(i64, u32)]) {
+    fn batch(&mut self, occ: &Occurrence<'a>, level_index: u32, batch: &[(i64, u32)]) {
+        let cells: &'a [GridCell] = &occ.grid.levels()[level_index as usize].cells;
         let options = self.options;
         let needs_query = |c: &GridCell| options.queries && c.weight >= options.query_threshold;
         let view = self.walk.view();
         let t = Instant::now();
-        let query = |c: &GridCell| -> bool {
-            !needs_query(c) || any_sample_passes(self.frame, view, &occ.clip_from_object, &c.tight)
+        let pyramid = self.pyramid.as_deref();
+        let query = |c: &GridCell| -> QueryOutcome {
+            if needs_query(c) {
+                query_cell(self.frame, view, &occ.clip_from_object, &c.tight, pyramid)
+            } else {
+                QueryOutcome::Visible
+            }
         };
         let queried = batch.iter().filter(|(_, i)| needs_query(&cells[*i as usize])).count() as u64;
         // Deviation (§3.4): a batch's queries run in parallel only when their screen area makes
@@ -586,7 +770,7 @@ impl<'a> Walk<'a> {
                 .sum();
             area >= PARALLEL_QUERY_MIN_PIXELS
         };
-        let visible: Vec<bool> = if parallel {
+        let outcomes: Vec<QueryOutcome> = if parallel {
             use rayon::prelude::*;
             self.counts.parallel_batches += 1;
             self.raster
@@ -597,6 +781,8 @@ impl<'a> Walk<'a> {
         if queried > 0 {
             self.query_time += t.elapsed();
         }
+        self.counts.pyramid_hidden += outcomes.iter().filter(|&&o| o == QueryOutcome::HiddenByPyramid).count() as u64;
+        let visible: Vec<bool> = outcomes.iter().map(|&o| o == QueryOutcome::Visible).collect();
         let visible_count = visible.iter().filter(|&&v| v).count() as u64;
         let hidden = batch
             .iter()
@@ -614,7 +800,8 @@ impl<'a> Walk<'a> {
         match occ.at.node.kind() {
             NodeKind::Mesh(mesh) => {
                 // The visible leaf cells' triangles, each once per occurrence (§3.1 stamps).
-                self.list.clear();
+                let start = self.gathered.len();
+                let (w, h) = (view.width(), view.height());
                 for (&(_, i), _) in batch.iter().zip(&visible).filter(|(_, v)| **v) {
                     let cell = &cells[i as usize];
                     if cell.child != NO_CHILD {
@@ -626,23 +813,33 @@ impl<'a> Walk<'a> {
                         for &t in tris {
                             if stamps[t as usize] != occ.epoch {
                                 stamps[t as usize] = occ.epoch;
-                                self.list.push(t);
+                                self.gathered.push(t);
                             }
                         }
                     } else {
-                        self.list.extend_from_slice(tris);
+                        self.gathered.extend_from_slice(tris);
+                    }
+                    // The pyramid is brought up to date over the cell's own box only: the parts of
+                    // its triangles outside it are left to the cells they cross (a pyramid that
+                    // misses pixels drawn is stale there, which is conservative).
+                    if self.pyramid.is_some() {
+                        if let Some(r) = query::screen_rect(&occ.clip_from_object, &cell.tight, w, h) {
+                            self.dirty.push(r);
+                        }
                     }
                 }
-                if !self.list.is_empty() {
-                    let draw = Draw {
+                if self.gathered.len() > start {
+                    self.pending_triangles += self.gathered.len() - start;
+                    self.gathered_count += (self.gathered.len() - start) as u64;
+                    self.pending.push(Pending {
                         mesh,
-                        triangles: DrawTriangles::List(&self.list),
+                        gathered: Some((start, self.gathered.len())),
                         clip_from_object: occ.clip_from_object,
                         first_item: occ.at.place.first_item,
-                    };
-                    let t = Instant::now();
-                    crate::rasterize(self.raster, view, self.frame, &[draw], &mut self.walk.stats);
-                    self.raster_time += t.elapsed();
+                    });
+                    if self.pending_triangles >= options.flush_triangles {
+                        self.flush();
+                    }
                 }
                 for (&(_, i), _) in batch.iter().zip(&visible).filter(|(_, v)| **v) {
                     let child = cells[i as usize].child;
@@ -674,6 +871,99 @@ impl<'a> Walk<'a> {
     }
 }
 
+impl<'a> Walk<'a> {
+    /// Queries the box of occurrence `at` before its grid is traversed; false when hidden.
+    fn node_visible(&mut self, at: &NodeAt<'a>, clip_from_object: &Mat4) -> bool {
+        let t = Instant::now();
+        let outcome = query_cell(
+            self.frame,
+            self.walk.view(),
+            clip_from_object,
+            &at.node.bounds(),
+            self.pyramid.as_deref(),
+        );
+        self.query_time += t.elapsed();
+        self.counts.node_queries += 1;
+        if outcome == QueryOutcome::Visible {
+            return true;
+        }
+        self.counts.nodes_hidden += 1;
+        self.counts.pyramid_hidden += (outcome == QueryOutcome::HiddenByPyramid) as u64;
+        false
+    }
+
+    /// Adds every triangle of mesh occurrence `at` to the pending draws.
+    fn push_whole(&mut self, mesh: &'a Mesh, at: &NodeAt<'a>, clip_from_object: Mat4) {
+        if self.pyramid.is_some() {
+            let (w, h) = (self.frame.width(), self.frame.height());
+            if let Some(r) = query::screen_rect(&clip_from_object, &at.node.bounds(), w, h) {
+                self.dirty.push(r);
+            }
+        }
+        self.pending_triangles += mesh.triangle_count();
+        self.pending.push(Pending {
+            mesh,
+            gathered: None,
+            clip_from_object,
+            first_item: at.place.first_item,
+        });
+        if self.pending_triangles >= self.options.flush_triangles {
+            self.flush();
+        }
+    }
+
+    /// Draws the pending triangles as one draw list, then brings the pyramid up to date where
+    /// they may have changed the depth.
+    fn flush(&mut self) {
+        if self.pending.is_empty() {
+            return;
+        }
+        let view = self.walk.view();
+        let draws: Vec<Draw<'_>> = self
+            .pending
+            .iter()
+            .map(|p| Draw {
+                mesh: p.mesh,
+                triangles: match p.gathered {
+                    Some((start, end)) => DrawTriangles::List(&self.gathered[start..end]),
+                    None => DrawTriangles::All,
+                },
+                clip_from_object: p.clip_from_object,
+                first_item: p.first_item,
+            })
+            .collect();
+        let t = Instant::now();
+        crate::rasterize(self.raster, view, self.frame, &draws, &mut self.walk.stats);
+        drop(draws);
+        self.counts.draws += 1;
+        self.raster_time += t.elapsed();
+        if let Some(pyramid) = self.pyramid.as_deref_mut().filter(|_| !self.dirty.is_empty()) {
+            let t = Instant::now();
+            // Rectangles overlap: where their bounding rectangle is no larger than their areas
+            // together, one pass over it is less work.
+            let area: u64 = self.dirty.iter().map(|r| r.area()).sum();
+            let union = self.dirty.iter().fold(self.dirty[0], |u, r| PixelRect {
+                x0: u.x0.min(r.x0),
+                y0: u.y0.min(r.y0),
+                x1: u.x1.max(r.x1),
+                y1: u.y1.max(r.y1),
+            });
+            if union.area() <= area {
+                pyramid.update(self.frame, union);
+            } else {
+                for &r in &self.dirty {
+                    pyramid.update(self.frame, r);
+                }
+            }
+            self.pyramid_time += t.elapsed();
+        }
+        self.pending.clear();
+        self.pending_triangles = 0;
+        self.gathered.clear();
+        self.dirty.clear();
+    }
+}
+
 impl Renderer for OqGrid {
     fn name(&self) -> &'static str {
         "oqgrid"
@@ -681,36 +971,58 @@ impl Renderer for OqGrid {
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
         let (start, t, cleared) = crate::begin_frame(&mut self.raster, view, frame)?;
+        let pyramid = match self.options.test {
+            CellTest::Query => None,
+            CellTest::Pyramid => {
+                if (self.pyramid.width(), self.pyramid.height()) != (frame.width(), frame.height()) {
+                    self.pyramid = ZPyramid::new(frame.width(), frame.height())?;
+                } else {
+                    self.pyramid.clear();
+                }
+                Some(&mut self.pyramid)
+            }
+        };
         let mut walk = Walk {
             walk: SceneWalk::new(&self.scene, view),
             grids: &self.grids,
             stamps: &mut self.stamps,
             epoch: &mut self.epoch,
+            shares: &mut self.shares,
+            gathered_count: 0,
             raster: &mut self.raster,
             options: &self.options,
             frame,
             counts: OqGridCounts::default(),
             query_time: Duration::ZERO,
             raster_time: Duration::ZERO,
-            list: Vec::new(),
+            pyramid_time: Duration::ZERO,
+            pyramid,
+            gathered: Vec::new(),
+            pending: Vec::new(),
+            pending_triangles: 0,
+            dirty: Vec::new(),
         };
         walk.walk.stats = cleared;
         walk.run();
+        walk.flush();
         let walked = t.elapsed();
         let Walk {
             walk,
             counts,
             query_time,
             raster_time,
+            pyramid_time,
             ..
         } = walk;
         let mut stats = walk.finish("oqgrid")?;
         stats.phases.add(Phase::Query, query_time);
-        stats
-            .phases
-            .add(Phase::Cull, walked.saturating_sub(query_time + raster_time));
-        stats.boxes_tested += counts.queries;
-        stats.boxes_culled += counts.queries_hidden;
+        stats.phases.add(Phase::DepthStructure, pyramid_time);
+        stats.phases.add(
+            Phase::Cull,
+            walked.saturating_sub(query_time + raster_time + pyramid_time),
+        );
+        stats.boxes_tested += counts.queries + counts.node_queries;
+        stats.boxes_culled += counts.queries_hidden + counts.nodes_hidden;
         // The counters are named in `INFO.counters`, in the order of `OqGridCounts::values`.
         debug_assert_eq!(INFO.counters.len(), counts.values().len());
         for (&name, n) in INFO.counters.iter().zip(counts.values()) {
@@ -724,6 +1036,8 @@ impl Renderer for OqGrid {
     fn memory_bytes(&self) -> usize {
         self.grids.iter().map(NestedGrid::memory_bytes).sum::<usize>()
             + self.stamps.iter().map(|s| s.len() * 4).sum::<usize>()
+            + self.pyramid.memory_bytes()
+            + self.shares.capacity() * std::mem::size_of::<(u64, (f32, u32))>()
             + self.raster.memory_bytes()
     }
 }

@@ -12,21 +12,57 @@
 //!
 //! It is never `false` where `query_box` counts a sample (tested on random boxes), so it is as
 //! conservative as `query_box`.
+//!
+//! [`query_cell`] may first ask a max-depth pyramid of the current depth
+//! ([`occult_raster::ZPyramid`]) about the silhouette's bounding rectangle, against the same
+//! nearest depth: when every pixel of the rectangle is nearer, no pixel of the silhouette (which
+//! lies inside it) can pass, and the span scan is skipped. A stale pyramid only answers "don't
+//! know", so the cheap test is as conservative as the scan; the scan runs where it is
+//! inconclusive.
 
 use occult_core::{Aabb, Mat4, Vec4, View};
-use occult_raster::Frame;
+use occult_raster::{Frame, PixelRect, PyramidCounts, PyramidTest, ZPyramid};
+
+/// What a cell's query found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum QueryOutcome {
+    /// Some pixel of the silhouette may pass: the cell's contents must be drawn.
+    Visible,
+    /// Hidden, answered by the pyramid (the cheap test) alone.
+    HiddenByPyramid,
+    /// Hidden, answered by the span scan (or empty, off screen, beyond the far plane).
+    Hidden,
+}
 
 /// True when some pixel inside the box's projected silhouette has a stored depth not nearer
 /// than the box's nearest point (a fragment of the box could pass); see the module doc.
 pub fn any_sample_passes(frame: &Frame, view: &View, clip_from_object: &Mat4, aabb: &Aabb) -> bool {
+    query_cell(frame, view, clip_from_object, aabb, None) == QueryOutcome::Visible
+}
+
+/// The query of [`any_sample_passes`], asking `pyramid` (a max-depth pyramid of `frame`, possibly
+/// stale) first about the silhouette's bounding rectangle; the span scan runs only where the
+/// pyramid does not find the rectangle hidden. Visible exactly where [`any_sample_passes`] is
+/// true.
+///
+/// # Panics
+/// If `pyramid` is not of `frame`'s size (a programmer error).
+pub fn query_cell(
+    frame: &Frame,
+    view: &View,
+    clip_from_object: &Mat4,
+    aabb: &Aabb,
+    pyramid: Option<&ZPyramid>,
+) -> QueryOutcome {
+    use QueryOutcome::{Hidden, HiddenByPyramid, Visible};
     if aabb.is_empty() {
-        return false;
+        return Hidden;
     }
     let (w, h) = (frame.width() as f64, frame.height() as f64);
     let clip: [Vec4; 8] = aabb.corners().map(|c| *clip_from_object * c.extend(1.0));
     // A box that may cover anything passes (every stored depth is finite).
     if clip.iter().any(|c| !c.is_finite()) {
-        return true;
+        return Visible;
     }
     let m = 1.0 + 4.0 / w.min(h) as f32;
     if clip.iter().all(|c| c.x < -c.w * m)
@@ -34,39 +70,46 @@ pub fn any_sample_passes(frame: &Frame, view: &View, clip_from_object: &Mat4, aa
         || clip.iter().all(|c| c.y < -c.w * m)
         || clip.iter().all(|c| c.y > c.w * m)
     {
-        return false;
+        return Hidden;
     }
     let near_margin = 1.0 + 1e-5;
     if clip.iter().any(|c| c.z * near_margin > c.w) {
-        return true;
+        return Visible;
     }
     let nearest = clip.iter().map(|c| c.z / c.w).fold(0.0f32, f32::max) * (1.0 + 1e-5);
     if nearest < view.far_depth() * (1.0 - 1e-5) {
-        return false;
+        return Hidden;
     }
     let mut pts = [(0.0f64, 0.0f64); 8];
     for (p, c) in pts.iter_mut().zip(&clip) {
         let (x, y, cw) = (c.x as f64, c.y as f64, c.w as f64);
         *p = ((x / cw * 0.5 + 0.5) * w, (0.5 - y / cw * 0.5) * h);
     }
+    // The hull's bounding box is the corners' (its vertices are corners, the extreme ones among
+    // them), so the rectangle is known before the hull is.
+    let (px0, py0, px1, py1) = pixel_bounds(&pts, w, h);
+    if px1 <= px0 || py1 <= py0 {
+        return Hidden;
+    }
+    if let Some(pyramid) = pyramid {
+        let rect = PixelRect {
+            x0: px0 as u32,
+            y0: py0 as u32,
+            x1: px1 as u32,
+            y1: py1 as u32,
+        };
+        let how = PyramidTest {
+            global: true,
+            hierarchical: true,
+        };
+        if pyramid.occludes(frame, rect, nearest, how, &mut PyramidCounts::default()) {
+            return HiddenByPyramid;
+        }
+    }
     let mut hull = [(0.0f64, 0.0f64); 16];
     let n = convex_hull(&mut pts, &mut hull);
     let hull = &hull[..n];
-    let margin = 1.0 / 64.0;
-    let (mut minx, mut maxx, mut miny, mut maxy) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
-    for &(x, y) in hull {
-        minx = minx.min(x);
-        maxx = maxx.max(x);
-        miny = miny.min(y);
-        maxy = maxy.max(y);
-    }
-    let px0 = ((minx - margin - 0.5).ceil().max(0.0)) as i64;
-    let py0 = ((miny - margin - 0.5).ceil().max(0.0)) as i64;
-    let px1 = ((maxx + margin - 0.5).floor().min(w - 1.0)).max(-1.0) as i64 + 1;
-    let py1 = ((maxy + margin - 0.5).floor().min(h - 1.0)).max(-1.0) as i64 + 1;
-    if px1 <= px0 || py1 <= py0 {
-        return false;
-    }
+    let margin = SNAP_MARGIN;
     // Edge half-planes a·x + b·y + c ≥ 0 (interior side), widened by `margin`, as query_box.
     let mut edges = [(0.0f64, 0.0f64, 0.0f64); 16];
     let edge_count = if n < 3 { 0 } else { n };
@@ -100,10 +143,61 @@ pub fn any_sample_passes(frame: &Frame, view: &View, clip_from_object: &Mat4, aa
         }
         let row = &depth[y as usize * fw..y as usize * fw + fw];
         if span_has_far_sample(&row[lo as usize..=hi as usize], nearest) {
-            return true;
+            return Visible;
         }
     }
-    false
+    Hidden
+}
+
+/// Pixel margin for vertex snapping, as [`occult_raster::query_box`].
+const SNAP_MARGIN: f64 = 1.0 / 64.0;
+
+/// The pixels `[x0, x1) × [y0, y1)` whose centres lie within [`SNAP_MARGIN`] of the bounding
+/// box of screen points `pts` (pixels, y down), clipped to the `w × h` frame (possibly empty).
+fn pixel_bounds(pts: &[(f64, f64)], w: f64, h: f64) -> (i64, i64, i64, i64) {
+    let (mut minx, mut maxx, mut miny, mut maxy) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    for &(x, y) in pts {
+        minx = minx.min(x);
+        maxx = maxx.max(x);
+        miny = miny.min(y);
+        maxy = maxy.max(y);
+    }
+    let px0 = ((minx - SNAP_MARGIN - 0.5).ceil().max(0.0)) as i64;
+    let py0 = ((miny - SNAP_MARGIN - 0.5).ceil().max(0.0)) as i64;
+    let px1 = ((maxx + SNAP_MARGIN - 0.5).floor().min(w - 1.0)).max(-1.0) as i64 + 1;
+    let py1 = ((maxy + SNAP_MARGIN - 0.5).floor().min(h - 1.0)).max(-1.0) as i64 + 1;
+    (px0, py0, px1, py1)
+}
+
+/// The pixels a box may draw into: the bounding rectangle of its projected corners, widened by
+/// [`SNAP_MARGIN`], or the whole frame when a corner is not finite or reaches the near plane;
+/// None when empty. The region a pyramid update must cover after the box's contents are drawn.
+pub(super) fn screen_rect(clip_from_object: &Mat4, aabb: &Aabb, width: u32, height: u32) -> Option<PixelRect> {
+    if aabb.is_empty() {
+        return None;
+    }
+    let (w, h) = (width as f64, height as f64);
+    let mut pts = [(0.0f64, 0.0f64); 8];
+    for (p, c) in pts.iter_mut().zip(aabb.corners()) {
+        let c = *clip_from_object * c.extend(1.0);
+        if !c.is_finite() || c.z * (1.0 + 1e-5) > c.w {
+            return Some(PixelRect {
+                x0: 0,
+                y0: 0,
+                x1: width,
+                y1: height,
+            });
+        }
+        let (x, y, cw) = (c.x as f64, c.y as f64, c.w as f64);
+        *p = ((x / cw * 0.5 + 0.5) * w, (0.5 - y / cw * 0.5) * h);
+    }
+    let (x0, y0, x1, y1) = pixel_bounds(&pts, w, h);
+    (x1 > x0 && y1 > y0).then_some(PixelRect {
+        x0: x0 as u32,
+        y0: y0 as u32,
+        x1: x1 as u32,
+        y1: y1 as u32,
+    })
 }
 
 /// True when some depth in `span` is not nearer than `nearest`; compares 16 at a time without
@@ -203,7 +297,7 @@ mod tests {
         let mut total = 0;
         for v in 0..8 {
             let eye = Vec3::new(rng.random_range(-9.0..9.0), rng.random_range(-3.0..3.0), 9.0 + v as f32);
-            let view = occult_core::View::new(Camera::look_at(eye, Vec3::ZERO), 96, 64).unwrap();
+            let view = View::new(Camera::look_at(eye, Vec3::ZERO), 96, 64).unwrap();
             let mut frame = Frame::new(96, 64).unwrap();
             let clip = view.clip_from_object(&Affine3A::IDENTITY);
             let draw = Draw {
@@ -236,6 +330,96 @@ mod tests {
             }
         }
         assert!(disagreements * 100 < total, "{disagreements} of {total} differ");
+    }
+
+    /// With a pyramid of the frame (fresh, or stale: built before the last draw), the query
+    /// answers exactly as without one, and the pyramid alone answers some hidden boxes.
+    #[test]
+    fn pyramid_changes_no_answer() {
+        let mut rng = Rng(0x2545_f491_4f6c_dd1d);
+        // A wall of two triangles at z = 0 in front of the boxes, half the screen wide.
+        let wall = Mesh::new(
+            vec![
+                Vec3::new(-6.0, -6.0, 0.0),
+                Vec3::new(0.5, -6.0, 0.0),
+                Vec3::new(0.5, 6.0, 0.0),
+                Vec3::new(-6.0, 6.0, 0.0),
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        )
+        .unwrap();
+        let small = Mesh::new(
+            vec![
+                Vec3::new(1.0, 0.0, 1.0),
+                Vec3::new(3.0, 0.0, 1.0),
+                Vec3::new(2.0, 2.0, 1.0),
+            ],
+            vec![[0, 1, 2]],
+        )
+        .unwrap();
+        let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 8.0), Vec3::ZERO), 96, 64).unwrap();
+        let clip = view.clip_from_object(&Affine3A::IDENTITY);
+        let mut raster = Rasterizer::new(RasterConfig::default()).unwrap();
+        let mut frame = Frame::new(96, 64).unwrap();
+        fn draw(mesh: &Mesh, clip_from_object: Mat4) -> Draw<'_> {
+            Draw {
+                mesh,
+                triangles: DrawTriangles::All,
+                clip_from_object,
+                first_item: 0,
+            }
+        }
+        raster.draw(&view, &mut frame, &[draw(&wall, clip)], RasterMode::Full);
+        let mut stale = ZPyramid::new(96, 64).unwrap();
+        stale.rebuild(&frame);
+        raster.draw(&view, &mut frame, &[draw(&small, clip)], RasterMode::Full);
+        let mut fresh = ZPyramid::new(96, 64).unwrap();
+        fresh.rebuild(&frame);
+        let mut by_pyramid = 0;
+        for _ in 0..2000 {
+            let c = Vec3::new(
+                rng.random_range(-5.0..5.0),
+                rng.random_range(-4.0..4.0),
+                rng.random_range(-6.0..3.0),
+            );
+            let e = Vec3::new(
+                rng.random_range(0.0..1.5),
+                rng.random_range(0.0..1.5),
+                rng.random_range(0.0..1.5),
+            );
+            let b = Aabb::new(c - e, c + e);
+            let exact = any_sample_passes(&frame, &view, &clip, &b);
+            for pyramid in [&fresh, &stale] {
+                let o = query_cell(&frame, &view, &clip, &b, Some(pyramid));
+                assert_eq!(o == QueryOutcome::Visible, exact, "box {b:?}");
+                by_pyramid += (o == QueryOutcome::HiddenByPyramid) as u32;
+            }
+        }
+        assert!(by_pyramid > 0, "the pyramid answered no query");
+    }
+
+    /// The screen rectangle holds every pixel the box's query scans; the whole frame when the
+    /// box reaches the near plane; nothing for an empty or off-screen box.
+    #[test]
+    fn screen_rect_bounds_the_box() {
+        let view = View::new(Camera::look_at(Vec3::new(0.3, 0.2, 5.0), Vec3::ZERO), 64, 48).unwrap();
+        let clip = view.clip_from_object(&Affine3A::IDENTITY);
+        let frame = Frame::new(64, 48).unwrap();
+        for b in [
+            Aabb::new(Vec3::splat(-1.0), Vec3::splat(1.0)),
+            Aabb::new(Vec3::new(2.0, 1.0, -3.0), Vec3::new(2.5, 1.2, -2.0)),
+        ] {
+            let r = screen_rect(&clip, &b, 64, 48).unwrap();
+            assert!(query_box(&frame, &view, &clip, &b) <= r.area());
+            assert!(r.x1 <= 64 && r.y1 <= 48 && r.x0 < r.x1 && r.y0 < r.y1);
+        }
+        let near = Aabb::new(Vec3::new(0.0, 0.0, 4.95), Vec3::new(1.0, 1.0, 6.0));
+        assert_eq!(screen_rect(&clip, &near, 64, 48).unwrap().area(), 64 * 48);
+        let nan = Aabb::new(Vec3::splat(f32::NAN), Vec3::splat(1.0));
+        assert!(screen_rect(&clip, &nan, 64, 48).is_none_or(|r| r.area() == 64 * 48));
+        assert!(screen_rect(&clip, &Aabb::EMPTY, 64, 48).is_none());
+        let aside = Aabb::new(Vec3::new(30.0, 0.0, -10.0), Vec3::new(31.0, 1.0, -9.0));
+        assert!(screen_rect(&clip, &aside, 64, 48).is_none());
     }
 
     #[test]
