@@ -19,14 +19,16 @@ pub struct LoadedScene {
     pub scene: Arc<Scene>,
     /// The generator's (or loader's) framing camera.
     pub default_camera: Camera,
-    /// What the loader skipped.
+    /// What the loader skipped, one line per kind with its count.
     pub warnings: Vec<String>,
     /// Time to parse and build (generate or load), ms.
     pub build_ms: f64,
 }
 
 /// Builds the scene of a parsed spec (a generator or a file), with a spinner while it takes
-/// long.
+/// long. The loader's warnings (one line per kind, with its count) go to stderr as
+/// `warning: ...` as soon as the scene is built, and stay in [`LoadedScene::warnings`] for
+/// reports.
 ///
 /// # Errors
 /// Unreadable or malformed files, generator limits.
@@ -37,6 +39,14 @@ pub fn load(arg: &SceneArg) -> Result<LoadedScene> {
     let built = arg.spec.build().map_err(|e| naming(e, "scene", spec))?;
     drop(progress);
     let build_ms = start.elapsed().as_secs_f64() * 1e3;
+    {
+        use std::io::Write as _;
+        let mut stderr = std::io::stderr().lock();
+        for w in &built.warnings {
+            // A closed stderr loses the warnings, not the run.
+            let _ = writeln!(stderr, "warning: {w}");
+        }
+    }
     Ok(LoadedScene {
         spec: spec.to_string(),
         name: built.name,
@@ -115,7 +125,8 @@ pub struct SceneSummary {
     pub bounds_max: [f32; 3],
     /// Time to parse and build, ms.
     pub build_ms: f64,
-    /// Loader warnings.
+    /// Loader warnings, one line per kind with its count (`file.obj: 12 faces with fewer than
+    /// 3 corners skipped (first at line 40)`); in `info --json` as `warnings`.
     pub warnings: Vec<String>,
 }
 

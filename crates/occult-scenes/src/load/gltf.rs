@@ -6,6 +6,8 @@
 //!   (buffers, buffer views, byte strides, accessors, normalized and sparse accessors), §3.7.2
 //!   meshes (primitives and their topology modes), §3.9 materials (`baseColorFactor`, linear),
 //!   §4 the GLB container (header, JSON and BIN chunks).
+//! - Khronos Group, *KHR_mesh_quantization* (glTF 2.0 extension): the component types allowed
+//!   for `POSITION` (and other attributes) besides `FLOAT`.
 //!
 //! The node hierarchy is kept as instancing, so that memory stays O(unique geometry):
 //! - each glTF **mesh** becomes one occult mesh node, all its triangle primitives merged
@@ -23,9 +25,20 @@
 //! index out of range, an index past the primitive's vertices and a non-finite position are
 //! errors naming the mesh, primitive and accessor. Skins, morph targets, cameras and lights are
 //! ignored. A node with a singular transform (scale 0, used to hide objects) is skipped with a
-//! warning; a projective node matrix loses its projective row. A file that requires an
-//! extension the `gltf` crate does not enable (Draco or meshopt compression,
-//! `KHR_mesh_quantization`) is refused by its validation ([`LoadError::Parse`]).
+//! warning; a projective node matrix loses its projective row.
+//!
+//! `KHR_mesh_quantization` (Khronos extension, ratified): positions may be `BYTE`,
+//! `UNSIGNED_BYTE`, `SHORT` or `UNSIGNED_SHORT`, normalized or not, as well as `FLOAT`. They are
+//! dequantized exactly as glTF §3.6.2 (`accessor.normalized`) says: a normalized `SHORT` `c` is
+//! `max(c / 32767, -1)`, an `UNSIGNED_SHORT` `c / 65535`, likewise for bytes (127, 255); a plain
+//! integer is its value. The node transforms that the quantizer wrote then place the mesh, as for
+//! any mesh. The extension is accepted whether or not the file lists it, and whether or not it
+//! requires it. A file that requires another extension the `gltf` crate does not enable (Draco
+//! or meshopt compression) is refused by its validation ([`LoadError::Parse`]).
+//!
+//! Warnings (one line per kind, with a count and the first place): point and line primitives,
+//! primitives without `POSITION`, triangle index counts not a multiple of 3, singular and
+//! projective node transforms, and a file with several scenes.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -37,10 +50,41 @@ use ::gltf::{Accessor, Document, Semantic};
 use occult_core::{Affine3A, Instance, Mat4, MeshColors, NodeId, Rgba8, SceneBuilder, Vec3, Vec4};
 
 use super::{compact_mesh, file_stem, linear_to_srgb_u8, read_bytes, unit_to_u8, LoadError, LoadedScene, Location};
+use super::{WarningKind, Warnings};
 
 /// Deepest glTF node chain accepted; the scene model allows 64 levels in all (root group and
 /// mesh included).
 const MAX_NODE_DEPTH: usize = 60;
+
+/// Required extensions read here although the `gltf` crate's validation refuses them.
+/// `KHR_mesh_quantization` only widens the component types attributes may have; positions of
+/// every integer type are read (and dequantized) by `component`.
+const EXTENSIONS_READ_HERE: [&str; 1] = ["KHR_mesh_quantization"];
+
+const SEVERAL_SCENES: WarningKind = WarningKind {
+    one: "the file has several scenes; one is loaded",
+    many: "the file has several scenes; one is loaded",
+};
+const PROJECTIVE_NODE: WarningKind = WarningKind {
+    one: "projective transform; its last row is ignored",
+    many: "nodes with a projective transform; their last rows are ignored",
+};
+const SINGULAR_NODE: WarningKind = WarningKind {
+    one: "singular transform (a zero scale?); the node is skipped",
+    many: "nodes with a singular transform (a zero scale?) skipped",
+};
+const POINT_OR_LINE_PRIMITIVE: WarningKind = WarningKind {
+    one: "point or line primitive skipped",
+    many: "point and line primitives skipped",
+};
+const NO_POSITION: WarningKind = WarningKind {
+    one: "primitive without POSITION skipped",
+    many: "primitives without POSITION skipped",
+};
+const INDEX_REMAINDER: WarningKind = WarningKind {
+    one: "triangle indices not a multiple of 3; the last ones ignored",
+    many: "primitives with triangle indices not a multiple of 3; the last ones ignored",
+};
 
 /// Loads a `.gltf` or `.glb` file (told apart by content: a GLB starts with `glTF`).
 ///
@@ -62,7 +106,9 @@ pub fn load_gltf(path: &Path) -> Result<LoadedScene, LoadError> {
 pub(super) fn gltf_from_bytes(path: &Path, data: &[u8]) -> Result<LoadedScene, LoadError> {
     check_glb_header(path, data)?;
     let gltf = ::gltf::Gltf::from_slice_without_validation(data).map_err(|e| document_error(path, e))?;
-    let json = gltf.document.into_json();
+    let mut json = gltf.document.into_json();
+    json.extensions_required
+        .retain(|name| !EXTENSIONS_READ_HERE.contains(&name.as_str()));
     check_position_references(path, &json)?;
     let document = Document::from_json(json).map_err(|e| document_error(path, e))?;
     let buffers = load_buffers(path, &document, gltf.blob)?;
@@ -74,7 +120,10 @@ pub(super) fn gltf_from_bytes(path: &Path, data: &[u8]) -> Result<LoadedScene, L
         part: "scene".into(),
         source,
     })?;
-    Ok(LoadedScene { scene, warnings })
+    Ok(LoadedScene {
+        scene,
+        warnings: warnings.into_lines(),
+    })
 }
 
 /// Refuses a GLB whose header is short or declares more bytes than the file has (the `gltf`
@@ -312,7 +361,7 @@ struct GltfLoader<'a> {
     /// Per glTF mesh: not built yet, or built (`None` when it has no triangle).
     meshes: Vec<Option<Option<NodeId>>>,
     visits: Vec<Visit>,
-    warnings: Vec<String>,
+    warnings: Warnings,
 }
 
 impl<'a> GltfLoader<'a> {
@@ -326,7 +375,7 @@ impl<'a> GltfLoader<'a> {
             builder: SceneBuilder::new(),
             meshes: vec![None; document.meshes().len()],
             visits: vec![Visit::Unvisited; document.nodes().len()],
-            warnings: Vec::new(),
+            warnings: Warnings::default(),
         }
     }
 
@@ -346,11 +395,12 @@ impl<'a> GltfLoader<'a> {
         let (root_name, roots): (String, Vec<::gltf::Node<'a>>) = match &scene {
             Some(scene) => {
                 if scene_count > 1 {
-                    self.warnings.push(format!(
-                        "{}: the file has {scene_count} scenes; scene {} loaded",
-                        self.path.display(),
-                        scene.index()
-                    ));
+                    self.warnings.add(
+                        self.path,
+                        SEVERAL_SCENES,
+                        Location::File,
+                        format!("scene {} of {scene_count}", scene.index()),
+                    );
                 }
                 (
                     scene.name().map_or_else(|| file_stem(self.path), str::to_string),
@@ -464,19 +514,11 @@ impl<'a> GltfLoader<'a> {
             });
         }
         if matrix.row(3) != Vec4::W {
-            self.warnings.push(format!(
-                "{}: node {}: projective transform; its last row is ignored",
-                self.path.display(),
-                node.index()
-            ));
+            self.warnings.add(self.path, PROJECTIVE_NODE, part(), "");
         }
         let transform = Affine3A::from_mat4(matrix);
         if transform.matrix3.determinant() == 0.0 {
-            self.warnings.push(format!(
-                "{}: node {}: singular transform (a zero scale?); the node is skipped",
-                self.path.display(),
-                node.index()
-            ));
+            self.warnings.add(self.path, SINGULAR_NODE, part(), "");
             return Ok(None);
         }
         Ok(Some(transform))
@@ -501,14 +543,17 @@ impl<'a> GltfLoader<'a> {
             let part = format!("{mesh_part} primitive {}", primitive.index());
             let mode = primitive.mode();
             if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
-                self.warnings
-                    .push(format!("{}: {part}: {mode:?} primitive skipped", self.path.display()));
+                self.warnings.add(
+                    self.path,
+                    POINT_OR_LINE_PRIMITIVE,
+                    Location::Part(part),
+                    format!("mode {mode:?}"),
+                );
                 continue;
             }
             let Some(position_accessor) = primitive.get(&Semantic::Positions) else {
                 // The `gltf` validation requires POSITION; stay safe all the same.
-                self.warnings
-                    .push(format!("{}: {part}: no POSITION, skipped", self.path.display()));
+                self.warnings.add(self.path, NO_POSITION, Location::Part(part), "");
                 continue;
             };
             let vertex_count = position_accessor.count();
@@ -548,12 +593,12 @@ impl<'a> GltfLoader<'a> {
                 Mode::Triangles => {
                     let chunks = indices.chunks_exact(3);
                     if !chunks.remainder().is_empty() {
-                        self.warnings.push(format!(
-                            "{}: {part}: {} indices, not a multiple of 3; the last {} ignored",
-                            self.path.display(),
-                            indices.len(),
-                            chunks.remainder().len()
-                        ));
+                        self.warnings.add(
+                            self.path,
+                            INDEX_REMAINDER,
+                            Location::Part(part.clone()),
+                            format!("{} indices", indices.len()),
+                        );
                     }
                     triangles.extend(chunks.map(|t| [global(t[0]), global(t[1]), global(t[2])]));
                 }

@@ -7,6 +7,17 @@
 //! with a file is a [`LoadError`] that names the file and, where known, the line (text formats)
 //! or the element (`vertex 17`, `face 3`, `mesh 0 primitive 1`).
 //!
+//! ## Accepted with a warning
+//! Real files that other readers accept load here too, with one warning line per kind however
+//! often it occurs: `file.obj: 12 faces with fewer than 3 corners skipped (first at line 40)`
+//! (one occurrence reads `file.obj line 40: a face with fewer than 3 corners skipped`).
+//! - OBJ and PLY faces of fewer than three corners are skipped (their indices are still
+//!   checked: index 0 or past the last vertex stays an error).
+//! - PLY header lines that are no PLY statement (a bare line of text) are read as comments.
+//! - glTF `KHR_mesh_quantization`: integer positions, normalized or not, are dequantized (see
+//!   the `gltf` module); no warning, it is part of the format.
+//! - Points and lines, missing material libraries and textures, singular glTF nodes.
+//!
 //! ```
 //! use occult_scenes::load::{load_bytes, load_file, LoadError};
 //! use std::path::Path;
@@ -14,6 +25,15 @@
 //! let square = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n";
 //! let loaded = load_bytes(Path::new("square.obj"), square).unwrap();
 //! assert_eq!(loaded.scene.item_count(), 2); // the quad, fan-triangulated
+//!
+//! // Faces of fewer than three corners are skipped: one warning with their count.
+//! let short = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\nf 1 2 3\nf 3\n";
+//! let loaded = load_bytes(Path::new("short.obj"), short).unwrap();
+//! assert_eq!(loaded.scene.item_count(), 1);
+//! assert_eq!(
+//!     loaded.warnings,
+//!     ["short.obj: 2 faces with fewer than 3 corners skipped (first at line 4)"]
+//! );
 //!
 //! let err = load_bytes(Path::new("bad.obj"), b"v 0 0 0\nf 1 1 9\n").unwrap_err();
 //! assert_eq!(err.to_string(), "bad.obj line 2: vertex index 9 is out of range (vertex count 1)");
@@ -78,7 +98,9 @@ pub use self::ply::load_ply;
 pub struct LoadedScene {
     /// The scene; its root's space is the file's world space.
     pub scene: Scene,
-    /// Things read but not used, one line each (missing `.mtl` or textures, skipped primitives).
+    /// Things read but not used, one line per kind with a count (`file.obj: 12 faces with
+    /// fewer than 3 corners skipped (first at line 40)`): missing `.mtl` or textures, skipped
+    /// faces, primitives and nodes, header lines read as comments.
     pub warnings: Vec<String>,
 }
 
@@ -185,6 +207,17 @@ impl Location {
             kind: kind.into(),
             index,
         }
+    }
+
+    /// The place in words without the separator `Display` puts before it (`line 42`,
+    /// `vertex 17`, `line 20: face 3`); `None` for the whole file.
+    pub fn place(&self) -> Option<String> {
+        let shown = self.to_string();
+        let place = shown
+            .strip_prefix(": ")
+            .or_else(|| shown.strip_prefix(' '))
+            .unwrap_or(&shown);
+        (!place.is_empty()).then(|| place.to_string())
     }
 }
 
@@ -442,11 +475,91 @@ fn scene_of_meshes(path: &Path, root_name: &str, meshes: Vec<(String, Mesh)>) ->
     builder.build(root).map_err(core(root_name))
 }
 
-/// Adds the warning `"{path}: {count} {what}"` to `warnings` when `count` is not zero (`what`
-/// says what was passed over: "faces with fewer than 3 corners skipped").
-fn warn_count(warnings: &mut Vec<String>, path: &Path, count: u64, what: &str) {
-    if count > 0 {
-        warnings.push(format!("{}: {count} {what}", path.display()));
+/// Faces (OBJ, PLY) of fewer than three corners, skipped.
+const SHORT_FACE: WarningKind = WarningKind {
+    one: "a face with fewer than 3 corners skipped",
+    many: "faces with fewer than 3 corners skipped",
+};
+
+/// A kind of warning: what one occurrence says, and what a count of them says.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct WarningKind {
+    /// One occurrence: "a face with fewer than 3 corners skipped".
+    one: &'static str,
+    /// After a count: "faces with fewer than 3 corners skipped".
+    many: &'static str,
+}
+
+/// The warnings of one load, one line per (file, kind) however often the kind occurs, in the
+/// order kinds first occur. A file with 10^5 bad faces gives one line, not 10^5.
+#[derive(Default)]
+struct Warnings {
+    groups: Vec<WarningGroup>,
+}
+
+/// Occurrences of one kind in one file.
+struct WarningGroup {
+    path: PathBuf,
+    kind: WarningKind,
+    count: u64,
+    /// Where the first occurrence is.
+    first: Location,
+    /// What the first occurrence adds (the line quoted, the mode of a primitive); may be empty.
+    detail: String,
+}
+
+impl Warnings {
+    /// Counts one occurrence of `kind` in `path` at `location`; `detail` (may be empty) is kept
+    /// for the first one only.
+    fn add(&mut self, path: &Path, kind: WarningKind, location: Location, detail: impl Into<String>) {
+        self.add_count(path, kind, 1, location, detail);
+    }
+
+    /// Counts `count` occurrences (none when 0) of `kind`, the first at `location`.
+    fn add_count(&mut self, path: &Path, kind: WarningKind, count: u64, location: Location, detail: impl Into<String>) {
+        if count == 0 {
+            return;
+        }
+        match self.groups.iter_mut().find(|g| g.kind == kind && g.path == path) {
+            Some(group) => group.count += count,
+            None => self.groups.push(WarningGroup {
+                path: path.to_path_buf(),
+                kind,
+                count,
+                first: location,
+                detail: detail.into(),
+            }),
+        }
+    }
+
+    /// One line per group: `file.obj line 40: a face with fewer than 3 corners skipped` for one
+    /// occurrence, `file.obj: 12 faces with fewer than 3 corners skipped (first at line 40)`
+    /// for several; a detail follows after `": "`.
+    fn into_lines(self) -> Vec<String> {
+        self.groups
+            .into_iter()
+            .map(|g| {
+                let detail = if g.detail.is_empty() {
+                    String::new()
+                } else {
+                    format!(": {}", g.detail)
+                };
+                let path = g.path.display();
+                match (g.count, g.first.place()) {
+                    (1, _) => format!("{path}{}: {}{detail}", g.first, g.kind.one),
+                    (count, Some(first)) => format!("{path}: {count} {} (first at {first}){detail}", g.kind.many),
+                    (count, None) => format!("{path}: {count} {}{detail}", g.kind.many),
+                }
+            })
+            .collect()
+    }
+}
+
+/// `text` quoted for a warning, cut to 60 characters.
+fn quoted(text: &str) -> String {
+    match text.char_indices().nth(60) {
+        Some((end, _)) => format!("'{}...'", &text[..end]),
+        None => format!("'{text}'"),
     }
 }
 
@@ -505,6 +618,35 @@ mod tests {
         );
         assert_eq!(mesh.triangles(), &[[0, 1, 2]]);
         assert!(remap.iter().all(|&r| r == u32::MAX));
+    }
+
+    #[test]
+    fn warnings_group_by_file_and_kind() {
+        let other = WarningKind {
+            one: "an x",
+            many: "xs",
+        };
+        let mut warnings = Warnings::default();
+        let (a, b) = (Path::new("a.obj"), Path::new("b.mtl"));
+        warnings.add(a, SHORT_FACE, Location::Line(40), "");
+        warnings.add(b, other, Location::File, "first");
+        warnings.add(a, SHORT_FACE, Location::Line(41), "");
+        warnings.add_count(a, SHORT_FACE, 10, Location::Line(50), "");
+        warnings.add_count(a, other, 0, Location::Line(1), "never");
+        warnings.add(a, other, Location::element("face", 3), "detail");
+        warnings.add(b, other, Location::Line(7), "second");
+        assert_eq!(
+            warnings.into_lines(),
+            [
+                "a.obj: 12 faces with fewer than 3 corners skipped (first at line 40)",
+                "b.mtl: 2 xs: first",
+                "a.obj: face 3: an x: detail",
+            ]
+        );
+        assert_eq!(Location::File.place(), None);
+        assert_eq!(Location::Line(3).place().as_deref(), Some("line 3"));
+        assert_eq!(quoted("ab"), "'ab'");
+        assert_eq!(quoted(&"é".repeat(70)), format!("'{}...'", "é".repeat(60)));
     }
 
     #[test]

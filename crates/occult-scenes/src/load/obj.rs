@@ -19,19 +19,44 @@
 //!
 //! Errors are reported as `file.obj line N: ...`. A vertex reference may point forward (to a `v`
 //! defined later in the file); references are checked once the whole file is read.
-//! Deviation: a face with fewer than three corners is an error (the format has `p` and `l` for
-//! points and lines); this catches most files cut in the middle of a face.
+//!
+//! Warnings (one line per kind, with a count and the first line): faces with fewer than three
+//! corners (skipped, as other readers do; their corners are still checked, so `f 0 1` or an
+//! index past the last vertex is an error all the same), `p` and `l` statements, material
+//! libraries that cannot be read, materials no library defines, unreadable `Kd` lines and
+//! missing texture files.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use occult_core::{MeshColors, Rgba8, Vec3};
 
-use super::{compact_mesh, fan_triangulate, file_stem, read_bytes, scene_of_meshes, unit_to_u8, warn_count};
-use super::{LoadError, LoadedScene, Location};
+use super::{compact_mesh, fan_triangulate, file_stem, quoted, read_bytes, scene_of_meshes, unit_to_u8};
+use super::{LoadError, LoadedScene, Location, WarningKind, Warnings, SHORT_FACE};
 
 /// Textures named in a warning before "and N more".
 const LISTED_NAMES_MAX: usize = 5;
+
+const POINT_OR_LINE: WarningKind = WarningKind {
+    one: "a point or line statement ignored",
+    many: "point and line statements ignored",
+};
+const LIBRARY_NOT_READ: WarningKind = WarningKind {
+    one: "a material library not read; meshes using it get no color",
+    many: "material libraries not read; meshes using them get no color",
+};
+const UNDEFINED_MATERIALS: WarningKind = WarningKind {
+    one: "materials used but not defined in any material library",
+    many: "materials used but not defined in any material library",
+};
+const DIFFUSE_NOT_READ: WarningKind = WarningKind {
+    one: "a diffuse color not read",
+    many: "diffuse colors not read",
+};
+const MISSING_TEXTURES: WarningKind = WarningKind {
+    one: "a texture file not found (textures are not used)",
+    many: "texture files not found (textures are not used)",
+};
 
 /// Loads a Wavefront OBJ file and the `.mtl` libraries it names (relative to its folder).
 ///
@@ -88,6 +113,8 @@ struct ObjReader<'p> {
     forward: Option<ForwardReference>,
     corners: Vec<u32>,
     ignored_point_and_line_count: u64,
+    short_face_count: u64,
+    warnings: Warnings,
 }
 
 impl<'p> ObjReader<'p> {
@@ -108,6 +135,8 @@ impl<'p> ObjReader<'p> {
             forward: None,
             corners: Vec::new(),
             ignored_point_and_line_count: 0,
+            short_face_count: 0,
+            warnings: Warnings::default(),
         }
     }
 
@@ -143,7 +172,11 @@ impl<'p> ObjReader<'p> {
                     self.chunk_index = None;
                 }
                 b"mtllib" => self.libraries.push((rest(), line_number)),
-                b"l" | b"p" => self.ignored_point_and_line_count += 1,
+                b"l" | b"p" => {
+                    self.ignored_point_and_line_count += 1;
+                    self.warnings
+                        .add(self.path, POINT_OR_LINE, Location::Line(line_number), "");
+                }
                 _ => {}
             }
         }
@@ -193,14 +226,13 @@ impl<'p> ObjReader<'p> {
             let index = self.resolve(written, line)?;
             self.corners.push(index);
         }
+        // The format has `p` and `l` for points and lines, but some exporters write faces of
+        // one or two corners; other readers skip them, so they are counted and skipped here
+        // (their corners were still checked above).
         if self.corners.len() < 3 {
-            return Err(self.parse_error(
-                line,
-                format!(
-                    "a face needs at least three corners, this one has {}",
-                    self.corners.len()
-                ),
-            ));
+            self.short_face_count += 1;
+            self.warnings.add(self.path, SHORT_FACE, Location::Line(line), "");
+            return Ok(());
         }
         let chunk_index = self.current_chunk();
         fan_triangulate(&self.corners, &mut self.chunks[chunk_index].triangles);
@@ -249,7 +281,7 @@ impl<'p> ObjReader<'p> {
         index
     }
 
-    fn finish(self) -> Result<LoadedScene, LoadError> {
+    fn finish(mut self) -> Result<LoadedScene, LoadError> {
         let path = self.path;
         if let Some(forward) = self.forward {
             if forward.index as usize >= self.positions.len() {
@@ -264,6 +296,8 @@ impl<'p> ObjReader<'p> {
         if self.chunks.iter().all(|c| c.triangles.is_empty()) {
             let reason = if self.ignored_point_and_line_count > 0 {
                 "the file has only points and lines"
+            } else if self.short_face_count > 0 {
+                "the file has only faces with fewer than 3 corners"
             } else {
                 "the file has no faces"
             };
@@ -273,13 +307,7 @@ impl<'p> ObjReader<'p> {
             });
         }
 
-        let mut warnings = Vec::new();
-        warn_count(
-            &mut warnings,
-            path,
-            self.ignored_point_and_line_count,
-            "point and line statements ignored",
-        );
+        let mut warnings = std::mem::take(&mut self.warnings);
         let colors = self.material_colors(&mut warnings);
 
         let mut chunks_per_object = vec![0usize; self.object_names.len()];
@@ -308,12 +336,15 @@ impl<'p> ObjReader<'p> {
             meshes.push((name, mesh));
         }
         let scene = scene_of_meshes(path, &file_stem(path), meshes)?;
-        Ok(LoadedScene { scene, warnings })
+        Ok(LoadedScene {
+            scene,
+            warnings: warnings.into_lines(),
+        })
     }
 
     /// The diffuse color of each material named by `usemtl`, from the libraries named by
     /// `mtllib`; what cannot be found becomes a warning.
-    fn material_colors(&self, warnings: &mut Vec<String>) -> Vec<Option<Rgba8>> {
+    fn material_colors(&self, warnings: &mut Warnings) -> Vec<Option<Rgba8>> {
         let folder = self.path.parent().unwrap_or(Path::new(""));
         let mut library = HashMap::new();
         let mut all_libraries_read = true;
@@ -323,11 +354,12 @@ impl<'p> ObjReader<'p> {
                     Ok(data) => parse_mtl(&mtl_path, &data, &mut library, warnings),
                     Err(error) => {
                         all_libraries_read = false;
-                        warnings.push(format!(
-                            "{} line {line}: material library {} not read ({error}); meshes using it get no color",
-                            self.path.display(),
-                            mtl_path.display()
-                        ));
+                        warnings.add(
+                            self.path,
+                            LIBRARY_NOT_READ,
+                            Location::Line(*line),
+                            format!("{}: {error}", mtl_path.display()),
+                        );
                     }
                 }
             }
@@ -344,11 +376,7 @@ impl<'p> ObjReader<'p> {
             .map(String::as_str)
             .collect();
         if all_libraries_read && !undefined.is_empty() {
-            warnings.push(format!(
-                "{}: materials used but not defined in any material library: {}",
-                self.path.display(),
-                list_names(&undefined)
-            ));
+            warnings.add(self.path, UNDEFINED_MATERIALS, Location::File, list_names(&undefined));
         }
         colors
     }
@@ -379,7 +407,7 @@ fn library_paths(folder: &Path, names: &str) -> Vec<PathBuf> {
 
 /// Reads the diffuse colors of an `.mtl` file into `library` and warns about texture files that
 /// do not exist (textures are never loaded; the warning says the model will look different).
-fn parse_mtl(mtl_path: &Path, data: &[u8], library: &mut HashMap<String, Option<Rgba8>>, warnings: &mut Vec<String>) {
+fn parse_mtl(mtl_path: &Path, data: &[u8], library: &mut HashMap<String, Option<Rgba8>>, warnings: &mut Warnings) {
     let folder = mtl_path.parent().unwrap_or(Path::new(""));
     let mut current: Option<String> = None;
     let mut missing_textures: Vec<String> = Vec::new();
@@ -409,12 +437,12 @@ fn parse_mtl(mtl_path: &Path, data: &[u8], library: &mut HashMap<String, Option<
                             Some([unit_to_u8(rgb[0]), unit_to_u8(rgb[1]), unit_to_u8(rgb[2]), 255]),
                         );
                     }
-                    (None, _) => warnings.push(format!(
-                        "{} line {}: diffuse color not read: '{}'",
-                        mtl_path.display(),
-                        line_index + 1,
-                        String::from_utf8_lossy(line)
-                    )),
+                    (None, _) => warnings.add(
+                        mtl_path,
+                        DIFFUSE_NOT_READ,
+                        Location::Line(line_index as u64 + 1),
+                        quoted(&String::from_utf8_lossy(line)),
+                    ),
                     (Some(_), None) => {}
                 }
             }
@@ -432,12 +460,13 @@ fn parse_mtl(mtl_path: &Path, data: &[u8], library: &mut HashMap<String, Option<
     }
     if !missing_textures.is_empty() {
         let names: Vec<&str> = missing_textures.iter().map(String::as_str).collect();
-        warnings.push(format!(
-            "{}: {} texture files not found (textures are not used): {}",
-            mtl_path.display(),
-            missing_textures.len(),
-            list_names(&names)
-        ));
+        warnings.add_count(
+            mtl_path,
+            MISSING_TEXTURES,
+            missing_textures.len() as u64,
+            Location::File,
+            list_names(&names),
+        );
     }
 }
 
@@ -533,7 +562,8 @@ mod tests {
 
     #[test]
     fn zero_and_too_negative_references_are_errors() {
-        for face in ["f 0 1 2", "f -4 1 2"] {
+        // Also in faces too short to be drawn: the index is wrong all the same.
+        for face in ["f 0 1 2", "f -4 1 2", "f 0 1", "f 1 -4"] {
             let mut reader = ObjReader::new(Path::new("t.obj"));
             let text = format!("v 0 0 0\nv 1 0 0\nv 0 1 0\n{face}\n");
             assert!(

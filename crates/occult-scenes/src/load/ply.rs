@@ -18,6 +18,12 @@
 //! errors name the line and the element and extra or missing values on a line are caught.
 //! Truncated data, data after the last declared element, non-finite coordinates and indices out
 //! of range are errors.
+//!
+//! Warnings (one line per kind, with a count and the first place): header lines that are not
+//! PLY statements (some exporters write a bare line of text; blank lines too) are read as
+//! comments, except a line whose first word is a near miss of `format`, `element`, `property`
+//! or `end_header` (`elment vertex 8`), which stays an error with its line and column; faces
+//! of fewer than three corners are skipped.
 
 use std::io::Cursor;
 use std::path::Path;
@@ -26,10 +32,31 @@ use occult_core::Vec3;
 use ply_rs_bw::parser::{ParseError, Parser, Reader};
 use ply_rs_bw::ply::{ElementDef, Encoding, Header, PropertyAccess, PropertyAccessResult, PropertyType, ScalarType};
 
-use super::{fan_triangulate, file_stem, read_bytes, scene_of_meshes, warn_count, LoadError, LoadedScene, Location};
+use super::{fan_triangulate, file_stem, quoted, read_bytes, scene_of_meshes, LoadError, LoadedScene, Location};
+use super::{WarningKind, Warnings, SHORT_FACE};
 
 /// Names of the vertex index list, in order of preference.
 const INDEX_LIST_NAMES: [&str; 2] = ["vertex_indices", "vertex_index"];
+
+/// The words that open a header line.
+const HEADER_KEYWORDS: [&[u8]; 7] = [
+    b"ply",
+    b"format",
+    b"comment",
+    b"obj_info",
+    b"element",
+    b"property",
+    b"end_header",
+];
+
+/// Keywords whose misspellings stay errors: a line that looks like a typo of one of them is
+/// most likely a broken definition, not an exporter's note.
+const STRUCTURAL_KEYWORDS: [&str; 4] = ["format", "element", "property", "end_header"];
+
+const HEADER_TEXT: WarningKind = WarningKind {
+    one: "a header line that is not a PLY keyword read as a comment",
+    many: "header lines that are not PLY keywords read as comments",
+};
 
 /// Loads a PLY file as one mesh.
 ///
@@ -47,12 +74,26 @@ pub fn load_ply(path: &Path) -> Result<LoadedScene, LoadError> {
 /// [`load_ply`] of bytes in memory; `path` names them.
 pub(super) fn ply_from_bytes(path: &Path, data: &[u8]) -> Result<LoadedScene, LoadError> {
     let parser = Parser::<PlyRecord>::new();
-    let mut reader = Reader::new(Cursor::new(data));
-    let header = parser.read_header(&mut reader).map_err(|e| header_error(path, e))?;
-    // The cursor stops right after `end_header\n`: `read_header` reads line by line.
-    let header_len = usize::try_from(reader.get_ref().position())
-        .unwrap_or(data.len())
-        .min(data.len());
+    let mut warnings = Warnings::default();
+    let scan = HeaderScan::of(data);
+    let header_len;
+    let header = if let Some((line, text)) = &scan.first_bare_line {
+        let count = scan.bare_lines.len() as u64;
+        warnings.add_count(path, HEADER_TEXT, count, Location::Line(*line), quoted(text));
+        // The bare lines become `comment` lines, so line numbers in errors stay those of the file.
+        let mut reader = Reader::new(Cursor::new(scan.rewritten(data)));
+        header_len = scan.end;
+        parser.read_header(&mut reader)
+    } else {
+        let mut reader = Reader::new(Cursor::new(data));
+        let header = parser.read_header(&mut reader);
+        // The cursor stops right after `end_header\n`: `read_header` reads line by line.
+        header_len = usize::try_from(reader.get_ref().position())
+            .unwrap_or(data.len())
+            .min(data.len());
+        header
+    }
+    .map_err(|e| header_error(path, e))?;
     let payload = &data[header_len..];
     let layout = Layout::of(path, &header)?;
     check_declared_counts(path, &header, payload.len())?;
@@ -75,13 +116,9 @@ pub(super) fn ply_from_bytes(path: &Path, data: &[u8]) -> Result<LoadedScene, Lo
         }
     }
 
-    let mut warnings = Vec::new();
-    warn_count(
-        &mut warnings,
-        path,
-        sink.short_face_count,
-        "faces with fewer than 3 corners skipped",
-    );
+    if let Some(first) = sink.first_short_face.take() {
+        warnings.add_count(path, SHORT_FACE, sink.short_face_count, first, "");
+    }
     let name = file_stem(path);
     let mesh = occult_core::Mesh::new(sink.positions, sink.triangles).map_err(|source| LoadError::Core {
         path: path.to_path_buf(),
@@ -89,7 +126,115 @@ pub(super) fn ply_from_bytes(path: &Path, data: &[u8]) -> Result<LoadedScene, Lo
         source,
     })?;
     let scene = scene_of_meshes(path, &name, vec![(name.clone(), mesh)])?;
-    Ok(LoadedScene { scene, warnings })
+    Ok(LoadedScene {
+        scene,
+        warnings: warnings.into_lines(),
+    })
+}
+
+/// The header as read before `ply-rs-bw` parses it: lines whose first word is no PLY keyword
+/// (a bare text line some exporters write, a blank line) are read as comments. A first word
+/// within two edits of a structural keyword (`elment`, `Property`) is a typo, left for the
+/// parser to report as an error with its line and column.
+struct HeaderScan {
+    /// The byte just past the `end_header` line, or the data's length without one.
+    end: usize,
+    /// The 1-based numbers of the bare lines.
+    bare_lines: Vec<u64>,
+    /// The first bare line and its text.
+    first_bare_line: Option<(u64, String)>,
+}
+
+impl HeaderScan {
+    fn of(data: &[u8]) -> Self {
+        let mut scan = Self {
+            end: data.len(),
+            bare_lines: Vec::new(),
+            first_bare_line: None,
+        };
+        let mut start = 0;
+        let mut line_number = 0u64;
+        while start < data.len() {
+            let end = data[start..]
+                .iter()
+                .position(|&b| b == b'\n')
+                .map_or(data.len(), |i| start + i + 1);
+            let line = &data[start..end];
+            start = end;
+            line_number += 1;
+            // The magic line is the parser's to check.
+            if line_number == 1 {
+                continue;
+            }
+            let first_word = line.split(|b| b.is_ascii_whitespace()).find(|w| !w.is_empty());
+            match first_word {
+                Some(b"end_header") => {
+                    scan.end = end;
+                    break;
+                }
+                Some(word) if HEADER_KEYWORDS.contains(&word) || is_keyword_typo(word) => {}
+                _ => {
+                    scan.bare_lines.push(line_number);
+                    if scan.first_bare_line.is_none() {
+                        let text = String::from_utf8_lossy(line.trim_ascii()).into_owned();
+                        scan.first_bare_line = Some((line_number, text));
+                    }
+                }
+            }
+        }
+        scan
+    }
+
+    /// The header (`data` up to [`HeaderScan::end`]) with each bare line replaced by `comment`
+    /// and its own line end.
+    fn rewritten(&self, data: &[u8]) -> Vec<u8> {
+        let mut out = Vec::with_capacity(self.end);
+        let mut bare = self.bare_lines.iter().peekable();
+        for (index, line) in data[..self.end].split_inclusive(|&b| b == b'\n').enumerate() {
+            if bare.next_if_eq(&&(index as u64 + 1)).is_some() {
+                out.extend_from_slice(b"comment");
+                let ending = if line.ends_with(b"\r\n") {
+                    &b"\r\n"[..]
+                } else if line.ends_with(b"\n") {
+                    &b"\n"[..]
+                } else {
+                    &[]
+                };
+                out.extend_from_slice(ending);
+            } else {
+                out.extend_from_slice(line);
+            }
+        }
+        out
+    }
+}
+
+/// Whether `word` is a structural keyword written with another case or within two edits of
+/// one (Levenshtein distance).
+fn is_keyword_typo(word: &[u8]) -> bool {
+    // Longer words are more than two edits from every keyword.
+    if word.len() > 12 {
+        return false;
+    }
+    let word = word.to_ascii_lowercase();
+    STRUCTURAL_KEYWORDS
+        .iter()
+        .any(|keyword| edit_distance(&word, keyword.as_bytes()) <= 2)
+}
+
+/// The Levenshtein distance of `a` and `b` (insertions, deletions and substitutions).
+fn edit_distance(a: &[u8], b: &[u8]) -> usize {
+    let mut previous: Vec<usize> = (0..=b.len()).collect();
+    let mut current = vec![0; b.len() + 1];
+    for (i, &ca) in a.iter().enumerate() {
+        current[0] = i + 1;
+        for (j, &cb) in b.iter().enumerate() {
+            let substitution = previous[j] + usize::from(ca != cb);
+            current[j + 1] = substitution.min(previous[j + 1] + 1).min(current[j] + 1);
+        }
+        std::mem::swap(&mut previous, &mut current);
+    }
+    previous[b.len()]
 }
 
 /// What the loader takes from the header.
@@ -261,6 +406,8 @@ struct MeshSink<'p> {
     triangles: Vec<[u32; 3]>,
     corners: Vec<u32>,
     short_face_count: u64,
+    /// Where the first face of fewer than three corners is.
+    first_short_face: Option<Location>,
 }
 
 impl<'p> MeshSink<'p> {
@@ -273,6 +420,7 @@ impl<'p> MeshSink<'p> {
             triangles: Vec::new(),
             corners: Vec::new(),
             short_face_count: 0,
+            first_short_face: None,
         }
     }
 
@@ -318,6 +466,7 @@ impl<'p> MeshSink<'p> {
         self.take_corners(indices, false, &location)?;
         if self.corners.len() < 3 {
             self.short_face_count += 1;
+            self.first_short_face.get_or_insert_with(location);
         }
         fan_triangulate(&self.corners, &mut self.triangles);
         Ok(())
@@ -815,6 +964,32 @@ mod tests {
             polygons: None,
         };
         MeshSink::new(Path::new("t.ply"), &layout)
+    }
+
+    #[test]
+    fn bare_header_lines_become_comments_and_typos_stay_lines() {
+        let text = b"ply\r\nformat ascii 1.0\r\nCreated by Scanner 3000\r\n\r\nelment vertex 3\nend_header\n1 2 3\n";
+        let scan = HeaderScan::of(text);
+        assert_eq!(scan.bare_lines, [3, 4]);
+        assert_eq!(scan.first_bare_line, Some((3, "Created by Scanner 3000".to_string())));
+        assert_eq!(&text[scan.end..], b"1 2 3\n");
+        assert_eq!(
+            scan.rewritten(text),
+            b"ply\r\nformat ascii 1.0\r\ncomment\r\ncomment\r\nelment vertex 3\nend_header\n"
+        );
+        // Without `end_header` the whole file is header, its last line without a line end.
+        let cut = b"ply\nhello\nworld";
+        let scan = HeaderScan::of(cut);
+        assert_eq!((scan.end, scan.bare_lines.as_slice()), (cut.len(), &[2, 3][..]));
+        assert_eq!(scan.rewritten(cut), b"ply\ncomment\ncomment");
+        assert_eq!(edit_distance(b"elment", b"element"), 1);
+        assert_eq!(edit_distance(b"", b"ply"), 3);
+        for typo in [&b"Property"[..], b"fromat", b"END_HEADER", b"elements"] {
+            assert!(is_keyword_typo(typo), "{}", String::from_utf8_lossy(typo));
+        }
+        for text in [&b"Created"[..], b"VCGLIB", b"author", b"element_count_is_long"] {
+            assert!(!is_keyword_typo(text), "{}", String::from_utf8_lossy(text));
+        }
     }
 
     #[test]

@@ -607,9 +607,14 @@ fn obj_bad_input_names_file_and_line() {
         assert!(matches!(case(name, text), LoadError::NonFinite { .. }), "{name}");
     }
 
-    // What a cut file looks like: a face or vertex statement missing its tail.
+    // A file whose only face has two corners: that face is skipped, nothing is left.
+    let e = case("short_face.obj", &format!("{tri}f 1 2\n"));
+    assert!(
+        matches!(e, LoadError::Empty { ref reason, .. } if reason.contains("fewer than 3 corners")),
+        "{e}"
+    );
+    // What a cut file looks like: a vertex statement missing its tail.
     for (name, text) in [
-        ("short_face.obj", format!("{tri}f 1 2\n")),
         ("short_vertex.obj", "v 0 0 0\nv 1 0\n".to_string()),
         ("lone_sign.obj", format!("{tri}f 1 2 -\n")),
     ] {
@@ -924,6 +929,222 @@ fn gltf_bad_input_names_file_and_part() {
             ..
         }
     ));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Real-world files that other readers accept: loaded, with one warning per kind
+
+#[test]
+fn obj_faces_of_one_and_two_corners_are_skipped_with_one_warning() {
+    let dir = scratch("obj_faces_of_one_and_two_corners_are_skipped_with_one_warning");
+    let text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 2\nf 1 3 4\nf 4\nf 2 3 4 1\n";
+    let path = write(&dir, "short.obj", text);
+    let loaded = load_ok(&path);
+    assert_eq!(loaded.scene.item_count(), 1 + 1 + 2);
+    assert_eq!(loaded.scene.bounds().max, Vec3::new(1.0, 1.0, 0.0));
+    assert_eq!(
+        loaded.warnings,
+        [format!(
+            "{}: 2 faces with fewer than 3 corners skipped (first at line 6)",
+            path.display()
+        )]
+    );
+}
+
+#[test]
+fn obj_index_zero_is_still_an_error_naming_file_and_line() {
+    let dir = scratch("obj_index_zero_is_still_an_error_naming_file_and_line");
+    let tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+    // In a whole face, and in a face too short to be drawn.
+    for (name, face) in [("zero.obj", "f 1 0 2"), ("zero_short.obj", "f 0 1")] {
+        let path = write(&dir, name, format!("{tri}f 1 2 3\n{face}\n"));
+        let e = load_err(&path);
+        assert_index_out_of_range(&e, 0, 3);
+        assert!(e.to_string().starts_with(&format!("{} line 5:", path.display())), "{e}");
+    }
+}
+
+#[test]
+fn ply_bare_text_header_line_is_a_comment_with_one_warning() {
+    let dir = scratch("ply_bare_text_header_line_is_a_comment_with_one_warning");
+    let note = "Exported by ScanTool 2.1\n";
+    let insert_note = |bytes: &[u8]| {
+        // After `ply\nformat ...\n`: the third line.
+        let second_end = bytes
+            .iter()
+            .enumerate()
+            .filter(|(_, &b)| b == b'\n')
+            .nth(1)
+            .expect("two lines")
+            .0;
+        [&bytes[..=second_end], note.as_bytes(), &bytes[second_end + 1..]].concat()
+    };
+    let ascii = insert_note(PLY_ASCII.as_bytes());
+    let binary = insert_note(&ply_binary(false, "list uchar int vertex_indices"));
+    for (name, bytes) in [("note_ascii.ply", ascii), ("note_le.ply", binary)] {
+        let path = write(&dir, name, bytes);
+        let loaded = load_ok(&path);
+        assert_eq!(loaded.scene.item_count(), 4, "{name}");
+        assert_eq!(loaded.scene.bounds().max, Vec3::new(1.0, 1.0, 2.0), "{name}");
+        assert_eq!(
+            loaded.warnings,
+            [format!(
+                "{} line 3: a header line that is not a PLY keyword read as a comment: 'Exported by ScanTool 2.1'",
+                path.display()
+            )],
+            "{name}"
+        );
+    }
+    // Lines after the note keep their numbers in errors.
+    let bad = ascii_ply("3", "1", "0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n").replacen(
+        "format ascii 1.0\n",
+        "format ascii 1.0\nnote\n",
+        1,
+    );
+    let e = load_err(&write(&dir, "bad_index.ply", bad));
+    assert!(e.to_string().contains("line 14: face 0"), "{e}");
+    // A misspelt keyword is no note: still an error with its line.
+    let typo = PLY_ASCII.replacen("element face", "elemnt face", 1);
+    let e = load_err(&write(&dir, "typo.ply", typo));
+    assert!(e.to_string().contains("line 10, column 1: bad header"), "{e}");
+}
+
+/// The component type codes of glTF accessors.
+const GLTF_UNSIGNED_BYTE: u32 = 5121;
+const GLTF_SHORT: u32 = 5122;
+const GLTF_UNSIGNED_SHORT: u32 = 5123;
+
+/// A document requiring `KHR_mesh_quantization` whose one node (`node`: its JSON properties
+/// besides the mesh) holds a quad with integer positions of `component_type`, padded to a
+/// stride of 4 bytes, and its JSON buffer `buffer`; and the buffer's bytes.
+fn quantized_gltf(
+    component_type: u32,
+    normalized: bool,
+    corners: [[i32; 3]; 4],
+    node: &str,
+    buffer: &str,
+) -> (String, Vec<u8>) {
+    let size = if component_type == GLTF_UNSIGNED_BYTE || component_type == 5120 {
+        1
+    } else {
+        2
+    };
+    // §3.6.2.4: each vertex attribute element starts on a 4-byte boundary.
+    let stride = 4 * size;
+    let mut bin = Vec::new();
+    for corner in corners {
+        for c in corner {
+            match size {
+                1 => bin.push(c as u8),
+                _ => bin.extend((c as u16).to_le_bytes()),
+            }
+        }
+        bin.resize(bin.len() + stride - 3 * size, 0);
+    }
+    let positions_len = bin.len();
+    for i in [0u16, 1, 2, 0, 2, 3] {
+        bin.extend(i.to_le_bytes());
+    }
+    let min: Vec<i32> = (0..3).map(|k| corners.iter().map(|c| c[k]).min().unwrap()).collect();
+    let max: Vec<i32> = (0..3).map(|k| corners.iter().map(|c| c[k]).max().unwrap()).collect();
+    let buffer = buffer.replace("LENGTH", &bin.len().to_string());
+    let json = format!(
+        r#"{{
+  "asset": {{"version": "2.0"}},
+  "extensionsUsed": ["KHR_mesh_quantization"],
+  "extensionsRequired": ["KHR_mesh_quantization"],
+  "scene": 0,
+  "scenes": [{{"nodes": [0]}}],
+  "nodes": [{{"mesh": 0, {node}}}],
+  "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}, "indices": 1}}]}}],
+  "buffers": [{buffer}],
+  "bufferViews": [
+    {{"buffer": 0, "byteOffset": 0, "byteLength": {positions_len}, "byteStride": {stride}, "target": 34962}},
+    {{"buffer": 0, "byteOffset": {positions_len}, "byteLength": 12, "target": 34963}}
+  ],
+  "accessors": [
+    {{"bufferView": 0, "componentType": {component_type}, "normalized": {normalized}, "count": 4, "type": "VEC3",
+      "min": {min:?}, "max": {max:?}}},
+    {{"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}}
+  ]
+}}"#
+    );
+    (json, bin)
+}
+
+/// Asserts that `loaded` holds the two triangles of the quad `corners` (world space) and
+/// their bounds, to within `tolerance` (the node transform rounds).
+fn check_quantized_quad(loaded: &LoadedScene, corners: [Vec3; 4], tolerance: f32) {
+    assert!(loaded.warnings.is_empty(), "{:?}", loaded.warnings);
+    assert_eq!(loaded.scene.item_count(), 2);
+    let triangles = world_triangles(&loaded.scene);
+    let expected = [
+        [corners[0], corners[1], corners[2]],
+        [corners[0], corners[2], corners[3]],
+    ];
+    for (got, want) in triangles.iter().flatten().zip(expected.iter().flatten()) {
+        assert!(got.abs_diff_eq(*want, tolerance), "{got} != {want}");
+    }
+    let min = corners.iter().copied().reduce(Vec3::min).unwrap();
+    let max = corners.iter().copied().reduce(Vec3::max).unwrap();
+    let bounds = loaded.scene.bounds();
+    assert!(
+        bounds.min.abs_diff_eq(min, tolerance) && bounds.max.abs_diff_eq(max, tolerance),
+        "{bounds:?}"
+    );
+}
+
+#[test]
+fn gltf_quantized_positions_load_with_their_node_transform() {
+    let dir = scratch("gltf_quantized_positions_load_with_their_node_transform");
+    // Normalized SHORT: c / 32767, and -32768 clamps to -1 (glTF §3.6.2). The node scales by 2
+    // and moves by 10 along x, as a quantizer writes it.
+    let corners = [[0, 0, 0], [32767, 0, -32768], [32767, 32767, -32767], [0, 32767, 16384]];
+    let node = r#""translation": [10, 0, 0], "scale": [2, 2, 2]"#;
+    let world = |c: [i32; 3]| {
+        let local = Vec3::from_array(c.map(|v| (v as f32 / 32767.0).max(-1.0)));
+        local * 2.0 + Vec3::new(10.0, 0.0, 0.0)
+    };
+    let expected = corners.map(world);
+    assert_eq!(expected[1], Vec3::new(12.0, 0.0, -2.0));
+    let (json, bin) = quantized_gltf(
+        GLTF_SHORT,
+        true,
+        corners,
+        node,
+        r#"{"uri": "short.bin", "byteLength": LENGTH}"#,
+    );
+    write(&dir, "short.bin", &bin);
+    check_quantized_quad(&load_ok(&write(&dir, "short.gltf", json)), expected, 1e-6);
+
+    // Plain UNSIGNED_SHORT: the values themselves, scaled by the node's matrix (1/1000), as GLB.
+    let corners = [[0, 0, 0], [1000, 0, 0], [1000, 500, 65535], [0, 500, 1]];
+    let node = r#""matrix": [0.001,0,0,0, 0,0.001,0,0, 0,0,0.001,0, 0,0,0,1]"#;
+    let expected = corners.map(|c| Vec3::from_array(c.map(|v| v as f32)) * 0.001);
+    let (json, bin) = quantized_gltf(GLTF_UNSIGNED_SHORT, false, corners, node, r#"{"byteLength": LENGTH}"#);
+    let loaded = load_ok(&write(&dir, "ushort.glb", glb(&json, &bin)));
+    check_quantized_quad(&loaded, expected, 1e-5);
+    assert_eq!(loaded.scene.bounds().max.z, 65535.0 * 0.001);
+
+    // Normalized UNSIGNED_BYTE, embedded: c / 255.
+    let corners = [[0, 0, 0], [255, 0, 0], [255, 255, 51], [0, 255, 0]];
+    let expected = corners.map(|c| Vec3::from_array(c.map(|v| v as f32 / 255.0)));
+    let (json, bin) = quantized_gltf(GLTF_UNSIGNED_BYTE, true, corners, r#""name": "bytes""#, "BUFFER");
+    let uri = format!("data:application/octet-stream;base64,{}", base64(&bin));
+    let json = json.replace("BUFFER", &format!(r#"{{"uri": "{uri}", "byteLength": {}}}"#, bin.len()));
+    check_quantized_quad(&load_ok(&write(&dir, "bytes.gltf", json)), expected, 0.0);
+
+    // Another required extension is still refused, naming it.
+    let (json, bin) = quantized_gltf(GLTF_SHORT, true, corners, node, r#"{"byteLength": LENGTH}"#);
+    let json = json.replace(
+        r#""extensionsRequired": ["KHR_mesh_quantization"]"#,
+        r#""extensionsRequired": ["KHR_mesh_quantization", "KHR_draco_mesh_compression"]"#,
+    );
+    let e = load_err(&write(&dir, "draco.glb", glb(&json, &bin)));
+    assert!(
+        matches!(e, LoadError::Parse { .. }) && e.to_string().contains("KHR_draco_mesh_compression"),
+        "{e}"
+    );
 }
 
 // ---------------------------------------------------------------------------------------------
