@@ -41,6 +41,9 @@ pub const MAX_ALLOWANCE: f64 = 0.25;
 pub const MIN_ALLOWANCE_TIME: Duration = Duration::from_millis(2);
 /// Rasterization cost of a triangle before one was measured, ns (a typical software rate).
 const PRIOR_NS_PER_TRIANGLE: f64 = 20.0;
+/// Triangles a renderer gathers per batch once its frame stopped testing: large enough that the
+/// rasterizer shares each batch over its threads, as brute force's draws are.
+pub const DIRECT_BATCH: usize = 1 << 19;
 /// Tests between two checks of the balance (a check reads the clock).
 const CHECK_EVERY: u32 = 32;
 
@@ -171,6 +174,12 @@ impl FramePayoff {
             }
         }
         true
+    }
+
+    /// `n` tests skipped without asking [`test`](Self::test) one by one (a renderer that
+    /// decides for a batch of tests at once), counted in `payoff_untested`.
+    pub fn skipped(&mut self, n: u64) {
+        self.untested += n;
     }
 
     /// True once the frame stopped testing.

@@ -11,7 +11,7 @@ use occult_spatial::{octree::hybrid::NO_CHILD, HybridOctree};
 use super::boxtest::{screen_rect, Occlusion};
 use super::{ChildOrder, Distribution, HzbOptions, VisEntry};
 use crate::hash::{FxBuild, FxHasher};
-use crate::payoff::{FramePayoff, Payoff};
+use crate::payoff::{FramePayoff, Payoff, DIRECT_BATCH};
 use crate::walk::{NodeAt, NodeTest, Placed, SceneWalk, Visitor};
 use crate::{FrameStats, Phase};
 
@@ -22,10 +22,6 @@ type NodeKey = (u32, u32, u64);
 
 /// Marks a primitive that no other node shares in [`Stamps`]' numbering.
 const NOT_SHARED: u32 = u32::MAX;
-
-/// Triangles gathered per batch once the frame stopped testing ([`crate::payoff`]): large
-/// enough that the rasterizer shares each batch over its threads, as brute force does.
-const UNTESTED_BATCH: usize = 1 << 19;
 
 /// §3.1's frame stamps of shared primitives, kept per instance: every instance (DAG node, first
 /// item) that draws a shared primitive this frame gets a bit set over its octree's shared
@@ -854,7 +850,7 @@ impl<'a> Walk<'a> {
 
     fn maybe_flush(&mut self) {
         let batch = if self.payoff.stopped() {
-            UNTESTED_BATCH
+            DIRECT_BATCH
         } else {
             self.options.batch_triangles
         };
@@ -883,7 +879,7 @@ impl<'a> Walk<'a> {
             .collect();
         let t = Instant::now();
         crate::rasterize(self.raster, self.walk.view(), self.frame, &draws, &mut self.walk.stats);
-        let shared = self.pending_triangles >= UNTESTED_BATCH;
+        let shared = self.pending_triangles >= DIRECT_BATCH;
         self.payoff
             .rasterized(self.pending_triangles as u64, t.elapsed(), shared);
         drop(draws);

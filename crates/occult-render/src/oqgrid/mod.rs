@@ -113,6 +113,7 @@ use occult_spatial::grid::{GridCell, GridConfig, GridError, MeshTriangles, Neste
 
 use crate::hash::FxBuild;
 use crate::params::read_params;
+use crate::payoff::{FramePayoff, Payoff, DIRECT_BATCH};
 use crate::walk::{NodeAt, NodeTest, SceneWalk, Visitor};
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
 
@@ -196,6 +197,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             default: "4096",
             help: "bound on all grids, MiB, checked before allocating (>= 1)",
         },
+        ParamDoc {
+            key: "payoff",
+            default: "on",
+            help: "stop querying for the rest of a frame once queries cost more than they save, and draw the rest directly (not in the paper)",
+        },
     ],
     counters: &[
         "cells_visited",
@@ -211,6 +217,8 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "node_queries",
         "nodes_hidden",
         "whole_drawn",
+        crate::payoff::COUNTERS[0],
+        crate::payoff::COUNTERS[1],
     ],
     conservative: true,
     build: |scene, options, params| {
@@ -286,6 +294,9 @@ pub struct OqGridOptions {
     pub order: Order,
     /// Draw a triangle shared by several visible cells once (§3.1), or once per cell.
     pub stamps: bool,
+    /// Stop querying for the rest of a frame once the queries cost more than they save, and
+    /// draw the rest directly ([`crate::payoff`]). Not in the paper.
+    pub payoff: bool,
     /// Bound on all grids' bytes, checked before allocating.
     pub max_memory_bytes: usize,
 }
@@ -307,6 +318,7 @@ impl Default for OqGridOptions {
             node_queries: true,
             order: Order::Slabs,
             stamps: true,
+            payoff: true,
             max_memory_bytes: 4 << 30,
         }
     }
@@ -360,7 +372,7 @@ impl OqGridOptions {
             "none" => Order::Unordered,
             _ => Order::Slabs,
         };
-        read_params!(params, o, { stamps: flag "stamps" });
+        read_params!(params, o, { stamps: flag "stamps", payoff: flag "payoff" });
         o.validate()?;
         Ok(o)
     }
@@ -437,6 +449,8 @@ pub struct OqGrid {
     /// last traversal of its grid drew, and the frames it was drawn whole since.
     shares: HashMap<u64, (f32, u32), FxBuild>,
     last_counts: OqGridCounts,
+    /// What the queries' balance learned from earlier frames ([`crate::payoff`]).
+    payoff: Payoff,
 }
 
 impl OqGrid {
@@ -486,6 +500,7 @@ impl OqGrid {
             stamps.push(vec![0u32; if oq.stamps { elements } else { 0 }]);
         }
         Ok(Self {
+            payoff: Payoff::new(oq.payoff, scene.item_count()),
             scene,
             raster,
             options: oq.clone(),
@@ -644,6 +659,8 @@ struct Walk<'a> {
     pending_triangles: usize,
     /// Where the pending draws may change the depth.
     dirty: Vec<PixelRect>,
+    /// Whether the queries still pay this frame.
+    payoff: FramePayoff,
 }
 
 impl<'a> Visitor<'a> for Walk<'a> {
@@ -666,6 +683,11 @@ impl<'a> Visitor<'a> for Walk<'a> {
         let view = self.walk.view();
         let clip_from_object = view.clip_from_object(&at.place.world_from_node);
         if self.options.queries && self.options.node_queries && !self.node_visible(at, &clip_from_object) {
+            return;
+        }
+        if let (NodeKind::Mesh(mesh), true) = (at.node.kind(), self.payoff.stopped() && at.inside) {
+            // Queries stopped paying: a mesh occurrence wholly in view is drawn whole.
+            self.push_whole(mesh, at, clip_from_object);
             return;
         }
         let whole = self.options.whole_percent;
@@ -747,7 +769,14 @@ impl<'a> Walk<'a> {
     fn batch(&mut self, occ: &Occurrence<'a>, level_index: u32, batch: &[(i64, u32)]) {
         let cells: &'a [GridCell] = &occ.grid.levels()[level_index as usize].cells;
         let options = self.options;
-        let needs_query = |c: &GridCell| options.queries && c.weight >= options.query_threshold;
+        let wants_query = |c: &GridCell| options.queries && c.weight >= options.query_threshold;
+        // One balance check for the batch: its queries run together.
+        let wanted = batch.iter().filter(|(_, i)| wants_query(&cells[*i as usize])).count() as u64;
+        let testing = wanted == 0 || self.payoff.test();
+        if !testing {
+            self.payoff.skipped(wanted.saturating_sub(1));
+        }
+        let needs_query = |c: &GridCell| testing && wants_query(c);
         let view = self.walk.view();
         let t = Instant::now();
         let pyramid = self.pyramid.as_deref();
@@ -791,6 +820,13 @@ impl<'a> Walk<'a> {
             .count() as u64;
         self.counts.queries += queried;
         self.counts.queries_hidden += hidden;
+        let saved: u64 = batch
+            .iter()
+            .zip(&visible)
+            .filter(|(_, v)| !**v)
+            .map(|((_, i), _)| cells[*i as usize].weight)
+            .sum();
+        self.payoff.saved(saved);
         self.counts.queries_skipped += batch.len() as u64 - queried;
         self.counts.cells_visible += visible_count;
         if visible_count == 0 {
@@ -837,7 +873,7 @@ impl<'a> Walk<'a> {
                         clip_from_object: occ.clip_from_object,
                         first_item: occ.at.place.first_item,
                     });
-                    if self.pending_triangles >= options.flush_triangles {
+                    if self.pending_triangles >= self.flush_at() {
                         self.flush();
                     }
                 }
@@ -874,6 +910,9 @@ impl<'a> Walk<'a> {
 impl<'a> Walk<'a> {
     /// Queries the box of occurrence `at` before its grid is traversed; false when hidden.
     fn node_visible(&mut self, at: &NodeAt<'a>, clip_from_object: &Mat4) -> bool {
+        if !self.payoff.test() {
+            return true;
+        }
         let t = Instant::now();
         let outcome = query_cell(
             self.frame,
@@ -889,6 +928,7 @@ impl<'a> Walk<'a> {
         }
         self.counts.nodes_hidden += 1;
         self.counts.pyramid_hidden += (outcome == QueryOutcome::HiddenByPyramid) as u64;
+        self.payoff.saved(at.node.item_count());
         false
     }
 
@@ -907,8 +947,18 @@ impl<'a> Walk<'a> {
             clip_from_object,
             first_item: at.place.first_item,
         });
-        if self.pending_triangles >= self.options.flush_triangles {
+        if self.pending_triangles >= self.flush_at() {
             self.flush();
+        }
+    }
+
+    /// Triangles gathered before a draw: the option's, or large threaded batches once the
+    /// frame stopped querying.
+    fn flush_at(&self) -> usize {
+        if self.payoff.stopped() {
+            DIRECT_BATCH.max(self.options.flush_triangles)
+        } else {
+            self.options.flush_triangles
         }
     }
 
@@ -936,8 +986,17 @@ impl<'a> Walk<'a> {
         crate::rasterize(self.raster, view, self.frame, &draws, &mut self.walk.stats);
         drop(draws);
         self.counts.draws += 1;
-        self.raster_time += t.elapsed();
-        if let Some(pyramid) = self.pyramid.as_deref_mut().filter(|_| !self.dirty.is_empty()) {
+        let spent = t.elapsed();
+        self.raster_time += spent;
+        let shared = self.pending_triangles >= DIRECT_BATCH;
+        self.payoff.rasterized(self.pending_triangles as u64, spent, shared);
+        // Once the frame stopped querying, nothing reads the pyramid.
+        let stopped = self.payoff.stopped();
+        if let Some(pyramid) = self
+            .pyramid
+            .as_deref_mut()
+            .filter(|_| !self.dirty.is_empty() && !stopped)
+        {
             let t = Instant::now();
             // Rectangles overlap: where their bounding rectangle is no larger than their areas
             // together, one pass over it is less work.
@@ -1001,6 +1060,7 @@ impl Renderer for OqGrid {
             pending: Vec::new(),
             pending_triangles: 0,
             dirty: Vec::new(),
+            payoff: self.payoff.begin(t),
         };
         walk.walk.stats = cleared;
         walk.run();
@@ -1012,8 +1072,10 @@ impl Renderer for OqGrid {
             query_time,
             raster_time,
             pyramid_time,
+            payoff,
             ..
         } = walk;
+        self.payoff.end(&payoff);
         let mut stats = walk.finish("oqgrid")?;
         stats.phases.add(Phase::Query, query_time);
         stats.phases.add(Phase::DepthStructure, pyramid_time);
@@ -1024,10 +1086,14 @@ impl Renderer for OqGrid {
         stats.boxes_tested += counts.queries + counts.node_queries;
         stats.boxes_culled += counts.queries_hidden + counts.nodes_hidden;
         // The counters are named in `INFO.counters`, in the order of `OqGridCounts::values`.
-        debug_assert_eq!(INFO.counters.len(), counts.values().len());
+        debug_assert_eq!(
+            INFO.counters.len(),
+            counts.values().len() + crate::payoff::COUNTERS.len()
+        );
         for (&name, n) in INFO.counters.iter().zip(counts.values()) {
             stats.counters.add(name, n);
         }
+        stats.counters.add_all(payoff.counters());
         stats.total = start.elapsed();
         self.last_counts = counts;
         Ok(stats)
