@@ -49,6 +49,10 @@
 //!   depth without the gathered triangles and cull less. Drawing after every batch (1) measured
 //!   best on the plant, city and forest paths; larger values are there for slower queries or
 //!   more threads.
+//! - Payoff ([`OqGridOptions::payoff`], `payoff=on`, [`crate::payoff`]): a frame whose queries
+//!   cost more than they save stops querying; meshes wholly in view are then drawn whole and
+//!   the rest of the grids drawn unqueried, in batches large enough for the rasterizer's
+//!   threads, without pyramid updates. Counters `payoff_stopped`, `payoff_untested`.
 //!
 //! # Instanced scenes
 //! The scene DAG is not flattened. A grid is built per *unique* node, in the node's own space:
