@@ -178,9 +178,14 @@ fn list_text(cases: &[Case], quick: bool) -> String {
     out
 }
 
-/// A ratio as `1.23x`, or `-`.
+/// A ratio as `1.23x`, or `-`; near 1 with three decimals (`0.998x`), so that a ratio just
+/// below 1, a violation, never reads `1.00x`.
 fn ratio(r: Option<f64>) -> String {
-    r.map_or_else(|| "-".into(), |r| format!("{r:.2}x"))
+    match r {
+        Some(r) if (0.995..1.005).contains(&r) && r != 1.0 => format!("{r:.3}x"),
+        Some(r) => format!("{r:.2}x"),
+        None => "-".into(),
+    }
 }
 
 /// One case: a header line and the compact table, violations flagged.
@@ -359,4 +364,19 @@ fn chart_panels(r: &SuiteReport) -> Vec<BarPanel> {
             |x| x.vs_oracle,
         ),
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ratios_near_one_show_which_side_of_it_they_fall() {
+        assert_eq!(ratio(Some(0.998)), "0.998x");
+        assert_eq!(ratio(Some(1.0)), "1.00x");
+        assert_eq!(ratio(Some(1.004)), "1.004x");
+        assert_eq!(ratio(Some(0.5)), "0.50x");
+        assert_eq!(ratio(Some(12.0)), "12.00x");
+        assert_eq!(ratio(None), "-");
+    }
 }
