@@ -40,6 +40,10 @@ pub enum Command {
     Particles(crate::commands::particles::ParticlesArgs),
     /// Shadow volumes of a spot light, clamped with litmaps and N-buffers (Décoret §3.3) or not.
     Shadows(crate::commands::shadows::ShadowsArgs),
+    /// The performance yardstick: a fixed, versioned matrix of scenes and camera paths, every
+    /// renderer on each; per case and renderer the speedup over zbuffer, the ratio to the
+    /// oracle and identical frames, then per renderer the geometric mean and worst case.
+    Suite(SuiteArgs),
 }
 
 /// A frame size.
@@ -328,6 +332,41 @@ pub struct SweepArgs {
     /// What frames are checked against, as `occult compare --reference`.
     #[arg(long, value_name = "auto|none|SPEC", default_value = "auto", value_parser = parse_reference)]
     pub reference: ReferenceArg,
+}
+
+/// `occult suite`.
+#[derive(Debug, Args)]
+pub struct SuiteArgs {
+    /// The quick subset (small scenes, few frames, a smaller default size): for CI.
+    #[arg(long)]
+    pub quick: bool,
+    /// Only these cases, comma-separated, by name (see --list).
+    #[arg(long, value_name = "A,B,..", value_delimiter = ',')]
+    pub cases: Option<Vec<String>>,
+    /// Renderers, as `occult compare --algos`; zbuffer is always measured.
+    #[arg(long, value_name = "A,B,..", default_value = "all", value_parser = parse_algorithms)]
+    pub algos: AlgorithmList,
+    /// Frame size, WxH pixels; default 1280x720, 640x360 with --quick.
+    #[arg(long, value_name = "WxH", value_parser = parse_size)]
+    pub size: Option<Size>,
+    /// Frames of every case, instead of the suite's own counts.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=i64::from(occult_scenes::path::MAX_VIEWS)))]
+    pub frames: Option<u32>,
+    /// The folder of the real models; default: $OCCULT_MODELS, else ../shared/models when it
+    /// exists. Model cases whose file is missing are skipped.
+    #[arg(long, value_name = "DIR")]
+    pub models: Option<PathBuf>,
+    /// Full report out (JSON: per case every renderer's comparison, the summary, the
+    /// violations).
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+    /// Chart out (PNG): per case, each renderer's speedup over zbuffer and its ratio to the
+    /// oracle.
+    #[arg(long, value_name = "FILE")]
+    pub chart: Option<PathBuf>,
+    /// Print the cases (with the suite's version) and exit.
+    #[arg(long)]
+    pub list: bool,
 }
 
 /// `occult algos`.

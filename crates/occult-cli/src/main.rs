@@ -13,9 +13,11 @@
 //! | `occult scenes` | the built-in generators and their parameters |
 //! | `occult particles` | sprites among a scene, culled with an N-buffer or not |
 //! | `occult shadows` | spot-light shadow volumes, clamped with litmaps and N-buffers or not |
+//! | `occult suite` | the performance yardstick: every renderer on a fixed, versioned matrix of cases |
 //!
 //! Default sizes: 1920x1080 for `render` (a picture to look at), 640x480 for `walk` and
-//! `compare` (many frames, several renderers; brute force must stay bearable).
+//! `compare` (many frames, several renderers; brute force must stay bearable); `suite` fixes its
+//! own (1280x720, 640x360 with `--quick`) so that its figures compare across commits.
 //!
 //! Errors: one line on stderr, `error: ` and the cause chain joined by `: `; exit status 1, or 2
 //! for usage errors (clap's convention). Never a panic trace for bad input.
@@ -68,6 +70,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Sweep(a) => commands::sweep::run(a),
         Command::Particles(a) => commands::particles::run(a),
         Command::Shadows(a) => commands::shadows::run(a),
+        Command::Suite(a) => commands::suite::run(a),
     }
 }
 

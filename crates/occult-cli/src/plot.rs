@@ -1,4 +1,5 @@
-//! PNG line plots (plotters): frame time per frame, and time against scene size.
+//! PNG plots (plotters): lines (frame time per frame, time against scene size) and grouped
+//! bars (a ratio per case and renderer, `occult suite`).
 //!
 //! Text uses Noto Sans Regular embedded in the binary (crate `ttf-noto-sans`, Apache-2.0),
 //! registered with plotters' `ab_glyph` backend at first use: no system font is assumed.
@@ -74,15 +75,28 @@ fn register_font() -> Result<()> {
 /// # Errors
 /// Drawing and file errors, naming the file.
 pub fn draw(path: &Path, panels: &[Panel]) -> Result<()> {
-    register_font()?;
     let panel_height = 480u32;
     let size = (1100u32, panel_height * panels.len().max(1) as u32);
+    draw_stacked(path, size, panels, draw_panel)
+}
+
+/// Draws `panels` stacked vertically, one `draw_one` each, into a PNG of `size` at `path`.
+///
+/// # Errors
+/// Drawing and file errors, naming the file.
+fn draw_stacked<P>(
+    path: &Path,
+    size: (u32, u32),
+    panels: &[P],
+    draw_one: for<'a> fn(&Area<'a>, &P) -> DrawResult<'a>,
+) -> Result<()> {
+    register_font()?;
     let fail = |e: &dyn std::fmt::Display| anyhow!("cannot draw plot '{}': {e}", path.display());
     let root = BitMapBackend::new(path, size).into_drawing_area();
     root.fill(&WHITE).map_err(|e| fail(&e))?;
     let areas = root.split_evenly((panels.len().max(1), 1));
     for (panel, area) in panels.iter().zip(&areas) {
-        draw_panel(area, panel).map_err(|e| fail(&e))?;
+        draw_one(area, panel).map_err(|e| fail(&e))?;
     }
     root.present().map_err(|e| fail(&e))?;
     Ok(())
@@ -206,6 +220,115 @@ fn draw_panel<'a>(area: &Area<'a>, panel: &Panel) -> DrawResult<'a> {
         };
         finish!(builder.build_cartesian_2d(x_axis, y_axis)?);
     }
+    Ok(())
+}
+
+/// One group of bars (a case of the suite): a value per series, `None` where there is none.
+pub struct BarGroup {
+    /// Label under the group.
+    pub label: String,
+    /// One value per series of the panel, in its order.
+    pub values: Vec<Option<f64>>,
+}
+
+/// A chart of grouped bars on a log y axis, with a horizontal line marking a reference value.
+pub struct BarPanel {
+    /// Title above the chart.
+    pub title: String,
+    /// Y axis label.
+    pub y_label: String,
+    /// Legend text of each series (a bar of each group).
+    pub series: Vec<String>,
+    /// The groups, left to right.
+    pub groups: Vec<BarGroup>,
+    /// Where the reference line is drawn (1 for ratios).
+    pub reference: f64,
+}
+
+/// Width of the legend column of a bar chart, pixels.
+const LEGEND_WIDTH: u32 = 130;
+
+/// Draws `panels` stacked vertically into a PNG at `path`; the width grows with the number of
+/// groups so that their labels do not overlap.
+///
+/// # Errors
+/// Drawing and file errors, naming the file.
+pub fn draw_bars(path: &Path, panels: &[BarPanel]) -> Result<()> {
+    let groups = panels.iter().map(|p| p.groups.len()).max().unwrap_or(1) as u32;
+    let size = (
+        1100u32.max(140 * groups + 160 + LEGEND_WIDTH),
+        520 * panels.len().max(1) as u32,
+    );
+    draw_stacked(path, size, panels, draw_bar_panel)
+}
+
+fn draw_bar_panel<'a>(area: &Area<'a>, panel: &BarPanel) -> DrawResult<'a> {
+    let values = || {
+        panel
+            .groups
+            .iter()
+            .flat_map(|g| g.values.iter().flatten().copied())
+            .chain([panel.reference])
+            .filter(|v| *v > 0.0 && v.is_finite())
+    };
+    let y0 = values().fold(f64::INFINITY, f64::min) / 1.5;
+    let y1 = values().fold(f64::NEG_INFINITY, f64::max) * 1.5;
+    // The legend goes in a column of its own at the right, clear of every bar.
+    let (area, legend) = area.split_horizontally(area.dim_in_pixel().0.saturating_sub(LEGEND_WIDTH));
+    for (i, name) in panel.series.iter().enumerate() {
+        let color = PALETTE[i % PALETTE.len()];
+        let y = 50 + 22 * i as i32;
+        legend.draw(&Rectangle::new([(8, y - 6), (22, y + 6)], color.filled()))?;
+        legend.draw(&Text::new(name.as_str(), (28, y - 8), (FONT, 14)))?;
+    }
+    let count = panel.groups.len().max(1);
+    let x_axis = Ticked {
+        inner: RangedCoordf64::from(0.0..count as f64),
+        ticks: (0..panel.groups.len()).map(|g| g as f64 + 0.5).collect(),
+    };
+    let y_axis = Ticked {
+        inner: LogCoord::from((y0..y1).log_scale()),
+        ticks: log_ticks(y0, y1),
+    };
+    let mut chart = ChartBuilder::on(&area)
+        .caption(&panel.title, (FONT, 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(x_axis, y_axis)?;
+    let group_label = |x: &f64| {
+        panel
+            .groups
+            .get(x.floor().max(0.0) as usize)
+            .map_or_else(String::new, |g| g.label.clone())
+    };
+    chart
+        .configure_mesh()
+        .x_label_formatter(&group_label)
+        .y_label_formatter(&|y: &f64| format!("{}x", tick_label(*y)))
+        .y_desc(&panel.y_label)
+        .label_style((FONT, 13))
+        .axis_desc_style((FONT, 16))
+        .light_line_style(RGBColor(235, 235, 235))
+        .disable_x_mesh()
+        .draw()?;
+    let width = 0.8 / panel.series.len().max(1) as f64;
+    for i in 0..panel.series.len() {
+        let color = PALETTE[i % PALETTE.len()];
+        let bars = panel.groups.iter().enumerate().filter_map(|(g, group)| {
+            let v = group
+                .values
+                .get(i)
+                .copied()
+                .flatten()
+                .filter(|v| *v > 0.0 && v.is_finite())?;
+            let x = g as f64 + 0.1 + i as f64 * width;
+            Some(Rectangle::new([(x, y0), (x + width * 0.9, v)], color.filled()))
+        });
+        chart.draw_series(bars)?;
+    }
+    let line = [(0.0, panel.reference), (count as f64, panel.reference)];
+    chart.draw_series(DashedLineSeries::new(line, 8, 5, BLACK.stroke_width(2)))?;
     Ok(())
 }
 
@@ -403,6 +526,30 @@ mod tests {
         draw(&path, &[panel]).unwrap();
         let img = image::open(&path).unwrap();
         assert_eq!((img.width(), img.height()), (1100, 480));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn bar_charts_draw_groups_with_missing_and_extreme_values() {
+        let dir = std::env::temp_dir().join(format!("occult-bars-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("b.png");
+        let panel = |groups: Vec<BarGroup>| BarPanel {
+            title: "speedup".into(),
+            y_label: "x zbuffer".into(),
+            series: vec!["zbuffer".into(), "hzb".into()],
+            groups,
+            reference: 1.0,
+        };
+        let groups = (0..12)
+            .map(|g| BarGroup {
+                label: format!("case-{g}"),
+                values: vec![Some(1.0), if g == 3 { None } else { Some(0.01 + g as f64 * 3.0) }],
+            })
+            .collect();
+        draw_bars(&path, &[panel(groups), panel(Vec::new())]).unwrap();
+        let img = image::open(&path).unwrap();
+        assert_eq!((img.width(), img.height()), (140 * 12 + 160 + LEGEND_WIDTH, 1040));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

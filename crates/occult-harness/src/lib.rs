@@ -12,6 +12,7 @@
 //! | [`sweep`] | one renderer parameter varied over values, a comparison per value |
 //! | [`particles`] | sprites among a scene, culled against an N-buffer or all drawn (Décoret §3.2) |
 //! | [`shadows`] | spot-light shadow volumes, clamped with litmaps and N-buffers or not (Décoret §3.3) |
+//! | [`suite`] | the performance yardstick: a versioned matrix of cases, every renderer, geometric means, worst cases and violations |
 //! | [`memory`] | whole-process peak memory, opt-in |
 //!
 //! The cross-renderer invariant tests (DESIGN invariant 2: conservative renderers are
@@ -36,6 +37,7 @@ pub mod compare;
 pub mod memory;
 pub mod particles;
 pub mod shadows;
+pub mod suite;
 pub mod sweep;
 
 use occult_raster::RasterError;

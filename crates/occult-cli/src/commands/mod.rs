@@ -8,6 +8,7 @@ pub mod particles;
 pub mod render;
 pub mod scenes;
 pub mod shadows;
+pub mod suite;
 pub mod sweep;
 pub mod walk;
 

@@ -1,0 +1,413 @@
+//! What [`run_suite`](super::run_suite) returns: per case the comparison and its compact
+//! summary, per renderer the summary over the cases, and the violations.
+
+use std::path::Path;
+
+use serde::Serialize;
+
+use super::{Case, CaseScene, SuiteConfig, SUITE_VERSION};
+use crate::compare::{CompareReport, RendererReport};
+
+/// One renderer on one case: the figures the suite is read by.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CaseRenderer {
+    /// The renderer's label.
+    pub name: String,
+    /// Its frames must be identical to the reference's.
+    pub conservative: bool,
+    /// The case's reference renderer.
+    pub is_reference: bool,
+    /// Mean frame time, ms.
+    pub mean_ms: f64,
+    /// `zbuffer`'s mean time over this renderer's (> 1: faster); `None` without `zbuffer`.
+    pub speedup_vs_zbuffer: Option<f64>,
+    /// This renderer's mean time over the oracle's (1: perfect culling at no cost); `None`
+    /// without an oracle.
+    pub vs_oracle: Option<f64>,
+    /// Frames identical to the reference's; `None` when nothing was checked.
+    pub frames_identical: Option<usize>,
+    /// Frames rendered.
+    pub frames: usize,
+    /// Mean triangles rasterized per frame.
+    pub triangles_rasterized: f64,
+    /// Mean exactly visible triangles per frame (the same for every renderer of the case).
+    pub triangles_visible: f64,
+}
+
+impl CaseRenderer {
+    fn of(r: &RendererReport) -> Self {
+        Self {
+            name: r.name.clone(),
+            conservative: r.conservative,
+            is_reference: r.is_reference,
+            mean_ms: r.mean_ms,
+            speedup_vs_zbuffer: r.speedup_vs_zbuffer,
+            vs_oracle: r.vs_oracle,
+            frames_identical: r.frames_identical,
+            frames: r.frames,
+            triangles_rasterized: r.triangles_rasterized,
+            triangles_visible: r.triangles_visible,
+        }
+    }
+
+    /// What this renderer breaks of the demands on conservative renderers (none for an
+    /// approximate one): slower than `zbuffer`, frames not identical.
+    pub fn violations(&self) -> Vec<ViolationKind> {
+        let mut broken = Vec::new();
+        if !self.conservative {
+            return broken;
+        }
+        if self.speedup_vs_zbuffer.is_some_and(|s| s < 1.0) {
+            broken.push(ViolationKind::SlowerThanZbuffer);
+        }
+        if self.frames_identical.is_some_and(|n| n < self.frames) {
+            broken.push(ViolationKind::FramesDiffer);
+        }
+        broken
+    }
+}
+
+/// One case's results.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CaseReport {
+    /// The case's name.
+    pub name: String,
+    /// Its scene (generator spec, or model file relative to the models folder).
+    pub scene: CaseScene,
+    /// The path spec run (`street:32`).
+    pub path: String,
+    /// Frames per renderer.
+    pub frames: usize,
+    /// The scene's name.
+    pub scene_name: String,
+    /// Triangle instances in the scene.
+    pub triangles: u64,
+    /// Time to generate or load the scene, ms.
+    pub scene_build_ms: f64,
+    /// Wall time of the whole case (scene, renderer builds, frames, checks), seconds.
+    pub seconds: f64,
+    /// The reference renderer; `None` when nothing was checked.
+    pub reference: Option<String>,
+    /// The oracle's mean time, ms; `None` without a reference.
+    pub oracle_ms: Option<f64>,
+    /// Every renderer, in the comparison's order (the reference first when not requested).
+    pub renderers: Vec<CaseRenderer>,
+    /// The violations on this case.
+    pub violations: Vec<Violation>,
+    /// The full comparison (per-frame records, counters, phases).
+    pub compare: CompareReport,
+}
+
+impl CaseReport {
+    /// The report of `case` from its comparison.
+    pub(super) fn new(
+        case: &Case,
+        scene_name: String,
+        scene_build_ms: f64,
+        seconds: f64,
+        compare: CompareReport,
+    ) -> Self {
+        let renderers: Vec<CaseRenderer> = compare.renderers.iter().map(CaseRenderer::of).collect();
+        let violations = renderers
+            .iter()
+            .flat_map(|r| {
+                r.violations().into_iter().map(|kind| Violation {
+                    case: case.name.to_string(),
+                    renderer: r.name.clone(),
+                    kind,
+                    speedup_vs_zbuffer: r.speedup_vs_zbuffer,
+                    frames_identical: r.frames_identical,
+                    frames: r.frames,
+                })
+            })
+            .collect();
+        Self {
+            name: case.name.to_string(),
+            scene: case.scene,
+            path: case.path_spec(),
+            frames: compare.frames,
+            scene_name,
+            triangles: compare.scene_triangles,
+            scene_build_ms,
+            seconds,
+            reference: compare.reference.clone(),
+            oracle_ms: compare.oracle.as_ref().map(|o| o.mean_ms),
+            renderers,
+            violations,
+            compare,
+        }
+    }
+
+    /// The renderer called `name`.
+    pub fn renderer(&self, name: &str) -> Option<&CaseRenderer> {
+        self.renderers.iter().find(|r| r.name == name)
+    }
+}
+
+/// A demand on conservative renderers that one broke on one case.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ViolationKind {
+    /// Slower than `zbuffer` (speedup below 1).
+    SlowerThanZbuffer,
+    /// Some frames not identical to the reference's.
+    FramesDiffer,
+}
+
+impl std::fmt::Display for ViolationKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::SlowerThanZbuffer => "slower than zbuffer",
+            Self::FramesDiffer => "frames differ",
+        })
+    }
+}
+
+/// One violation: a conservative renderer, a case, the demand broken and the figures.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Violation {
+    /// The case.
+    pub case: String,
+    /// The renderer.
+    pub renderer: String,
+    /// What it broke.
+    pub kind: ViolationKind,
+    /// Its speedup over `zbuffer` on the case.
+    pub speedup_vs_zbuffer: Option<f64>,
+    /// Its identical frames on the case.
+    pub frames_identical: Option<usize>,
+    /// Frames of the case.
+    pub frames: usize,
+}
+
+/// The case where a ratio was worst, and its value.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Worst {
+    /// The case.
+    pub case: String,
+    /// The ratio there.
+    pub value: f64,
+}
+
+/// One renderer over every case it ran.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RendererSummary {
+    /// The renderer's label.
+    pub name: String,
+    /// Its frames must be identical to the reference's.
+    pub conservative: bool,
+    /// Cases it ran.
+    pub cases: usize,
+    /// Geometric mean of its speedup over `zbuffer` over the cases that measured one.
+    pub speedup_geomean: Option<f64>,
+    /// Its lowest speedup over `zbuffer`.
+    pub speedup_worst: Option<Worst>,
+    /// Geometric mean of its ratio to the oracle.
+    pub oracle_geomean: Option<f64>,
+    /// Its highest ratio to the oracle.
+    pub oracle_worst: Option<Worst>,
+    /// Frames identical to the reference's, over every case that checked them; `None` when
+    /// none did.
+    pub frames_identical: Option<usize>,
+    /// Frames rendered, over every case.
+    pub frames: usize,
+    /// Its violations (see [`Violation`]).
+    pub violations: usize,
+}
+
+/// A case left out, and why.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SkippedCase {
+    /// The case.
+    pub name: String,
+    /// Its scene.
+    pub scene: CaseScene,
+    /// The model file looked for, when there was a folder to look in.
+    pub path: Option<String>,
+    /// Why.
+    pub reason: String,
+}
+
+impl SkippedCase {
+    pub(super) fn new(case: &Case, path: Option<&Path>, reason: &str) -> Self {
+        Self {
+            name: case.name.to_string(),
+            scene: case.scene,
+            path: path.map(|p| p.display().to_string()),
+            reason: reason.to_string(),
+        }
+    }
+}
+
+/// Everything a suite run measured. Serializes to JSON (the CLI's `suite --json`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SuiteReport {
+    /// [`SUITE_VERSION`] of the definition run.
+    pub suite_version: u32,
+    /// Frame width, pixels.
+    pub width: u32,
+    /// Frame height, pixels.
+    pub height: u32,
+    /// Rasterizer worker threads.
+    pub threads: usize,
+    /// The renderers requested, by label.
+    pub algorithms: Vec<String>,
+    /// The models folder, when one was given.
+    pub models: Option<String>,
+    /// The cases run, in order.
+    pub cases: Vec<CaseReport>,
+    /// The cases skipped.
+    pub skipped: Vec<SkippedCase>,
+    /// Per renderer, in the order it first appeared.
+    pub summary: Vec<RendererSummary>,
+    /// Every violation, case by case.
+    pub violations: Vec<Violation>,
+    /// How many violations (the length of `violations`): 0 when every conservative renderer
+    /// was at least as fast as `zbuffer` with identical frames on every case.
+    pub violation_count: usize,
+    /// Wall time of the run, seconds.
+    pub seconds: f64,
+}
+
+impl SuiteReport {
+    /// The report of a run of `config` over the cases `done`, with `skipped` left out.
+    pub(super) fn new(config: &SuiteConfig, done: Vec<CaseReport>, skipped: Vec<SkippedCase>) -> Self {
+        let violations: Vec<Violation> = done.iter().flat_map(|c| c.violations.iter().cloned()).collect();
+        Self {
+            suite_version: SUITE_VERSION,
+            width: config.width,
+            height: config.height,
+            threads: done.first().map_or_else(
+                || match config.options.raster.threads {
+                    0 => rayon::current_num_threads(),
+                    n => n,
+                },
+                |c| c.compare.threads,
+            ),
+            algorithms: config.algorithms.iter().map(|a| a.label()).collect(),
+            models: config.models.as_ref().map(|m| m.display().to_string()),
+            summary: summarize(&done),
+            violation_count: violations.len(),
+            violations,
+            seconds: done.iter().map(|c| c.seconds).sum(),
+            cases: done,
+            skipped,
+        }
+    }
+
+    /// The summary of the renderer called `name`.
+    pub fn renderer(&self, name: &str) -> Option<&RendererSummary> {
+        self.summary.iter().find(|r| r.name == name)
+    }
+}
+
+/// Per renderer (in order of first appearance): geometric means and worst cases.
+fn summarize(cases: &[CaseReport]) -> Vec<RendererSummary> {
+    let mut names: Vec<&str> = Vec::new();
+    for r in cases.iter().flat_map(|c| &c.renderers) {
+        if !names.contains(&r.name.as_str()) {
+            names.push(r.name.as_str());
+        }
+    }
+    names
+        .into_iter()
+        .map(|name| {
+            let runs: Vec<(&str, &CaseRenderer)> = cases
+                .iter()
+                .filter_map(|c| c.renderer(name).map(|r| (c.name.as_str(), r)))
+                .collect();
+            let speedups: Vec<(&str, f64)> = runs
+                .iter()
+                .filter_map(|(c, r)| r.speedup_vs_zbuffer.map(|s| (*c, s)))
+                .collect();
+            let oracle: Vec<(&str, f64)> = runs.iter().filter_map(|(c, r)| r.vs_oracle.map(|s| (*c, s))).collect();
+            let checked: Vec<usize> = runs.iter().filter_map(|(_, r)| r.frames_identical).collect();
+            RendererSummary {
+                name: name.to_string(),
+                conservative: runs.iter().all(|(_, r)| r.conservative),
+                cases: runs.len(),
+                speedup_geomean: geomean(&speedups),
+                speedup_worst: worst(&speedups, |a, b| a < b),
+                oracle_geomean: geomean(&oracle),
+                oracle_worst: worst(&oracle, |a, b| a > b),
+                frames_identical: (!checked.is_empty()).then(|| checked.iter().sum()),
+                frames: runs.iter().map(|(_, r)| r.frames).sum(),
+                violations: runs.iter().map(|(_, r)| r.violations().len()).sum(),
+            }
+        })
+        .collect()
+}
+
+/// The geometric mean of the positive, finite values; `None` when there is none.
+fn geomean(values: &[(&str, f64)]) -> Option<f64> {
+    let logs: Vec<f64> = values
+        .iter()
+        .map(|(_, v)| *v)
+        .filter(|v| *v > 0.0 && v.is_finite())
+        .map(f64::ln)
+        .collect();
+    (!logs.is_empty()).then(|| (logs.iter().sum::<f64>() / logs.len() as f64).exp())
+}
+
+/// The value for which `worse(value, every other)` holds (the first such), with its case.
+fn worst(values: &[(&str, f64)], worse: fn(f64, f64) -> bool) -> Option<Worst> {
+    values
+        .iter()
+        .copied()
+        .reduce(|w, x| if worse(x.1, w.1) { x } else { w })
+        .map(|(case, value)| Worst {
+            case: case.to_string(),
+            value,
+        })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn geometric_means_skip_what_is_not_a_ratio() {
+        assert_eq!(geomean(&[]), None);
+        assert_eq!(geomean(&[("a", 0.0), ("b", f64::NAN)]), None);
+        let g = geomean(&[("a", 2.0), ("b", 8.0), ("c", f64::INFINITY)]).unwrap();
+        assert!((g - 4.0).abs() < 1e-12, "{g}");
+    }
+
+    #[test]
+    fn worst_is_the_first_extreme() {
+        let v = [("a", 2.0), ("b", 0.5), ("c", 0.5), ("d", 3.0)];
+        assert_eq!(worst(&v, |a, b| a < b).unwrap().case, "b");
+        assert_eq!(worst(&v, |a, b| a > b).unwrap().case, "d");
+        assert_eq!(worst(&[], |a, b| a < b), None);
+    }
+
+    #[test]
+    fn only_conservative_renderers_owe_speed_and_identity() {
+        let mut r = CaseRenderer {
+            name: "x".into(),
+            conservative: true,
+            is_reference: false,
+            mean_ms: 2.0,
+            speedup_vs_zbuffer: Some(0.99),
+            vs_oracle: Some(3.0),
+            frames_identical: Some(3),
+            frames: 4,
+            triangles_rasterized: 10.0,
+            triangles_visible: 5.0,
+        };
+        assert_eq!(
+            r.violations(),
+            [ViolationKind::SlowerThanZbuffer, ViolationKind::FramesDiffer]
+        );
+        r.speedup_vs_zbuffer = Some(1.0);
+        r.frames_identical = Some(4);
+        assert!(r.violations().is_empty());
+        r.speedup_vs_zbuffer = None;
+        r.frames_identical = None;
+        assert!(r.violations().is_empty(), "nothing measured, nothing broken");
+        r.conservative = false;
+        r.speedup_vs_zbuffer = Some(0.1);
+        r.frames_identical = Some(0);
+        assert!(r.violations().is_empty());
+    }
+}

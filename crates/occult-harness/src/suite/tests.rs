@@ -1,0 +1,185 @@
+//! The runner on tiny case lists: summaries, violations, skipped and failing cases.
+
+use super::*;
+use occult_render::Algorithm;
+
+/// Two small generated cases, fast on two cores.
+const TINY: [Case; 2] = [
+    Case {
+        name: "tiny-city-street",
+        scene: CaseScene::Generated("city:blocks=1,detail=1,variants=2"),
+        path: "street",
+        frames: 2,
+        quick: true,
+    },
+    Case {
+        name: "tiny-terrain-orbit",
+        scene: CaseScene::Generated("terrain:g=8"),
+        path: "circle",
+        frames: 3,
+        quick: false,
+    },
+];
+
+const CUBE_CASE: Case = Case {
+    name: "cube-orbit",
+    scene: CaseScene::Model("cube/cube.obj"),
+    path: "circle",
+    frames: 2,
+    quick: false,
+};
+
+fn config<A: Into<AlgoSpec>>(algorithms: impl IntoIterator<Item = A>) -> SuiteConfig {
+    let mut config = SuiteConfig::new(algorithms, 48, 32);
+    config.options.raster.threads = 2;
+    config
+}
+
+/// A fresh directory for one test's files.
+fn scratch(test: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("occult-suite-{test}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn every_renderer_is_summarised_over_every_case() {
+    let mut events = Vec::new();
+    let report = run_suite(&TINY, &config(Algorithm::all()), &mut |e| {
+        events.push(match e {
+            SuiteProgress::Case { case, .. } => format!("case {}", case.name),
+            SuiteProgress::Compare { .. } => "compare".to_string(),
+            SuiteProgress::Skipped(s) => format!("skipped {}", s.name),
+            SuiteProgress::Done(c) => format!("done {}", c.name),
+        })
+    })
+    .unwrap();
+    assert_eq!(report.suite_version, SUITE_VERSION);
+    assert_eq!((report.width, report.height), (48, 32));
+    assert_eq!(report.cases.len(), 2);
+    assert!(report.skipped.is_empty());
+    assert_eq!(report.cases[1].path, "circle:3");
+    assert_eq!(report.cases[1].frames, 3);
+    assert_eq!(report.cases[1].triangles, 2 * 8 * 8);
+    let names: Vec<&str> = report.summary.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(names, Algorithm::all().iter().map(|a| a.name()).collect::<Vec<_>>());
+    for r in &report.summary {
+        assert_eq!(r.cases, 2, "{}", r.name);
+        assert_eq!(r.frames, 5);
+        assert!(r.speedup_geomean.is_some_and(|s| s > 0.0), "{}", r.name);
+        assert!(r.oracle_geomean.is_some_and(|s| s > 0.0), "{}", r.name);
+        let worst = r.speedup_worst.as_ref().unwrap();
+        assert!(worst.case.starts_with("tiny-"));
+        assert!(worst.value <= r.speedup_geomean.unwrap() * (1.0 + 1e-12));
+        assert!(r.oracle_worst.as_ref().unwrap().value >= r.oracle_geomean.unwrap() * (1.0 - 1e-12));
+        if r.conservative {
+            assert_eq!(r.frames_identical, Some(5), "{}: DESIGN invariant 2", r.name);
+        }
+    }
+    let zbuffer = report.renderer("zbuffer").unwrap();
+    assert_eq!(zbuffer.speedup_geomean, Some(1.0));
+    assert_eq!(zbuffer.violations, 0);
+    // Only speed can be violated here: conservative frames are identical.
+    assert!(report
+        .violations
+        .iter()
+        .all(|v| v.kind == ViolationKind::SlowerThanZbuffer && v.speedup_vs_zbuffer.unwrap() < 1.0));
+    assert!(report.violations.iter().all(|v| v.renderer != "rzb"));
+    assert_eq!(report.violation_count, report.violations.len());
+    assert_eq!(
+        report.violation_count,
+        report.summary.iter().map(|r| r.violations).sum::<usize>()
+    );
+    assert_eq!(events.first().unwrap(), "case tiny-city-street");
+    assert_eq!(events.last().unwrap(), "done tiny-terrain-orbit");
+    assert!(events.contains(&"compare".to_string()));
+    let json = serde_json::to_value(&report).unwrap();
+    for field in [
+        "suite_version",
+        "cases",
+        "summary",
+        "violations",
+        "violation_count",
+        "skipped",
+    ] {
+        assert!(json.get(field).is_some(), "{field}");
+    }
+    assert_eq!(json["cases"][0]["scene"]["kind"], "generated");
+}
+
+#[test]
+fn zbuffer_is_measured_although_not_requested() {
+    let report = run_suite(&TINY[1..], &config([Algorithm::FRUSTUM]), &mut |_| {}).unwrap();
+    assert_eq!(report.algorithms, ["frustum"]);
+    let case = &report.cases[0];
+    assert_eq!(case.reference.as_deref(), Some("zbuffer"));
+    assert!(case.renderer("frustum").unwrap().speedup_vs_zbuffer.is_some());
+    assert!(case.oracle_ms.is_some());
+}
+
+#[test]
+fn model_cases_are_skipped_without_their_file_and_run_with_it() {
+    // No models folder: skipped, saying so.
+    let report = run_suite(&[CUBE_CASE], &config([Algorithm::ZBUFFER]), &mut |_| {}).unwrap();
+    assert!(report.cases.is_empty());
+    assert_eq!(report.skipped[0].name, "cube-orbit");
+    assert_eq!(report.skipped[0].path, None);
+    assert_eq!(report.summary, []);
+    assert_eq!(report.violation_count, 0);
+
+    // A folder without the file: skipped, with the path looked for.
+    let dir = scratch("models");
+    let mut c = config([Algorithm::ZBUFFER, Algorithm::FRUSTUM]);
+    c.models = Some(dir.clone());
+    let cases = [CUBE_CASE, TINY[1]];
+    let report = run_suite(&cases, &c, &mut |_| {}).unwrap();
+    assert_eq!(report.cases.len(), 1);
+    let skipped = &report.skipped[0];
+    assert!(skipped.path.as_ref().unwrap().ends_with("cube.obj"), "{skipped:?}");
+    assert!(skipped.reason.contains("missing"));
+
+    // With the file.
+    std::fs::create_dir_all(dir.join("cube")).unwrap();
+    let mut obj = String::new();
+    for i in 0..8 {
+        obj += &format!("v {} {} {}\n", i & 1, i >> 1 & 1, i >> 2 & 1);
+    }
+    obj += "f 1 3 4 2\nf 5 6 8 7\nf 1 2 6 5\nf 3 7 8 4\nf 1 5 7 3\nf 2 4 8 6\n";
+    std::fs::write(dir.join("cube/cube.obj"), obj).unwrap();
+    let report = run_suite(&cases, &c, &mut |_| {}).unwrap();
+    assert_eq!(report.cases.len(), 2);
+    assert!(report.skipped.is_empty());
+    assert_eq!(report.cases[0].triangles, 12);
+    assert_eq!(report.cases[0].scene_name, "cube.obj");
+    assert_eq!(report.renderer("frustum").unwrap().frames_identical, Some(5));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn bad_input_is_an_error_naming_it() {
+    let c = config([Algorithm::ZBUFFER]);
+    assert!(matches!(run_suite(&[], &c, &mut |_| {}), Err(SuiteError::NoCases)));
+
+    let mut unreadable = c.clone();
+    unreadable.models = Some(PathBuf::from("/no/such/models/folder"));
+    let e = run_suite(&TINY[1..], &unreadable, &mut |_| {}).unwrap_err();
+    assert!(matches!(e, SuiteError::Models { .. }));
+    assert!(e.to_string().contains("/no/such/models/folder"));
+
+    let bad_scene = Case {
+        scene: CaseScene::Generated("city:blocks=0"),
+        ..TINY[0]
+    };
+    let e = run_suite(&[bad_scene], &c, &mut |_| {}).unwrap_err();
+    assert!(matches!(e, SuiteError::Scene { .. }));
+    assert!(e.to_string().contains("tiny-city-street"));
+
+    let bad_path = Case {
+        path: "spiral",
+        ..TINY[1]
+    };
+    let e = run_suite(&[bad_path], &c, &mut |_| {}).unwrap_err();
+    assert!(matches!(e, SuiteError::Path { .. }));
+    assert!(e.to_string().contains("spiral:3"));
+}
