@@ -51,7 +51,9 @@
 //!   whose culling did not pay ([`FramePayoff::paid`]), the next 2, 4, 8 .. [`MAX_DIRECT_RUN`]
 //!   frames (doubling after each probe that did not pay, back to 2 after one that did) are
 //!   drawn by an embedded [`FrustumCulling`] (counter `payoff_direct`): what `frustum` draws,
-//!   the way it draws it (whole instances and its own mesh BVHs).
+//!   the way it draws it (whole instances and its own mesh BVHs). A frame that finds no
+//!   occluder at all (an empty depth buffer hides nothing) is drawn the same way, without
+//!   counting as a probe (counter `no_occluders`).
 //!
 //! # First frame
 //! With `occluders=visible` and no previous frame (and after a resolution change) the
@@ -174,6 +176,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "rect_pixels",
         "survivors_drawn",
         "payoff_direct",
+        "no_occluders",
         "triangles_saved",
         "second_pass_saved",
     ],
@@ -920,7 +923,7 @@ impl Renderer for NBufferCulling {
             stats.counters.add("payoff_direct", 1);
             return Ok(stats);
         }
-        let (start, cleared_at, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
+        crate::check_frame(view, frame)?;
         let (w, h) = (view.width(), view.height());
         if self.last_size != (w, h) {
             self.visible.fill(false);
@@ -928,7 +931,6 @@ impl Renderer for NBufferCulling {
         }
         let frustum = view.frustum(&Affine3A::IDENTITY);
         self.drawn.fill(false);
-        let mut payoff = self.payoff.begin(cleared_at);
         let project = Projector {
             clip_from_world: view.clip_from_object(&Affine3A::IDENTITY),
             width: f64::from(w),
@@ -936,13 +938,15 @@ impl Renderer for NBufferCulling {
         };
 
         // Occluders: last frame's visible objects still in the frustum (§3.1), and the
-        // objects of this view with the largest screen boxes.
+        // objects of this view with the largest screen boxes. Chosen before the frame is
+        // cleared: with none, nothing can be culled.
         let t = Instant::now();
+        let mut walk = FrameStats::default();
         let mut occluders = Vec::new();
         if self.options.occluders.visible() {
             for i in 0..self.objects.len() {
                 if self.visible[i] {
-                    if test_box(&mut stats, &frustum, &self.objects[i].bounds) == Containment::Outside {
+                    if test_box(&mut walk, &frustum, &self.objects[i].bounds) == Containment::Outside {
                         continue;
                     }
                     self.drawn[i] = true;
@@ -950,15 +954,34 @@ impl Renderer for NBufferCulling {
                 }
             }
         }
+        let mut near_count = 0;
         if self.options.occluders.near() {
-            let near = self.near_occluders(&frustum, &project, &mut stats);
-            stats.counters.add("near_occluders", near.len() as u64);
+            let near = self.near_occluders(&frustum, &project, &mut walk);
+            near_count = near.len() as u64;
             for i in near {
                 if !self.drawn[i] {
                     self.drawn[i] = true;
                     occluders.push(i);
                 }
             }
+        }
+        if let (Some(direct), true) = (&mut self.direct, occluders.is_empty()) {
+            // Nothing to occlude with: an empty depth buffer hides nothing.
+            let mut stats = direct.render(view, frame)?;
+            stats.counters.add("no_occluders", 1);
+            stats.phases.add(Phase::Cull, t.elapsed());
+            return Ok(stats);
+        }
+        let selection = t.elapsed();
+        let (start, cleared_at, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
+        let start = start - selection;
+        let mut payoff = self.payoff.begin(cleared_at - selection);
+        let t = Instant::now() - selection;
+        stats.nodes_visited += walk.nodes_visited;
+        stats.boxes_tested += walk.boxes_tested;
+        stats.boxes_culled += walk.boxes_culled;
+        if self.options.occluders.near() {
+            stats.counters.add("near_occluders", near_count);
         }
         let draws = draws_of(&self.scene, &self.objects, &self.mesh_bvhs, view, &mut occluders);
         stats.phases.add(Phase::Cull, t.elapsed());
@@ -1245,37 +1268,12 @@ mod tests {
 
     #[test]
     fn coarse_rectangles_hold_every_pixel_and_stay_empty_when_empty() {
-        let r = PixelRect {
-            x0: 3,
-            y0: 4,
-            x1: 9,
-            y1: 5,
-        };
+        let rect = |x0, y0, x1, y1| PixelRect { x0, y0, x1, y1 };
+        let r = rect(3, 4, 9, 5);
         assert_eq!(coarse(r, 0), r);
-        assert_eq!(
-            coarse(r, 1),
-            PixelRect {
-                x0: 1,
-                y0: 2,
-                x1: 5,
-                y1: 3
-            }
-        );
-        assert_eq!(
-            coarse(r, 2),
-            PixelRect {
-                x0: 0,
-                y0: 1,
-                x1: 3,
-                y1: 2
-            }
-        );
-        let empty = PixelRect {
-            x0: 5,
-            y0: 2,
-            x1: 5,
-            y1: 7,
-        };
+        assert_eq!(coarse(r, 1), rect(1, 2, 5, 3));
+        assert_eq!(coarse(r, 2), rect(0, 1, 3, 2));
+        let empty = rect(5, 2, 5, 7);
         assert_eq!(coarse(empty, 2), empty);
     }
 
