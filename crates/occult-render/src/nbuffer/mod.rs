@@ -110,7 +110,7 @@ pub const MAX_OBJECTS: u64 = 1 << 24;
 /// Registry entry of [`NBufferCulling`].
 pub static INFO: AlgorithmInfo = AlgorithmInfo {
     name: "nbuffer",
-    summary: "N-buffer occlusion culling (Décoret 2005): last frame's visible objects as occluders, 4-lookup box tests",
+    summary: "N-buffer occlusion culling (Décoret 2005): the objects with the largest screen boxes (or last frame's visible ones) as occluders, 4-lookup box tests",
     params: &[
         ParamDoc {
             key: "hierarchy",
