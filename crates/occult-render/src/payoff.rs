@@ -182,6 +182,13 @@ impl FramePayoff {
         self.untested += n;
     }
 
+    /// True unless, as of `now`, the frame's tests cost more than they saved by more than
+    /// [`MIN_ALLOWANCE_TIME`] (so short frames always pay): for renderers whose costs come
+    /// before their tests and decide per frame whether to cull at all.
+    pub fn paid(&self, now: Instant) -> bool {
+        self.cost_ns(now) <= self.gain_ns() + MIN_ALLOWANCE_TIME.as_nanos() as f64
+    }
+
     /// True once the frame stopped testing.
     pub fn stopped(&self) -> bool {
         self.stopped
@@ -242,6 +249,7 @@ mod tests {
         assert!(f.stopped());
         assert!(!f.test());
         assert_eq!(f.counters(), [("payoff_stopped", 1), ("payoff_untested", 2)]);
+        assert!(!f.paid(Instant::now()));
         p.end(&f);
         assert_eq!(p.allowance, MAX_ALLOWANCE * 0.5);
         assert_eq!(p.ns_per_triangle, 1_000.0);
@@ -260,6 +268,7 @@ mod tests {
         // Time spent rasterizing is not a cost of the tests.
         f.rasterized(1_000, Duration::from_micros(30), true);
         assert!((0..10 * CHECK_EVERY).all(|_| f.test()));
+        assert!(f.paid(Instant::now()));
         p.end(&f);
         assert_eq!(p.allowance, 2.0 * MIN_ALLOWANCE);
         assert_eq!(p.ns_per_triangle, 30.0);

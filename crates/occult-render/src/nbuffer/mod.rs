@@ -2,10 +2,11 @@
 //!
 //! # References
 //! Décoret, *N-Buffers for efficient depth map query*, 2005 (`papers/n-buffers-decoret-2005.txt`):
-//! - §3.1: occluders are the objects visible in the previous frame [BWPP04]; they are drawn,
-//!   an N-buffer is built from the depth buffer (§2, [`occult_raster::NBuffer`], min variant
-//!   = farthest depth in our reversed-Z), every object's screen box and nearest depth is
-//!   tested with four lookups (Fig. 3 cover), and the survivors not drawn yet are drawn.
+//! - §3.1: occluders are drawn, an N-buffer is built from the depth buffer (§2,
+//!   [`occult_raster::NBuffer`], min variant = farthest depth in our reversed-Z), every
+//!   object's screen box and nearest depth is tested with four lookups (Fig. 3 cover), and
+//!   the survivors not drawn yet are drawn. The paper's occluders are the objects visible in
+//!   the previous frame [BWPP04] (`occluders=visible`); see *Parts* for the default.
 //! - §3.2: particle culling, [`particles`].
 //! - §4.2 / Table 2: the same test over a hierarchy of bounding volumes (`hierarchy=bvh`) or
 //!   over every object (`hierarchy=flat`): testing a node costs the same four lookups as
@@ -14,7 +15,9 @@
 //! # Objects
 //! An object is a mesh instance of the scene DAG, or, for a mesh of more than `leaf`
 //! triangles, a leaf of a median-split BVH over its triangles (so one terrain mesh is many
-//! objects). Transforms are composed from the root exactly as `frustum` and `zbuffer` do and
+//! objects). The default `leaf` (256) splits a building or a machine into parts: a part's
+//! box is tighter than the whole's (more are culled), and a near occluder is a wall rather
+//! than a whole building. Transforms are composed from the root exactly as `frustum` and `zbuffer` do and
 //! each object keeps its instance's first item id, so frames are bit-identical to `zbuffer`'s
 //! (DESIGN invariant 2): every object that can put a fragment in the frame is drawn.
 //! Objects are flattened at build time (refused above [`MAX_OBJECTS`]); the hierarchy is a
@@ -27,13 +30,43 @@
 //! walk's counted frustum test ([`crate::walk::test_box`]) and BVH descent
 //! ([`crate::walk::cull_bvh`]).
 //!
+//! # Parts
+//! - **Near occluders** (`occluders=near`, default; `both` adds last frame's visible set):
+//!   the objects in the frustum whose screen boxes cover at least `near_area` of the screen,
+//!   largest first, at most `near_max` (a box reaching the near plane counts as the whole
+//!   screen). Found by a frustum walk of the hierarchy that skips subtrees whose own screen
+//!   box is smaller than `near_area`. They occlude from the first frame and after any jump of
+//!   the camera, where the visible set of the last frame occludes nothing.
+//! - **Coarse N-buffer** (`scale`): the depth map is first reduced to the farthest depth of
+//!   each `scale × scale` block, the N-buffer is built over that, and a tested rectangle is
+//!   widened to the blocks holding its pixels: conservative (a block's sample is at most
+//!   every pixel's depth), a build `scale²` times smaller for a slightly coarser test.
+//! - **Second pass** (`passes=2`): the survivors are sorted by nearest depth; the nearer
+//!   half is drawn, the N-buffer rebuilt over the new depth, and the farther half tested
+//!   again; skipped for [`SECOND_PASS_SKIP`] frames after a frame where the rebuild cost more
+//!   than the drawing it saved.
+//! - **Payoff** (`payoff`, [`crate::payoff`]): a frame weighs its culling (everything but
+//!   rasterization: the occluder walk, the N-buffer builds, the tests, the read-back) against
+//!   the triangles its tests removed times the measured cost of a triangle. After a frame
+//!   whose culling did not pay ([`FramePayoff::paid`]), the next 2, 4, 8 .. [`MAX_DIRECT_RUN`]
+//!   frames (doubling after each probe that did not pay, back to 2 after one that did) are
+//!   drawn by an embedded [`FrustumCulling`] (counter `payoff_direct`): what `frustum` draws,
+//!   the way it draws it (whole instances and its own mesh BVHs). A frame that finds no
+//!   occluder at all (an empty depth buffer hides nothing) is drawn the same way, without
+//!   counting as a probe (counter `no_occluders`).
+//!
 //! # First frame
-//! With no previous frame (and after a resolution change) the occluder set is empty: the
-//! N-buffer of an empty depth buffer culls nothing, so the first frame is frustum culling.
-//! Each frame's visible objects are read back from the item buffer (exact, not the set of
-//! test survivors) and become the next frame's occluders.
+//! With `occluders=visible` and no previous frame (and after a resolution change) the
+//! occluder set is empty: the N-buffer of an empty depth buffer culls nothing, so the first
+//! frame is frustum culling. With `visible` or `both`, each frame's visible objects are read
+//! back from the item buffer (exact, not the set of test survivors) and become the next
+//! frame's occluders; `near` needs no read-back.
 //!
 //! # Deviations
+//! - Occluders (default `near`): the paper selects last frame's visible set; on walks whose
+//!   views jump (a street snake) that set is small and mostly out of view.
+//! - Additions not in the paper: `scale`, `passes=2` and `payoff` (above); the paper builds
+//!   one full-resolution N-buffer per frame and always culls.
 //! - Software throughout: the N-buffer lookups are plain loads (the paper read pixels back
 //!   from GPU textures, §4.2).
 //! - The screen box of a bounding box is the pixel-centre rectangle of its 8 projected
@@ -48,9 +81,11 @@
 //!   `depth_comparisons` is the pixels compared (the lookups with the N-buffer).
 //!
 //! # Cost
-//! Per frame: drawing last frame's visible set, one N-buffer build (resolution only), 4 loads
-//! per tested box (one when its rectangle is a single pixel, none when it covers no pixel centre), and
-//! a pass over the item buffer. Not worth it when nearly everything is visible.
+//! Per frame: the occluder walk (projecting the boxes of the objects and nodes in the
+//! frustum), drawing the occluders, one reduction and N-buffer build (resolution only; two
+//! with `passes=2`), 4 loads per tested box (one when its rectangle is a single pixel, none
+//! when it covers no pixel centre), and with `visible` or `both` a pass over the item buffer.
+//! Not worth it when nearly everything is visible: then `payoff` draws directly.
 
 pub mod particles;
 pub mod shadows;
@@ -58,11 +93,14 @@ pub mod shadows;
 use std::sync::Arc;
 use std::time::Instant;
 
-use occult_core::{Aabb, Affine3A, Containment, ItemId, NodeId, NodeKind, Scene, Vec3, View, NO_ITEM};
+use occult_core::{Aabb, Affine3A, Containment, Frustum, ItemId, NodeId, NodeKind, Scene, Vec3, View, NO_ITEM};
 use occult_raster::{query_box_counted, Draw, DrawTriangles, Extremum, Frame, NBuffer, PixelRect, Rasterizer};
 use occult_spatial::Bvh;
+use rayon::prelude::*;
 
+use crate::frustum::{FrustumCulling, FrustumOptions};
 use crate::nodes::{per_node, triangle_boxes};
+use crate::payoff::{FramePayoff, Payoff};
 use crate::walk::{cull_bvh, test_box};
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Phase, RenderError, RenderOptions, Renderer, Result};
 
@@ -72,7 +110,7 @@ pub const MAX_OBJECTS: u64 = 1 << 24;
 /// Registry entry of [`NBufferCulling`].
 pub static INFO: AlgorithmInfo = AlgorithmInfo {
     name: "nbuffer",
-    summary: "N-buffer occlusion culling (Décoret 2005): last frame's visible objects as occluders, 4-lookup box tests",
+    summary: "N-buffer occlusion culling (Décoret 2005): the objects with the largest screen boxes (or last frame's visible ones) as occluders, 4-lookup box tests",
     params: &[
         ParamDoc {
             key: "hierarchy",
@@ -91,7 +129,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         },
         ParamDoc {
             key: "leaf",
-            default: "4096",
+            default: "256",
             help: "triangles per object: meshes above this are split into BVH leaves (>= 1)",
         },
         ParamDoc {
@@ -99,13 +137,48 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             default: "4",
             help: "objects per leaf of the hierarchy over objects (>= 1)",
         },
+        ParamDoc {
+            key: "occluders",
+            default: "near",
+            help: "occluders: last frame's visible objects (visible, the paper), the objects of this view with the largest screen boxes (near), or both",
+        },
+        ParamDoc {
+            key: "near_area",
+            default: "0.004",
+            help: "near occluders: least share of the screen an object's box must cover (0..=1)",
+        },
+        ParamDoc {
+            key: "near_max",
+            default: "128",
+            help: "near occluders: most objects taken, largest screen boxes first",
+        },
+        ParamDoc {
+            key: "scale",
+            default: "2",
+            help: "pixels per side of one N-buffer sample (1, 2, 4 or 8): the depth is first reduced to the farthest of each block (a cheaper build, a coarser test)",
+        },
+        ParamDoc {
+            key: "passes",
+            default: "2",
+            help: "1: draw every survivor; 2: draw the nearer half, rebuild the N-buffer, test the farther half again (skipped for 3 frames after one where the rebuild cost more than it saved)",
+        },
+        ParamDoc {
+            key: "payoff",
+            default: "on",
+            help: "after a frame whose culling cost more than it saved, draw the frustum's objects directly, probing again after 2, 4, 8 .. 16 frames (on|off)",
+        },
     ],
     counters: &[
         "occluders_drawn",
+        "near_occluders",
         "depth_comparisons",
         "nbuffer_lookups",
         "rect_pixels",
         "survivors_drawn",
+        "payoff_direct",
+        "no_occluders",
+        "triangles_saved",
+        "second_pass_saved",
     ],
     conservative: true,
     build: |scene, options, params| {
@@ -116,13 +189,23 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             query: params.choice("test", &["nbuffer", "query"], "nbuffer")? == "query",
             leaf_size: params.get("leaf", defaults.leaf_size)?,
             group_leaf_size: params.get("group_leaf", defaults.group_leaf_size)?,
+            occluders: match params.choice("occluders", &["visible", "near", "both"], "near")? {
+                "visible" => Occluders::Visible,
+                "near" => Occluders::Near,
+                _ => Occluders::Both,
+            },
+            near_area: params.get("near_area", defaults.near_area)?,
+            near_max: params.get("near_max", defaults.near_max)?,
+            payoff: params.flag("payoff", defaults.payoff)?,
+            scale: params.get("scale", defaults.scale)?,
+            passes: params.get("passes", defaults.passes)?,
         };
         Ok(Box::new(NBufferCulling::with_options(scene, options, &no)?))
     },
 };
 
 /// Tunables of [`NBufferCulling`].
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct NBufferOptions {
     /// Test a BVH over the objects top-down (true) or every object (false).
     pub hierarchy: bool,
@@ -136,7 +219,54 @@ pub struct NBufferOptions {
     pub leaf_size: usize,
     /// Objects per leaf of the hierarchy (≥ 1).
     pub group_leaf_size: usize,
+    /// Which objects are drawn first, as occluders.
+    pub occluders: Occluders,
+    /// Near occluders: the least share of the screen (0..=1) an object's screen box covers.
+    pub near_area: f64,
+    /// Near occluders: the most objects taken, largest screen boxes first.
+    pub near_max: usize,
+    /// Draw the frustum's objects directly after a frame whose culling did not pay
+    /// ([`crate::payoff`]), probing again after [`MIN_DIRECT_RUN`], twice that .. [`MAX_DIRECT_RUN`] frames.
+    pub payoff: bool,
+    /// Pixels per side of one N-buffer sample (1, 2, 4 or 8): the depth map is reduced to
+    /// the farthest depth of each `scale × scale` block before the N-buffer is built over it.
+    pub scale: u32,
+    /// 1, or 2: the nearer half of the survivors is drawn, the N-buffer rebuilt and the
+    /// farther half tested again (skipped for [`SECOND_PASS_SKIP`] frames after a frame
+    /// where the rebuild cost more than the drawing it saved).
+    pub passes: u32,
 }
+
+/// Which objects a frame draws first, before building the N-buffer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Occluders {
+    /// §3.1: the objects visible in the previous frame (read back from its item buffer).
+    Visible,
+    /// The objects of this view whose screen boxes are largest (nearest, biggest).
+    Near,
+    /// Both sets.
+    Both,
+}
+
+impl Occluders {
+    fn visible(self) -> bool {
+        self != Occluders::Near
+    }
+
+    fn near(self) -> bool {
+        self != Occluders::Visible
+    }
+}
+
+/// Frames without a second pass after one that did not pay (`passes=2`).
+pub const SECOND_PASS_SKIP: u32 = 3;
+
+/// Shortest run of frames drawn directly after a frame whose culling did not pay (a probe
+/// costs a culling frame: a run of one would probe every other frame).
+pub const MIN_DIRECT_RUN: u32 = 2;
+
+/// Longest run of frames drawn directly (without culling) before culling is tried again.
+pub const MAX_DIRECT_RUN: u32 = 16;
 
 impl Default for NBufferOptions {
     fn default() -> Self {
@@ -144,8 +274,14 @@ impl Default for NBufferOptions {
             hierarchy: true,
             four_square: true,
             query: false,
-            leaf_size: 4096,
+            leaf_size: 256,
             group_leaf_size: 4,
+            occluders: Occluders::Near,
+            near_area: 0.004,
+            near_max: 128,
+            payoff: true,
+            scale: 2,
+            passes: 2,
         }
     }
 }
@@ -154,12 +290,31 @@ impl NBufferOptions {
     /// Checks the ranges.
     ///
     /// # Errors
-    /// [`RenderError::BadParameter`] for a zero leaf size.
+    /// [`RenderError::BadParameter`] for a zero leaf size, a `scale` other than 1, 2, 4 or 8,
+    /// `passes` other than 1 or 2, or a `near_area` outside 0..=1.
     pub fn validate(&self) -> Result<()> {
         if self.leaf_size == 0 || self.group_leaf_size == 0 {
             return Err(RenderError::BadParameter(format!(
                 "nbuffer: leaf={} and group_leaf={} must be at least 1",
                 self.leaf_size, self.group_leaf_size
+            )));
+        }
+        if ![1, 2, 4, 8].contains(&self.scale) {
+            return Err(RenderError::BadParameter(format!(
+                "nbuffer: scale={} must be 1, 2, 4 or 8",
+                self.scale
+            )));
+        }
+        if self.passes == 0 || self.passes > 2 {
+            return Err(RenderError::BadParameter(format!(
+                "nbuffer: passes={} must be 1 or 2",
+                self.passes
+            )));
+        }
+        if !(0.0..=1.0).contains(&self.near_area) {
+            return Err(RenderError::BadParameter(format!(
+                "nbuffer: near_area={} must be in 0..=1",
+                self.near_area
             )));
         }
         Ok(())
@@ -178,6 +333,8 @@ struct Object {
     leaf_node: u32,
     /// Rank of its mesh instance in item order.
     instance: u32,
+    /// Its triangles.
+    triangles: u32,
 }
 
 /// A mesh instance's item range and its objects.
@@ -212,6 +369,20 @@ pub struct NBufferCulling {
     last_size: (u32, u32),
     /// The flat list's batched tests (scratch).
     batch: Batch,
+    /// Per node of `hierarchy`: the triangles of its objects (what culling it saves).
+    node_triangles: Vec<u64>,
+    /// Whether culling pays ([`crate::payoff`]).
+    payoff: Payoff,
+    /// Frames still to draw directly before culling is tried again.
+    direct_left: u32,
+    /// Length of the next run of direct frames (doubles after each probe that did not pay).
+    direct_run: u32,
+    /// What draws the direct frames (`payoff=on`).
+    direct: Option<FrustumCulling>,
+    /// The depth map reduced to `scale × scale` blocks (scratch).
+    coarse_depth: Vec<f32>,
+    /// Frames still to render without the second pass.
+    second_pass_skip: u32,
 }
 
 impl NBufferCulling {
@@ -286,7 +457,7 @@ impl NBufferCulling {
                 first_object: objects.len() as u32,
                 mesh: mesh_id,
             });
-            let mut push = |object_bounds: Aabb, leaf_node: u32| {
+            let mut push = |object_bounds: Aabb, leaf_node: u32, triangles: usize| {
                 objects.push(Object {
                     world_from_object: *world_from_object,
                     bounds: widen(object_bounds.transformed(world_from_object)),
@@ -294,22 +465,44 @@ impl NBufferCulling {
                     mesh: mesh_id,
                     leaf_node,
                     instance,
+                    triangles: triangles as u32,
                 })
             };
             match (&mesh_bvhs[mesh_id.index()], &leaves[mesh_id.index()]) {
                 (Some(bvh), Some(l)) => {
                     for &n in l {
-                        push(bvh.nodes()[n as usize].bounds, n);
+                        let node = &bvh.nodes()[n as usize];
+                        push(node.bounds, n, node.range().len());
                     }
                 }
-                _ => push(scene.node(mesh_id).bounds(), u32::MAX),
+                _ => push(scene.node(mesh_id).bounds(), u32::MAX, mesh.triangle_count()),
             }
         });
         let hierarchy = no.hierarchy.then(|| {
             let boxes: Vec<Aabb> = objects.iter().map(|o| o.bounds).collect();
             Bvh::build(&boxes, no.group_leaf_size)
         });
+        let node_triangles = hierarchy.as_ref().map_or_else(Vec::new, |bvh| {
+            // Children come after their parent (first child `n + 1`, second child later):
+            // summed in reverse.
+            let nodes = bvh.nodes();
+            let mut t = vec![0u64; nodes.len()];
+            for n in (0..nodes.len()).rev() {
+                let node = &nodes[n];
+                t[n] = if node.is_leaf() {
+                    bvh.primitive_indices()[node.range()]
+                        .iter()
+                        .map(|&i| u64::from(objects[i as usize].triangles))
+                        .sum()
+                } else {
+                    t[n + 1] + t[node.second_child as usize]
+                };
+            }
+            t
+        });
         let n = objects.len();
+        let payoff = Payoff::new(no.payoff, scene.item_count());
+        let scene_for_direct = scene.clone();
         Ok(Self {
             scene,
             raster,
@@ -324,7 +517,98 @@ impl NBufferCulling {
             drawn: vec![false; n],
             last_size: (0, 0),
             batch: Batch::default(),
+            node_triangles,
+            payoff,
+            direct_left: 0,
+            direct_run: MIN_DIRECT_RUN,
+            direct: match no.payoff {
+                true => Some(FrustumCulling::with_options(
+                    scene_for_direct,
+                    options,
+                    &FrustumOptions::default(),
+                )?),
+                false => None,
+            },
+            coarse_depth: Vec::new(),
+            second_pass_skip: 0,
         })
+    }
+
+    /// The objects in the frustum whose screen boxes cover at least `near_area` of the
+    /// screen, largest first, at most `near_max` (a box reaching the near plane counts as the
+    /// whole screen).
+    fn near_occluders(&self, frustum: &Frustum, project: &Projector, stats: &mut FrameStats) -> Vec<usize> {
+        let least = (self.options.near_area * project.width * project.height).max(1.0);
+        let screen = project.width * project.height;
+        let mut found: Vec<(f64, usize)> = Vec::new();
+        let mut consider = |i: usize| {
+            let area = match project.screen(&self.objects[i].bounds) {
+                Screen::Empty => return,
+                Screen::Anywhere => screen,
+                Screen::Rect(rect, _) => rect.area() as f64,
+            };
+            if area >= least {
+                found.push((area, i));
+            }
+        };
+        match &self.hierarchy {
+            Some(bvh) => cull_bvh(stats, bvh, frustum, |stats, _, node, inside| {
+                if node.is_leaf() {
+                    for &i in &bvh.primitive_indices()[node.range()] {
+                        let i = i as usize;
+                        if inside || test_box(stats, frustum, &self.objects[i].bounds) != Containment::Outside {
+                            consider(i);
+                        }
+                    }
+                    return false;
+                }
+                // A subtree whose whole screen box is smaller than the least area holds no
+                // object that large.
+                match project.screen(&node.bounds) {
+                    Screen::Empty => false,
+                    Screen::Anywhere => true,
+                    Screen::Rect(rect, _) => rect.area() as f64 >= least,
+                }
+            }),
+            None => {
+                for i in 0..self.objects.len() {
+                    if test_box(stats, frustum, &self.objects[i].bounds) != Containment::Outside {
+                        consider(i);
+                    }
+                }
+            }
+        }
+        found.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        found.truncate(self.options.near_max);
+        found.into_iter().map(|(_, i)| i).collect()
+    }
+
+    /// §2: builds the N-buffer over `frame`'s depth (reduced to `scale × scale` blocks
+    /// first), adding the time to [`Phase::DepthStructure`].
+    fn build_nbuffer(&mut self, frame: &Frame, stats: &mut FrameStats) -> Result<()> {
+        let t = Instant::now();
+        let (w, h) = (frame.width(), frame.height());
+        let shift = self.options.scale.trailing_zeros();
+        let coarse = &mut self.coarse_depth;
+        let nbuffer = &mut self.nbuffer;
+        let result = self.raster.install(|| {
+            let (depth, cw, ch) = if shift == 0 {
+                (frame.depth(), w, h)
+            } else {
+                let (cw, ch) = reduce_farthest(frame.depth(), w, h, shift, coarse);
+                (&coarse[..], cw, ch)
+            };
+            let levels = NBuffer::default_level_count(cw, ch);
+            match nbuffer {
+                Some(nb) => nb.rebuild(depth, cw, ch, levels),
+                None => NBuffer::new(Extremum::Min, depth, cw, ch).map(|nb| {
+                    *nbuffer = Some(nb);
+                }),
+            }
+        });
+        result?;
+        stats.phases.add(Phase::DepthStructure, t.elapsed());
+        Ok(())
     }
 
     /// Marks the objects whose items are in `frame` as visible (the next frame's occluders).
@@ -408,6 +692,64 @@ fn draws_of<'a>(
     draws
 }
 
+/// The rectangle of N-buffer samples (each `2^shift` pixels a side) that holds every pixel
+/// of `rect`; an empty rectangle stays empty (it is hidden: it draws nothing).
+fn coarse(rect: PixelRect, shift: u32) -> PixelRect {
+    if shift == 0 || rect.x0 >= rect.x1 || rect.y0 >= rect.y1 {
+        return rect;
+    }
+    let up = |v: u32| (v >> shift) + u32::from(v & ((1 << shift) - 1) != 0);
+    PixelRect {
+        x0: rect.x0 >> shift,
+        y0: rect.y0 >> shift,
+        x1: up(rect.x1),
+        y1: up(rect.y1),
+    }
+}
+
+/// Reduces the `w × h` depth map to one sample per `2^shift`-pixel square block (partial at
+/// the right and bottom edges): the farthest depth of the block (the least, in reversed Z; a
+/// NaN reads as `-inf`, the farthest), so an object nearer than a sample is nearer than every
+/// pixel of its block. Fills `out` and returns its size; runs on the current rayon pool.
+fn reduce_farthest(depth: &[f32], w: u32, h: u32, shift: u32, out: &mut Vec<f32>) -> (u32, u32) {
+    let b = 1usize << shift;
+    let (w, h) = (w as usize, h as usize);
+    let (cw, ch) = (w.div_ceil(b), h.div_ceil(b));
+    out.clear();
+    out.resize(cw * ch, f32::INFINITY);
+    out.par_chunks_mut(cw).enumerate().for_each_init(
+        || vec![0.0f32; w],
+        |acc, (cy, row)| {
+            // Down the block's rows first (one vectorizable pass per row), then across.
+            acc.fill(f32::INFINITY);
+            for src in depth[cy * b * w..((cy + 1) * b).min(h) * w].chunks_exact(w) {
+                for (m, &v) in acc.iter_mut().zip(src) {
+                    let v = if v.is_nan() { f32::NEG_INFINITY } else { v };
+                    *m = if v < *m { v } else { *m };
+                }
+            }
+            for (m, block) in row.iter_mut().zip(acc.chunks(b)) {
+                *m = block.iter().fold(f32::INFINITY, |a, &v| if v < a { v } else { a });
+            }
+        },
+    );
+    (cw as u32, ch as u32)
+}
+
+/// [`crate::rasterize`], also telling `payoff` what was rasterized and how long it took.
+fn rasterize_weighed(
+    raster: &mut Rasterizer,
+    view: &View,
+    frame: &mut Frame,
+    draws: &[Draw<'_>],
+    stats: &mut FrameStats,
+    payoff: &mut FramePayoff,
+) {
+    let (t, before) = (Instant::now(), stats.triangles_submitted);
+    crate::rasterize(raster, view, frame, draws, stats);
+    payoff.rasterized(stats.triangles_submitted - before, t.elapsed(), false);
+}
+
 /// Widens a world box by a relative 1e-5 of its coordinates, so that rounding in the
 /// transforms cannot leave a vertex outside it.
 fn widen(b: Aabb) -> Aabb {
@@ -478,12 +820,20 @@ impl Batch {
 /// The screen test of a world box.
 struct BoxTest<'a> {
     against: Against<'a>,
+    project: Projector,
+    /// log2 of the N-buffer's pixels per sample side.
+    shift: u32,
+}
+
+/// Where world boxes land on the screen of a view.
+#[derive(Clone, Copy)]
+struct Projector {
     clip_from_world: occult_core::Mat4,
     width: f64,
     height: f64,
 }
 
-impl BoxTest<'_> {
+impl Projector {
     /// The box's screen rectangle (pixel centres) and nearest depth.
     fn screen(&self, b: &Aabb) -> Screen {
         if b.is_empty() {
@@ -519,12 +869,14 @@ impl BoxTest<'_> {
         };
         Screen::Rect(rect, nearest)
     }
+}
 
+impl BoxTest<'_> {
     /// True when the box is hidden; adds the depth comparisons made and the pixels of the
     /// tested rectangle to `tally`. Boxes reaching the near plane are never hidden and are
     /// not tested (in both modes, so both test the same boxes).
     fn hidden(&self, b: &Aabb, tally: &mut Tally) -> bool {
-        let (rect, nearest) = match self.screen(b) {
+        let (rect, nearest) = match self.project.screen(b) {
             Screen::Empty => return true,
             Screen::Anywhere => return false,
             Screen::Rect(rect, nearest) => (rect, nearest),
@@ -532,19 +884,19 @@ impl BoxTest<'_> {
         tally.rect_pixels += rect.area();
         match self.against {
             Against::NBuffer(nbuffer, true) => {
-                let (hidden, n) = nbuffer.occludes(rect, nearest);
+                let (hidden, n) = nbuffer.occludes(coarse(rect, self.shift), nearest);
                 tally.comparisons += u64::from(n);
                 hidden
             }
             Against::NBuffer(nbuffer, false) => {
-                let q = nbuffer.query_one(rect);
+                let q = nbuffer.query_one(coarse(rect, self.shift));
                 tally.comparisons += u64::from(q.lookups);
                 q.lookups == 0 || nearest < q.depth
             }
             Against::Query(frame, view) => {
                 // Deviation: the software occlusion query counts every pixel of the
                 // silhouette (no early out), as a hardware query's sample count does.
-                let q = query_box_counted(frame, view, &self.clip_from_world, b);
+                let q = query_box_counted(frame, view, &self.project.clip_from_world, b);
                 tally.comparisons += q.comparisons;
                 q.samples == 0
             }
@@ -558,46 +910,90 @@ impl Renderer for NBufferCulling {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        let (start, _, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
-        if self.last_size != (view.width(), view.height()) {
+        // Payoff: after a frame whose culling cost more than it saved, a run of frames is
+        // drawn by `frustum` (the same objects drawn the way it draws them), then culling is
+        // probed again.
+        if let (Some(direct), true) = (&mut self.direct, self.direct_left > 0) {
+            self.direct_left -= 1;
+            let start = Instant::now();
+            let mut stats = direct.render(view, frame)?;
+            let mut payoff = self.payoff.begin(start);
+            payoff.rasterized(stats.triangles_submitted, stats.phases.get(Phase::Raster), false);
+            self.payoff.end(&payoff);
+            stats.counters.add("payoff_direct", 1);
+            return Ok(stats);
+        }
+        crate::check_frame(view, frame)?;
+        let (w, h) = (view.width(), view.height());
+        if self.last_size != (w, h) {
             self.visible.fill(false);
-            self.last_size = (view.width(), view.height());
+            self.last_size = (w, h);
         }
         let frustum = view.frustum(&Affine3A::IDENTITY);
         self.drawn.fill(false);
+        let project = Projector {
+            clip_from_world: view.clip_from_object(&Affine3A::IDENTITY),
+            width: f64::from(w),
+            height: f64::from(h),
+        };
 
-        // §3.1: draw last frame's visible objects (those still in the frustum) as occluders.
+        // Occluders: last frame's visible objects still in the frustum (§3.1), and the
+        // objects of this view with the largest screen boxes. Chosen before the frame is
+        // cleared: with none, nothing can be culled.
         let t = Instant::now();
+        let mut walk = FrameStats::default();
         let mut occluders = Vec::new();
-        for i in 0..self.objects.len() {
-            if self.visible[i] {
-                if test_box(&mut stats, &frustum, &self.objects[i].bounds) == Containment::Outside {
-                    continue;
+        if self.options.occluders.visible() {
+            for i in 0..self.objects.len() {
+                if self.visible[i] {
+                    if test_box(&mut walk, &frustum, &self.objects[i].bounds) == Containment::Outside {
+                        continue;
+                    }
+                    self.drawn[i] = true;
+                    occluders.push(i);
                 }
-                self.drawn[i] = true;
-                occluders.push(i);
             }
+        }
+        let mut near_count = 0;
+        if self.options.occluders.near() {
+            let near = self.near_occluders(&frustum, &project, &mut walk);
+            near_count = near.len() as u64;
+            for i in near {
+                if !self.drawn[i] {
+                    self.drawn[i] = true;
+                    occluders.push(i);
+                }
+            }
+        }
+        if let (Some(direct), true) = (&mut self.direct, occluders.is_empty()) {
+            // Nothing to occlude with: an empty depth buffer hides nothing.
+            let mut stats = direct.render(view, frame)?;
+            stats.counters.add("no_occluders", 1);
+            stats.phases.add(Phase::Cull, t.elapsed());
+            return Ok(stats);
+        }
+        let selection = t.elapsed();
+        let (start, cleared_at, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
+        let start = start - selection;
+        let mut payoff = self.payoff.begin(cleared_at - selection);
+        let t = Instant::now() - selection;
+        stats.nodes_visited += walk.nodes_visited;
+        stats.boxes_tested += walk.boxes_tested;
+        stats.boxes_culled += walk.boxes_culled;
+        if self.options.occluders.near() {
+            stats.counters.add("near_occluders", near_count);
         }
         let draws = draws_of(&self.scene, &self.objects, &self.mesh_bvhs, view, &mut occluders);
         stats.phases.add(Phase::Cull, t.elapsed());
-        crate::rasterize(&mut self.raster, view, frame, &draws, &mut stats);
+        rasterize_weighed(&mut self.raster, view, frame, &draws, &mut stats, &mut payoff);
         drop(draws);
         stats.counters.add("occluders_drawn", occluders.len() as u64);
 
         // §2: the N-buffer of the occluders' depth (min variant: farthest depth); none for
         // occlusion queries, which read the depth buffer itself.
-        let (w, h) = (view.width(), view.height());
+        let shift = self.options.scale.trailing_zeros();
         if !self.options.query {
-            let t = Instant::now();
-            let levels = NBuffer::default_level_count(w, h);
-            let result = self.raster.install(|| match &mut self.nbuffer {
-                Some(nb) => nb.rebuild(frame.depth(), w, h, levels),
-                None => NBuffer::new(Extremum::Min, frame.depth(), w, h).map(|nb| {
-                    self.nbuffer = Some(nb);
-                }),
-            });
-            result?;
-            stats.phases.add(Phase::DepthStructure, t.elapsed());
+            self.build_nbuffer(frame, &mut stats)?;
         }
 
         // §3.1: test every object (through the hierarchy or flat), keep the survivors.
@@ -608,15 +1004,15 @@ impl Renderer for NBufferCulling {
         };
         let test = BoxTest {
             against,
-            clip_from_world: view.clip_from_object(&Affine3A::IDENTITY),
-            width: f64::from(w),
-            height: f64::from(h),
+            project,
+            shift,
         };
         let mut tally = Tally::default();
         let mut survivors = Vec::new();
         let objects = &self.objects;
         let drawn = &self.drawn;
-        let mut test_object = |i: usize, inside: bool, stats: &mut FrameStats, tally: &mut Tally| {
+        let mut saved = 0u64;
+        let mut test_object = |i: usize, inside: bool, stats: &mut FrameStats, tally: &mut Tally, saved: &mut u64| {
             if drawn[i] {
                 return;
             }
@@ -627,26 +1023,32 @@ impl Renderer for NBufferCulling {
             stats.rects_tested += 1;
             if test.hidden(b, tally) {
                 stats.rects_culled += 1;
+                *saved += u64::from(objects[i].triangles);
             } else {
                 survivors.push(i);
             }
         };
         match &self.hierarchy {
-            Some(bvh) if !bvh.nodes().is_empty() => cull_bvh(&mut stats, bvh, &frustum, |stats, _, node, inside| {
-                if node.is_leaf() {
-                    for &i in &bvh.primitive_indices()[node.range()] {
-                        test_object(i as usize, inside, stats, &mut tally);
+            Some(bvh) if !bvh.nodes().is_empty() => {
+                let node_triangles = &self.node_triangles;
+                cull_bvh(&mut stats, bvh, &frustum, |stats, n, node, inside| {
+                    if node.is_leaf() {
+                        for &i in &bvh.primitive_indices()[node.range()] {
+                            test_object(i as usize, inside, stats, &mut tally, &mut saved);
+                        }
+                        return false;
                     }
-                    return false;
-                }
-                // §4.2: an inner node is tested like an object; a hidden one hides its subtree.
-                stats.rects_tested += 1;
-                if test.hidden(&node.bounds, &mut tally) {
-                    stats.rects_culled += 1;
-                    return false;
-                }
-                true
-            }),
+                    // §4.2: an inner node is tested like an object; a hidden one hides its
+                    // subtree (occluders in it were drawn: what it saves is an upper bound).
+                    stats.rects_tested += 1;
+                    if test.hidden(&node.bounds, &mut tally) {
+                        stats.rects_culled += 1;
+                        saved += node_triangles[n as usize];
+                        return false;
+                    }
+                    true
+                })
+            }
             _ => match test.against {
                 Against::NBuffer(nbuffer, true) => {
                     // §3.1 over the flat list: every object's rectangle first, then one
@@ -658,12 +1060,12 @@ impl Renderer for NBufferCulling {
                             continue;
                         }
                         stats.rects_tested += 1;
-                        match test.screen(&object.bounds) {
+                        match test.project.screen(&object.bounds) {
                             Screen::Empty => stats.rects_culled += 1,
                             Screen::Anywhere => survivors.push(i),
                             Screen::Rect(rect, nearest) => {
                                 tally.rect_pixels += rect.area();
-                                batch.push(i, rect, nearest);
+                                batch.push(i, coarse(rect, shift), nearest);
                             }
                         }
                     }
@@ -671,6 +1073,7 @@ impl Renderer for NBufferCulling {
                     for (&i, &hidden) in batch.objects.iter().zip(&batch.hidden) {
                         if hidden {
                             stats.rects_culled += 1;
+                            saved += u64::from(objects[i as usize].triangles);
                         } else {
                             survivors.push(i as usize);
                         }
@@ -678,11 +1081,13 @@ impl Renderer for NBufferCulling {
                 }
                 _ => {
                     for i in 0..objects.len() {
-                        test_object(i, false, &mut stats, &mut tally);
+                        test_object(i, false, &mut stats, &mut tally, &mut saved);
                     }
                 }
             },
         }
+        payoff.saved(saved);
+        stats.counters.add("triangles_saved", saved);
         // Table 2: the depth comparisons of the tests (N-buffer lookups, or the pixels the
         // occlusion queries compared).
         stats.counters.add("depth_comparisons", tally.comparisons);
@@ -692,16 +1097,89 @@ impl Renderer for NBufferCulling {
         // The pixels of the tested boxes' screen rectangles (what a per-pixel test of the
         // rectangles, `query_rect`, would compare).
         stats.counters.add("rect_pixels", tally.rect_pixels);
+        // Second pass: the nearer half of the survivors first; the farther half is tested
+        // again against the N-buffer of the new depth.
+        let mut later = Vec::new();
+        let second_pass = self.options.passes == 2 && self.second_pass_skip == 0;
+        self.second_pass_skip = self.second_pass_skip.saturating_sub(1);
+        if second_pass && !self.options.query && survivors.len() >= 2 {
+            let mut keyed: Vec<(f32, usize)> = survivors
+                .iter()
+                .map(|&i| match project.screen(&self.objects[i].bounds) {
+                    Screen::Rect(_, nearest) => (nearest, i),
+                    _ => (f32::INFINITY, i),
+                })
+                .collect();
+            keyed.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+            let half = keyed.len() / 2;
+            survivors = keyed[..half].iter().map(|&(_, i)| i).collect();
+            later = keyed[half..].iter().map(|&(_, i)| i).collect();
+        }
         stats.counters.add("survivors_drawn", survivors.len() as u64);
         let draws = draws_of(&self.scene, &self.objects, &self.mesh_bvhs, view, &mut survivors);
         stats.phases.add(Phase::Cull, t.elapsed());
-        crate::rasterize(&mut self.raster, view, frame, &draws, &mut stats);
+        rasterize_weighed(&mut self.raster, view, frame, &draws, &mut stats, &mut payoff);
         drop(draws);
+        if !later.is_empty() {
+            let t = Instant::now();
+            self.build_nbuffer(frame, &mut stats)?;
+            let rebuild = t.elapsed();
+            let t = Instant::now();
+            let Some(nbuffer) = &self.nbuffer else {
+                unreachable!("build_nbuffer succeeded");
+            };
+            let test = BoxTest {
+                against: Against::NBuffer(nbuffer, self.options.four_square),
+                project,
+                shift,
+            };
+            let mut saved = 0u64;
+            let mut last = Vec::new();
+            for i in later {
+                stats.rects_tested += 1;
+                if test.hidden(&self.objects[i].bounds, &mut tally) {
+                    stats.rects_culled += 1;
+                    saved += u64::from(self.objects[i].triangles);
+                } else {
+                    last.push(i);
+                }
+            }
+            payoff.saved(saved);
+            stats.counters.add("triangles_saved", saved);
+            stats.counters.add("second_pass_saved", saved);
+            stats.counters.add("survivors_drawn", last.len() as u64);
+            let draws = draws_of(&self.scene, &self.objects, &self.mesh_bvhs, view, &mut last);
+            stats.phases.add(Phase::Cull, t.elapsed());
+            rasterize_weighed(&mut self.raster, view, frame, &draws, &mut stats, &mut payoff);
+            // A second pass whose rebuild cost more than the drawing it saved is skipped for
+            // the next frames (this frame's cost of a triangle).
+            let ns_per_triangle =
+                stats.phases.get(Phase::Raster).as_nanos() as f64 / stats.triangles_submitted.max(1) as f64;
+            if (saved as f64) * ns_per_triangle < rebuild.as_nanos() as f64 {
+                self.second_pass_skip = SECOND_PASS_SKIP;
+            }
+        }
 
         // The exactly visible objects become the next frame's occluders.
-        let t = Instant::now();
-        self.read_back_visible(frame);
-        stats.phases.add(Phase::Other, t.elapsed());
+        if self.options.occluders.visible() {
+            let t = Instant::now();
+            self.read_back_visible(frame);
+            stats.phases.add(Phase::Other, t.elapsed());
+        }
+        if self.options.payoff {
+            if payoff.paid(Instant::now()) {
+                self.direct_run = MIN_DIRECT_RUN;
+            } else {
+                // Not worth it on this view: draw directly for a while, longer each time.
+                self.direct_left = self.direct_run;
+                self.direct_run = (self.direct_run * 2).min(MAX_DIRECT_RUN);
+                if self.options.occluders.visible() {
+                    // Stale by the next probe.
+                    self.visible.fill(false);
+                }
+            }
+        }
+        self.payoff.end(&payoff);
         stats.total = start.elapsed();
         Ok(stats)
     }
@@ -724,6 +1202,173 @@ impl Renderer for NBufferCulling {
             + self.batch.rects.capacity() * std::mem::size_of::<PixelRect>()
             + self.batch.nearest.capacity() * 4
             + self.batch.hidden.capacity()
+            + self.coarse_depth.capacity() * 4
+            + self.direct.as_ref().map_or(0, FrustumCulling::memory_bytes)
             + self.raster.memory_bytes()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use occult_core::{Camera, Instance, Mesh, SceneBuilder};
+
+    /// A `g` × `g`-quad grid over the unit square at z = 0.
+    fn grid(g: u32) -> Mesh {
+        let n = g + 1;
+        let positions = (0..n * n)
+            .map(|i| Vec3::new((i % n) as f32 / g as f32, (i / n) as f32 / g as f32, 0.0))
+            .collect();
+        let triangles = (0..g * g)
+            .flat_map(|q| {
+                let (x, y) = (q % g, q / g);
+                let a = y * n + x;
+                [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
+            })
+            .collect();
+        Mesh::new(positions, triangles).unwrap()
+    }
+
+    /// A big wall in front of rows of small grids: most of them hidden.
+    fn wall_scene() -> (Arc<Scene>, View) {
+        let mut b = SceneBuilder::new();
+        let wall = b.add_mesh("wall", grid(8)).unwrap();
+        let small = b.add_mesh("small", grid(4)).unwrap();
+        let mut instances = vec![Instance {
+            parent_from_child: Affine3A::from_scale_rotation_translation(
+                Vec3::splat(6.0),
+                Default::default(),
+                Vec3::new(-1.0, -1.0, 1.0),
+            ),
+            child: wall,
+        }];
+        instances.extend((0..40).map(|i| Instance {
+            parent_from_child: Affine3A::from_translation(Vec3::new(
+                (i % 8) as f32 * 0.5,
+                (i / 8) as f32 * 0.5,
+                -(i % 5) as f32,
+            )),
+            child: small,
+        }));
+        let root = b.add_group("scene", instances).unwrap();
+        let scene = Arc::new(b.build(root).unwrap());
+        let camera = Camera::look_at(Vec3::new(2.0, 1.5, 6.0), Vec3::new(2.0, 1.5, 0.0));
+        (scene, View::new(camera, 96, 64).unwrap())
+    }
+
+    fn zbuffer_frame(scene: &Arc<Scene>, view: &View) -> Frame {
+        let mut z = crate::AlgoSpec::parse("zbuffer")
+            .unwrap()
+            .build(scene.clone(), &RenderOptions::default())
+            .unwrap();
+        let mut f = Frame::new(view.width(), view.height()).unwrap();
+        z.render(view, &mut f).unwrap();
+        f
+    }
+
+    #[test]
+    fn coarse_rectangles_hold_every_pixel_and_stay_empty_when_empty() {
+        let rect = |x0, y0, x1, y1| PixelRect { x0, y0, x1, y1 };
+        let r = rect(3, 4, 9, 5);
+        assert_eq!(coarse(r, 0), r);
+        assert_eq!(coarse(r, 1), rect(1, 2, 5, 3));
+        assert_eq!(coarse(r, 2), rect(0, 1, 3, 2));
+        let empty = rect(5, 2, 5, 7);
+        assert_eq!(coarse(empty, 2), empty);
+    }
+
+    #[test]
+    fn reduction_keeps_the_farthest_depth_of_each_block() {
+        // 5 × 3, reversed Z: smaller is farther; a NaN reads as the farthest.
+        let depth = [
+            0.5,
+            0.4,
+            0.9,
+            0.9,
+            0.1, //
+            0.6,
+            0.7,
+            0.8,
+            f32::NAN,
+            0.2, //
+            0.3,
+            0.9,
+            0.9,
+            0.9,
+            0.9,
+        ];
+        let mut out = Vec::new();
+        assert_eq!(reduce_farthest(&depth, 5, 3, 1, &mut out), (3, 2));
+        assert_eq!(&out[..], &[0.4, f32::NEG_INFINITY, 0.1, 0.3, 0.9, 0.9]);
+        assert_eq!(reduce_farthest(&depth, 5, 3, 2, &mut out), (2, 1));
+        assert_eq!(&out[..], &[f32::NEG_INFINITY, 0.1]);
+    }
+
+    #[test]
+    fn near_occluders_cull_on_the_first_frame_and_direct_frames_are_identical() {
+        let (scene, view) = wall_scene();
+        let reference = zbuffer_frame(&scene, &view);
+        // One near occluder: the wall (the largest screen box).
+        for params in [
+            "",
+            ",scale=1",
+            ",scale=8,passes=2",
+            ",hierarchy=flat,passes=2",
+            ",occluders=both",
+        ] {
+            let mut r = crate::AlgoSpec::parse(&format!("nbuffer:near_max=1{params}"))
+                .unwrap()
+                .build(scene.clone(), &RenderOptions::default())
+                .unwrap();
+            let mut f = Frame::new(view.width(), view.height()).unwrap();
+            let s = r.render(&view, &mut f).unwrap();
+            assert!(f.same_visibility(&reference), "{params}");
+            assert_eq!(
+                s.counters.get("near_occluders"),
+                1,
+                "{params}: the wall is the near occluder"
+            );
+            assert!(s.rects_culled > 0, "{params}: nothing culled behind the wall");
+            assert!(s.counters.get("triangles_saved") > 0, "{params}");
+        }
+        // A frame drawn directly (as after a frame whose culling did not pay) tests nothing
+        // and draws the same frame; the run of direct frames ends with a culling frame.
+        let no = NBufferOptions::default();
+        let mut r = NBufferCulling::with_options(scene.clone(), &RenderOptions::default(), &no).unwrap();
+        r.direct_left = 2;
+        for i in 0..3 {
+            let mut f = Frame::new(view.width(), view.height()).unwrap();
+            let s = r.render(&view, &mut f).unwrap();
+            assert!(f.same_visibility(&reference), "frame {i}");
+            let direct = i < 2;
+            assert_eq!(s.counters.get("payoff_direct"), u64::from(direct), "frame {i}");
+            assert_eq!(s.rects_tested == 0, direct, "frame {i}");
+        }
+    }
+
+    #[test]
+    fn bad_options_are_named_errors() {
+        let (scene, _) = wall_scene();
+        for bad in [
+            "scale=3",
+            "scale=0",
+            "passes=0",
+            "passes=3",
+            "near_area=1.5",
+            "near_area=-0.1",
+            "occluders=all",
+            "payoff=maybe",
+            "near_max=-1",
+        ] {
+            let key = bad.split('=').next().unwrap();
+            match crate::AlgoSpec::parse(&format!("nbuffer:{bad}"))
+                .unwrap()
+                .build(scene.clone(), &RenderOptions::default())
+            {
+                Err(RenderError::BadParameter(m)) => assert!(m.contains("nbuffer") && m.contains(key), "{bad}: {m}"),
+                Err(e) => panic!("{bad}: {e}"),
+                Ok(_) => panic!("{bad} was accepted"),
+            }
+        }
     }
 }
