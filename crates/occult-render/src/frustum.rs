@@ -309,24 +309,9 @@ impl Renderer for FrustumCulling {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_grid as grid;
     use crate::walk::MAX_FRAME_TRIANGLES;
-    use occult_core::{Affine3A, Camera, Instance, Mesh, SceneBuilder, Vec3};
-
-    /// A `g` × `g`-quad grid over the unit square at z = 0.
-    fn grid(g: u32) -> Mesh {
-        let n = g + 1;
-        let positions = (0..n * n)
-            .map(|i| Vec3::new((i % n) as f32 / g as f32, (i / n) as f32 / g as f32, 0.0))
-            .collect();
-        let triangles = (0..g * g)
-            .flat_map(|q| {
-                let (x, y) = (q % g, q / g);
-                let a = y * n + x;
-                [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
-            })
-            .collect();
-        Mesh::new(positions, triangles).unwrap()
-    }
+    use occult_core::{Affine3A, Camera, Instance, SceneBuilder, Vec3};
 
     fn render(scene: &Arc<Scene>, params: &str, view: &View) -> Result<(FrameStats, Frame)> {
         let spec = if params.is_empty() {

@@ -315,6 +315,24 @@ pub(crate) fn check_same_size(context: &str, a: &str, a_size: (u32, u32), b: &st
     Ok(())
 }
 
+/// For unit tests: a `g` × `g`-quad grid over the unit square at z = 0.
+#[cfg(test)]
+pub(crate) fn test_grid(g: u32) -> occult_core::Mesh {
+    let n = g + 1;
+    let positions = (0..n * n)
+        .map(|i| occult_core::Vec3::new((i % n) as f32 / g as f32, (i / n) as f32 / g as f32, 0.0))
+        .collect();
+    let triangles = (0..g * g)
+        .flat_map(|q| {
+            let (x, y) = (q % g, q / g);
+            let a = y * n + x;
+            [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
+        })
+        .collect();
+    // A valid mesh by construction: every index is below (g + 1)^2.
+    occult_core::Mesh::new(positions, triangles).expect("a grid is a valid mesh")
+}
+
 /// For unit tests: a `width` x `height` view from `eye` towards `target`, with its
 /// `clip_from_object` for objects placed at the world origin.
 #[cfg(test)]

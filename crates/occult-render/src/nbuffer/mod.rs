@@ -1211,23 +1211,8 @@ impl Renderer for NBufferCulling {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use occult_core::{Camera, Instance, Mesh, SceneBuilder};
-
-    /// A `g` × `g`-quad grid over the unit square at z = 0.
-    fn grid(g: u32) -> Mesh {
-        let n = g + 1;
-        let positions = (0..n * n)
-            .map(|i| Vec3::new((i % n) as f32 / g as f32, (i / n) as f32 / g as f32, 0.0))
-            .collect();
-        let triangles = (0..g * g)
-            .flat_map(|q| {
-                let (x, y) = (q % g, q / g);
-                let a = y * n + x;
-                [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
-            })
-            .collect();
-        Mesh::new(positions, triangles).unwrap()
-    }
+    use crate::test_grid as grid;
+    use occult_core::{Camera, Instance, SceneBuilder};
 
     /// A big wall in front of rows of small grids: most of them hidden.
     fn wall_scene() -> (Arc<Scene>, View) {
