@@ -99,8 +99,15 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
 
 /// The frustum-culling renderer.
 pub struct FrustumCulling {
-    scene: Arc<Scene>,
+    culling: Hierarchies,
     raster: Rasterizer,
+}
+
+/// What frustum culling keeps of a scene, apart from a rasterizer: the scene, its
+/// hierarchies and the batch size. Other renderers embed one to draw frames as `frustum`
+/// does, through their own rasterizer ([`crate::direct`]).
+pub struct Hierarchies {
+    scene: Arc<Scene>,
     /// Per node: its hierarchy (None when small enough to test as one box).
     hierarchies: Vec<Option<Bvh>>,
     /// [`FrustumOptions::batch_draws`].
@@ -113,9 +120,22 @@ impl FrustumCulling {
     /// # Errors
     /// [`RenderError::BadParameter`] for a zero leaf size; raster configuration errors.
     pub fn with_options(scene: Arc<Scene>, options: &RenderOptions, fo: &FrustumOptions) -> Result<Self> {
-        fo.validate()?;
         let raster = Rasterizer::new(options.raster.clone())?;
-        let hierarchies = per_node(&raster, &scene, |node| match node.kind() {
+        Ok(Self {
+            culling: Hierarchies::build(scene, &raster, fo)?,
+            raster,
+        })
+    }
+}
+
+impl Hierarchies {
+    /// Builds the per-node hierarchies of `scene` (on `raster`'s threads).
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] for a zero leaf size or batch.
+    pub fn build(scene: Arc<Scene>, raster: &Rasterizer, fo: &FrustumOptions) -> Result<Self> {
+        fo.validate()?;
+        let hierarchies = per_node(raster, &scene, |node| match node.kind() {
             NodeKind::Mesh(m) if m.triangle_count() > fo.mesh_leaf_size => {
                 Some(Bvh::build(&triangle_boxes(m), fo.mesh_leaf_size))
             }
@@ -126,10 +146,62 @@ impl FrustumCulling {
         });
         Ok(Self {
             scene,
-            raster,
             hierarchies,
             batch_draws: fo.batch_draws,
         })
+    }
+
+    /// The triangles a frame of `view` submits, found by one walk of the hierarchies that
+    /// draws nothing: the work [`crate::direct`] measures frames by.
+    pub fn triangles_in_view(&self, view: &View) -> u64 {
+        let mut w = Walk::new(&self.scene, &self.hierarchies, view, 0, 0);
+        w.run();
+        w.walk.triangles_met()
+    }
+
+    /// Draws a frame of `view` into `frame` (cleared first) through `raster`: what
+    /// [`FrustumCulling`] renders.
+    ///
+    /// # Errors
+    /// A frame whose size is not the view's; a view of more triangles than a frame can draw
+    /// ([`RenderError::TooManyInView`](crate::RenderError::TooManyInView)).
+    pub fn render(&self, raster: &mut Rasterizer, view: &View, frame: &mut Frame) -> Result<FrameStats> {
+        let (start, t, cleared) = crate::begin_frame(raster, view, frame)?;
+        // The first walk meets every draw (keeping the first batch) and gives the statistics.
+        let mut first = Walk::new(&self.scene, &self.hierarchies, view, 0, self.batch_draws);
+        first.walk.stats = cleared;
+        first.run();
+        let Walk {
+            walk,
+            mut draws,
+            met,
+            mut more,
+            ..
+        } = first;
+        let triangles = walk.triangles_met();
+        let mut stats = walk.finish("frustum")?;
+        stats.phases.add(Phase::Cull, t.elapsed());
+        let mut done = 0;
+        loop {
+            crate::rasterize(raster, view, frame, &draws, &mut stats);
+            done += draws.len();
+            if !more {
+                break;
+            }
+            let t = Instant::now();
+            let mut next = Walk::new(&self.scene, &self.hierarchies, view, done, self.batch_draws);
+            next.run();
+            stats.phases.add(Phase::Cull, t.elapsed());
+            (draws, more) = (next.draws, next.more);
+        }
+        debug_assert_eq!((done, stats.triangles_submitted), (met, triangles));
+        stats.total = start.elapsed();
+        Ok(stats)
+    }
+
+    /// Bytes held by the hierarchies.
+    pub fn memory_bytes(&self) -> usize {
+        self.hierarchies.iter().flatten().map(Bvh::memory_bytes).sum()
     }
 }
 
@@ -268,41 +340,11 @@ impl Renderer for FrustumCulling {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        let (start, t, cleared) = crate::begin_frame(&mut self.raster, view, frame)?;
-        // The first walk meets every draw (keeping the first batch) and gives the statistics.
-        let mut first = Walk::new(&self.scene, &self.hierarchies, view, 0, self.batch_draws);
-        first.walk.stats = cleared;
-        first.run();
-        let Walk {
-            walk,
-            mut draws,
-            met,
-            mut more,
-            ..
-        } = first;
-        let triangles = walk.triangles_met();
-        let mut stats = walk.finish("frustum")?;
-        stats.phases.add(Phase::Cull, t.elapsed());
-        let mut done = 0;
-        loop {
-            crate::rasterize(&mut self.raster, view, frame, &draws, &mut stats);
-            done += draws.len();
-            if !more {
-                break;
-            }
-            let t = Instant::now();
-            let mut next = Walk::new(&self.scene, &self.hierarchies, view, done, self.batch_draws);
-            next.run();
-            stats.phases.add(Phase::Cull, t.elapsed());
-            (draws, more) = (next.draws, next.more);
-        }
-        debug_assert_eq!((done, stats.triangles_submitted), (met, triangles));
-        stats.total = start.elapsed();
-        Ok(stats)
+        self.culling.render(&mut self.raster, view, frame)
     }
 
     fn memory_bytes(&self) -> usize {
-        self.hierarchies.iter().flatten().map(Bvh::memory_bytes).sum::<usize>() + self.raster.memory_bytes()
+        self.culling.memory_bytes() + self.raster.memory_bytes()
     }
 }
 

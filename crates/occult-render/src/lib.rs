@@ -8,6 +8,7 @@
 //! | --- | --- |
 //! | [`zbuffer`] | brute force: every triangle instance rasterized; the reference |
 //! | [`frustum`] | hierarchical view-frustum culling only: the baseline the papers compare to |
+//! | [`payoff`], [`direct`] | the culling renderers' guarantee: tests stop where they do not pay, frames are drawn as `frustum` draws them while culling loses |
 //! | [`params`] | algorithm specs (`name:key=value,...`) and their parameters |
 //! | [`walk`] | the one walk over the scene DAG every renderer uses (placements, counted frustum tests) |
 //! | [`compare`] | runs several renderers over one camera path and measures them against each other |
@@ -28,6 +29,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod direct;
 pub mod frustum;
 mod hash;
 pub mod hzb;

@@ -27,6 +27,15 @@
 //! few percent of a frame, then drawing directly in large batches as brute force does. Frames
 //! do not change (stopping only draws more), only the time.
 //!
+//! Across frames, [`crate::direct::DirectFrames`] chooses whether a frame is culled at all,
+//! from measured frame times, and hands its measured direct rate back
+//! ([`Payoff::set_direct`]): the balance then weighs the frame so far against drawing its
+//! work directly (also after each batch), and a frame that falls behind by more than the
+//! allowance **early** (before half a direct frame's time) is abandoned
+//! ([`FramePayoff::abandoned`]): the renderer draws nothing more of it and the whole frame is
+//! drawn directly instead (at most about 1.5 direct frames in all). A frame that falls behind
+//! later is finished as begun; the frame-level choice weighs it.
+//!
 //! Counters, registered by each renderer that uses it: `payoff_stopped` (1 when the frame
 //! stopped testing), `payoff_untested` (the tests then skipped).
 
@@ -59,6 +68,18 @@ pub struct Payoff {
     direct_ns: Option<f64>,
     /// Triangles last frame drew or removed by tests: the work a direct frame would face.
     in_view: u64,
+    /// Cost of a whole direct frame per triangle of its work, ns, measured by
+    /// [`crate::direct::DirectFrames`]; preferred to `direct_ns` when known.
+    frame_direct_ns: Option<f64>,
+    /// What a direct frame of the coming view is expected to cost, ns.
+    direct_frame_ns: f64,
+    /// Whether the last frame's tests saved more than they cost ([`FramePayoff::paid`]).
+    last_paid: bool,
+    /// Whether the last frame was abandoned ([`FramePayoff::abandoned`]).
+    last_abandoned: bool,
+    /// Tests: every frame stops at its first check.
+    #[cfg(test)]
+    pub(crate) force_stop: bool,
 }
 
 impl Payoff {
@@ -71,7 +92,33 @@ impl Payoff {
             ns_per_triangle: PRIOR_NS_PER_TRIANGLE,
             direct_ns: None,
             in_view: scene_triangles,
+            frame_direct_ns: None,
+            direct_frame_ns: 0.0,
+            last_paid: false,
+            last_abandoned: false,
+            #[cfg(test)]
+            force_stop: false,
         }
+    }
+
+    /// Weighs the coming frames against drawing them directly at `ns` per triangle of work (a
+    /// measured direct frame's rate, [`crate::direct::DirectFrames::direct_ns`]), a whole
+    /// direct frame expected to take `frame_ns`.
+    pub fn set_direct(&mut self, ns: Option<f64>, frame_ns: f64) {
+        self.frame_direct_ns = ns;
+        self.direct_frame_ns = frame_ns;
+    }
+
+    /// Whether the last frame's tests saved more than they cost ([`FramePayoff::paid`] at its
+    /// end).
+    pub fn last_paid(&self) -> bool {
+        self.last_paid
+    }
+
+    /// Whether the last frame was abandoned, to be redrawn directly
+    /// ([`FramePayoff::abandoned`]).
+    pub fn last_abandoned(&self) -> bool {
+        self.last_abandoned
     }
 
     /// Starts weighing a frame that began at `start`.
@@ -84,7 +131,11 @@ impl Payoff {
             shared: (0, Duration::ZERO),
             saved_triangles: 0,
             last_ns_per_triangle: self.ns_per_triangle,
-            direct_ns: self.direct_ns,
+            direct_ns: self.frame_direct_ns.or(self.direct_ns),
+            abandon: self.frame_direct_ns.is_some(),
+            direct_frame_ns: self.direct_frame_ns,
+            #[cfg(test)]
+            force_stop: self.force_stop,
             allowance_triangles: self.allowance * self.in_view as f64,
             stopped: false,
             since_check: 0,
@@ -94,6 +145,8 @@ impl Payoff {
 
     /// Learns from a finished frame: the allowance, the cost of a triangle, the work in view.
     pub fn end(&mut self, f: &FramePayoff) {
+        self.last_paid = f.paid(Instant::now());
+        self.last_abandoned = f.abandoned();
         self.ns_per_triangle = f.ns_per_triangle();
         if f.shared.0 > 0 {
             let measured = f.shared.1.as_nanos() as f64 / f.shared.0 as f64;
@@ -120,6 +173,12 @@ pub struct FramePayoff {
     saved_triangles: u64,
     last_ns_per_triangle: f64,
     direct_ns: Option<f64>,
+    /// A stop abandons the frame (a measured direct frame redraws it, [`crate::direct`]).
+    abandon: bool,
+    /// What a direct frame is expected to cost, ns (with `abandon`).
+    direct_frame_ns: f64,
+    #[cfg(test)]
+    force_stop: bool,
     allowance_triangles: f64,
     stopped: bool,
     since_check: u32,
@@ -136,6 +195,11 @@ impl FramePayoff {
         if shared {
             self.shared.0 += triangles;
             self.shared.1 += time;
+        }
+        // A batch can take longer than many tests: the balance is weighed after each too, once
+        // a frame that stops is abandoned (its drawing in pieces is then the cost to stop).
+        if self.enabled && self.abandon && !self.stopped {
+            self.check(Instant::now());
         }
     }
 
@@ -157,23 +221,38 @@ impl FramePayoff {
         self.since_check += 1;
         if self.since_check >= CHECK_EVERY {
             self.since_check = 0;
-            let allowance =
-                (self.allowance_triangles * self.ns_per_triangle()).max(MIN_ALLOWANCE_TIME.as_nanos() as f64);
-            let now = Instant::now();
-            // Once the direct rate is known (a frame drew directly), the whole frame so far is
-            // weighed against drawing its work directly: small tested batches rasterize slower
-            // than shared ones, a cost of testing too.
-            let direct_too_slow = self.direct_ns.is_some_and(|d| {
-                let work = (self.raster_triangles + self.saved_triangles) as f64 * d;
-                now.saturating_duration_since(self.start).as_nanos() as f64 > work + allowance
-            });
-            if direct_too_slow || self.cost_ns(now) > self.gain_ns() + allowance {
-                self.stopped = true;
+            if self.check(Instant::now()) {
                 self.untested += 1;
                 return false;
             }
         }
         true
+    }
+
+    /// Weighs the frame so far; true (and stopped) once testing no longer pays.
+    fn check(&mut self, now: Instant) -> bool {
+        let allowance = (self.allowance_triangles * self.ns_per_triangle()).max(MIN_ALLOWANCE_TIME.as_nanos() as f64);
+        // Once the direct rate is known (a frame drew directly), the whole frame so far is
+        // weighed against drawing its work directly: small tested batches rasterize slower
+        // than shared ones, a cost of testing too.
+        let elapsed = now.saturating_duration_since(self.start).as_nanos() as f64;
+        let direct_too_slow = self.direct_ns.is_some_and(|d| {
+            let work = (self.raster_triangles + self.saved_triangles) as f64 * d;
+            elapsed > work + allowance
+        });
+        self.stopped = if self.abandon {
+            // Abandoning costs what was spent plus a whole direct frame: worth it only early
+            // (at most 1.5 direct frames in all); later the frame is finished as begun, and
+            // the frame-level choice weighs it.
+            direct_too_slow && elapsed < 0.5 * self.direct_frame_ns
+        } else {
+            direct_too_slow || self.cost_ns(now) > self.gain_ns() + allowance
+        };
+        #[cfg(test)]
+        {
+            self.stopped |= self.force_stop;
+        }
+        self.stopped
     }
 
     /// `n` tests skipped without asking [`test`](Self::test) one by one (a renderer that
@@ -192,6 +271,15 @@ impl FramePayoff {
     /// True once the frame stopped testing.
     pub fn stopped(&self) -> bool {
         self.stopped
+    }
+
+    /// True once the frame stopped testing while a measured direct frame's rate was known
+    /// ([`Payoff::set_direct`]): the renderer then draws nothing more of the frame and
+    /// hands it to [`crate::direct::DirectFrames::redraw`], which draws it whole as `frustum`
+    /// does (a stopped frame was slower than that by more than its allowance; finishing it
+    /// its own way, in pieces, would be slower still).
+    pub fn abandoned(&self) -> bool {
+        self.stopped && self.abandon
     }
 
     /// The counters `payoff_stopped` and `payoff_untested`.

@@ -54,7 +54,11 @@
 //! - **Payoff** ([`crate::payoff`], `payoff`): a frame whose tests cost more than they save
 //!   stops testing and draws the rest directly: mesh instances wholly in view whole, in batches
 //!   large enough for the rasterizer's threads, without pyramid updates (only the recheck reads
-//!   the pyramid then, and it rebuilds it).
+//!   the pyramid then, and it rebuilds it). Across frames ([`crate::direct`], without a
+//!   distribution): after a frame that was slower than a measured direct frame (`frustum`'s
+//!   way, per triangle in view), runs of frames are drawn directly (counter `payoff_direct`),
+//!   culling probed between them; a frame that stops once a direct frame was measured is
+//!   abandoned and drawn directly instead.
 //!
 //! Every part has a switch so its effect can be measured (`occult algos` lists them).
 //!
@@ -111,6 +115,7 @@ use occult_core::{Affine3A, NodeId, NodeKind, Scene, View};
 use occult_raster::{Frame, Rasterizer, ZPyramid};
 use occult_spatial::{HybridOctree, HybridOctreeConfig};
 
+use crate::direct::DirectFrames;
 use crate::nodes::{instance_boxes, per_node, triangle_boxes};
 use crate::payoff::Payoff;
 use crate::{
@@ -182,7 +187,8 @@ pub struct HzbOptions {
     /// Workers of the distribution (1 ..= [`MAX_WORKERS`]); each rasterizes on one thread.
     pub workers: usize,
     /// Stop testing for the rest of a frame once the tests cost more than they save, and draw
-    /// the rest directly ([`crate::payoff`]). Not in the paper.
+    /// the rest directly ([`crate::payoff`]); draw whole frames directly while culled frames
+    /// are slower than direct ones ([`crate::direct`]). Not in the paper.
     pub payoff: bool,
 }
 
@@ -293,7 +299,7 @@ impl HzbOptions {
 /// Every counter ([`FrameStats::counters`](crate::FrameStats::counters)) a frame may report,
 /// whichever the settings, except the per-worker ones of `parallel=on` (`worker<k>_busy_us`,
 /// `worker<k>_idle_us`); [`INFO`]'s counters list those too.
-pub const COUNTERS: [&str; 15] = [
+pub const COUNTERS: [&str; 16] = [
     "occlusion_tests",
     "occlusion_culled",
     "frustum_culled",
@@ -309,6 +315,7 @@ pub const COUNTERS: [&str; 15] = [
     "visible_list_retested",
     crate::payoff::COUNTERS[0],
     crate::payoff::COUNTERS[1],
+    crate::direct::COUNTER,
 ];
 
 /// Every counter a frame may report: [`COUNTERS`], then the workers' busy and idle times.
@@ -417,7 +424,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc {
             key: "payoff",
             default: "on",
-            help: "stop testing for the rest of a frame once tests cost more than they save, and draw the rest directly (not in the paper)",
+            help: "stop testing for the rest of a frame once tests cost more than they save, and draw the rest directly; draw runs of frames as frustum does while culled frames are slower than such direct frames (not in the paper)",
         },
     ],
     counters: &DECLARED,
@@ -469,6 +476,8 @@ pub struct Hzb {
     /// One walker, or one per worker of the distribution.
     workers: Vec<Worker>,
     frames_since_recheck: u32,
+    /// Frames drawn directly where culling does not pay (`payoff=on`).
+    direct: Option<DirectFrames>,
 }
 
 /// Counter names per worker (counters are named by static strings).
@@ -572,7 +581,14 @@ impl Hzb {
             .collect();
         let mut hzb = hzb.clone();
         hzb.temporal &= hzb.occlusion; // without tests a visible list changes nothing
+                                       // Direct frames go through the walker's rasterizer: not under a distribution, whose
+                                       // workers rasterize on one thread each.
+        let direct = match hzb.payoff && hzb.distribution == Distribution::Off {
+            true => Some(DirectFrames::new(scene.clone(), &workers[0].raster)?),
+            false => None,
+        };
         Ok(Self {
+            direct,
             scene,
             options: hzb,
             subtree_items,
@@ -771,6 +787,14 @@ impl Renderer for Hzb {
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
         check_frame(view, frame)?;
         let start = Instant::now();
+        if let Some(direct) = &mut self.direct {
+            if let Some(stats) = direct.render_if_due(&mut self.workers[0].raster, view, frame)? {
+                return Ok(stats);
+            }
+            for w in &mut self.workers {
+                w.payoff.set_direct(direct.direct_ns(), direct.direct_frame_ns());
+            }
+        }
         self.frames_since_recheck += 1;
         let recheck = self.options.temporal && self.frames_since_recheck >= self.options.recheck_every;
         if recheck {
@@ -801,6 +825,14 @@ impl Renderer for Hzb {
         } else {
             self.render_distributed(view, frame, recheck)?
         };
+        if let Some(direct) = &mut self.direct {
+            if self.workers.iter().any(|w| w.payoff.last_abandoned()) {
+                direct.redraw(&mut self.workers[0].raster, view, frame, &mut stats)?;
+            }
+            let (t, paid) = (Instant::now(), self.workers.iter().all(|w| w.payoff.last_paid()));
+            direct.culled(view, start.elapsed(), stats.triangles_submitted, paid);
+            stats.phases.add(Phase::Other, t.elapsed());
+        }
         stats.total = start.elapsed();
         let p = &stats.phases;
         let accounted = p.get(Phase::Clear) + p.get(Phase::Raster) + p.get(Phase::DepthStructure) + p.get(Phase::Other);
@@ -815,8 +847,23 @@ impl Renderer for Hzb {
             .map(HybridOctree::memory_bytes)
             .sum::<usize>()
             + self.workers.iter().map(Worker::memory_bytes).sum::<usize>()
+            + self.direct.as_ref().map_or(0, DirectFrames::memory_bytes)
     }
 }
+#[cfg(test)]
+impl crate::direct::tests::ForceDirect for Hzb {
+    fn force(&mut self, n: u32, abandon: bool) {
+        let direct = self.direct.as_mut().expect("payoff is on by default");
+        direct.force(n);
+        if abandon {
+            direct.force_rate(1.0);
+        }
+        for w in &mut self.workers {
+            w.payoff.force_stop = abandon;
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -47,13 +47,14 @@
 //!   than the drawing it saved.
 //! - **Payoff** (`payoff`, [`crate::payoff`]): a frame weighs its culling (everything but
 //!   rasterization: the occluder walk, the N-buffer builds, the tests, the read-back) against
-//!   the triangles its tests removed times the measured cost of a triangle. After a frame
-//!   whose culling did not pay ([`FramePayoff::paid`]), the next 2, 4, 8 .. [`MAX_DIRECT_RUN`]
-//!   frames (doubling after each probe that did not pay, back to 2 after one that did) are
-//!   drawn by an embedded [`FrustumCulling`] (counter `payoff_direct`): what `frustum` draws,
-//!   the way it draws it (whole instances and its own mesh BVHs). A frame that finds no
-//!   occluder at all (an empty depth buffer hides nothing) is drawn the same way, without
-//!   counting as a probe (counter `no_occluders`).
+//!   the triangles its tests removed times the measured cost of a triangle
+//!   ([`FramePayoff::paid`]). Across frames ([`crate::direct`]): after a culled frame slower,
+//!   per triangle in view, than a measured direct frame, runs of 8, 16 .. 64 frames (doubling
+//!   after each probe that loses, back to 8 after one that wins) are drawn by an embedded
+//!   `frustum` (counter `payoff_direct`): what `frustum` draws, the way it draws it (whole
+//!   instances and its own mesh BVHs). A frame that finds no occluder at all (an empty depth
+//!   buffer hides nothing) is drawn the same way, without counting as a probe (counter
+//!   `no_occluders`).
 //!
 //! # First frame
 //! With `occluders=visible` and no previous frame (and after a resolution change) the
@@ -98,7 +99,7 @@ use occult_raster::{query_box_counted, Draw, DrawTriangles, Extremum, Frame, NBu
 use occult_spatial::Bvh;
 use rayon::prelude::*;
 
-use crate::frustum::{FrustumCulling, FrustumOptions};
+use crate::direct::DirectFrames;
 use crate::nodes::{per_node, triangle_boxes};
 use crate::payoff::{FramePayoff, Payoff};
 use crate::walk::{cull_bvh, test_box};
@@ -165,7 +166,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc {
             key: "payoff",
             default: "on",
-            help: "after a frame whose culling cost more than it saved, draw the frustum's objects directly, probing again after 2, 4, 8 .. 16 frames (on|off)",
+            help: "draw runs of frames as frustum does (8, 16 .. 64 frames, culling probed between) while culled frames are slower than such direct frames (on|off)",
         },
     ],
     counters: &[
@@ -225,8 +226,8 @@ pub struct NBufferOptions {
     pub near_area: f64,
     /// Near occluders: the most objects taken, largest screen boxes first.
     pub near_max: usize,
-    /// Draw the frustum's objects directly after a frame whose culling did not pay
-    /// ([`crate::payoff`]), probing again after [`MIN_DIRECT_RUN`], twice that .. [`MAX_DIRECT_RUN`] frames.
+    /// Draw runs of frames as `frustum` does while culled frames are slower than such direct
+    /// frames ([`crate::direct`]).
     pub payoff: bool,
     /// Pixels per side of one N-buffer sample (1, 2, 4 or 8): the depth map is reduced to
     /// the farthest depth of each `scale × scale` block before the N-buffer is built over it.
@@ -260,13 +261,6 @@ impl Occluders {
 
 /// Frames without a second pass after one that did not pay (`passes=2`).
 pub const SECOND_PASS_SKIP: u32 = 3;
-
-/// Shortest run of frames drawn directly after a frame whose culling did not pay (a probe
-/// costs a culling frame: a run of one would probe every other frame).
-pub const MIN_DIRECT_RUN: u32 = 2;
-
-/// Longest run of frames drawn directly (without culling) before culling is tried again.
-pub const MAX_DIRECT_RUN: u32 = 16;
 
 impl Default for NBufferOptions {
     fn default() -> Self {
@@ -373,12 +367,8 @@ pub struct NBufferCulling {
     node_triangles: Vec<u64>,
     /// Whether culling pays ([`crate::payoff`]).
     payoff: Payoff,
-    /// Frames still to draw directly before culling is tried again.
-    direct_left: u32,
-    /// Length of the next run of direct frames (doubles after each probe that did not pay).
-    direct_run: u32,
-    /// What draws the direct frames (`payoff=on`).
-    direct: Option<FrustumCulling>,
+    /// What draws the direct frames and when (`payoff=on`).
+    direct: Option<DirectFrames>,
     /// The depth map reduced to `scale × scale` blocks (scratch).
     coarse_depth: Vec<f32>,
     /// Frames still to render without the second pass.
@@ -502,7 +492,10 @@ impl NBufferCulling {
         });
         let n = objects.len();
         let payoff = Payoff::new(no.payoff, scene.item_count());
-        let scene_for_direct = scene.clone();
+        let direct = match no.payoff {
+            true => Some(DirectFrames::new(scene.clone(), &raster)?),
+            false => None,
+        };
         Ok(Self {
             scene,
             raster,
@@ -519,16 +512,7 @@ impl NBufferCulling {
             batch: Batch::default(),
             node_triangles,
             payoff,
-            direct_left: 0,
-            direct_run: MIN_DIRECT_RUN,
-            direct: match no.payoff {
-                true => Some(FrustumCulling::with_options(
-                    scene_for_direct,
-                    options,
-                    &FrustumOptions::default(),
-                )?),
-                false => None,
-            },
+            direct,
             coarse_depth: Vec::new(),
             second_pass_skip: 0,
         })
@@ -910,20 +894,15 @@ impl Renderer for NBufferCulling {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        // Payoff: after a frame whose culling cost more than it saved, a run of frames is
-        // drawn by `frustum` (the same objects drawn the way it draws them), then culling is
-        // probed again.
-        if let (Some(direct), true) = (&mut self.direct, self.direct_left > 0) {
-            self.direct_left -= 1;
-            let start = Instant::now();
-            let mut stats = direct.render(view, frame)?;
-            let mut payoff = self.payoff.begin(start);
-            payoff.rasterized(stats.triangles_submitted, stats.phases.get(Phase::Raster), false);
-            self.payoff.end(&payoff);
-            stats.counters.add("payoff_direct", 1);
-            return Ok(stats);
-        }
+        // Payoff: while culled frames are slower than direct ones, runs of frames are drawn by
+        // `frustum` (the same objects drawn the way it draws them), culling probed between.
         crate::check_frame(view, frame)?;
+        let begun = Instant::now();
+        if let Some(direct) = &mut self.direct {
+            if let Some(stats) = direct.render_if_due(&mut self.raster, view, frame)? {
+                return Ok(stats);
+            }
+        }
         let (w, h) = (view.width(), view.height());
         if self.last_size != (w, h) {
             self.visible.fill(false);
@@ -967,7 +946,7 @@ impl Renderer for NBufferCulling {
         }
         if let (Some(direct), true) = (&mut self.direct, occluders.is_empty()) {
             // Nothing to occlude with: an empty depth buffer hides nothing.
-            let mut stats = direct.render(view, frame)?;
+            let mut stats = direct.render(&mut self.raster, view, frame)?;
             stats.counters.add("no_occluders", 1);
             stats.phases.add(Phase::Cull, t.elapsed());
             return Ok(stats);
@@ -1166,20 +1145,17 @@ impl Renderer for NBufferCulling {
             self.read_back_visible(frame);
             stats.phases.add(Phase::Other, t.elapsed());
         }
-        if self.options.payoff {
-            if payoff.paid(Instant::now()) {
-                self.direct_run = MIN_DIRECT_RUN;
-            } else {
-                // Not worth it on this view: draw directly for a while, longer each time.
-                self.direct_left = self.direct_run;
-                self.direct_run = (self.direct_run * 2).min(MAX_DIRECT_RUN);
-                if self.options.occluders.visible() {
-                    // Stale by the next probe.
-                    self.visible.fill(false);
-                }
-            }
-        }
         self.payoff.end(&payoff);
+        if let Some(direct) = &mut self.direct {
+            let t = Instant::now();
+            let paid = self.payoff.last_paid();
+            if direct.culled(view, begun.elapsed(), stats.triangles_submitted, paid) && self.options.occluders.visible()
+            {
+                // Stale by the next probe.
+                self.visible.fill(false);
+            }
+            stats.phases.add(Phase::Other, t.elapsed());
+        }
         stats.total = start.elapsed();
         Ok(stats)
     }
@@ -1203,7 +1179,7 @@ impl Renderer for NBufferCulling {
             + self.batch.nearest.capacity() * 4
             + self.batch.hidden.capacity()
             + self.coarse_depth.capacity() * 4
-            + self.direct.as_ref().map_or(0, FrustumCulling::memory_bytes)
+            + self.direct.as_ref().map_or(0, DirectFrames::memory_bytes)
             + self.raster.memory_bytes()
     }
 }
@@ -1320,7 +1296,7 @@ mod tests {
         // and draws the same frame; the run of direct frames ends with a culling frame.
         let no = NBufferOptions::default();
         let mut r = NBufferCulling::with_options(scene.clone(), &RenderOptions::default(), &no).unwrap();
-        r.direct_left = 2;
+        r.direct.as_mut().unwrap().force(2);
         for i in 0..3 {
             let mut f = Frame::new(view.width(), view.height()).unwrap();
             let s = r.render(&view, &mut f).unwrap();

@@ -52,7 +52,10 @@
 //! - Payoff ([`OqGridOptions::payoff`], `payoff=on`, [`crate::payoff`]): a frame whose queries
 //!   cost more than they save stops querying; meshes wholly in view are then drawn whole and
 //!   the rest of the grids drawn unqueried, in batches large enough for the rasterizer's
-//!   threads, without pyramid updates. Counters `payoff_stopped`, `payoff_untested`.
+//!   threads, without pyramid updates. Counters `payoff_stopped`, `payoff_untested`. Across
+//!   frames ([`crate::direct`]): after a frame that was slower than a measured direct frame
+//!   (`frustum`'s way, per triangle in view), runs of frames are drawn directly (counter
+//!   `payoff_direct`), querying probed between them.
 //!
 //! # Instanced scenes
 //! The scene DAG is not flattened. A grid is built per *unique* node, in the node's own space:
@@ -115,6 +118,7 @@ use occult_raster::{Draw, DrawTriangles, Frame, PixelRect, Rasterizer, ZPyramid}
 pub use occult_spatial::grid::Resolution;
 use occult_spatial::grid::{GridCell, GridConfig, GridError, MeshTriangles, NestedGrid, WeightedBoxes, NO_CHILD};
 
+use crate::direct::DirectFrames;
 use crate::hash::FxBuild;
 use crate::params::read_params;
 use crate::payoff::{FramePayoff, Payoff, DIRECT_BATCH};
@@ -204,7 +208,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc {
             key: "payoff",
             default: "on",
-            help: "stop querying for the rest of a frame once queries cost more than they save, and draw the rest directly (not in the paper)",
+            help: "stop querying for the rest of a frame once queries cost more than they save, and draw the rest directly; draw runs of frames as frustum does while queried frames are slower than such direct frames (not in the paper)",
         },
     ],
     counters: &[
@@ -223,6 +227,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "whole_drawn",
         crate::payoff::COUNTERS[0],
         crate::payoff::COUNTERS[1],
+        crate::direct::COUNTER,
     ],
     conservative: true,
     build: |scene, options, params| {
@@ -299,7 +304,8 @@ pub struct OqGridOptions {
     /// Draw a triangle shared by several visible cells once (§3.1), or once per cell.
     pub stamps: bool,
     /// Stop querying for the rest of a frame once the queries cost more than they save, and
-    /// draw the rest directly ([`crate::payoff`]). Not in the paper.
+    /// draw the rest directly ([`crate::payoff`]); draw whole frames directly while queried
+    /// frames are slower than direct ones ([`crate::direct`]). Not in the paper.
     pub payoff: bool,
     /// Bound on all grids' bytes, checked before allocating.
     pub max_memory_bytes: usize,
@@ -455,6 +461,8 @@ pub struct OqGrid {
     last_counts: OqGridCounts,
     /// What the queries' balance learned from earlier frames ([`crate::payoff`]).
     payoff: Payoff,
+    /// Frames drawn directly where querying does not pay (`payoff=on`).
+    direct: Option<DirectFrames>,
 }
 
 impl OqGrid {
@@ -505,6 +513,10 @@ impl OqGrid {
         }
         Ok(Self {
             payoff: Payoff::new(oq.payoff, scene.item_count()),
+            direct: match oq.payoff {
+                true => Some(DirectFrames::new(scene.clone(), &raster)?),
+                false => None,
+            },
             scene,
             raster,
             options: oq.clone(),
@@ -677,6 +689,9 @@ impl<'a> Visitor<'a> for Walk<'a> {
 
     /// Traverses the occurrence's grid from its top level.
     fn visit(&mut self, at: &NodeAt<'a>) {
+        if self.payoff.abandoned() {
+            return; // the frame is redrawn directly (`crate::direct`)
+        }
         self.counts.node_occurrences += 1;
         *self.epoch = self.epoch.wrapping_add(1);
         if *self.epoch == 0 {
@@ -771,6 +786,9 @@ impl<'a> Walk<'a> {
     /// Queries the cells of one batch against the same depth state, then draws the visible
     /// ones (§3.4) and recurses into the visible ones' subgrids (§3.2) and instances.
     fn batch(&mut self, occ: &Occurrence<'a>, level_index: u32, batch: &[(i64, u32)]) {
+        if self.payoff.abandoned() {
+            return; // the frame is redrawn directly (`crate::direct`)
+        }
         let cells: &'a [GridCell] = &occ.grid.levels()[level_index as usize].cells;
         let options = self.options;
         let wants_query = |c: &GridCell| options.queries && c.weight >= options.query_threshold;
@@ -972,6 +990,14 @@ impl<'a> Walk<'a> {
         if self.pending.is_empty() {
             return;
         }
+        if self.payoff.abandoned() {
+            // The frame is redrawn directly (`crate::direct`).
+            self.pending.clear();
+            self.gathered.clear();
+            self.dirty.clear();
+            self.pending_triangles = 0;
+            return;
+        }
         let view = self.walk.view();
         let draws: Vec<Draw<'_>> = self
             .pending
@@ -1033,6 +1059,13 @@ impl Renderer for OqGrid {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
+        crate::check_frame(view, frame)?;
+        if let Some(direct) = &mut self.direct {
+            if let Some(stats) = direct.render_if_due(&mut self.raster, view, frame)? {
+                return Ok(stats);
+            }
+            self.payoff.set_direct(direct.direct_ns(), direct.direct_frame_ns());
+        }
         let (start, t, cleared) = crate::begin_frame(&mut self.raster, view, frame)?;
         let pyramid = match self.options.test {
             CellTest::Query => None,
@@ -1098,6 +1131,19 @@ impl Renderer for OqGrid {
             stats.counters.add(name, n);
         }
         stats.counters.add_all(payoff.counters());
+        if let Some(direct) = &mut self.direct {
+            if payoff.abandoned() {
+                direct.redraw(&mut self.raster, view, frame, &mut stats)?;
+            }
+            let t = Instant::now();
+            direct.culled(
+                view,
+                start.elapsed(),
+                stats.triangles_submitted,
+                self.payoff.last_paid(),
+            );
+            stats.phases.add(Phase::Other, t.elapsed());
+        }
         stats.total = start.elapsed();
         self.last_counts = counts;
         Ok(stats)
@@ -1109,5 +1155,18 @@ impl Renderer for OqGrid {
             + self.pyramid.memory_bytes()
             + self.shares.capacity() * std::mem::size_of::<(u64, (f32, u32))>()
             + self.raster.memory_bytes()
+            + self.direct.as_ref().map_or(0, DirectFrames::memory_bytes)
+    }
+}
+
+#[cfg(test)]
+impl crate::direct::tests::ForceDirect for OqGrid {
+    fn force(&mut self, n: u32, abandon: bool) {
+        let direct = self.direct.as_mut().expect("payoff is on by default");
+        direct.force(n);
+        if abandon {
+            direct.force_rate(1.0);
+        }
+        self.payoff.force_stop = abandon;
     }
 }

@@ -1,0 +1,403 @@
+//! Frames drawn directly: the frame-level half of the payoff guarantee ([`crate::payoff`]).
+//!
+//! Within a frame, [`FramePayoff`](crate::payoff::FramePayoff) stops testing once tests cost
+//! more than they save. That bounds a frame's loss but cannot undo it, and on a view where
+//! culling never pays (a single mesh in full view, open terrain) every frame would pay it
+//! again. [`DirectFrames`] decides **per frame** whether a culling renderer culls at all or
+//! draws the frame as `frustum` does (embedded [`Hierarchies`], drawn through the renderer's
+//! own rasterizer: whole instances, `frustum`'s mesh BVHs, the same frame), from measured
+//! costs:
+//!
+//! - every frame's time is divided by its **work**: the triangles `frustum` would submit for
+//!   that view (one walk of its hierarchy, counting only: cheap beside any frame), so that
+//!   frames of different views compare;
+//! - after a culled frame the rate is compared with the measured direct rate (the least of
+//!   the last [`DIRECT_KEPT`] direct frames'): culling slower than drawing directly starts a **run** of
+//!   direct frames, [`MIN_RUN`] the first time, twice as long after each probe that loses
+//!   again, up to [`MAX_RUN`] (back to [`MIN_RUN`] after a probe that wins);
+//! - the direct rate is measured right after the first culled frame, and once more after the
+//!   next culled frame if that one won (a renderer's first direct frame also pays its
+//!   rasterizer's first large draws), unless the first culled frame plainly paid (its tests saved more than they cost, and it submitted at most a third of
+//!   the work); a culled frame that pays less than [`REMEASURE_SHARE`] of a direct frame's
+//!   rate measures it again once it is [`REMEASURE_AFTER`] frames old;
+//! - a culled frame shorter than [`MIN_ALLOWANCE_TIME`] never starts a run (small scenes keep
+//!   their tests whatever the clock says).
+//!
+//! Renderers also hand the direct rate to their in-frame payoff, which then stops a frame
+//! whose time so far exceeds what drawing its work directly costs ([`DirectFrames::direct_ns`]).
+//! Frames do not change (`frustum` is exact), only the time. Counter: `payoff_direct` (1 for
+//! a frame drawn directly).
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use occult_core::{Scene, View};
+use occult_raster::{Frame, Rasterizer};
+
+use crate::frustum::{FrustumOptions, Hierarchies};
+use crate::payoff::MIN_ALLOWANCE_TIME;
+use crate::{FrameStats, Result};
+
+/// Longest run of direct frames between two probes of culling.
+pub const MAX_RUN: u32 = 64;
+/// First run of direct frames after culling lost: a probe costs a culled frame that loses, so
+/// runs are long (on a 24-frame path that culling loses, frames 0 and 10 are culled).
+pub const MIN_RUN: u32 = 8;
+/// A culled frame paying less than this share of the direct rate measures it again ...
+pub const REMEASURE_SHARE: f64 = 0.8;
+/// ... once the last measurement is this many frames old.
+pub const REMEASURE_AFTER: u32 = 16;
+/// Direct frames whose rates are kept ([`DirectFrames::direct_ns`] is their least).
+pub const DIRECT_KEPT: usize = 4;
+/// The counter of frames drawn directly.
+pub const COUNTER: &str = "payoff_direct";
+
+/// The frame-level choice between culling and drawing directly ([module doc](self)).
+pub struct DirectFrames {
+    frustum: Hierarchies,
+    choice: Choice,
+}
+
+impl DirectFrames {
+    /// `frustum`'s hierarchies of `scene` (its default options; built on `raster`'s threads)
+    /// and a fresh choice.
+    ///
+    /// # Errors
+    /// None with the default options; [`Hierarchies::build`]'s otherwise.
+    pub fn new(scene: Arc<Scene>, raster: &Rasterizer) -> Result<Self> {
+        Ok(Self {
+            frustum: Hierarchies::build(scene, raster, &FrustumOptions::default())?,
+            choice: Choice::default(),
+        })
+    }
+
+    /// Draws this frame directly when the choice says so (counting it in `payoff_direct` and
+    /// measuring its rate); `None` when the frame is to be culled.
+    ///
+    /// # Errors
+    /// The frame or view errors of [`Hierarchies::render`].
+    pub fn render_if_due(
+        &mut self,
+        raster: &mut Rasterizer,
+        view: &View,
+        frame: &mut Frame,
+    ) -> Result<Option<FrameStats>> {
+        if !self.choice.take_direct() {
+            return Ok(None);
+        }
+        let mut stats = self.render(raster, view, frame)?;
+        stats.counters.add(COUNTER, 1);
+        self.choice.direct(stats.total, stats.triangles_submitted);
+        Ok(Some(stats))
+    }
+
+    /// Draws the frame directly, neither measured nor counted (for frames a renderer cannot
+    /// cull, such as one without occluders).
+    ///
+    /// # Errors
+    /// As [`DirectFrames::render_if_due`].
+    pub fn render(&mut self, raster: &mut Rasterizer, view: &View, frame: &mut Frame) -> Result<FrameStats> {
+        self.frustum.render(raster, view, frame)
+    }
+
+    /// Redraws a frame whose culling was abandoned ([`FramePayoff::abandoned`]) as `frustum`
+    /// does (the frame is cleared first), adding its counts and phases to the culled part's
+    /// `stats` and counting it in `payoff_direct`.
+    ///
+    /// [`FramePayoff::abandoned`]: crate::payoff::FramePayoff::abandoned
+    ///
+    /// # Errors
+    /// As [`DirectFrames::render_if_due`].
+    pub fn redraw(
+        &mut self,
+        raster: &mut Rasterizer,
+        view: &View,
+        frame: &mut Frame,
+        stats: &mut FrameStats,
+    ) -> Result<()> {
+        let s = self.render(raster, view, frame)?;
+        stats.triangles_submitted += s.triangles_submitted;
+        stats.triangles_rasterized += s.triangles_rasterized;
+        stats.fragments_written += s.fragments_written;
+        stats.nodes_visited += s.nodes_visited;
+        stats.boxes_tested += s.boxes_tested;
+        stats.boxes_culled += s.boxes_culled;
+        stats.phases.merge(&s.phases);
+        stats.counters.add(COUNTER, 1);
+        Ok(())
+    }
+
+    /// Learns from a culled frame of `view` that took `total` and submitted `submitted`
+    /// triangles; `tests_paid`: its tests saved more than they cost
+    /// ([`Payoff::last_paid`](crate::payoff::Payoff::last_paid)). True when the next frames
+    /// are to be drawn directly.
+    pub fn culled(&mut self, view: &View, total: Duration, submitted: u64, tests_paid: bool) -> bool {
+        let work = self.frustum.triangles_in_view(view);
+        self.choice
+            .culled(total, work, Self::plainly(tests_paid, submitted, work));
+        self.choice.direct_left > 0
+    }
+
+    /// Whether a culled frame paid plainly: its tests paid and it submitted at most a third of
+    /// the `work`.
+    pub fn plainly(tests_paid: bool, submitted: u64, work: u64) -> bool {
+        tests_paid && submitted.saturating_mul(3) <= work
+    }
+
+    /// The measured cost of a direct frame per triangle of work, ns (the least of the last
+    /// [`DIRECT_KEPT`] direct frames'); `None` before one was drawn.
+    pub fn direct_ns(&self) -> Option<f64> {
+        self.choice.direct_ns
+    }
+
+    /// What a direct frame is expected to cost, ns: the direct rate times the last frame's
+    /// work (0 before both are known).
+    pub fn direct_frame_ns(&self) -> f64 {
+        self.choice.direct_ns.unwrap_or(0.0) * self.choice.last_work as f64
+    }
+
+    /// Bytes held (`frustum`'s hierarchies).
+    pub fn memory_bytes(&self) -> usize {
+        self.frustum.memory_bytes()
+    }
+
+    /// Makes the next `n` frames direct (tests of the renderers that embed one).
+    #[cfg(test)]
+    pub(crate) fn force(&mut self, n: u32) {
+        self.choice.direct_left = n;
+    }
+
+    /// Sets the measured direct rate (tests: frames that stop are then abandoned).
+    #[cfg(test)]
+    pub(crate) fn force_rate(&mut self, ns: f64) {
+        self.choice.direct_ns = Some(ns);
+        self.choice.direct_rates = vec![ns];
+    }
+}
+
+/// The decision alone, on numbers: times and work.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Choice {
+    /// Rate of the last culled frame, ns per triangle of work.
+    cull_ns: Option<f64>,
+    /// Rate of direct frames: the least of the last [`DIRECT_KEPT`] (noise on a shared
+    /// machine only ever adds time; one slow direct frame must not make culling look good).
+    direct_ns: Option<f64>,
+    /// The last direct rates, newest last.
+    direct_rates: Vec<f64>,
+    /// Direct frames left in the current run.
+    direct_left: u32,
+    /// Length of the next run (0: [`MIN_RUN`]).
+    run: u32,
+    /// Culled frames since the last direct one.
+    since_direct: u32,
+    /// The last frame's work.
+    last_work: u64,
+}
+
+fn rate(time: Duration, work: u64) -> f64 {
+    time.as_nanos() as f64 / work.max(1) as f64
+}
+
+impl Choice {
+    /// True, and one direct frame fewer left, when this frame is to be drawn directly.
+    fn take_direct(&mut self) -> bool {
+        let due = self.direct_left > 0;
+        self.direct_left = self.direct_left.saturating_sub(1);
+        due
+    }
+
+    /// Starts a run of direct frames, twice as long as the last.
+    fn start_run(&mut self) {
+        let run = self.run.max(MIN_RUN);
+        self.direct_left = run;
+        self.run = (run * 2).min(MAX_RUN);
+    }
+
+    fn culled(&mut self, total: Duration, work: u64, paid_plainly: bool) {
+        self.since_direct = self.since_direct.saturating_add(1);
+        self.last_work = work;
+        if total < MIN_ALLOWANCE_TIME {
+            return;
+        }
+        let r = rate(total, work);
+        self.cull_ns = Some(r);
+        match self.direct_ns {
+            None if paid_plainly => {}
+            // Measure the alternative once, next frame.
+            None => self.direct_left = 1,
+            Some(d) if r > d => self.start_run(),
+            // One direct frame is not enough to keep culling on: the first one a renderer
+            // draws also pays its rasterizer's first large draws (buffers allocated, pages
+            // touched), so it is measured once more.
+            Some(_) if self.direct_rates.len() < 2 => self.direct_left = 1,
+            Some(d) => {
+                self.run = 0;
+                if r > REMEASURE_SHARE * d && self.since_direct >= REMEASURE_AFTER {
+                    self.direct_left = 1;
+                }
+            }
+        }
+    }
+
+    fn direct(&mut self, total: Duration, work: u64) {
+        self.last_work = work;
+        let r = rate(total, work);
+        if self.direct_rates.len() == DIRECT_KEPT {
+            self.direct_rates.remove(0);
+        }
+        self.direct_rates.push(r);
+        self.direct_ns = self.direct_rates.iter().copied().reduce(f64::min);
+        self.since_direct = 0;
+        // A measurement frame after a culled frame that lost: go straight into a run.
+        if self.direct_left == 0 && self.cull_ns.is_some_and(|c| c > r) && self.run == 0 {
+            self.start_run();
+        }
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::{RenderOptions, Renderer};
+    use occult_core::Vec3;
+
+    const MS: Duration = Duration::from_millis(1);
+
+    /// A row of cubes before more cubes on the ground, a view along the row, and the
+    /// reference frame.
+    fn scene_view_reference() -> (Arc<Scene>, View, Frame) {
+        let at = (0..40).map(|i| Vec3::new((i % 8) as f32 * 1.5 - 6.0, 0.0, -((i / 8) as f32) * 2.0));
+        let scene = crate::tests::cubes_on_ground([-9.0, 9.0, -20.0, 2.0], at);
+        let (view, _) = crate::test_view(Vec3::new(0.5, 1.0, 4.0), Vec3::new(0.0, 0.0, -4.0), 96, 64);
+        let mut reference = Frame::new(96, 64).unwrap();
+        crate::zbuffer::ZBuffer::new(scene.clone(), &RenderOptions::default())
+            .unwrap()
+            .render(&view, &mut reference)
+            .unwrap();
+        (scene, view, reference)
+    }
+
+    /// Frames drawn directly, and frames whose culling stops and is abandoned (redrawn
+    /// directly), are the reference frames, counted as such; the renderers that embed
+    /// [`DirectFrames`] each.
+    #[test]
+    fn direct_and_abandoned_frames_are_identical() {
+        let (scene, view, reference) = scene_view_reference();
+        let options = RenderOptions::default();
+        let hzb = crate::hzb::Hzb::new(scene.clone(), &options, &crate::hzb::HzbOptions::default()).unwrap();
+        let oqgrid =
+            crate::oqgrid::OqGrid::with_options(scene.clone(), &options, &crate::oqgrid::OqGridOptions::default())
+                .unwrap();
+        let mut renderers: Vec<(&str, Box<dyn ForceDirect>)> =
+            vec![("hzb", Box::new(hzb)), ("oqgrid", Box::new(oqgrid))];
+        for (name, r) in &mut renderers {
+            r.force(2, false);
+            for i in 0..3 {
+                let mut f = Frame::new(96, 64).unwrap();
+                let s = r.render(&view, &mut f).unwrap();
+                assert!(f.same_visibility(&reference), "{name} frame {i}");
+                assert_eq!(s.counters.get(COUNTER), u64::from(i < 2), "{name} frame {i}");
+            }
+            r.force(0, true);
+            let mut f = Frame::new(96, 64).unwrap();
+            let s = r.render(&view, &mut f).unwrap();
+            assert!(f.same_visibility(&reference), "{name} abandoned");
+            assert_eq!(
+                s.counters.get(COUNTER),
+                1,
+                "{name}: an abandoned frame is drawn directly"
+            );
+            assert_eq!(s.counters.get("payoff_stopped"), 1, "{name}");
+        }
+    }
+
+    /// What the tests above set in a renderer that embeds [`DirectFrames`].
+    pub(crate) trait ForceDirect: Renderer {
+        /// Makes the next `n` frames direct; `abandon`: frames stop at their first balance
+        /// check, with a direct rate known (so they are abandoned).
+        fn force(&mut self, n: u32, abandon: bool);
+    }
+
+    /// Frames of a view where culling costs twice what drawing directly does: one measurement,
+    /// then runs of 8, 16, 32 and 64 direct frames between single probes.
+    #[test]
+    fn culling_that_loses_runs_direct_ever_longer() {
+        let mut c = Choice::default();
+        let mut ways = String::new();
+        for _ in 0..120 {
+            if c.take_direct() {
+                ways.push('d');
+                c.direct(10 * MS, 1000);
+            } else {
+                ways.push('c');
+                c.culled(20 * MS, 1000, false);
+            }
+        }
+        let expected = format!(
+            "cd{}c{}c{}c{}",
+            "d".repeat(8),
+            "d".repeat(16),
+            "d".repeat(32),
+            "d".repeat(64)
+        );
+        assert_eq!(ways, expected[..120]);
+    }
+
+    /// Culling that wins after a direct measurement keeps culling, measuring again only when
+    /// its margin is thin and the measurement old.
+    #[test]
+    fn culling_that_wins_keeps_culling() {
+        let mut c = Choice::default();
+        c.culled(20 * MS, 1000, false);
+        assert!(c.take_direct());
+        c.direct(40 * MS, 1000);
+        // Culling (20) beats direct (40): no run; one more measurement after a culled frame.
+        assert!(!c.take_direct());
+        c.culled(20 * MS, 1000, false);
+        assert!(c.take_direct());
+        c.direct(40 * MS, 1000);
+        for _ in 0..40 {
+            c.culled(20 * MS, 1000, false);
+            assert!(!c.take_direct(), "a wide margin never remeasures");
+        }
+        // A thin margin (36 of 40) remeasures once the measurement is old.
+        let mut remeasured = 0;
+        for _ in 0..40 {
+            c.culled(36 * MS, 1000, false);
+            if c.take_direct() {
+                remeasured += 1;
+                c.direct(40 * MS, 1000);
+            }
+        }
+        // The first thin frame (the measurement 40 frames old), then every 16th.
+        assert_eq!(remeasured, 3);
+    }
+
+    /// A frame that plainly paid needs no measurement; short frames never start a run; rates
+    /// are per triangle of work.
+    #[test]
+    fn plain_wins_short_frames_and_work() {
+        let mut c = Choice::default();
+        c.culled(20 * MS, 1000, true);
+        assert!(!c.take_direct());
+        let mut c = Choice::default();
+        c.culled(MIN_ALLOWANCE_TIME / 2, 1000, false);
+        assert!(!c.take_direct());
+        assert_eq!(c.cull_ns, None);
+        // 20 ms for 2,000 triangles beats 15 ms for 1,000.
+        let mut c = Choice::default();
+        c.culled(20 * MS, 2000, false);
+        assert!(c.take_direct());
+        c.direct(15 * MS, 1000);
+        assert!(!c.take_direct());
+        c.culled(20 * MS, 2000, false);
+        assert!(c.take_direct(), "the second measurement");
+        c.direct(15 * MS, 1000);
+        c.culled(20 * MS, 2000, false);
+        assert!(!c.take_direct());
+        assert!(DirectFrames::plainly(true, 100, 300));
+        assert!(!DirectFrames::plainly(true, 101, 300));
+        assert!(!DirectFrames::plainly(false, 1, 300));
+    }
+}
