@@ -12,19 +12,22 @@
 //!   that view (one walk of its hierarchy, counting only: cheap beside any frame), so that
 //!   frames of different views compare;
 //! - after a culled frame the rate is compared with the measured direct rate (the least of
-//!   the last [`DIRECT_KEPT`] direct frames'): culling slower than drawing directly starts a **run** of
-//!   direct frames, [`MIN_RUN`] the first time, twice as long after each probe that loses
-//!   again, up to [`MAX_RUN`] (back to [`MIN_RUN`] after a probe that wins);
+//!   the last [`DIRECT_KEPT`] direct frames'): culling slower than drawing directly starts a
+//!   **run** of direct frames, [`MIN_RUN`] the first time, twice as long after each probe
+//!   that loses again, up to [`MAX_RUN`] (back to [`MIN_RUN`] after a probe that wins);
 //! - the direct rate is measured right after the first culled frame, and once more after the
 //!   next culled frame if that one won (a renderer's first direct frame also pays its
-//!   rasterizer's first large draws), unless the first culled frame plainly paid (its tests saved more than they cost, and it submitted at most a third of
-//!   the work); a culled frame that pays less than [`REMEASURE_SHARE`] of a direct frame's
-//!   rate measures it again once it is [`REMEASURE_AFTER`] frames old;
+//!   rasterizer's first large draws), unless the first culled frame plainly paid
+//!   ([`DirectFrames::plainly`]: its tests saved more than they cost, and it submitted at
+//!   most a third of the work or took less than half of what the work would cost at its own
+//!   rasterization rate); a culled frame that pays less than [`REMEASURE_SHARE`] of a direct
+//!   frame's rate measures it again once it is [`REMEASURE_AFTER`] frames old;
 //! - a culled frame shorter than [`MIN_ALLOWANCE_TIME`] never starts a run (small scenes keep
 //!   their tests whatever the clock says).
 //!
-//! Renderers also hand the direct rate to their in-frame payoff, which then stops a frame
-//! whose time so far exceeds what drawing its work directly costs ([`DirectFrames::direct_ns`]).
+//! Renderers also hand the direct rate to their in-frame payoff, which then abandons a frame
+//! that falls behind drawing its work directly early on ([`DirectFrames::direct_ns`],
+//! [`FramePayoff::abandoned`](crate::payoff::FramePayoff::abandoned)).
 //! Frames do not change (`frustum` is exact), only the time. Counter: `payoff_direct` (1 for
 //! a frame drawn directly).
 
@@ -36,7 +39,7 @@ use occult_raster::{Frame, Rasterizer};
 
 use crate::frustum::{FrustumOptions, Hierarchies};
 use crate::payoff::MIN_ALLOWANCE_TIME;
-use crate::{FrameStats, Result};
+use crate::{FrameStats, Phase, Result};
 
 /// Longest run of direct frames between two probes of culling.
 pub const MAX_RUN: u32 = 64;
@@ -127,21 +130,25 @@ impl DirectFrames {
         Ok(())
     }
 
-    /// Learns from a culled frame of `view` that took `total` and submitted `submitted`
-    /// triangles; `tests_paid`: its tests saved more than they cost
+    /// Learns from a culled frame of `view` that took `total` (its statistics `stats`);
+    /// `tests_paid`: its tests saved more than they cost
     /// ([`Payoff::last_paid`](crate::payoff::Payoff::last_paid)). True when the next frames
     /// are to be drawn directly.
-    pub fn culled(&mut self, view: &View, total: Duration, submitted: u64, tests_paid: bool) -> bool {
+    pub fn culled(&mut self, view: &View, total: Duration, stats: &FrameStats, tests_paid: bool) -> bool {
         let work = self.frustum.triangles_in_view(view);
-        self.choice
-            .culled(total, work, Self::plainly(tests_paid, submitted, work));
+        let raster_ns = stats.phases.get(Phase::Raster).as_nanos() as f64 / stats.triangles_submitted.max(1) as f64;
+        let plainly = Self::plainly(tests_paid, total, stats.triangles_submitted, raster_ns, work);
+        self.choice.culled(total, work, plainly);
         self.choice.direct_left > 0
     }
 
-    /// Whether a culled frame paid plainly: its tests paid and it submitted at most a third of
-    /// the `work`.
-    pub fn plainly(tests_paid: bool, submitted: u64, work: u64) -> bool {
-        tests_paid && submitted.saturating_mul(3) <= work
+    /// Whether a culled frame that took `total` paid plainly, needing no direct frame to tell:
+    /// its tests paid, and it submitted at most a third of the `work`, or took less than half
+    /// of what the work would cost at its own rasterization cost of a triangle (`raster_ns`;
+    /// a direct frame's triangles, whole meshes in large batches, cost less each, hence the
+    /// margin).
+    pub fn plainly(tests_paid: bool, total: Duration, submitted: u64, raster_ns: f64, work: u64) -> bool {
+        tests_paid && (submitted.saturating_mul(3) <= work || (total.as_nanos() as f64) < 0.5 * raster_ns * work as f64)
     }
 
     /// The measured cost of a direct frame per triangle of work, ns (the least of the last
@@ -396,8 +403,11 @@ pub(crate) mod tests {
         c.direct(15 * MS, 1000);
         c.culled(20 * MS, 2000, false);
         assert!(!c.take_direct());
-        assert!(DirectFrames::plainly(true, 100, 300));
-        assert!(!DirectFrames::plainly(true, 101, 300));
-        assert!(!DirectFrames::plainly(false, 1, 300));
+        // Submitted a third of the work, or took less than half of the work at its own rate.
+        assert!(DirectFrames::plainly(true, 100 * MS, 100, 1.0, 300));
+        assert!(!DirectFrames::plainly(true, 100 * MS, 101, 1.0, 300));
+        assert!(!DirectFrames::plainly(false, 100 * MS, 1, 1.0, 300));
+        assert!(DirectFrames::plainly(true, 100 * MS, 200, 1e6, 300));
+        assert!(!DirectFrames::plainly(true, 200 * MS, 200, 1e6, 300));
     }
 }

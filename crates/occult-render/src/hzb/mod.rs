@@ -830,7 +830,7 @@ impl Renderer for Hzb {
                 direct.redraw(&mut self.workers[0].raster, view, frame, &mut stats)?;
             }
             let (t, paid) = (Instant::now(), self.workers.iter().all(|w| w.payoff.last_paid()));
-            direct.culled(view, start.elapsed(), stats.triangles_submitted, paid);
+            direct.culled(view, start.elapsed(), &stats, paid);
             stats.phases.add(Phase::Other, t.elapsed());
         }
         stats.total = start.elapsed();

@@ -1136,12 +1136,7 @@ impl Renderer for OqGrid {
                 direct.redraw(&mut self.raster, view, frame, &mut stats)?;
             }
             let t = Instant::now();
-            direct.culled(
-                view,
-                start.elapsed(),
-                stats.triangles_submitted,
-                self.payoff.last_paid(),
-            );
+            direct.culled(view, start.elapsed(), &stats, self.payoff.last_paid());
             stats.phases.add(Phase::Other, t.elapsed());
         }
         stats.total = start.elapsed();
