@@ -8,26 +8,29 @@
 //! own rasterizer: whole instances, `frustum`'s mesh BVHs, the same frame), from measured
 //! costs:
 //!
-//! - every frame's time is divided by its **work**: the triangles `frustum` would submit for
-//!   that view (one walk of its hierarchy, counting only: cheap beside any frame), so that
-//!   frames of different views compare;
-//! - after a culled frame the rate is compared with the measured direct rate (the least of
-//!   the last [`DIRECT_KEPT`] direct frames'): culling slower than drawing directly starts a
-//!   **run** of direct frames, [`MIN_RUN`] the first time, twice as long after each probe
-//!   that loses again, up to [`MAX_RUN`] (back to [`MIN_RUN`] after a probe that wins);
+//! - a frame's **work** is the triangles `frustum` submits for its view (one walk of its
+//!   hierarchies, counting only: cheap beside any frame); a direct frame's time is a fixed
+//!   part (clear, walk) and its rasterization, a rate per triangle of work; the model is the
+//!   least of each over the last [`DIRECT_KEPT`] direct frames (noise only adds time);
+//! - a culled frame's time is compared with what the model predicts for its work, so that
+//!   frames of different views compare: culling slower than drawing directly by more than
+//!   [`CLEAR_LOSS`], or slower in two culled frames in a row, starts a **run** of direct
+//!   frames, [`MIN_RUN`] the first time, twice as long after each probe that loses again, up
+//!   to [`MAX_RUN`] (back to [`MIN_RUN`] after a probe that wins);
 //! - the direct rate is measured right after the first culled frame, and once more after the
 //!   next culled frame if that one won (a renderer's first direct frame also pays its
 //!   rasterizer's first large draws), unless the first culled frame plainly paid
 //!   ([`DirectFrames::plainly`]: its tests saved more than they cost, and it submitted at
 //!   most a third of the work or took less than half of what the work would cost at its own
-//!   rasterization rate); a culled frame that pays less than [`REMEASURE_SHARE`] of a direct
+//!   rasterization rate) or is small beside the culled frames before it (less than half
+//!   their mean time); a culled frame that pays less than [`REMEASURE_SHARE`] of a direct
 //!   frame's rate measures it again once it is [`REMEASURE_AFTER`] frames old;
 //! - a culled frame shorter than [`MIN_ALLOWANCE_TIME`] never starts a run (small scenes keep
 //!   their tests whatever the clock says).
 //!
-//! Renderers also hand the direct rate to their in-frame payoff, which then abandons a frame
-//! that falls behind drawing its work directly early on ([`DirectFrames::direct_ns`],
-//! [`FramePayoff::abandoned`](crate::payoff::FramePayoff::abandoned)).
+//! Renderers also hand the expected direct frame to their in-frame payoff, which then
+//! abandons a frame plainly headed for four times its time
+//! ([`FramePayoff::abandoned`](crate::payoff::FramePayoff::abandoned)).
 //! Frames do not change (`frustum` is exact), only the time. Counter: `payoff_direct` (1 for
 //! a frame drawn directly).
 
@@ -50,7 +53,11 @@ pub const MIN_RUN: u32 = 8;
 pub const REMEASURE_SHARE: f64 = 0.8;
 /// ... once the last measurement is this many frames old.
 pub const REMEASURE_AFTER: u32 = 16;
-/// Direct frames whose rates are kept ([`DirectFrames::direct_ns`] is their least).
+/// A culled frame slower than a direct one by more than this factor starts a run of direct
+/// frames alone; one slower by less starts one only after another culled frame that lost
+/// (one frame's noise does not give up culling).
+pub const CLEAR_LOSS: f64 = 1.25;
+/// Direct frames whose measurements are kept ([`DirectFrames::direct_ns`] is their least).
 pub const DIRECT_KEPT: usize = 4;
 /// The counter of frames drawn directly.
 pub const COUNTER: &str = "payoff_direct";
@@ -75,7 +82,8 @@ impl DirectFrames {
     }
 
     /// Draws this frame directly when the choice says so (counting it in `payoff_direct` and
-    /// measuring its rate); `None` when the frame is to be culled.
+    /// measuring its rate); `None` when the frame is to be culled: its work is then counted
+    /// ([`DirectFrames::last_work`], [`DirectFrames::direct_frame_ns`] of this view).
     ///
     /// # Errors
     /// The frame or view errors of [`Hierarchies::render`].
@@ -86,11 +94,13 @@ impl DirectFrames {
         frame: &mut Frame,
     ) -> Result<Option<FrameStats>> {
         if !self.choice.take_direct() {
+            self.choice.last_work = self.frustum.triangles_in_view(view);
             return Ok(None);
         }
         let mut stats = self.render(raster, view, frame)?;
         stats.counters.add(COUNTER, 1);
-        self.choice.direct(stats.total, stats.triangles_submitted);
+        let raster_time = stats.phases.get(Phase::Raster);
+        self.choice.direct(stats.total, raster_time, stats.triangles_submitted);
         Ok(Some(stats))
     }
 
@@ -130,12 +140,12 @@ impl DirectFrames {
         Ok(())
     }
 
-    /// Learns from a culled frame of `view` that took `total` (its statistics `stats`);
-    /// `tests_paid`: its tests saved more than they cost
+    /// Learns from the culled frame that [`DirectFrames::render_if_due`] declined, which took
+    /// `total` (its statistics `stats`); `tests_paid`: its tests saved more than they cost
     /// ([`Payoff::last_paid`](crate::payoff::Payoff::last_paid)). True when the next frames
     /// are to be drawn directly.
-    pub fn culled(&mut self, view: &View, total: Duration, stats: &FrameStats, tests_paid: bool) -> bool {
-        let work = self.frustum.triangles_in_view(view);
+    pub fn culled(&mut self, total: Duration, stats: &FrameStats, tests_paid: bool) -> bool {
+        let work = self.choice.last_work;
         let raster_ns = stats.phases.get(Phase::Raster).as_nanos() as f64 / stats.triangles_submitted.max(1) as f64;
         let plainly = Self::plainly(tests_paid, total, stats.triangles_submitted, raster_ns, work);
         self.choice.culled(total, work, plainly);
@@ -151,16 +161,22 @@ impl DirectFrames {
         tests_paid && (submitted.saturating_mul(3) <= work || (total.as_nanos() as f64) < 0.5 * raster_ns * work as f64)
     }
 
-    /// The measured cost of a direct frame per triangle of work, ns (the least of the last
-    /// [`DIRECT_KEPT`] direct frames'); `None` before one was drawn.
+    /// The measured rasterization cost of a direct frame per triangle of work, ns (the least of
+    /// the last [`DIRECT_KEPT`] direct frames'); `None` before one was drawn.
     pub fn direct_ns(&self) -> Option<f64> {
-        self.choice.direct_ns
+        self.choice.model().map(|m| m.rate_ns)
     }
 
-    /// What a direct frame is expected to cost, ns: the direct rate times the last frame's
-    /// work (0 before both are known).
+    /// What a direct frame of the current frame's work is expected to cost, ns (0 before one
+    /// was drawn).
     pub fn direct_frame_ns(&self) -> f64 {
-        self.choice.direct_ns.unwrap_or(0.0) * self.choice.last_work as f64
+        self.choice.model().map_or(0.0, |m| m.predict(self.choice.last_work))
+    }
+
+    /// The current frame's work once [`DirectFrames::render_if_due`] declined it, else the
+    /// last frame's: the triangles `frustum` submits for the view.
+    pub fn last_work(&self) -> u64 {
+        self.choice.last_work
     }
 
     /// Bytes held (`frustum`'s hierarchies).
@@ -177,21 +193,42 @@ impl DirectFrames {
     /// Sets the measured direct rate (tests: frames that stop are then abandoned).
     #[cfg(test)]
     pub(crate) fn force_rate(&mut self, ns: f64) {
-        self.choice.direct_ns = Some(ns);
-        self.choice.direct_rates = vec![ns];
+        self.choice.measured = vec![Model {
+            fixed_ns: 0.0,
+            rate_ns: ns,
+        }];
+    }
+}
+
+/// What a direct frame costs: a fixed part (clearing the frame, walking the hierarchies) and
+/// a part per triangle of work (rasterizing).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Model {
+    fixed_ns: f64,
+    rate_ns: f64,
+}
+
+impl Model {
+    /// The expected time of a direct frame of `work` triangles, ns.
+    fn predict(&self, work: u64) -> f64 {
+        self.fixed_ns + self.rate_ns * work as f64
     }
 }
 
 /// The decision alone, on numbers: times and work.
 #[derive(Clone, Debug, Default, PartialEq)]
 struct Choice {
-    /// Rate of the last culled frame, ns per triangle of work.
-    cull_ns: Option<f64>,
-    /// Rate of direct frames: the least of the last [`DIRECT_KEPT`] (noise on a shared
-    /// machine only ever adds time; one slow direct frame must not make culling look good).
-    direct_ns: Option<f64>,
-    /// The last direct rates, newest last.
-    direct_rates: Vec<f64>,
+    /// The last direct frames' models, newest last, at most [`DIRECT_KEPT`].
+    measured: Vec<Model>,
+    /// Culled frames (time, work) not yet weighed: those before the first direct frame.
+    unweighed: Vec<(Duration, u64)>,
+    /// The balance of the recent culled frames: each one's gain (the predicted direct time of
+    /// its work minus its time, ns) added to half the balance before; reset when a run
+    /// starts. A frame of little work that loses a little does not outweigh frames before it
+    /// that won much.
+    balance: f64,
+    /// Whether the last culled frame lost (slower than predicted for a direct frame).
+    lost_last: bool,
     /// Direct frames left in the current run.
     direct_left: u32,
     /// Length of the next run (0: [`MIN_RUN`]).
@@ -202,11 +239,22 @@ struct Choice {
     last_work: u64,
 }
 
-fn rate(time: Duration, work: u64) -> f64 {
-    time.as_nanos() as f64 / work.max(1) as f64
-}
-
 impl Choice {
+    /// The direct frame model: the least fixed part and the least rate of the last direct
+    /// frames (noise on a shared machine only ever adds time; one slow direct frame must not
+    /// make culling look good). `None` before one was drawn.
+    fn model(&self) -> Option<Model> {
+        let fixed_ns = self.measured.iter().map(|m| m.fixed_ns).reduce(f64::min)?;
+        let rate_ns = self.measured.iter().map(|m| m.rate_ns).reduce(f64::min)?;
+        Some(Model { fixed_ns, rate_ns })
+    }
+
+    /// A culled frame's time over what a direct frame of its work is expected to take.
+    fn ratio(&self, total: Duration, work: u64) -> Option<f64> {
+        let m = self.model()?;
+        Some(total.as_nanos() as f64 / m.predict(work).max(1.0))
+    }
+
     /// True, and one direct frame fewer left, when this frame is to be drawn directly.
     fn take_direct(&mut self) -> bool {
         let due = self.direct_left > 0;
@@ -214,8 +262,9 @@ impl Choice {
         due
     }
 
-    /// Starts a run of direct frames, twice as long as the last.
+    /// Starts a run of direct frames, twice as long as the last; the next probe alone weighs.
     fn start_run(&mut self) {
+        self.balance = 0.0;
         let run = self.run.max(MIN_RUN);
         self.direct_left = run;
         self.run = (run * 2).min(MAX_RUN);
@@ -227,37 +276,65 @@ impl Choice {
         if total < MIN_ALLOWANCE_TIME {
             return;
         }
-        let r = rate(total, work);
-        self.cull_ns = Some(r);
-        match self.direct_ns {
-            None if paid_plainly => {}
-            // Measure the alternative once, next frame.
-            None => self.direct_left = 1,
-            Some(d) if r > d => self.start_run(),
+        if self.model().is_none() {
+            // Measure the alternative, next frame, unless this frame plainly paid or is small
+            // beside the culled frames before it (a view of a wall: whatever it loses is
+            // little, and weighed once a direct frame was measured).
+            let n = self.unweighed.len() as f64;
+            let mean = self.unweighed.iter().map(|(t, _)| t.as_secs_f64()).sum::<f64>() / n.max(1.0);
+            if !paid_plainly && total.as_secs_f64() >= 0.5 * mean {
+                self.direct_left = 1;
+            }
+            if self.unweighed.len() == DIRECT_KEPT {
+                self.unweighed.remove(0);
+            }
+            self.unweighed.push((total, work));
+            return;
+        }
+        let lost = self.weigh(total, work);
+        if self.balance < 0.0 && lost && (self.ratio(total, work) > Some(CLEAR_LOSS) || self.lost_last) {
+            self.start_run();
+        } else if self.measured.len() < 2 {
             // One direct frame is not enough to keep culling on: the first one a renderer
             // draws also pays its rasterizer's first large draws (buffers allocated, pages
             // touched), so it is measured once more.
-            Some(_) if self.direct_rates.len() < 2 => self.direct_left = 1,
-            Some(d) => {
-                self.run = 0;
-                if r > REMEASURE_SHARE * d && self.since_direct >= REMEASURE_AFTER {
-                    self.direct_left = 1;
-                }
+            self.direct_left = 1;
+        } else if !lost {
+            self.run = 0;
+            if self.ratio(total, work) > Some(REMEASURE_SHARE) && self.since_direct >= REMEASURE_AFTER {
+                self.direct_left = 1;
             }
         }
+        self.lost_last = lost;
     }
 
-    fn direct(&mut self, total: Duration, work: u64) {
+    /// Adds a culled frame's gain to the balance; true when it lost.
+    fn weigh(&mut self, total: Duration, work: u64) -> bool {
+        let predicted = self.model().map_or(0.0, |m| m.predict(work));
+        let gain = predicted - total.as_nanos() as f64;
+        self.balance = 0.5 * self.balance + gain;
+        gain < 0.0
+    }
+
+    fn direct(&mut self, total: Duration, raster: Duration, work: u64) {
         self.last_work = work;
-        let r = rate(total, work);
-        if self.direct_rates.len() == DIRECT_KEPT {
-            self.direct_rates.remove(0);
+        if self.measured.len() == DIRECT_KEPT {
+            self.measured.remove(0);
         }
-        self.direct_rates.push(r);
-        self.direct_ns = self.direct_rates.iter().copied().reduce(f64::min);
+        self.measured.push(Model {
+            fixed_ns: total.saturating_sub(raster).as_nanos() as f64,
+            rate_ns: raster.as_nanos() as f64 / work.max(1) as f64,
+        });
         self.since_direct = 0;
-        // A measurement frame after a culled frame that lost: go straight into a run.
-        if self.direct_left == 0 && self.cull_ns.is_some_and(|c| c > r) && self.run == 0 {
+        // The culled frames before the first measurement, weighed now: when they clearly lost,
+        // straight into a run.
+        let unweighed = std::mem::take(&mut self.unweighed);
+        let mut clearly = false;
+        for &(t, w) in &unweighed {
+            self.lost_last = self.weigh(t, w);
+            clearly = self.ratio(t, w) > Some(CLEAR_LOSS);
+        }
+        if self.direct_left == 0 && self.balance < 0.0 && self.lost_last && clearly {
             self.start_run();
         }
     }
@@ -335,7 +412,7 @@ pub(crate) mod tests {
         for _ in 0..120 {
             if c.take_direct() {
                 ways.push('d');
-                c.direct(10 * MS, 1000);
+                c.direct(10 * MS, 9 * MS, 1000);
             } else {
                 ways.push('c');
                 c.culled(20 * MS, 1000, false);
@@ -351,19 +428,19 @@ pub(crate) mod tests {
         assert_eq!(ways, expected[..120]);
     }
 
-    /// Culling that wins after a direct measurement keeps culling, measuring again only when
-    /// its margin is thin and the measurement old.
+    /// Culling that wins after two direct measurements keeps culling, measuring again only
+    /// when its margin is thin and the measurement old.
     #[test]
     fn culling_that_wins_keeps_culling() {
         let mut c = Choice::default();
         c.culled(20 * MS, 1000, false);
         assert!(c.take_direct());
-        c.direct(40 * MS, 1000);
+        c.direct(40 * MS, 39 * MS, 1000);
         // Culling (20) beats direct (40): no run; one more measurement after a culled frame.
         assert!(!c.take_direct());
         c.culled(20 * MS, 1000, false);
         assert!(c.take_direct());
-        c.direct(40 * MS, 1000);
+        c.direct(40 * MS, 39 * MS, 1000);
         for _ in 0..40 {
             c.culled(20 * MS, 1000, false);
             assert!(!c.take_direct(), "a wide margin never remeasures");
@@ -374,15 +451,42 @@ pub(crate) mod tests {
             c.culled(36 * MS, 1000, false);
             if c.take_direct() {
                 remeasured += 1;
-                c.direct(40 * MS, 1000);
+                c.direct(40 * MS, 39 * MS, 1000);
             }
         }
         // The first thin frame (the measurement 40 frames old), then every 16th.
         assert_eq!(remeasured, 3);
     }
 
-    /// A frame that plainly paid needs no measurement; short frames never start a run; rates
-    /// are per triangle of work.
+    /// A mild loss starts a run only when the culled frame before lost too; a clear one at
+    /// once.
+    #[test]
+    fn mild_losses_need_two_frames() {
+        let mut c = Choice::default();
+        c.measured = vec![
+            Model {
+                fixed_ns: 0.0,
+                rate_ns: 10_000.0,
+            };
+            2
+        ];
+        c.culled(11 * MS, 1000, false);
+        assert!(!c.take_direct(), "one mild loss");
+        c.culled(9 * MS, 1000, false);
+        c.culled(11 * MS, 1000, false);
+        assert!(!c.take_direct(), "a win between");
+        c.culled(11 * MS, 1000, false);
+        assert!(c.take_direct(), "two mild losses in a row");
+        let mut c = Choice {
+            measured: c.measured.clone(),
+            ..Choice::default()
+        };
+        c.culled(13 * MS, 1000, false);
+        assert!(c.take_direct(), "a clear loss");
+    }
+
+    /// A frame that plainly paid needs no measurement; short frames never start a run; a
+    /// frame of little work is weighed against a direct frame's fixed part too.
     #[test]
     fn plain_wins_short_frames_and_work() {
         let mut c = Choice::default();
@@ -391,18 +495,35 @@ pub(crate) mod tests {
         let mut c = Choice::default();
         c.culled(MIN_ALLOWANCE_TIME / 2, 1000, false);
         assert!(!c.take_direct());
-        assert_eq!(c.cull_ns, None);
-        // 20 ms for 2,000 triangles beats 15 ms for 1,000.
+        assert!(c.unweighed.is_empty());
+        // Direct frames: 8 ms fixed, 2 µs a triangle.
         let mut c = Choice::default();
+        c.measured = vec![
+            Model {
+                fixed_ns: 8e6,
+                rate_ns: 2000.0,
+            };
+            2
+        ];
+        assert_eq!(c.model().map(|m| m.predict(1000)), Some(10e6));
+        c.culled(3 * MS, 1, false);
+        assert!(
+            !c.take_direct(),
+            "3 ms beats the 8 ms a direct frame needs whatever its work"
+        );
         c.culled(20 * MS, 2000, false);
-        assert!(c.take_direct());
-        c.direct(15 * MS, 1000);
-        assert!(!c.take_direct());
-        c.culled(20 * MS, 2000, false);
-        assert!(c.take_direct(), "the second measurement");
-        c.direct(15 * MS, 1000);
-        c.culled(20 * MS, 2000, false);
-        assert!(!c.take_direct());
+        assert!(c.take_direct(), "20 ms loses to 12 ms");
+        // Frames that won much outweigh a frame of little work that loses a little.
+        let mut c = Choice {
+            measured: c.measured.clone(),
+            ..Choice::default()
+        };
+        c.culled(5 * MS, 1000, false);
+        c.culled(5 * MS, 1000, false);
+        c.culled(11 * MS, 1, false);
+        assert!(!c.take_direct(), "3 ms lost after 2 × 5 ms won");
+        c.culled(11 * MS, 1, false);
+        assert!(c.take_direct(), "lost again");
         // Submitted a third of the work, or took less than half of the work at its own rate.
         assert!(DirectFrames::plainly(true, 100 * MS, 100, 1.0, 300));
         assert!(!DirectFrames::plainly(true, 100 * MS, 101, 1.0, 300));

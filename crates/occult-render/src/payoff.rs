@@ -28,13 +28,13 @@
 //! do not change (stopping only draws more), only the time.
 //!
 //! Across frames, [`crate::direct::DirectFrames`] chooses whether a frame is culled at all,
-//! from measured frame times, and hands its measured direct rate back
-//! ([`Payoff::set_direct`]): the balance then weighs the frame so far against drawing its
-//! work directly (also after each batch), and a frame that falls behind by more than the
-//! allowance **early** (before half a direct frame's time) is abandoned
+//! from measured frame times, and hands back what a direct frame of the view is expected to
+//! cost and the work it meets ([`Payoff::set_direct`]). The balance is then checked after
+//! each batch too, and a frame plainly headed for four times a direct frame's time (all of
+//! it spent while less than a quarter of the work was drawn or removed) is **abandoned**
 //! ([`FramePayoff::abandoned`]): the renderer draws nothing more of it and the whole frame is
-//! drawn directly instead (at most about 1.5 direct frames in all). A frame that falls behind
-//! later is finished as begun; the frame-level choice weighs it.
+//! drawn directly instead (about two direct frames in all). Any other frame is finished as
+//! begun, tests and all; the frame-level choice weighs it.
 //!
 //! Counters, registered by each renderer that uses it: `payoff_stopped` (1 when the frame
 //! stopped testing), `payoff_untested` (the tests then skipped).
@@ -68,9 +68,11 @@ pub struct Payoff {
     direct_ns: Option<f64>,
     /// Triangles last frame drew or removed by tests: the work a direct frame would face.
     in_view: u64,
-    /// Cost of a whole direct frame per triangle of its work, ns, measured by
-    /// [`crate::direct::DirectFrames`]; preferred to `direct_ns` when known.
-    frame_direct_ns: Option<f64>,
+    /// Whether a direct frame was measured ([`crate::direct`]): a frame that stops is then
+    /// abandoned.
+    direct_known: bool,
+    /// What a direct frame of the coming view is expected to cost, ns, and its work.
+    direct_work: u64,
     /// What a direct frame of the coming view is expected to cost, ns.
     direct_frame_ns: f64,
     /// Whether the last frame's tests saved more than they cost ([`FramePayoff::paid`]).
@@ -92,7 +94,8 @@ impl Payoff {
             ns_per_triangle: PRIOR_NS_PER_TRIANGLE,
             direct_ns: None,
             in_view: scene_triangles,
-            frame_direct_ns: None,
+            direct_known: false,
+            direct_work: 0,
             direct_frame_ns: 0.0,
             last_paid: false,
             last_abandoned: false,
@@ -101,12 +104,13 @@ impl Payoff {
         }
     }
 
-    /// Weighs the coming frames against drawing them directly at `ns` per triangle of work (a
-    /// measured direct frame's rate, [`crate::direct::DirectFrames::direct_ns`]), a whole
-    /// direct frame expected to take `frame_ns`.
-    pub fn set_direct(&mut self, ns: Option<f64>, frame_ns: f64) {
-        self.frame_direct_ns = ns;
+    /// Weighs the coming frames against drawing them directly: `known` once a direct frame was
+    /// measured ([`crate::direct::DirectFrames`]), a direct frame of the view expected to take
+    /// `frame_ns` for `work` triangles.
+    pub fn set_direct(&mut self, known: bool, frame_ns: f64, work: u64) {
+        self.direct_known = known;
         self.direct_frame_ns = frame_ns;
+        self.direct_work = work;
     }
 
     /// Whether the last frame's tests saved more than they cost ([`FramePayoff::paid`] at its
@@ -131,9 +135,10 @@ impl Payoff {
             shared: (0, Duration::ZERO),
             saved_triangles: 0,
             last_ns_per_triangle: self.ns_per_triangle,
-            direct_ns: self.frame_direct_ns.or(self.direct_ns),
-            abandon: self.frame_direct_ns.is_some(),
+            direct_ns: self.direct_ns,
+            abandon: self.direct_known,
             direct_frame_ns: self.direct_frame_ns,
+            direct_work: self.direct_work,
             #[cfg(test)]
             force_stop: self.force_stop,
             allowance_triangles: self.allowance * self.in_view as f64,
@@ -175,8 +180,9 @@ pub struct FramePayoff {
     direct_ns: Option<f64>,
     /// A stop abandons the frame (a measured direct frame redraws it, [`crate::direct`]).
     abandon: bool,
-    /// What a direct frame is expected to cost, ns (with `abandon`).
+    /// What a direct frame is expected to cost, ns, and the work it meets (with `abandon`).
     direct_frame_ns: f64,
+    direct_work: u64,
     #[cfg(test)]
     force_stop: bool,
     allowance_triangles: f64,
@@ -241,10 +247,11 @@ impl FramePayoff {
             elapsed > work + allowance
         });
         self.stopped = if self.abandon {
-            // Abandoning costs what was spent plus a whole direct frame: worth it only early
-            // (at most 1.5 direct frames in all); later the frame is finished as begun, and
-            // the frame-level choice weighs it.
-            direct_too_slow && elapsed < 0.5 * self.direct_frame_ns
+            // Abandoning costs what was spent plus a whole direct frame: only for a frame
+            // plainly headed for four times a direct frame's time (its time spent with less
+            // than a quarter of its work done).
+            let progress = (self.raster_triangles + self.saved_triangles) as f64 / self.direct_work.max(1) as f64;
+            elapsed > self.direct_frame_ns.max(MIN_ALLOWANCE_TIME.as_nanos() as f64) && progress < 0.25
         } else {
             direct_too_slow || self.cost_ns(now) > self.gain_ns() + allowance
         };

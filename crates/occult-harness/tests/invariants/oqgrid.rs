@@ -205,7 +205,7 @@ fn parallel_query_batches_are_identical() {
     let scene = Arc::new(built.scene);
     let opts = RenderOptions::default();
     let mut z = Algorithm::ZBUFFER.build(scene.clone(), &opts).unwrap();
-    let mut r = spec("oqgrid:grid=uniform,resolution=2,batch=8")
+    let mut r = spec("oqgrid:grid=uniform,resolution=2,batch=8,payoff=off")
         .build(scene, &opts)
         .unwrap();
     let (mut a, mut b) = (Frame::new(640, 480).unwrap(), Frame::new(640, 480).unwrap());
@@ -229,7 +229,7 @@ fn whole_draws_from_earlier_frames_are_identical() {
     let scene = Arc::new(built.scene);
     let opts = RenderOptions::default();
     let mut z = Algorithm::ZBUFFER.build(scene.clone(), &opts).unwrap();
-    let mut r = spec("oqgrid:whole=1").build(scene, &opts).unwrap();
+    let mut r = spec("oqgrid:whole=1,payoff=off").build(scene, &opts).unwrap();
     let (mut a, mut b) = (Frame::new(160, 120).unwrap(), Frame::new(160, 120).unwrap());
     let mut whole = Vec::new();
     for cam in &cams {

@@ -792,7 +792,11 @@ impl Renderer for Hzb {
                 return Ok(stats);
             }
             for w in &mut self.workers {
-                w.payoff.set_direct(direct.direct_ns(), direct.direct_frame_ns());
+                w.payoff.set_direct(
+                    direct.direct_ns().is_some(),
+                    direct.direct_frame_ns(),
+                    direct.last_work(),
+                );
             }
         }
         self.frames_since_recheck += 1;
@@ -830,7 +834,7 @@ impl Renderer for Hzb {
                 direct.redraw(&mut self.workers[0].raster, view, frame, &mut stats)?;
             }
             let (t, paid) = (Instant::now(), self.workers.iter().all(|w| w.payoff.last_paid()));
-            direct.culled(view, start.elapsed(), &stats, paid);
+            direct.culled(start.elapsed(), &stats, paid);
             stats.phases.add(Phase::Other, t.elapsed());
         }
         stats.total = start.elapsed();

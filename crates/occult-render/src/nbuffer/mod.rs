@@ -1149,7 +1149,7 @@ impl Renderer for NBufferCulling {
         if let Some(direct) = &mut self.direct {
             let t = Instant::now();
             let paid = self.payoff.last_paid();
-            if direct.culled(view, begun.elapsed(), &stats, paid) && self.options.occluders.visible() {
+            if direct.culled(begun.elapsed(), &stats, paid) && self.options.occluders.visible() {
                 // Stale by the next probe.
                 self.visible.fill(false);
             }

@@ -1064,7 +1064,11 @@ impl Renderer for OqGrid {
             if let Some(stats) = direct.render_if_due(&mut self.raster, view, frame)? {
                 return Ok(stats);
             }
-            self.payoff.set_direct(direct.direct_ns(), direct.direct_frame_ns());
+            self.payoff.set_direct(
+                direct.direct_ns().is_some(),
+                direct.direct_frame_ns(),
+                direct.last_work(),
+            );
         }
         let (start, t, cleared) = crate::begin_frame(&mut self.raster, view, frame)?;
         let pyramid = match self.options.test {
@@ -1136,7 +1140,7 @@ impl Renderer for OqGrid {
                 direct.redraw(&mut self.raster, view, frame, &mut stats)?;
             }
             let t = Instant::now();
-            direct.culled(view, start.elapsed(), &stats, self.payoff.last_paid());
+            direct.culled(start.elapsed(), &stats, self.payoff.last_paid());
             stats.phases.add(Phase::Other, t.elapsed());
         }
         stats.total = start.elapsed();
