@@ -1129,7 +1129,7 @@ impl Renderer for OqGrid {
         // The counters are named in `INFO.counters`, in the order of `OqGridCounts::values`.
         debug_assert_eq!(
             INFO.counters.len(),
-            counts.values().len() + crate::payoff::COUNTERS.len()
+            counts.values().len() + crate::payoff::COUNTERS.len() + 1 // and `direct::COUNTER`
         );
         for (&name, n) in INFO.counters.iter().zip(counts.values()) {
             stats.counters.add(name, n);
