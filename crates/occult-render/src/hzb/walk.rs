@@ -37,6 +37,28 @@ pub(super) struct Stamps {
     bit_of: Vec<Vec<u32>>,
     /// Per DAG node: words of one instance's bit set.
     words: Vec<u32>,
+    /// Per DAG node whose octree shares primitives: its nodes' own lists regrouped (read for
+    /// meshes).
+    split: Vec<Option<Split>>,
+    /// This frame's bit sets.
+    sets: StampSets,
+}
+
+/// The own primitives of every node of a mesh octree, regrouped as the unshared ones then the
+/// shared ones with their stamp bits: drawing a node copies the first run as it is and checks
+/// a stamp only for the second, reading both in order (the per-primitive lookup of a bit in a
+/// table over the whole mesh missed the cache).
+struct Split {
+    /// Per octree node: where its unshared run starts, where its shared run starts, the end.
+    ranges: Vec<[u32; 3]>,
+    order: Vec<u32>,
+    /// The stamp bit of each entry of `order` ([`NOT_SHARED`] in unshared runs).
+    bits: Vec<u32>,
+}
+
+/// The frame's stamp bit sets, one per instance that drew a shared primitive.
+#[derive(Default)]
+struct StampSets {
     /// Instance (DAG node, first item) → offset of its bit set in `bits`, this frame.
     slots: std::collections::HashMap<(u32, u64), usize, FxBuild>,
     bits: Vec<u64>,
@@ -44,11 +66,48 @@ pub(super) struct Stamps {
     last: Option<((u32, u64), usize)>,
 }
 
+impl StampSets {
+    /// Sets stamp `bit` of the instance of DAG node `id` at `first_item` (whose set has
+    /// `words` words); false when it was already set this frame.
+    #[inline]
+    fn stamp(&mut self, id: NodeId, words: u32, bit: u32, first_item: u64) -> bool {
+        let (word, mask) = (
+            &mut self.set(id, words, first_item)[bit as usize / 64],
+            1u64 << (bit % 64),
+        );
+        let fresh = *word & mask == 0;
+        *word |= mask;
+        fresh
+    }
+
+    /// The bit set of the instance of DAG node `id` at `first_item` (`words` words), made
+    /// empty at its first use this frame.
+    #[inline]
+    fn set(&mut self, id: NodeId, words: u32, first_item: u64) -> &mut [u64] {
+        let key = (id.0, first_item);
+        let offset = match self.last {
+            Some((k, o)) if k == key => o,
+            _ => {
+                let bits = &mut self.bits;
+                let o = *self.slots.entry(key).or_insert_with(|| {
+                    let o = bits.len();
+                    bits.resize(o + words as usize, 0);
+                    o
+                });
+                self.last = Some((key, o));
+                o
+            }
+        };
+        &mut self.bits[offset..offset + words as usize]
+    }
+}
+
 impl Stamps {
-    /// Stamp numbering for the shared primitives of `octrees`.
+    /// Stamp numbering for the shared primitives of `octrees`, and their node lists regrouped
+    /// (see [`Split`]).
     pub(super) fn new(octrees: &[Option<HybridOctree>]) -> Self {
         let mut words = Vec::with_capacity(octrees.len());
-        let bit_of = octrees
+        let bit_of: Vec<Vec<u32>> = octrees
             .iter()
             .map(|o| match o {
                 Some(o) if o.shared_count() > 0 => {
@@ -72,58 +131,94 @@ impl Stamps {
                 }
             })
             .collect();
+        let split = octrees
+            .iter()
+            .zip(&bit_of)
+            .map(|(o, bit_of)| {
+                let o = o.as_ref().filter(|_| !bit_of.is_empty())?;
+                let mut split = Split {
+                    ranges: Vec::with_capacity(o.nodes().len()),
+                    order: Vec::new(),
+                    bits: Vec::new(),
+                };
+                for n in 0..o.nodes().len() as u32 {
+                    let own = o.node_primitives(n);
+                    let start = split.order.len() as u32;
+                    split
+                        .order
+                        .extend(own.iter().filter(|&&p| bit_of[p as usize] == NOT_SHARED));
+                    let mid = split.order.len() as u32;
+                    split
+                        .order
+                        .extend(own.iter().filter(|&&p| bit_of[p as usize] != NOT_SHARED));
+                    split.ranges.push([start, mid, split.order.len() as u32]);
+                }
+                split.bits = split.order.iter().map(|&p| bit_of[p as usize]).collect();
+                Some(split)
+            })
+            .collect();
         Self {
             bit_of,
             words,
-            slots: Default::default(),
-            bits: Vec::new(),
-            last: None,
+            split,
+            sets: StampSets::default(),
         }
     }
 
     /// Forgets the previous frame's stamps.
     fn begin_frame(&mut self) {
-        self.slots.clear();
-        self.bits.clear();
-        self.last = None;
+        self.sets.slots.clear();
+        self.sets.bits.clear();
+        self.sets.last = None;
     }
 
     /// Bytes held.
     pub(super) fn memory_bytes(&self) -> usize {
         self.bit_of.iter().map(|b| b.capacity() * 4).sum::<usize>()
+            + self
+                .split
+                .iter()
+                .flatten()
+                .map(|s| s.ranges.capacity() * 12 + s.order.capacity() * 4 + s.bits.capacity() * 4)
+                .sum::<usize>()
             + self.words.capacity() * 4
-            + self.bits.capacity() * 8
-            + self.slots.capacity() * 24
+            + self.sets.bits.capacity() * 8
+            + self.sets.slots.capacity() * 24
+    }
+
+    /// Appends to `out` the own primitives of octree node `n` of the instance of mesh `id` at
+    /// `first_item` that it has not drawn yet this frame, stamping the shared ones; false (and
+    /// nothing appended) when the octree shares nothing: its node lists are drawn as they are.
+    #[inline]
+    fn gather(&mut self, id: NodeId, n: u32, first_item: u64, out: &mut Vec<u32>) -> bool {
+        let Some(split) = &self.split[id.index()] else {
+            return false;
+        };
+        let [start, mid, end] = split.ranges[n as usize];
+        out.extend_from_slice(&split.order[start as usize..mid as usize]);
+        if mid == end {
+            return true;
+        }
+        let set = self.sets.set(id, self.words[id.index()], first_item);
+        for k in mid as usize..end as usize {
+            let bit = split.bits[k];
+            let (word, mask) = (&mut set[bit as usize / 64], 1u64 << (bit % 64));
+            if *word & mask == 0 {
+                *word |= mask;
+                out.push(split.order[k]);
+            }
+        }
+        true
     }
 
     /// Stamps primitive `p` of the instance of DAG node `id` at `first_item`; false when it is
     /// shared and that instance already drew it this frame.
     #[inline]
     fn stamp(&mut self, id: NodeId, p: u32, first_item: u64) -> bool {
-        let Some(&bit) = self.bit_of[id.index()].get(p as usize) else {
-            return true;
-        };
-        if bit == NOT_SHARED {
-            return true;
+        match self.bit_of[id.index()].get(p as usize) {
+            Some(&bit) if bit != NOT_SHARED => self.sets.stamp(id, self.words[id.index()], bit, first_item),
+            _ => true,
         }
-        let key = (id.0, first_item);
-        let offset = match self.last {
-            Some((k, o)) if k == key => o,
-            _ => {
-                let (bits, words) = (&mut self.bits, self.words[id.index()] as usize);
-                let o = *self.slots.entry(key).or_insert_with(|| {
-                    let o = bits.len();
-                    bits.resize(o + words, 0);
-                    o
-                });
-                self.last = Some((key, o));
-                o
-            }
-        };
-        let (word, mask) = (&mut self.bits[offset + bit as usize / 64], 1u64 << (bit % 64));
-        let fresh = *word & mask == 0;
-        *word |= mask;
-        fresh
     }
 }
 
@@ -186,11 +281,31 @@ struct Placement {
     eye: Vec3,
 }
 
+/// Which triangles of a mesh a pending draw holds.
+#[derive(Clone, Copy)]
+enum Triangles<'a> {
+    /// The whole mesh.
+    All,
+    /// A range of `scratch` (a list filtered by stamps or shares).
+    Scratch(u32, u32),
+    /// An octree node's own index list, as it is.
+    Node(&'a [u32]),
+}
+
+impl Triangles<'_> {
+    fn count(self, mesh: &Mesh) -> usize {
+        match self {
+            Triangles::All => mesh.triangle_count(),
+            Triangles::Scratch(s, e) => (e - s) as usize,
+            Triangles::Node(l) => l.len(),
+        }
+    }
+}
+
 /// Geometry gathered for the next rasterizer call.
 struct Pending<'a> {
     mesh: &'a Mesh,
-    /// Range of `scratch` holding the triangle list; None for the whole mesh.
-    list: Option<(u32, u32)>,
+    triangles: Triangles<'a>,
     clip_from_object: Mat4,
     first_item: u64,
 }
@@ -331,7 +446,7 @@ impl<'a> Walk<'a> {
                         let b = mesh.bounds();
                         if pl.frustum.classify_aabb(&b) != Containment::Outside {
                             self.whole_drawn += 1;
-                            self.push(mesh, None, pl.clip_from_object, e.first_item, &b);
+                            self.push(mesh, Triangles::All, pl.clip_from_object, e.first_item, &b);
                             self.maybe_flush();
                         }
                     }
@@ -574,7 +689,7 @@ impl<'a> Walk<'a> {
                 return false;
             }
         }
-        self.push(mesh, None, clip, at.place.first_item, &b);
+        self.push(mesh, Triangles::All, clip, at.place.first_item, &b);
         true
     }
 
@@ -643,7 +758,7 @@ impl<'a> Walk<'a> {
             // frame is drawn again, which changes no pixel).
             if let NodeKind::Mesh(mesh) = self.walk.scene().node(inst.place.id).kind() {
                 let b = node.bounds;
-                self.push(mesh, None, inst.clip_from_object, inst.place.first_item, &b);
+                self.push(mesh, Triangles::All, inst.clip_from_object, inst.place.first_item, &b);
                 self.maybe_flush();
                 return;
             }
@@ -768,7 +883,7 @@ impl<'a> Walk<'a> {
         world_from_node: &Affine3A,
         first_item: u64,
         clip: Mat4,
-        own: &occult_core::Aabb,
+        own_box: &occult_core::Aabb,
     ) -> bool {
         let scene: &'a Scene = self.walk.scene();
         let octrees: &'a [Option<HybridOctree>] = self.octrees;
@@ -783,8 +898,21 @@ impl<'a> Walk<'a> {
         let (share, root) = (self.share, scene.root());
         match scene.node(id).kind() {
             NodeKind::Mesh(mesh) => {
+                let own = octree.node_primitives(n);
                 let start = self.scratch.len() as u32;
-                for &p in octree.node_primitives(n) {
+                if self.share == Share::ALL {
+                    if self.stamps.gather(id, n, first_item, &mut self.scratch) {
+                        let end = self.scratch.len() as u32;
+                        if end > start {
+                            self.push(mesh, Triangles::Scratch(start, end), clip, first_item, own_box);
+                        }
+                    } else if !own.is_empty() {
+                        // Nothing shared: the octree's list is drawn as it is.
+                        self.push(mesh, Triangles::Node(own), clip, first_item, own_box);
+                    }
+                    return self.pending.len() > queued;
+                }
+                for &p in own {
                     if !share.owns_primitive(id, root, key, p) {
                         continue;
                     }
@@ -796,7 +924,7 @@ impl<'a> Walk<'a> {
                 }
                 let end = self.scratch.len() as u32;
                 if end > start {
-                    self.push(mesh, Some((start, end)), clip, first_item, own);
+                    self.push(mesh, Triangles::Scratch(start, end), clip, first_item, own_box);
                 }
             }
             NodeKind::Group(instances) => {
@@ -819,7 +947,7 @@ impl<'a> Walk<'a> {
                     .child_of(scene.node(id), p as usize);
                     let clip = self.walk.view().clip_from_object(&child.world_from_node);
                     let b = scene.node(i.child).bounds();
-                    self.push(mesh, None, clip, child.first_item, &b);
+                    self.push(mesh, Triangles::All, clip, child.first_item, &b);
                 }
             }
         }
@@ -827,8 +955,8 @@ impl<'a> Walk<'a> {
     }
 
     /// Queues triangles whose object-space bounds are `b` (for the pyramid's dirty region).
-    fn push(&mut self, mesh: &'a Mesh, list: Option<(u32, u32)>, clip: Mat4, first_item: u64, b: &occult_core::Aabb) {
-        self.pending_triangles += list.map_or(mesh.triangle_count(), |(s, e)| (e - s) as usize);
+    fn push(&mut self, mesh: &'a Mesh, triangles: Triangles<'a>, clip: Mat4, first_item: u64, b: &occult_core::Aabb) {
+        self.pending_triangles += triangles.count(mesh);
         if let Some(r) = screen_rect(&clip, b, self.frame.width(), self.frame.height()) {
             self.dirty = Some(match self.dirty {
                 None => r,
@@ -842,7 +970,7 @@ impl<'a> Walk<'a> {
         }
         self.pending.push(Pending {
             mesh,
-            list,
+            triangles,
             clip_from_object: clip,
             first_item,
         });
@@ -869,9 +997,10 @@ impl<'a> Walk<'a> {
             .iter()
             .map(|p| Draw {
                 mesh: p.mesh,
-                triangles: match p.list {
-                    None => DrawTriangles::All,
-                    Some((s, e)) => DrawTriangles::List(&self.scratch[s as usize..e as usize]),
+                triangles: match p.triangles {
+                    Triangles::All => DrawTriangles::All,
+                    Triangles::Scratch(s, e) => DrawTriangles::List(&self.scratch[s as usize..e as usize]),
+                    Triangles::Node(l) => DrawTriangles::List(l),
                 },
                 clip_from_object: p.clip_from_object,
                 first_item: p.first_item,
