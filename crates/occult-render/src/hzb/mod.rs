@@ -25,7 +25,9 @@
 //!   over the union of the batch's screen boxes. Per triangle would cost more than the triangle;
 //!   per batch amortizes the update and keeps the rasterizer's batches large. Correctness does
 //!   not depend on the schedule: depth only grows during a frame, so a stale pyramid can only
-//!   fail to reject (the test's last level reads the frame itself).
+//!   fail to reject (the test's last level reads the frame itself). The visible list, which
+//!   nothing tests, is drawn in batches large enough for the rasterizer's threads, the pyramid
+//!   updated once after it.
 //! - **Front-to-back traversal**: children of an octree node in the order of the octants seen
 //!   from the eye; a node's box is tested (frustum, then occlusion) before its own primitives
 //!   are drawn and its children visited.

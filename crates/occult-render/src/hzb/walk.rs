@@ -349,6 +349,9 @@ pub(super) struct Walk<'a> {
     placements: std::collections::HashMap<(u32, u64), Placement, FxBuild>,
     /// Whether the last instance visited was a small mesh queued whole.
     queued_whole: bool,
+    /// Whether the visible list is being drawn: nothing reads the pyramid then (but a
+    /// retested entry), so batches are large enough for the rasterizer's threads.
+    listing: bool,
     pc: PyramidCounts,
     occlusion_tests: u64,
     occlusion_culled: u64,
@@ -403,6 +406,7 @@ impl<'a> Walk<'a> {
             listed: IdSet::default(),
             placements: Default::default(),
             queued_whole: false,
+            listing: false,
             pc: PyramidCounts::default(),
             occlusion_tests: 0,
             occlusion_culled: 0,
@@ -433,6 +437,7 @@ impl<'a> Walk<'a> {
             list = keyed.into_iter().map(|(_, e)| e).collect();
         }
         let whole = self.whole_instances(&list);
+        self.listing = true;
         for e in list {
             let own = self.node_of(&e).own_bounds;
             let pl = self.placement(&e);
@@ -465,6 +470,10 @@ impl<'a> Walk<'a> {
             // back into view it is tested like a node of the traversal (`retest`).
             if e.stale && self.options.retest && self.options.occlusion {
                 self.list_retested += 1;
+                // What the list drew so far, in the pyramid as far as a tested batch would be.
+                if self.pending_triangles >= self.options.batch_triangles {
+                    self.flush();
+                }
                 let items = self.own_items(e.dag_node, e.octree_node);
                 if self.hidden(&pl.clip_from_object, &own, pl.eye, items) {
                     continue; // the traversal lists it again if it is drawn
@@ -485,6 +494,7 @@ impl<'a> Walk<'a> {
             self.list(e);
             self.maybe_flush();
         }
+        self.listing = false;
         self.flush();
     }
 
@@ -977,7 +987,7 @@ impl<'a> Walk<'a> {
     }
 
     fn maybe_flush(&mut self) {
-        let batch = if self.payoff.stopped() {
+        let batch = if self.payoff.stopped() || self.listing {
             DIRECT_BATCH
         } else {
             self.options.batch_triangles
