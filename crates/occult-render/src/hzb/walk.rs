@@ -362,6 +362,8 @@ pub(super) struct Walk<'a> {
     batches: u64,
     whole_drawn: u64,
     list_retested: u64,
+    /// Batches drawn early for a test (`refresh`).
+    refreshes: u64,
 }
 
 impl<'a> Walk<'a> {
@@ -417,6 +419,7 @@ impl<'a> Walk<'a> {
             batches: 0,
             whole_drawn: 0,
             list_retested: 0,
+            refreshes: 0,
         }
     }
 
@@ -589,6 +592,7 @@ impl<'a> Walk<'a> {
             ("batches", self.batches),
             ("whole_drawn", self.whole_drawn),
             ("visible_list_retested", self.list_retested),
+            ("refreshes", self.refreshes),
         ]);
         c.add_all(self.payoff.counters());
         self.payoff_state.end(&self.payoff);
@@ -728,7 +732,13 @@ impl<'a> Walk<'a> {
         self.walk.stats.boxes_tested += 1;
         self.occlusion_tests += 1;
         let mut pc = self.pc;
-        let hidden = self.occlusion().box_hidden(clip, b, eye, &mut pc);
+        let mut hidden = self.occlusion().box_hidden(clip, b, eye, &mut pc);
+        if !hidden && self.refresh_pays(clip, b) {
+            // The batch may hide the box: draw it, and test again.
+            self.flush();
+            self.refreshes += 1;
+            hidden = self.occlusion().box_hidden(clip, b, eye, &mut pc);
+        }
         self.pc = pc;
         if hidden {
             self.walk.stats.boxes_culled += 1;
@@ -736,6 +746,25 @@ impl<'a> Walk<'a> {
             self.payoff.saved(items);
         }
         hidden
+    }
+
+    /// Whether a box that failed its test should be tested again once the pending batch is
+    /// drawn (`refresh`): the batch holds at least `refresh` triangles and its screen region
+    /// meets the box's. Within a front-to-back walk the batch holds the nearest geometry drawn
+    /// so far, often the very occluder of the box (the front of the same building); waiting
+    /// for the batch to fill tests the box against a pyramid that lacks it.
+    fn refresh_pays(&self, clip: &Mat4, b: &occult_core::Aabb) -> bool {
+        let refresh = self.options.refresh;
+        if refresh == 0 || self.pending_triangles < refresh || self.listing {
+            return false;
+        }
+        let (Some(d), Some(r)) = (
+            self.dirty,
+            screen_rect(clip, b, self.frame.width(), self.frame.height()),
+        ) else {
+            return false;
+        };
+        d.x0 < r.x1 && r.x0 < d.x1 && d.y0 < r.y1 && r.y0 < d.y1
     }
 
     /// §3.2: test the node's box, draw its own primitives, then its children front to back.
