@@ -30,6 +30,8 @@ const CONFIGS: &[&str] = &[
     "hzb:parallel=hybrid,workers=4,recheck=3",
     "hzb:whole=0.01,recheck=2",
     "hzb:retest=off,leaf=64",
+    "hzb:refresh=0",
+    "hzb:refresh=1,batch=64,leaf=16",
 ];
 
 identical_on_every_generator! {
@@ -140,6 +142,7 @@ fn hzb_bad_parameters_are_errors() {
         "hzb:batch=0",
         "hzb:order=x",
         "hzb:whole=2",
+        "hzb:refresh=-1",
     ] {
         let s = spec(bad);
         match s.build(scene.clone(), &RenderOptions::default()) {

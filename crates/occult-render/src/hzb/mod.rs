@@ -25,7 +25,12 @@
 //!   over the union of the batch's screen boxes. Per triangle would cost more than the triangle;
 //!   per batch amortizes the update and keeps the rasterizer's batches large. Correctness does
 //!   not depend on the schedule: depth only grows during a frame, so a stale pyramid can only
-//!   fail to reject (the test's last level reads the frame itself).
+//!   fail to reject (the test's last level reads the frame itself). The visible list, which
+//!   nothing tests, is drawn in batches large enough for the rasterizer's threads, the pyramid
+//!   updated once after it. Addition, `refresh`: a test that fails while the pending batch
+//!   (at least `refresh` triangles) meets the box on screen draws the batch and tests again:
+//!   in a front-to-back walk the batch often holds the box's occluder (the near side of the
+//!   same building), which a full-size batch would leave out of the pyramid.
 //! - **Front-to-back traversal**: children of an octree node in the order of the octants seen
 //!   from the eye; a node's box is tested (frustum, then occlusion) before its own primitives
 //!   are drawn and its children visited.
@@ -160,6 +165,9 @@ pub struct HzbOptions {
     pub octree: HybridOctreeConfig,
     /// Triangles gathered before rasterizing and updating the pyramid (≥ 1).
     pub batch_triangles: usize,
+    /// A test that fails while at least this many triangles are pending, over a screen region
+    /// meeting the box's, draws them, updates the pyramid and tests again (0: never).
+    pub refresh: usize,
     /// Occlusion tests at all (off: octree frustum culling only, and no visible list).
     pub occlusion: bool,
     /// Hierarchical pyramid test (§3.2); off: a full-resolution scan of each face's rectangle.
@@ -201,6 +209,7 @@ impl Default for HzbOptions {
                 small_fraction: 0.25,
             },
             batch_triangles: 4096,
+            refresh: 512,
             occlusion: true,
             pyramid: true,
             global: true,
@@ -246,6 +255,7 @@ impl HzbOptions {
                 "batch={batch_triangles}: triangles per batch must be in 1..=16777216"
             ));
         }
+        let refresh: usize = p.get("refresh", d.refresh)?;
         let recheck: i64 = p.get("recheck", d.recheck_every as i64)?;
         if !(1..=1_000_000).contains(&recheck) {
             return bad(format!(
@@ -278,6 +288,7 @@ impl HzbOptions {
                 small_fraction,
             },
             batch_triangles,
+            refresh,
             occlusion,
             pyramid: p.flag("pyramid", d.pyramid)?,
             global: p.flag("global", d.global)?,
@@ -313,6 +324,7 @@ pub const COUNTERS: [&str; 16] = [
     "batches",
     "whole_drawn",
     "visible_list_retested",
+    "refreshes",
     crate::payoff::COUNTERS[0],
     crate::payoff::COUNTERS[1],
     crate::direct::COUNTER,
@@ -360,6 +372,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             key: "batch",
             default: "4096",
             help: "triangles rasterized per batch, after which the z-pyramid is updated (§3.2)",
+        },
+        ParamDoc {
+            key: "refresh",
+            default: "512",
+            help: "a failed test draws the pending batch early and tests again when it holds at least this many triangles over the box's screen region, 0 = never (not in the paper)",
         },
         ParamDoc {
             key: "occlusion",

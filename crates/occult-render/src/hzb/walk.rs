@@ -37,6 +37,28 @@ pub(super) struct Stamps {
     bit_of: Vec<Vec<u32>>,
     /// Per DAG node: words of one instance's bit set.
     words: Vec<u32>,
+    /// Per DAG node whose octree shares primitives: its nodes' own lists regrouped (read for
+    /// meshes).
+    split: Vec<Option<Split>>,
+    /// This frame's bit sets.
+    sets: StampSets,
+}
+
+/// The own primitives of every node of a mesh octree, regrouped as the unshared ones then the
+/// shared ones with their stamp bits: drawing a node copies the first run as it is and checks
+/// a stamp only for the second, reading both in order (the per-primitive lookup of a bit in a
+/// table over the whole mesh missed the cache).
+struct Split {
+    /// Per octree node: where its unshared run starts, where its shared run starts, the end.
+    ranges: Vec<[u32; 3]>,
+    order: Vec<u32>,
+    /// The stamp bit of each entry of `order` ([`NOT_SHARED`] in unshared runs).
+    bits: Vec<u32>,
+}
+
+/// The frame's stamp bit sets, one per instance that drew a shared primitive.
+#[derive(Default)]
+struct StampSets {
     /// Instance (DAG node, first item) → offset of its bit set in `bits`, this frame.
     slots: std::collections::HashMap<(u32, u64), usize, FxBuild>,
     bits: Vec<u64>,
@@ -44,11 +66,48 @@ pub(super) struct Stamps {
     last: Option<((u32, u64), usize)>,
 }
 
+impl StampSets {
+    /// Sets stamp `bit` of the instance of DAG node `id` at `first_item` (whose set has
+    /// `words` words); false when it was already set this frame.
+    #[inline]
+    fn stamp(&mut self, id: NodeId, words: u32, bit: u32, first_item: u64) -> bool {
+        let (word, mask) = (
+            &mut self.set(id, words, first_item)[bit as usize / 64],
+            1u64 << (bit % 64),
+        );
+        let fresh = *word & mask == 0;
+        *word |= mask;
+        fresh
+    }
+
+    /// The bit set of the instance of DAG node `id` at `first_item` (`words` words), made
+    /// empty at its first use this frame.
+    #[inline]
+    fn set(&mut self, id: NodeId, words: u32, first_item: u64) -> &mut [u64] {
+        let key = (id.0, first_item);
+        let offset = match self.last {
+            Some((k, o)) if k == key => o,
+            _ => {
+                let bits = &mut self.bits;
+                let o = *self.slots.entry(key).or_insert_with(|| {
+                    let o = bits.len();
+                    bits.resize(o + words as usize, 0);
+                    o
+                });
+                self.last = Some((key, o));
+                o
+            }
+        };
+        &mut self.bits[offset..offset + words as usize]
+    }
+}
+
 impl Stamps {
-    /// Stamp numbering for the shared primitives of `octrees`.
+    /// Stamp numbering for the shared primitives of `octrees`, and their node lists regrouped
+    /// (see [`Split`]).
     pub(super) fn new(octrees: &[Option<HybridOctree>]) -> Self {
         let mut words = Vec::with_capacity(octrees.len());
-        let bit_of = octrees
+        let bit_of: Vec<Vec<u32>> = octrees
             .iter()
             .map(|o| match o {
                 Some(o) if o.shared_count() > 0 => {
@@ -72,58 +131,94 @@ impl Stamps {
                 }
             })
             .collect();
+        let split = octrees
+            .iter()
+            .zip(&bit_of)
+            .map(|(o, bit_of)| {
+                let o = o.as_ref().filter(|_| !bit_of.is_empty())?;
+                let mut split = Split {
+                    ranges: Vec::with_capacity(o.nodes().len()),
+                    order: Vec::new(),
+                    bits: Vec::new(),
+                };
+                for n in 0..o.nodes().len() as u32 {
+                    let own = o.node_primitives(n);
+                    let start = split.order.len() as u32;
+                    split
+                        .order
+                        .extend(own.iter().filter(|&&p| bit_of[p as usize] == NOT_SHARED));
+                    let mid = split.order.len() as u32;
+                    split
+                        .order
+                        .extend(own.iter().filter(|&&p| bit_of[p as usize] != NOT_SHARED));
+                    split.ranges.push([start, mid, split.order.len() as u32]);
+                }
+                split.bits = split.order.iter().map(|&p| bit_of[p as usize]).collect();
+                Some(split)
+            })
+            .collect();
         Self {
             bit_of,
             words,
-            slots: Default::default(),
-            bits: Vec::new(),
-            last: None,
+            split,
+            sets: StampSets::default(),
         }
     }
 
     /// Forgets the previous frame's stamps.
     fn begin_frame(&mut self) {
-        self.slots.clear();
-        self.bits.clear();
-        self.last = None;
+        self.sets.slots.clear();
+        self.sets.bits.clear();
+        self.sets.last = None;
     }
 
     /// Bytes held.
     pub(super) fn memory_bytes(&self) -> usize {
         self.bit_of.iter().map(|b| b.capacity() * 4).sum::<usize>()
+            + self
+                .split
+                .iter()
+                .flatten()
+                .map(|s| s.ranges.capacity() * 12 + s.order.capacity() * 4 + s.bits.capacity() * 4)
+                .sum::<usize>()
             + self.words.capacity() * 4
-            + self.bits.capacity() * 8
-            + self.slots.capacity() * 24
+            + self.sets.bits.capacity() * 8
+            + self.sets.slots.capacity() * 24
+    }
+
+    /// Appends to `out` the own primitives of octree node `n` of the instance of mesh `id` at
+    /// `first_item` that it has not drawn yet this frame, stamping the shared ones; false (and
+    /// nothing appended) when the octree shares nothing: its node lists are drawn as they are.
+    #[inline]
+    fn gather(&mut self, id: NodeId, n: u32, first_item: u64, out: &mut Vec<u32>) -> bool {
+        let Some(split) = &self.split[id.index()] else {
+            return false;
+        };
+        let [start, mid, end] = split.ranges[n as usize];
+        out.extend_from_slice(&split.order[start as usize..mid as usize]);
+        if mid == end {
+            return true;
+        }
+        let set = self.sets.set(id, self.words[id.index()], first_item);
+        for k in mid as usize..end as usize {
+            let bit = split.bits[k];
+            let (word, mask) = (&mut set[bit as usize / 64], 1u64 << (bit % 64));
+            if *word & mask == 0 {
+                *word |= mask;
+                out.push(split.order[k]);
+            }
+        }
+        true
     }
 
     /// Stamps primitive `p` of the instance of DAG node `id` at `first_item`; false when it is
     /// shared and that instance already drew it this frame.
     #[inline]
     fn stamp(&mut self, id: NodeId, p: u32, first_item: u64) -> bool {
-        let Some(&bit) = self.bit_of[id.index()].get(p as usize) else {
-            return true;
-        };
-        if bit == NOT_SHARED {
-            return true;
+        match self.bit_of[id.index()].get(p as usize) {
+            Some(&bit) if bit != NOT_SHARED => self.sets.stamp(id, self.words[id.index()], bit, first_item),
+            _ => true,
         }
-        let key = (id.0, first_item);
-        let offset = match self.last {
-            Some((k, o)) if k == key => o,
-            _ => {
-                let (bits, words) = (&mut self.bits, self.words[id.index()] as usize);
-                let o = *self.slots.entry(key).or_insert_with(|| {
-                    let o = bits.len();
-                    bits.resize(o + words, 0);
-                    o
-                });
-                self.last = Some((key, o));
-                o
-            }
-        };
-        let (word, mask) = (&mut self.bits[offset + bit as usize / 64], 1u64 << (bit % 64));
-        let fresh = *word & mask == 0;
-        *word |= mask;
-        fresh
     }
 }
 
@@ -186,11 +281,31 @@ struct Placement {
     eye: Vec3,
 }
 
+/// Which triangles of a mesh a pending draw holds.
+#[derive(Clone, Copy)]
+enum Triangles<'a> {
+    /// The whole mesh.
+    All,
+    /// A range of `scratch` (a list filtered by stamps or shares).
+    Scratch(u32, u32),
+    /// An octree node's own index list, as it is.
+    Node(&'a [u32]),
+}
+
+impl Triangles<'_> {
+    fn count(self, mesh: &Mesh) -> usize {
+        match self {
+            Triangles::All => mesh.triangle_count(),
+            Triangles::Scratch(s, e) => (e - s) as usize,
+            Triangles::Node(l) => l.len(),
+        }
+    }
+}
+
 /// Geometry gathered for the next rasterizer call.
 struct Pending<'a> {
     mesh: &'a Mesh,
-    /// Range of `scratch` holding the triangle list; None for the whole mesh.
-    list: Option<(u32, u32)>,
+    triangles: Triangles<'a>,
     clip_from_object: Mat4,
     first_item: u64,
 }
@@ -234,6 +349,9 @@ pub(super) struct Walk<'a> {
     placements: std::collections::HashMap<(u32, u64), Placement, FxBuild>,
     /// Whether the last instance visited was a small mesh queued whole.
     queued_whole: bool,
+    /// Whether the visible list is being drawn: nothing reads the pyramid then (but a
+    /// retested entry), so batches are large enough for the rasterizer's threads.
+    listing: bool,
     pc: PyramidCounts,
     occlusion_tests: u64,
     occlusion_culled: u64,
@@ -244,6 +362,8 @@ pub(super) struct Walk<'a> {
     batches: u64,
     whole_drawn: u64,
     list_retested: u64,
+    /// Batches drawn early for a test (`refresh`).
+    refreshes: u64,
 }
 
 impl<'a> Walk<'a> {
@@ -288,6 +408,7 @@ impl<'a> Walk<'a> {
             listed: IdSet::default(),
             placements: Default::default(),
             queued_whole: false,
+            listing: false,
             pc: PyramidCounts::default(),
             occlusion_tests: 0,
             occlusion_culled: 0,
@@ -298,6 +419,7 @@ impl<'a> Walk<'a> {
             batches: 0,
             whole_drawn: 0,
             list_retested: 0,
+            refreshes: 0,
         }
     }
 
@@ -318,6 +440,7 @@ impl<'a> Walk<'a> {
             list = keyed.into_iter().map(|(_, e)| e).collect();
         }
         let whole = self.whole_instances(&list);
+        self.listing = true;
         for e in list {
             let own = self.node_of(&e).own_bounds;
             let pl = self.placement(&e);
@@ -331,7 +454,7 @@ impl<'a> Walk<'a> {
                         let b = mesh.bounds();
                         if pl.frustum.classify_aabb(&b) != Containment::Outside {
                             self.whole_drawn += 1;
-                            self.push(mesh, None, pl.clip_from_object, e.first_item, &b);
+                            self.push(mesh, Triangles::All, pl.clip_from_object, e.first_item, &b);
                             self.maybe_flush();
                         }
                     }
@@ -350,6 +473,10 @@ impl<'a> Walk<'a> {
             // back into view it is tested like a node of the traversal (`retest`).
             if e.stale && self.options.retest && self.options.occlusion {
                 self.list_retested += 1;
+                // What the list drew so far, in the pyramid as far as a tested batch would be.
+                if self.pending_triangles >= self.options.batch_triangles {
+                    self.flush();
+                }
                 let items = self.own_items(e.dag_node, e.octree_node);
                 if self.hidden(&pl.clip_from_object, &own, pl.eye, items) {
                     continue; // the traversal lists it again if it is drawn
@@ -370,6 +497,7 @@ impl<'a> Walk<'a> {
             self.list(e);
             self.maybe_flush();
         }
+        self.listing = false;
         self.flush();
     }
 
@@ -464,6 +592,7 @@ impl<'a> Walk<'a> {
             ("batches", self.batches),
             ("whole_drawn", self.whole_drawn),
             ("visible_list_retested", self.list_retested),
+            ("refreshes", self.refreshes),
         ]);
         c.add_all(self.payoff.counters());
         self.payoff_state.end(&self.payoff);
@@ -574,7 +703,7 @@ impl<'a> Walk<'a> {
                 return false;
             }
         }
-        self.push(mesh, None, clip, at.place.first_item, &b);
+        self.push(mesh, Triangles::All, clip, at.place.first_item, &b);
         true
     }
 
@@ -603,7 +732,13 @@ impl<'a> Walk<'a> {
         self.walk.stats.boxes_tested += 1;
         self.occlusion_tests += 1;
         let mut pc = self.pc;
-        let hidden = self.occlusion().box_hidden(clip, b, eye, &mut pc);
+        let mut hidden = self.occlusion().box_hidden(clip, b, eye, &mut pc);
+        if !hidden && self.refresh_pays(clip, b) {
+            // The batch may hide the box: draw it, and test again.
+            self.flush();
+            self.refreshes += 1;
+            hidden = self.occlusion().box_hidden(clip, b, eye, &mut pc);
+        }
         self.pc = pc;
         if hidden {
             self.walk.stats.boxes_culled += 1;
@@ -611,6 +746,25 @@ impl<'a> Walk<'a> {
             self.payoff.saved(items);
         }
         hidden
+    }
+
+    /// Whether a box that failed its test should be tested again once the pending batch is
+    /// drawn (`refresh`): the batch holds at least `refresh` triangles and its screen region
+    /// meets the box's. Within a front-to-back walk the batch holds the nearest geometry drawn
+    /// so far, often the very occluder of the box (the front of the same building); waiting
+    /// for the batch to fill tests the box against a pyramid that lacks it.
+    fn refresh_pays(&self, clip: &Mat4, b: &occult_core::Aabb) -> bool {
+        let refresh = self.options.refresh;
+        if refresh == 0 || self.pending_triangles < refresh || self.listing {
+            return false;
+        }
+        let (Some(d), Some(r)) = (
+            self.dirty,
+            screen_rect(clip, b, self.frame.width(), self.frame.height()),
+        ) else {
+            return false;
+        };
+        d.x0 < r.x1 && r.x0 < d.x1 && d.y0 < r.y1 && r.y0 < d.y1
     }
 
     /// §3.2: test the node's box, draw its own primitives, then its children front to back.
@@ -646,7 +800,7 @@ impl<'a> Walk<'a> {
             // frame is drawn again, which changes no pixel).
             if let NodeKind::Mesh(mesh) = self.walk.scene().node(inst.place.id).kind() {
                 let b = node.bounds;
-                self.push(mesh, None, inst.clip_from_object, inst.place.first_item, &b);
+                self.push(mesh, Triangles::All, inst.clip_from_object, inst.place.first_item, &b);
                 self.maybe_flush();
                 return;
             }
@@ -771,7 +925,7 @@ impl<'a> Walk<'a> {
         world_from_node: &Affine3A,
         first_item: u64,
         clip: Mat4,
-        own: &occult_core::Aabb,
+        own_box: &occult_core::Aabb,
     ) -> bool {
         let scene: &'a Scene = self.walk.scene();
         let octrees: &'a [Option<HybridOctree>] = self.octrees;
@@ -786,8 +940,21 @@ impl<'a> Walk<'a> {
         let (share, root) = (self.share, scene.root());
         match scene.node(id).kind() {
             NodeKind::Mesh(mesh) => {
+                let own = octree.node_primitives(n);
                 let start = self.scratch.len() as u32;
-                for &p in octree.node_primitives(n) {
+                if self.share == Share::ALL {
+                    if self.stamps.gather(id, n, first_item, &mut self.scratch) {
+                        let end = self.scratch.len() as u32;
+                        if end > start {
+                            self.push(mesh, Triangles::Scratch(start, end), clip, first_item, own_box);
+                        }
+                    } else if !own.is_empty() {
+                        // Nothing shared: the octree's list is drawn as it is.
+                        self.push(mesh, Triangles::Node(own), clip, first_item, own_box);
+                    }
+                    return self.pending.len() > queued;
+                }
+                for &p in own {
                     if !share.owns_primitive(id, root, key, p) {
                         continue;
                     }
@@ -799,7 +966,7 @@ impl<'a> Walk<'a> {
                 }
                 let end = self.scratch.len() as u32;
                 if end > start {
-                    self.push(mesh, Some((start, end)), clip, first_item, own);
+                    self.push(mesh, Triangles::Scratch(start, end), clip, first_item, own_box);
                 }
             }
             NodeKind::Group(instances) => {
@@ -822,7 +989,7 @@ impl<'a> Walk<'a> {
                     .child_of(scene.node(id), p as usize);
                     let clip = self.walk.view().clip_from_object(&child.world_from_node);
                     let b = scene.node(i.child).bounds();
-                    self.push(mesh, None, clip, child.first_item, &b);
+                    self.push(mesh, Triangles::All, clip, child.first_item, &b);
                 }
             }
         }
@@ -830,8 +997,8 @@ impl<'a> Walk<'a> {
     }
 
     /// Queues triangles whose object-space bounds are `b` (for the pyramid's dirty region).
-    fn push(&mut self, mesh: &'a Mesh, list: Option<(u32, u32)>, clip: Mat4, first_item: u64, b: &occult_core::Aabb) {
-        self.pending_triangles += list.map_or(mesh.triangle_count(), |(s, e)| (e - s) as usize);
+    fn push(&mut self, mesh: &'a Mesh, triangles: Triangles<'a>, clip: Mat4, first_item: u64, b: &occult_core::Aabb) {
+        self.pending_triangles += triangles.count(mesh);
         if let Some(r) = screen_rect(&clip, b, self.frame.width(), self.frame.height()) {
             self.dirty = Some(match self.dirty {
                 None => r,
@@ -845,14 +1012,14 @@ impl<'a> Walk<'a> {
         }
         self.pending.push(Pending {
             mesh,
-            list,
+            triangles,
             clip_from_object: clip,
             first_item,
         });
     }
 
     fn maybe_flush(&mut self) {
-        let batch = if self.payoff.stopped() {
+        let batch = if self.payoff.stopped() || self.listing {
             DIRECT_BATCH
         } else {
             self.options.batch_triangles
@@ -880,9 +1047,10 @@ impl<'a> Walk<'a> {
             .iter()
             .map(|p| Draw {
                 mesh: p.mesh,
-                triangles: match p.list {
-                    None => DrawTriangles::All,
-                    Some((s, e)) => DrawTriangles::List(&self.scratch[s as usize..e as usize]),
+                triangles: match p.triangles {
+                    Triangles::All => DrawTriangles::All,
+                    Triangles::Scratch(s, e) => DrawTriangles::List(&self.scratch[s as usize..e as usize]),
+                    Triangles::Node(l) => DrawTriangles::List(l),
                 },
                 clip_from_object: p.clip_from_object,
                 first_item: p.first_item,
