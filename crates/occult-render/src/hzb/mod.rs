@@ -310,7 +310,7 @@ impl HzbOptions {
 /// Every counter ([`FrameStats::counters`](crate::FrameStats::counters)) a frame may report,
 /// whichever the settings, except the per-worker ones of `parallel=on` (`worker<k>_busy_us`,
 /// `worker<k>_idle_us`); [`INFO`]'s counters list those too.
-pub const COUNTERS: [&str; 16] = [
+pub const COUNTERS: [&str; 17] = [
     "occlusion_tests",
     "occlusion_culled",
     "frustum_culled",
