@@ -13,18 +13,21 @@
 //!   part (clear, walk) and its rasterization, a rate per triangle of work; the model is the
 //!   least of each over the last [`DIRECT_KEPT`] direct frames (noise only adds time);
 //! - a culled frame's time is compared with what the model predicts for its work, so that
-//!   frames of different views compare: culling slower than drawing directly by more than
-//!   [`CLEAR_LOSS`], or slower in two culled frames in a row, starts a **run** of direct
-//!   frames, [`MIN_RUN`] the first time, twice as long after each probe that loses again, up
-//!   to [`MAX_RUN`] (back to [`MIN_RUN`] after a probe that wins);
-//! - the direct rate is measured right after the first culled frame, and once more after the
-//!   next culled frame if that one won (a renderer's first direct frame also pays its
-//!   rasterizer's first large draws), unless the first culled frame plainly paid
-//!   ([`DirectFrames::plainly`]: its tests saved more than they cost, and it submitted at
-//!   most a third of the work or took less than half of what the work would cost at its own
-//!   rasterization rate) or is small beside the culled frames before it (less than half
-//!   their mean time); a culled frame that pays less than [`REMEASURE_SHARE`] of a direct
-//!   frame's rate measures it again once it is [`REMEASURE_AFTER`] frames old;
+//!   frames of different views compare, and its gain (or loss) added to a decaying balance: a
+//!   frame that loses while the balance is negative starts a **run** of direct frames when its
+//!   tests did not pay by their own measure or the culled frame before lost too (the model
+//!   knows triangles, not pixels: a near wall, few triangles and much to fill, is predicted
+//!   cheap, so one loss of a frame whose tests paid is not trusted); a run is [`MIN_RUN`]
+//!   frames the first time, twice as long after each probe that loses again, up to
+//!   [`MAX_RUN`] (back to [`MIN_RUN`] after a probe that wins);
+//! - the first direct frame is drawn after a culled frame whose tests did not pay, or after
+//!   two in a row that did not plainly pay ([`DirectFrames::plainly`]: tests that paid, and at
+//!   most a third of the work submitted or less than half of what the work would cost at the
+//!   frame's own rasterization rate), unless that frame is small beside the culled frames
+//!   before it (less than half their mean time); a culled frame that wins by a thin margin
+//!   (more than [`REMEASURE_SHARE`] of the predicted direct time) measures it again, once more
+//!   after the first measurement (a renderer's first direct frame also pays its rasterizer's
+//!   first large draws) and once it is [`REMEASURE_AFTER`] frames old;
 //! - a culled frame shorter than [`MIN_ALLOWANCE_TIME`] never starts a run (small scenes keep
 //!   their tests whatever the clock says).
 //!
@@ -53,10 +56,6 @@ pub const MIN_RUN: u32 = 8;
 pub const REMEASURE_SHARE: f64 = 0.8;
 /// ... once the last measurement is this many frames old.
 pub const REMEASURE_AFTER: u32 = 16;
-/// A culled frame slower than a direct one by more than this factor starts a run of direct
-/// frames alone; one slower by less starts one only after another culled frame that lost
-/// (one frame's noise does not give up culling).
-pub const CLEAR_LOSS: f64 = 1.25;
 /// Direct frames whose measurements are kept ([`DirectFrames::direct_ns`] is their least).
 pub const DIRECT_KEPT: usize = 4;
 /// The counter of frames drawn directly.
@@ -148,7 +147,7 @@ impl DirectFrames {
         let work = self.choice.last_work;
         let raster_ns = stats.phases.get(Phase::Raster).as_nanos() as f64 / stats.triangles_submitted.max(1) as f64;
         let plainly = Self::plainly(tests_paid, total, stats.triangles_submitted, raster_ns, work);
-        self.choice.culled(total, work, plainly);
+        self.choice.culled(total, work, tests_paid, plainly);
         self.choice.direct_left > 0
     }
 
@@ -220,8 +219,11 @@ impl Model {
 struct Choice {
     /// The last direct frames' models, newest last, at most [`DIRECT_KEPT`].
     measured: Vec<Model>,
-    /// Culled frames (time, work) not yet weighed: those before the first direct frame.
-    unweighed: Vec<(Duration, u64)>,
+    /// Culled frames (time, work, whether their tests paid) not yet weighed: those before the
+    /// first direct frame.
+    unweighed: Vec<(Duration, u64, bool)>,
+    /// Culled frames in a row that did not plainly pay, before the first direct frame.
+    unplain: u32,
     /// The balance of the recent culled frames: each one's gain (the predicted direct time of
     /// its work minus its time, ns) added to half the balance before; reset when a run
     /// starts. A frame of little work that loses a little does not outweigh frames before it
@@ -270,42 +272,52 @@ impl Choice {
         self.run = (run * 2).min(MAX_RUN);
     }
 
-    fn culled(&mut self, total: Duration, work: u64, paid_plainly: bool) {
+    fn culled(&mut self, total: Duration, work: u64, tests_paid: bool, paid_plainly: bool) {
         self.since_direct = self.since_direct.saturating_add(1);
         self.last_work = work;
         if total < MIN_ALLOWANCE_TIME {
             return;
         }
         if self.model().is_none() {
-            // Measure the alternative, next frame, unless this frame plainly paid or is small
-            // beside the culled frames before it (a view of a wall: whatever it loses is
-            // little, and weighed once a direct frame was measured).
+            // Measure the alternative, next frame, when this frame's tests did not pay, or two
+            // frames in a row did not plainly pay; not for a frame small beside the culled
+            // frames before it (a view of a wall: whatever it loses is little, and weighed
+            // once a direct frame was measured).
+            self.unplain = if paid_plainly { 0 } else { self.unplain + 1 };
             let n = self.unweighed.len() as f64;
-            let mean = self.unweighed.iter().map(|(t, _)| t.as_secs_f64()).sum::<f64>() / n.max(1.0);
-            if !paid_plainly && total.as_secs_f64() >= 0.5 * mean {
+            let mean = self.unweighed.iter().map(|u| u.0.as_secs_f64()).sum::<f64>() / n.max(1.0);
+            if (!tests_paid || self.unplain >= 2) && total.as_secs_f64() >= 0.5 * mean {
                 self.direct_left = 1;
             }
             if self.unweighed.len() == DIRECT_KEPT {
                 self.unweighed.remove(0);
             }
-            self.unweighed.push((total, work));
+            self.unweighed.push((total, work, tests_paid));
             return;
         }
-        let lost = self.weigh(total, work);
-        if self.balance < 0.0 && lost && (self.ratio(total, work) > Some(CLEAR_LOSS) || self.lost_last) {
+        if self.judge(total, work, tests_paid) {
             self.start_run();
-        } else if self.measured.len() < 2 {
-            // One direct frame is not enough to keep culling on: the first one a renderer
-            // draws also pays its rasterizer's first large draws (buffers allocated, pages
-            // touched), so it is measured once more.
-            self.direct_left = 1;
-        } else if !lost {
+        } else if !self.lost_last {
             self.run = 0;
-            if self.ratio(total, work) > Some(REMEASURE_SHARE) && self.since_direct >= REMEASURE_AFTER {
+            // A thin win is measured again: against one direct frame (whose first large draws
+            // cost the rasterizer extra), or one measured long ago.
+            let thin = self.ratio(total, work) > Some(REMEASURE_SHARE);
+            if thin && (self.measured.len() < 2 || self.since_direct >= REMEASURE_AFTER) {
                 self.direct_left = 1;
             }
         }
+    }
+
+    /// Weighs a culled frame; true when a run of direct frames is due: the balance is negative
+    /// and the frame lost, and either its tests did not pay (by their own measure) or the
+    /// culled frame before lost too. A single loss of a frame whose tests paid is a view the
+    /// model predicts badly (a near wall: few triangles, much to fill), not a reason to stop
+    /// culling.
+    fn judge(&mut self, total: Duration, work: u64, tests_paid: bool) -> bool {
+        let lost = self.weigh(total, work);
+        let due = self.balance < 0.0 && lost && (!tests_paid || self.lost_last);
         self.lost_last = lost;
+        due
     }
 
     /// Adds a culled frame's gain to the balance; true when it lost.
@@ -326,15 +338,13 @@ impl Choice {
             rate_ns: raster.as_nanos() as f64 / work.max(1) as f64,
         });
         self.since_direct = 0;
-        // The culled frames before the first measurement, weighed now: when they clearly lost,
-        // straight into a run.
-        let unweighed = std::mem::take(&mut self.unweighed);
-        let mut clearly = false;
-        for &(t, w) in &unweighed {
-            self.lost_last = self.weigh(t, w);
-            clearly = self.ratio(t, w) > Some(CLEAR_LOSS);
+        // The culled frames before the first measurement, weighed now: straight into a run
+        // when the last of them makes one due.
+        let mut due = false;
+        for (t, w, paid) in std::mem::take(&mut self.unweighed) {
+            due = self.judge(t, w, paid);
         }
-        if self.direct_left == 0 && self.balance < 0.0 && self.lost_last && clearly {
+        if due && self.direct_left == 0 {
             self.start_run();
         }
     }
@@ -403,8 +413,8 @@ pub(crate) mod tests {
         fn force(&mut self, n: u32, abandon: bool);
     }
 
-    /// Frames of a view where culling costs twice what drawing directly does: one measurement,
-    /// then runs of 8, 16, 32 and 64 direct frames between single probes.
+    /// Frames of a view where culling costs twice what drawing directly does and its tests do
+    /// not pay: one measurement, then runs of 8, 16, 32 and 64 direct frames between probes.
     #[test]
     fn culling_that_loses_runs_direct_ever_longer() {
         let mut c = Choice::default();
@@ -415,7 +425,7 @@ pub(crate) mod tests {
                 c.direct(10 * MS, 9 * MS, 1000);
             } else {
                 ways.push('c');
-                c.culled(20 * MS, 1000, false);
+                c.culled(20 * MS, 1000, false, false);
             }
         }
         let expected = format!(
@@ -428,101 +438,109 @@ pub(crate) mod tests {
         assert_eq!(ways, expected[..120]);
     }
 
-    /// Culling that wins after two direct measurements keeps culling, measuring again only
-    /// when its margin is thin and the measurement old.
+    /// Culling that wins keeps culling, measuring again only when its margin is thin: once
+    /// more after the first measurement, then when the measurement is old.
     #[test]
     fn culling_that_wins_keeps_culling() {
         let mut c = Choice::default();
-        c.culled(20 * MS, 1000, false);
-        assert!(c.take_direct());
-        c.direct(40 * MS, 39 * MS, 1000);
-        // Culling (20) beats direct (40): no run; one more measurement after a culled frame.
-        assert!(!c.take_direct());
-        c.culled(20 * MS, 1000, false);
+        c.culled(20 * MS, 1000, false, false);
         assert!(c.take_direct());
         c.direct(40 * MS, 39 * MS, 1000);
         for _ in 0..40 {
-            c.culled(20 * MS, 1000, false);
+            c.culled(20 * MS, 1000, true, false);
             assert!(!c.take_direct(), "a wide margin never remeasures");
         }
-        // A thin margin (36 of 40) remeasures once the measurement is old.
+        // A thin margin (36 of 40) remeasures at once (one measurement only), then every
+        // 16th frame.
         let mut remeasured = 0;
         for _ in 0..40 {
-            c.culled(36 * MS, 1000, false);
+            c.culled(36 * MS, 1000, true, false);
             if c.take_direct() {
                 remeasured += 1;
                 c.direct(40 * MS, 39 * MS, 1000);
             }
         }
-        // The first thin frame (the measurement 40 frames old), then every 16th.
         assert_eq!(remeasured, 3);
     }
 
-    /// A mild loss starts a run only when the culled frame before lost too; a clear one at
-    /// once.
+    /// A loss starts a run when its tests did not pay, or after another loss; a single loss
+    /// of a frame whose tests paid does not.
     #[test]
-    fn mild_losses_need_two_frames() {
-        let mut c = Choice::default();
-        c.measured = vec![
+    fn single_losses_of_paying_tests_are_not_trusted() {
+        let model = vec![
             Model {
                 fixed_ns: 0.0,
                 rate_ns: 10_000.0,
             };
             2
         ];
-        c.culled(11 * MS, 1000, false);
-        assert!(!c.take_direct(), "one mild loss");
-        c.culled(9 * MS, 1000, false);
-        c.culled(11 * MS, 1000, false);
-        assert!(!c.take_direct(), "a win between");
-        c.culled(11 * MS, 1000, false);
-        assert!(c.take_direct(), "two mild losses in a row");
         let mut c = Choice {
-            measured: c.measured.clone(),
+            measured: model.clone(),
             ..Choice::default()
         };
-        c.culled(13 * MS, 1000, false);
-        assert!(c.take_direct(), "a clear loss");
+        c.culled(30 * MS, 1000, true, false);
+        assert!(!c.take_direct(), "one loss, tests paid");
+        c.culled(9 * MS, 1000, true, false);
+        c.culled(11 * MS, 1000, true, false);
+        assert!(!c.take_direct(), "a win between");
+        c.culled(11 * MS, 1000, true, false);
+        assert!(c.take_direct(), "two losses in a row");
+        let mut c = Choice {
+            measured: model,
+            ..Choice::default()
+        };
+        c.culled(11 * MS, 1000, false, false);
+        assert!(c.take_direct(), "a loss whose tests did not pay");
     }
 
-    /// A frame that plainly paid needs no measurement; short frames never start a run; a
-    /// frame of little work is weighed against a direct frame's fixed part too.
+    /// The first measurement: after tests that did not pay, or two frames in a row that did
+    /// not plainly pay; never after a plain win or a small frame.
     #[test]
-    fn plain_wins_short_frames_and_work() {
+    fn when_direct_is_first_measured() {
         let mut c = Choice::default();
-        c.culled(20 * MS, 1000, true);
-        assert!(!c.take_direct());
+        c.culled(20 * MS, 1000, true, true);
+        assert!(!c.take_direct(), "plainly paid");
+        c.culled(20 * MS, 1000, true, false);
+        assert!(!c.take_direct(), "once not plainly");
+        c.culled(20 * MS, 1000, true, false);
+        assert!(c.take_direct(), "twice not plainly");
         let mut c = Choice::default();
-        c.culled(MIN_ALLOWANCE_TIME / 2, 1000, false);
-        assert!(!c.take_direct());
+        c.culled(20 * MS, 1000, true, true);
+        c.culled(5 * MS, 1000, false, false);
+        assert!(!c.take_direct(), "small beside the frames before");
+        c.culled(20 * MS, 1000, false, false);
+        assert!(c.take_direct(), "tests that did not pay");
+        let mut c = Choice::default();
+        c.culled(MIN_ALLOWANCE_TIME / 2, 1000, false, false);
+        assert!(!c.take_direct(), "short frames keep their tests");
         assert!(c.unweighed.is_empty());
-        // Direct frames: 8 ms fixed, 2 µs a triangle.
-        let mut c = Choice::default();
-        c.measured = vec![
-            Model {
-                fixed_ns: 8e6,
-                rate_ns: 2000.0,
-            };
-            2
-        ];
+    }
+
+    /// Frames are weighed against a direct frame's fixed part and rate; frames that won much
+    /// outweigh a frame of little work that loses a little.
+    #[test]
+    fn the_model_and_the_balance() {
+        let mut c = Choice {
+            measured: vec![
+                Model {
+                    fixed_ns: 8e6,
+                    rate_ns: 2000.0,
+                };
+                2
+            ],
+            ..Choice::default()
+        };
         assert_eq!(c.model().map(|m| m.predict(1000)), Some(10e6));
-        c.culled(3 * MS, 1, false);
+        c.culled(3 * MS, 1, false, false);
         assert!(
             !c.take_direct(),
             "3 ms beats the 8 ms a direct frame needs whatever its work"
         );
-        c.culled(20 * MS, 2000, false);
-        assert!(c.take_direct(), "20 ms loses to 12 ms");
-        // Frames that won much outweigh a frame of little work that loses a little.
-        let mut c = Choice {
-            measured: c.measured.clone(),
-            ..Choice::default()
-        };
-        c.culled(5 * MS, 1000, false);
-        c.culled(5 * MS, 1000, false);
-        c.culled(11 * MS, 1, false);
+        c.culled(5 * MS, 1000, false, false);
+        c.culled(5 * MS, 1000, false, false);
+        c.culled(11 * MS, 1, false, false);
         assert!(!c.take_direct(), "3 ms lost after 2 × 5 ms won");
-        c.culled(11 * MS, 1, false);
+        c.culled(11 * MS, 1, false, false);
         assert!(c.take_direct(), "lost again");
         // Submitted a third of the work, or took less than half of the work at its own rate.
         assert!(DirectFrames::plainly(true, 100 * MS, 100, 1.0, 300));
