@@ -128,12 +128,7 @@ impl DirectFrames {
         stats: &mut FrameStats,
     ) -> Result<()> {
         let s = self.render(raster, view, frame)?;
-        stats.triangles_submitted += s.triangles_submitted;
-        stats.triangles_rasterized += s.triangles_rasterized;
-        stats.fragments_written += s.fragments_written;
-        stats.nodes_visited += s.nodes_visited;
-        stats.boxes_tested += s.boxes_tested;
-        stats.boxes_culled += s.boxes_culled;
+        stats.add_counts(&s);
         stats.phases.merge(&s.phases);
         stats.counters.add(COUNTER, 1);
         Ok(())

@@ -141,6 +141,17 @@ impl FrameStats {
             .collect()
     }
 
+    /// Adds the triangle, fragment, node and box counts of `other` (a part of this frame drawn
+    /// apart: a worker's share, a redrawn frame); counters and phases are left to the caller.
+    pub fn add_counts(&mut self, other: &FrameStats) {
+        self.triangles_submitted += other.triangles_submitted;
+        self.triangles_rasterized += other.triangles_rasterized;
+        self.fragments_written += other.fragments_written;
+        self.nodes_visited += other.nodes_visited;
+        self.boxes_tested += other.boxes_tested;
+        self.boxes_culled += other.boxes_culled;
+    }
+
     /// Adds the counts of one rasterizer call.
     pub fn add_raster(&mut self, counts: occult_raster::RasterCounts) {
         self.triangles_submitted += counts.triangles_submitted;

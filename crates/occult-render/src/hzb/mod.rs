@@ -752,12 +752,7 @@ impl Hzb {
         let slowest = results.iter().map(|r| r.1).max().unwrap_or_default();
         let mut stats = FrameStats::default();
         for (k, (s, busy)) in results.iter().enumerate() {
-            stats.triangles_submitted += s.triangles_submitted;
-            stats.triangles_rasterized += s.triangles_rasterized;
-            stats.fragments_written += s.fragments_written;
-            stats.nodes_visited += s.nodes_visited;
-            stats.boxes_tested += s.boxes_tested;
-            stats.boxes_culled += s.boxes_culled;
+            stats.add_counts(s);
             stats.counters.merge(&s.counters);
             stats.counters.add(BUSY[k], busy.as_micros() as u64);
             stats.counters.add(IDLE[k], (slowest - *busy).as_micros() as u64);
