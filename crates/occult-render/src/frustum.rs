@@ -164,7 +164,7 @@ impl Hierarchies {
     ///
     /// # Errors
     /// A frame whose size is not the view's; a view of more triangles than a frame can draw
-    /// ([`RenderError::TooManyInView`](crate::RenderError::TooManyInView)).
+    /// ([`RenderError::TooManyInView`]).
     pub fn render(&self, raster: &mut Rasterizer, view: &View, frame: &mut Frame) -> Result<FrameStats> {
         let (start, t, cleared) = crate::begin_frame(raster, view, frame)?;
         // The first walk meets every draw (keeping the first batch) and gives the statistics.

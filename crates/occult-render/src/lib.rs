@@ -11,7 +11,7 @@
 //! | [`payoff`], [`direct`] | the culling renderers' guarantee: tests stop where they do not pay, frames are drawn as `frustum` draws them while culling loses |
 //! | [`params`] | algorithm specs (`name:key=value,...`) and their parameters |
 //! | [`walk`] | the one walk over the scene DAG every renderer uses (placements, counted frustum tests) |
-//! | [`compare`] | runs several renderers over one camera path and measures them against each other |
+//! | `occult_harness::compare` | runs several renderers over one camera path and measures them against each other |
 //!
 //! ```
 //! use std::sync::Arc;

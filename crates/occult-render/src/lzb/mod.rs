@@ -35,7 +35,7 @@
 //!   `1.01 · z_clip`, so they cannot win a finished pixel.
 //! - Rays are cones of 1/8 pixel radius ([`occult_spatial::FatRay`]): a triangle that the
 //!   rasterizer's snapped coverage gives a pixel lies within the cone of its centre.
-//! - A ray ends only at a *robust* hit ([`cast`]): the pixel centre lies at least 1/32 pixel
+//! - A ray ends only at a *robust* hit (`cast.rs`): the pixel centre lies at least 1/32 pixel
 //!   inside every projected edge (computed from the rasterizer's `clip_from_object`), the corners
 //!   well in front of the near plane, facing right if back faces are culled. It records every
 //!   leaf it enters up to `t_hit · (1 + 2·10⁻³)`, so the pixel's winner, at most as far, is in

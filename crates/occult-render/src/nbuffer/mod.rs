@@ -6,7 +6,7 @@
 //!   [`occult_raster::NBuffer`], min variant = farthest depth in our reversed-Z), every
 //!   object's screen box and nearest depth is tested with four lookups (Fig. 3 cover), and
 //!   the survivors not drawn yet are drawn. The paper's occluders are the objects visible in
-//!   the previous frame [BWPP04] (`occluders=visible`); see *Parts* for the default.
+//!   the previous frame \[BWPP04\] (`occluders=visible`); see *Parts* for the default.
 //! - §3.2: particle culling, [`particles`].
 //! - §4.2 / Table 2: the same test over a hierarchy of bounding volumes (`hierarchy=bvh`) or
 //!   over every object (`hierarchy=flat`): testing a node costs the same four lookups as
