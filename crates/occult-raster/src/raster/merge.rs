@@ -9,6 +9,7 @@ use super::threads::Workers;
 use super::{Draw, RasterMode, Rasterizer};
 use crate::frame::Frame;
 use occult_core::ItemId;
+use std::time::Instant;
 
 impl Rasterizer {
     /// Sort-last drawing for large draws on several threads: worker `k` draws the `k`-th part of
@@ -25,7 +26,7 @@ impl Rasterizer {
         draw_starts: &[usize],
         vertex_offsets: &[usize],
         mode: RasterMode,
-    ) -> Option<(u64, u64)> {
+    ) -> Option<(u64, u64, f64)> {
         let parts = workers.threads;
         let (w, h) = (vp.width as usize, vp.height as usize);
         // Private frames are kept cleared between draws; one a panic left drawn is dropped.
@@ -50,8 +51,9 @@ impl Rasterizer {
         for (d, i) in self.scratch.iter_mut().take(parts - 1) {
             targets.push(FrameTarget::from_buffers(d, i, w));
         }
-        let results: Vec<(u64, u64, Vec<[u32; 4]>)> = workers.share((0..parts).collect(), |k| {
+        let results: Vec<(u64, u64, Vec<[u32; 4]>, f64)> = workers.share((0..parts).collect(), |k| {
             let target = &targets[k];
+            let t = Instant::now();
             // Worker k takes every parts-th block: each gets a share of near and far, large
             // and small triangles, and a block is long enough to keep the frame in cache.
             let (mut rasterized, mut written, mut boxes) = (0, 0, Vec::new());
@@ -65,10 +67,10 @@ impl Rasterizer {
                     boxes.push(d);
                 }
             }
-            (rasterized, written, boxes)
+            (rasterized, written, boxes, t.elapsed().as_nanos() as f64)
         });
         let (depth, items) = frame.buffers_mut();
-        for (k, (_, _, boxes)) in results.iter().enumerate().skip(1) {
+        for (k, (_, _, boxes, _)) in results.iter().enumerate().skip(1) {
             // The merge reads and resets only each row's span of the boxes of this worker's
             // blocks, not their bounding box: where the blocks of a coherent stream touch bands
             // of the frame, the merge (memory bound) skips the rows between them.
@@ -97,7 +99,11 @@ impl Rasterizer {
             });
         }
         self.scratch_clean = true;
-        Some(results.iter().fold((0, 0), |(r, f), &(rr, ff, _)| (r + rr, f + ff)))
+        Some(
+            results
+                .iter()
+                .fold((0, 0, 0.0), |(r, f, t), &(rr, ff, _, tt)| (r + rr, f + ff, t + tt)),
+        )
     }
 }
 

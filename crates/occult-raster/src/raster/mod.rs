@@ -82,6 +82,7 @@ use crate::frame::Frame;
 use occult_core::simd::Isa;
 use occult_core::{ItemId, Mat4, Mesh, View};
 use std::ops::Range;
+use std::time::Instant;
 
 use project::{
     clip_and_setup, ProjVertex, Viewport, NEEDS_CLIP, NOT_FINITE, OUT_BOTTOM, OUT_LEFT, OUT_NEAR, OUT_OF_VIEW,
@@ -132,10 +133,11 @@ pub struct RasterConfig {
 /// How a draw is spread over threads.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Strategy {
-    /// Direct on the calling thread on one thread, and on several for draws of fewer than
-    /// 200,000 triangles; sort-last over the threads for larger ones (of which a pass of fewer,
-    /// split off to bound memory, is drawn directly by one thread). The split was measured on
-    /// two cores: on many, draws of large triangles may gain from [`Strategy::Binned`].
+    /// Direct on the calling thread on one thread. On several: sort-last over the threads for
+    /// draws of 200,000 triangles or more, and for smaller ones (of at least 4,096) that this
+    /// rasterizer's measured cost of a triangle makes long (see `Rasterizer::on_caller`);
+    /// the rest directly on the calling thread. The split was measured on two cores: on many,
+    /// draws of large triangles may gain from [`Strategy::Binned`].
     #[default]
     Auto,
     /// Set up and scan each triangle at once, on the calling thread, whatever the thread
@@ -244,6 +246,9 @@ pub struct Rasterizer {
     /// False while a sort-last draw is in flight (a panic there leaves the scratch drawn).
     scratch_clean: bool,
     isa: Isa,
+    /// Decaying sums of the thread time and the triangles of the measured draws (see
+    /// [`Rasterizer::on_caller`]): their ratio is what a triangle costs one thread.
+    measured: (f64, f64),
     /// Whether the last pass drawn ran on the calling thread alone, and its strategy, for
     /// tests of the choice.
     #[cfg(test)]
@@ -319,6 +324,7 @@ impl Rasterizer {
             chunks: Vec::new(),
             scratch: Vec::new(),
             scratch_clean: true,
+            measured: (0.0, 0.0),
             #[cfg(test)]
             last_pass: None,
             isa,
@@ -391,7 +397,7 @@ impl Rasterizer {
             "frame and view sizes differ"
         );
         let vp = Viewport::new(view, &self.config);
-        let single = self.on_caller(draws);
+        let single = self.on_caller(draws, u64::from(view.width()) * u64::from(view.height()));
         self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES, single)
     }
 
@@ -399,26 +405,49 @@ impl Rasterizer {
     /// frames (a one-thread rasterizer never hands work to its pool, whatever the strategy):
     /// - on a one-thread rasterizer unless tile binning is forced;
     /// - under [`Strategy::Direct`], as it says;
-    /// - under [`Strategy::Auto`], draws of fewer than [`SORT_LAST_MIN_TRIANGLES`] triangles.
-    ///   Tile binning would share them over the threads, but its fixed cost (waking them for
-    ///   two parallel phases, each set-up triangle stored and read back, a large triangle's
-    ///   spans found again in every tile it touches) was more than it saved for every
-    ///   renderer's draws measured on two cores, even a few large triangles. Frames and
-    ///   counts are those of the binned path (both scan each pixel's fragments in stream
-    ///   order).
-    fn on_caller(&self, draws: &[Draw<'_>]) -> bool {
+    /// - under [`Strategy::Auto`], draws of fewer than [`SORT_LAST_MIN_TRIANGLES`] triangles,
+    ///   unless they are expected to take one thread longer than [`SHARED_MIN_NS_PER_PIXEL`]
+    ///   per pixel of the frame (`pixels`) at the cost of a triangle measured on this
+    ///   rasterizer's recent draws (fill-heavy draws: few large triangles, much overdraw).
+    ///   Sharing costs a fixed part (waking the threads, merging the private frames over the
+    ///   rows they drew), which was more than it saved for every renderer's usual draws
+    ///   measured on two cores; tile binning costs more still (each set-up triangle stored
+    ///   and read back, a large triangle's spans found again in every tile it touches).
+    ///   Frames and counts are those of the binned path (both scan each pixel's fragments in
+    ///   stream order).
+    fn on_caller(&self, draws: &[Draw<'_>], pixels: u64) -> bool {
         match self.config.strategy {
             Strategy::Direct => true,
             Strategy::Binned => false,
             Strategy::SortLast => self.config.threads == 1,
             Strategy::Auto => {
-                let mut total = 0;
-                self.config.threads == 1
-                    || draws.iter().all(|d| {
-                        total += d.triangles.len(d.mesh);
-                        total < SORT_LAST_MIN_TRIANGLES
-                    })
+                if self.config.threads == 1 {
+                    return true;
+                }
+                let total: usize = draws.iter().map(|d| d.triangles.len(d.mesh)).sum();
+                total < SORT_LAST_MIN_TRIANGLES
+                    && (total < SHARED_MIN_TRIANGLES
+                        || total as f64 * self.triangle_ns() < SHARED_MIN_NS_PER_PIXEL * pixels as f64)
             }
+        }
+    }
+
+    /// What a triangle costs one thread to draw, ns, over this rasterizer's recent draws of
+    /// at least [`MEASURED_MIN_TRIANGLES`] (the last ones weigh most); 0 before one.
+    fn triangle_ns(&self) -> f64 {
+        let (ns, triangles) = self.measured;
+        if triangles > 0.0 {
+            ns / triangles
+        } else {
+            0.0
+        }
+    }
+
+    /// Learns from a pass of `triangles` that took its threads `thread_ns` together.
+    fn measure(&mut self, triangles: usize, thread_ns: f64) {
+        if triangles >= MEASURED_MIN_TRIANGLES {
+            let (ns, n) = self.measured;
+            self.measured = (0.5 * ns + thread_ns, 0.5 * n + triangles as f64);
         }
     }
 
@@ -517,8 +546,8 @@ impl Rasterizer {
         counts.triangles_submitted = total as u64;
 
         let strategy = match self.config.strategy {
-            // A smaller pass of a large draw (see `draw_in_passes`) is drawn directly too.
-            Strategy::Auto if threads > 1 && total >= SORT_LAST_MIN_TRIANGLES => Strategy::SortLast,
+            // A small pass of a large draw (see `draw_in_passes`) is drawn directly too.
+            Strategy::Auto if threads > 1 && total >= SHARED_MIN_TRIANGLES => Strategy::SortLast,
             Strategy::Auto => Strategy::Direct,
             Strategy::SortLast if threads == 1 => Strategy::Direct,
             s => s,
@@ -529,19 +558,22 @@ impl Rasterizer {
         }
         if strategy == Strategy::Direct {
             let target = FrameTarget::new(frame);
+            let t = Instant::now();
             // SAFETY: only this thread touches the frame while it is drawn.
             let (rasterized, written, _) = unsafe {
                 let stream = TriStream::new(draws, &draw_starts, &vertex_offsets, &self.vertices);
                 dispatch::draw_direct(self.isa, vp, &stream, 0..total, &target, mode)
             };
+            self.measure(total, t.elapsed().as_nanos() as f64);
             counts.triangles_rasterized = rasterized;
             counts.fragments_written = written;
             return counts;
         }
         if strategy == Strategy::SortLast {
-            if let Some((rasterized, written)) =
+            if let Some((rasterized, written, thread_ns)) =
                 self.draw_sort_last(&workers, vp, frame, draws, &draw_starts, &vertex_offsets, mode)
             {
+                self.measure(total, thread_ns);
                 counts.triangles_rasterized = rasterized;
                 counts.fragments_written = written;
                 return counts;
@@ -595,5 +627,14 @@ impl Rasterizer {
 const MAX_PROJECTED_VERTICES: usize = 1 << 22;
 
 /// Draws at least this large go sort-last on several threads (below it, the calling thread
-/// draws them directly: see `Rasterizer::on_caller`).
+/// draws them directly unless they are long: see `Rasterizer::on_caller`).
 const SORT_LAST_MIN_TRIANGLES: usize = 200_000;
+/// Draws smaller than this are drawn on the calling thread however long they are measured to
+/// take (a few triangles' cost is no guide to a draw's).
+const SHARED_MIN_TRIANGLES: usize = 4096;
+/// Draws whose triangles at least this many take the rasterizer's threads are measured.
+const MEASURED_MIN_TRIANGLES: usize = 1024;
+/// A draw of fewer than [`SORT_LAST_MIN_TRIANGLES`] is shared when expected to take one thread
+/// more than this per pixel of the frame, ns (a whole frame's merge is a few ns a pixel;
+/// chosen from 1, 2 and 4 on the suite's fill-heavy model views, on two cores).
+const SHARED_MIN_NS_PER_PIXEL: f64 = 2.0;

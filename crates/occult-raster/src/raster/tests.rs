@@ -23,7 +23,7 @@ fn grid(n: u32, side: f32) -> Mesh {
     Mesh::new(positions, triangles).unwrap()
 }
 
-/// On several threads, the automatic strategy draws fewer than
+/// On several threads, a fresh rasterizer's automatic strategy draws fewer than
 /// [`SORT_LAST_MIN_TRIANGLES`] triangles directly on the calling thread, small or large,
 /// with the binned path's frame and counts; larger draws go sort-last over the pool, and
 /// forced strategies do what they say.
@@ -93,6 +93,43 @@ fn small_draws_stay_on_the_calling_thread() {
         .iter()
         .zip(frames[1].depth())
         .all(|(x, y)| x.to_bits() == y.to_bits()));
+}
+
+/// Under the automatic strategy, a draw of fewer than [`SORT_LAST_MIN_TRIANGLES`] triangles is
+/// shared when the rasterizer's measured cost of a triangle makes it long beside the frame,
+/// and only then; draws go on being measured.
+#[test]
+fn long_small_draws_are_shared() {
+    let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 320, 240).unwrap();
+    let mesh = grid(60, 0.03);
+    let list: Vec<u32> = (0..SHARED_MIN_TRIANGLES as u32).collect();
+    let draw = |n: usize| Draw {
+        mesh: &mesh,
+        triangles: DrawTriangles::List(&list[..n]),
+        clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
+        first_item: 0,
+    };
+    let mut r = Rasterizer::new(RasterConfig {
+        threads: 2,
+        ..RasterConfig::default()
+    })
+    .unwrap();
+    let mut frame = Frame::new(320, 240).unwrap();
+    let pixels = 320.0 * 240.0;
+    r.draw(&view, &mut frame, &[draw(SHARED_MIN_TRIANGLES)], RasterMode::Full);
+    assert_eq!(r.last_pass, Some((true, Strategy::Direct)), "nothing measured yet");
+    assert!(r.triangle_ns() > 0.0, "the draw was measured");
+    // One thread would take twice the threshold.
+    let ns = 2.0 * SHARED_MIN_NS_PER_PIXEL * pixels / SHARED_MIN_TRIANGLES as f64;
+    r.measured = (ns * 1000.0, 1000.0);
+    r.draw(&view, &mut frame, &[draw(SHARED_MIN_TRIANGLES)], RasterMode::Full);
+    assert_eq!(r.last_pass, Some((false, Strategy::SortLast)), "long: shared");
+    r.measured = (ns * 1000.0, 1000.0);
+    r.draw(&view, &mut frame, &[draw(SHARED_MIN_TRIANGLES - 1)], RasterMode::Full);
+    assert_eq!(r.last_pass, Some((true, Strategy::Direct)), "too few to judge");
+    r.measured = (ns * 250.0, 1000.0);
+    r.draw(&view, &mut frame, &[draw(SHARED_MIN_TRIANGLES)], RasterMode::Full);
+    assert_eq!(r.last_pass, Some((true, Strategy::Direct)), "short: on the caller");
 }
 
 /// A sort-last draw and a clear finish, with the frame and counts of one thread, while one
