@@ -20,14 +20,14 @@
 //!   cheap, so one loss of a frame whose tests paid is not trusted); a run is [`MIN_RUN`]
 //!   frames the first time, twice as long after each probe that loses again, up to
 //!   [`MAX_RUN`] (back to [`MIN_RUN`] after a probe that wins);
-//! - the first direct frame is drawn after a culled frame whose tests did not pay, or after
-//!   two in a row that did not plainly pay ([`DirectFrames::plainly`]: tests that paid, and at
-//!   most a third of the work submitted or less than half of what the work would cost at the
-//!   frame's own rasterization rate), unless that frame is small beside the culled frames
-//!   before it (less than half their mean time); a culled frame that wins by a thin margin
-//!   (more than [`REMEASURE_SHARE`] of the predicted direct time) measures it again, once more
-//!   after the first measurement (a renderer's first direct frame also pays its rasterizer's
-//!   first large draws) and once it is [`REMEASURE_AFTER`] frames old;
+//! - the first direct frames ([`FIRST_MEASURED`] in a row: the first also pays the
+//!   rasterizer's first large draws) are drawn after a culled frame whose tests did not pay,
+//!   or after two in a row that did not plainly pay ([`DirectFrames::plainly`]: tests that
+//!   paid, and at most a third of the work submitted or less than half of what the work would
+//!   cost at the frame's own rasterization rate), unless that frame is small beside the culled
+//!   frames before it (less than half their mean time); a culled frame that wins by a thin
+//!   margin (more than [`REMEASURE_SHARE`] of the predicted direct time) measures it again
+//!   once the measurement is [`REMEASURE_AFTER`] frames old;
 //! - a culled frame shorter than [`MIN_ALLOWANCE_TIME`] never starts a run (small scenes keep
 //!   their tests whatever the clock says).
 //!
@@ -58,6 +58,10 @@ pub const REMEASURE_SHARE: f64 = 0.8;
 pub const REMEASURE_AFTER: u32 = 16;
 /// Direct frames whose measurements are kept ([`DirectFrames::direct_ns`] is their least).
 pub const DIRECT_KEPT: usize = 4;
+/// Direct frames drawn in a row for the first measurement: a renderer's first direct frame
+/// also pays its rasterizer's first large draws (fresh buffers faulted in, several times the
+/// frame's own cost on a large scene), which would make culled frames look good for long.
+pub const FIRST_MEASURED: u32 = 2;
 /// The counter of frames drawn directly.
 pub const COUNTER: &str = "payoff_direct";
 
@@ -282,7 +286,7 @@ impl Choice {
             let n = self.unweighed.len() as f64;
             let mean = self.unweighed.iter().map(|u| u.0.as_secs_f64()).sum::<f64>() / n.max(1.0);
             if (!tests_paid || self.unplain >= 2) && total.as_secs_f64() >= 0.5 * mean {
-                self.direct_left = 1;
+                self.direct_left = FIRST_MEASURED;
             }
             if self.unweighed.len() == DIRECT_KEPT {
                 self.unweighed.remove(0);
@@ -294,10 +298,9 @@ impl Choice {
             self.start_run();
         } else if !self.lost_last {
             self.run = 0;
-            // A thin win is measured again: against one direct frame (whose first large draws
-            // cost the rasterizer extra), or one measured long ago.
+            // A thin win against a direct frame measured long ago is measured again.
             let thin = self.ratio(total, work) > Some(REMEASURE_SHARE);
-            if thin && (self.measured.len() < 2 || self.since_direct >= REMEASURE_AFTER) {
+            if thin && self.since_direct >= REMEASURE_AFTER {
                 self.direct_left = 1;
             }
         }
@@ -339,7 +342,7 @@ impl Choice {
         for (t, w, paid) in std::mem::take(&mut self.unweighed) {
             due = self.judge(t, w, paid);
         }
-        if due && self.direct_left == 0 {
+        if due {
             self.start_run();
         }
     }
@@ -433,20 +436,22 @@ pub(crate) mod tests {
         assert_eq!(ways, expected[..120]);
     }
 
-    /// Culling that wins keeps culling, measuring again only when its margin is thin: once
-    /// more after the first measurement, then when the measurement is old.
+    /// Culling that wins keeps culling (after the first measurement's direct frames),
+    /// measuring again only when its margin is thin and the measurement old.
     #[test]
     fn culling_that_wins_keeps_culling() {
         let mut c = Choice::default();
         c.culled(20 * MS, 1000, false, false);
-        assert!(c.take_direct());
-        c.direct(40 * MS, 39 * MS, 1000);
+        for _ in 0..FIRST_MEASURED {
+            assert!(c.take_direct());
+            c.direct(40 * MS, 39 * MS, 1000);
+        }
         for _ in 0..40 {
             c.culled(20 * MS, 1000, true, false);
             assert!(!c.take_direct(), "a wide margin never remeasures");
         }
-        // A thin margin (36 of 40) remeasures at once (one measurement only), then every
-        // 16th frame.
+        // A thin margin (36 of 40) remeasures at once (the measurement is 40 frames old),
+        // then every 16th frame.
         let mut remeasured = 0;
         for _ in 0..40 {
             c.culled(36 * MS, 1000, true, false);
