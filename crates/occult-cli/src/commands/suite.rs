@@ -208,7 +208,14 @@ fn case_text(c: &CaseReport) -> String {
         .renderers
         .iter()
         .map(|r| {
-            let flags: Vec<String> = r.violations().iter().map(|v| format!("<< {v}")).collect();
+            let flags: Vec<String> = r
+                .violations()
+                .iter()
+                .map(|&v| match v {
+                    ViolationKind::SlowerThanZbuffer if !r.significantly_slower() => format!("<< {v} (within noise)"),
+                    v => format!("<< {v}"),
+                })
+                .collect();
             vec![
                 if r.conservative {
                     r.name.clone()
@@ -217,6 +224,8 @@ fn case_text(c: &CaseReport) -> String {
                 },
                 output::millis(r.mean_ms),
                 ratio(r.speedup_vs_zbuffer),
+                r.speedup_interval
+                    .map_or_else(|| "-".into(), |[lo, hi]| format!("{lo:.2}-{hi:.2}")),
                 ratio(r.vs_oracle),
                 r.frames_identical
                     .map_or_else(|| "-".into(), |n| format!("{n}/{}", r.frames)),
@@ -230,6 +239,7 @@ fn case_text(c: &CaseReport) -> String {
             "renderer",
             "ms",
             "x zbuffer",
+            "90% interval",
             "x oracle",
             "identical",
             "rasterized/frame",
@@ -277,7 +287,7 @@ fn summary_text(r: &SuiteReport) -> String {
                 s.frames_identical
                     .map_or_else(|| "-".into(), |n| format!("{n}/{}", s.frames)),
                 if s.conservative {
-                    s.violations.to_string()
+                    format!("{} ({})", s.violations, s.significant_violations)
                 } else {
                     "-".into()
                 },
@@ -294,14 +304,15 @@ fn summary_text(r: &SuiteReport) -> String {
             "worst",
             "on",
             "identical",
-            "violations",
+            "violations (beyond noise)",
         ],
         &rows,
     );
     let _ = writeln!(
         out,
-        "\nviolations (a conservative renderer slower than zbuffer, or with a frame not identical, on a case): {}",
-        r.violation_count
+        "\nviolations (a conservative renderer slower than zbuffer, or with a frame not identical, on a case): {}, \
+         {} beyond noise (frames that differ, or slower with the speedup's 90% interval wholly below 1)",
+        r.violation_count, r.significant_violation_count
     );
     for s in r.summary.iter().filter(|s| s.violations > 0) {
         let cases: Vec<String> = r
@@ -309,9 +320,12 @@ fn summary_text(r: &SuiteReport) -> String {
             .iter()
             .filter(|v| v.renderer == s.name)
             .map(|v| match v.kind {
-                ViolationKind::SlowerThanZbuffer => {
-                    format!("{} {}", v.case, ratio(v.speedup_vs_zbuffer))
-                }
+                ViolationKind::SlowerThanZbuffer => format!(
+                    "{} {}{}",
+                    v.case,
+                    ratio(v.speedup_vs_zbuffer),
+                    if v.significant { " (beyond noise)" } else { "" }
+                ),
                 ViolationKind::FramesDiffer => format!(
                     "{} frames differ ({}/{} identical)",
                     v.case,

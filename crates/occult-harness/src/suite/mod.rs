@@ -21,8 +21,10 @@
 //! - the **violations** of what the project demands of conservative renderers on every case
 //!   ([`Violation`]): at least as fast as `zbuffer` (speedup ≥ 1) and frames identical to the
 //!   reference. Each broken demand of a renderer on a case is one violation; the report counts
-//!   them ([`SuiteReport::violation_count`]). Approximate renderers (`rzb`) are measured but
-//!   owe neither.
+//!   them ([`SuiteReport::violation_count`]), and those beyond the noise apart
+//!   ([`SuiteReport::significant_violation_count`]: frames that differ, or a speedup whose
+//!   90 % bootstrap interval over the case's frames, [`speedup_interval`], lies wholly below
+//!   1). Approximate renderers (`rzb`) are measured but owe neither.
 //!
 //! Cases whose model file is missing are skipped and listed with the path
 //! ([`SuiteReport::skipped`]); so are all model cases when no models folder is given. A models
@@ -32,7 +34,7 @@
 //! process, interleaved, so they hold across machines far better than the times themselves;
 //! a geometric mean is the typical factor over the cases, the worst case says where a renderer
 //! loses. Times are wall-clock times of whole frames, noisy on a shared machine: a speedup
-//! near 1 can fall either side of it from one run to the next.
+//! near 1 can fall either side of it from one run to the next, which its interval shows.
 //!
 //! Cost: the sum of the cases' comparisons; one scene is held at a time.
 //!
@@ -71,7 +73,8 @@ pub use cases::{
     default_size, select, Case, CaseScene, CASES, DEFAULT_SIZE, QUICK_MAX_FRAMES, QUICK_SIZE, SUITE_VERSION,
 };
 pub use report::{
-    CaseRenderer, CaseReport, RendererSummary, SkippedCase, SuiteReport, Violation, ViolationKind, Worst,
+    speedup_interval, CaseRenderer, CaseReport, RendererSummary, SkippedCase, SuiteReport, Violation, ViolationKind,
+    Worst, INTERVAL,
 };
 
 /// Errors of [`run_suite`] and [`select`].

@@ -21,6 +21,9 @@ pub struct CaseRenderer {
     pub mean_ms: f64,
     /// `zbuffer`'s mean time over this renderer's (> 1: faster); `None` without `zbuffer`.
     pub speedup_vs_zbuffer: Option<f64>,
+    /// The [`INTERVAL`] bootstrap interval of the speedup over the case's frames (see
+    /// [`speedup_interval`]): how far the machine's noise moves it; `None` without `zbuffer`.
+    pub speedup_interval: Option<[f64; 2]>,
     /// This renderer's mean time over the oracle's (1: perfect culling at no cost); `None`
     /// without an oracle.
     pub vs_oracle: Option<f64>,
@@ -35,19 +38,28 @@ pub struct CaseRenderer {
 }
 
 impl CaseRenderer {
-    fn of(r: &RendererReport) -> Self {
+    /// `r`'s figures; `zbuffer`: `zbuffer`'s report on the case, if it ran.
+    fn of(r: &RendererReport, zbuffer: Option<&RendererReport>) -> Self {
+        let times = |r: &RendererReport| r.per_frame.iter().map(|f| f.time_ms).collect::<Vec<_>>();
         Self {
             name: r.name.clone(),
             conservative: r.conservative,
             is_reference: r.is_reference,
             mean_ms: r.mean_ms,
             speedup_vs_zbuffer: r.speedup_vs_zbuffer,
+            speedup_interval: zbuffer.and_then(|z| speedup_interval(&times(z), &times(r))),
             vs_oracle: r.vs_oracle,
             frames_identical: r.frames_identical,
             frames: r.frames,
             triangles_rasterized: r.triangles_rasterized,
             triangles_visible: r.triangles_visible,
         }
+    }
+
+    /// Whether its speedup's interval lies wholly below 1: slower than `zbuffer` beyond what
+    /// the noise explains.
+    pub fn significantly_slower(&self) -> bool {
+        self.speedup_interval.is_some_and(|[_, hi]| hi < 1.0)
     }
 
     /// What this renderer breaks of the demands on conservative renderers (none for an
@@ -107,7 +119,8 @@ impl CaseReport {
         seconds: f64,
         compare: CompareReport,
     ) -> Self {
-        let renderers: Vec<CaseRenderer> = compare.renderers.iter().map(CaseRenderer::of).collect();
+        let zbuffer = compare.renderers.iter().find(|r| r.name == "zbuffer");
+        let renderers: Vec<CaseRenderer> = compare.renderers.iter().map(|r| CaseRenderer::of(r, zbuffer)).collect();
         let violations = renderers
             .iter()
             .flat_map(|r| {
@@ -115,7 +128,9 @@ impl CaseReport {
                     case: case.name.to_string(),
                     renderer: r.name.clone(),
                     kind,
+                    significant: kind == ViolationKind::SlowerThanZbuffer && r.significantly_slower(),
                     speedup_vs_zbuffer: r.speedup_vs_zbuffer,
+                    speedup_interval: r.speedup_interval,
                     frames_identical: r.frames_identical,
                     frames: r.frames,
                 })
@@ -172,12 +187,66 @@ pub struct Violation {
     pub renderer: String,
     /// What it broke.
     pub kind: ViolationKind,
+    /// For [`ViolationKind::SlowerThanZbuffer`]: the speedup's interval lies wholly below 1
+    /// ([`CaseRenderer::significantly_slower`]), so noise does not explain it.
+    pub significant: bool,
     /// Its speedup over `zbuffer` on the case.
     pub speedup_vs_zbuffer: Option<f64>,
+    /// Its speedup's interval ([`CaseRenderer::speedup_interval`]).
+    pub speedup_interval: Option<[f64; 2]>,
     /// Its identical frames on the case.
     pub frames_identical: Option<usize>,
     /// Frames of the case.
     pub frames: usize,
+}
+
+impl Violation {
+    /// Frames that differ, or a slowdown the noise does not explain.
+    pub fn beyond_noise(&self) -> bool {
+        self.kind == ViolationKind::FramesDiffer || self.significant
+    }
+}
+
+/// Coverage of [`speedup_interval`].
+pub const INTERVAL: f64 = 0.9;
+/// Resamples of [`speedup_interval`].
+const RESAMPLES: usize = 2000;
+
+/// The [`INTERVAL`] percentile-bootstrap interval of a renderer's speedup over `zbuffer` on a
+/// case: frames are resampled in pairs (frame `i` of both was rendered moments apart, from the
+/// same view: the suite interleaves renderers frame by frame), and each resample's speedup is
+/// its sum of `zbuffer`'s times over its sum of the renderer's. Deterministic (a fixed seed),
+/// so a report reproduces from its frame times. `None` for fewer than two frames, or frame
+/// lists of different lengths.
+pub fn speedup_interval(zbuffer_ms: &[f64], renderer_ms: &[f64]) -> Option<[f64; 2]> {
+    let n = zbuffer_ms.len();
+    if n < 2 || renderer_ms.len() != n {
+        return None;
+    }
+    let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+    let mut next = move || {
+        // splitmix64
+        state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    };
+    let mut speedups: Vec<f64> = (0..RESAMPLES)
+        .map(|_| {
+            let (mut z, mut r) = (0.0, 0.0);
+            for _ in 0..n {
+                let i = (next() % n as u64) as usize;
+                z += zbuffer_ms[i];
+                r += renderer_ms[i];
+            }
+            z / r.max(f64::MIN_POSITIVE)
+        })
+        .collect();
+    speedups.sort_by(f64::total_cmp);
+    let tail = (1.0 - INTERVAL) / 2.0;
+    let at = |q: f64| speedups[((q * RESAMPLES as f64) as usize).min(RESAMPLES - 1)];
+    Some([at(tail), at(1.0 - tail)])
 }
 
 /// The case where a ratio was worst, and its value.
@@ -213,6 +282,8 @@ pub struct RendererSummary {
     pub frames: usize,
     /// Its violations (see [`Violation`]).
     pub violations: usize,
+    /// Those of them beyond the noise ([`Violation::significant`]).
+    pub significant_violations: usize,
 }
 
 /// A case left out, and why.
@@ -265,6 +336,9 @@ pub struct SuiteReport {
     /// How many violations (the length of `violations`): 0 when every conservative renderer
     /// was at least as fast as `zbuffer` with identical frames on every case.
     pub violation_count: usize,
+    /// How many of them are beyond the noise: frames that differ, and speedups whose interval
+    /// lies wholly below 1.
+    pub significant_violation_count: usize,
     /// Wall time of the run, seconds.
     pub seconds: f64,
 }
@@ -288,6 +362,7 @@ impl SuiteReport {
             models: config.models.as_ref().map(|m| m.display().to_string()),
             summary: summarize(&done),
             violation_count: violations.len(),
+            significant_violation_count: violations.iter().filter(|v| v.beyond_noise()).count(),
             violations,
             seconds: done.iter().map(|c| c.seconds).sum(),
             cases: done,
@@ -333,6 +408,15 @@ fn summarize(cases: &[CaseReport]) -> Vec<RendererSummary> {
                 frames_identical: (!checked.is_empty()).then(|| checked.iter().sum()),
                 frames: runs.iter().map(|(_, r)| r.frames).sum(),
                 violations: runs.iter().map(|(_, r)| r.violations().len()).sum(),
+                significant_violations: runs
+                    .iter()
+                    .map(|(_, r)| {
+                        r.violations()
+                            .into_iter()
+                            .filter(|&k| k == ViolationKind::FramesDiffer || r.significantly_slower())
+                            .count()
+                    })
+                    .sum(),
             }
         })
         .collect()
@@ -389,6 +473,7 @@ mod tests {
             is_reference: false,
             mean_ms: 2.0,
             speedup_vs_zbuffer: Some(0.99),
+            speedup_interval: Some([0.9, 1.05]),
             vs_oracle: Some(3.0),
             frames_identical: Some(3),
             frames: 4,
@@ -399,6 +484,9 @@ mod tests {
             r.violations(),
             [ViolationKind::SlowerThanZbuffer, ViolationKind::FramesDiffer]
         );
+        assert!(!r.significantly_slower(), "within the noise");
+        r.speedup_interval = Some([0.9, 0.98]);
+        assert!(r.significantly_slower());
         r.speedup_vs_zbuffer = Some(1.0);
         r.frames_identical = Some(4);
         assert!(r.violations().is_empty());
@@ -409,5 +497,32 @@ mod tests {
         r.speedup_vs_zbuffer = Some(0.1);
         r.frames_identical = Some(0);
         assert!(r.violations().is_empty());
+    }
+
+    /// The interval holds the speedup of the frames as measured; a renderer slower on every
+    /// frame lies wholly below 1; one slow frame among many does not make a slowdown certain.
+    #[test]
+    fn speedup_intervals_tell_noise_from_slowdowns() {
+        let z = [10.0, 12.0, 9.0, 11.0, 10.0, 13.0, 10.0, 9.0];
+        let same = speedup_interval(&z, &z).unwrap();
+        assert!(same[0] == 1.0 && same[1] == 1.0, "{same:?}");
+        let slower: Vec<f64> = z.iter().map(|t| t * 1.2).collect();
+        let [lo, hi] = speedup_interval(&z, &slower).unwrap();
+        assert!(
+            lo <= 1.0 / 1.2 + 1e-9 && hi >= 1.0 / 1.2 - 1e-9 && hi < 1.0,
+            "{lo} {hi}"
+        );
+        let mut spike = z.to_vec();
+        spike[3] = 30.0;
+        let [lo, hi] = speedup_interval(&z, &spike).unwrap();
+        let point = z.iter().sum::<f64>() / spike.iter().sum::<f64>();
+        assert!(point < 1.0 && lo < point && hi >= 1.0, "{lo} {point} {hi}");
+        assert_eq!(
+            speedup_interval(&z, &spike),
+            speedup_interval(&z, &spike),
+            "deterministic"
+        );
+        assert_eq!(speedup_interval(&z[..1], &z[..1]), None);
+        assert_eq!(speedup_interval(&z, &z[..4]), None);
     }
 }
