@@ -32,7 +32,7 @@
 //!   their tests whatever the clock says).
 //!
 //! Renderers also hand the expected direct frame to their in-frame payoff, which then
-//! abandons a frame plainly headed for four times its time
+//! abandons a frame plainly slower than drawing it again directly
 //! ([`FramePayoff::abandoned`](crate::payoff::FramePayoff::abandoned)).
 //! Frames do not change (`frustum` is exact), only the time. Counter: `payoff_direct` (1 for
 //! a frame drawn directly).
@@ -44,7 +44,7 @@ use occult_core::{Scene, View};
 use occult_raster::{Frame, Rasterizer};
 
 use crate::frustum::{FrustumOptions, Hierarchies};
-use crate::payoff::MIN_ALLOWANCE_TIME;
+use crate::payoff::{Payoff, MIN_ALLOWANCE_TIME};
 use crate::{FrameStats, Phase, Result};
 
 /// Longest run of direct frames between two probes of culling.
@@ -56,7 +56,7 @@ pub const MIN_RUN: u32 = 8;
 pub const REMEASURE_SHARE: f64 = 0.8;
 /// ... once the last measurement is this many frames old.
 pub const REMEASURE_AFTER: u32 = 16;
-/// Direct frames whose measurements are kept ([`DirectFrames::direct_ns`] is their least).
+/// Direct frames whose measurements are kept (the model takes the least of each part).
 pub const DIRECT_KEPT: usize = 4;
 /// Direct frames drawn in a row for the first measurement: a renderer's first direct frame
 /// also pays its rasterizer's first large draws (fresh buffers faulted in, several times the
@@ -86,7 +86,7 @@ impl DirectFrames {
 
     /// Draws this frame directly when the choice says so (counting it in `payoff_direct` and
     /// measuring its rate); `None` when the frame is to be culled: its work is then counted
-    /// ([`DirectFrames::last_work`], [`DirectFrames::direct_frame_ns`] of this view).
+    /// (what [`DirectFrames::arm`] hands over).
     ///
     /// # Errors
     /// The frame or view errors of [`Hierarchies::render`].
@@ -118,7 +118,9 @@ impl DirectFrames {
 
     /// Redraws a frame whose culling was abandoned ([`FramePayoff::abandoned`]) as `frustum`
     /// does (the frame is cleared first), adding its counts and phases to the culled part's
-    /// `stats` and counting it in `payoff_direct`.
+    /// `stats` and counting it in `payoff_direct`. Before a direct frame was measured, this
+    /// one is, and the next frame is drawn directly too (as the first measurement always is,
+    /// [`FIRST_MEASURED`]).
     ///
     /// [`FramePayoff::abandoned`]: crate::payoff::FramePayoff::abandoned
     ///
@@ -132,6 +134,11 @@ impl DirectFrames {
         stats: &mut FrameStats,
     ) -> Result<()> {
         let s = self.render(raster, view, frame)?;
+        if self.choice.model().is_none() {
+            self.choice
+                .direct(s.total, s.phases.get(Phase::Raster), s.triangles_submitted);
+            self.choice.direct_left = self.choice.direct_left.max(FIRST_MEASURED - 1);
+        }
         stats.add_counts(&s);
         stats.phases.merge(&s.phases);
         stats.counters.add(COUNTER, 1);
@@ -159,22 +166,12 @@ impl DirectFrames {
         tests_paid && (submitted.saturating_mul(3) <= work || (total.as_nanos() as f64) < 0.5 * raster_ns * work as f64)
     }
 
-    /// The measured rasterization cost of a direct frame per triangle of work, ns (the least of
-    /// the last [`DIRECT_KEPT`] direct frames'); `None` before one was drawn.
-    pub fn direct_ns(&self) -> Option<f64> {
-        self.choice.model().map(|m| m.rate_ns)
-    }
-
-    /// What a direct frame of the current frame's work is expected to cost, ns (0 before one
-    /// was drawn).
-    pub fn direct_frame_ns(&self) -> f64 {
-        self.choice.model().map_or(0.0, |m| m.predict(self.choice.last_work))
-    }
-
-    /// The current frame's work once [`DirectFrames::render_if_due`] declined it, else the
-    /// last frame's: the triangles `frustum` submits for the view.
-    pub fn last_work(&self) -> u64 {
-        self.choice.last_work
+    /// Hands the coming culled frame's expectations to its in-frame `payoff`: the frame's
+    /// work (counted by [`DirectFrames::render_if_due`]), what a direct frame of it is expected
+    /// to take once one was measured, and the `threads` a direct frame is shared over.
+    pub fn arm(&self, payoff: &mut Payoff, threads: usize) {
+        let work = self.choice.last_work;
+        payoff.set_direct(self.choice.model().map(|m| m.predict(work)), work, threads);
     }
 
     /// Bytes held (`frustum`'s hierarchies).

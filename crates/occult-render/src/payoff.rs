@@ -28,13 +28,14 @@
 //! do not change (stopping only draws more), only the time.
 //!
 //! Across frames, [`crate::direct::DirectFrames`] chooses whether a frame is culled at all,
-//! from measured frame times, and hands back what a direct frame of the view is expected to
-//! cost and the work it meets ([`Payoff::set_direct`]). The balance is then checked after
-//! each batch too, and a frame plainly headed for four times a direct frame's time (all of
-//! it spent while less than a quarter of the work was drawn or removed) is **abandoned**
-//! ([`FramePayoff::abandoned`]): the renderer draws nothing more of it and the whole frame is
-//! drawn directly instead (about two direct frames in all). Any other frame is finished as
-//! begun, tests and all; the frame-level choice weighs it.
+//! from measured frame times, and hands over the work a direct frame of the view meets and,
+//! once one was measured, what it is expected to cost ([`Payoff::set_direct`]; before that,
+//! an estimate from the rasterization rates seen). The balance is then checked after each
+//! batch too, and a frame that has spent a direct frame's time, whose rest at its pace so far
+//! would take longer than another, is **abandoned** ([`FramePayoff::abandoned`]): the renderer
+//! draws nothing more of it and the whole frame is drawn directly instead (about two direct
+//! frames in all). Once a direct frame was measured,
+//! any other frame is finished as begun, tests and all; the frame-level choice weighs it.
 //!
 //! Counters, registered by each renderer that uses it: `payoff_stopped` (1 when the frame
 //! stopped testing), `payoff_untested` (the tests then skipped).
@@ -53,6 +54,11 @@ const PRIOR_NS_PER_TRIANGLE: f64 = 20.0;
 /// Triangles a renderer gathers per batch once its frame stopped testing: large enough that the
 /// rasterizer shares each batch over its threads, as brute force's draws are.
 pub const DIRECT_BATCH: usize = 1 << 19;
+/// A frame is abandoned when the rest of it, at its pace so far, would take this many times a
+/// direct frame (see [`FramePayoff::abandoned`]): at least a direct frame's time is spent by
+/// then, and culling that pays often pays late in a frame (what is hidden is reached after its
+/// occluders), hence the margin over 1.
+const ABANDON_MARGIN: f64 = 1.25;
 /// Tests between two checks of the balance (a check reads the clock).
 const CHECK_EVERY: u32 = 32;
 
@@ -68,13 +74,14 @@ pub struct Payoff {
     direct_ns: Option<f64>,
     /// Triangles last frame drew or removed by tests: the work a direct frame would face.
     in_view: u64,
-    /// Whether a direct frame was measured ([`crate::direct`]): a frame that stops is then
-    /// abandoned.
-    direct_known: bool,
-    /// What a direct frame of the coming view is expected to cost, ns, and its work.
+    /// What a measured direct frame of the coming view is expected to cost, ns
+    /// ([`crate::direct`]): a frame that stops is then abandoned. `None` before one was
+    /// measured.
+    direct_frame_ns: Option<f64>,
+    /// The coming view's work: the triangles a direct frame would submit (0: unknown).
     direct_work: u64,
-    /// What a direct frame of the coming view is expected to cost, ns.
-    direct_frame_ns: f64,
+    /// Threads a direct frame's draws are shared over (for the estimate before a measurement).
+    direct_threads: usize,
     /// Whether the last frame's tests saved more than they cost ([`FramePayoff::paid`]).
     last_paid: bool,
     /// Whether the last frame was abandoned ([`FramePayoff::abandoned`]).
@@ -94,9 +101,9 @@ impl Payoff {
             ns_per_triangle: PRIOR_NS_PER_TRIANGLE,
             direct_ns: None,
             in_view: scene_triangles,
-            direct_known: false,
+            direct_frame_ns: None,
             direct_work: 0,
-            direct_frame_ns: 0.0,
+            direct_threads: 1,
             last_paid: false,
             last_abandoned: false,
             #[cfg(test)]
@@ -104,13 +111,14 @@ impl Payoff {
         }
     }
 
-    /// Weighs the coming frames against drawing them directly: `known` once a direct frame was
-    /// measured ([`crate::direct::DirectFrames`]), a direct frame of the view expected to take
-    /// `frame_ns` for `work` triangles.
-    pub fn set_direct(&mut self, known: bool, frame_ns: f64, work: u64) {
-        self.direct_known = known;
+    /// Weighs the coming frames against drawing them directly ([`crate::direct::DirectFrames`]):
+    /// a direct frame of the view meets `work` triangles, over `threads` threads, and is
+    /// expected to take `frame_ns` once one was measured (`None` before: the frame then
+    /// estimates it from its own rasterization rate, see [`FramePayoff::abandoned`]).
+    pub fn set_direct(&mut self, frame_ns: Option<f64>, work: u64, threads: usize) {
         self.direct_frame_ns = frame_ns;
         self.direct_work = work;
+        self.direct_threads = threads.max(1);
     }
 
     /// Whether the last frame's tests saved more than they cost ([`FramePayoff::paid`] at its
@@ -136,9 +144,10 @@ impl Payoff {
             saved_triangles: 0,
             last_ns_per_triangle: self.ns_per_triangle,
             direct_ns: self.direct_ns,
-            abandon: self.direct_known,
             direct_frame_ns: self.direct_frame_ns,
             direct_work: self.direct_work,
+            direct_threads: self.direct_threads,
+            abandoned: false,
             #[cfg(test)]
             force_stop: self.force_stop,
             allowance_triangles: self.allowance * self.in_view as f64,
@@ -178,11 +187,14 @@ pub struct FramePayoff {
     saved_triangles: u64,
     last_ns_per_triangle: f64,
     direct_ns: Option<f64>,
-    /// A stop abandons the frame (a measured direct frame redraws it, [`crate::direct`]).
-    abandon: bool,
-    /// What a direct frame is expected to cost, ns, and the work it meets (with `abandon`).
-    direct_frame_ns: f64,
+    /// What a measured direct frame is expected to cost, ns: a stop then abandons the frame
+    /// (redrawn directly, [`crate::direct`]).
+    direct_frame_ns: Option<f64>,
+    /// The work a direct frame meets (0: unknown), and the threads it is shared over.
     direct_work: u64,
+    direct_threads: usize,
+    /// The frame was abandoned ([`FramePayoff::abandoned`]).
+    abandoned: bool,
     #[cfg(test)]
     force_stop: bool,
     allowance_triangles: f64,
@@ -203,8 +215,8 @@ impl FramePayoff {
             self.shared.1 += time;
         }
         // A batch can take longer than many tests: the balance is weighed after each too, once
-        // a frame that stops is abandoned (its drawing in pieces is then the cost to stop).
-        if self.enabled && self.abandon && !self.stopped {
+        // a frame can be abandoned (its drawing in pieces is then the cost to stop).
+        if self.enabled && self.direct_work > 0 && !self.stopped {
             self.check(Instant::now());
         }
     }
@@ -246,20 +258,33 @@ impl FramePayoff {
             let work = (self.raster_triangles + self.saved_triangles) as f64 * d;
             elapsed > work + allowance
         });
-        self.stopped = if self.abandon {
-            // Abandoning costs what was spent plus a whole direct frame: only for a frame
-            // plainly headed for four times a direct frame's time (its time spent with less
-            // than a quarter of its work done).
-            let progress = (self.raster_triangles + self.saved_triangles) as f64 / self.direct_work.max(1) as f64;
-            elapsed > self.direct_frame_ns.max(MIN_ALLOWANCE_TIME.as_nanos() as f64) && progress < 0.25
-        } else {
-            direct_too_slow || self.cost_ns(now) > self.gain_ns() + allowance
-        };
+        // Abandoning costs what was spent plus a whole direct frame: only once a direct
+        // frame's time is spent, and the rest of the frame at its pace so far would take
+        // longer than a direct frame by a margin.
+        let expected = self.direct_frame_ns.unwrap_or_else(|| self.estimated_direct_ns());
+        let progress =
+            ((self.raster_triangles + self.saved_triangles) as f64 / self.direct_work.max(1) as f64).min(1.0);
+        self.abandoned = self.direct_work > 0
+            && elapsed > expected.max(MIN_ALLOWANCE_TIME.as_nanos() as f64)
+            && elapsed * (1.0 - progress) > ABANDON_MARGIN * expected * progress;
+        self.stopped = self.abandoned
+            || (self.direct_frame_ns.is_none() && (direct_too_slow || self.cost_ns(now) > self.gain_ns() + allowance));
         #[cfg(test)]
         {
             self.stopped |= self.force_stop;
+            self.abandoned |= self.force_stop && self.direct_frame_ns.is_some();
         }
         self.stopped
+    }
+
+    /// A direct frame's time before one was measured, ns: its work at the rate of this
+    /// renderer's batches shared over the threads, if it drew any, else at this frame's own
+    /// rate shared over the threads (an optimistic guess: the sooner a frame is abandoned).
+    fn estimated_direct_ns(&self) -> f64 {
+        let rate = self
+            .direct_ns
+            .unwrap_or_else(|| self.ns_per_triangle() / self.direct_threads as f64);
+        rate * self.direct_work as f64
     }
 
     /// `n` tests skipped without asking [`test`](Self::test) one by one (a renderer that
@@ -280,13 +305,16 @@ impl FramePayoff {
         self.stopped
     }
 
-    /// True once the frame stopped testing while a measured direct frame's rate was known
-    /// ([`Payoff::set_direct`]): the renderer then draws nothing more of the frame and
-    /// hands it to [`crate::direct::DirectFrames::redraw`], which draws it whole as `frustum`
-    /// does (a stopped frame was slower than that by more than its allowance; finishing it
-    /// its own way, in pieces, would be slower still).
+    /// True once the frame has spent a direct frame's time and the rest of it, at its pace so
+    /// far (the share of its work drawn or removed), would take more than [`ABANDON_MARGIN`]
+    /// direct frames: the renderer then draws nothing more of the frame and hands it to
+    /// [`crate::direct::DirectFrames::redraw`], which draws it whole as `frustum` does. The
+    /// direct frame's time is the measured one ([`Payoff::set_direct`]); before one was
+    /// measured, an estimate from the rasterization rates seen (so that a first frame that
+    /// culling cannot help, with no list of what was visible yet, is not finished in small
+    /// tested batches).
     pub fn abandoned(&self) -> bool {
-        self.stopped && self.abandon
+        self.abandoned
     }
 
     /// The counters `payoff_stopped` and `payoff_untested`.
@@ -369,5 +397,39 @@ mod tests {
         assert_eq!(p.ns_per_triangle, 30.0);
         assert_eq!(p.direct_ns, Some(30.0));
         assert_eq!(p.in_view, 1_001_000);
+    }
+
+    /// A frame that spent a direct frame's time, with a tenth of its work done, is abandoned:
+    /// the direct frame measured, or before a measurement estimated from the frame's own rate
+    /// shared over the threads; one nearly done stops testing only (before a measurement) or
+    /// goes on.
+    #[test]
+    fn abandons_a_frame_plainly_headed_for_four_direct_frames() {
+        let ago = |ms| Instant::now() - Duration::from_millis(ms);
+        // 1,000 triangles drawn at 10 µs each: a direct frame of 10,000 on 2 threads, 50 ms.
+        let frame = |p: &Payoff, started: Instant, saved: u64| {
+            let mut f = p.begin(started);
+            f.saved(saved);
+            f.rasterized(1_000, Duration::from_millis(10), false);
+            f
+        };
+        let mut p = Payoff::new(true, 10_000);
+        p.set_direct(None, 10_000, 2);
+        let f = frame(&p, ago(60), 0);
+        assert!(f.abandoned() && f.stopped(), "60 ms, a tenth of the work: estimated");
+        let f = frame(&p, ago(25), 0);
+        assert!(!f.abandoned() && !f.stopped(), "within the estimate and the allowance");
+        let f = frame(&p, ago(500), 8_000);
+        assert!(!f.abandoned() && f.stopped(), "nearly done: stops testing only");
+        p.set_direct(Some(200e6), 10_000, 2);
+        let f = frame(&p, ago(60), 0);
+        assert!(!f.stopped(), "within the measured 200 ms");
+        let f = frame(&p, ago(250), 0);
+        assert!(f.abandoned());
+        let f = frame(&p, ago(500), 8_000);
+        assert!(!f.stopped(), "measured: a frame nearly done goes on");
+        p.set_direct(None, 0, 2);
+        let f = frame(&p, ago(60), 0);
+        assert!(!f.abandoned(), "no work known, nothing to abandon for");
     }
 }

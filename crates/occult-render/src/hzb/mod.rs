@@ -72,8 +72,9 @@
 //!   per-frame filters over the shared octrees rather than copies of the data, and every
 //!   worker of `structure`/`hybrid` still walks (and tests) the shared upper octree levels.
 //!   With `parallel=off` (the default) parallelism is the rasterizer's own: sort-last within
-//!   a batch of at least 200,000 triangles; smaller batches, the usual ones, are drawn on the
-//!   calling thread (sharing them over two cores measured slower).
+//!   a batch of at least 200,000 triangles, or of fewer that its measured cost of a triangle
+//!   makes long; the usual batches are drawn on the calling thread (sharing them over two
+//!   cores measured slower).
 //! - Two additions beyond the paper, both conservative: an inner octree node's own primitives
 //!   (its large straddlers) are tested against their own box before they are drawn, and the
 //!   instances held by one node of a group's octree are visited nearest first (the octants
@@ -804,11 +805,7 @@ impl Renderer for Hzb {
                 return Ok(stats);
             }
             for w in &mut self.workers {
-                w.payoff.set_direct(
-                    direct.direct_ns().is_some(),
-                    direct.direct_frame_ns(),
-                    direct.last_work(),
-                );
+                direct.arm(&mut w.payoff, w.raster.thread_count());
             }
         }
         self.frames_since_recheck += 1;

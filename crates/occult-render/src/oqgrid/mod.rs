@@ -1064,11 +1064,7 @@ impl Renderer for OqGrid {
             if let Some(stats) = direct.render_if_due(&mut self.raster, view, frame)? {
                 return Ok(stats);
             }
-            self.payoff.set_direct(
-                direct.direct_ns().is_some(),
-                direct.direct_frame_ns(),
-                direct.last_work(),
-            );
+            direct.arm(&mut self.payoff, self.raster.thread_count());
         }
         let (start, t, cleared) = crate::begin_frame(&mut self.raster, view, frame)?;
         let pyramid = match self.options.test {
