@@ -58,7 +58,7 @@ pub const DIRECT_BATCH: usize = 1 << 19;
 /// direct frame (see [`FramePayoff::abandoned`]): at least a direct frame's time is spent by
 /// then, and culling that pays often pays late in a frame (what is hidden is reached after its
 /// occluders), hence the margin over 1.
-const ABANDON_MARGIN: f64 = 1.25;
+pub const ABANDON_MARGIN: f64 = 1.25;
 /// Tests between two checks of the balance (a check reads the clock).
 const CHECK_EVERY: u32 = 32;
 

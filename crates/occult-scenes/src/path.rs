@@ -372,7 +372,7 @@ fn validate_views(views: &[Camera]) -> Result<(), PathError> {
 /// horizontally (so any landscape aspect ratio shows it all), plus 5 %; near and far planes
 /// just hold the box. Degenerate bounds are treated as a small box. Flat bounds (a plane
 /// model) are never looked at edge-on: a direction within about 6° of their plane is turned
-/// about 27° out of it ([`out_of_flat_planes`]).
+/// about 27° out of it (`out_of_flat_planes`).
 pub fn framing_camera(bounds: &Aabb, direction: Vec3, fov_y_deg: f32) -> Camera {
     let frame = Framing::new(bounds, fov_y_deg);
     let back = out_of_flat_planes(bounds, direction.normalize_or(Vec3::new(0.0, 0.42, -0.9)));

@@ -7,8 +7,8 @@
 //! with the reference renderer's frame of the same view:
 //!
 //! - **reference** ([`Reference`]): by default `zbuffer` whenever the scene has at most
-//!   [`MAX_BRUTE_FORCE_ITEMS`](crate::zbuffer::MAX_BRUTE_FORCE_ITEMS) triangle instances,
-//!   otherwise `frustum` (the conservative renderer that scales); or any conservative renderer
+//!   [`MAX_BRUTE_FORCE_ITEMS`] triangle instances, otherwise `frustum` (the conservative
+//!   renderer that scales); or any conservative renderer
 //!   named by the caller; or none, for scenes even `frustum` cannot render in useful time
 //!   (10^14 triangles): then no frame is checked and there is no oracle. The reference is always
 //!   rendered and reported, requested or not ([`RendererReport::requested`] says which), so a
