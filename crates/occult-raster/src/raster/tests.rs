@@ -100,7 +100,8 @@ fn small_draws_stay_on_the_calling_thread() {
 /// and only then; draws go on being measured.
 #[test]
 fn long_small_draws_are_shared() {
-    let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 320, 240).unwrap();
+    let view =
+        View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 320, 240).expect("a valid 320 × 240 view");
     let mesh = grid(60, 0.03);
     let list: Vec<u32> = (0..SHARED_MIN_TRIANGLES as u32).collect();
     let draw = |n: usize| Draw {
@@ -113,8 +114,8 @@ fn long_small_draws_are_shared() {
         threads: 2,
         ..RasterConfig::default()
     })
-    .unwrap();
-    let mut frame = Frame::new(320, 240).unwrap();
+    .expect("a valid two-thread configuration");
+    let mut frame = Frame::new(320, 240).expect("a 320 × 240 frame");
     let pixels = 320.0 * 240.0;
     r.draw(&view, &mut frame, &[draw(SHARED_MIN_TRIANGLES)], RasterMode::Full);
     assert_eq!(r.last_pass, Some((true, Strategy::Direct)), "nothing measured yet");
