@@ -404,7 +404,7 @@ mod tests {
     /// shared over the threads; one nearly done stops testing only (before a measurement) or
     /// goes on.
     #[test]
-    fn abandons_a_frame_plainly_headed_for_four_direct_frames() {
+    fn abandons_a_frame_plainly_slower_than_drawing_it_again() {
         let ago = |ms| Instant::now() - Duration::from_millis(ms);
         // 1,000 triangles drawn at 10 µs each: a direct frame of 10,000 on 2 threads, 50 ms.
         let frame = |p: &Payoff, started: Instant, saved: u64| {
