@@ -24,9 +24,9 @@ identical_on_every_generator! {
         "oqgrid:grid=nested,resolution=3,split=8,branching=2,depth=4,batch=8",
         0
     );
-    /// The paper's query alone: no pyramid, no node queries, no whole draws.
+    /// The paper's query alone: no pyramid, no node queries, no whole draws, no visible list.
     paper_query_only_is_identical_on_every_generator:
-        assert_variant_identical_on_every_generator("oqgrid:test=query,nodes=off,whole=0", 0);
+        assert_variant_identical_on_every_generator("oqgrid:test=query,nodes=off,whole=0,coherence=off", 0);
     /// Every mesh drawn whole once any of it was drawn; visible triangles gathered over
     /// batches into large draws (queries meanwhile see a depth without them).
     whole_and_flush_are_identical_on_every_generator:
@@ -241,4 +241,46 @@ fn whole_draws_from_earlier_frames_are_identical() {
     }
     assert_eq!(whole[0], 0, "nothing is known before the first frame");
     assert!(whole.iter().sum::<u64>() > 0, "no mesh was drawn whole");
+}
+
+/// Frame-to-frame coherence: last frame's visible cells are drawn first, unqueried. Frames stay
+/// identical with it on and off over a path. On a view seen again (without whole draws, whose
+/// grids are traversed again now and then), the cells drawn first are all the traversal finds
+/// visible (each was visible against less depth before), so the frame draws no more than the
+/// first did, all of it from the list.
+#[test]
+fn coherence_draws_last_frames_cells_first() {
+    let built = build_scene("plant:units=2,floors=2,pipes=10");
+    let mut cams = occult_scenes::path::parse_path("circle:10", &built.scene, &built.default_camera).unwrap();
+    cams.push(cams[9]);
+    let scene = Arc::new(built.scene);
+    let opts = RenderOptions::default();
+    let mut z = Algorithm::ZBUFFER.build(scene.clone(), &opts).unwrap();
+    let mut renderers: Vec<_> = ["oqgrid:payoff=off", "oqgrid:payoff=off,coherence=off", "oqgrid:payoff=off,whole=0"]
+        .iter()
+        .map(|s| spec(s).build(scene.clone(), &opts).expect("oqgrid builds"))
+        .collect();
+    let (mut a, mut b) = (Frame::new(160, 120).unwrap(), Frame::new(160, 120).unwrap());
+    let mut stats = vec![Vec::new(); renderers.len()];
+    for cam in &cams {
+        let view = View::new(*cam, 160, 120).unwrap();
+        z.render(&view, &mut a).unwrap();
+        for (r, s) in renderers.iter_mut().zip(&mut stats) {
+            s.push(r.render(&view, &mut b).expect("oqgrid frame"));
+            assert!(a.same_visibility(&b), "{} differs from zbuffer: {cam:?}", r.name());
+        }
+    }
+    let coherent = |s: &occult_render::FrameStats| s.counters.get("coherent_cells");
+    assert!(stats[1].iter().all(|s| coherent(s) == 0), "off draws nothing first");
+    for s in [&stats[0], &stats[2]] {
+        assert_eq!(coherent(&s[0]), 0, "nothing is known before the first frame");
+        assert!(s[1..].iter().all(|s| coherent(s) > 0));
+    }
+    let (first, again) = (&stats[2][9], &stats[2][10]);
+    assert!(again.triangles_submitted <= first.triangles_submitted);
+    assert_eq!(
+        again.counters.get("coherent_triangles"),
+        again.triangles_submitted,
+        "the same view draws only what the list drew"
+    );
 }
