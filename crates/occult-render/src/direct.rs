@@ -378,8 +378,9 @@ pub(crate) mod tests {
         let oqgrid =
             crate::oqgrid::OqGrid::with_options(scene.clone(), &options, &crate::oqgrid::OqGridOptions::default())
                 .unwrap();
+        let lzb = crate::lzb::Lzb::new(scene.clone(), &options, &crate::lzb::LzbOptions::default()).unwrap();
         let mut renderers: Vec<(&str, Box<dyn ForceDirect>)> =
-            vec![("hzb", Box::new(hzb)), ("oqgrid", Box::new(oqgrid))];
+            vec![("hzb", Box::new(hzb)), ("oqgrid", Box::new(oqgrid)), ("lzb", Box::new(lzb))];
         for (name, r) in &mut renderers {
             r.force(2, false);
             for i in 0..3 {

@@ -261,12 +261,9 @@ impl FramePayoff {
         // Abandoning costs what was spent plus a whole direct frame: only once a direct
         // frame's time is spent, and the rest of the frame at its pace so far would take
         // longer than a direct frame by a margin.
-        let expected = self.direct_frame_ns.unwrap_or_else(|| self.estimated_direct_ns());
         let progress =
             ((self.raster_triangles + self.saved_triangles) as f64 / self.direct_work.max(1) as f64).min(1.0);
-        self.abandoned = self.direct_work > 0
-            && elapsed > expected.max(MIN_ALLOWANCE_TIME.as_nanos() as f64)
-            && elapsed * (1.0 - progress) > ABANDON_MARGIN * expected * progress;
+        self.abandoned = self.abandons(elapsed, progress);
         self.stopped = self.abandoned
             || (self.direct_frame_ns.is_none() && (direct_too_slow || self.cost_ns(now) > self.gain_ns() + allowance));
         #[cfg(test)]
@@ -275,6 +272,38 @@ impl FramePayoff {
             self.abandoned |= self.force_stop && self.direct_frame_ns.is_some();
         }
         self.stopped
+    }
+
+    /// The abandonment rule ([`FramePayoff::abandoned`]) after `elapsed` ns, `progress` (0..=1)
+    /// of the frame done.
+    fn abandons(&self, elapsed: f64, progress: f64) -> bool {
+        let expected = self.direct_frame_ns.unwrap_or_else(|| self.estimated_direct_ns());
+        self.direct_work > 0
+            && elapsed > expected.max(MIN_ALLOWANCE_TIME.as_nanos() as f64)
+            && elapsed * (1.0 - progress) > ABANDON_MARGIN * expected * progress
+    }
+
+    /// For a renderer whose tests are not per triangle (rays): `progress` (0..=1) of the
+    /// frame's tests is done; weighs abandonment by the same rule as the triangle count does
+    /// ([`FramePayoff::abandoned`]) and returns it. Never abandons when payoff is off or the
+    /// frame's work is unknown.
+    pub fn progressed(&mut self, progress: f64) -> bool {
+        if self.enabled && !self.abandoned {
+            let elapsed = self.start.elapsed().as_nanos() as f64;
+            self.abandoned = self.abandons(elapsed, progress.clamp(0.0, 1.0));
+            #[cfg(test)]
+            {
+                self.abandoned |= self.force_stop && self.direct_frame_ns.is_some();
+            }
+            self.stopped |= self.abandoned;
+        }
+        self.abandoned
+    }
+
+    /// The triangles a direct frame of this view meets (0: unknown), as armed by
+    /// [`crate::direct::DirectFrames::arm`].
+    pub fn work(&self) -> u64 {
+        self.direct_work
     }
 
     /// A direct frame's time before one was measured, ns: its work at the rate of this

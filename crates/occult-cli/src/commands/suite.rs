@@ -229,6 +229,7 @@ fn case_text(c: &CaseReport) -> String {
                 ratio(r.vs_oracle),
                 r.frames_identical
                     .map_or_else(|| "-".into(), |n| format!("{n}/{}", r.frames)),
+                format!("{}/{}", r.direct_frames, r.frames),
                 output::count(r.triangles_rasterized),
                 flags.join(" "),
             ]
@@ -242,6 +243,7 @@ fn case_text(c: &CaseReport) -> String {
             "90% interval",
             "x oracle",
             "identical",
+            "direct",
             "rasterized/frame",
             "",
         ],

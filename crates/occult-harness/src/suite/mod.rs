@@ -13,8 +13,9 @@
 //! - per case and renderer ([`CaseRenderer`]): mean frame time, **speedup over `zbuffer`**
 //!   (zbuffer's mean time over the renderer's, > 1 is faster), **ratio to the oracle** (the
 //!   renderer's mean time over the time to rasterize exactly the visible triangles; 1 is
-//!   perfect culling at no cost), frames identical to the reference's, triangles rasterized
-//!   beside those visible;
+//!   perfect culling at no cost), frames identical to the reference's, frames drawn directly
+//!   because culling did not pay there (counter `payoff_direct`), triangles rasterized beside
+//!   those visible;
 //! - per renderer over the cases ([`RendererSummary`]): the geometric mean and the worst case of
 //!   both ratios (worst: the lowest speedup, the highest oracle ratio), with the case it
 //!   occurred on;

@@ -31,6 +31,9 @@ pub struct CaseRenderer {
     pub frames_identical: Option<usize>,
     /// Frames rendered.
     pub frames: usize,
+    /// Frames it drew directly, as `frustum` does, because its culling did not pay there
+    /// (counter `payoff_direct`; DESIGN invariant 5).
+    pub direct_frames: usize,
     /// Mean triangles rasterized per frame.
     pub triangles_rasterized: f64,
     /// Mean exactly visible triangles per frame (the same for every renderer of the case).
@@ -51,6 +54,11 @@ impl CaseRenderer {
             vs_oracle: r.vs_oracle,
             frames_identical: r.frames_identical,
             frames: r.frames,
+            direct_frames: r
+                .per_frame
+                .iter()
+                .filter(|f| f.counters.get(occult_render::direct::COUNTER) > 0)
+                .count(),
             triangles_rasterized: r.triangles_rasterized,
             triangles_visible: r.triangles_visible,
         }
@@ -477,6 +485,7 @@ mod tests {
             vs_oracle: Some(3.0),
             frames_identical: Some(3),
             frames: 4,
+            direct_frames: 1,
             triangles_rasterized: 10.0,
             triangles_visible: 5.0,
         };

@@ -77,6 +77,24 @@ fn every_renderer_is_summarised_over_every_case() {
             assert_eq!(r.frames_identical, Some(5), "{}: DESIGN invariant 2", r.name);
         }
     }
+    for case in &report.cases {
+        for r in &case.renderers {
+            let direct = case
+                .compare
+                .renderers
+                .iter()
+                .find(|c| c.name == r.name)
+                .expect("every renderer compared")
+                .per_frame
+                .iter()
+                .filter(|f| f.counters.get("payoff_direct") == 1)
+                .count();
+            assert_eq!(r.direct_frames, direct, "{} on {}", r.name, case.name);
+        }
+        // Only renderers that cull can draw a frame directly instead.
+        let never = ["zbuffer", "frustum", "rzb"];
+        assert!(case.renderers.iter().all(|r| r.direct_frames == 0 || !never.contains(&r.name.as_str())));
+    }
     let zbuffer = report.renderer("zbuffer").unwrap();
     assert_eq!(zbuffer.speedup_geomean, Some(1.0));
     assert_eq!(zbuffer.violations, 0);

@@ -247,6 +247,8 @@ fn bad_parameters_are_errors() {
         ("lzb:mode=fast", "mode"),
         ("lzb:pvl=some", "pvl"),
         ("lzb:leaf=many", "leaf"),
+        ("lzb:mode=naive,payoff=on", "payoff"),
+        ("lzb:payoff=maybe", "payoff"),
     ] {
         match spec(bad).build(scene.clone(), &o) {
             Err(RenderError::BadParameter(m)) => assert!(m.contains(names), "{bad}: {m}"),

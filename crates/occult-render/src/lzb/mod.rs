@@ -57,6 +57,13 @@
 //! - Coherence bounds the traversal by the neighbour's hit instead of starting below the root
 //!   (see [`occult_spatial::raycast`]).
 //! - The PVL goes to this crate's software rasterizer, not a GPU.
+//! - Addition, payoff (`payoff=on`, lazy mode only; [`crate::payoff`], [`crate::direct`]): the
+//!   rays are cast in waves, and a frame that has spent a direct frame's time and whose rays
+//!   left, at their pace so far, would take longer than another is abandoned and drawn directly
+//!   (as `frustum` does); runs of frames are drawn directly while lzb frames lose to direct
+//!   ones, probed between runs. DESIGN's invariant 5 (never slower than brute force) asks it of
+//!   every conservative renderer. Counters `payoff_direct`, `payoff_stopped`; `payoff=off`
+//!   measures the paper's algorithm alone.
 //! - `pvl=triangles` (an option; leaves by default, as the paper): the recording pass keeps,
 //!   of each leaf on the path, only the triangles whose box the ray's cone enters before the
 //!   bound. Conservative for the same reason as the leaves: the pixel's winner lies within the
@@ -73,10 +80,19 @@ use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 use occult_spatial::{RayOctree, RayOctreeConfig, RayOctreeError};
 use rayon::prelude::*;
 
+/// Pixels cast between two checks of the payoff balance (`payoff=on`): a few milliseconds of
+/// rays at the slowest rates measured, so an abandoned frame overshoots little.
+const RAY_WAVE: usize = 4096;
+
+/// Pixels one task casts (one [`Caster`], so one coherence chain).
+const CHUNK: usize = 256;
+
 /// Deepest octree `lzb` accepts (its documented `depth` range is 0..=24): an `f32` octant of
 /// the node's bounds halved more often than its mantissa has bits no longer splits it.
 const MAX_DEPTH: u32 = 24;
 
+use crate::direct::DirectFrames;
+use crate::payoff::{Payoff, MIN_ALLOWANCE_TIME};
 use crate::walk::{NodeAt, SceneWalk, Visitor};
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
 use cast::{row_w, Caster, InstanceRec};
@@ -156,6 +172,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             default: "on",
             help: "start each ray from its neighbour's hit (§III.D)",
         },
+        ParamDoc {
+            key: "payoff",
+            default: "on",
+            help: "abandon a frame whose rays would take longer than drawing it directly, and draw runs of frames as frustum does while lzb frames are slower than such direct frames (not in the paper; lazy mode only: off, and refused, with mode=naive, whose frames are approximate)",
+        },
     ],
     counters: &[
         "plane_reused",
@@ -175,6 +196,9 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "pvl_leaves",
         "pvl_entries_triangles",
         "pvl_triangles",
+        crate::payoff::COUNTERS[0],
+        crate::payoff::COUNTERS[1],
+        crate::direct::COUNTER,
     ],
     conservative: true,
     build: |scene, options, params| Ok(Box::new(Lzb::new(scene, options, &LzbOptions::from_params(params)?)?)),
@@ -233,6 +257,9 @@ pub struct LzbOptions {
     pub coherence: bool,
     /// Rays record triangles instead of whole leaves.
     pub pvl_triangles: bool,
+    /// Abandon frames whose rays do not pay, and draw frames directly while they do not
+    /// (lazy mode only).
+    pub payoff: bool,
 }
 
 impl Default for LzbOptions {
@@ -247,14 +274,15 @@ impl LzbOptions {
     /// # Errors
     /// [`RenderError::BadParameter`] naming the key for values out of range.
     pub fn from_params(p: &Params) -> Result<Self> {
+        let mode = match p.choice("mode", &["lazy", "naive"], "lazy")? {
+            "naive" => Mode::Naive,
+            _ => Mode::Lazy,
+        };
         let o = Self {
             leaf: p.get("leaf", 150usize)?,
             depth: p.get("depth", 10u32)?,
             group_leaf: p.get("group_leaf", 8usize)?,
-            mode: match p.choice("mode", &["lazy", "naive"], "lazy")? {
-                "naive" => Mode::Naive,
-                _ => Mode::Lazy,
-            },
+            mode,
             selection: match p.choice("select", &["all", "static", "dynamic", "hybrid"], "hybrid")? {
                 "all" => Selection::All,
                 "static" => Selection::Static,
@@ -270,6 +298,7 @@ impl LzbOptions {
             oor: p.flag("oor", true)?,
             coherence: p.flag("coherence", true)?,
             pvl_triangles: p.choice("pvl", &["leaves", "triangles"], "leaves")? == "triangles",
+            payoff: p.flag("payoff", mode == Mode::Lazy)?,
         };
         o.check()?;
         Ok(o)
@@ -303,6 +332,9 @@ impl LzbOptions {
         }
         if self.plane_reuse == 0 {
             return bad("plane_reuse=0: a plane is used for at least 1 frame".into());
+        }
+        if self.payoff && self.mode == Mode::Naive {
+            return bad("payoff=on needs mode=lazy: naive frames are approximate, and drawing them directly would change them".into());
         }
         Ok(())
     }
@@ -382,6 +414,10 @@ pub struct Lzb {
     plane_cache: Option<PlaneCache>,
     build_time: Duration,
     cull_backfaces: bool,
+    /// What the rays' balance learned from earlier frames ([`crate::payoff`]).
+    payoff: Payoff,
+    /// Frames drawn directly where the rays do not pay (`payoff=on`).
+    direct: Option<DirectFrames>,
 }
 
 /// Per-frame constants shared by the walk and the rays.
@@ -574,8 +610,13 @@ impl Lzb {
             .iter()
             .map(|n| vec![0u32; n.mesh().map_or(0, |m| m.triangle_count())])
             .collect();
+        let direct = match opts.payoff {
+            true => Some(DirectFrames::new(scene.clone(), &raster)?),
+            false => None,
+        };
         Ok(Self {
             cull_backfaces: options.raster.cull_backfaces,
+            payoff: Payoff::new(opts.payoff, scene.item_count()),
             scene,
             raster,
             opts: opts.clone(),
@@ -583,6 +624,7 @@ impl Lzb {
             stamps,
             stamp: 0,
             plane_cache: None,
+            direct,
             build_time: start.elapsed(),
         })
     }
@@ -846,7 +888,15 @@ impl Renderer for Lzb {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        let (start, _, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
+        crate::check_frame(view, frame)?;
+        if let Some(direct) = &mut self.direct {
+            if let Some(stats) = direct.render_if_due(&mut self.raster, view, frame)? {
+                return Ok(stats);
+            }
+            direct.arm(&mut self.payoff, self.raster.thread_count());
+        }
+        let (start, cleared, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
+        let mut payoff = self.payoff.begin(cleared);
         let mut ctx = FrameCtx::new(view, self.cull_backfaces);
 
         // Step 2 (§II.B): the partition plane.
@@ -963,20 +1013,28 @@ impl Renderer for Lzb {
         let t = Instant::now();
         let naive = self.opts.mode == Mode::Naive;
         let this: &Lzb = self;
-        let results: Vec<Caster<'_>> = this.raster.install(|| {
-            pixels
-                .par_chunks(256)
-                .map(|chunk| {
-                    let mut caster = Caster::new(this, &ctx, naive);
-                    for &i in chunk {
-                        if let Some((t, item)) = caster.cast(i % w, i / w) {
-                            caster.hits.push((i, t, item));
+        // With payoff, in waves: before each, the frame is abandoned once its rays do not pay.
+        let wave = if self.direct.is_some() { RAY_WAVE } else { pixels.len().max(1) };
+        let mut results: Vec<Caster<'_>> = Vec::new();
+        for (k, pixels_of_wave) in pixels.chunks(wave).enumerate() {
+            if self.direct.is_some() && payoff.progressed((k * wave) as f64 / pixels.len() as f64) {
+                break;
+            }
+            results.extend(this.raster.install(|| {
+                pixels_of_wave
+                    .par_chunks(CHUNK)
+                    .map(|chunk| {
+                        let mut caster = Caster::new(this, &ctx, naive);
+                        for &i in chunk {
+                            if let Some((t, item)) = caster.cast(i % w, i / w) {
+                                caster.hits.push((i, t, item));
+                            }
                         }
-                    }
-                    caster
-                })
-                .collect()
-        });
+                        caster
+                    })
+                    .collect::<Vec<_>>()
+            }));
+        }
         let mut pairs: Vec<(ItemId, u32)> = Vec::new();
         let mut recs = std::collections::HashMap::<ItemId, InstanceRec, crate::hash::FxBuild>::default();
         let mut hits = Vec::new();
@@ -1007,7 +1065,9 @@ impl Renderer for Lzb {
         ]);
         stats.phases.add(Phase::Rays, t.elapsed());
 
-        if naive {
+        if payoff.abandoned() {
+            // Redrawn directly below (`crate::direct`).
+        } else if naive {
             // §II: the first hits are shaded directly (depth near / view distance).
             for (i, t, item) in hits {
                 frame.write_fragment(i % w, i / w, ctx.near / t, item);
@@ -1033,6 +1093,26 @@ impl Renderer for Lzb {
             let draws = make_draws(&self.scene, view, &lists, &pool);
             crate::rasterize(&mut self.raster, view, frame, &draws, &mut stats);
         }
+        // The rays paid when the time outside rasterization is no more than what the
+        // triangles they removed from a direct frame's work would have cost at this frame's
+        // rate (with the payoff's least allowance). The in-frame balance is not fed with the
+        // near pass's rate: a few large near triangles make a triangle look costly, which
+        // would put off abandoning the first frame.
+        let total = start.elapsed();
+        let raster = stats.phases.get(Phase::Raster);
+        let removed = payoff.work().saturating_sub(stats.triangles_submitted);
+        let gain = raster.as_secs_f64() * removed as f64 / stats.triangles_submitted.max(1) as f64;
+        let rays_paid = (total.saturating_sub(raster)).as_secs_f64() <= gain + MIN_ALLOWANCE_TIME.as_secs_f64();
+        self.payoff.end(&payoff);
+        if let Some(direct) = &mut self.direct {
+            stats.counters.add_all(payoff.counters());
+            if payoff.abandoned() {
+                direct.redraw(&mut self.raster, view, frame, &mut stats)?;
+            }
+            let t = Instant::now();
+            direct.culled(start.elapsed(), &stats, rays_paid && !payoff.abandoned());
+            stats.phases.add(Phase::Other, t.elapsed());
+        }
         stats.total = start.elapsed();
         Ok(stats)
     }
@@ -1045,5 +1125,17 @@ impl Renderer for Lzb {
 
     fn is_conservative(&self) -> bool {
         self.opts.mode == Mode::Lazy
+    }
+}
+
+#[cfg(test)]
+impl crate::direct::tests::ForceDirect for Lzb {
+    fn force(&mut self, n: u32, abandon: bool) {
+        let direct = self.direct.as_mut().expect("payoff is on by default");
+        direct.force(n);
+        if abandon {
+            direct.force_rate(1.0);
+        }
+        self.payoff.force_stop = abandon;
     }
 }
