@@ -13,28 +13,32 @@ use occult_render::{Algorithm, RenderError, RenderOptions};
 
 identical_on_every_generator! {
     default_is_identical_on_every_generator: assert_identical_on_every_generator("lzb", 1);
+    /// The paper's algorithm alone: with payoff, frames it loses are drawn directly instead,
+    /// so every other configuration here turns it off too.
+    without_payoff_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("lzb:payoff=off", 1);
     lazy_all_triangles_static_plane_is_identical_on_every_generator:
-        assert_variant_identical_on_every_generator("lzb:select=all,plane=static,plane_fraction=0.15,oor=off", 2);
+        assert_variant_identical_on_every_generator("lzb:payoff=off,select=all,plane=static,plane_fraction=0.15,oor=off", 2);
     static_occluders_small_leaves_is_identical_on_every_generator:
-        assert_variant_identical_on_every_generator("lzb:select=static,k=1,leaf=8,depth=6,coherence=off", 0);
+        assert_variant_identical_on_every_generator("lzb:payoff=off,select=static,k=1,leaf=8,depth=6,coherence=off", 0);
     dynamic_selection_every_frame_plane_is_identical_on_every_generator: assert_variant_identical_on_every_generator(
-        "lzb:select=dynamic,base_cos=0.9,plane_reuse=1,coarse_rays=16,group_leaf=1",
+        "lzb:payoff=off,select=dynamic,base_cos=0.9,plane_reuse=1,coarse_rays=16,group_leaf=1",
         1
     );
     /// A tiny plane: almost nothing near, almost every pixel goes to the rays.
     hybrid_everything_behind_the_plane_is_identical_on_every_generator:
-        assert_variant_identical_on_every_generator("lzb:plane=static,plane_fraction=0.0001,leaf=32", 2);
+        assert_variant_identical_on_every_generator("lzb:payoff=off,plane=static,plane_fraction=0.0001,leaf=32", 2);
     /// Rays record triangles, not leaves; almost every pixel goes to the rays.
     triangle_pvl_everything_behind_the_plane_is_identical_on_every_generator:
-        assert_variant_identical_on_every_generator("lzb:pvl=triangles,plane=static,plane_fraction=0.0001", 1);
+        assert_variant_identical_on_every_generator("lzb:payoff=off,pvl=triangles,plane=static,plane_fraction=0.0001", 1);
 }
 
 #[test]
 fn identical_on_paths() {
     for algo in [
         "lzb",
-        "lzb:select=all,oor=off",
-        "lzb:plane=static,plane_fraction=0.3,select=static",
+        "lzb:payoff=off,select=all,oor=off",
+        "lzb:payoff=off,plane=static,plane_fraction=0.3,select=static",
     ] {
         assert_identical_on_path(&spec(algo), "city:blocks=3,detail=1", "circle:12", 128, 96);
         assert_identical_on_path(&spec(algo), "forest:trees=2,patches=2", "flyover:8", 96, 64);
@@ -114,11 +118,11 @@ fn check_scene(scene: Scene, views: &[View], algos: &[&str]) {
 
 /// Configurations that send (nearly) everything to the rays.
 const RAY_HEAVY: &[&str] = &[
-    "lzb:plane=static,plane_fraction=0.0001",
-    "lzb:plane=static,plane_fraction=0.0001,select=all,oor=off,leaf=1,depth=8",
-    "lzb:plane=static,plane_fraction=0.0001,select=static,k=1,leaf=4",
-    "lzb:plane=dynamic,select=dynamic,base_cos=1,leaf=2",
-    "lzb:plane=static,plane_fraction=0.0001,pvl=triangles,select=all",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=all,oor=off,leaf=1,depth=8",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=static,k=1,leaf=4",
+    "lzb:payoff=off,plane=dynamic,select=dynamic,base_cos=1,leaf=2",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,pvl=triangles,select=all",
 ];
 
 #[test]
@@ -286,7 +290,8 @@ fn counters_and_multithreaded_pvl_match_single_threaded() {
                 ..Default::default()
             },
         };
-        let mut r = spec("lzb:coherence=off").build(scene.clone(), &o).unwrap();
+        // The algorithm itself: with payoff a frame may be drawn directly, without rays.
+        let mut r = spec("lzb:coherence=off,payoff=off").build(scene.clone(), &o).unwrap();
         let mut f = Frame::new(160, 120).unwrap();
         let s = r.render(&view, &mut f).unwrap();
         assert_eq!(s.rays_cast, s.counters.get("rays"));

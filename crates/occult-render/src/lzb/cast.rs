@@ -34,6 +34,18 @@ struct LastHit {
     clip_from_object: Mat4,
 }
 
+/// A mesh instance a ray met that holds candidate leaves of its path.
+struct Met {
+    /// Item id of its first triangle.
+    base: ItemId,
+    node: NodeId,
+    world_from_object: Affine3A,
+    /// The ray in the node's space.
+    ray: FatRay,
+    /// Something of it is on the path.
+    recorded: bool,
+}
+
 /// Per-thread state of the ray caster.
 pub(super) struct Caster<'a> {
     lzb: &'a Lzb,
@@ -50,8 +62,13 @@ pub(super) struct Caster<'a> {
     pub coherent_starts: u64,
     /// Rays that ended at a robust hit (the others ran to the far plane or out of the scene).
     pub resolved: u64,
-    /// Mailbox of the current pass: `(group visit serial, instance)` already cast.
+    /// Mailbox of the current ray: `(group visit serial, instance)` already cast.
     visited: HashSet<(u32, u32), FxBuild>,
+    /// The current ray's mesh instances that hold candidate leaves.
+    met: Vec<Met>,
+    /// The current ray's candidate leaves, in far leaves: `(index into met, leaf, entry)`;
+    /// those entered before the ray's final bound are its path (§III.A).
+    candidates: Vec<(u32, u32, f32)>,
     serial: u32,
     last: Option<LastHit>,
     /// The hit that ended the current ray.
@@ -59,8 +76,6 @@ pub(super) struct Caster<'a> {
     pixel: (f32, f32),
     best: Option<(f32, ItemId)>,
     naive: bool,
-    /// Second pass: record leaves, test nothing.
-    recording: bool,
 }
 
 impl<'a> Caster<'a> {
@@ -77,13 +92,14 @@ impl<'a> Caster<'a> {
             coherent_starts: 0,
             resolved: 0,
             visited: HashSet::default(),
+            met: Vec::new(),
+            candidates: Vec::new(),
             serial: 0,
             last: None,
             found: None,
             pixel: (0.0, 0.0),
             best: None,
             naive,
-            recording: false,
         }
     }
 
@@ -115,31 +131,28 @@ impl<'a> Caster<'a> {
                 }
             }
         }
-        // Pass 1 finds the bound (the first robust hit); pass 2 records the path up to it.
-        // Deviation: one pass that records as it goes would record, in an instance met early
-        // whose box starts near, everything up to that instance's own hit, before an instance
-        // met later (a wall) lowers the bound.
+        // One pass finds the bound (the first robust hit) and keeps every far leaf it enters with
+        // its entry; those entered before the final bound are the path. The bound only falls
+        // during the pass, so every leaf the cone enters before the final bound is met (a
+        // traversal with the final bound from the start would meet no other, and perhaps fewer:
+        // a leaf's tight box may start nearer than its octant). Recording as the pass goes would
+        // record, in an instance met early whose box starts near, everything up to that
+        // instance's own hit, before an instance met later (a wall) lowers the bound.
+        self.met.clear();
+        self.candidates.clear();
         let root = self.lzb.scene.root();
-        let passes = if !self.naive && self.lzb.opts.mode == Mode::Lazy {
-            2
-        } else {
-            1
-        };
-        for pass in 0..passes {
-            self.recording = pass == 1;
-            if self.recording {
-                self.visited.clear();
-            }
-            self.visit(
-                root,
-                origin,
-                dir,
-                spread,
-                &Affine3A::IDENTITY,
-                &Affine3A::IDENTITY,
-                0,
-                &mut t_limit,
-            );
+        self.visit(
+            root,
+            origin,
+            dir,
+            spread,
+            &Affine3A::IDENTITY,
+            &Affine3A::IDENTITY,
+            0,
+            &mut t_limit,
+        );
+        if !self.naive && self.lzb.opts.mode == Mode::Lazy {
+            self.record(t_limit);
         }
         self.last = self.found;
         self.resolved += self.found.is_some() as u64;
@@ -264,6 +277,42 @@ impl<'a> Caster<'a> {
         })
     }
 
+    /// Records the current ray's path: its candidate leaves entered no later than `t_limit`,
+    /// the final bound, into the PVL (with their instances). With `pvl=triangles`
+    /// (deviation), only the triangles of those leaves whose box the cone enters before the
+    /// bound: as conservative as the leaf, the pixel's winner lying within the cone, nearer
+    /// than the bound.
+    fn record(&mut self, t_limit: f32) {
+        let lzb = self.lzb;
+        for &(m, leaf, t_enter) in &self.candidates {
+            if t_enter > t_limit {
+                continue;
+            }
+            let met = &mut self.met[m as usize];
+            if !lzb.opts.pvl_triangles {
+                self.pvl.insert((met.base, leaf));
+                met.recorded = true;
+                continue;
+            }
+            let Accel::Mesh { octree, refs, .. } = &lzb.accel[met.node.index()] else {
+                continue;
+            };
+            let range = octree.nodes()[leaf as usize].range();
+            for (r, &t) in refs[range.clone()].iter().zip(&octree.primitives()[range]) {
+                if met.ray.enter(&Aabb::from_points(r.corners)).is_some_and(|(e, _)| e <= t_limit) {
+                    self.pvl.insert((met.base, t));
+                    met.recorded = true;
+                }
+            }
+        }
+        for met in self.met.iter().filter(|m| m.recorded) {
+            self.instances.entry(met.base).or_insert(InstanceRec {
+                node: met.node,
+                world_from_object: met.world_from_object,
+            });
+        }
+    }
+
     /// Casts the ray `o + t·d` (node space) through node `id` placed by `world_from_node`.
     #[allow(clippy::too_many_arguments)]
     fn visit(
@@ -283,44 +332,32 @@ impl<'a> Caster<'a> {
         let mut counters = TraversalCounters::default();
         match &lzb.accel[id.index()] {
             Accel::Empty => {}
-            Accel::Mesh { octree, refs, .. } => {
-                let by_triangle = lzb.opts.pvl_triangles;
+            Accel::Mesh { octree, .. } => {
                 let ray = FatRay::new(o, d, spread, if self.naive { 0.0 } else { margin(&octree.bounds()) });
                 let clip = self.ctx.view.clip_from_object(world_from_node);
                 let w_row = row_w(&clip);
-                let record = self.recording;
-                let mut recorded = false;
+                let keep = !self.naive && lzb.opts.mode == Mode::Lazy;
+                let mut met: Option<u32> = None;
                 let sheared = ShearedRay::new(o, d);
                 // Deviation: the leaves' boxes are their tight boxes, not their octants
                 // (`RayOctree::tighten_leaves`): the traversal hands over only leaves whose tight
                 // box the cone enters before the bound.
-                traverse(octree, &ray, t_limit, &mut counters, |leaf, _, _, t_limit| {
-                    let tb = &octree.nodes()[leaf as usize].bounds;
-                    // §III.A: every leaf on the path up to (and past, by the margin) the hit is
-                    // recorded; near leaves are drawn already (step 3).
-                    if record {
-                        if self.ctx.is_near(w_row, tb) {
-                            return;
-                        }
-                        if !by_triangle {
-                            self.pvl.insert((base, leaf));
-                            recorded = true;
-                            return;
-                        }
-                        // `pvl=triangles` (deviation): only the triangles whose box the cone
-                        // enters before the bound. As conservative as the leaf: the pixel's
-                        // winner lies within the cone, nearer than the bound.
-                        let range = octree.nodes()[leaf as usize].range();
-                        for (r, &t) in refs[range.clone()].iter().zip(&octree.primitives()[range]) {
-                            if ray
-                                .enter(&Aabb::from_points(r.corners))
-                                .is_some_and(|(e, _)| e <= *t_limit)
-                            {
-                                self.pvl.insert((base, t));
-                                recorded = true;
-                            }
-                        }
-                        return;
+                traverse(octree, &ray, t_limit, &mut counters, |leaf, t_enter, _, t_limit| {
+                    // §III.A: every far leaf on the path up to (and past, by the margin) the hit
+                    // is recorded once the bound is final (`record`); near leaves are drawn
+                    // already (step 3).
+                    if keep && !self.ctx.is_near(w_row, &octree.nodes()[leaf as usize].bounds) {
+                        let m = *met.get_or_insert_with(|| {
+                            self.met.push(Met {
+                                base,
+                                node: id,
+                                world_from_object: *world_from_node,
+                                ray,
+                                recorded: false,
+                            });
+                            (self.met.len() - 1) as u32
+                        });
+                        self.candidates.push((m, leaf, t_enter));
                     }
                     if let Some(t) = self.test_leaf(id, leaf, &sheared, d, &clip, *t_limit, base) {
                         if self.naive {
@@ -336,12 +373,6 @@ impl<'a> Caster<'a> {
                         }
                     }
                 });
-                if recorded {
-                    self.instances.entry(base).or_insert(InstanceRec {
-                        node: id,
-                        world_from_object: *world_from_node,
-                    });
-                }
             }
             Accel::Group {
                 octree,

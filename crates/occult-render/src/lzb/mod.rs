@@ -64,7 +64,7 @@
 //!   ones, probed between runs. DESIGN's invariant 5 (never slower than brute force) asks it of
 //!   every conservative renderer. Counters `payoff_direct`, `payoff_stopped`; `payoff=off`
 //!   measures the paper's algorithm alone.
-//! - `pvl=triangles` (an option; leaves by default, as the paper): the recording pass keeps,
+//! - `pvl=triangles` (an option; leaves by default, as the paper): the ray's record keeps,
 //!   of each leaf on the path, only the triangles whose box the ray's cone enters before the
 //!   bound. Conservative for the same reason as the leaves: the pixel's winner lies within the
 //!   cone, nearer than the bound.
