@@ -9,7 +9,7 @@ use std::sync::Arc;
 use crate::support::{assert_identical_on_path, identical_on_every_generator, spec};
 use occult_core::{Affine3A, Camera, Instance, Mesh, Scene, SceneBuilder, Vec3, View};
 use occult_raster::Frame;
-use occult_render::{Algorithm, RenderError, RenderOptions};
+use occult_render::{Algorithm, RenderError, RenderOptions, Renderer};
 
 identical_on_every_generator! {
     default_is_identical_on_every_generator: assert_identical_on_every_generator("lzb", 1);
@@ -260,18 +260,31 @@ fn bad_parameters_are_errors() {
             Ok(_) => panic!("{bad} accepted"),
         }
     }
-    // An octree that would explode (tiny leaves, deep) is refused, not built.
-    let big = Arc::new(
-        occult_scenes::spec::parse_spec("terrain:g=64")
-            .unwrap()
-            .build()
-            .unwrap()
-            .scene,
-    );
-    assert!(matches!(
-        spec("lzb:leaf=1,depth=24").build(big, &o),
-        Err(RenderError::BadParameter(_))
-    ));
+}
+
+/// An octree that would explode at the depth asked (tiny leaves, deep) is built shallower,
+/// within its reference budget, and frames stay identical.
+#[test]
+fn octrees_over_their_budget_are_built_shallower() {
+    let built = occult_scenes::spec::parse_spec("terrain:g=64").unwrap().build().unwrap();
+    let scene = Arc::new(built.scene);
+    let o = RenderOptions::default();
+    let opts = occult_render::lzb::LzbOptions {
+        leaf: 1,
+        depth: 24,
+        payoff: false,
+        ..Default::default()
+    };
+    let mut lzb = occult_render::lzb::Lzb::new(scene.clone(), &o, &opts).expect("built within the budget");
+    assert_eq!(lzb.shallower_octrees(), 1, "the terrain's one mesh");
+    let deep_enough = occult_render::lzb::Lzb::new(scene.clone(), &o, &occult_render::lzb::LzbOptions::default())
+        .expect("the default builds");
+    assert_eq!(deep_enough.shallower_octrees(), 0);
+    let view = View::new(built.default_camera, 96, 64).unwrap();
+    let (mut a, mut b) = (Frame::new(96, 64).unwrap(), Frame::new(96, 64).unwrap());
+    Algorithm::ZBUFFER.build(scene, &o).unwrap().render(&view, &mut a).unwrap();
+    lzb.render(&view, &mut b).unwrap();
+    assert!(a.same_visibility(&b));
 }
 
 #[test]

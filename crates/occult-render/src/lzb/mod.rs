@@ -418,6 +418,31 @@ pub struct Lzb {
     payoff: Payoff,
     /// Frames drawn directly where the rays do not pay (`payoff=on`).
     direct: Option<DirectFrames>,
+    /// Octrees built shallower than asked, to fit their reference budget.
+    shallower_octrees: usize,
+}
+
+/// An octree built by `build` with `config`, or, when it would hold more references than its
+/// budget ([`RayOctreeError::TooLarge`]: on real models, large instances overlapping many
+/// cells at every level), the deepest shallower one that fits: its leaves hold more, rays test
+/// more of them, frames are the same. True in the second case. Each failed try stops at the
+/// budget, a bounded amount of work.
+///
+/// # Errors
+/// The build's other errors, or [`RayOctreeError::TooLarge`] when even the root alone exceeds
+/// the budget.
+fn fit_budget(
+    config: RayOctreeConfig,
+    build: impl Fn(RayOctreeConfig) -> std::result::Result<RayOctree, RayOctreeError>,
+) -> std::result::Result<(RayOctree, bool), RayOctreeError> {
+    let mut c = config;
+    loop {
+        match build(c) {
+            Ok(tree) => return Ok((tree, c.max_depth < config.max_depth)),
+            Err(RayOctreeError::TooLarge(_)) if c.max_depth > 0 => c.max_depth -= 1,
+            Err(e) => return Err(e),
+        }
+    }
 }
 
 /// Per-frame constants shared by the walk and the rays.
@@ -489,7 +514,8 @@ impl Lzb {
     /// Builds the octrees of `scene` (§II.A).
     ///
     /// # Errors
-    /// [`RenderError::BadParameter`] for bad options or an octree over its reference budget;
+    /// [`RenderError::BadParameter`] for bad options or an octree over its reference budget
+    /// even at depth 0 (deeper ones are built shallower, [`Lzb::shallower_octrees`]);
     /// raster configuration errors.
     pub fn new(scene: Arc<Scene>, options: &RenderOptions, opts: &LzbOptions) -> Result<Self> {
         opts.check()?;
@@ -504,7 +530,7 @@ impl Lzb {
             max_leaf_size: opts.group_leaf,
         };
         let base_cos = opts.base_cos;
-        let built: Vec<Result<Accel>> = raster.install(|| {
+        let built: Vec<Result<(Accel, bool)>> = raster.install(|| {
             scene
                 .nodes()
                 .par_iter()
@@ -513,12 +539,13 @@ impl Lzb {
                         RenderError::BadParameter(format!("lzb: octree of node '{}': {e}", node.name()))
                     };
                     if node.item_count() == 0 {
-                        return Ok(Accel::Empty);
+                        return Ok((Accel::Empty, false));
                     }
                     Ok(match node.kind() {
                         NodeKind::Mesh(m) => {
-                            let mut octree =
-                                RayOctree::build_triangles(m.positions(), m.triangles(), mesh_cfg).map_err(err)?;
+                            let (mut octree, shallower) =
+                                fit_budget(mesh_cfg, |c| RayOctree::build_triangles(m.positions(), m.triangles(), c))
+                                    .map_err(err)?;
                             let normals: Vec<Vec3> = (0..m.triangle_count())
                                 .map(|t| {
                                     let [a, b, c] = m.triangle_positions(t);
@@ -561,11 +588,14 @@ impl Lzb {
                                     normal: normals[t as usize],
                                 })
                                 .collect();
-                            Accel::Mesh {
-                                octree,
-                                refs,
-                                leaf_base,
-                            }
+                            (
+                                Accel::Mesh {
+                                    octree,
+                                    refs,
+                                    leaf_base,
+                                },
+                                shallower,
+                            )
                         }
                         NodeKind::Group(instances) => {
                             let bounds: Vec<Aabb> = instances
@@ -579,7 +609,8 @@ impl Lzb {
                                     }
                                 })
                                 .collect();
-                            let octree = RayOctree::build_boxes(&bounds, group_cfg).map_err(err)?;
+                            let (octree, shallower) =
+                                fit_budget(group_cfg, |c| RayOctree::build_boxes(&bounds, c)).map_err(err)?;
                             let child_from_parent: Vec<Affine3A> =
                                 instances.iter().map(|i| i.parent_from_child.inverse()).collect();
                             let stretch = child_from_parent
@@ -593,18 +624,23 @@ impl Lzb {
                                     (norm1 * rows.max_element()).sqrt() * 1.001
                                 })
                                 .collect();
-                            Accel::Group {
-                                octree,
-                                bounds,
-                                child_from_parent,
-                                stretch,
-                            }
+                            (
+                                Accel::Group {
+                                    octree,
+                                    bounds,
+                                    child_from_parent,
+                                    stretch,
+                                },
+                                shallower,
+                            )
                         }
                     })
                 })
                 .collect()
         });
-        let accel = built.into_iter().collect::<Result<Vec<_>>>()?;
+        let built = built.into_iter().collect::<Result<Vec<_>>>()?;
+        let shallower_octrees = built.iter().filter(|(_, s)| *s).count();
+        let accel: Vec<Accel> = built.into_iter().map(|(a, _)| a).collect();
         let stamps = scene
             .nodes()
             .iter()
@@ -625,6 +661,7 @@ impl Lzb {
             stamp: 0,
             plane_cache: None,
             direct,
+            shallower_octrees,
             build_time: start.elapsed(),
         })
     }
@@ -632,6 +669,12 @@ impl Lzb {
     /// Preprocessing time (octree builds, §II.A).
     pub fn build_time(&self) -> Duration {
         self.build_time
+    }
+
+    /// Octrees built shallower than `depth` to stay within their reference budget
+    /// ([`fit_budget`]).
+    pub fn shallower_octrees(&self) -> usize {
+        self.shallower_octrees
     }
 
     /// §II.B: the partition plane's view distance.
