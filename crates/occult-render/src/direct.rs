@@ -179,10 +179,14 @@ impl DirectFrames {
         self.frustum.memory_bytes()
     }
 
-    /// Makes the next `n` frames direct (tests of the renderers that embed one).
+    /// Makes the next `n` frames direct (tests of the renderers that embed one); `abandon`:
+    /// with a direct rate known, so that frames that stop are abandoned.
     #[cfg(test)]
-    pub(crate) fn force(&mut self, n: u32) {
+    pub(crate) fn force(&mut self, n: u32, abandon: bool) {
         self.choice.direct_left = n;
+        if abandon {
+            self.force_rate(1.0);
+        }
     }
 
     /// Sets the measured direct rate (tests: frames that stop are then abandoned).

@@ -867,10 +867,7 @@ impl Renderer for Hzb {
 impl crate::direct::tests::ForceDirect for Hzb {
     fn force(&mut self, n: u32, abandon: bool) {
         let direct = self.direct.as_mut().expect("payoff is on by default");
-        direct.force(n);
-        if abandon {
-            direct.force_rate(1.0);
-        }
+        direct.force(n, abandon);
         for w in &mut self.workers {
             w.payoff.force_stop = abandon;
         }

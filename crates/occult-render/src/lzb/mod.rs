@@ -1175,10 +1175,7 @@ impl Renderer for Lzb {
 impl crate::direct::tests::ForceDirect for Lzb {
     fn force(&mut self, n: u32, abandon: bool) {
         let direct = self.direct.as_mut().expect("payoff is on by default");
-        direct.force(n);
-        if abandon {
-            direct.force_rate(1.0);
-        }
+        direct.force(n, abandon);
         self.payoff.force_stop = abandon;
     }
 }

@@ -1092,18 +1092,7 @@ impl<'a> Walk<'a> {
                 self.predrawn.insert((place.first_item, WHOLE));
                 self.counts.coherent_cells += 1;
                 self.counts.coherent_triangles += mesh.triangle_count() as u64;
-                if self.pyramid.is_some() {
-                    if let Some(r) = query::screen_rect(&clip_from_object, &bounds, w, h) {
-                        self.dirty.push(r);
-                    }
-                }
-                self.pending_triangles += mesh.triangle_count();
-                self.pending.push(Pending {
-                    mesh,
-                    gathered: None,
-                    clip_from_object,
-                    first_item: place.first_item,
-                });
+                self.pend_whole(mesh, &bounds, place.first_item, clip_from_object);
                 continue;
             }
             self.next_epoch();
@@ -1178,11 +1167,21 @@ impl<'a> Walk<'a> {
         false
     }
 
-    /// Adds every triangle of mesh occurrence `at` to the pending draws.
+    /// Adds every triangle of mesh occurrence `at` to the pending draws, drawn once enough
+    /// are pending.
     fn push_whole(&mut self, mesh: &'a Mesh, at: &NodeAt<'a>, clip_from_object: Mat4) {
+        self.pend_whole(mesh, &at.node.bounds(), at.place.first_item, clip_from_object);
+        if self.pending_triangles >= self.flush_at() {
+            self.flush();
+        }
+    }
+
+    /// Adds every triangle of the mesh occurrence with box `bounds` and first item `first_item`
+    /// to the pending draws (and its screen rectangle to the pyramid's dirty ones).
+    fn pend_whole(&mut self, mesh: &'a Mesh, bounds: &occult_core::Aabb, first_item: u64, clip_from_object: Mat4) {
         if self.pyramid.is_some() {
             let (w, h) = (self.frame.width(), self.frame.height());
-            if let Some(r) = query::screen_rect(&clip_from_object, &at.node.bounds(), w, h) {
+            if let Some(r) = query::screen_rect(&clip_from_object, bounds, w, h) {
                 self.dirty.push(r);
             }
         }
@@ -1191,11 +1190,8 @@ impl<'a> Walk<'a> {
             mesh,
             gathered: None,
             clip_from_object,
-            first_item: at.place.first_item,
+            first_item,
         });
-        if self.pending_triangles >= self.flush_at() {
-            self.flush();
-        }
     }
 
     /// Triangles gathered before a draw: the option's, or large threaded batches once the
@@ -1404,10 +1400,7 @@ impl Renderer for OqGrid {
 impl crate::direct::tests::ForceDirect for OqGrid {
     fn force(&mut self, n: u32, abandon: bool) {
         let direct = self.direct.as_mut().expect("payoff is on by default");
-        direct.force(n);
-        if abandon {
-            direct.force_rate(1.0);
-        }
+        direct.force(n, abandon);
         self.payoff.force_stop = abandon;
     }
 }
