@@ -382,7 +382,12 @@ pub(crate) mod tests {
         let oqgrid =
             crate::oqgrid::OqGrid::with_options(scene.clone(), &options, &crate::oqgrid::OqGridOptions::default())
                 .unwrap();
-        let lzb = crate::lzb::Lzb::new(scene.clone(), &options, &crate::lzb::LzbOptions::default()).unwrap();
+        // The paper's plane, so that rays are cast (abandonment comes between waves of them).
+        let lzb_options = crate::lzb::LzbOptions {
+            plane: crate::lzb::Plane::Dynamic,
+            ..Default::default()
+        };
+        let lzb = crate::lzb::Lzb::new(scene.clone(), &options, &lzb_options).unwrap();
         let mut renderers: Vec<(&str, Box<dyn ForceDirect>)> =
             vec![("hzb", Box::new(hzb)), ("oqgrid", Box::new(oqgrid)), ("lzb", Box::new(lzb))];
         for (name, r) in &mut renderers {

@@ -57,6 +57,15 @@
 //! - Coherence bounds the traversal by the neighbour's hit instead of starting below the root
 //!   (see [`occult_spatial::raycast`]).
 //! - The PVL goes to this crate's software rasterizer, not a GPU.
+//! - Addition, the partition plane by a cost model (`plane=cost`, the default in lazy mode;
+//!   [`cost_plane`]): the coarse rays' first-hit distances, and the least view distance and
+//!   triangles of every leaf in the frustum (collected by step 1 before the split), give for
+//!   each candidate plane the triangles drawn near, the pixels left to the rays, the far leaves
+//!   and their expected PVL; the plane whose frame would cost least at last frame's measured
+//!   rates (per triangle, per ray, per far leaf, the PVL's share of the far triangles) wins.
+//!   Where rays cost more than the triangles they would spare, that is every leaf near: the
+//!   frame is a z-buffer frame. A mesh instance all of whose leaves are near is drawn whole
+//!   (its vertices shared), not by leaf lists. The paper's mean-hit plane is `plane=dynamic`.
 //! - Addition, payoff (`payoff=on`, lazy mode only; [`crate::payoff`], [`crate::direct`]): the
 //!   rays are cast in waves, and a frame that has spent a direct frame's time and whose rays
 //!   left, at their pace so far, would take longer than another is abandoned and drawn directly
@@ -79,6 +88,77 @@ use occult_core::{Aabb, Affine3A, Camera, Containment, Frustum, ItemId, Mat4, No
 use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
 use occult_spatial::{RayOctree, RayOctreeConfig, RayOctreeError};
 use rayon::prelude::*;
+
+/// The least view distance of box `b` (object space; `w_row` the clip-w row of its
+/// `clip_from_object`), a bound from below: what [`FrameCtx::is_near`] compares with the limit.
+#[inline]
+fn near_distance(w_row: Vec4, b: &Aabb) -> f32 {
+    let n = w_row.truncate();
+    n.dot(b.center()) + w_row.w - n.abs().dot(b.half_extent())
+}
+
+/// Rasterization cost of a triangle, wall ns, before `plane=cost` measured one.
+const PRIOR_NS_PER_TRIANGLE: f64 = 20.0;
+/// Cost of a ray, wall ns, before `plane=cost` measured one.
+const PRIOR_NS_PER_RAY: f64 = 1000.0;
+/// Share of the far leaves' triangles the rays' PVL holds, before `plane=cost` measured it.
+const PRIOR_PVL_SHARE: f64 = 0.5;
+/// Wall ns per far leaf outside rays and rasterization (its object-oriented polygon over the
+/// unfinished pixels, its part of the PVL's assembly), before `plane=cost` measured it.
+const PRIOR_NS_PER_FAR_LEAF: f64 = 500.0;
+
+/// `plane=cost`: the partition plane's view distance whose frame is expected to cost least.
+/// `leaves`: every leaf in the frustum as (its least view distance, its triangles); `hits`:
+/// the coarse rays' first-hit distances (`None`: no hit), each standing for `pixels /
+/// hits.len()` pixels; `ns_per_triangle` and `ns_per_ray`: wall time of a rasterized triangle
+/// and of a ray; `pvl_share`: the share of the far leaves' triangles the rays' PVL holds;
+/// `ns_per_far_leaf`: the rest of a far leaf's cost (its polygon, the PVL's assembly). A
+/// plane at `z` draws the leaves nearer than `z · (1 + NEAR_MARGIN)`, casts the pixels whose
+/// first hit lies at `z` or beyond (those nearer are finished by the near pass; those that hit
+/// nothing are left out, object-oriented casting skipping most of them) and draws their PVL.
+/// Candidates: `near`, every coarse hit distance, and beyond every leaf (`far`: all drawn
+/// near, no ray).
+#[allow(clippy::too_many_arguments)]
+pub fn cost_plane(
+    leaves: &[(f32, u32)],
+    hits: &[Option<f32>],
+    pixels: f64,
+    ns_per_triangle: f64,
+    ns_per_ray: f64,
+    pvl_share: f64,
+    ns_per_far_leaf: f64,
+    near: f32,
+    far: f32,
+) -> f32 {
+    let mut by_distance: Vec<(f32, u32)> = leaves.to_vec();
+    by_distance.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    let mut prefix = Vec::with_capacity(by_distance.len() + 1);
+    prefix.push(0u64);
+    for &(_, t) in &by_distance {
+        prefix.push(prefix.last().copied().unwrap_or(0) + u64::from(t));
+    }
+    let mut hit_distances: Vec<f32> = hits.iter().flatten().copied().filter(|d| d.is_finite()).collect();
+    hit_distances.sort_unstable_by(f32::total_cmp);
+    let per_ray = pixels / hits.len().max(1) as f64;
+    let cost = |z: f32| {
+        let limit = z * (1.0 + NEAR_MARGIN);
+        let near_leaves = by_distance.partition_point(|&(d, _)| d < limit);
+        let near_triangles = prefix[near_leaves] as f64;
+        let far_triangles = prefix[by_distance.len()] as f64 - near_triangles;
+        let far_leaves = (by_distance.len() - near_leaves) as f64;
+        let rays = (hit_distances.len() - hit_distances.partition_point(|&d| d < z)) as f64 * per_ray;
+        (near_triangles + far_triangles * pvl_share) * ns_per_triangle
+            + rays * ns_per_ray
+            + far_leaves * ns_per_far_leaf
+    };
+    std::iter::once(near)
+        .chain(hit_distances.iter().copied())
+        .chain(std::iter::once(far))
+        .map(|z| z.clamp(near, far))
+        .map(|z| (cost(z), z))
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map_or(near, |(_, z)| z)
+}
 
 /// Pixels cast between two checks of the payoff balance (`payoff=on`): a few milliseconds of
 /// rays at the slowest rates measured, so an abandoned frame overshoots little.
@@ -139,8 +219,8 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         },
         ParamDoc {
             key: "plane",
-            default: "dynamic",
-            help: "partition plane: static (plane_fraction of the depth) or dynamic (coarse ray casting) (§II.B)",
+            default: "cost",
+            help: "partition plane: static (plane_fraction of the depth), dynamic (coarse rays' mean hit distance, §II.B) or cost (the plane whose near rasterization and rays are expected to cost least, from the coarse rays' hits, the leaves' triangles and last frame's rates; the default in lazy mode, dynamic in naive mode)",
         },
         ParamDoc {
             key: "plane_fraction",
@@ -213,6 +293,17 @@ pub enum Mode {
     Naive,
 }
 
+/// How the partition plane is chosen (§II.B).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Plane {
+    /// At `plane_fraction` of the depth over which the scene lies in the frustum.
+    Static,
+    /// At the mean first-hit distance of coarse rays (the paper's dynamic plane).
+    Dynamic,
+    /// Where the near pass and the rays are expected to cost least ([`cost_plane`]).
+    Cost,
+}
+
 /// Which triangles of a leaf a ray tests (§III.B).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Selection {
@@ -243,8 +334,8 @@ pub struct LzbOptions {
     pub k: usize,
     /// Preset `|v·n|` of the base visibility.
     pub base_cos: f32,
-    /// Dynamic partition plane.
-    pub dynamic_plane: bool,
+    /// How the partition plane is chosen.
+    pub plane: Plane,
     /// Static plane fraction.
     pub plane_fraction: f32,
     /// Coarse rays of the dynamic plane.
@@ -291,7 +382,12 @@ impl LzbOptions {
             },
             k: p.get("k", 5usize)?,
             base_cos: p.get("base_cos", 0.5f32)?,
-            dynamic_plane: p.choice("plane", &["static", "dynamic"], "dynamic")? == "dynamic",
+            // The cost model weighs lazy rays and their PVL; naive rays shade, as §II measures.
+            plane: match p.choice("plane", &["static", "dynamic", "cost"], if mode == Mode::Lazy { "cost" } else { "dynamic" })? {
+                "static" => Plane::Static,
+                "cost" => Plane::Cost,
+                _ => Plane::Dynamic,
+            },
             plane_fraction: p.get("plane_fraction", 0.2f32)?,
             coarse_rays: p.get("coarse_rays", 256u32)?,
             plane_reuse: p.get("plane_reuse", 8u32)?,
@@ -353,6 +449,8 @@ pub(crate) enum Accel {
         refs: Vec<RefTriangle>,
         /// Per octree node (leaves only meaningful): base visibility `base_cos × mean area`.
         leaf_base: Vec<f32>,
+        /// Its non-empty leaves (all of them near: the mesh is drawn whole).
+        leaves: u32,
     },
     /// A group: octree over its instances' boxes.
     Group {
@@ -374,6 +472,7 @@ impl Accel {
                 octree,
                 refs,
                 leaf_base,
+                ..
             } => {
                 octree.memory_bytes() + refs.capacity() * std::mem::size_of::<RefTriangle>() + leaf_base.capacity() * 4
             }
@@ -394,6 +493,15 @@ impl Accel {
 
 /// A leaf-list entry's triangle (object space), stored in leaf order for the ray caster.
 pub(crate) use occult_spatial::LeafTriangle as RefTriangle;
+
+/// The partition plane of a frame, or what it is to be chosen from.
+enum PlaneChoice {
+    /// At this view distance.
+    At(f32),
+    /// `plane=cost`: chosen by [`cost_plane`] from these coarse first hits once the leaves in
+    /// the frustum are known.
+    Cost(Vec<Option<f32>>),
+}
 
 /// A partition plane kept for reuse (§II.B).
 struct PlaneCache {
@@ -420,6 +528,13 @@ pub struct Lzb {
     direct: Option<DirectFrames>,
     /// Octrees built shallower than asked, to fit their reference budget.
     shallower_octrees: usize,
+    /// Wall time of a rasterized triangle and of a ray, last measured (`plane=cost`).
+    ns_per_triangle: f64,
+    ns_per_ray: f64,
+    /// The share of the far leaves' triangles last frame's PVL held (`plane=cost`).
+    pvl_share: f64,
+    /// Wall ns per far leaf outside rays and rasterization, last measured (`plane=cost`).
+    ns_per_far_leaf: f64,
 }
 
 /// An octree built by `build` with `config`, or, when it would hold more references than its
@@ -505,8 +620,7 @@ impl FrameCtx {
     /// reaches nearer than the near limit: its triangles are drawn by the near pass.
     #[inline]
     fn is_near(&self, w_row: Vec4, b: &Aabb) -> bool {
-        let n = w_row.truncate();
-        n.dot(b.center()) + w_row.w - n.abs().dot(b.half_extent()) < self.near_limit
+        near_distance(w_row, b) < self.near_limit
     }
 }
 
@@ -590,6 +704,7 @@ impl Lzb {
                                 .collect();
                             (
                                 Accel::Mesh {
+                                    leaves: octree.nodes().iter().filter(|n| n.is_leaf() && n.count > 0).count() as u32,
                                     octree,
                                     refs,
                                     leaf_base,
@@ -662,6 +777,10 @@ impl Lzb {
             plane_cache: None,
             direct,
             shallower_octrees,
+            ns_per_triangle: PRIOR_NS_PER_TRIANGLE,
+            ns_per_ray: PRIOR_NS_PER_RAY,
+            pvl_share: PRIOR_PVL_SHARE,
+            ns_per_far_leaf: PRIOR_NS_PER_FAR_LEAF,
             build_time: start.elapsed(),
         })
     }
@@ -677,10 +796,11 @@ impl Lzb {
         self.shallower_octrees
     }
 
-    /// §II.B: the partition plane's view distance.
-    fn partition_plane(&mut self, ctx: &FrameCtx, stats: &mut FrameStats) -> f32 {
+    /// §II.B: the partition plane's view distance, or (`plane=cost`, not reused) the coarse
+    /// rays' first-hit distances from which it is chosen once the leaves are known.
+    fn partition_plane(&mut self, ctx: &FrameCtx, stats: &mut FrameStats) -> PlaneChoice {
         let near = ctx.near;
-        if !self.opts.dynamic_plane {
+        if self.opts.plane == Plane::Static {
             let clip = ctx.view.clip_from_world();
             let w = row_w(&clip);
             let extent = self
@@ -691,7 +811,7 @@ impl Lzb {
                 .map(|c| w.dot(c.extend(1.0)))
                 .fold(near, f32::max)
                 .min(ctx.far);
-            return near + self.opts.plane_fraction * (extent - near);
+            return PlaneChoice::At(near + self.opts.plane_fraction * (extent - near));
         }
         let cam = *ctx.view.camera();
         if let Some(c) = &mut self.plane_cache {
@@ -708,7 +828,7 @@ impl Lzb {
             {
                 c.frames += 1;
                 stats.counters.add("plane_reused", 1);
-                return c.z_clip.clamp(near, ctx.far);
+                return PlaneChoice::At(c.z_clip.clamp(near, ctx.far));
             }
         }
         let t = Instant::now();
@@ -716,32 +836,41 @@ impl Lzb {
         let gx = ((n * ctx.width / ctx.height).sqrt().ceil() as u32).clamp(1, ctx.view.width());
         let gy = ((n / gx as f64).ceil() as u32).clamp(1, ctx.view.height());
         let mut caster = Caster::new(self, ctx, true);
-        let (mut sum, mut hits) = (0f64, 0u32);
+        let mut distances = Vec::with_capacity((gx * gy) as usize);
         for j in 0..gy {
             for i in 0..gx {
                 let x = ((i as f64 + 0.5) / gx as f64 * ctx.width) as u32;
                 let y = ((j as f64 + 0.5) / gy as f64 * ctx.height) as u32;
-                if let Some((t, _)) = caster.cast(x, y) {
-                    sum += t as f64;
-                    hits += 1;
-                }
+                distances.push(caster.cast(x, y).map(|(t, _)| t));
             }
         }
         stats.counters.add("coarse_rays", caster.rays);
         stats.nodes_visited += caster.counters.nodes_visited;
+        stats.phases.add(Phase::Rays, t.elapsed());
+        if self.opts.plane == Plane::Cost {
+            return PlaneChoice::Cost(distances);
+        }
+        let (sum, hits) = distances
+            .iter()
+            .flatten()
+            .fold((0f64, 0u32), |(s, n), &t| (s + t as f64, n + 1));
         // No hit: nothing to draw near; every pixel goes to the rays.
         let z_clip = if hits == 0 {
             near
         } else {
             ((sum / hits as f64) as f32).clamp(near, ctx.far)
         };
-        stats.phases.add(Phase::Rays, t.elapsed());
+        self.remember_plane(cam, z_clip);
+        PlaneChoice::At(z_clip)
+    }
+
+    /// Keeps `z_clip`, chosen for `camera`, for reuse (§II.B).
+    fn remember_plane(&mut self, camera: Camera, z_clip: f32) {
         self.plane_cache = Some(PlaneCache {
-            camera: cam,
+            camera,
             z_clip,
             frames: 1,
         });
-        z_clip
     }
 
     /// Builds index lists for `(key, leaf)` pairs grouped by key (consecutive), one draw per
@@ -816,6 +945,9 @@ struct Walk<'a> {
     instances: Vec<(InstanceRec, ItemId, Mat4)>,
     near: Vec<(u32, u32)>,
     far: Vec<(u32, u32)>,
+    /// `plane=cost`: every leaf `(instance, leaf, least view distance, triangles)`, split once
+    /// the plane is chosen.
+    deferred: Option<Vec<(u32, u32, f32, u32)>>,
 }
 
 /// The frustum-culled descent of `octree` from its root, children in order (`inside`: the
@@ -866,12 +998,15 @@ impl<'a> Visitor<'a> for Walk<'a> {
                 let inst = self.instances.len() as u32;
                 let mut any = false;
                 let (ctx, near, far) = (self.ctx, &mut self.near, &mut self.far);
+                let deferred = &mut self.deferred;
                 cull_octree(&mut self.walk, octree, &at.frustum, at.inside, |walk, n, _| {
                     let on = &octree.nodes()[n as usize];
                     any = true;
                     walk.meet_triangles(on.count as u64);
                     // The leaf's tight box (`RayOctree::tighten_leaves`).
-                    if ctx.is_near(w_row, &on.bounds) {
+                    if let Some(d) = deferred {
+                        d.push((inst, n, near_distance(w_row, &on.bounds), on.count));
+                    } else if ctx.is_near(w_row, &on.bounds) {
                         near.push((inst, n));
                     } else {
                         far.push((inst, n));
@@ -942,12 +1077,13 @@ impl Renderer for Lzb {
         let mut payoff = self.payoff.begin(cleared);
         let mut ctx = FrameCtx::new(view, self.cull_backfaces);
 
-        // Step 2 (§II.B): the partition plane.
-        let z_clip = self.partition_plane(&ctx, &mut stats);
+        // Step 2 (§II.B): the partition plane (with `plane=cost`, chosen after step 1).
+        let choice = self.partition_plane(&ctx, &mut stats);
+        let mut z_clip = match choice {
+            PlaneChoice::At(z) => z,
+            PlaneChoice::Cost(_) => ctx.near,
+        };
         ctx.near_limit = z_clip * (1.0 + NEAR_MARGIN);
-        stats
-            .counters
-            .add("z_clip_permille_of_far", (z_clip / ctx.far * 1000.0) as u64);
 
         // Step 1: frustum culling collecting leaves, split by the plane.
         let t = Instant::now();
@@ -958,36 +1094,88 @@ impl Renderer for Lzb {
             instances: Vec::new(),
             near: Vec::new(),
             far: Vec::new(),
+            deferred: matches!(choice, PlaneChoice::Cost(_)).then(Vec::new),
         };
         walk.walk.stats = stats;
         walk.run();
         let Walk {
             walk,
             instances,
-            near,
-            far,
+            mut near,
+            mut far,
+            deferred,
             ..
         } = walk;
         stats = walk.finish("lzb")?;
+        if let (PlaneChoice::Cost(hits), Some(deferred)) = (&choice, deferred) {
+            let leaves: Vec<(f32, u32)> = deferred.iter().map(|&(_, _, d, n)| (d, n)).collect();
+            let pixels = f64::from(view.width()) * f64::from(view.height());
+            z_clip = cost_plane(
+                &leaves,
+                hits,
+                pixels,
+                self.ns_per_triangle,
+                self.ns_per_ray,
+                self.pvl_share,
+                self.ns_per_far_leaf,
+                ctx.near,
+                ctx.far,
+            );
+            self.remember_plane(*view.camera(), z_clip);
+            ctx.near_limit = z_clip * (1.0 + NEAR_MARGIN);
+            for (inst, leaf, d, _) in deferred {
+                if d < ctx.near_limit {
+                    near.push((inst, leaf));
+                } else {
+                    far.push((inst, leaf));
+                }
+            }
+        }
+        stats
+            .counters
+            .add("z_clip_permille_of_far", (z_clip / ctx.far * 1000.0) as u64);
         stats.counters.add("near_leaves", near.len() as u64);
         stats.counters.add("far_leaves", far.len() as u64);
+        let far_leaves = far.len();
+        let far_triangles: u64 = far
+            .iter()
+            .map(|&(inst, leaf)| match &self.accel[instances[inst as usize].0.node.index()] {
+                Accel::Mesh { octree, .. } => u64::from(octree.nodes()[leaf as usize].count),
+                _ => 0,
+            })
+            .sum();
         stats.phases.add(Phase::Cull, t.elapsed());
 
         // Step 3: local rendering of S_near with the z-buffer.
         let t = Instant::now();
-        let near_groups: Vec<_> = group_ranges(&near)
-            .into_iter()
-            .map(|(inst, r)| {
-                let (rec, base, _) = instances[inst as usize];
-                (rec, base, r)
-            })
-            .collect();
+        // A mesh instance all of whose leaves are near is drawn whole (its vertices shared, no
+        // list to build); the others by their near leaves' triangles.
+        let (mut near_groups, mut whole) = (Vec::new(), Vec::new());
+        for (inst, r) in group_ranges(&near) {
+            let (rec, base, _) = instances[inst as usize];
+            match &self.accel[rec.node.index()] {
+                Accel::Mesh { leaves, .. } if r.len() == *leaves as usize => whole.push((rec, base)),
+                _ => near_groups.push((rec, base, r)),
+            }
+        }
         let near_leaves: Vec<u32> = near.iter().map(|&(_, l)| l).collect();
         let mut pool = Vec::new();
         let near_lists = self.emit(&near_groups, &near_leaves, &mut pool, false);
-        stats.counters.add("near_triangles", pool.len() as u64);
+        let whole_triangles: usize = whole
+            .iter()
+            .filter_map(|(rec, _)| self.scene.node(rec.node).mesh().map(|m| m.triangle_count()))
+            .sum();
+        stats.counters.add("near_triangles", (pool.len() + whole_triangles) as u64);
         stats.phases.add(Phase::Other, t.elapsed());
-        let draws = make_draws(&self.scene, view, &near_lists, &pool);
+        let mut draws = make_draws(&self.scene, view, &near_lists, &pool);
+        draws.extend(whole.iter().filter_map(|(rec, base)| {
+            Some(Draw {
+                mesh: self.scene.node(rec.node).mesh()?,
+                triangles: DrawTriangles::All,
+                clip_from_object: view.clip_from_object(&rec.world_from_object),
+                first_item: *base,
+            })
+        }));
         crate::rasterize(&mut self.raster, view, frame, &draws, &mut stats);
         drop(draws);
 
@@ -1146,6 +1334,25 @@ impl Renderer for Lzb {
         let removed = payoff.work().saturating_sub(stats.triangles_submitted);
         let gain = raster.as_secs_f64() * removed as f64 / stats.triangles_submitted.max(1) as f64;
         let rays_paid = (total.saturating_sub(raster)).as_secs_f64() <= gain + MIN_ALLOWANCE_TIME.as_secs_f64();
+        if !payoff.abandoned() {
+            // The rates `plane=cost` weighs (halfway to each new measurement).
+            let blend = |old: f64, new: f64| if new.is_finite() && new > 0.0 { 0.5 * (old + new) } else { old };
+            let submitted = stats.triangles_submitted;
+            if submitted > 0 {
+                self.ns_per_triangle = blend(self.ns_per_triangle, raster.as_nanos() as f64 / submitted as f64);
+            }
+            let pvl = stats.counters.get("pvl_triangles");
+            if far_triangles > 0 && !naive {
+                self.pvl_share = blend(self.pvl_share, pvl as f64 / far_triangles as f64);
+                let other = stats.phases.get(Phase::Other).as_nanos() as f64;
+                self.ns_per_far_leaf = blend(self.ns_per_far_leaf, other / far_leaves as f64);
+            }
+            let rays = stats.rays_cast + stats.counters.get("coarse_rays");
+            if rays > 0 {
+                let ns = stats.phases.get(Phase::Rays).as_nanos() as f64 / rays as f64;
+                self.ns_per_ray = blend(self.ns_per_ray, ns);
+            }
+        }
         self.payoff.end(&payoff);
         if let Some(direct) = &mut self.direct {
             stats.counters.add_all(payoff.counters());
@@ -1177,5 +1384,39 @@ impl crate::direct::tests::ForceDirect for Lzb {
         let direct = self.direct.as_mut().expect("payoff is on by default");
         direct.force(n, abandon);
         self.payoff.force_stop = abandon;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::cost_plane;
+
+    /// Ten leaves of 1,000 triangles at distances 1..=10; coarse rays hitting at 1..=10 (and
+    /// one missing), each standing for 100 pixels.
+    fn case(ns_per_triangle: f64, ns_per_ray: f64) -> f32 {
+        let leaves: Vec<(f32, u32)> = (1..=10).map(|d| (d as f32, 1000)).collect();
+        let mut hits: Vec<Option<f32>> = (1..=10).map(|d| Some(d as f32 + 0.5)).collect();
+        hits.push(None);
+        cost_plane(&leaves, &hits, 1100.0, ns_per_triangle, ns_per_ray, 0.5, 100.0, 0.1, 1000.0)
+    }
+
+    /// Dear rays: everything near, nothing cast; cheap rays against dear triangles: the plane
+    /// at the nearest candidate, everything cast (half the far triangles in the PVL).
+    #[test]
+    fn the_cost_model_weighs_triangles_against_rays() {
+        assert_eq!(case(10.0, 1e6), 1000.0, "rays dear: all near");
+        assert_eq!(case(1e4, 1.0), 0.1, "rays cheap: the plane at the near plane");
+        // Small leaves near, large ones far: the small ones drawn, the rest to the rays. The
+        // plane sits at the hit just past the small leaves.
+        let leaves: Vec<(f32, u32)> = (1..=10).map(|d| (d as f32, if d <= 5 { 10 } else { 100_000 })).collect();
+        let hits: Vec<Option<f32>> = (1..=10).map(|d| Some(d as f32 + 0.5)).collect();
+        let z = cost_plane(&leaves, &hits, 1000.0, 100.0, 2000.0, 0.5, 100.0, 0.1, 1000.0);
+        assert_eq!(z, 5.5);
+    }
+
+    /// No leaf and no hit: nothing costs anything; the plane is the near plane.
+    #[test]
+    fn nothing_in_view_puts_the_plane_at_the_near_plane() {
+        assert_eq!(cost_plane(&[], &[None, None], 100.0, 1.0, 1.0, 0.5, 1.0, 0.1, 10.0), 0.1);
     }
 }
