@@ -99,6 +99,8 @@ fn near_distance(w_row: Vec4, b: &Aabb) -> f32 {
 
 /// Rasterization cost of a triangle, wall ns, before `plane=cost` measured one.
 const PRIOR_NS_PER_TRIANGLE: f64 = 20.0;
+/// Triangles a frame must draw for `plane=cost` to learn the cost of a triangle from it.
+const MIN_RATE_TRIANGLES: u64 = 10_000;
 /// Cost of a ray, wall ns, before `plane=cost` measured one.
 const PRIOR_NS_PER_RAY: f64 = 1000.0;
 /// Share of the far leaves' triangles the rays' PVL holds, before `plane=cost` measured it.
@@ -1294,7 +1296,8 @@ impl Renderer for Lzb {
             ("coherent_starts", coherent),
             ("rays_resolved", resolved),
         ]);
-        stats.phases.add(Phase::Rays, t.elapsed());
+        let fine_rays_time = t.elapsed();
+        stats.phases.add(Phase::Rays, fine_rays_time);
 
         if payoff.abandoned() {
             // Redrawn directly below (`crate::direct`).
@@ -1337,8 +1340,11 @@ impl Renderer for Lzb {
         if !payoff.abandoned() {
             // The rates `plane=cost` weighs (halfway to each new measurement).
             let blend = |old: f64, new: f64| if new.is_finite() && new > 0.0 { 0.5 * (old + new) } else { old };
+            // Only from frames that drew enough triangles for their rate to be one: a few
+            // large triangles over the screen (a view down the street to the sky) would make a
+            // triangle look as dear as its fill, and the next frame cast rays instead.
             let submitted = stats.triangles_submitted;
-            if submitted > 0 {
+            if submitted >= MIN_RATE_TRIANGLES {
                 self.ns_per_triangle = blend(self.ns_per_triangle, raster.as_nanos() as f64 / submitted as f64);
             }
             let pvl = stats.counters.get("pvl_triangles");
@@ -1347,9 +1353,10 @@ impl Renderer for Lzb {
                 let other = stats.phases.get(Phase::Other).as_nanos() as f64;
                 self.ns_per_far_leaf = blend(self.ns_per_far_leaf, other / far_leaves as f64);
             }
-            let rays = stats.rays_cast + stats.counters.get("coarse_rays");
-            if rays > 0 {
-                let ns = stats.phases.get(Phase::Rays).as_nanos() as f64 / rays as f64;
+            // The fine rays alone: the coarse ones are thin first-hit rays, several times
+            // cheaper, and a frame that cast none but them made rays look cheap to the next.
+            if stats.rays_cast > 0 {
+                let ns = fine_rays_time.as_nanos() as f64 / stats.rays_cast as f64;
                 self.ns_per_ray = blend(self.ns_per_ray, ns);
             }
         }
