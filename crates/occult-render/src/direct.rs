@@ -387,7 +387,7 @@ pub(crate) mod tests {
             plane: crate::lzb::Plane::Dynamic,
             ..Default::default()
         };
-        let lzb = crate::lzb::Lzb::new(scene.clone(), &options, &lzb_options).unwrap();
+        let lzb = crate::lzb::Lzb::new(scene.clone(), &options, &lzb_options).expect("lzb builds");
         let mut renderers: Vec<(&str, Box<dyn ForceDirect>)> =
             vec![("hzb", Box::new(hzb)), ("oqgrid", Box::new(oqgrid)), ("lzb", Box::new(lzb))];
         for (name, r) in &mut renderers {

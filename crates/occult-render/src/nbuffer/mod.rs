@@ -1295,7 +1295,7 @@ mod tests {
         // and draws the same frame; the run of direct frames ends with a culling frame.
         let no = NBufferOptions::default();
         let mut r = NBufferCulling::with_options(scene.clone(), &RenderOptions::default(), &no).unwrap();
-        r.direct.as_mut().unwrap().force(2, false);
+        r.direct.as_mut().expect("payoff is on by default").force(2, false);
         for i in 0..3 {
             let mut f = Frame::new(view.width(), view.height()).unwrap();
             let s = r.render(&view, &mut f).unwrap();
