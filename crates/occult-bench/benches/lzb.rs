@@ -168,9 +168,12 @@ mod anchor {
         let mut group = c.benchmark_group("embree_terrain_640x360");
         group.sample_size(10);
         let mut rates = [0f64; 2];
-        for (k, (name, cast)) in [("single_rays_1_thread", &single as &dyn Fn(&mut u64)), ("packets16_1_thread", &packets)]
-            .into_iter()
-            .enumerate()
+        for (k, (name, cast)) in [
+            ("single_rays_1_thread", &single as &dyn Fn(&mut u64)),
+            ("packets16_1_thread", &packets),
+        ]
+        .into_iter()
+        .enumerate()
         {
             let (mut n, mut secs) = (0u64, 0f64);
             group.bench_function(name, |b| {

@@ -388,8 +388,11 @@ pub(crate) mod tests {
             ..Default::default()
         };
         let lzb = crate::lzb::Lzb::new(scene.clone(), &options, &lzb_options).expect("lzb builds");
-        let mut renderers: Vec<(&str, Box<dyn ForceDirect>)> =
-            vec![("hzb", Box::new(hzb)), ("oqgrid", Box::new(oqgrid)), ("lzb", Box::new(lzb))];
+        let mut renderers: Vec<(&str, Box<dyn ForceDirect>)> = vec![
+            ("hzb", Box::new(hzb)),
+            ("oqgrid", Box::new(oqgrid)),
+            ("lzb", Box::new(lzb)),
+        ];
         for (name, r) in &mut renderers {
             r.force(2, false);
             for i in 0..3 {

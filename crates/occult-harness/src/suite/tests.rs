@@ -93,7 +93,10 @@ fn every_renderer_is_summarised_over_every_case() {
         }
         // Only renderers that cull can draw a frame directly instead.
         let never = ["zbuffer", "frustum", "rzb"];
-        assert!(case.renderers.iter().all(|r| r.direct_frames == 0 || !never.contains(&r.name.as_str())));
+        assert!(case
+            .renderers
+            .iter()
+            .all(|r| r.direct_frames == 0 || !never.contains(&r.name.as_str())));
     }
     let zbuffer = report.renderer("zbuffer").unwrap();
     assert_eq!(zbuffer.speedup_geomean, Some(1.0));

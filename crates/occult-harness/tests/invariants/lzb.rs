@@ -266,7 +266,10 @@ fn bad_parameters_are_errors() {
 /// within its reference budget, and frames stay identical.
 #[test]
 fn octrees_over_their_budget_are_built_shallower() {
-    let built = occult_scenes::spec::parse_spec("terrain:g=64").unwrap().build().unwrap();
+    let built = occult_scenes::spec::parse_spec("terrain:g=64")
+        .unwrap()
+        .build()
+        .unwrap();
     let scene = Arc::new(built.scene);
     let o = RenderOptions::default();
     let opts = occult_render::lzb::LzbOptions {
@@ -282,7 +285,11 @@ fn octrees_over_their_budget_are_built_shallower() {
     assert_eq!(deep_enough.shallower_octrees(), 0);
     let view = View::new(built.default_camera, 96, 64).unwrap();
     let (mut a, mut b) = (Frame::new(96, 64).unwrap(), Frame::new(96, 64).unwrap());
-    Algorithm::ZBUFFER.build(scene, &o).unwrap().render(&view, &mut a).unwrap();
+    Algorithm::ZBUFFER
+        .build(scene, &o)
+        .unwrap()
+        .render(&view, &mut a)
+        .unwrap();
     lzb.render(&view, &mut b).unwrap();
     assert!(a.same_visibility(&b));
 }

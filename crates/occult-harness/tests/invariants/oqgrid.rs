@@ -256,10 +256,14 @@ fn coherence_draws_last_frames_cells_first() {
     let scene = Arc::new(built.scene);
     let opts = RenderOptions::default();
     let mut z = Algorithm::ZBUFFER.build(scene.clone(), &opts).unwrap();
-    let mut renderers: Vec<_> = ["oqgrid:payoff=off", "oqgrid:payoff=off,coherence=off", "oqgrid:payoff=off,whole=0"]
-        .iter()
-        .map(|s| spec(s).build(scene.clone(), &opts).expect("oqgrid builds"))
-        .collect();
+    let mut renderers: Vec<_> = [
+        "oqgrid:payoff=off",
+        "oqgrid:payoff=off,coherence=off",
+        "oqgrid:payoff=off,whole=0",
+    ]
+    .iter()
+    .map(|s| spec(s).build(scene.clone(), &opts).expect("oqgrid builds"))
+    .collect();
     let (mut a, mut b) = (Frame::new(160, 120).unwrap(), Frame::new(160, 120).unwrap());
     let mut stats = vec![Vec::new(); renderers.len()];
     for cam in &cams {

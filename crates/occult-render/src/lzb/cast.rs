@@ -299,7 +299,11 @@ impl<'a> Caster<'a> {
             };
             let range = octree.nodes()[leaf as usize].range();
             for (r, &t) in refs[range.clone()].iter().zip(&octree.primitives()[range]) {
-                if met.ray.enter(&Aabb::from_points(r.corners)).is_some_and(|(e, _)| e <= t_limit) {
+                if met
+                    .ray
+                    .enter(&Aabb::from_points(r.corners))
+                    .is_some_and(|(e, _)| e <= t_limit)
+                {
                     self.pvl.insert((met.base, t));
                     met.recorded = true;
                 }

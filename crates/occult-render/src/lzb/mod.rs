@@ -385,7 +385,11 @@ impl LzbOptions {
             k: p.get("k", 5usize)?,
             base_cos: p.get("base_cos", 0.5f32)?,
             // The cost model weighs lazy rays and their PVL; naive rays shade, as §II measures.
-            plane: match p.choice("plane", &["static", "dynamic", "cost"], if mode == Mode::Lazy { "cost" } else { "dynamic" })? {
+            plane: match p.choice(
+                "plane",
+                &["static", "dynamic", "cost"],
+                if mode == Mode::Lazy { "cost" } else { "dynamic" },
+            )? {
                 "static" => Plane::Static,
                 "cost" => Plane::Cost,
                 _ => Plane::Dynamic,
@@ -432,7 +436,10 @@ impl LzbOptions {
             return bad("plane_reuse=0: a plane is used for at least 1 frame".into());
         }
         if self.payoff && self.mode == Mode::Naive {
-            return bad("payoff=on needs mode=lazy: naive frames are approximate, and drawing them directly would change them".into());
+            return bad(
+                "payoff=on needs mode=lazy: naive frames are approximate, and drawing them directly would change them"
+                    .into(),
+            );
         }
         Ok(())
     }
@@ -659,9 +666,10 @@ impl Lzb {
                     }
                     Ok(match node.kind() {
                         NodeKind::Mesh(m) => {
-                            let (mut octree, shallower) =
-                                fit_budget(mesh_cfg, |c| RayOctree::build_triangles(m.positions(), m.triangles(), c))
-                                    .map_err(err)?;
+                            let (mut octree, shallower) = fit_budget(mesh_cfg, |c| {
+                                RayOctree::build_triangles(m.positions(), m.triangles(), c)
+                            })
+                            .map_err(err)?;
                             let normals: Vec<Vec3> = (0..m.triangle_count())
                                 .map(|t| {
                                     let [a, b, c] = m.triangle_positions(t);
@@ -1141,10 +1149,12 @@ impl Renderer for Lzb {
         let far_leaves = far.len();
         let far_triangles: u64 = far
             .iter()
-            .map(|&(inst, leaf)| match &self.accel[instances[inst as usize].0.node.index()] {
-                Accel::Mesh { octree, .. } => u64::from(octree.nodes()[leaf as usize].count),
-                _ => 0,
-            })
+            .map(
+                |&(inst, leaf)| match &self.accel[instances[inst as usize].0.node.index()] {
+                    Accel::Mesh { octree, .. } => u64::from(octree.nodes()[leaf as usize].count),
+                    _ => 0,
+                },
+            )
             .sum();
         stats.phases.add(Phase::Cull, t.elapsed());
 
@@ -1167,7 +1177,9 @@ impl Renderer for Lzb {
             .iter()
             .filter_map(|(rec, _)| self.scene.node(rec.node).mesh().map(|m| m.triangle_count()))
             .sum();
-        stats.counters.add("near_triangles", (pool.len() + whole_triangles) as u64);
+        stats
+            .counters
+            .add("near_triangles", (pool.len() + whole_triangles) as u64);
         stats.phases.add(Phase::Other, t.elapsed());
         let mut draws = make_draws(&self.scene, view, &near_lists, &pool);
         draws.extend(whole.iter().filter_map(|(rec, base)| {
@@ -1247,7 +1259,11 @@ impl Renderer for Lzb {
         let naive = self.opts.mode == Mode::Naive;
         let this: &Lzb = self;
         // With payoff, in waves: before each, the frame is abandoned once its rays do not pay.
-        let wave = if self.direct.is_some() { RAY_WAVE } else { pixels.len().max(1) };
+        let wave = if self.direct.is_some() {
+            RAY_WAVE
+        } else {
+            pixels.len().max(1)
+        };
         let mut results: Vec<Caster<'_>> = Vec::new();
         for (k, pixels_of_wave) in pixels.chunks(wave).enumerate() {
             if self.direct.is_some() && payoff.progressed((k * wave) as f64 / pixels.len() as f64) {
@@ -1339,7 +1355,13 @@ impl Renderer for Lzb {
         let rays_paid = (total.saturating_sub(raster)).as_secs_f64() <= gain + MIN_ALLOWANCE_TIME.as_secs_f64();
         if !payoff.abandoned() {
             // The rates `plane=cost` weighs (halfway to each new measurement).
-            let blend = |old: f64, new: f64| if new.is_finite() && new > 0.0 { 0.5 * (old + new) } else { old };
+            let blend = |old: f64, new: f64| {
+                if new.is_finite() && new > 0.0 {
+                    0.5 * (old + new)
+                } else {
+                    old
+                }
+            };
             // Only from frames that drew enough triangles for their rate to be one: a few
             // large triangles over the screen (a view down the street to the sky) would make a
             // triangle look as dear as its fill, and the next frame cast rays instead.
@@ -1404,7 +1426,17 @@ mod tests {
         let leaves: Vec<(f32, u32)> = (1..=10).map(|d| (d as f32, 1000)).collect();
         let mut hits: Vec<Option<f32>> = (1..=10).map(|d| Some(d as f32 + 0.5)).collect();
         hits.push(None);
-        cost_plane(&leaves, &hits, 1100.0, ns_per_triangle, ns_per_ray, 0.5, 100.0, 0.1, 1000.0)
+        cost_plane(
+            &leaves,
+            &hits,
+            1100.0,
+            ns_per_triangle,
+            ns_per_ray,
+            0.5,
+            100.0,
+            0.1,
+            1000.0,
+        )
     }
 
     /// Dear rays: everything near, nothing cast; cheap rays against dear triangles: the plane
@@ -1415,7 +1447,9 @@ mod tests {
         assert_eq!(case(1e4, 1.0), 0.1, "rays cheap: the plane at the near plane");
         // Small leaves near, large ones far: the small ones drawn, the rest to the rays. The
         // plane sits at the hit just past the small leaves.
-        let leaves: Vec<(f32, u32)> = (1..=10).map(|d| (d as f32, if d <= 5 { 10 } else { 100_000 })).collect();
+        let leaves: Vec<(f32, u32)> = (1..=10)
+            .map(|d| (d as f32, if d <= 5 { 10 } else { 100_000 }))
+            .collect();
         let hits: Vec<Option<f32>> = (1..=10).map(|d| Some(d as f32 + 0.5)).collect();
         let z = cost_plane(&leaves, &hits, 1000.0, 100.0, 2000.0, 0.5, 100.0, 0.1, 1000.0);
         assert_eq!(z, 5.5);
@@ -1424,6 +1458,9 @@ mod tests {
     /// No leaf and no hit: nothing costs anything; the plane is the near plane.
     #[test]
     fn nothing_in_view_puts_the_plane_at_the_near_plane() {
-        assert_eq!(cost_plane(&[], &[None, None], 100.0, 1.0, 1.0, 0.5, 1.0, 0.1, 10.0), 0.1);
+        assert_eq!(
+            cost_plane(&[], &[None, None], 100.0, 1.0, 1.0, 0.5, 1.0, 0.1, 10.0),
+            0.1
+        );
     }
 }
