@@ -1371,7 +1371,8 @@ impl Renderer for Lzb {
             }
             let pvl = stats.counters.get("pvl_triangles");
             if far_triangles > 0 && !naive {
-                self.pvl_share = blend(self.pvl_share, pvl as f64 / far_triangles as f64);
+                // An empty PVL is a measurement too (a share of 0), unlike a zero time.
+                self.pvl_share = 0.5 * (self.pvl_share + pvl as f64 / far_triangles as f64);
                 let other = stats.phases.get(Phase::Other).as_nanos() as f64;
                 self.ns_per_far_leaf = blend(self.ns_per_far_leaf, other / far_leaves as f64);
             }

@@ -220,7 +220,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc {
             key: "coherence",
             default: "on",
-            help: "draw the cells (and whole meshes) found visible last frame first, unqueried, then traverse the grids as usual, skipping what is drawn (frame-to-frame coherence, the paper's §6 future work)",
+            help: "draw the cells (and whole meshes) found visible last frame first, unqueried, then traverse the grids as usual, skipping what is drawn (frame-to-frame coherence, the paper's §6 future work; with queries=off there is nothing to skip and it does nothing)",
         },
         ParamDoc {
             key: "payoff",
