@@ -305,6 +305,30 @@ impl Scene {
         self.reachable_nodes().map(|n| n.instances().len() as u64).sum()
     }
 
+    /// Vertex instances in the scene: every mesh's vertices times the instances of it that
+    /// the root reaches (saturating). What drawing every mesh whole projects.
+    pub fn vertex_instance_count(&self) -> u64 {
+        // Instances of each node under the root, one pass down (children have smaller ids).
+        let mut times = vec![0u64; self.nodes.len()];
+        times[self.root.index()] = 1;
+        let mut vertices = 0u64;
+        for i in (0..=self.root.index()).rev() {
+            let t = times[i];
+            if t == 0 {
+                continue;
+            }
+            let node = &self.nodes[i];
+            if let Some(m) = node.mesh() {
+                vertices = vertices.saturating_add(t.saturating_mul(m.positions().len() as u64));
+            }
+            for instance in node.instances() {
+                let c = &mut times[instance.child.index()];
+                *c = c.saturating_add(t);
+            }
+        }
+        vertices
+    }
+
     /// The nodes the root reaches, in storage order.
     fn reachable_nodes(&self) -> impl Iterator<Item = &Node> {
         self.nodes
@@ -483,6 +507,11 @@ mod tests {
             2,
             "the unreachable group's instances are not counted"
         );
+        assert_eq!(
+            s.vertex_instance_count(),
+            6,
+            "two instances of a 3-vertex triangle, nothing unreachable"
+        );
         let one = Scene::from_mesh("one", tri()).unwrap();
         assert_eq!((one.unique_triangle_count(), one.instance_count()), (1, 0));
     }
@@ -493,6 +522,7 @@ mod tests {
         assert_eq!(s.item_count(), 12);
         assert_eq!(s.unique_triangle_count(), 1);
         assert_eq!(s.instance_count(), 7);
+        assert_eq!(s.vertex_instance_count(), 36, "12 instances of a 3-vertex triangle");
         assert_eq!(s.bounds(), Aabb::new(Vec3::ZERO, Vec3::new(5.0, 7.0, 0.0)));
         let mut items = vec![];
         s.for_each_mesh_instance(|_, _, _, base| items.push(base));

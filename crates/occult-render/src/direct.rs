@@ -29,19 +29,31 @@
 //!   margin (more than [`REMEASURE_SHARE`] of the predicted direct time) measures it again
 //!   once the measurement is [`REMEASURE_AFTER`] frames old;
 //! - a culled frame shorter than [`MIN_ALLOWANCE_TIME`] never starts a run (small scenes keep
-//!   their tests whatever the clock says).
+//!   their tests whatever the clock says);
+//! - probes are **screened**: the last direct frame of a run has its final depth, and what a
+//!   culled frame could remove at most is what lies behind it: the triangles under the boxes
+//!   of `frustum`'s hierarchies hidden by that depth
+//!   ([`Hierarchies::hidden_triangles`], Greene's box test through a pyramid of it). When
+//!   drawing those directly costs less than culling cost the last culled frame (its time
+//!   beyond a direct frame of the triangles it submitted), the probe cannot pay and the next
+//!   run starts instead, doubled as after a losing probe (a screening is a walk of the
+//!   hierarchies, a few percent of a frame; a losing probe costs up to two frames). Only with
+//!   a culled frame at most [`SCREEN_AGE`] frames old; before the first direct frame, a culled
+//!   frame that did not plainly pay is screened the same way on its own depth, at its own
+//!   cost of a triangle, and the direct frames are measured next when it cannot pay.
 //!
 //! Renderers also hand the expected direct frame to their in-frame payoff, which then
 //! abandons a frame plainly slower than drawing it again directly
 //! ([`FramePayoff::abandoned`](crate::payoff::FramePayoff::abandoned)).
-//! Frames do not change (`frustum` is exact), only the time. Counter: `payoff_direct` (1 for
-//! a frame drawn directly).
+//! Frames do not change (`frustum` is exact), only the time. Counters: `payoff_direct` (1 for
+//! a frame drawn directly), `payoff_screened` (1 for a frame whose screening skipped a probe
+//! or, before the first measurement, a culled frame).
 
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use occult_core::{Scene, View};
-use occult_raster::{Frame, Rasterizer};
+use occult_raster::{Frame, Rasterizer, ZPyramid};
 
 use crate::frustum::{FrustumOptions, Hierarchies};
 use crate::payoff::{Payoff, MIN_ALLOWANCE_TIME};
@@ -64,11 +76,20 @@ pub const DIRECT_KEPT: usize = 4;
 pub const FIRST_MEASURED: u32 = 2;
 /// The counter of frames drawn directly.
 pub const COUNTER: &str = "payoff_direct";
+/// The counter of probes skipped because the frame before showed that culling could not pay
+/// ([`DirectFrames::render_if_due`]).
+pub const SCREENED: &str = "payoff_screened";
+/// A screening needs the test cost of a culled frame at most this many frames old (views
+/// change: an old cost may not be this view's).
+pub const SCREEN_AGE: u32 = 2 * MAX_RUN;
 
 /// The frame-level choice between culling and drawing directly ([module doc](self)).
 pub struct DirectFrames {
     frustum: Hierarchies,
     choice: Choice,
+    /// The depth pyramid of the last direct frame of a run (screening), made at the frame's
+    /// size when first needed.
+    pyramid: Option<ZPyramid>,
 }
 
 impl DirectFrames {
@@ -81,6 +102,7 @@ impl DirectFrames {
         Ok(Self {
             frustum: Hierarchies::build(scene, raster, &FrustumOptions::default())?,
             choice: Choice::default(),
+            pyramid: None,
         })
     }
 
@@ -104,7 +126,27 @@ impl DirectFrames {
         stats.counters.add(COUNTER, 1);
         let raster_time = stats.phases.get(Phase::Raster);
         self.choice.direct(stats.total, raster_time, stats.triangles_submitted);
+        if self.choice.direct_left == 0 && self.choice.screens() {
+            let t = Instant::now();
+            let hidden = self.hidden_triangles(view, frame)?;
+            if !self.choice.worth_probing(hidden, stats.triangles_submitted) {
+                self.choice.start_run();
+                stats.counters.add(SCREENED, 1);
+            }
+            stats.phases.add(Phase::Cull, t.elapsed());
+            stats.total += t.elapsed();
+        }
         Ok(Some(stats))
+    }
+
+    /// [`Hierarchies::hidden_triangles`] of the frame just drawn.
+    fn hidden_triangles(&mut self, view: &View, frame: &Frame) -> Result<u64> {
+        let fits = |p: &ZPyramid| p.width() == frame.width() && p.height() == frame.height();
+        if !self.pyramid.as_ref().is_some_and(fits) {
+            self.pyramid = Some(ZPyramid::new(frame.width(), frame.height())?);
+        }
+        let pyramid = self.pyramid.as_mut().expect("made above");
+        Ok(self.frustum.hidden_triangles(view, frame, pyramid))
     }
 
     /// Draws the frame directly, neither measured nor counted (for frames a renderer cannot
@@ -145,16 +187,46 @@ impl DirectFrames {
         Ok(())
     }
 
-    /// Learns from the culled frame that [`DirectFrames::render_if_due`] declined, which took
-    /// `total` (its statistics `stats`); `tests_paid`: its tests saved more than they cost
+    /// Learns from the culled frame of `view` that [`DirectFrames::render_if_due`] declined,
+    /// drawn into `frame`, which took `total` (its statistics `stats`); `tests_paid`: its
+    /// tests saved more than they cost
     /// ([`Payoff::last_paid`](crate::payoff::Payoff::last_paid)). True when the next frames
-    /// are to be drawn directly.
-    pub fn culled(&mut self, total: Duration, stats: &FrameStats, tests_paid: bool) -> bool {
+    /// are to be drawn directly. A screening that says so is counted in `stats`
+    /// ([`SCREENED`]).
+    ///
+    /// Before a direct frame was measured, a culled frame that did not plainly pay is
+    /// screened: when even removing every triangle hidden behind its final depth
+    /// ([`Hierarchies::hidden_triangles`]) would save less than its culling cost, at its own
+    /// rasterization cost of a triangle, the direct frames are measured next.
+    ///
+    /// # Errors
+    /// [`crate::RenderError::Raster`] when the screening's pyramid cannot be allocated.
+    pub fn culled(
+        &mut self,
+        view: &View,
+        frame: &Frame,
+        total: Duration,
+        stats: &mut FrameStats,
+        tests_paid: bool,
+    ) -> Result<bool> {
         let work = self.choice.last_work;
-        let raster_ns = stats.phases.get(Phase::Raster).as_nanos() as f64 / stats.triangles_submitted.max(1) as f64;
-        let plainly = Self::plainly(tests_paid, total, stats.triangles_submitted, raster_ns, work);
-        self.choice.culled(total, work, tests_paid, plainly);
-        self.choice.direct_left > 0
+        let submitted = stats.triangles_submitted;
+        let raster_ns = stats.phases.get(Phase::Raster).as_nanos() as f64 / submitted.max(1) as f64;
+        let plainly = Self::plainly(tests_paid, total, submitted, raster_ns, work);
+        // Culling pays only if drawing the hidden triangles costs more than what culling cost
+        // this frame beyond drawing what it submitted (both at this frame's rate: a direct
+        // frame's is lower, which only widens the loss).
+        let cannot_pay = self.choice.model().is_none()
+            && !plainly
+            && total >= MIN_ALLOWANCE_TIME
+            && raster_ns * (self.hidden_triangles(view, frame)? + submitted) as f64 <= total.as_nanos() as f64;
+        if cannot_pay {
+            stats.counters.add(SCREENED, 1);
+        }
+        self.choice.last_culled = Some((total, submitted));
+        self.choice.last_culled_age = 0;
+        self.choice.culled(total, work, tests_paid, plainly, cannot_pay);
+        Ok(self.choice.direct_left > 0)
     }
 
     /// Whether a culled frame that took `total` paid plainly, needing no direct frame to tell:
@@ -174,9 +246,9 @@ impl DirectFrames {
         payoff.set_direct(self.choice.model().map(|m| m.predict(work)), work, threads);
     }
 
-    /// Bytes held (`frustum`'s hierarchies).
+    /// Bytes held (`frustum`'s hierarchies, the screening's pyramid).
     pub fn memory_bytes(&self) -> usize {
-        self.frustum.memory_bytes()
+        self.frustum.memory_bytes() + self.pyramid.as_ref().map_or(0, ZPyramid::memory_bytes)
     }
 
     /// Makes the next `n` frames direct (tests of the renderers that embed one); `abandon`:
@@ -239,6 +311,10 @@ struct Choice {
     since_direct: u32,
     /// The last frame's work.
     last_work: u64,
+    /// The last culled frame's time and the triangles it submitted (its cost of culling is
+    /// its time beyond a direct frame of those triangles); the direct frames since.
+    last_culled: Option<(Duration, u64)>,
+    last_culled_age: u32,
 }
 
 impl Choice {
@@ -257,6 +333,27 @@ impl Choice {
         Some(total.as_nanos() as f64 / m.predict(work).max(1.0))
     }
 
+    /// Whether a run's last direct frame screens the coming probe: a direct frame and a
+    /// culled one were measured, the culled one recently ([`SCREEN_AGE`]).
+    fn screens(&self) -> bool {
+        self.model().is_some() && self.last_culled.is_some() && self.last_culled_age < SCREEN_AGE
+    }
+
+    /// Whether a probe may pay, on a view of `work` triangles of which at most `hidden` can be
+    /// culled ([`Hierarchies::hidden_triangles`]): drawing the hidden ones directly must cost
+    /// more than culling cost the last culled frame (its time beyond a direct frame of the
+    /// triangles it submitted: its tests, and its smaller batches' slower drawing). A bound in
+    /// culling's favour: a culled frame removes less, drawing occluders first.
+    fn worth_probing(&self, hidden: u64, work: u64) -> bool {
+        match (self.model(), self.last_culled) {
+            (Some(m), Some((total, submitted))) => {
+                let cost = total.as_nanos() as f64 - m.predict(submitted);
+                m.rate_ns * hidden.min(work) as f64 > cost
+            }
+            _ => true,
+        }
+    }
+
     /// True, and one direct frame fewer left, when this frame is to be drawn directly.
     fn take_direct(&mut self) -> bool {
         let due = self.direct_left > 0;
@@ -272,7 +369,10 @@ impl Choice {
         self.run = (run * 2).min(MAX_RUN);
     }
 
-    fn culled(&mut self, total: Duration, work: u64, tests_paid: bool, paid_plainly: bool) {
+    /// Weighs a culled frame of `work` triangles that took `total`; `cannot_pay`: before the
+    /// first measurement, its own depth showed that culling cannot pay
+    /// ([`DirectFrames::culled`]).
+    fn culled(&mut self, total: Duration, work: u64, tests_paid: bool, paid_plainly: bool, cannot_pay: bool) {
         self.since_direct = self.since_direct.saturating_add(1);
         self.last_work = work;
         if total < MIN_ALLOWANCE_TIME {
@@ -286,7 +386,7 @@ impl Choice {
             self.unplain = if paid_plainly { 0 } else { self.unplain + 1 };
             let n = self.unweighed.len() as f64;
             let mean = self.unweighed.iter().map(|u| u.0.as_secs_f64()).sum::<f64>() / n.max(1.0);
-            if (!tests_paid || self.unplain >= 2) && total.as_secs_f64() >= 0.5 * mean {
+            if cannot_pay || ((!tests_paid || self.unplain >= 2) && total.as_secs_f64() >= 0.5 * mean) {
                 self.direct_left = FIRST_MEASURED;
             }
             if self.unweighed.len() == DIRECT_KEPT {
@@ -329,6 +429,7 @@ impl Choice {
 
     fn direct(&mut self, total: Duration, raster: Duration, work: u64) {
         self.last_work = work;
+        self.last_culled_age = self.last_culled_age.saturating_add(1);
         if self.measured.len() == DIRECT_KEPT {
             self.measured.remove(0);
         }
@@ -354,6 +455,7 @@ pub(crate) mod tests {
     use super::*;
     use crate::{RenderOptions, Renderer};
     use occult_core::Vec3;
+    use occult_raster::RasterConfig;
 
     const MS: Duration = Duration::from_millis(1);
 
@@ -433,7 +535,7 @@ pub(crate) mod tests {
                 c.direct(10 * MS, 9 * MS, 1000);
             } else {
                 ways.push('c');
-                c.culled(20 * MS, 1000, false, false);
+                c.culled(20 * MS, 1000, false, false, false);
             }
         }
         let expected = format!(
@@ -446,25 +548,79 @@ pub(crate) mod tests {
         assert_eq!(ways, expected[..120]);
     }
 
+    /// A probe is screened out when drawing the triangles that could be hidden costs less
+    /// than culling cost the last culled frame; screening needs a recent culled frame; a
+    /// first culled frame that cannot pay has the direct frames measured next.
+    #[test]
+    fn screening_weighs_hidden_triangles_against_the_cost_of_culling() {
+        let mut c = Choice {
+            measured: vec![Model {
+                fixed_ns: 0.0,
+                rate_ns: 10_000.0,
+            }],
+            ..Choice::default()
+        };
+        assert!(!c.screens(), "no culled frame measured");
+        // 14 ms for 1000 submitted triangles, 10 ms of drawing them directly: culling cost 4 ms.
+        c.last_culled = Some((14 * MS, 1000));
+        assert!(c.screens());
+        assert!(!c.worth_probing(300, 1000), "at most 3 ms to save");
+        assert!(c.worth_probing(500, 1000), "up to 5 ms to save");
+        assert!(!c.worth_probing(500, 300), "no more than the work is hidden");
+        for _ in 0..SCREEN_AGE {
+            c.direct(10 * MS, 9 * MS, 1000);
+        }
+        assert!(!c.screens(), "the culled frame is too old");
+        let mut c = Choice::default();
+        c.culled(20 * MS, 1000, true, false, true);
+        assert!(c.take_direct(), "a first culled frame that cannot pay");
+    }
+
+    /// The hidden triangles of a view: some behind the front row, never one that a pixel of
+    /// the frame shows, none behind an empty frame.
+    #[test]
+    fn hidden_triangles_are_not_shown() {
+        let (scene, view, reference) = scene_view_reference();
+        let raster = Rasterizer::new(RasterConfig::default()).unwrap();
+        let d = DirectFrames::new(scene, &raster).unwrap();
+        let mut pyramid = ZPyramid::new(96, 64).unwrap();
+        let hidden = d.frustum.hidden_triangles(&view, &reference, &mut pyramid);
+        let shown: std::collections::HashSet<_> = reference
+            .items()
+            .iter()
+            .copied()
+            .filter(|&i| i != occult_core::NO_ITEM)
+            .collect();
+        let in_view = d.frustum.triangles_in_view(&view);
+        assert!(hidden > 0, "the rows behind the first are hidden");
+        assert!(
+            hidden + shown.len() as u64 <= in_view,
+            "{hidden} hidden + {} shown of {in_view} in view",
+            shown.len()
+        );
+        let empty = Frame::new(96, 64).unwrap();
+        assert_eq!(d.frustum.hidden_triangles(&view, &empty, &mut pyramid), 0);
+    }
+
     /// Culling that wins keeps culling (after the first measurement's direct frames),
     /// measuring again only when its margin is thin and the measurement old.
     #[test]
     fn culling_that_wins_keeps_culling() {
         let mut c = Choice::default();
-        c.culled(20 * MS, 1000, false, false);
+        c.culled(20 * MS, 1000, false, false, false);
         for _ in 0..FIRST_MEASURED {
             assert!(c.take_direct());
             c.direct(40 * MS, 39 * MS, 1000);
         }
         for _ in 0..40 {
-            c.culled(20 * MS, 1000, true, false);
+            c.culled(20 * MS, 1000, true, false, false);
             assert!(!c.take_direct(), "a wide margin never remeasures");
         }
         // A thin margin (36 of 40) remeasures at once (the measurement is 40 frames old),
         // then every 16th frame.
         let mut remeasured = 0;
         for _ in 0..40 {
-            c.culled(36 * MS, 1000, true, false);
+            c.culled(36 * MS, 1000, true, false, false);
             if c.take_direct() {
                 remeasured += 1;
                 c.direct(40 * MS, 39 * MS, 1000);
@@ -488,18 +644,18 @@ pub(crate) mod tests {
             measured: model.clone(),
             ..Choice::default()
         };
-        c.culled(30 * MS, 1000, true, false);
+        c.culled(30 * MS, 1000, true, false, false);
         assert!(!c.take_direct(), "one loss, tests paid");
-        c.culled(9 * MS, 1000, true, false);
-        c.culled(11 * MS, 1000, true, false);
+        c.culled(9 * MS, 1000, true, false, false);
+        c.culled(11 * MS, 1000, true, false, false);
         assert!(!c.take_direct(), "a win between");
-        c.culled(11 * MS, 1000, true, false);
+        c.culled(11 * MS, 1000, true, false, false);
         assert!(c.take_direct(), "two losses in a row");
         let mut c = Choice {
             measured: model,
             ..Choice::default()
         };
-        c.culled(11 * MS, 1000, false, false);
+        c.culled(11 * MS, 1000, false, false, false);
         assert!(c.take_direct(), "a loss whose tests did not pay");
     }
 
@@ -508,20 +664,20 @@ pub(crate) mod tests {
     #[test]
     fn when_direct_is_first_measured() {
         let mut c = Choice::default();
-        c.culled(20 * MS, 1000, true, true);
+        c.culled(20 * MS, 1000, true, true, false);
         assert!(!c.take_direct(), "plainly paid");
-        c.culled(20 * MS, 1000, true, false);
+        c.culled(20 * MS, 1000, true, false, false);
         assert!(!c.take_direct(), "once not plainly");
-        c.culled(20 * MS, 1000, true, false);
+        c.culled(20 * MS, 1000, true, false, false);
         assert!(c.take_direct(), "twice not plainly");
         let mut c = Choice::default();
-        c.culled(20 * MS, 1000, true, true);
-        c.culled(5 * MS, 1000, false, false);
+        c.culled(20 * MS, 1000, true, true, false);
+        c.culled(5 * MS, 1000, false, false, false);
         assert!(!c.take_direct(), "small beside the frames before");
-        c.culled(20 * MS, 1000, false, false);
+        c.culled(20 * MS, 1000, false, false, false);
         assert!(c.take_direct(), "tests that did not pay");
         let mut c = Choice::default();
-        c.culled(MIN_ALLOWANCE_TIME / 2, 1000, false, false);
+        c.culled(MIN_ALLOWANCE_TIME / 2, 1000, false, false, false);
         assert!(!c.take_direct(), "short frames keep their tests");
         assert!(c.unweighed.is_empty());
     }
@@ -541,16 +697,16 @@ pub(crate) mod tests {
             ..Choice::default()
         };
         assert_eq!(c.model().map(|m| m.predict(1000)), Some(10e6));
-        c.culled(3 * MS, 1, false, false);
+        c.culled(3 * MS, 1, false, false, false);
         assert!(
             !c.take_direct(),
             "3 ms beats the 8 ms a direct frame needs whatever its work"
         );
-        c.culled(5 * MS, 1000, false, false);
-        c.culled(5 * MS, 1000, false, false);
-        c.culled(11 * MS, 1, false, false);
+        c.culled(5 * MS, 1000, false, false, false);
+        c.culled(5 * MS, 1000, false, false, false);
+        c.culled(11 * MS, 1, false, false, false);
         assert!(!c.take_direct(), "3 ms lost after 2 × 5 ms won");
-        c.culled(11 * MS, 1, false, false);
+        c.culled(11 * MS, 1, false, false, false);
         assert!(c.take_direct(), "lost again");
         // Submitted a third of the work, or took less than half of the work at its own rate.
         assert!(DirectFrames::plainly(true, 100 * MS, 100, 1.0, 300));

@@ -16,9 +16,10 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use occult_core::{NodeKind, Scene, View};
-use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
+use occult_raster::{Draw, DrawTriangles, Frame, PyramidCounts, PyramidTest, Rasterizer, ZPyramid};
 use occult_spatial::Bvh;
 
+use crate::hzb::boxtest::Occlusion;
 use crate::nodes::{instance_boxes, per_node, triangle_boxes};
 use crate::walk::{cull_bvh, Counts, NodeAt, SceneWalk, Visitor};
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Phase, RenderError, RenderOptions, Renderer, Result};
@@ -120,7 +121,7 @@ impl FrustumCulling {
     /// # Errors
     /// [`RenderError::BadParameter`] for a zero leaf size; raster configuration errors.
     pub fn with_options(scene: Arc<Scene>, options: &RenderOptions, fo: &FrustumOptions) -> Result<Self> {
-        let raster = Rasterizer::new(options.raster.clone())?;
+        let raster = crate::scene_rasterizer(&scene, options)?;
         Ok(Self {
             culling: Hierarchies::build(scene, &raster, fo)?,
             raster,
@@ -202,6 +203,102 @@ impl Hierarchies {
     /// Bytes held by the hierarchies.
     pub fn memory_bytes(&self) -> usize {
         self.hierarchies.iter().flatten().map(Bvh::memory_bytes).sum()
+    }
+
+    /// The triangles in the view of `frame` (drawn whole, its depth final) whose boxes are
+    /// hidden behind that depth: what a frustum walk meets that an occlusion test of its boxes
+    /// (Greene's §3.2 face test through `pyramid`, rebuilt here from the frame) would remove
+    /// with every occluder already drawn. No culling renderer's frame of the view removes more
+    /// at this granularity, drawing occluders first as it must ([`crate::direct`] screens its
+    /// probes with it).
+    pub fn hidden_triangles(&self, view: &View, frame: &Frame, pyramid: &mut ZPyramid) -> u64 {
+        pyramid.rebuild(frame);
+        let mut w = Hidden {
+            walk: SceneWalk::new(&self.scene, view),
+            hierarchies: &self.hierarchies,
+            occlusion: Occlusion {
+                frame,
+                pyramid,
+                how: PyramidTest {
+                    global: true,
+                    hierarchical: true,
+                },
+                far_depth: view.far_depth(),
+            },
+            counts: PyramidCounts::default(),
+            hidden: 0,
+        };
+        w.run();
+        w.hidden
+    }
+}
+
+/// The walk of [`Hierarchies::hidden_triangles`]: the frustum walk, each box also tested
+/// against the final depth.
+struct Hidden<'a> {
+    walk: SceneWalk<'a>,
+    hierarchies: &'a [Option<Bvh>],
+    occlusion: Occlusion<'a>,
+    counts: PyramidCounts,
+    /// Triangle instances under the hidden boxes.
+    hidden: u64,
+}
+
+impl Counts for Hidden<'_> {
+    fn counts(&mut self) -> &mut FrameStats {
+        &mut self.walk.stats
+    }
+}
+
+impl<'a> Visitor<'a> for Hidden<'a> {
+    fn walk(&mut self) -> &mut SceneWalk<'a> {
+        &mut self.walk
+    }
+
+    fn visit(&mut self, at: &NodeAt<'a>) {
+        let view = self.walk.view();
+        let clip = view.clip_from_object(&at.place.world_from_node);
+        let eye = at.place.world_from_node.inverse().transform_point3(view.camera().eye);
+        if self
+            .occlusion
+            .box_hidden(&clip, &at.node.bounds(), eye, &mut self.counts)
+        {
+            self.hidden += at.node.item_count();
+            return;
+        }
+        let scene = self.walk.scene();
+        let hierarchy = self.hierarchies[at.place.id.index()].as_ref();
+        match (at.node.kind(), hierarchy) {
+            (NodeKind::Mesh(_), Some(bvh)) => cull_bvh(self, bvh, &at.frustum, |w, _, bn, _| {
+                if w.occlusion.box_hidden(&clip, &bn.bounds, eye, &mut w.counts) {
+                    w.hidden += bn.range().len() as u64;
+                    return false;
+                }
+                true
+            }),
+            (NodeKind::Mesh(_), None) => {}
+            (NodeKind::Group(instances), Some(bvh)) => cull_bvh(self, bvh, &at.frustum, |w, _, bn, inside| {
+                let under = &bvh.primitive_indices()[bn.range()];
+                if w.occlusion.box_hidden(&clip, &bn.bounds, eye, &mut w.counts) {
+                    w.hidden += under
+                        .iter()
+                        .map(|&i| scene.node(instances[i as usize].child).item_count())
+                        .sum::<u64>();
+                    return false;
+                }
+                if bn.is_leaf() {
+                    for &i in under {
+                        w.enter(at.child(i as usize), inside);
+                    }
+                }
+                true
+            }),
+            (NodeKind::Group(instances), None) => {
+                for i in 0..instances.len() {
+                    self.enter(at.child(i), at.inside);
+                }
+            }
+        }
     }
 }
 

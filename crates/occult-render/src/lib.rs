@@ -254,6 +254,19 @@ impl AlgoSpec {
     }
 }
 
+/// The rasterizer of a renderer of `scene`: `options`' configuration, with the buffer its
+/// whole-mesh draws project vertices into reserved for the scene
+/// ([`Rasterizer::reserve_vertices`]), so that its first large draw is not slowed by fresh
+/// pages (preparation, not a frame, pays for them).
+///
+/// # Errors
+/// Raster configuration errors; [`RasterError::OutOfMemory`] for the buffer.
+pub(crate) fn scene_rasterizer(scene: &Scene, options: &RenderOptions) -> Result<Rasterizer> {
+    let mut raster = Rasterizer::new(options.raster.clone())?;
+    raster.reserve_vertices(scene.vertex_instance_count())?;
+    Ok(raster)
+}
+
 /// Rasterizes `draws` into `frame`, adding the time to [`Phase::Raster`] and the counts to
 /// `stats`: the last step every renderer shares.
 pub(crate) fn rasterize(

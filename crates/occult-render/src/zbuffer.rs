@@ -45,8 +45,8 @@ impl ZBuffer {
             )));
         }
         Ok(Self {
+            raster: crate::scene_rasterizer(&scene, options)?,
             scene,
-            raster: Rasterizer::new(options.raster.clone())?,
         })
     }
 }

@@ -331,6 +331,29 @@ impl Rasterizer {
         })
     }
 
+    /// Faults in, ahead of the first frame, the buffer a draw projects whole meshes' vertices
+    /// into, for draws of up to `vertices` vertices in all (a scene's vertex instances,
+    /// [`occult_core::Scene::vertex_instance_count`]; capped at what one pass of a draw
+    /// projects). The buffer grows with the largest draw anyway; reserved at preparation, a
+    /// renderer's first large draw does not pay for fresh pages (about a third of a
+    /// 2-million-triangle frame). Frames do not change.
+    ///
+    /// # Errors
+    /// [`crate::RasterError::OutOfMemory`] when the buffer cannot be allocated.
+    pub fn reserve_vertices(&mut self, vertices: u64) -> Result<(), crate::RasterError> {
+        let n = usize::try_from(vertices)
+            .unwrap_or(usize::MAX)
+            .min(MAX_PROJECTED_VERTICES);
+        if n > self.vertices.len() {
+            let bytes = n * std::mem::size_of::<ProjVertex>();
+            self.vertices
+                .try_reserve_exact(n - self.vertices.len())
+                .map_err(|_| crate::RasterError::OutOfMemory(bytes))?;
+            self.vertices.resize(n, ProjVertex::default());
+        }
+        Ok(())
+    }
+
     /// The configuration.
     pub fn config(&self) -> &RasterConfig {
         &self.config

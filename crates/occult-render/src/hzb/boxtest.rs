@@ -67,7 +67,7 @@ pub(super) fn screen_rect(clip_from_object: &Mat4, b: &Aabb, width: u32, height:
 }
 
 /// Where the test is run and what it counts.
-pub(super) struct Occlusion<'a> {
+pub(crate) struct Occlusion<'a> {
     pub frame: &'a Frame,
     pub pyramid: &'a ZPyramid,
     pub how: PyramidTest,

@@ -111,7 +111,7 @@
 //! plus rasterizing what survives. It pays off on scenes of high depth complexity (cities,
 //! plants); on open terrain almost everything is visible and the tests are pure overhead.
 
-mod boxtest;
+pub(crate) mod boxtest;
 mod walk;
 
 use std::sync::Arc;
@@ -311,7 +311,7 @@ impl HzbOptions {
 /// Every counter ([`FrameStats::counters`](crate::FrameStats::counters)) a frame may report,
 /// whichever the settings, except the per-worker ones of `parallel=on` (`worker<k>_busy_us`,
 /// `worker<k>_idle_us`); [`INFO`]'s counters list those too.
-pub const COUNTERS: [&str; 17] = [
+pub const COUNTERS: [&str; 18] = [
     "occlusion_tests",
     "occlusion_culled",
     "frustum_culled",
@@ -329,6 +329,7 @@ pub const COUNTERS: [&str; 17] = [
     crate::payoff::COUNTERS[0],
     crate::payoff::COUNTERS[1],
     crate::direct::COUNTER,
+    crate::direct::SCREENED,
 ];
 
 /// Every counter a frame may report: [`COUNTERS`], then the workers' busy and idle times.
@@ -552,7 +553,7 @@ impl Hzb {
                 "hzb: batch and recheck must be at least 1".into(),
             ));
         }
-        let raster = Rasterizer::new(options.raster.clone())?;
+        let raster = crate::scene_rasterizer(&scene, options)?;
         let octrees: std::result::Result<Vec<Option<HybridOctree>>, _> =
             per_node(&raster, &scene, |node| match node.kind() {
                 NodeKind::Mesh(m) if m.triangle_count() > o.leaf_size => {
@@ -843,7 +844,7 @@ impl Renderer for Hzb {
                 direct.redraw(&mut self.workers[0].raster, view, frame, &mut stats)?;
             }
             let (t, paid) = (Instant::now(), self.workers.iter().all(|w| w.payoff.last_paid()));
-            direct.culled(start.elapsed(), &stats, paid);
+            direct.culled(view, frame, start.elapsed(), &mut stats, paid)?;
             stats.phases.add(Phase::Other, t.elapsed());
         }
         stats.total = start.elapsed();

@@ -281,6 +281,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         crate::payoff::COUNTERS[0],
         crate::payoff::COUNTERS[1],
         crate::direct::COUNTER,
+        crate::direct::SCREENED,
     ],
     conservative: true,
     build: |scene, options, params| Ok(Box::new(Lzb::new(scene, options, &LzbOptions::from_params(params)?)?)),
@@ -643,7 +644,7 @@ impl Lzb {
     pub fn new(scene: Arc<Scene>, options: &RenderOptions, opts: &LzbOptions) -> Result<Self> {
         opts.check()?;
         let start = Instant::now();
-        let raster = Rasterizer::new(options.raster.clone())?;
+        let raster = crate::scene_rasterizer(&scene, options)?;
         let mesh_cfg = RayOctreeConfig {
             max_depth: opts.depth,
             max_leaf_size: opts.leaf,
@@ -1390,7 +1391,13 @@ impl Renderer for Lzb {
                 direct.redraw(&mut self.raster, view, frame, &mut stats)?;
             }
             let t = Instant::now();
-            direct.culled(start.elapsed(), &stats, rays_paid && !payoff.abandoned());
+            direct.culled(
+                view,
+                frame,
+                start.elapsed(),
+                &mut stats,
+                rays_paid && !payoff.abandoned(),
+            )?;
             stats.phases.add(Phase::Other, t.elapsed());
         }
         stats.total = start.elapsed();

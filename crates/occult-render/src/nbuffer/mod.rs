@@ -177,6 +177,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "rect_pixels",
         "survivors_drawn",
         "payoff_direct",
+        "payoff_screened",
         "no_occluders",
         "triangles_saved",
         "second_pass_saved",
@@ -383,7 +384,7 @@ impl NBufferCulling {
     /// objects (checked before allocating them); raster configuration errors.
     pub fn with_options(scene: Arc<Scene>, options: &RenderOptions, no: &NBufferOptions) -> Result<Self> {
         no.validate()?;
-        let raster = Rasterizer::new(options.raster.clone())?;
+        let raster = crate::scene_rasterizer(&scene, options)?;
         let leaf = no.leaf_size;
         let mesh_bvhs: Vec<Option<Bvh>> = per_node(&raster, &scene, |node| match node.kind() {
             NodeKind::Mesh(m) if m.triangle_count() > leaf => Some(Bvh::build(&triangle_boxes(m), leaf)),
@@ -1149,7 +1150,7 @@ impl Renderer for NBufferCulling {
         if let Some(direct) = &mut self.direct {
             let t = Instant::now();
             let paid = self.payoff.last_paid();
-            if direct.culled(begun.elapsed(), &stats, paid) && self.options.occluders.visible() {
+            if direct.culled(view, frame, begun.elapsed(), &mut stats, paid)? && self.options.occluders.visible() {
                 // Stale by the next probe.
                 self.visible.fill(false);
             }

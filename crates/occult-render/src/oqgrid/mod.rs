@@ -247,6 +247,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         crate::payoff::COUNTERS[0],
         crate::payoff::COUNTERS[1],
         crate::direct::COUNTER,
+        crate::direct::SCREENED,
     ],
     conservative: true,
     build: |scene, options, params| {
@@ -535,7 +536,7 @@ impl OqGrid {
     /// memory bound (refused before allocating); raster configuration errors.
     pub fn with_options(scene: Arc<Scene>, options: &RenderOptions, oq: &OqGridOptions) -> Result<Self> {
         oq.validate()?;
-        let raster = Rasterizer::new(options.raster.clone())?;
+        let raster = crate::scene_rasterizer(&scene, options)?;
         let mut left = oq.max_memory_bytes;
         let mut grids = Vec::with_capacity(scene.nodes().len());
         let mut stamps = Vec::with_capacity(scene.nodes().len());
@@ -1364,7 +1365,7 @@ impl Renderer for OqGrid {
         // The counters are named in `INFO.counters`, in the order of `OqGridCounts::values`.
         debug_assert_eq!(
             INFO.counters.len(),
-            counts.values().len() + crate::payoff::COUNTERS.len() + 1 // and `direct::COUNTER`
+            counts.values().len() + crate::payoff::COUNTERS.len() + 2 // and `direct`'s two
         );
         for (&name, n) in INFO.counters.iter().zip(counts.values()) {
             stats.counters.add(name, n);
@@ -1375,7 +1376,7 @@ impl Renderer for OqGrid {
                 direct.redraw(&mut self.raster, view, frame, &mut stats)?;
             }
             let t = Instant::now();
-            direct.culled(start.elapsed(), &stats, self.payoff.last_paid());
+            direct.culled(view, frame, start.elapsed(), &mut stats, self.payoff.last_paid())?;
             stats.phases.add(Phase::Other, t.elapsed());
         }
         stats.total = start.elapsed();
