@@ -73,7 +73,7 @@ pub const DIRECT_KEPT: usize = 4;
 /// Direct frames drawn in a row for the first measurement: a renderer's first direct frame
 /// also pays its rasterizer's first large draws (fresh buffers faulted in, several times the
 /// frame's own cost on a large scene), which would make culled frames look good for long.
-pub const FIRST_MEASURED: u32 = 2;
+pub const FIRST_MEASURED: u32 = 1;
 /// The counter of frames drawn directly.
 pub const COUNTER: &str = "payoff_direct";
 /// The counter of probes skipped because the frame before showed that culling could not pay

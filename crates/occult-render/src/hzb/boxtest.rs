@@ -50,7 +50,7 @@ fn rect_of(c: &[Vec4; 8], corners: impl Iterator<Item = usize>, width: u32, heig
 
 /// The screen rectangle `b` may draw into (the whole frame when it reaches the near plane);
 /// None for an empty box or an empty rectangle.
-pub(super) fn screen_rect(clip_from_object: &Mat4, b: &Aabb, width: u32, height: u32) -> Option<PixelRect> {
+pub(crate) fn screen_rect(clip_from_object: &Mat4, b: &Aabb, width: u32, height: u32) -> Option<PixelRect> {
     if b.is_empty() {
         return None;
     }

@@ -85,7 +85,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use occult_core::{Aabb, Affine3A, Camera, Containment, Frustum, ItemId, Mat4, NodeKind, Scene, Vec3, Vec4, View};
-use occult_raster::{Draw, DrawTriangles, Frame, Rasterizer};
+use occult_raster::{Draw, DrawTriangles, Frame, PixelRect, PyramidCounts, PyramidTest, Rasterizer, ZPyramid};
 use occult_spatial::{RayOctree, RayOctreeConfig, RayOctreeError};
 use rayon::prelude::*;
 
@@ -113,7 +113,9 @@ const PRIOR_NS_PER_FAR_LEAF: f64 = 500.0;
 /// `leaves`: every leaf in the frustum as (its least view distance, its triangles); `hits`:
 /// the coarse rays' first-hit distances (`None`: no hit), each standing for `pixels /
 /// hits.len()` pixels; `ns_per_triangle` and `ns_per_ray`: wall time of a rasterized triangle
-/// and of a ray; `pvl_share`: the share of the far leaves' triangles the rays' PVL holds;
+/// and of a ray; `near_share`: the share of the near leaves' triangles the near pass draws
+/// (1 without `near_cull`); `pvl_share`: the share of the far leaves' triangles the rays' PVL
+/// holds;
 /// `ns_per_far_leaf`: the rest of a far leaf's cost (its polygon, the PVL's assembly). A
 /// plane at `z` draws the leaves nearer than `z · (1 + NEAR_MARGIN)`, casts the pixels whose
 /// first hit lies at `z` or beyond (those nearer are finished by the near pass; those that hit
@@ -127,6 +129,7 @@ pub fn cost_plane(
     pixels: f64,
     ns_per_triangle: f64,
     ns_per_ray: f64,
+    near_share: f64,
     pvl_share: f64,
     ns_per_far_leaf: f64,
     near: f32,
@@ -149,7 +152,7 @@ pub fn cost_plane(
         let far_triangles = prefix[by_distance.len()] as f64 - near_triangles;
         let far_leaves = (by_distance.len() - near_leaves) as f64;
         let rays = (hit_distances.len() - hit_distances.partition_point(|&d| d < z)) as f64 * per_ray;
-        (near_triangles + far_triangles * pvl_share) * ns_per_triangle
+        (near_triangles * near_share + far_triangles * pvl_share) * ns_per_triangle
             + rays * ns_per_ray
             + far_leaves * ns_per_far_leaf
     };
@@ -166,6 +169,15 @@ pub fn cost_plane(
 /// rays at the slowest rates measured, so an abandoned frame overshoots little.
 const RAY_WAVE: usize = 4096;
 
+/// Triangles of the near pass's first batch (`near_cull=on`), drawn untested: the nearest
+/// units, occluders of the rest.
+const NEAR_FIRST_BATCH: usize = 4096;
+/// Triangle references of a unit of the near pass's tests (`near_cull=on`): consecutive near
+/// leaves of a mesh instance, up to this many, are tested as one box.
+const NEAR_UNIT: u32 = 256;
+/// Largest batch of the near pass: batches double up to it, each followed by a pyramid update.
+const NEAR_MAX_BATCH: usize = 1 << 16;
+
 /// Pixels one task casts (one [`Caster`], so one coherence chain).
 const CHUNK: usize = 256;
 
@@ -174,7 +186,8 @@ const CHUNK: usize = 256;
 const MAX_DEPTH: u32 = 24;
 
 use crate::direct::DirectFrames;
-use crate::payoff::{Payoff, MIN_ALLOWANCE_TIME};
+use crate::hzb::boxtest::{screen_rect, Occlusion};
+use crate::payoff::{FramePayoff, Payoff, MIN_ALLOWANCE_TIME};
 use crate::walk::{NodeAt, SceneWalk, Visitor};
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
 use cast::{row_w, Caster, InstanceRec};
@@ -255,6 +268,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             help: "start each ray from its neighbour's hit (§III.D)",
         },
         ParamDoc {
+            key: "near_cull",
+            default: "on",
+            help: "draw the near set front to back in growing batches, testing each near leaf (or mesh) against the depth drawn so far through a pyramid, as hzb does, and skipping the hidden ones (not in the paper; off: one draw, §II)",
+        },
+        ParamDoc {
             key: "payoff",
             default: "on",
             help: "abandon a frame whose rays would take longer than drawing it directly, and draw runs of frames as frustum does while lzb frames are slower than such direct frames (not in the paper; lazy mode only: off, and refused, with mode=naive, whose frames are approximate)",
@@ -278,6 +296,8 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "pvl_leaves",
         "pvl_entries_triangles",
         "pvl_triangles",
+        "near_culled_units",
+        "near_culled_triangles",
         crate::payoff::COUNTERS[0],
         crate::payoff::COUNTERS[1],
         crate::direct::COUNTER,
@@ -354,6 +374,8 @@ pub struct LzbOptions {
     /// Abandon frames whose rays do not pay, and draw frames directly while they do not
     /// (lazy mode only).
     pub payoff: bool,
+    /// Occlusion-cull the near set front to back (not in the paper).
+    pub near_cull: bool,
 }
 
 impl Default for LzbOptions {
@@ -402,6 +424,7 @@ impl LzbOptions {
             coherence: p.flag("coherence", true)?,
             pvl_triangles: p.choice("pvl", &["leaves", "triangles"], "leaves")? == "triangles",
             payoff: p.flag("payoff", mode == Mode::Lazy)?,
+            near_cull: p.flag("near_cull", true)?,
         };
         o.check()?;
         Ok(o)
@@ -538,11 +561,17 @@ pub struct Lzb {
     direct: Option<DirectFrames>,
     /// Octrees built shallower than asked, to fit their reference budget.
     shallower_octrees: usize,
+    /// The near pass's depth pyramid (`near_cull=on`), made at the frame's size when first
+    /// needed.
+    pyramid: Option<ZPyramid>,
     /// Wall time of a rasterized triangle and of a ray, last measured (`plane=cost`).
     ns_per_triangle: f64,
     ns_per_ray: f64,
     /// The share of the far leaves' triangles last frame's PVL held (`plane=cost`).
     pvl_share: f64,
+    /// The share of the near leaves' triangle references the near pass last drew
+    /// (`plane=cost`; 1 without `near_cull`).
+    near_share: f64,
     /// Wall ns per far leaf outside rays and rasterization, last measured (`plane=cost`).
     ns_per_far_leaf: f64,
 }
@@ -791,7 +820,9 @@ impl Lzb {
             ns_per_triangle: PRIOR_NS_PER_TRIANGLE,
             ns_per_ray: PRIOR_NS_PER_RAY,
             pvl_share: PRIOR_PVL_SHARE,
+            near_share: 1.0,
             ns_per_far_leaf: PRIOR_NS_PER_FAR_LEAF,
+            pyramid: None,
             build_time: start.elapsed(),
         })
     }
@@ -884,6 +915,230 @@ impl Lzb {
         });
     }
 
+    /// Step 3 (§II): the near leaves `near` (`(instance, leaf)` pairs of `instances`) drawn
+    /// with the z-buffer, in one draw.
+    fn draw_near(
+        &mut self,
+        view: &View,
+        frame: &mut Frame,
+        instances: &[(InstanceRec, ItemId, Mat4)],
+        near: &[(u32, u32)],
+        stats: &mut FrameStats,
+    ) {
+        let t = Instant::now();
+        // A mesh instance all of whose leaves are near is drawn whole (its vertices shared, no
+        // list to build); the others by their near leaves' triangles.
+        let (mut near_groups, mut whole) = (Vec::new(), Vec::new());
+        for (inst, r) in group_ranges(near) {
+            let (rec, base, _) = instances[inst as usize];
+            match &self.accel[rec.node.index()] {
+                Accel::Mesh { leaves, .. } if r.len() == *leaves as usize => whole.push((rec, base)),
+                _ => near_groups.push((rec, base, r)),
+            }
+        }
+        let near_leaves: Vec<u32> = near.iter().map(|&(_, l)| l).collect();
+        let mut pool = Vec::new();
+        let near_lists = self.emit(&near_groups, &near_leaves, &mut pool, false);
+        let whole_triangles: usize = whole
+            .iter()
+            .filter_map(|(rec, _)| self.scene.node(rec.node).mesh().map(|m| m.triangle_count()))
+            .sum();
+        stats
+            .counters
+            .add("near_triangles", (pool.len() + whole_triangles) as u64);
+        stats.phases.add(Phase::Other, t.elapsed());
+        let mut draws = make_draws(&self.scene, view, &near_lists, &pool);
+        draws.extend(whole.iter().filter_map(|(rec, base)| {
+            Some(Draw {
+                mesh: self.scene.node(rec.node).mesh()?,
+                triangles: DrawTriangles::All,
+                clip_from_object: view.clip_from_object(&rec.world_from_object),
+                first_item: *base,
+            })
+        }));
+        crate::rasterize(&mut self.raster, view, frame, &draws, stats);
+        drop(draws);
+    }
+
+    /// Step 3 with `near_cull=on` (not in the paper): the near set drawn front to back in
+    /// growing batches, each unit (a near leaf, or a mesh instance of a single leaf) tested
+    /// against the depth drawn so far, as `hzb` tests its boxes (Greene's face
+    /// test through a pyramid updated after each batch); hidden units are not drawn. The near
+    /// z-buffer ends the same (a hidden unit draws no pixel), so are the unfinished pixels
+    /// and the frame. Counters `near_culled_units`, `near_culled_triangles`.
+    ///
+    /// # Errors
+    /// [`RenderError::Raster`] when the pyramid cannot be allocated.
+    fn draw_near_culled(
+        &mut self,
+        view: &View,
+        frame: &mut Frame,
+        instances: &[(InstanceRec, ItemId, Mat4)],
+        near: &[(u32, u32)],
+        stats: &mut FrameStats,
+        payoff: &mut FramePayoff,
+    ) -> Result<()> {
+        let t = Instant::now();
+        let (w, h) = (view.width(), view.height());
+        // The units, by their least view distance: a mesh instance of one leaf (drawn whole),
+        // or runs of consecutive near leaves of an instance (neighbours in the octree's
+        // depth-first order, so close in space) of up to NEAR_UNIT triangle references.
+        let mut units: Vec<NearUnit> = Vec::new();
+        for (inst, r) in group_ranges(near) {
+            let (rec, _, clip) = &instances[inst as usize];
+            let Accel::Mesh { octree, leaves, .. } = &self.accel[rec.node.index()] else {
+                continue;
+            };
+            let w_row = row_w(clip);
+            let whole = r.len() == *leaves as usize && *leaves == 1;
+            let mut at = r.start;
+            while at < r.end {
+                let (mut end, mut count, mut bounds) = (at, 0u32, Aabb::EMPTY);
+                while end < r.end && (end == at || count < NEAR_UNIT) {
+                    let on = &octree.nodes()[near[end].1 as usize];
+                    count += on.count;
+                    bounds = bounds.union(on.bounds);
+                    end += 1;
+                }
+                if whole {
+                    count = self
+                        .scene
+                        .node(rec.node)
+                        .mesh()
+                        .map_or(0, |m| m.triangle_count() as u32);
+                }
+                units.push(NearUnit {
+                    distance: near_distance(w_row, &bounds),
+                    inst,
+                    leaves: at as u32..end as u32,
+                    whole,
+                    count,
+                    bounds,
+                });
+                at = end;
+            }
+        }
+        units.sort_unstable_by(|a, b| a.distance.total_cmp(&b.distance));
+        let fits = |p: &ZPyramid| p.width() == w && p.height() == h;
+        let mut pyramid = match self.pyramid.take() {
+            Some(p) if fits(&p) => p,
+            _ => ZPyramid::new(w, h)?,
+        };
+        pyramid.clear();
+        let eye = view.camera().eye;
+        let mut eyes: Vec<Option<Vec3>> = vec![None; instances.len()];
+        let (mut tested, mut culled_units, mut culled_triangles, mut near_triangles) = (0u64, 0u64, 0u64, 0u64);
+        let mut pyramid_time = Duration::ZERO;
+        let mut counts = PyramidCounts::default();
+        let mut batch_triangles = NEAR_FIRST_BATCH;
+        let mut next = 0;
+        let mut first = true;
+        stats.phases.add(Phase::Other, t.elapsed());
+        while next < units.len() {
+            let t = Instant::now();
+            // Gather a batch: the next units not hidden behind what is drawn.
+            let (mut pairs, mut whole, mut rect) = (Vec::new(), Vec::new(), None::<PixelRect>);
+            let mut gathered = 0usize;
+            while next < units.len() && gathered < batch_triangles {
+                let NearUnit {
+                    inst,
+                    ref leaves,
+                    whole: is_whole,
+                    count,
+                    bounds: b,
+                    ..
+                } = units[next];
+                next += 1;
+                let (rec, base, clip) = &instances[inst as usize];
+                if !first && payoff.test() {
+                    tested += 1;
+                    let e = *eyes[inst as usize]
+                        .get_or_insert_with(|| rec.world_from_object.inverse().transform_point3(eye));
+                    let occlusion = Occlusion {
+                        frame,
+                        pyramid: &pyramid,
+                        how: PyramidTest {
+                            global: true,
+                            hierarchical: true,
+                        },
+                        far_depth: view.far_depth(),
+                    };
+                    if occlusion.box_hidden(clip, &b, e, &mut counts) {
+                        culled_units += 1;
+                        culled_triangles += u64::from(count);
+                        payoff.saved(u64::from(count));
+                        continue;
+                    }
+                }
+                if let Some(r) = screen_rect(clip, &b, w, h) {
+                    rect = Some(rect.map_or(r, |a| PixelRect {
+                        x0: a.x0.min(r.x0),
+                        y0: a.y0.min(r.y0),
+                        x1: a.x1.max(r.x1),
+                        y1: a.y1.max(r.y1),
+                    }));
+                }
+                if is_whole {
+                    whole.push((*rec, *base));
+                } else {
+                    pairs.extend(near[leaves.start as usize..leaves.end as usize].iter().copied());
+                }
+                gathered += count as usize;
+            }
+            // Draw it: index lists per instance (each triangle once), whole meshes whole.
+            pairs.sort_unstable();
+            let groups: Vec<_> = group_ranges(&pairs)
+                .into_iter()
+                .map(|(inst, r)| {
+                    let (rec, base, _) = instances[inst as usize];
+                    (rec, base, r)
+                })
+                .collect();
+            let leaves: Vec<u32> = pairs.iter().map(|&(_, l)| l).collect();
+            let mut pool = Vec::new();
+            let lists = self.emit(&groups, &leaves, &mut pool, false);
+            let mut draws = make_draws(&self.scene, view, &lists, &pool);
+            draws.extend(whole.iter().filter_map(|(rec, base)| {
+                Some(Draw {
+                    mesh: self.scene.node(rec.node).mesh()?,
+                    triangles: DrawTriangles::All,
+                    clip_from_object: view.clip_from_object(&rec.world_from_object),
+                    first_item: *base,
+                })
+            }));
+            let submitted = pool.len()
+                + whole
+                    .iter()
+                    .filter_map(|(rec, _)| self.scene.node(rec.node).mesh().map(|m| m.triangle_count()))
+                    .sum::<usize>();
+            near_triangles += submitted as u64;
+            stats.phases.add(Phase::Other, t.elapsed());
+            let raster_before = stats.phases.get(Phase::Raster);
+            crate::rasterize(&mut self.raster, view, frame, &draws, stats);
+            let raster_time = stats.phases.get(Phase::Raster).saturating_sub(raster_before);
+            payoff.rasterized(submitted as u64, raster_time, false);
+            drop(draws);
+            // The pyramid over what the batch drew, for the next batch's tests.
+            if next < units.len() {
+                let t = Instant::now();
+                if let Some(r) = rect {
+                    pyramid.update(frame, r);
+                }
+                pyramid_time += t.elapsed();
+            }
+            first = false;
+            batch_triangles = (batch_triangles * 2).min(NEAR_MAX_BATCH);
+        }
+        stats.phases.add(Phase::DepthStructure, pyramid_time);
+        stats.boxes_tested += tested;
+        stats.boxes_culled += culled_units;
+        stats.counters.add("near_triangles", near_triangles);
+        stats.counters.add("near_culled_units", culled_units);
+        stats.counters.add("near_culled_triangles", culled_triangles);
+        self.pyramid = Some(pyramid);
+        Ok(())
+    }
+
     /// Builds index lists for `(key, leaf)` pairs grouped by key (consecutive), one draw per
     /// instance, each triangle once (stamps).
     fn emit(
@@ -925,6 +1180,22 @@ impl Lzb {
         }
         out
     }
+}
+
+/// What the near pass tests as one box (`near_cull=on`).
+struct NearUnit {
+    /// Its least view distance.
+    distance: f32,
+    /// Its instance.
+    inst: u32,
+    /// Its leaves: a range of the frame's near `(instance, leaf)` pairs.
+    leaves: std::ops::Range<u32>,
+    /// The instance's mesh has one leaf: drawn whole.
+    whole: bool,
+    /// Its triangle references.
+    count: u32,
+    /// The union of its leaves' boxes.
+    bounds: Aabb,
 }
 
 /// One draw per instance list of the pool.
@@ -1127,6 +1398,7 @@ impl Renderer for Lzb {
                 pixels,
                 self.ns_per_triangle,
                 self.ns_per_ray,
+                self.near_share,
                 self.pvl_share,
                 self.ns_per_far_leaf,
                 ctx.near,
@@ -1159,40 +1431,13 @@ impl Renderer for Lzb {
             .sum();
         stats.phases.add(Phase::Cull, t.elapsed());
 
-        // Step 3: local rendering of S_near with the z-buffer.
-        let t = Instant::now();
-        // A mesh instance all of whose leaves are near is drawn whole (its vertices shared, no
-        // list to build); the others by their near leaves' triangles.
-        let (mut near_groups, mut whole) = (Vec::new(), Vec::new());
-        for (inst, r) in group_ranges(&near) {
-            let (rec, base, _) = instances[inst as usize];
-            match &self.accel[rec.node.index()] {
-                Accel::Mesh { leaves, .. } if r.len() == *leaves as usize => whole.push((rec, base)),
-                _ => near_groups.push((rec, base, r)),
-            }
+        // Step 3: local rendering of S_near with the z-buffer (occlusion-culled front to back
+        // with `near_cull=on`).
+        if self.opts.near_cull {
+            self.draw_near_culled(view, frame, &instances, &near, &mut stats, &mut payoff)?;
+        } else {
+            self.draw_near(view, frame, &instances, &near, &mut stats);
         }
-        let near_leaves: Vec<u32> = near.iter().map(|&(_, l)| l).collect();
-        let mut pool = Vec::new();
-        let near_lists = self.emit(&near_groups, &near_leaves, &mut pool, false);
-        let whole_triangles: usize = whole
-            .iter()
-            .filter_map(|(rec, _)| self.scene.node(rec.node).mesh().map(|m| m.triangle_count()))
-            .sum();
-        stats
-            .counters
-            .add("near_triangles", (pool.len() + whole_triangles) as u64);
-        stats.phases.add(Phase::Other, t.elapsed());
-        let mut draws = make_draws(&self.scene, view, &near_lists, &pool);
-        draws.extend(whole.iter().filter_map(|(rec, base)| {
-            Some(Draw {
-                mesh: self.scene.node(rec.node).mesh()?,
-                triangles: DrawTriangles::All,
-                clip_from_object: view.clip_from_object(&rec.world_from_object),
-                first_item: *base,
-            })
-        }));
-        crate::rasterize(&mut self.raster, view, frame, &draws, &mut stats);
-        drop(draws);
 
         // Step 4: the unfinished pixels: nothing drawn nearer than the plane.
         let t = Instant::now();
@@ -1370,6 +1615,14 @@ impl Renderer for Lzb {
             if submitted >= MIN_RATE_TRIANGLES {
                 self.ns_per_triangle = blend(self.ns_per_triangle, raster.as_nanos() as f64 / submitted as f64);
             }
+            // The near pass's share, from a near set large enough to say (`near_cull=on`).
+            let (drawn, culled) = (
+                stats.counters.get("near_triangles"),
+                stats.counters.get("near_culled_triangles"),
+            );
+            if self.opts.near_cull && drawn + culled >= MIN_RATE_TRIANGLES {
+                self.near_share = 0.5 * (self.near_share + drawn as f64 / (drawn + culled) as f64);
+            }
             let pvl = stats.counters.get("pvl_triangles");
             if far_triangles > 0 && !naive {
                 // An empty PVL is a measurement too (a share of 0), unlike a zero time.
@@ -1408,6 +1661,7 @@ impl Renderer for Lzb {
         self.accel.iter().map(Accel::memory_bytes).sum::<usize>()
             + self.stamps.iter().map(|s| s.capacity() * 4).sum::<usize>()
             + self.raster.memory_bytes()
+            + self.pyramid.as_ref().map_or(0, ZPyramid::memory_bytes)
     }
 
     fn is_conservative(&self) -> bool {
@@ -1426,7 +1680,7 @@ impl crate::direct::tests::ForceDirect for Lzb {
 
 #[cfg(test)]
 mod tests {
-    use super::cost_plane;
+    use super::*;
 
     /// Ten leaves of 1,000 triangles at distances 1..=10; coarse rays hitting at 1..=10 (and
     /// one missing), each standing for 100 pixels.
@@ -1440,6 +1694,7 @@ mod tests {
             1100.0,
             ns_per_triangle,
             ns_per_ray,
+            1.0,
             0.5,
             100.0,
             0.1,
@@ -1459,15 +1714,64 @@ mod tests {
             .map(|d| (d as f32, if d <= 5 { 10 } else { 100_000 }))
             .collect();
         let hits: Vec<Option<f32>> = (1..=10).map(|d| Some(d as f32 + 0.5)).collect();
-        let z = cost_plane(&leaves, &hits, 1000.0, 100.0, 2000.0, 0.5, 100.0, 0.1, 1000.0);
+        let z = cost_plane(&leaves, &hits, 1000.0, 100.0, 2000.0, 1.0, 0.5, 100.0, 0.1, 1000.0);
         assert_eq!(z, 5.5);
     }
 
     /// No leaf and no hit: nothing costs anything; the plane is the near plane.
+    /// `near_cull=on`: with every leaf near, the units behind a wall are not drawn, and the
+    /// frame is the one drawn without culling (and `zbuffer`'s).
+    #[test]
+    fn near_cull_skips_what_the_near_pass_hides() {
+        use occult_core::{Affine3A, Instance, SceneBuilder, Vec3};
+        // A wall of 12,800 triangles at z = 0 hiding another one at z = -2, both 4 × 4.
+        let mut b = SceneBuilder::new();
+        let grid = b.add_mesh("grid", crate::test_grid(80)).expect("a grid");
+        let at = |z: f32| Instance {
+            parent_from_child: Affine3A::from_translation(Vec3::new(-2.0, -2.0, z))
+                * Affine3A::from_scale(Vec3::splat(4.0)),
+            child: grid,
+        };
+        let root = b.add_group("walls", vec![at(0.0), at(-2.0)]).expect("a group");
+        let scene = Arc::new(b.build(root).expect("a scene"));
+        let (view, _) = crate::test_view(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 96, 64);
+        let options = RenderOptions::default();
+        let mut reference = Frame::new(96, 64).expect("a frame");
+        crate::zbuffer::ZBuffer::new(scene.clone(), &options)
+            .expect("zbuffer")
+            .render(&view, &mut reference)
+            .expect("a frame");
+        for near_cull in [true, false] {
+            let opts = LzbOptions {
+                plane: Plane::Static,
+                plane_fraction: 1.0,
+                payoff: false,
+                near_cull,
+                ..LzbOptions::default()
+            };
+            let mut lzb = Lzb::new(scene.clone(), &options, &opts).expect("lzb builds");
+            let mut frame = Frame::new(96, 64).expect("a frame");
+            let stats = lzb.render(&view, &mut frame).expect("a frame");
+            assert!(frame.same_visibility(&reference), "near_cull={near_cull}");
+            assert_eq!(stats.counters.get("far_leaves"), 0, "every leaf near");
+            let culled = stats.counters.get("near_culled_triangles");
+            if near_cull {
+                assert!(culled > 0, "the far wall is hidden");
+                assert!(
+                    stats.triangles_submitted < 2 * 12_800 - 4096,
+                    "{} submitted",
+                    stats.triangles_submitted
+                );
+            } else {
+                assert_eq!(culled, 0);
+            }
+        }
+    }
+
     #[test]
     fn nothing_in_view_puts_the_plane_at_the_near_plane() {
         assert_eq!(
-            cost_plane(&[], &[None, None], 100.0, 1.0, 1.0, 0.5, 1.0, 0.1, 10.0),
+            cost_plane(&[], &[None, None], 100.0, 1.0, 1.0, 1.0, 0.5, 1.0, 0.1, 10.0),
             0.1
         );
     }
