@@ -386,7 +386,7 @@ impl Choice {
             self.unplain = if paid_plainly { 0 } else { self.unplain + 1 };
             let n = self.unweighed.len() as f64;
             let mean = self.unweighed.iter().map(|u| u.0.as_secs_f64()).sum::<f64>() / n.max(1.0);
-            if cannot_pay || ((!tests_paid || self.unplain >= 2) && total.as_secs_f64() >= 0.5 * mean) {
+            if (cannot_pay || !tests_paid || self.unplain >= 2) && total.as_secs_f64() >= 0.5 * mean {
                 self.direct_left = FIRST_MEASURED;
             }
             if self.unweighed.len() == DIRECT_KEPT {
@@ -574,6 +574,10 @@ pub(crate) mod tests {
         let mut c = Choice::default();
         c.culled(20 * MS, 1000, true, false, true);
         assert!(c.take_direct(), "a first culled frame that cannot pay");
+        let mut c = Choice::default();
+        c.culled(20 * MS, 1000, true, true, false);
+        c.culled(5 * MS, 1000, true, false, true);
+        assert!(!c.take_direct(), "unless small beside the frames before");
     }
 
     /// The hidden triangles of a view: some behind the front row, never one that a pixel of

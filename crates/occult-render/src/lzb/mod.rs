@@ -1050,7 +1050,9 @@ impl Lzb {
                 } = units[next];
                 next += 1;
                 let (rec, base, clip) = &instances[inst as usize];
-                if !first && payoff.test() {
+                // Not weighed by the in-frame payoff's stop rule: it weighs the rays, and a
+                // frame's coarse rays and first batch come before any gain of these tests.
+                if !first {
                     tested += 1;
                     let e = *eyes[inst as usize]
                         .get_or_insert_with(|| rec.world_from_object.inverse().transform_point3(eye));
