@@ -915,6 +915,18 @@ impl Lzb {
         });
     }
 
+    /// Reserves `n` stamps no triangle holds yet and returns the first (the stamps are reset
+    /// when they would run out).
+    fn reserve_stamps(&mut self, n: u32) -> u32 {
+        if self.stamp >= u32::MAX - n {
+            self.stamps.iter_mut().for_each(|s| s.fill(0));
+            self.stamp = 0;
+        }
+        let first = self.stamp + 1;
+        self.stamp += n;
+        first
+    }
+
     /// Step 3 (§II): the near leaves `near` (`(instance, leaf)` pairs of `instances`) drawn
     /// with the z-buffer, in one draw.
     fn draw_near(
@@ -938,7 +950,7 @@ impl Lzb {
         }
         let near_leaves: Vec<u32> = near.iter().map(|&(_, l)| l).collect();
         let mut pool = Vec::new();
-        let near_lists = self.emit(&near_groups, &near_leaves, &mut pool, false);
+        let near_lists = self.emit(&near_groups, &near_leaves, &mut pool, false, None);
         let whole_triangles: usize = whole
             .iter()
             .filter_map(|(rec, _)| self.scene.node(rec.node).mesh().map(|m| m.triangle_count()))
@@ -1027,6 +1039,7 @@ impl Lzb {
         pyramid.clear();
         let eye = view.camera().eye;
         let mut eyes: Vec<Option<Vec3>> = vec![None; instances.len()];
+        let first_stamp = self.reserve_stamps(instances.len() as u32);
         let (mut tested, mut culled_units, mut culled_triangles, mut near_triangles) = (0u64, 0u64, 0u64, 0u64);
         let mut pyramid_time = Duration::ZERO;
         let mut counts = PyramidCounts::default();
@@ -1088,8 +1101,11 @@ impl Lzb {
                 gathered += count as usize;
             }
             // Draw it: index lists per instance (each triangle once), whole meshes whole.
+            // An instance's stamp is the frame's: what an earlier batch listed is not again.
             pairs.sort_unstable();
-            let groups: Vec<_> = group_ranges(&pairs)
+            let ranges = group_ranges(&pairs);
+            let stamps: Vec<u32> = ranges.iter().map(|&(inst, _)| first_stamp + inst).collect();
+            let groups: Vec<_> = ranges
                 .into_iter()
                 .map(|(inst, r)| {
                     let (rec, base, _) = instances[inst as usize];
@@ -1098,7 +1114,7 @@ impl Lzb {
                 .collect();
             let leaves: Vec<u32> = pairs.iter().map(|&(_, l)| l).collect();
             let mut pool = Vec::new();
-            let lists = self.emit(&groups, &leaves, &mut pool, false);
+            let lists = self.emit(&groups, &leaves, &mut pool, false, Some(&stamps));
             let mut draws = make_draws(&self.scene, view, &lists, &pool);
             draws.extend(whole.iter().filter_map(|(rec, base)| {
                 Some(Draw {
@@ -1142,24 +1158,26 @@ impl Lzb {
     }
 
     /// Builds index lists for `(key, leaf)` pairs grouped by key (consecutive), one draw per
-    /// instance, each triangle once (stamps).
+    /// instance, each triangle once (stamps). `stamps_of`: the stamp of each group, reserved
+    /// by the caller ([`Lzb::reserve_stamps`]) so that several calls skip what earlier ones
+    /// listed for the same instance; `None`: a fresh stamp per group.
     fn emit(
         &mut self,
         groups: &[(InstanceRec, ItemId, std::ops::Range<usize>)],
         leaves: &[u32],
         pool: &mut Vec<u32>,
         triangles: bool,
+        stamps_of: Option<&[u32]>,
     ) -> Vec<(InstanceRec, ItemId, std::ops::Range<usize>)> {
         let mut out = Vec::with_capacity(groups.len());
-        for (rec, first_item, range) in groups {
+        for (g, (rec, first_item, range)) in groups.iter().enumerate() {
+            let stamp = match stamps_of {
+                Some(s) => s[g],
+                None => self.reserve_stamps(1),
+            };
             let Accel::Mesh { octree, .. } = &self.accel[rec.node.index()] else {
                 continue;
             };
-            if self.stamp == u32::MAX {
-                self.stamps.iter_mut().for_each(|s| s.fill(0));
-                self.stamp = 0;
-            }
-            self.stamp += 1;
             let stamps = &mut self.stamps[rec.node.index()];
             let start = pool.len();
             for &leaf in &leaves[range.clone()] {
@@ -1170,8 +1188,8 @@ impl Lzb {
                     octree.leaf_primitives(leaf)
                 };
                 for &t in list {
-                    if stamps[t as usize] != self.stamp {
-                        stamps[t as usize] = self.stamp;
+                    if stamps[t as usize] != stamp {
+                        stamps[t as usize] = stamp;
                         pool.push(t);
                     }
                 }
@@ -1585,7 +1603,7 @@ impl Renderer for Lzb {
             };
             stats.counters.add(entries, pvl_leaves.len() as u64);
             let mut pool = Vec::new();
-            let lists = self.emit(&groups, &pvl_leaves, &mut pool, self.opts.pvl_triangles);
+            let lists = self.emit(&groups, &pvl_leaves, &mut pool, self.opts.pvl_triangles, None);
             stats.counters.add("pvl_triangles", pool.len() as u64);
             stats.phases.add(Phase::Other, t.elapsed());
             let draws = make_draws(&self.scene, view, &lists, &pool);
