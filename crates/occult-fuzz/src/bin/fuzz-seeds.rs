@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 use occult_core::Vec3;
 use occult_fuzz::{with_companion, Target};
 use occult_scenes::load::load_file;
+use occult_scenes::save::glb_container as glb;
 
 /// Triangles kept in an excerpt.
 const EXCERPT_TRIANGLES: [usize; 2] = [4, 200];
@@ -371,28 +372,4 @@ fn bounds(positions: &[Vec3]) -> (Vec3, Vec3) {
         .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), &p| {
             (lo.min(p), hi.max(p))
         })
-}
-
-/// A GLB of `json` and `bin`, each chunk padded to 4 bytes.
-fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
-    let mut json = json.as_bytes().to_vec();
-    while !json.len().is_multiple_of(4) {
-        json.push(b' ');
-    }
-    let mut bin = bin.to_vec();
-    while !bin.len().is_multiple_of(4) {
-        bin.push(0);
-    }
-    let total = 12 + 8 + json.len() + 8 + bin.len();
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&json);
-    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"BIN\0");
-    out.extend_from_slice(&bin);
-    out
 }

@@ -6,6 +6,7 @@ use std::path::Path;
 
 use occult_core::Vec3;
 use occult_scenes::load::{load_file, LoadError, LoadedScene};
+use occult_scenes::save::glb_container as glb;
 
 /// A grid of `n` × `n` quads on integer corners `0..=n` in x and y, z = x + y.
 fn grid(n: u32) -> (Vec<[u32; 3]>, Vec<u32>) {
@@ -25,30 +26,6 @@ fn grid(n: u32) -> (Vec<[u32; 3]>, Vec<u32>) {
         }
     }
     (corners, indices)
-}
-
-/// A GLB of a JSON document and a binary chunk, padded to 4 bytes.
-fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
-    let pad = |mut v: Vec<u8>, with: u8| {
-        while !v.len().is_multiple_of(4) {
-            v.push(with);
-        }
-        v
-    };
-    let json = pad(json.as_bytes().to_vec(), b' ');
-    let bin = pad(bin.to_vec(), 0);
-    let total = (12 + 8 + json.len() + 8 + bin.len()) as u32;
-    let mut out = Vec::new();
-    out.extend(b"glTF");
-    out.extend(2u32.to_le_bytes());
-    out.extend(total.to_le_bytes());
-    out.extend((json.len() as u32).to_le_bytes());
-    out.extend(b"JSON");
-    out.extend(json);
-    out.extend((bin.len() as u32).to_le_bytes());
-    out.extend(b"BIN\0");
-    out.extend(bin);
-    out
 }
 
 /// How one test file stores its grid.
