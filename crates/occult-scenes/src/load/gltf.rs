@@ -685,10 +685,17 @@ impl<'a> GltfLoader<'a> {
         let id = if triangles.is_empty() {
             None
         } else {
-            let mut remap = vec![u32::MAX; positions.len()];
-            let mut built =
-                compact_mesh(&positions, &triangles, &mut remap).map_err(self.core_error(mesh_part.clone()))?;
-            if let Some(colors) = mesh_colors(&color_runs, triangles.len()) {
+            let triangle_count = triangles.len();
+            let mut built = if uses_every_vertex(&triangles, positions.len()) {
+                // Nothing to drop (the common case: exporters write the vertices a primitive
+                // uses): the arrays become the mesh as they are, without the compaction's copies.
+                occult_core::Mesh::new(positions, triangles)
+            } else {
+                let mut remap = vec![u32::MAX; positions.len()];
+                compact_mesh(&positions, &triangles, &mut remap)
+            }
+            .map_err(self.core_error(mesh_part.clone()))?;
+            if let Some(colors) = mesh_colors(&color_runs, triangle_count) {
                 built = built.with_colors(colors).map_err(self.core_error(mesh_part.clone()))?;
             }
             Some(
@@ -933,6 +940,19 @@ impl<'a> GltfLoader<'a> {
     }
 }
 
+/// Whether `triangles` name every vertex of `0..vertex_count` (indices already checked to be in
+/// range). One pass over the indices, one byte per vertex.
+fn uses_every_vertex(triangles: &[[u32; 3]], vertex_count: usize) -> bool {
+    if triangles.len().saturating_mul(3) < vertex_count {
+        return false;
+    }
+    let mut used = vec![false; vertex_count];
+    for &i in triangles.iter().flatten() {
+        used[i as usize] = true;
+    }
+    used.iter().all(|&u| u)
+}
+
 /// Per-mesh colors from the primitives' materials: `None` when no primitive has a material,
 /// one color when all agree, per triangle otherwise (primitives without one get white, the
 /// glTF default material's base color).
@@ -1016,6 +1036,14 @@ fn component(data_type: DataType, normalized: bool, bytes: &[u8]) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_vertex_used_or_not() {
+        assert!(uses_every_vertex(&[[0, 2, 1]], 3));
+        assert!(!uses_every_vertex(&[[0, 2, 1]], 4));
+        assert!(!uses_every_vertex(&[[0, 0, 1], [1, 0, 1]], 3));
+        assert!(uses_every_vertex(&[], 0));
+    }
 
     #[test]
     fn percent_decoding() {
