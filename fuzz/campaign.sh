@@ -19,7 +19,7 @@ targets=("$@")
 models="${OCCULT_MODELS:-$(cd .. && pwd)/shared/models}"
 if [ ! -d "$work/seeds" ]; then
   # The test fixtures are the files the loader tests write under target/tmp/occult-loaders.
-  nice -n 19 cargo test --release -p occult-scenes --test scenes loaders >/dev/null
+  nice -n 19 cargo test --release -p occult-scenes --test scenes -- loaders meshopt >/dev/null
   nice -n 19 cargo run --release -p occult-fuzz --bin fuzz-seeds -- "$work/seeds" "$models" target/tmp/occult-loaders
 fi
 # No sanitizer: the targets are safe Rust but for the meshopt decoder (C++, which fuzz/asan.sh
