@@ -11,6 +11,7 @@
 //! - [`path`]: [`parse_path`] turns a path spec into views ([`PathSpec`] checks one before the
 //!   scene exists, [`ViewSpec`] names one view); [`path::write_path_json`] saves them.
 //! - [`load`]: [`load::load_file`] reads a model file.
+//! - [`save`]: writes a mesh as OBJ, PLY or GLB (round trips, load benchmarks, fuzz seeds).
 //!
 //! ```
 //! use occult_scenes::{parse_path, parse_spec};
@@ -25,6 +26,7 @@
 pub mod generate;
 pub mod load;
 pub mod path;
+pub mod save;
 pub mod spec;
 
 pub use generate::{GenerateError, Generator, GeneratorInfo, ParamInfo};

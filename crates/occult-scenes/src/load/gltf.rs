@@ -33,15 +33,22 @@
 //! `max(c / 32767, -1)`, an `UNSIGNED_SHORT` `c / 65535`, likewise for bytes (127, 255); a plain
 //! integer is its value. The node transforms that the quantizer wrote then place the mesh, as for
 //! any mesh. The extension is accepted whether or not the file lists it, and whether or not it
-//! requires it. A file that requires another extension the `gltf` crate does not enable (Draco
-//! or meshopt compression) is refused by its validation ([`LoadError::Parse`]).
+//! requires it.
+//!
+//! `EXT_meshopt_compression` (gltfpack's `-c`): a compressed buffer view is decoded (module
+//! `meshopt`) the first time an accessor reads it, and stands for the view's bytes from then on;
+//! fallback buffers are never read. A file that requires another extension the `gltf` crate does
+//! not enable (`KHR_draco_mesh_compression`: see `docs/loaders.md` for why it has no decoder
+//! here) is refused by its validation ([`LoadError::Parse`]).
 //!
 //! Warnings (one line per kind, with a count and the first place): point and line primitives,
 //! primitives without `POSITION`, triangle index counts not a multiple of 3, singular and
 //! projective node transforms, and a file with several scenes.
 
+use std::cell::OnceCell;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use std::rc::Rc;
 
 use ::gltf::accessor::{DataType, Dimensions};
 use ::gltf::buffer::Source;
@@ -49,7 +56,9 @@ use ::gltf::mesh::Mode;
 use ::gltf::{Accessor, Document, Semantic};
 use occult_core::{Affine3A, Instance, Mat4, MeshColors, NodeId, Rgba8, SceneBuilder, Vec3, Vec4};
 
+use super::meshopt::{self, CompressedView};
 use super::{compact_mesh, file_stem, linear_to_srgb_u8, read_bytes, unit_to_u8, LoadError, LoadedScene, Location};
+use super::{Disk, ExternalFiles};
 use super::{WarningKind, Warnings};
 
 /// Deepest glTF node chain accepted; the scene model allows 64 levels in all (root group and
@@ -58,8 +67,9 @@ const MAX_NODE_DEPTH: usize = 60;
 
 /// Required extensions read here although the `gltf` crate's validation refuses them.
 /// `KHR_mesh_quantization` only widens the component types attributes may have; positions of
-/// every integer type are read (and dequantized) by `component`.
-const EXTENSIONS_READ_HERE: [&str; 1] = ["KHR_mesh_quantization"];
+/// every integer type are read (and dequantized) by `component`. `EXT_meshopt_compression` views
+/// are decoded by `GltfLoader::view_bytes`.
+const EXTENSIONS_READ_HERE: [&str; 2] = ["KHR_mesh_quantization", meshopt::EXTENSION];
 
 const SEVERAL_SCENES: WarningKind = WarningKind {
     one: "the file has several scenes; one is loaded",
@@ -99,11 +109,12 @@ const INDEX_REMAINDER: WarningKind = WarningKind {
 /// the scene holds no triangle; [`LoadError::Core`] for a node hierarchy with a cycle or deeper
 /// than the scene model allows.
 pub fn load_gltf(path: &Path) -> Result<LoadedScene, LoadError> {
-    gltf_from_bytes(path, &read_bytes(path)?)
+    gltf_from_bytes(path, &read_bytes(path)?, &Disk)
 }
 
-/// [`load_gltf`] of bytes in memory; `path` names them and locates external buffers.
-pub(super) fn gltf_from_bytes(path: &Path, data: &[u8]) -> Result<LoadedScene, LoadError> {
+/// [`load_gltf`] of bytes in memory; `path` names them and locates external buffers, which
+/// are read from `files`.
+pub(super) fn gltf_from_bytes(path: &Path, data: &[u8], files: &dyn ExternalFiles) -> Result<LoadedScene, LoadError> {
     check_glb_header(path, data)?;
     let gltf = ::gltf::Gltf::from_slice_without_validation(data).map_err(|e| document_error(path, e))?;
     let mut json = gltf.document.into_json();
@@ -111,7 +122,7 @@ pub(super) fn gltf_from_bytes(path: &Path, data: &[u8]) -> Result<LoadedScene, L
         .retain(|name| !EXTENSIONS_READ_HERE.contains(&name.as_str()));
     check_position_references(path, &json)?;
     let document = Document::from_json(json).map_err(|e| document_error(path, e))?;
-    let buffers = load_buffers(path, &document, gltf.blob)?;
+    let buffers = load_buffers(path, &document, gltf.blob, files)?;
     let mut loader = GltfLoader::new(path, &document, buffers);
     let root = loader.scene_root()?;
     let GltfLoader { builder, warnings, .. } = loader;
@@ -238,10 +249,18 @@ fn document_error(path: &Path, error: ::gltf::Error) -> LoadError {
     }
 }
 
-/// The bytes of every buffer of the document, in order.
-fn load_buffers(path: &Path, document: &Document, mut blob: Option<Vec<u8>>) -> Result<Vec<Vec<u8>>, LoadError> {
+/// The bytes of every buffer of the document, in order. Buffers naming the same file share
+/// one read of it, so that memory stays bounded by the files' sizes however many buffers name
+/// them.
+fn load_buffers(
+    path: &Path,
+    document: &Document,
+    mut blob: Option<Vec<u8>>,
+    files: &dyn ExternalFiles,
+) -> Result<Vec<Rc<Vec<u8>>>, LoadError> {
     let folder = path.parent().unwrap_or(Path::new(""));
     let mut buffers = Vec::new();
+    let mut read_files: HashMap<PathBuf, Rc<Vec<u8>>> = HashMap::new();
     for buffer in document.buffers() {
         let buffer_error = |uri: &str, message: String| LoadError::Buffer {
             path: path.to_path_buf(),
@@ -249,31 +268,48 @@ fn load_buffers(path: &Path, document: &Document, mut blob: Option<Vec<u8>>) -> 
             uri: shorten_uri(uri),
             message,
         };
+        if meshopt::is_fallback(buffer.extension_value(meshopt::EXTENSION)) {
+            // Stands in for compressed views only, which name their data elsewhere; it may have
+            // no data at all, and is never read (a view reading it is past its end).
+            buffers.push(Rc::new(Vec::new()));
+            continue;
+        }
         let (uri, data) = match buffer.source() {
             Source::Bin => {
                 let uri = "<GLB BIN chunk>";
                 (
                     uri,
-                    blob.take()
-                        .ok_or_else(|| buffer_error(uri, "the file has no BIN chunk".into()))?,
+                    Rc::new(
+                        blob.take()
+                            .ok_or_else(|| buffer_error(uri, "the file has no BIN chunk".into()))?,
+                    ),
                 )
             }
             Source::Uri(uri) if uri.starts_with("data:") => {
                 // Base64 decoding by the `gltf` crate; no file access for data URIs.
                 let data = ::gltf::buffer::Data::from_source(buffer.source(), None)
                     .map_err(|e| buffer_error(uri, format!("bad data URI: {e}")))?;
-                (uri, data.0)
+                (uri, Rc::new(data.0))
             }
             Source::Uri(uri) => {
                 let file = resolve_uri(folder, uri).map_err(|message| buffer_error(uri, message))?;
-                if !file.is_file() {
+                if !files.is_file(&file) {
                     return Err(buffer_error(
                         uri,
                         format!("{} is not a file that can be read", file.display()),
                     ));
                 }
-                let data = std::fs::read(&file)
-                    .map_err(|e| buffer_error(uri, format!("cannot read {}: {e}", file.display())))?;
+                let data = match read_files.get(&file) {
+                    Some(data) => Rc::clone(data),
+                    None => {
+                        let data = files
+                            .read(&file)
+                            .map_err(|e| buffer_error(uri, format!("cannot read {}: {e}", file.display())))?;
+                        let data = Rc::new(data);
+                        read_files.insert(file, Rc::clone(&data));
+                        data
+                    }
+                };
                 (uri, data)
             }
         };
@@ -354,8 +390,11 @@ enum Visit {
 struct GltfLoader<'a> {
     path: &'a Path,
     document: &'a Document,
-    buffers: Vec<Vec<u8>>,
-    /// All buffer bytes: no accessor may allocate more elements than this many bytes hold.
+    buffers: Vec<Rc<Vec<u8>>>,
+    /// Per buffer view: its `EXT_meshopt_compression` bytes once decoded.
+    decoded_views: Vec<OnceCell<Vec<u8>>>,
+    /// All buffer bytes and the declared sizes of the compressed views (a file named by several buffers counted once): no accessor may
+    /// allocate more elements than this many bytes hold.
     buffer_bytes: usize,
     builder: SceneBuilder,
     /// Per glTF mesh: not built yet, or built (`None` when it has no triangle).
@@ -365,12 +404,25 @@ struct GltfLoader<'a> {
 }
 
 impl<'a> GltfLoader<'a> {
-    fn new(path: &'a Path, document: &'a Document, buffers: Vec<Vec<u8>>) -> Self {
-        let buffer_bytes = buffers.iter().map(Vec::len).sum();
+    fn new(path: &'a Path, document: &'a Document, buffers: Vec<Rc<Vec<u8>>>) -> Self {
+        let mut counted = std::collections::HashSet::new();
+        let buffer_bytes = buffers
+            .iter()
+            .filter(|b| counted.insert(Rc::as_ptr(b)))
+            .map(|b| b.len())
+            .sum::<usize>()
+            .saturating_add(
+                document
+                    .views()
+                    .filter_map(|v| CompressedView::parse(v.extension_value(meshopt::EXTENSION)?).ok())
+                    .map(|compressed| compressed.decoded_len())
+                    .fold(0usize, usize::saturating_add),
+            );
         Self {
             path,
             document,
             buffers,
+            decoded_views: vec![OnceCell::new(); document.views().len()],
             buffer_bytes,
             builder: SceneBuilder::new(),
             meshes: vec![None; document.meshes().len()],
@@ -633,10 +685,17 @@ impl<'a> GltfLoader<'a> {
         let id = if triangles.is_empty() {
             None
         } else {
-            let mut remap = vec![u32::MAX; positions.len()];
-            let mut built =
-                compact_mesh(&positions, &triangles, &mut remap).map_err(self.core_error(mesh_part.clone()))?;
-            if let Some(colors) = mesh_colors(&color_runs, triangles.len()) {
+            let triangle_count = triangles.len();
+            let mut built = if uses_every_vertex(&triangles, positions.len()) {
+                // Nothing to drop (the common case: exporters write the vertices a primitive
+                // uses): the arrays become the mesh as they are, without the compaction's copies.
+                occult_core::Mesh::new(positions, triangles)
+            } else {
+                let mut remap = vec![u32::MAX; positions.len()];
+                compact_mesh(&positions, &triangles, &mut remap)
+            }
+            .map_err(self.core_error(mesh_part.clone()))?;
+            if let Some(colors) = mesh_colors(&color_runs, triangle_count) {
                 built = built.with_colors(colors).map_err(self.core_error(mesh_part.clone()))?;
             }
             Some(
@@ -777,12 +836,46 @@ impl<'a> GltfLoader<'a> {
         Ok(values)
     }
 
-    /// The bytes of a buffer view, checked against its buffer.
+    /// The bytes of a buffer view, checked against its buffer; a compressed view's decoded
+    /// bytes (decoded on first use).
     fn view_bytes(
         &self,
         view: &::gltf::buffer::View<'_>,
         location: &impl Fn() -> Location,
     ) -> Result<&[u8], LoadError> {
+        if let Some(object) = view.extension_value(meshopt::EXTENSION) {
+            let cell = &self.decoded_views[view.index()];
+            if let Some(decoded) = cell.get() {
+                return Ok(decoded);
+            }
+            let bad = |message: String| LoadError::Parse {
+                path: self.path.to_path_buf(),
+                location: location(),
+                message: format!("buffer view {}: {message}", view.index()),
+            };
+            let compressed = CompressedView::parse(object).map_err(bad)?;
+            let source = self
+                .buffers
+                .get(compressed.buffer_index)
+                .and_then(|buffer| {
+                    let end = compressed.byte_offset.checked_add(compressed.byte_length)?;
+                    buffer.get(compressed.byte_offset..end)
+                })
+                .ok_or_else(|| LoadError::CountMismatch {
+                    path: self.path.to_path_buf(),
+                    location: location(),
+                    message: format!(
+                        "buffer view {}: {} bytes {}..+{} reach past the end of buffer {} (or there is no such buffer)",
+                        view.index(),
+                        meshopt::EXTENSION,
+                        compressed.byte_offset,
+                        compressed.byte_length,
+                        compressed.buffer_index
+                    ),
+                })?;
+            let decoded = compressed.decode(source).map_err(bad)?;
+            return Ok(cell.get_or_init(|| decoded));
+        }
         let buffer = &self.buffers[view.buffer().index()];
         view.offset()
             .checked_add(view.length())
@@ -845,6 +938,19 @@ impl<'a> GltfLoader<'a> {
         // In bounds: the last element ends at `end` <= bytes.len(), checked above.
         Ok((0..count).map(move |i| &bytes[offset + i * stride..offset + i * stride + element_size]))
     }
+}
+
+/// Whether `triangles` name every vertex of `0..vertex_count` (indices already checked to be in
+/// range). One pass over the indices, one byte per vertex.
+fn uses_every_vertex(triangles: &[[u32; 3]], vertex_count: usize) -> bool {
+    if triangles.len().saturating_mul(3) < vertex_count {
+        return false;
+    }
+    let mut used = vec![false; vertex_count];
+    for &i in triangles.iter().flatten() {
+        used[i as usize] = true;
+    }
+    used.iter().all(|&u| u)
 }
 
 /// Per-mesh colors from the primitives' materials: `None` when no primitive has a material,
@@ -930,6 +1036,14 @@ fn component(data_type: DataType, normalized: bool, bytes: &[u8]) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_vertex_used_or_not() {
+        assert!(uses_every_vertex(&[[0, 2, 1]], 3));
+        assert!(!uses_every_vertex(&[[0, 2, 1]], 4));
+        assert!(!uses_every_vertex(&[[0, 0, 1], [1, 0, 1]], 3));
+        assert!(uses_every_vertex(&[], 0));
+    }
 
     #[test]
     fn percent_decoding() {

@@ -16,7 +16,14 @@
 //! - PLY header lines that are no PLY statement (a bare line of text) are read as comments.
 //! - glTF `KHR_mesh_quantization`: integer positions, normalized or not, are dequantized (see
 //!   the `gltf` module); no warning, it is part of the format.
+//! - glTF `EXT_meshopt_compression` (gltfpack's `-c`): compressed buffer views are decoded with
+//!   meshoptimizer's codecs and filters (the `meshopt` module); no warning.
 //! - Points and lines, missing material libraries and textures, singular glTF nodes.
+//!
+//! ## Companion files
+//! The files a model names (OBJ `.mtl` libraries and their textures, glTF `.bin` buffers) are
+//! read through [`ExternalFiles`]: the disk ([`Disk`], regular files only) for [`load_file`]
+//! and [`load_bytes`], anything else (a map in memory, an archive) for [`load_bytes_with`].
 //!
 //! ```
 //! use occult_scenes::load::{load_bytes, load_file, LoadError};
@@ -86,6 +93,7 @@ use occult_core::{CoreError, Instance, Mesh, NodeId, Scene, SceneBuilder};
 use thiserror::Error;
 
 mod gltf;
+mod meshopt;
 mod obj;
 mod ply;
 
@@ -111,13 +119,81 @@ pub struct LoadedScene {
 /// # Errors
 /// As [`load_file`], except that `path` not existing is no error.
 pub fn load_bytes(path: &Path, bytes: &[u8]) -> Result<LoadedScene, LoadError> {
+    load_bytes_with(path, bytes, &Disk)
+}
+
+/// [`load_bytes`] with the files the model refers to (OBJ material libraries and textures,
+/// glTF `.bin` buffers) taken from `files` instead of the disk: a model held in memory with
+/// its companions, an archive, a fuzzer's input.
+///
+/// # Errors
+/// As [`load_bytes`]; a companion that `files` cannot give is what a missing file on disk is.
+pub fn load_bytes_with(path: &Path, bytes: &[u8], files: &dyn ExternalFiles) -> Result<LoadedScene, LoadError> {
     match Format::from_path(path) {
-        Some(Format::Obj) => obj::obj_from_bytes(path, bytes),
+        Some(Format::Obj) => obj::obj_from_bytes(path, bytes, files),
         Some(Format::Ply) => ply::ply_from_bytes(path, bytes),
-        Some(Format::Gltf) => self::gltf::gltf_from_bytes(path, bytes),
+        Some(Format::Gltf) => self::gltf::gltf_from_bytes(path, bytes, files),
         None => Err(LoadError::UnsupportedExtension {
             path: path.to_path_buf(),
         }),
+    }
+}
+
+/// Where a loader reads the files a model refers to: OBJ `.mtl` libraries (and the textures
+/// they name, only checked to exist) and glTF buffers given by a file URI. Paths are those the
+/// model names, resolved against the model's own path.
+pub trait ExternalFiles {
+    /// The whole content of the regular file at `path`.
+    ///
+    /// # Errors
+    /// An I/O error when there is no such file or it cannot be read.
+    fn read(&self, path: &Path) -> std::io::Result<Vec<u8>>;
+
+    /// Whether `path` names a regular file that [`ExternalFiles::read`] would read.
+    fn is_file(&self, path: &Path) -> bool;
+}
+
+/// The file system: what [`load_file`] and [`load_bytes`] read companions from. Only regular
+/// files are read (not devices or pipes such as `/dev/zero`, which a model could name and
+/// which never end).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Disk;
+
+impl ExternalFiles for Disk {
+    fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
+        let mut file = std::fs::File::open(path)?;
+        let metadata = file.metadata()?;
+        if !metadata.is_file() {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "not a regular file",
+            ));
+        }
+        // Bounded by the file's size (a file that grows while it is read is cut there).
+        let length = usize::try_from(metadata.len()).map_err(|_| std::io::ErrorKind::OutOfMemory)?;
+        let mut data = Vec::new();
+        data.try_reserve_exact(length)
+            .map_err(|_| std::io::ErrorKind::OutOfMemory)?;
+        std::io::Read::read_to_end(&mut std::io::Read::take(&mut file, metadata.len()), &mut data)?;
+        Ok(data)
+    }
+
+    fn is_file(&self, path: &Path) -> bool {
+        path.is_file()
+    }
+}
+
+/// Files held in memory, by the path a model names them with (joined to the model's folder,
+/// as the loaders resolve them: `models/a.mtl` for `mtllib a.mtl` in `models/a.obj`).
+impl<S: std::hash::BuildHasher> ExternalFiles for std::collections::HashMap<PathBuf, Vec<u8>, S> {
+    fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
+        self.get(path)
+            .cloned()
+            .ok_or_else(|| std::io::ErrorKind::NotFound.into())
+    }
+
+    fn is_file(&self, path: &Path) -> bool {
+        self.contains_key(path)
     }
 }
 
@@ -382,7 +458,7 @@ impl LoadError {
 
 /// Reads a whole file.
 fn read_bytes(path: &Path) -> Result<Vec<u8>, LoadError> {
-    std::fs::read(path).map_err(|source| LoadError::Io {
+    Disk.read(path).map_err(|source| LoadError::Io {
         path: path.to_path_buf(),
         source,
     })

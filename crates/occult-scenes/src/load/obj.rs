@@ -26,13 +26,13 @@
 //! libraries that cannot be read, materials no library defines, unreadable `Kd` lines and
 //! missing texture files.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use occult_core::{MeshColors, Rgba8, Vec3};
 
 use super::{compact_mesh, fan_triangulate, file_stem, quoted, read_bytes, scene_of_meshes, unit_to_u8};
-use super::{LoadError, LoadedScene, Location, WarningKind, Warnings, SHORT_FACE};
+use super::{Disk, ExternalFiles, LoadError, LoadedScene, Location, WarningKind, Warnings, SHORT_FACE};
 
 /// Textures named in a warning before "and N more".
 const LISTED_NAMES_MAX: usize = 5;
@@ -70,14 +70,15 @@ const MISSING_TEXTURES: WarningKind = WarningKind {
 /// [`LoadError::NonFinite`] for a NaN or infinite coordinate (also one that overflows `f32`);
 /// [`LoadError::Empty`] when the file has no face.
 pub fn load_obj(path: &Path) -> Result<LoadedScene, LoadError> {
-    obj_from_bytes(path, &read_bytes(path)?)
+    obj_from_bytes(path, &read_bytes(path)?, &Disk)
 }
 
-/// [`load_obj`] of bytes in memory; `path` names them and locates the `.mtl` files.
-pub(super) fn obj_from_bytes(path: &Path, data: &[u8]) -> Result<LoadedScene, LoadError> {
+/// [`load_obj`] of bytes in memory; `path` names them and locates the `.mtl` files, which are
+/// read from `files`.
+pub(super) fn obj_from_bytes(path: &Path, data: &[u8], files: &dyn ExternalFiles) -> Result<LoadedScene, LoadError> {
     let mut reader = ObjReader::new(path);
     reader.parse(data)?;
-    reader.finish()
+    reader.finish(files)
 }
 
 /// The triangles of one (object, material) pair, with global vertex indices.
@@ -281,7 +282,7 @@ impl<'p> ObjReader<'p> {
         index
     }
 
-    fn finish(mut self) -> Result<LoadedScene, LoadError> {
+    fn finish(mut self, files: &dyn ExternalFiles) -> Result<LoadedScene, LoadError> {
         let path = self.path;
         if let Some(forward) = self.forward {
             if forward.index as usize >= self.positions.len() {
@@ -308,7 +309,7 @@ impl<'p> ObjReader<'p> {
         }
 
         let mut warnings = std::mem::take(&mut self.warnings);
-        let colors = self.material_colors(&mut warnings);
+        let colors = self.material_colors(files, &mut warnings);
 
         let mut chunks_per_object = vec![0usize; self.object_names.len()];
         for chunk in &self.chunks {
@@ -343,15 +344,20 @@ impl<'p> ObjReader<'p> {
     }
 
     /// The diffuse color of each material named by `usemtl`, from the libraries named by
-    /// `mtllib`; what cannot be found becomes a warning.
-    fn material_colors(&self, warnings: &mut Warnings) -> Vec<Option<Rgba8>> {
+    /// `mtllib`; what cannot be found becomes a warning. A library named several times is read
+    /// once (the cost stays linear in the files' sizes).
+    fn material_colors(&self, files: &dyn ExternalFiles, warnings: &mut Warnings) -> Vec<Option<Rgba8>> {
         let folder = self.path.parent().unwrap_or(Path::new(""));
         let mut library = HashMap::new();
         let mut all_libraries_read = true;
+        let mut libraries_seen: HashSet<PathBuf> = HashSet::new();
         for (names, line) in &self.libraries {
-            for mtl_path in library_paths(folder, names) {
-                match std::fs::read(&mtl_path) {
-                    Ok(data) => parse_mtl(&mtl_path, &data, &mut library, warnings),
+            for mtl_path in library_paths(files, folder, names) {
+                if !libraries_seen.insert(mtl_path.clone()) {
+                    continue;
+                }
+                match files.read(&mtl_path) {
+                    Ok(data) => parse_mtl(files, &mtl_path, &data, &mut library, warnings),
                     Err(error) => {
                         all_libraries_read = false;
                         warnings.add(
@@ -394,9 +400,9 @@ fn intern(names: &mut Vec<String>, index_by_name: &mut HashMap<String, usize>, n
 
 /// The library files of a `mtllib` statement: the whole rest of the line when that file exists
 /// (names with spaces), otherwise each whitespace-separated name.
-fn library_paths(folder: &Path, names: &str) -> Vec<PathBuf> {
+fn library_paths(files: &dyn ExternalFiles, folder: &Path, names: &str) -> Vec<PathBuf> {
     let whole = folder.join(names.replace('\\', "/"));
-    if whole.is_file() || !names.contains(char::is_whitespace) {
+    if files.is_file(&whole) || !names.contains(char::is_whitespace) {
         return vec![whole];
     }
     names
@@ -407,10 +413,18 @@ fn library_paths(folder: &Path, names: &str) -> Vec<PathBuf> {
 
 /// Reads the diffuse colors of an `.mtl` file into `library` and warns about texture files that
 /// do not exist (textures are never loaded; the warning says the model will look different).
-fn parse_mtl(mtl_path: &Path, data: &[u8], library: &mut HashMap<String, Option<Rgba8>>, warnings: &mut Warnings) {
+fn parse_mtl(
+    files: &dyn ExternalFiles,
+    mtl_path: &Path,
+    data: &[u8],
+    library: &mut HashMap<String, Option<Rgba8>>,
+    warnings: &mut Warnings,
+) {
     let folder = mtl_path.parent().unwrap_or(Path::new(""));
     let mut current: Option<String> = None;
+    // In order of first mention; the set keeps the test linear in the number of statements.
     let mut missing_textures: Vec<String> = Vec::new();
+    let mut textures_seen: HashSet<String> = HashSet::new();
     for (line_index, line) in statement_lines(data) {
         let mut tokens = tokens_of(line);
         let Some(keyword) = tokens.next() else { continue };
@@ -450,7 +464,7 @@ fn parse_mtl(mtl_path: &Path, data: &[u8], library: &mut HashMap<String, Option<
                 // Options (`-s 1 1 1`, `-bm 0.5`) come first; the file name is last.
                 if let Some(name) = tokens.next_back() {
                     let name = String::from_utf8_lossy(name).replace('\\', "/");
-                    if !folder.join(&name).is_file() && !missing_textures.contains(&name) {
+                    if textures_seen.insert(name.clone()) && !files.is_file(&folder.join(&name)) {
                         missing_textures.push(name);
                     }
                 }
@@ -548,7 +562,7 @@ mod tests {
             .parse(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\nf 1 2 4\nv 1 1 0\n")
             .unwrap();
         assert_eq!(reader.chunks[0].triangles, vec![[0, 1, 2], [0, 1, 3]]);
-        let loaded = reader.finish().unwrap();
+        let loaded = reader.finish(&Disk).unwrap();
         assert_eq!(loaded.scene.item_count(), 2);
     }
 
@@ -556,7 +570,7 @@ mod tests {
     fn forward_reference_past_the_end_names_its_line() {
         let mut reader = ObjReader::new(Path::new("t.obj"));
         reader.parse(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n").unwrap();
-        let error = reader.finish().unwrap_err().to_string();
+        let error = reader.finish(&Disk).unwrap_err().to_string();
         assert_eq!(error, "t.obj line 5: vertex index 9 is out of range (vertex count 3)");
     }
 

@@ -217,6 +217,45 @@ fn obj_missing_mtl_and_missing_texture_are_warnings() {
     assert!(loaded.warnings[0].contains("bricks.png"), "{}", loaded.warnings[0]);
 }
 
+/// A model may name any file as a companion; one that never ends (a device) must not hang the
+/// load or exhaust memory: only regular files are read.
+#[cfg(unix)]
+#[test]
+fn companions_that_are_devices_are_not_read() {
+    let dir = scratch("companions_that_are_devices_are_not_read");
+    let obj = "mtllib /dev/zero\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    let loaded = load_ok(&write(&dir, "device.obj", obj));
+    assert_eq!(loaded.scene.item_count(), 1);
+    assert!(
+        loaded.warnings.iter().any(|w| w.contains("/dev/zero")),
+        "{:?}",
+        loaded.warnings
+    );
+    let gltf = quad_gltf(r#"{"uri": "file:///dev/zero", "byteLength": 60}"#);
+    let e = load_err(&write(&dir, "device.gltf", gltf));
+    assert!(matches!(e, LoadError::Buffer { .. }), "{e}");
+}
+
+/// Library and texture checks stay linear: a library named 2,000 times is read once, and
+/// 20,000 distinct missing textures make one warning listing a few of them.
+#[test]
+fn many_libraries_and_textures_stay_linear() {
+    let dir = scratch("many_libraries_and_textures_stay_linear");
+    let mtl: String = (0..20_000).map(|i| format!("map_Kd missing_{i}.png\n")).collect();
+    write(&dir, "big.mtl", format!("newmtl a\nKd 1 0 0\n{mtl}"));
+    let obj = format!(
+        "{}usemtl a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+        "mtllib big.mtl\n".repeat(2_000)
+    );
+    let loaded = load_ok(&write(&dir, "many.obj", obj));
+    assert_eq!(loaded.warnings.len(), 1, "{:?}", loaded.warnings);
+    assert!(
+        loaded.warnings[0].starts_with(&format!("{}: 20000 texture files", dir.join("big.mtl").display())),
+        "{}",
+        loaded.warnings[0]
+    );
+}
+
 // ---------------------------------------------------------------------------------------------
 // PLY round trips
 

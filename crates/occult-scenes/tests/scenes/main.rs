@@ -3,5 +3,6 @@
 
 mod generators;
 mod loaders;
+mod meshopt;
 mod models;
 mod paths;
