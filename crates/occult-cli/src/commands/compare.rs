@@ -35,7 +35,7 @@ struct RunOut<'a> {
     report: &'a CompareReport,
 }
 
-const CSV_HEADER: [&str; 14] = [
+const CSV_HEADER: [&str; 15] = [
     "scene",
     "triangles",
     "renderer",
@@ -46,6 +46,7 @@ const CSV_HEADER: [&str; 14] = [
     "triangles_visible",
     "identical",
     "item_error",
+    "paper_error",
     "psnr_db",
     "covered_pixels",
     "image_complexity",
@@ -233,7 +234,11 @@ fn report_text(scene: &SceneSummary, path: &str, r: &CompareReport) -> String {
                 "-".to_string()
             } else {
                 let psnr = x.min_psnr_db.map_or(String::new(), |p| format!(", {p:.1} dB"));
-                format!("{:.3}%{psnr}", 100.0 * x.mean_item_error)
+                format!(
+                    "{:.3}% (paper {:.3}%){psnr}",
+                    100.0 * x.mean_item_error,
+                    100.0 * x.mean_paper_error
+                )
             };
             vec![
                 name,
@@ -382,6 +387,7 @@ fn csv_rows(runs: &[(SceneSummary, CompareReport)]) -> Vec<Vec<String>> {
                         String::new()
                     },
                     opt_field(f.item_error),
+                    opt_field(f.paper_error),
                     opt_field(f.psnr_db),
                 ];
                 row.extend(image_fields(i));

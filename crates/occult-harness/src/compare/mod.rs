@@ -269,7 +269,7 @@ pub fn compare(
         render_view(&mut contestants, view, view_index, config.peak_rss.as_ref())?;
         checks.measure_image(&scene, view, &contestants[reference_index.unwrap_or(0)].frame);
         if let Some(reference_index) = reference_index {
-            checks.check_view(&scene, view, &mut contestants, reference_index);
+            checks.check_view(&scene, view, view_index, &mut contestants, reference_index)?;
         }
         progress(CompareProgress::Frame {
             index: view_index,
@@ -491,6 +491,11 @@ struct Checks {
     image: ImageMeasures,
     /// The items visible in the measured frame of the current view, sorted.
     visible: Vec<ItemId>,
+    /// Options of the supersampled reference.
+    options: RenderOptions,
+    /// The supersampled reference of the paper's criterion ([`oracle::paper_error`]): made
+    /// when a frame first differs from the reference.
+    fine: Option<(Box<dyn Renderer>, Frame)>,
 }
 
 impl Checks {
@@ -509,7 +514,35 @@ impl Checks {
                 projected_pixels: config.image_complexity.then(|| Vec::with_capacity(view_count)),
             },
             visible: Vec::new(),
+            options: config.options.clone(),
+            fine: None,
         })
+    }
+
+    /// Renders the supersampled reference of `view` ([`oracle::SUPERSAMPLE`] times the frame's
+    /// size on each axis, smaller where that would exceed [`oracle::MAX_FINE_PIXELS`]).
+    fn draw_fine(&mut self, scene: &Arc<Scene>, view: &View, view_index: usize) -> Result<()> {
+        let label = "zbuffer (supersampled, the paper's criterion)";
+        let (w, h) = oracle::fine_size(view.width(), view.height());
+        let fits = |f: &Frame| f.width() == w && f.height() == h;
+        if !self.fine.as_ref().is_some_and(|(_, f)| fits(f)) {
+            let r = Algorithm::ZBUFFER
+                .build(scene.clone(), &self.options)
+                .map_err(|source| CompareError::Build {
+                    algorithm: label.into(),
+                    source,
+                })?;
+            self.fine = Some((r, Frame::new(w, h)?));
+        }
+        let fine_view =
+            View::new(*view.camera(), w, h).map_err(|source| CompareError::BadView { view_index, source })?;
+        let (r, f) = self.fine.as_mut().expect("made above");
+        r.render(&fine_view, f).map_err(|source| CompareError::Render {
+            algorithm: label.into(),
+            view_index,
+            source,
+        })?;
+        Ok(())
     }
 
     /// The image measures of `view` from `measured_frame` (the reference's or the first
@@ -525,11 +558,22 @@ impl Checks {
 
     /// Compares every renderer's frame of `view` with the reference's (identical, or item
     /// error and PSNR of the shaded colors), then times the oracle on the visible set.
-    fn check_view(&mut self, scene: &Scene, view: &View, contestants: &mut [Contestant], reference_index: usize) {
+    ///
+    /// # Errors
+    /// [`CompareError::Build`] or [`CompareError::Render`] of the supersampled reference.
+    fn check_view(
+        &mut self,
+        scene: &Arc<Scene>,
+        view: &View,
+        view_index: usize,
+        contestants: &mut [Contestant],
+        reference_index: usize,
+    ) -> Result<()> {
         let (before, rest) = contestants.split_at_mut(reference_index);
         let (reference_c, after) = rest.split_first_mut().expect("reference_index is in range");
         let reference_frame = &reference_c.frame;
         let mut reference_shaded = false;
+        let mut fine_drawn = false;
         for c in before.iter_mut().chain(after.iter_mut()) {
             let record = c.records.last_mut().expect("a record was just pushed");
             if c.frame.same_visibility(reference_frame) {
@@ -537,6 +581,13 @@ impl Checks {
                 continue;
             }
             record.item_error = Some(item_error(&c.frame, reference_frame));
+            if !fine_drawn {
+                self.draw_fine(scene, view, view_index)?;
+                fine_drawn = true;
+            }
+            if let Some((_, fine)) = &self.fine {
+                record.paper_error = Some(oracle::paper_error(&c.frame, reference_frame, fine));
+            }
             if !reference_shaded {
                 self.shaded_reference.clone_from(reference_frame);
                 shade(&mut self.shaded_reference, scene, view);
@@ -558,6 +609,7 @@ impl Checks {
         if self.oracle_frame.same_visibility(reference_frame) {
             self.oracle_identical += 1;
         }
+        Ok(())
     }
 }
 
@@ -655,6 +707,7 @@ fn renderer_report(c: Contestant, is_reference: bool, b: &Baselines) -> Renderer
         memory_bytes_after_build: c.memory_bytes_after_build,
         peak_rss_bytes: c.peak_rss_bytes,
         mean_item_error: mean(errors.iter().copied(), frames),
+        mean_paper_error: mean(c.records.iter().map(|r| r.paper_error.unwrap_or(0.0)), frames),
         max_item_error: errors.iter().copied().fold(0.0, f64::max),
         min_psnr_db: c.records.iter().filter_map(|r| r.psnr_db).reduce(f64::min),
         phases: phase_means(&c.stats),

@@ -28,6 +28,11 @@ pub struct FrameRecord {
     /// When not identical: share of pixels covered in either frame whose item differs, in
     /// `[0, 1]`. `None` when identical.
     pub item_error: Option<f64>,
+    /// When not identical: the share of covered pixels that are wrong by the randomized
+    /// z-buffer paper's criterion (§4.1: a pixel is correct when it shows a triangle visible
+    /// somewhere in it; measured against a supersampled `zbuffer` frame, see
+    /// `oracle::paper_error`). `None` when identical.
+    pub paper_error: Option<f64>,
     /// When not identical: PSNR of the shaded color against the reference's, dB (`None` when
     /// identical, i.e. infinite).
     pub psnr_db: Option<f64>,
@@ -160,6 +165,9 @@ pub struct RendererReport {
     pub mean_item_error: f64,
     /// Largest per-frame share of differing covered pixels.
     pub max_item_error: f64,
+    /// Mean share of covered pixels wrong by the paper's criterion over all frames (0 for
+    /// identical frames; see [`FrameRecord::paper_error`]).
+    pub mean_paper_error: f64,
     /// Lowest per-frame color PSNR, dB; `None` when every frame is identical.
     pub min_psnr_db: Option<f64>,
     /// Mean time per phase, ms, in the order the renderer reports phases.

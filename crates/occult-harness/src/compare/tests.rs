@@ -1,8 +1,10 @@
 //! The comparison on a small scene of instanced cubes: line-ups, references, reports, errors.
 
 use super::*;
+use occult_core::NO_ITEM;
 use occult_core::{Affine3A, Camera, Instance, Mesh, SceneBuilder, Vec3, View};
 use occult_raster::Frame;
+use oracle::{fine_size, paper_error};
 
 /// A 6×6 grid of unit cubes (instanced) on a ground quad: cubes hide each other and the
 /// ground from most views.
@@ -229,6 +231,42 @@ fn views_that_see_nothing_are_fine() {
     let report = run(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], &[away]).unwrap();
     assert_eq!(report.oracle.as_ref().unwrap().triangles_visible, vec![0]);
     assert!(report.renderers.iter().all(|r| r.frames_identical == Some(1)));
+}
+
+/// The paper's criterion: a pixel is right when its item is visible somewhere in it (a
+/// subpixel of the supersampled reference shows it), or is the reference's own.
+#[test]
+fn paper_error_accepts_what_is_visible_in_the_pixel() {
+    let frame_of = |w: u32, h: u32, items: &[ItemId]| {
+        let mut f = Frame::new(w, h).expect("frame");
+        let (depth, ids) = f.buffers_mut();
+        for (k, &i) in items.iter().enumerate() {
+            ids[k] = i;
+            depth[k] = if i == NO_ITEM { 0.0 } else { 0.5 };
+        }
+        f
+    };
+    // Pixel 0 sees items 1 and 3 (and the background), pixel 1 only item 2.
+    let reference = frame_of(2, 1, &[1, 2]);
+    let fine = frame_of(4, 2, &[1, 3, 2, 2, 1, NO_ITEM, 2, 2]);
+    assert_eq!(paper_error(&reference, &reference, &fine), 0.0);
+    assert_eq!(
+        paper_error(&frame_of(2, 1, &[3, 4]), &reference, &fine),
+        0.5,
+        "3 is seen in pixel 0, 4 nowhere"
+    );
+    assert_eq!(
+        paper_error(&frame_of(2, 1, &[NO_ITEM, NO_ITEM]), &reference, &fine),
+        0.5,
+        "the background shows in pixel 0 only"
+    );
+    assert_eq!(
+        paper_error(&frame_of(2, 1, &[2, 1]), &reference, &fine),
+        1.0,
+        "each item is the other pixel's"
+    );
+    assert_eq!(fine_size(640, 480), (2560, 1920));
+    assert_eq!(fine_size(4000, 3000), (4000, 3000), "no room for subsamples");
 }
 
 #[test]

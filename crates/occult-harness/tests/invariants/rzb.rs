@@ -483,3 +483,72 @@ fn dynamic_updates_through_the_renderer_restore_the_frame() {
     let share = differing_share(&render(r.as_mut(), &view), &reference);
     assert!(share <= 0.03, "dynamic=on: {:.3}% differ", share * 100.0);
 }
+
+/// `occlude=on` (the default) skips boxes hidden behind what is drawn and splits large boxes
+/// that are not, sampling the visible parts at the box's density: it samples less where much
+/// is hidden (the city from its streets, the plant) and its error against `zbuffer` is not
+/// larger than `occlude=off`'s, per-pixel, with splats and with the Gaussian pass, with and
+/// without the large-triangle fallback (summed over every view: the frames differ only by
+/// which random samples are drawn).
+#[test]
+fn hidden_boxes_get_no_samples_and_the_error_does_not_grow() {
+    // (scene, path, much hidden)
+    let cases = [
+        ("city:blocks=4", "street:3", true),
+        ("city:blocks=4", "circle:2", false),
+        ("forest:trees=3,patches=3", "circle:2", false),
+        ("plant", "circle:2", false),
+        ("chessboard:n=200", "circle:2", false),
+        ("terrain", "flyover:2", false),
+    ];
+    let settings = ["", "d=3,", "large=off,", "recon=gauss,", "d=2,recon=gauss,large=off,"];
+    let mut hidden = 0u64;
+    let (mut on_error, mut off_error) = (0f64, 0f64);
+    for (spec, path, much_hidden) in cases {
+        let (mut on_samples, mut off_samples) = (0u64, 0u64);
+        // With the default settings (large triangles drawn first, then occluding).
+        let (mut on_default, mut off_default) = (0u64, 0u64);
+        let (scene, camera) = scene(spec);
+        let cameras = occult_scenes::path::parse_path(path, &scene, &camera).expect("valid path");
+        for s in settings {
+            let mut on = rzb(&scene, &format!("rzb:{s}seed=5,max_samples=4e6"), 2);
+            let mut off = rzb(&scene, &format!("rzb:{s}seed=5,max_samples=4e6,occlude=off"), 2);
+            for c in &cameras {
+                let view = View::new(*c, 160, 120).expect("valid view");
+                let reference = zbuffer_frame(&scene, &view);
+                let (mut fa, mut fb) = (
+                    Frame::new(160, 120).expect("frame"),
+                    Frame::new(160, 120).expect("frame"),
+                );
+                let sa = on.render(&view, &mut fa).expect("occlude=on renders");
+                let sb = off.render(&view, &mut fb).expect("occlude=off renders");
+                on_error += differing_share(&fa, &reference);
+                off_error += differing_share(&fb, &reference);
+                on_samples += sa.counters.get("samples_generated");
+                off_samples += sb.counters.get("samples_generated");
+                if s.is_empty() {
+                    on_default += sa.counters.get("samples_generated");
+                    off_default += sb.counters.get("samples_generated");
+                }
+                hidden += sa.counters.get("boxes_hidden");
+                assert_eq!(sb.counters.get("boxes_hidden"), 0, "occlude=off hid boxes");
+            }
+        }
+        // Split parts round their expected counts each, so a box's count may differ by a few.
+        assert!(
+            on_samples as f64 <= off_samples as f64 * 1.01 + 100.0,
+            "{spec} {path}: occlude=on sampled {on_samples} against {off_samples}"
+        );
+        if much_hidden {
+            assert!(
+                (on_default as f64) < 0.8 * off_default as f64,
+                "{spec} {path}: occlude=on sampled {on_default} against {off_default}"
+            );
+        }
+    }
+    assert!(hidden > 0, "no box was ever hidden");
+    assert!(
+        on_error <= off_error * 1.05 + 0.01,
+        "summed differing shares: occlude=on {on_error:.4}, off {off_error:.4}"
+    );
+}

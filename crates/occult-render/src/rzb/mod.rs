@@ -72,6 +72,16 @@
 //!   is set on every instance of it, up the DAG (O(height) per referencing instance).
 //!   `dynamic=on` samples by one tree descent per sample instead of the multinomial split over
 //!   lists.
+//! - Addition, `occlude=on` (the default; `off` is the paper's behaviour): the paper samples
+//!   every surface in view, hidden or not. Here the selected boxes are sampled nearest first,
+//!   in batches of growing size (the first about half a sample per pixel, then ×1.5); before
+//!   each batch a z-pyramid is rebuilt over the frame (the large triangles, the batches
+//!   before), and a box whose every sample would lose the depth test there gets none
+//!   ([`occluded`], Greene's test with margins for the samples' own rounding, splats and the
+//!   Gaussian pass's reach and tolerance). A box of at least `split` samples that is not
+//!   hidden is split into its octree node's parts (a box of instances: into the instances,
+//!   entered), each tested in turn and sampled at the box's density ([`split`]). Counters `boxes_hidden`, `samples_hidden` (expected samples
+//!   skipped), `boxes_split`. The error does not grow (tested against `occlude=off`).
 
 pub mod cache;
 pub mod recon;
@@ -82,8 +92,9 @@ pub mod structure;
 use std::sync::Arc;
 use std::time::Instant;
 
+use occult_core::{Aabb, Mat4, Vec3};
 use occult_core::{ItemId, Scene, View, NO_ITEM};
-use occult_raster::{keep_fragment, Frame, Rasterizer};
+use occult_raster::{keep_fragment, Frame, PixelRect, PyramidCounts, PyramidTest, Rasterizer, ZPyramid};
 use occult_spatial::SampleOctreeConfig;
 use rayon::prelude::*;
 
@@ -118,6 +129,8 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc { key: "backface", default: "auto", help: "reject back-facing samples (5.3.3): auto follows the rasterizer's back-face culling, on, off" },
         ParamDoc { key: "dynamic", default: "off", help: "sample from distribution trees (5.4) so that entries can be removed and inserted through Rzb::remove/insert" },
         ParamDoc { key: "max_samples", default: "1e9", help: "most samples per frame; beyond, counts are scaled down (counter samples_capped)" },
+        ParamDoc { key: "occlude", default: "on", help: "boxes sampled nearest first in batches; a box whose every sample would lose the depth test against what is drawn (large triangles, earlier batches, through a z-pyramid) gets none, and a large box that is not hidden is split into its octree parts, each tested and sampled at the box's density (not in the paper)" },
+        ParamDoc { key: "split", default: "128", help: "occlude=on: expected samples from which a box that is not hidden is split into its octree parts or entered instances, each tested in turn; 0 = never" },
     ],
     counters: &[
         "boxes_selected",
@@ -133,6 +146,9 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "cache_evictions",
         "cache_kib",
         "eps_milli",
+        "boxes_hidden",
+        "samples_hidden",
+        "boxes_split",
     ],
     conservative: false,
     build: |scene, options, params| Ok(Box::new(Rzb::with_options(scene, options, &RzbOptions::from_params(params)?)?)),
@@ -215,6 +231,12 @@ pub struct RzbOptions {
     /// Most samples per frame (≥ 1): beyond, every box's count is scaled down (counter
     /// `samples_capped`), so that a box at the near plane cannot stall a frame.
     pub max_samples: f64,
+    /// Addition: skip the boxes hidden behind what is already drawn (see [`occluded`]),
+    /// splitting large ones that are not ([`split`]).
+    pub occlude: bool,
+    /// `occlude`: a box that is not hidden, of at least this many expected samples, is split
+    /// into parts tested in turn (0: never).
+    pub split: f64,
 }
 
 impl Default for RzbOptions {
@@ -239,6 +261,8 @@ impl Default for RzbOptions {
             backface: Backface::Auto,
             max_samples: 1e9,
             dynamic: false,
+            occlude: true,
+            split: 128.0,
         }
     }
 }
@@ -279,7 +303,7 @@ impl RzbOptions {
             "off" => Backface::Off,
             _ => Backface::Auto,
         };
-        read_params!(params, o, { max_samples: "max_samples", dynamic: flag "dynamic" });
+        read_params!(params, o, { max_samples: "max_samples", dynamic: flag "dynamic", occlude: flag "occlude", split: "split" });
         o.validate()?;
         Ok(o)
     }
@@ -331,6 +355,9 @@ impl RzbOptions {
         }
         if !(self.cache_tolerance > 1.0 && self.cache_tolerance <= 16.0) {
             return bad("cache_tolerance", self.cache_tolerance.to_string(), "(1, 16]");
+        }
+        if !(self.split >= 0.0 && self.split.is_finite()) {
+            return bad("split", self.split.to_string(), "a number >= 0");
         }
         if !(self.max_samples >= 1.0 && self.max_samples <= 1e12) {
             return bad("max_samples", self.max_samples.to_string(), "1..=1e12");
@@ -402,6 +429,8 @@ pub struct Rzb {
     auto: Option<AutoEps>,
     frame_index: u64,
     scratch: Vec<(Vec<f32>, Vec<ItemId>)>,
+    /// `occlude=on`: the depth pyramid of the frame being sampled.
+    pyramid: Option<ZPyramid>,
     /// §5.4: for each DAG node, the (group, instance index, area scale) of the instances
     /// that reference it.
     referrers: Vec<Vec<(u32, u32, f64)>>,
@@ -451,6 +480,7 @@ impl Rzb {
             structures,
             frame_index: 0,
             scratch: Vec::new(),
+            pyramid: None,
             referrers,
         };
         if opts.dynamic {
@@ -604,6 +634,287 @@ struct Unit {
     len: usize,
 }
 
+/// Relative depth margin of [`occluded`]: a sample's depth is computed through its own chain
+/// of instance transforms, the box's corners through the composed matrix.
+const OCCLUDE_DEPTH_MARGIN: f32 = 1e-4;
+/// Pixel margin of [`occluded`], for the same rounding on screen.
+const OCCLUDE_PIXEL_MARGIN: f32 = 0.5;
+
+/// `occlude=on`: true when no sample of `job` can change `frame` (or, with `gauss`, the
+/// Gaussian pass's colors): every pixel a sample in its bounds (grown by `grow`, structure
+/// space, for quantized cached sets) may write holds a depth nearer than the box's nearest
+/// corner, as far as `pyramid` (up to date with `frame`) shows. A sample writes the pixel its
+/// projection falls in, or a `splat`-sided square around it; the Gaussian pass writes within
+/// `reach` pixels and keeps samples within `keep` of a pixel's view distance, so its depth
+/// bound is that much nearer. A box reaching the near plane is never hidden.
+///
+/// Skipping such a box leaves the frame as it would have been: its samples would all have
+/// lost the depth test there, and depth only grows while a frame is drawn. Other boxes'
+/// samples do not change (each box has its own generator); a box that is [`split`] is
+/// sampled by its parts' generators instead, at the same density.
+fn occluded(
+    pyramid: &ZPyramid,
+    frame: &Frame,
+    clip_from_structure: &Mat4,
+    b: &Aabb,
+    reach: Reach,
+    counts: &mut PyramidCounts,
+) -> bool {
+    let mut nearest = f32::NEG_INFINITY;
+    let (mut x0, mut x1, mut y0, mut y1) = (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY);
+    let (w, h) = (frame.width() as f32, frame.height() as f32);
+    for p in b.corners() {
+        let c = *clip_from_structure * p.extend(1.0);
+        if !c.is_finite() || c.w <= 0.0 || c.z * (1.0 + OCCLUDE_DEPTH_MARGIN) >= c.w {
+            return false;
+        }
+        let inv_w = 1.0 / c.w;
+        nearest = nearest.max(c.z * inv_w);
+        let x = (c.x * inv_w * 0.5 + 0.5) * w;
+        let y = (0.5 - c.y * inv_w * 0.5) * h;
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    // Samples outside the view are dropped.
+    if x1 + OCCLUDE_PIXEL_MARGIN < 0.0
+        || y1 + OCCLUDE_PIXEL_MARGIN < 0.0
+        || x0 - OCCLUDE_PIXEL_MARGIN > w
+        || y0 - OCCLUDE_PIXEL_MARGIN > h
+    {
+        return true;
+    }
+    // The pixels samples fall in (clamped as the splat clamps them), grown by the splat.
+    let pixel = |v: f32, n: f32| (v.clamp(0.0, n) as i64).min(n as i64 - 1);
+    let (before, after) = (reach.before as i64, reach.after as i64);
+    let span = |lo: f32, hi: f32, n: f32| {
+        let a = pixel(lo - OCCLUDE_PIXEL_MARGIN, n) - before;
+        let b = pixel(hi + OCCLUDE_PIXEL_MARGIN, n) + after + 1;
+        (a.clamp(0, n as i64) as u32, b.clamp(0, n as i64) as u32)
+    };
+    let (rx0, rx1) = span(x0, x1, w);
+    let (ry0, ry1) = span(y0, y1, h);
+    let rect = PixelRect {
+        x0: rx0,
+        y0: ry0,
+        x1: rx1,
+        y1: ry1,
+    };
+    let how = PyramidTest {
+        global: true,
+        hierarchical: true,
+    };
+    pyramid.occludes(
+        frame,
+        rect,
+        nearest * (1.0 + OCCLUDE_DEPTH_MARGIN) * reach.depth_factor,
+        how,
+        counts,
+    )
+}
+
+/// How far a sample's effect reaches from the pixel it falls in: `before` pixels left and up,
+/// `after` right and down, and how much nearer than the sample a pixel's depth must be
+/// (a factor ≥ 1 on reversed depth) for the sample to leave it unchanged.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Reach {
+    before: u32,
+    after: u32,
+    depth_factor: f32,
+}
+
+impl Reach {
+    /// A `splat`-sided square (§4.2), or with the Gaussian pass a `sigma` filter's 3σ support
+    /// and its visibility tolerance.
+    fn of(opts: &RzbOptions) -> Self {
+        let d = opts.splat;
+        let splat = Self {
+            before: (d - 1) / 2,
+            after: d - 1 - (d - 1) / 2,
+            depth_factor: 1.0,
+        };
+        match opts.recon {
+            Recon::Nearest => splat,
+            Recon::Gauss => {
+                let r = (3.0 * opts.sigma).ceil() as u32 + 1;
+                Self {
+                    before: splat.before.max(r),
+                    after: splat.after.max(r),
+                    depth_factor: 1.0 + opts.gauss_tolerance,
+                }
+            }
+        }
+    }
+}
+
+/// `occlude=on`: expected samples of the first batch, per pixel of the frame ...
+const FIRST_BATCH_PER_PIXEL: f64 = 0.5;
+/// ... and the factor from a batch to the next.
+const BATCH_GROWTH: f64 = 1.5;
+
+/// `occlude=on`: the parts of a selected box that failed its occlusion test, when it is the
+/// subtree of an inner octree node with at least `min_samples` expected samples: each child's
+/// subtree and the node's own entries, with their tight bounds, each sampled at the box's
+/// density (its share of the box's samples by area; depth accuracy and cached cells as the
+/// box's), so a part hidden behind what is drawn can be skipped while the visible ones are
+/// sampled as the whole box would have been. `None` for a box that cannot be split (a leaf, a
+/// node's own entries, a distribution tree's section).
+fn split(
+    scene: &Scene,
+    view: &View,
+    structures: &[Structure],
+    job: &select::Job,
+    min_samples: f64,
+) -> Option<Vec<select::Job>> {
+    if min_samples <= 0.0 || job.samples < min_samples {
+        return None;
+    }
+    let st = &structures[job.structure as usize];
+    if st.tree.is_some() {
+        return None;
+    }
+    let node = st.octree.nodes()[job.node as usize];
+    if job.own || node.is_leaf() {
+        return enter_instances(scene, view, structures, job);
+    }
+    if node.section() != job.range {
+        return None;
+    }
+    let area = |sec: &structure::Section| st.section_area(sec);
+    let whole = area(&structure::Section {
+        node: job.node,
+        own: false,
+        range: job.range.clone(),
+    });
+    if whole.is_nan() || whole <= 0.0 {
+        return None;
+    }
+    let mut parts = Vec::new();
+    let mut part = |sec: structure::Section, bounds: Aabb| {
+        let a = area(&sec);
+        if a > 0.0 && !bounds.is_empty() {
+            parts.push(select::Job {
+                node: sec.node,
+                own: sec.own,
+                range: sec.range,
+                bounds,
+                samples: job.samples * a / whole,
+                ..job.clone()
+            });
+        }
+    };
+    for c in node.children() {
+        let child = st.octree.nodes()[c as usize];
+        part(
+            structure::Section {
+                node: c,
+                own: false,
+                range: child.section(),
+            },
+            child.bounds,
+        );
+    }
+    if node.own_first < node.end {
+        part(
+            structure::Section {
+                node: job.node,
+                own: true,
+                range: node.own(),
+            },
+            node.own_bounds,
+        );
+    }
+    Some(parts)
+}
+
+/// [`split`] of a box that holds instances (a group's leaf or a node's own entries): each
+/// instance entered, as one box per orientation class of its child's structure, placed and
+/// numbered as the scene walk places it, at the box's density (the instance's share of the
+/// box's area). `None` for a box of triangles.
+fn enter_instances(
+    scene: &Scene,
+    view: &View,
+    structures: &[Structure],
+    job: &select::Job,
+) -> Option<Vec<select::Job>> {
+    let st = &structures[job.structure as usize];
+    let group = scene.node(occult_core::NodeId(job.structure));
+    if !matches!(group.kind(), occult_core::NodeKind::Group(_)) {
+        return None;
+    }
+    let whole = st.section_area(&structure::Section {
+        node: job.node,
+        own: job.own,
+        range: job.range.clone(),
+    });
+    if whole.is_nan() || whole <= 0.0 {
+        return None;
+    }
+    let at = crate::walk::Placed {
+        id: occult_core::NodeId(job.structure),
+        world_from_node: job.world_from_structure,
+        first_item: job.base,
+    };
+    let mut parts = Vec::new();
+    for &e in &st.octree.entries()[job.range.start as usize..job.range.end as usize] {
+        let inst = &group.instances()[e as usize];
+        let child = at.child_of(group, e as usize);
+        let cs = &structures[child.id.index()];
+        let share = structure::area_scale(&inst.parent_from_child) / whole;
+        let clip_from_structure = view.clip_from_object(&child.world_from_node);
+        let scale = structure::area_scale(&child.world_from_node).sqrt() as f32;
+        for root in cs.octree.roots().iter().flatten() {
+            let n = cs.octree.nodes()[*root as usize];
+            let sec = structure::Section {
+                node: *root,
+                own: false,
+                range: n.section(),
+            };
+            let a = cs.section_area(&sec) * share;
+            if a > 0.0 && !n.bounds.is_empty() {
+                parts.push(select::Job {
+                    structure: child.id.0,
+                    range: sec.range,
+                    node: *root,
+                    own: false,
+                    world_from_structure: child.world_from_node,
+                    clip_from_structure,
+                    base: child.first_item,
+                    bounds: n.bounds,
+                    samples: job.samples * a,
+                    z_min: job.z_min,
+                    scale,
+                });
+            }
+        }
+    }
+    Some(parts)
+}
+
+/// `occlude=on`: the boxes in `order` (nearest first) cut into batches of doubling expected
+/// samples (`samples` of a box), the first of about four samples per pixel of the frame's
+/// `pixels`: each batch is tested against the depth of the ones before, so the first holds
+/// the nearest surfaces and later ones are large enough that the pyramid's rebuild and the
+/// threads' merge stay small beside them.
+fn occlusion_batches(order: &[usize], samples: impl Fn(usize) -> f64, pixels: f64) -> Vec<std::ops::Range<usize>> {
+    let mut batches = Vec::new();
+    let (mut start, mut sum, mut target) = (0, 0.0, FIRST_BATCH_PER_PIXEL * pixels);
+    for (i, &k) in order.iter().enumerate() {
+        sum += samples(k);
+        if sum >= target {
+            batches.push(start..i + 1);
+            start = i + 1;
+            sum = 0.0;
+            target *= BATCH_GROWTH;
+        }
+    }
+    if start < order.len() || batches.is_empty() {
+        batches.push(start..order.len());
+    }
+    batches
+}
+
 /// The cache key of a selected box.
 fn job_key(job: &select::Job) -> cache::BoxKey {
     (job.structure, job.base, job.range.start, job.range.end)
@@ -641,7 +952,7 @@ impl Renderer for Rzb {
             Backface::On => true,
             Backface::Off => false,
         };
-        let sel = Selection::run(&self.scene, &self.structures, view, &self.opts, eps, backface);
+        let mut sel = Selection::run(&self.scene, &self.structures, view, &self.opts, eps, backface);
         let select_time = t_select.elapsed();
         stats.phases.add(Phase::Cull, select_time);
         stats.boxes_tested = sel.boxes_tested;
@@ -654,7 +965,9 @@ impl Renderer for Rzb {
 
         // §4 / §5.2 / §7.2: samples.
         let t_samples = Instant::now();
-        let expected: f64 = sel.jobs.iter().map(|j| j.samples).sum();
+        let mut jobs = std::mem::take(&mut sel.jobs);
+        let selected = jobs.len();
+        let expected: f64 = jobs.iter().map(|j| j.samples).sum();
         let cap = if expected > self.opts.max_samples {
             self.opts.max_samples / expected
         } else {
@@ -674,162 +987,258 @@ impl Renderer for Rzb {
         let consts = select::ViewConsts::new(view, self.opts.splat);
         let frame_index = self.frame_index;
         let tol = self.opts.cache_tolerance;
-        let mut hits = 0u64;
-        let mut sources = Vec::with_capacity(sel.jobs.len());
-        let mut to_build = Vec::new();
-        for (k, job) in sel.jobs.iter().enumerate() {
-            let key = (job.structure, job.base, job.range.start, job.range.end);
-            let src = match self.cache.as_mut() {
-                Some(c) => {
-                    if c.lookup(&key, job.z_min, frame_index) {
-                        hits += 1;
-                        Source::Hit
-                    } else if c.fits(job.samples * cap * (tol * tol) as f64) {
-                        to_build.push(k);
-                        Source::Built(to_build.len() - 1)
-                    } else {
-                        Source::Direct
-                    }
-                }
-                None => Source::Direct,
-            };
-            sources.push(src);
-        }
-        // §7.2: build the missing sets (parallel over boxes), at the density needed at
-        // z_min / tolerance, quantized to cells that project to at most one splat there.
-        let built: Vec<(Vec<CachedSample>, u64)> = self.raster.install(|| {
-            to_build
-                .par_iter()
-                .map(|&k| {
-                    let job = &sel.jobs[k];
-                    let mut rng = box_rng(sampler.seed, job);
-                    let n = sample_count(job.samples * cap * (tol * tol) as f64, &mut rng);
-                    let z = job.z_min / tol;
-                    let cell =
-                        (consts.splat as f64 * z as f64 / consts.focal_px) as f32 / job.scale.max(f32::MIN_POSITIVE);
-                    let place = sample::Place::new(job, sampler.eye, false);
-                    let mut points = Vec::with_capacity(n.min(1 << 24) as usize);
-                    sampler.generate(
-                        job.structure,
-                        job.range.clone(),
-                        sample::Part::of(job),
-                        n,
-                        &place,
-                        &mut rng,
-                        &mut |pl, p, _, item| {
-                            points.push((pl.job_from_space.transform_point3(p), item - job.base));
-                        },
-                    );
-                    let points = points.into_iter();
-                    (quantize(points, cell.max(f32::MIN_POSITIVE)), n)
-                })
-                .collect()
-        });
-        // Work units of at most PIECE samples: a direct box's pieces each have their own
-        // generator (seeded from the box and the piece index), so the frame does not depend on
-        // how units are spread over threads.
-        let mut units: Vec<Unit> = Vec::new();
-        for (k, (job, src)) in sel.jobs.iter().zip(&sources).enumerate() {
-            let n = match src {
-                Source::Direct => {
-                    let mut rng = box_rng(sampler.seed, job);
-                    sample_count(job.samples * cap, &mut rng)
-                }
-                Source::Hit => self.cache.as_ref().map_or(0, |c| c.samples(&job_key(job)).len() as u64),
-                Source::Built(b) => built[*b].0.len() as u64,
-            };
-            let mut first = 0u64;
-            let mut piece = 0u64;
-            while first < n {
-                let len = (n - first).min(PIECE);
-                units.push(Unit {
-                    job: k,
-                    piece,
-                    first: first as usize,
-                    len: len as usize,
-                });
-                first += len;
-                piece += 1;
-            }
-        }
-        // Contiguous runs of units, one per thread; run 0 draws into the frame, the others into
-        // scratch buffers merged afterwards under the (depth, item) rule.
         let (width, height) = (frame.width(), frame.height());
         let pixels = width as usize * height as usize;
-        let max_threads = (1usize << 30) / (pixels * 12).max(1);
-        let threads = self
-            .raster
-            .thread_count()
-            .clamp(1, max_threads.max(1))
-            .min(units.len().max(1));
-        let mut bounds: Vec<usize> = (0..=threads).map(|t| t * units.len() / threads).collect();
-        bounds.dedup();
-        if bounds.len() == 1 {
-            bounds.push(units.len());
-        }
-        let chunk_count = bounds.len() - 1;
-        self.scratch.truncate(chunk_count.saturating_sub(1));
-        while self.scratch.len() + 1 < chunk_count {
-            self.scratch.push((Vec::new(), Vec::new()));
-        }
-        let cache = self.cache.as_ref();
-        let (frame_depth, frame_items) = frame.buffers_mut();
-        let mut targets: Vec<Target<'_>> = Vec::with_capacity(chunk_count);
-        targets.push(Target {
-            depth: frame_depth,
-            items: frame_items,
-            width,
-            height,
-        });
-        for (d, i) in self.scratch.iter_mut() {
-            d.clear();
-            d.resize(pixels, 0.0);
-            i.clear();
-            i.resize(pixels, NO_ITEM);
+        // Addition (`occlude=on`): the boxes nearest first, in batches; a box every sample of
+        // which would lose the depth test against the frame as drawn so far (the large
+        // triangles, the batches before) gets none ([`occluded`]).
+        let order: Vec<usize> = if self.opts.occlude {
+            let mut o: Vec<usize> = (0..jobs.len()).collect();
+            o.sort_by(|&a, &b| jobs[a].z_min.total_cmp(&jobs[b].z_min).then(a.cmp(&b)));
+            o
+        } else {
+            (0..jobs.len()).collect()
+        };
+        let batches = if self.opts.occlude {
+            occlusion_batches(&order, |k| jobs[k].samples * cap, pixels as f64)
+        } else {
+            std::iter::once(0..order.len()).collect()
+        };
+        let mut pyramid = if self.opts.occlude {
+            let fits = |p: &ZPyramid| p.width() == width && p.height() == height;
+            if !self.pyramid.as_ref().is_some_and(fits) {
+                self.pyramid = Some(ZPyramid::new(width, height)?);
+            }
+            self.pyramid.take()
+        } else {
+            None
+        };
+        let reach = Reach::of(&self.opts);
+        let mut hidden = (0u64, 0f64);
+        let mut split_count = 0u64;
+        let mut pyramid_counts = PyramidCounts::default();
+        let mut hits = 0u64;
+        let mut sources: Vec<Option<Source>> = vec![None; jobs.len()];
+        let mut to_build: Vec<usize> = Vec::new();
+        let mut built: Vec<(Vec<CachedSample>, u64)> = Vec::new();
+        let mut units: Vec<Unit> = Vec::new();
+        let mut counts: Vec<SampleCounts> = Vec::new();
+        let batch_count = batches.len();
+        for (batch_index, batch) in batches.into_iter().enumerate() {
+            if let Some(p) = pyramid.as_mut() {
+                let t = Instant::now();
+                p.rebuild(frame);
+                stats.phases.add(Phase::DepthStructure, t.elapsed());
+            }
+            let (first_build, first_unit) = (to_build.len(), units.len());
+            // The batch's boxes, then the parts of those split (appended, tested in turn).
+            let mut work: Vec<usize> = order[batch].to_vec();
+            let mut accepted: Vec<usize> = Vec::with_capacity(work.len());
+            let mut next = 0;
+            while next < work.len() {
+                let k = work[next];
+                next += 1;
+                let job = &jobs[k];
+                if let Some(p) = &pyramid {
+                    // Cached sets are quantized to cells of at most a splat at the box's
+                    // distance, which may move a sample that far out of the box.
+                    let bounds = match self.cache {
+                        Some(_) => {
+                            let cell = (consts.splat as f64 * job.z_min as f64 / consts.focal_px) as f32
+                                / job.scale.max(f32::MIN_POSITIVE);
+                            Aabb::new(job.bounds.min - Vec3::splat(cell), job.bounds.max + Vec3::splat(cell))
+                        }
+                        None => job.bounds,
+                    };
+                    if occluded(p, frame, &job.clip_from_structure, &bounds, reach, &mut pyramid_counts) {
+                        hidden.0 += 1;
+                        hidden.1 += job.samples * cap;
+                        continue;
+                    }
+                    if let Some(parts) = split(&self.scene, view, &self.structures, job, self.opts.split) {
+                        split_count += 1;
+                        for part in parts {
+                            jobs.push(part);
+                            sources.push(None);
+                            work.push(jobs.len() - 1);
+                        }
+                        continue;
+                    }
+                }
+                let job = &jobs[k];
+                accepted.push(k);
+                let key = (job.structure, job.base, job.range.start, job.range.end);
+                let src = match self.cache.as_mut() {
+                    Some(c) => {
+                        if c.lookup(&key, job.z_min, frame_index) {
+                            hits += 1;
+                            Source::Hit
+                        } else if c.fits(job.samples * cap * (tol * tol) as f64) {
+                            to_build.push(k);
+                            Source::Built(to_build.len() - 1)
+                        } else {
+                            Source::Direct
+                        }
+                    }
+                    None => Source::Direct,
+                };
+                sources[k] = Some(src);
+            }
+            // §7.2: build the missing sets (parallel over boxes), at the density needed at
+            // z_min / tolerance, quantized to cells that project to at most one splat there.
+            let new_sets: Vec<(Vec<CachedSample>, u64)> = self.raster.install(|| {
+                to_build[first_build..]
+                    .par_iter()
+                    .map(|&k| {
+                        let job = &jobs[k];
+                        let mut rng = box_rng(sampler.seed, job);
+                        let n = sample_count(job.samples * cap * (tol * tol) as f64, &mut rng);
+                        let z = job.z_min / tol;
+                        let cell = (consts.splat as f64 * z as f64 / consts.focal_px) as f32
+                            / job.scale.max(f32::MIN_POSITIVE);
+                        let place = sample::Place::new(job, sampler.eye, false);
+                        let mut points = Vec::with_capacity(n.min(1 << 24) as usize);
+                        sampler.generate(
+                            job.structure,
+                            job.range.clone(),
+                            sample::Part::of(job),
+                            n,
+                            &place,
+                            &mut rng,
+                            &mut |pl, p, _, item| {
+                                points.push((pl.job_from_space.transform_point3(p), item - job.base));
+                            },
+                        );
+                        let points = points.into_iter();
+                        (quantize(points, cell.max(f32::MIN_POSITIVE)), n)
+                    })
+                    .collect()
+            });
+            built.extend(new_sets);
+            // Work units of at most PIECE samples: a direct box's pieces each have their own
+            // generator (seeded from the box and the piece index), so the frame does not depend
+            // on how units are spread over threads.
+            for &k in &accepted {
+                let (job, Some(src)) = (&jobs[k], &sources[k]) else {
+                    continue;
+                };
+                let n = match src {
+                    Source::Direct => {
+                        let mut rng = box_rng(sampler.seed, job);
+                        sample_count(job.samples * cap, &mut rng)
+                    }
+                    Source::Hit => self.cache.as_ref().map_or(0, |c| c.samples(&job_key(job)).len() as u64),
+                    Source::Built(b) => built[*b].0.len() as u64,
+                };
+                let mut first = 0u64;
+                let mut piece = 0u64;
+                while first < n {
+                    let len = (n - first).min(PIECE);
+                    units.push(Unit {
+                        job: k,
+                        piece,
+                        first: first as usize,
+                        len: len as usize,
+                    });
+                    first += len;
+                    piece += 1;
+                }
+            }
+            // Contiguous runs of the batch's units, one per thread; run 0 draws into the frame,
+            // the others into scratch buffers merged afterwards under the (depth, item) rule.
+            let batch_units = &units[first_unit..];
+            let max_threads = (1usize << 30) / (pixels * 12).max(1);
+            let threads = self
+                .raster
+                .thread_count()
+                .clamp(1, max_threads.max(1))
+                .min(batch_units.len().max(1));
+            let mut bounds: Vec<usize> = (0..=threads)
+                .map(|t| first_unit + t * batch_units.len() / threads)
+                .collect();
+            bounds.dedup();
+            if bounds.len() == 1 {
+                bounds.push(units.len());
+            }
+            let chunk_count = bounds.len() - 1;
+            if batch_units.is_empty() && batch_index + 1 < batch_count {
+                continue;
+            }
+            self.scratch.truncate(chunk_count.saturating_sub(1));
+            while self.scratch.len() + 1 < chunk_count {
+                self.scratch.push((Vec::new(), Vec::new()));
+            }
+            let cache = self.cache.as_ref();
+            let (frame_depth, frame_items) = frame.buffers_mut();
+            let mut targets: Vec<Target<'_>> = Vec::with_capacity(chunk_count);
             targets.push(Target {
-                depth: d,
-                items: i,
+                depth: frame_depth,
+                items: frame_items,
                 width,
                 height,
             });
-        }
-        let counts: Vec<SampleCounts> = self.raster.install(|| {
-            targets
-                .par_iter_mut()
-                .enumerate()
-                .map(|(c, target)| {
-                    let mut counts = SampleCounts::default();
-                    for u in &units[bounds[c]..bounds[c + 1]] {
-                        let job = &sel.jobs[u.job];
-                        match sources[u.job] {
-                            Source::Direct => {
-                                let mut rng = piece_rng(sampler.seed, job, u.piece);
-                                sampler.draw_job(job, u.len as u64, &mut rng, target, &mut counts);
-                            }
-                            Source::Hit => {
-                                if let Some(c) = cache {
-                                    let set = &c.samples(&job_key(job))[u.first..u.first + u.len];
+            for (d, i) in self.scratch.iter_mut() {
+                d.clear();
+                d.resize(pixels, 0.0);
+                i.clear();
+                i.resize(pixels, NO_ITEM);
+                targets.push(Target {
+                    depth: d,
+                    items: i,
+                    width,
+                    height,
+                });
+            }
+            let (units, sources, built, bounds) = (&units, &sources, &built, &bounds);
+            let batch_counts: Vec<SampleCounts> = self.raster.install(|| {
+                targets
+                    .par_iter_mut()
+                    .enumerate()
+                    .map(|(c, target)| {
+                        let mut counts = SampleCounts::default();
+                        for u in &units[bounds[c]..bounds[c + 1]] {
+                            let job = &jobs[u.job];
+                            match sources[u.job] {
+                                Some(Source::Direct) => {
+                                    let mut rng = piece_rng(sampler.seed, job, u.piece);
+                                    sampler.draw_job(job, u.len as u64, &mut rng, target, &mut counts);
+                                }
+                                Some(Source::Hit) => {
+                                    if let Some(c) = cache {
+                                        let set = &c.samples(&job_key(job))[u.first..u.first + u.len];
+                                        sampler.draw_cached(
+                                            &job.clip_from_structure,
+                                            job.base,
+                                            set,
+                                            target,
+                                            &mut counts,
+                                        );
+                                    }
+                                }
+                                Some(Source::Built(b)) => {
+                                    let set = &built[b].0[u.first..u.first + u.len];
                                     sampler.draw_cached(&job.clip_from_structure, job.base, set, target, &mut counts);
                                 }
-                            }
-                            Source::Built(b) => {
-                                let set = &built[b].0[u.first..u.first + u.len];
-                                sampler.draw_cached(&job.clip_from_structure, job.base, set, target, &mut counts);
+                                None => {}
                             }
                         }
+                        counts
+                    })
+                    .collect()
+            });
+            counts.extend(batch_counts);
+            // Merge the scratch buffers into the frame.
+            let (frame_depth, frame_items) = frame.buffers_mut();
+            for (d, i) in self.scratch.iter().take(chunk_count.saturating_sub(1)) {
+                for p in 0..pixels {
+                    if d[p] > 0.0 {
+                        keep_fragment(&mut frame_depth[p], &mut frame_items[p], d[p], i[p]);
                     }
-                    counts
-                })
-                .collect()
-        });
-        // Merge the scratch buffers into the frame.
-        let (frame_depth, frame_items) = frame.buffers_mut();
-        for (d, i) in self.scratch.iter().take(chunk_count.saturating_sub(1)) {
-            for p in 0..pixels {
-                if d[p] > 0.0 {
-                    keep_fragment(&mut frame_depth[p], &mut frame_items[p], d[p], i[p]);
                 }
             }
+        }
+        if pyramid.is_some() {
+            self.pyramid = pyramid;
         }
         // §4.2: the Gaussian pass over the same samples.
         if gauss {
@@ -842,14 +1251,15 @@ impl Renderer for Rzb {
             };
             let light = occult_raster::light_direction(view);
             let scene = &*self.scene;
-            // One accumulation buffer per run of units (the runs of pass 1, bounded by the
-            // same budget as the scratch buffers).
+            let cache = self.cache.as_ref();
+            // One accumulation buffer per contiguous run of units, one run per thread, bounded
+            // by the same budget as the scratch buffers (sums of integers: any split gives the
+            // same image).
             let max_runs = ((1usize << 30) / (pixels * recon::ACCUM_BYTES).max(1)).max(1);
-            let runs: Vec<std::ops::Range<usize>> = if chunk_count <= max_runs {
-                (0..chunk_count).map(|c| bounds[c]..bounds[c + 1]).collect()
-            } else {
-                std::iter::once(0..units.len()).collect()
-            };
+            let run_count = self.raster.thread_count().clamp(1, max_runs).min(units.len().max(1));
+            let runs: Vec<std::ops::Range<usize>> = (0..run_count)
+                .map(|t| t * units.len() / run_count..(t + 1) * units.len() / run_count)
+                .collect();
             let sums: Vec<Vec<recon::Accum>> = self.raster.install(|| {
                 runs.par_iter()
                     .map(|run| {
@@ -861,15 +1271,16 @@ impl Renderer for Rzb {
                             filter.add(s, c, &mut acc);
                         };
                         for u in &units[run.clone()] {
-                            let job = &sel.jobs[u.job];
+                            let job = &jobs[u.job];
                             let set = match sources[u.job] {
-                                Source::Direct => {
+                                Some(Source::Direct) => {
                                     let mut rng = piece_rng(sampler.seed, job, u.piece);
                                     sampler.project_job(job, u.len as u64, &mut rng, &mut counts, &mut emit);
                                     None
                                 }
-                                Source::Hit => cache.map(|c| &c.samples(&job_key(job))[u.first..u.first + u.len]),
-                                Source::Built(b) => Some(&built[b].0[u.first..u.first + u.len]),
+                                Some(Source::Hit) => cache.map(|c| &c.samples(&job_key(job))[u.first..u.first + u.len]),
+                                Some(Source::Built(b)) => Some(&built[b].0[u.first..u.first + u.len]),
+                                None => None,
                             };
                             if let Some(set) = set {
                                 sampler.project_cached(&job.clip_from_structure, job.base, set, &mut counts, &mut emit);
@@ -898,7 +1309,7 @@ impl Renderer for Rzb {
         let mut built_samples = 0u64;
         if let Some(c) = self.cache.as_mut() {
             for (b, (set, generated)) in built.into_iter().enumerate() {
-                let job = &sel.jobs[to_build[b]];
+                let job = &jobs[to_build[b]];
                 built_samples += generated;
                 evictions += c.insert(
                     (job.structure, job.base, job.range.start, job.range.end),
@@ -917,7 +1328,7 @@ impl Renderer for Rzb {
         });
         stats.samples_drawn = sum.drawn;
         let c = &mut stats.counters;
-        c.add("boxes_selected", sel.jobs.len() as u64);
+        c.add("boxes_selected", selected as u64);
         c.add("boxes_zbuffer", sel.boxes_zbuffer);
         if self.opts.orientation > 0 {
             c.add("boxes_backfacing", sel.boxes_backfacing);
@@ -934,6 +1345,11 @@ impl Renderer for Rzb {
             c.add("cache_kib", (self.cache_bytes() >> 10) as u64);
         }
         c.add("eps_milli", (eps * 1000.0).round() as u64);
+        if self.opts.occlude {
+            c.add("boxes_hidden", hidden.0);
+            c.add("samples_hidden", hidden.1.min(u64::MAX as f64) as u64);
+            c.add("boxes_split", split_count);
+        }
         if let Some(a) = self.auto.as_mut() {
             a.record((select_time + samples_time).as_secs_f64());
         }

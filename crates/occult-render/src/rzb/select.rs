@@ -67,6 +67,8 @@ pub struct Job {
     pub clip_from_structure: Mat4,
     /// Item id of the structure instance's first triangle.
     pub base: ItemId,
+    /// Bounds of the entries sampled (structure space): every sample lies in them.
+    pub bounds: Aabb,
     /// Expected samples: area × maximum projection factor × ln v / d² (§5.3, §4.1.1).
     pub samples: f64,
     /// Nearest view distance of the box (clamped to the near plane).
@@ -278,7 +280,7 @@ impl Selection<'_> {
         let per_item = samples / st.section_items(&whole).max(1) as f64;
         let too_dense = self.large.is_some_and(|t| per_item > t);
         if ratio <= self.eps && lateral_ok && !too_dense {
-            self.select(p, whole, samples, z_min);
+            self.select(p, whole, node.bounds, samples, z_min);
         } else if node.is_leaf() {
             self.part(p, whole, node.bounds, false, cone);
         } else {
@@ -331,7 +333,7 @@ impl Selection<'_> {
                         first_item: p.at.first_item,
                     });
                 } else {
-                    self.select(p, sec, samples, z_min);
+                    self.select(p, sec, bounds, samples, z_min);
                 }
             }
             NodeKind::Group(_) => {
@@ -346,7 +348,7 @@ impl Selection<'_> {
         }
     }
 
-    fn select(&mut self, p: &Place, sec: Section, samples: f64, z_min: f64) {
+    fn select(&mut self, p: &Place, sec: Section, bounds: Aabb, samples: f64, z_min: f64) {
         if samples <= 0.0 {
             return;
         }
@@ -358,6 +360,7 @@ impl Selection<'_> {
             world_from_structure: p.at.world_from_node,
             clip_from_structure: p.clip_from_structure,
             base: p.at.first_item,
+            bounds,
             samples,
             z_min: z_min as f32,
             scale: p.area_scale.sqrt() as f32,
