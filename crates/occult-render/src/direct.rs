@@ -585,9 +585,9 @@ pub(crate) mod tests {
     #[test]
     fn hidden_triangles_are_not_shown() {
         let (scene, view, reference) = scene_view_reference();
-        let raster = Rasterizer::new(RasterConfig::default()).unwrap();
-        let d = DirectFrames::new(scene, &raster).unwrap();
-        let mut pyramid = ZPyramid::new(96, 64).unwrap();
+        let raster = Rasterizer::new(RasterConfig::default()).expect("default rasterizer");
+        let d = DirectFrames::new(scene, &raster).expect("frustum hierarchies build");
+        let mut pyramid = ZPyramid::new(96, 64).expect("small pyramid");
         let hidden = d.frustum.hidden_triangles(&view, &reference, &mut pyramid);
         let shown: std::collections::HashSet<_> = reference
             .items()
@@ -602,7 +602,7 @@ pub(crate) mod tests {
             "{hidden} hidden + {} shown of {in_view} in view",
             shown.len()
         );
-        let empty = Frame::new(96, 64).unwrap();
+        let empty = Frame::new(96, 64).expect("small frame");
         assert_eq!(d.frustum.hidden_triangles(&view, &empty, &mut pyramid), 0);
     }
 

@@ -562,7 +562,7 @@ mod tests {
             .parse(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\nf 1 2 4\nv 1 1 0\n")
             .unwrap();
         assert_eq!(reader.chunks[0].triangles, vec![[0, 1, 2], [0, 1, 3]]);
-        let loaded = reader.finish(&Disk).unwrap();
+        let loaded = reader.finish(&Disk).expect("the relative indices resolve");
         assert_eq!(loaded.scene.item_count(), 2);
     }
 

@@ -1,0 +1,241 @@
+//! Step 3 of a frame (§II): the near set drawn with the z-buffer, whole (the paper) or
+//! occlusion-culled front to back (`near_cull=on`).
+
+use std::time::Instant;
+
+use occult_core::{ItemId, Mat4, View};
+use occult_raster::{Draw, DrawTriangles, Frame};
+
+use super::*;
+
+impl Lzb {
+    /// Step 3 (§II): the near leaves `near` (`(instance, leaf)` pairs of `instances`) drawn
+    /// with the z-buffer, in one draw.
+    pub(super) fn draw_near(
+        &mut self,
+        view: &View,
+        frame: &mut Frame,
+        instances: &[(InstanceRec, ItemId, Mat4)],
+        near: &[(u32, u32)],
+        stats: &mut FrameStats,
+    ) {
+        let t = Instant::now();
+        // A mesh instance all of whose leaves are near is drawn whole (its vertices shared, no
+        // list to build); the others by their near leaves' triangles.
+        let (mut near_groups, mut whole) = (Vec::new(), Vec::new());
+        for (inst, r) in group_ranges(near) {
+            let (rec, base, _) = instances[inst as usize];
+            match &self.accel[rec.node.index()] {
+                Accel::Mesh { leaves, .. } if r.len() == *leaves as usize => whole.push((rec, base)),
+                _ => near_groups.push((rec, base, r)),
+            }
+        }
+        let near_leaves: Vec<u32> = near.iter().map(|&(_, l)| l).collect();
+        let mut pool = Vec::new();
+        let near_lists = self.emit(&near_groups, &near_leaves, &mut pool, false, None);
+        let whole_triangles: usize = whole
+            .iter()
+            .filter_map(|(rec, _)| self.scene.node(rec.node).mesh().map(|m| m.triangle_count()))
+            .sum();
+        stats
+            .counters
+            .add("near_triangles", (pool.len() + whole_triangles) as u64);
+        stats.phases.add(Phase::Other, t.elapsed());
+        let mut draws = make_draws(&self.scene, view, &near_lists, &pool);
+        draws.extend(whole.iter().filter_map(|(rec, base)| {
+            Some(Draw {
+                mesh: self.scene.node(rec.node).mesh()?,
+                triangles: DrawTriangles::All,
+                clip_from_object: view.clip_from_object(&rec.world_from_object),
+                first_item: *base,
+            })
+        }));
+        crate::rasterize(&mut self.raster, view, frame, &draws, stats);
+        drop(draws);
+    }
+
+    /// Step 3 with `near_cull=on` (not in the paper): the near set drawn front to back in
+    /// growing batches, each unit (a near leaf, or a mesh instance of a single leaf) tested
+    /// against the depth drawn so far, as `hzb` tests its boxes (Greene's face
+    /// test through a pyramid updated after each batch); hidden units are not drawn. The near
+    /// z-buffer ends the same (a hidden unit draws no pixel), so are the unfinished pixels
+    /// and the frame. Counters `near_culled_units`, `near_culled_triangles`.
+    ///
+    /// # Errors
+    /// [`RenderError::Raster`] when the pyramid cannot be allocated.
+    pub(super) fn draw_near_culled(
+        &mut self,
+        view: &View,
+        frame: &mut Frame,
+        instances: &[(InstanceRec, ItemId, Mat4)],
+        near: &[(u32, u32)],
+        stats: &mut FrameStats,
+        payoff: &mut FramePayoff,
+    ) -> Result<()> {
+        let t = Instant::now();
+        let (w, h) = (view.width(), view.height());
+        // The units, by their least view distance: a mesh instance of one leaf (drawn whole),
+        // or runs of consecutive near leaves of an instance (neighbours in the octree's
+        // depth-first order, so close in space) of up to NEAR_UNIT triangle references.
+        let mut units: Vec<NearUnit> = Vec::new();
+        for (inst, r) in group_ranges(near) {
+            let (rec, _, clip) = &instances[inst as usize];
+            let Accel::Mesh { octree, leaves, .. } = &self.accel[rec.node.index()] else {
+                continue;
+            };
+            let w_row = row_w(clip);
+            let whole = r.len() == *leaves as usize && *leaves == 1;
+            let mut at = r.start;
+            while at < r.end {
+                let (mut end, mut count, mut bounds) = (at, 0u32, Aabb::EMPTY);
+                while end < r.end && (end == at || count < NEAR_UNIT) {
+                    let on = &octree.nodes()[near[end].1 as usize];
+                    count += on.count;
+                    bounds = bounds.union(on.bounds);
+                    end += 1;
+                }
+                if whole {
+                    count = self
+                        .scene
+                        .node(rec.node)
+                        .mesh()
+                        .map_or(0, |m| m.triangle_count() as u32);
+                }
+                units.push(NearUnit {
+                    distance: near_distance(w_row, &bounds),
+                    inst,
+                    leaves: at as u32..end as u32,
+                    whole,
+                    count,
+                    bounds,
+                });
+                at = end;
+            }
+        }
+        units.sort_unstable_by(|a, b| a.distance.total_cmp(&b.distance));
+        let fits = |p: &ZPyramid| p.width() == w && p.height() == h;
+        let mut pyramid = match self.pyramid.take() {
+            Some(p) if fits(&p) => p,
+            _ => ZPyramid::new(w, h)?,
+        };
+        pyramid.clear();
+        let eye = view.camera().eye;
+        let mut eyes: Vec<Option<Vec3>> = vec![None; instances.len()];
+        let first_stamp = self.reserve_stamps(instances.len() as u32);
+        let (mut tested, mut culled_units, mut culled_triangles, mut near_triangles) = (0u64, 0u64, 0u64, 0u64);
+        let mut pyramid_time = Duration::ZERO;
+        let mut counts = PyramidCounts::default();
+        let mut batch_triangles = NEAR_FIRST_BATCH;
+        let mut next = 0;
+        let mut first = true;
+        stats.phases.add(Phase::Other, t.elapsed());
+        while next < units.len() {
+            let t = Instant::now();
+            // Gather a batch: the next units not hidden behind what is drawn.
+            let (mut pairs, mut whole, mut rect) = (Vec::new(), Vec::new(), None::<PixelRect>);
+            let mut gathered = 0usize;
+            while next < units.len() && gathered < batch_triangles {
+                let NearUnit {
+                    inst,
+                    ref leaves,
+                    whole: is_whole,
+                    count,
+                    bounds: b,
+                    ..
+                } = units[next];
+                next += 1;
+                let (rec, base, clip) = &instances[inst as usize];
+                // Not weighed by the in-frame payoff's stop rule: it weighs the rays, and a
+                // frame's coarse rays and first batch come before any gain of these tests.
+                if !first {
+                    tested += 1;
+                    let e = *eyes[inst as usize]
+                        .get_or_insert_with(|| rec.world_from_object.inverse().transform_point3(eye));
+                    let occlusion = Occlusion {
+                        frame,
+                        pyramid: &pyramid,
+                        how: PyramidTest {
+                            global: true,
+                            hierarchical: true,
+                        },
+                        far_depth: view.far_depth(),
+                    };
+                    if occlusion.box_hidden(clip, &b, e, &mut counts) {
+                        culled_units += 1;
+                        culled_triangles += u64::from(count);
+                        payoff.saved(u64::from(count));
+                        continue;
+                    }
+                }
+                if let Some(r) = screen_rect(clip, &b, w, h) {
+                    rect = Some(rect.map_or(r, |a| PixelRect {
+                        x0: a.x0.min(r.x0),
+                        y0: a.y0.min(r.y0),
+                        x1: a.x1.max(r.x1),
+                        y1: a.y1.max(r.y1),
+                    }));
+                }
+                if is_whole {
+                    whole.push((*rec, *base));
+                } else {
+                    pairs.extend(near[leaves.start as usize..leaves.end as usize].iter().copied());
+                }
+                gathered += count as usize;
+            }
+            // Draw it: index lists per instance (each triangle once), whole meshes whole.
+            // An instance's stamp is the frame's: what an earlier batch listed is not again.
+            pairs.sort_unstable();
+            let ranges = group_ranges(&pairs);
+            let stamps: Vec<u32> = ranges.iter().map(|&(inst, _)| first_stamp + inst).collect();
+            let groups: Vec<_> = ranges
+                .into_iter()
+                .map(|(inst, r)| {
+                    let (rec, base, _) = instances[inst as usize];
+                    (rec, base, r)
+                })
+                .collect();
+            let leaves: Vec<u32> = pairs.iter().map(|&(_, l)| l).collect();
+            let mut pool = Vec::new();
+            let lists = self.emit(&groups, &leaves, &mut pool, false, Some(&stamps));
+            let mut draws = make_draws(&self.scene, view, &lists, &pool);
+            draws.extend(whole.iter().filter_map(|(rec, base)| {
+                Some(Draw {
+                    mesh: self.scene.node(rec.node).mesh()?,
+                    triangles: DrawTriangles::All,
+                    clip_from_object: view.clip_from_object(&rec.world_from_object),
+                    first_item: *base,
+                })
+            }));
+            let submitted = pool.len()
+                + whole
+                    .iter()
+                    .filter_map(|(rec, _)| self.scene.node(rec.node).mesh().map(|m| m.triangle_count()))
+                    .sum::<usize>();
+            near_triangles += submitted as u64;
+            stats.phases.add(Phase::Other, t.elapsed());
+            let raster_before = stats.phases.get(Phase::Raster);
+            crate::rasterize(&mut self.raster, view, frame, &draws, stats);
+            let raster_time = stats.phases.get(Phase::Raster).saturating_sub(raster_before);
+            payoff.rasterized(submitted as u64, raster_time, false);
+            drop(draws);
+            // The pyramid over what the batch drew, for the next batch's tests.
+            if next < units.len() {
+                let t = Instant::now();
+                if let Some(r) = rect {
+                    pyramid.update(frame, r);
+                }
+                pyramid_time += t.elapsed();
+            }
+            first = false;
+            batch_triangles = (batch_triangles * 2).min(NEAR_MAX_BATCH);
+        }
+        stats.phases.add(Phase::DepthStructure, pyramid_time);
+        stats.boxes_tested += tested;
+        stats.boxes_culled += culled_units;
+        stats.counters.add("near_triangles", near_triangles);
+        stats.counters.add("near_culled_units", culled_units);
+        stats.counters.add("near_culled_triangles", culled_triangles);
+        self.pyramid = Some(pyramid);
+        Ok(())
+    }
+}

@@ -1,0 +1,97 @@
+//! Unit tests of the renderer's cost model, near pass and payoff.
+
+use super::*;
+
+/// Ten leaves of 1,000 triangles at distances 1..=10; coarse rays hitting at 1..=10 (and
+/// one missing), each standing for 100 pixels.
+fn case(ns_per_triangle: f64, ns_per_ray: f64) -> f32 {
+    let leaves: Vec<(f32, u32)> = (1..=10).map(|d| (d as f32, 1000)).collect();
+    let mut hits: Vec<Option<f32>> = (1..=10).map(|d| Some(d as f32 + 0.5)).collect();
+    hits.push(None);
+    cost_plane(
+        &leaves,
+        &hits,
+        1100.0,
+        ns_per_triangle,
+        ns_per_ray,
+        1.0,
+        0.5,
+        100.0,
+        0.1,
+        1000.0,
+    )
+}
+
+/// Dear rays: everything near, nothing cast; cheap rays against dear triangles: the plane
+/// at the nearest candidate, everything cast (half the far triangles in the PVL).
+#[test]
+fn the_cost_model_weighs_triangles_against_rays() {
+    assert_eq!(case(10.0, 1e6), 1000.0, "rays dear: all near");
+    assert_eq!(case(1e4, 1.0), 0.1, "rays cheap: the plane at the near plane");
+    // Small leaves near, large ones far: the small ones drawn, the rest to the rays. The
+    // plane sits at the hit just past the small leaves.
+    let leaves: Vec<(f32, u32)> = (1..=10)
+        .map(|d| (d as f32, if d <= 5 { 10 } else { 100_000 }))
+        .collect();
+    let hits: Vec<Option<f32>> = (1..=10).map(|d| Some(d as f32 + 0.5)).collect();
+    let z = cost_plane(&leaves, &hits, 1000.0, 100.0, 2000.0, 1.0, 0.5, 100.0, 0.1, 1000.0);
+    assert_eq!(z, 5.5);
+}
+
+/// No leaf and no hit: nothing costs anything; the plane is the near plane.
+/// `near_cull=on`: with every leaf near, the units behind a wall are not drawn, and the
+/// frame is the one drawn without culling (and `zbuffer`'s).
+#[test]
+fn near_cull_skips_what_the_near_pass_hides() {
+    use occult_core::{Affine3A, Instance, SceneBuilder, Vec3};
+    // A wall of 12,800 triangles at z = 0 hiding another one at z = -2, both 4 × 4.
+    let mut b = SceneBuilder::new();
+    let grid = b.add_mesh("grid", crate::test_grid(80)).expect("a grid");
+    let at = |z: f32| Instance {
+        parent_from_child: Affine3A::from_translation(Vec3::new(-2.0, -2.0, z))
+            * Affine3A::from_scale(Vec3::splat(4.0)),
+        child: grid,
+    };
+    let root = b.add_group("walls", vec![at(0.0), at(-2.0)]).expect("a group");
+    let scene = Arc::new(b.build(root).expect("a scene"));
+    let (view, _) = crate::test_view(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 96, 64);
+    let options = RenderOptions::default();
+    let mut reference = Frame::new(96, 64).expect("a frame");
+    crate::zbuffer::ZBuffer::new(scene.clone(), &options)
+        .expect("zbuffer")
+        .render(&view, &mut reference)
+        .expect("a frame");
+    for near_cull in [true, false] {
+        let opts = LzbOptions {
+            plane: Plane::Static,
+            plane_fraction: 1.0,
+            payoff: false,
+            near_cull,
+            ..LzbOptions::default()
+        };
+        let mut lzb = Lzb::new(scene.clone(), &options, &opts).expect("lzb builds");
+        let mut frame = Frame::new(96, 64).expect("a frame");
+        let stats = lzb.render(&view, &mut frame).expect("a frame");
+        assert!(frame.same_visibility(&reference), "near_cull={near_cull}");
+        assert_eq!(stats.counters.get("far_leaves"), 0, "every leaf near");
+        let culled = stats.counters.get("near_culled_triangles");
+        if near_cull {
+            assert!(culled > 0, "the far wall is hidden");
+            assert!(
+                stats.triangles_submitted < 2 * 12_800 - 4096,
+                "{} submitted",
+                stats.triangles_submitted
+            );
+        } else {
+            assert_eq!(culled, 0);
+        }
+    }
+}
+
+#[test]
+fn nothing_in_view_puts_the_plane_at_the_near_plane() {
+    assert_eq!(
+        cost_plane(&[], &[None, None], 100.0, 1.0, 1.0, 1.0, 0.5, 1.0, 0.1, 10.0),
+        0.1
+    );
+}
