@@ -32,6 +32,8 @@ const CONFIGS: &[&str] = &[
     "hzb:retest=off,leaf=64",
     "hzb:refresh=0",
     "hzb:refresh=1,batch=64,leaf=16",
+    "hzb:trust=1,recheck=2",
+    "hzb:trust=0",
 ];
 
 identical_on_every_generator! {
@@ -103,6 +105,50 @@ fn hzb_culls_on_a_city_street_and_keeps_a_visible_list() {
 }
 
 #[test]
+fn hzb_skips_an_imprecise_visible_list_and_keeps_a_precise_one() {
+    // An orbit in 6 steps (60 degrees a frame): most of last frame's list is hidden now, so the
+    // list is measured imprecise and skipped, and the frames submit less than drawing it would;
+    // a street walk keeps its list. Frames stay exact either way.
+    let built = build_scene("city:blocks=3,detail=2");
+    let scene = Arc::new(built.scene);
+    let run = |algo: &str, path: &str| {
+        let cams = occult_scenes::path::parse_path(path, &scene, &built.default_camera).expect("a generated path");
+        let mut h = spec(algo)
+            .build(scene.clone(), &RenderOptions::default())
+            .expect("hzb builds");
+        let mut z = renderer("zbuffer", &scene);
+        let (mut fh, mut fz) = (
+            Frame::new(160, 90).expect("a frame"),
+            Frame::new(160, 90).expect("a frame"),
+        );
+        let (mut skipped, mut submitted, mut precision) = (0, 0, Vec::new());
+        for cam in &cams {
+            let view = View::new(*cam, 160, 90).expect("a view");
+            let s = h.render(&view, &mut fh).expect("hzb renders");
+            z.render(&view, &mut fz).expect("zbuffer renders");
+            assert!(fh.same_visibility(&fz), "{algo} on {path}");
+            skipped += s.counters.get("visible_list_skipped");
+            submitted += s.triangles_submitted;
+            precision.push(s.counters.get("visible_list_precision_pct"));
+        }
+        (skipped, submitted, precision)
+    };
+    let (skipped, submitted, precision) = run("hzb:payoff=off,trust=0.9", "circle:6");
+    let (never, blind, _) = run("hzb:payoff=off,trust=0", "circle:6");
+    assert!(
+        skipped > 0,
+        "the orbit's list was never skipped (precision {precision:?})"
+    );
+    assert_eq!(never, 0, "trust=0 never skips");
+    assert!(
+        submitted < blind,
+        "skipping submitted {submitted} triangles, drawing the list {blind}"
+    );
+    let (skipped, _, precision) = run("hzb:payoff=off,trust=0.5", "street:12");
+    assert_eq!(skipped, 0, "a street walk's list is precise (precision {precision:?})");
+}
+
+#[test]
 fn hzb_draws_mostly_visible_instances_whole() {
     // A city overview: most of each building is visible, so with a low `whole` fraction the
     // visible list draws instances whole (and the traversal skips them); frames stay exact.
@@ -142,6 +188,7 @@ fn hzb_bad_parameters_are_errors() {
         "hzb:batch=0",
         "hzb:order=x",
         "hzb:whole=2",
+        "hzb:trust=1.5",
         "hzb:refresh=-1",
     ] {
         let s = spec(bad);

@@ -362,6 +362,15 @@ pub(super) struct Walk<'a> {
     batches: u64,
     whole_drawn: u64,
     list_retested: u64,
+    /// Entries of the visible list in view not drawn because the list was not trusted
+    /// (`trust`).
+    list_skipped: u64,
+    /// The keys of last frame's list entries in view this frame, and their triangles: what
+    /// the recheck measures the list's precision over.
+    from_list: IdSet<NodeKey>,
+    from_list_triangles: u64,
+    /// The precision measured by this frame's recheck, in percent (a counter).
+    list_precision_pct: Option<u64>,
     /// Batches drawn early for a test (`refresh`).
     refreshes: u64,
 }
@@ -419,15 +428,22 @@ impl<'a> Walk<'a> {
             batches: 0,
             whole_drawn: 0,
             list_retested: 0,
+            list_skipped: 0,
+            from_list: IdSet::default(),
+            from_list_triangles: 0,
+            list_precision_pct: None,
             refreshes: 0,
         }
     }
 
     /// §3.3: draws last frame's visible list first (in descending screen area, §4.2), untested
     /// except against the frustum; entries outside it stay listed when `keep_culled` (§5.1).
-    pub fn draw_visible_list(&mut self, mut list: Vec<VisEntry>) {
+    /// With `skip` (the list was not precise enough last time, `trust`), entries in view are
+    /// not drawn, only noted for the recheck to measure the list's precision again: the
+    /// tested traversal draws what is visible.
+    pub fn draw_visible_list(&mut self, mut list: Vec<VisEntry>, skip: bool) {
         let (w, h) = (self.frame.width(), self.frame.height());
-        if self.options.area_sort {
+        if self.options.area_sort && !skip {
             let mut keyed: Vec<(u64, VisEntry)> = list
                 .into_iter()
                 .map(|e| {
@@ -439,12 +455,28 @@ impl<'a> Walk<'a> {
             keyed.sort_by_key(|k| std::cmp::Reverse(k.0));
             list = keyed.into_iter().map(|(_, e)| e).collect();
         }
-        let whole = self.whole_instances(&list);
+        let whole = if skip {
+            IdSet::default()
+        } else {
+            self.whole_instances(&list)
+        };
         self.listing = true;
         for e in list {
-            let own = self.node_of(&e).own_bounds;
-            let pl = self.placement(&e);
+            let node = self.node_of(&e);
+            let (own, count) = (node.own_bounds, node.count as u64);
             let key = (e.dag_node.0, e.octree_node, e.first_item);
+            if skip && !e.stale {
+                // Noted only (out of view now or not: either way it did not stay visible).
+                if self.from_list.insert(key) {
+                    self.from_list_triangles += count;
+                    self.list_skipped += 1;
+                }
+                continue;
+            }
+            let pl = self.placement(&e);
+            if !e.stale && pl.frustum.classify_aabb(&own) != Containment::Outside && self.from_list.insert(key) {
+                self.from_list_triangles += count;
+            }
             if whole.contains(&(e.dag_node.0, e.first_item)) {
                 // Drawn whole (once, at its first entry); its entries stay listed, so that the
                 // recheck keeps measuring how much of it is visible.
@@ -534,12 +566,37 @@ impl<'a> Walk<'a> {
         self.flush();
     }
 
+    /// For a frame that skipped the visible list (`trust`): the share of the triangles of the
+    /// skipped entries that the tested traversal drew anyway, an upper bound of the precision
+    /// the recheck would measure (drawn is not yet visible at the frame's end), so that a list
+    /// still too imprecise by it need not be rechecked. `None` with nothing skipped.
+    pub fn skipped_drawn_share(&mut self) -> Option<f64> {
+        if self.list_skipped == 0 || self.from_list_triangles == 0 {
+            return None;
+        }
+        let drawn: u64 = self
+            .from_list
+            .iter()
+            .filter(|k| self.listed.contains(k))
+            .map(|&(id, n, _)| match &self.octrees[id as usize] {
+                Some(o) => o.nodes()[n as usize].count as u64,
+                None => 0,
+            })
+            .sum();
+        let p = drawn as f64 / self.from_list_triangles as f64;
+        self.list_precision_pct = Some((p * 100.0).round() as u64);
+        Some(p)
+    }
+
     /// §3.3: removes from the visible list the nodes whose own primitives are hidden in the
     /// final frame (frustum-culled ones stay when `keep_culled`, §5.1).
-    pub fn recheck(&mut self) {
+    /// Returns the list's precision (`trust`): the share of the triangles of last frame's
+    /// entries in view that are still visible; `None` when there was nothing to measure.
+    pub fn recheck(&mut self) -> Option<f64> {
         if self.payoff.stopped() {
-            return; // the list is dropped (`finish`): rechecking it would be testing again
+            return None; // the list is dropped (`finish`): rechecking it would be testing again
         }
+        let mut kept_from_list = 0u64;
         let t = Instant::now();
         self.pyramid.rebuild(self.frame);
         self.walk.stats.phases.add(Phase::DepthStructure, t.elapsed());
@@ -558,6 +615,9 @@ impl<'a> Walk<'a> {
                 !hidden
             };
             if keep {
+                if !outside && self.from_list.contains(&(e.dag_node.0, e.octree_node, e.first_item)) {
+                    kept_from_list += self.node_of(&e).count as u64;
+                }
                 kept.push(VisEntry { stale: outside, ..e });
             } else {
                 self.recheck_dropped += 1;
@@ -565,6 +625,11 @@ impl<'a> Walk<'a> {
             }
         }
         self.visible = kept;
+        (self.from_list_triangles > 0).then(|| {
+            let p = kept_from_list as f64 / self.from_list_triangles as f64;
+            self.list_precision_pct = Some((p * 100.0).round() as u64);
+            p
+        })
     }
 
     /// The next visible list and the frame's statistics.
@@ -592,8 +657,12 @@ impl<'a> Walk<'a> {
             ("batches", self.batches),
             ("whole_drawn", self.whole_drawn),
             ("visible_list_retested", self.list_retested),
+            ("visible_list_skipped", self.list_skipped),
             ("refreshes", self.refreshes),
         ]);
+        if let Some(p) = self.list_precision_pct {
+            c.add("visible_list_precision_pct", p);
+        }
         c.add_all(self.payoff.counters());
         self.payoff_state.end(&self.payoff);
         (self.visible, self.walk.stats)
