@@ -253,6 +253,13 @@ pub struct CompareArgs {
     /// column, fields and CSV column are empty.
     #[arg(long)]
     pub peak_rss: bool,
+    /// For every frame that differs from the reference, an image of where, into DIR (created if
+    /// missing) as `LABEL-frame_00000.png` (`sceneN-LABEL-...` with several scenes; characters
+    /// other than letters, digits, `.`, `_` and `-` in a label become `_`): pixels wrong by the
+    /// paper's criterion (an item not visible through the pixel) red, another item visible
+    /// through the pixel yellow, the rest the reference's color dimmed.
+    #[arg(long, value_name = "DIR")]
+    pub diff_out: Option<PathBuf>,
     /// What frames are checked against: `auto` (zbuffer, or frustum on scenes too large for
     /// brute force), `none` (nothing checked, no oracle: for scenes too large even for frustum)
     /// or a conservative renderer's spec.

@@ -236,6 +236,7 @@ pub fn sweep(
             reference: config.reference.clone(),
             image_complexity: false,
             peak_rss: None,
+            diff_images: false,
         };
         let report = compare(Arc::clone(scene), cameras, &compare_config, &mut |event| {
             progress((value, event))

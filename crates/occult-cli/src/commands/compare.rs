@@ -80,19 +80,44 @@ pub fn run(a: CompareArgs) -> Result<()> {
         image_complexity: a.complexity || (a.plot_scaling.is_some() && axes.iter().any(|x| x.needs_image_complexity())),
         // One handle for every scene, so that the process peak survives the resets.
         peak_rss: a.peak_rss.then(PeakRss::new),
+        diff_images: a.diff_out.is_some(),
     };
+    if let Some(dir) = &a.diff_out {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create directory '{}'", dir.display()))?;
+    }
+    let several = a.scene.len() > 1;
+    let mut diffs_written = 0usize;
     let mut runs: Vec<(SceneSummary, CompareReport)> = Vec::new();
-    for spec in &a.scene {
+    for (scene_index, spec) in a.scene.iter().enumerate() {
         let scene = scene::load(spec)?;
         let cameras = scene::path(&a.frames.path, &scene)?;
         let progress = Progress::bar(cameras.len() as u64, format!("{spec}: preparing"));
+        let mut diff_error = None;
         let report = compare(scene.scene.clone(), &cameras, &config, &mut |event| match event {
             CompareProgress::Building { label, .. } => progress.set_message(format!("{spec}: preparing {label}")),
             CompareProgress::Built { .. } => progress.set_message(format!("{spec}: rendering")),
+            CompareProgress::Differs { label, index, image } => {
+                let Some(dir) = &a.diff_out else { return };
+                let prefix = if several {
+                    format!("scene{scene_index}-")
+                } else {
+                    String::new()
+                };
+                let path = dir.join(format!("{prefix}{}-frame_{index:05}.png", file_label(label)));
+                if diff_error.is_none() {
+                    match image.save_with_format(&path, image::ImageFormat::Png) {
+                        Ok(()) => diffs_written += 1,
+                        Err(e) => diff_error = Some(anyhow::anyhow!("cannot write '{}': {e}", path.display())),
+                    }
+                }
+            }
             CompareProgress::Frame { .. } => progress.inc(),
         })
         .with_context(|| format!("comparing on scene '{spec}'"))?;
         drop(progress);
+        if let Some(e) = diff_error {
+            return Err(e);
+        }
         let summary = scene.summary();
         say_raw!("{}", report_text(&summary, &a.frames.path.text, &report));
         runs.push((summary, report));
@@ -149,7 +174,28 @@ pub fn run(a: CompareArgs) -> Result<()> {
             say!("wrote {}", p.display());
         }
     }
+    if let Some(dir) = &a.diff_out {
+        say!(
+            "wrote {diffs_written} images of differing frames to {} (red: wrong by the paper's criterion, yellow: another item visible through the pixel)",
+            dir.display()
+        );
+    }
     Ok(())
+}
+
+/// A renderer label as part of a file name: characters other than letters, digits, `.`, `_`
+/// and `-` become `_`.
+fn file_label(label: &str) -> String {
+    label
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
 }
 
 /// What `--plot-y` takes besides counter names.

@@ -95,6 +95,7 @@ pub fn run(a: SweepArgs) -> Result<()> {
         }
         CompareProgress::Built { .. } => progress.set_message(format!("{}={value}: rendering", vary.key)),
         CompareProgress::Frame { .. } => progress.inc(),
+        CompareProgress::Differs { .. } => {} // not requested by the sweep
     })?;
     drop(progress);
     let reports: Vec<&CompareReport> = report.points.iter().map(|p| &p.report).collect();

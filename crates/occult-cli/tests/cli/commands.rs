@@ -717,6 +717,60 @@ fn compare_takes_several_configurations_of_one_renderer() {
 }
 
 #[test]
+fn compare_writes_images_of_where_frames_differ() {
+    let dir = scratch("compare-diff");
+    let diffs = dir.join("diffs");
+    let out = ok(&[
+        "compare",
+        "--scene",
+        CITY,
+        "--path",
+        "circle:2",
+        "--size",
+        "64x48",
+        "--algos",
+        "frustum,rzb:large=off",
+        "--diff-out",
+        path_arg(&diffs),
+    ]);
+    let mut names: Vec<String> = std::fs::read_dir(&diffs)
+        .expect("the directory was made")
+        .map(|e| e.expect("an entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    // frustum is identical to the reference: no image of it.
+    assert_eq!(
+        names,
+        ["rzb_large_off-frame_00000.png", "rzb_large_off-frame_00001.png"],
+        "{out}"
+    );
+    let image = image::open(diffs.join(&names[0])).expect("a PNG").to_rgba8();
+    assert_eq!(image.dimensions(), (64, 48));
+    assert!(image
+        .pixels()
+        .any(|p| p.0 == [255, 0, 0, 255] || p.0 == [255, 200, 0, 255]));
+    assert!(out.contains("wrote 2 images of differing frames"), "{out}");
+    // A file where the directory should be: one line, non-zero.
+    let file = dir.join("taken");
+    std::fs::write(&file, b"x").expect("a file");
+    let (code, _, err) = fails(&[
+        "compare",
+        "--scene",
+        CITY,
+        "--path",
+        "circle:1",
+        "--size",
+        "16x16",
+        "--algos",
+        "rzb",
+        "--diff-out",
+        path_arg(&file),
+    ]);
+    assert_eq!(code, Some(1));
+    assert!(err.contains("taken") && err.trim().lines().count() == 1, "{err}");
+}
+
+#[test]
 fn sweep_varies_a_parameter_and_plots_it() {
     let dir = scratch("sweep");
     let (csv, plot, json) = (dir.join("s.csv"), dir.join("s.png"), dir.join("s.json"));

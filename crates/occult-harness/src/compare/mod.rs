@@ -170,6 +170,10 @@ pub struct CompareConfig {
     /// fields are `None`. Pass clones of one [`PeakRss`] to every comparison of a process so
     /// that the process peak survives the resets.
     pub peak_rss: Option<PeakRss>,
+    /// For every frame that differs from the reference, an image of where
+    /// ([`CompareProgress::Differs`]): pixels wrong by the paper's criterion red, another item
+    /// visible through the pixel yellow, the rest the reference dimmed.
+    pub diff_images: bool,
 }
 
 /// The renderer whose frames the others must reproduce (module doc).
@@ -196,6 +200,7 @@ impl CompareConfig {
             reference: Reference::Auto,
             image_complexity: false,
             peak_rss: None,
+            diff_images: false,
         }
     }
 }
@@ -218,6 +223,16 @@ pub enum CompareProgress<'a> {
         label: &'a str,
         /// Its preprocessing time.
         prepare_ms: f64,
+    },
+    /// A renderer's frame of view `index` differs from the reference's (only with
+    /// [`CompareConfig::diff_images`]): where, as an image ([`CompareConfig::diff_images`]).
+    Differs {
+        /// The renderer's label.
+        label: &'a str,
+        /// The view, from 0.
+        index: usize,
+        /// The image.
+        image: &'a image::RgbaImage,
     },
     /// View `index` of `count` was rendered by every renderer and compared.
     Frame {
@@ -270,6 +285,13 @@ pub fn compare(
         checks.measure_image(&scene, view, &contestants[reference_index.unwrap_or(0)].frame);
         if let Some(reference_index) = reference_index {
             checks.check_view(&scene, view, view_index, &mut contestants, reference_index)?;
+            for (label, image) in checks.diffs.drain(..) {
+                progress(CompareProgress::Differs {
+                    label: &label,
+                    index: view_index,
+                    image: &image,
+                });
+            }
         }
         progress(CompareProgress::Frame {
             index: view_index,
@@ -496,6 +518,10 @@ struct Checks {
     /// The supersampled reference of the paper's criterion ([`oracle::paper_error`]): made
     /// when a frame first differs from the reference.
     fine: Option<(Box<dyn Renderer>, Frame)>,
+    /// Whether to make [`Checks::diffs`] ([`CompareConfig::diff_images`]).
+    diff_images: bool,
+    /// The current view's images of differing frames, by renderer label.
+    diffs: Vec<(String, image::RgbaImage)>,
 }
 
 impl Checks {
@@ -516,6 +542,8 @@ impl Checks {
             visible: Vec::new(),
             options: config.options.clone(),
             fine: None,
+            diff_images: config.diff_images,
+            diffs: Vec::new(),
         })
     }
 
@@ -596,6 +624,10 @@ impl Checks {
             shade(&mut c.frame, scene, view);
             let psnr = c.frame.color_psnr(&self.shaded_reference);
             record.psnr_db = psnr.is_finite().then_some(psnr);
+            if let (true, Some((_, fine))) = (self.diff_images, &self.fine) {
+                let image = oracle::diff_image(&c.frame, reference_frame, fine, &self.shaded_reference);
+                self.diffs.push((c.label.clone(), image));
+            }
         }
         reference_c
             .records

@@ -226,32 +226,16 @@ pub(crate) fn fine_size(width: u32, height: u32) -> (u32, u32) {
 /// slightly, never undercounts: a triangle no subsample sees counts as wrong. 0 when no pixel
 /// is covered.
 pub(crate) fn paper_error(frame: &Frame, reference: &Frame, fine: &Frame) -> f64 {
-    let (w, h) = (frame.width() as usize, frame.height() as usize);
-    let k = fine.width() as usize / w.max(1);
-    debug_assert_eq!(fine.width() as usize, w * k);
-    debug_assert_eq!(fine.height() as usize, h * k);
-    let (items, reference_items, fine_items) = (frame.items(), reference.items(), fine.items());
-    let fw = fine.width() as usize;
-    let (wrong, covered) = (0..h)
+    let verdicts = Verdicts::new(frame, reference, fine);
+    let (wrong, covered) = (0..frame.height() as usize)
         .into_par_iter()
         .map(|y| {
             let (mut wrong, mut covered) = (0u64, 0u64);
-            for x in 0..w {
-                let p = y * w + x;
-                let (item, truth) = (items[p], reference_items[p]);
-                if item == NO_ITEM && truth == NO_ITEM {
-                    continue;
-                }
-                covered += 1;
-                if item == truth {
-                    continue;
-                }
-                let seen = (0..k).any(|j| {
-                    let row = (y * k + j) * fw + x * k;
-                    fine_items[row..row + k].contains(&item)
-                });
-                if !seen {
-                    wrong += 1;
+            for x in 0..frame.width() as usize {
+                match verdicts.at(x, y) {
+                    Verdict::Empty => {}
+                    Verdict::Wrong => (wrong, covered) = (wrong + 1, covered + 1),
+                    Verdict::Same | Verdict::Seen => covered += 1,
                 }
             }
             (wrong, covered)
@@ -262,4 +246,87 @@ pub(crate) fn paper_error(frame: &Frame, reference: &Frame, fine: &Frame) -> f64
     } else {
         wrong as f64 / covered as f64
     }
+}
+
+/// What a pixel of a frame is against the reference, by the paper's criterion
+/// ([`paper_error`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Verdict {
+    /// Covered in neither frame.
+    Empty,
+    /// The reference's item.
+    Same,
+    /// Another item, visible through the pixel: right by the paper's criterion.
+    Seen,
+    /// An item not visible through the pixel.
+    Wrong,
+}
+
+/// The per-pixel verdicts of a frame against the reference and its supersampled version.
+pub(crate) struct Verdicts<'f> {
+    items: &'f [ItemId],
+    reference: &'f [ItemId],
+    fine: &'f [ItemId],
+    width: usize,
+    fine_width: usize,
+    k: usize,
+}
+
+impl<'f> Verdicts<'f> {
+    pub(crate) fn new(frame: &'f Frame, reference: &'f Frame, fine: &'f Frame) -> Self {
+        let (w, h) = (frame.width() as usize, frame.height() as usize);
+        let k = fine.width() as usize / w.max(1);
+        debug_assert_eq!(fine.width() as usize, w * k);
+        debug_assert_eq!(fine.height() as usize, h * k);
+        Self {
+            items: frame.items(),
+            reference: reference.items(),
+            fine: fine.items(),
+            width: w,
+            fine_width: fine.width() as usize,
+            k,
+        }
+    }
+
+    pub(crate) fn at(&self, x: usize, y: usize) -> Verdict {
+        let p = y * self.width + x;
+        let (item, truth) = (self.items[p], self.reference[p]);
+        if item == NO_ITEM && truth == NO_ITEM {
+            return Verdict::Empty;
+        }
+        if item == truth {
+            return Verdict::Same;
+        }
+        let k = self.k;
+        let seen = (0..k).any(|j| {
+            let row = (y * k + j) * self.fine_width + x * k;
+            self.fine[row..row + k].contains(&item)
+        });
+        if seen {
+            Verdict::Seen
+        } else {
+            Verdict::Wrong
+        }
+    }
+}
+
+/// The image of where `frame` differs from the reference: pixels wrong by the paper's
+/// criterion red, pixels showing another item visible through them yellow, the rest the
+/// reference's shaded color (`shaded_reference`) dimmed to a third, uncovered ones black.
+pub(crate) fn diff_image(frame: &Frame, reference: &Frame, fine: &Frame, shaded_reference: &Frame) -> image::RgbaImage {
+    let verdicts = Verdicts::new(frame, reference, fine);
+    let (w, h) = (frame.width(), frame.height());
+    let colors = shaded_reference.color();
+    image::RgbaImage::from_fn(w, h, |x, y| {
+        let c = match verdicts.at(x as usize, y as usize) {
+            Verdict::Empty => [0, 0, 0, 255],
+            Verdict::Wrong => [255, 0, 0, 255],
+            Verdict::Seen => [255, 200, 0, 255],
+            Verdict::Same => {
+                let c = colors[(y * w + x) as usize];
+                [c[0] / 3, c[1] / 3, c[2] / 3, 255]
+            }
+        };
+        image::Rgba(c)
+    })
 }

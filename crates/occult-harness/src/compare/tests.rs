@@ -317,6 +317,8 @@ fn reference_can_be_chosen_or_none() {
 
 #[test]
 fn approximate_or_impossible_references_are_refused() {
+    // One view: with large=off the ground's two triangles are sampled as points, millions of
+    // them from views where the ground passes close to the eye.
     let cameras = circle(1);
     let mut config = CompareConfig::new(vec![Algorithm::FRUSTUM], 32, 32);
     config.reference = Reference::Spec(AlgoSpec::parse("rzb").unwrap());
@@ -403,4 +405,46 @@ fn time_summary_uses_nearest_rank() {
     );
     assert_eq!(TimeSummary::of(&[3.0]).p95_ms, 3.0);
     assert_eq!(TimeSummary::of(&[]), TimeSummary::default());
+}
+
+#[test]
+fn differing_frames_come_with_an_image_of_where_only_when_asked() {
+    let cameras = circle(1);
+    // Every box sampled (no z-buffered large triangles): point samples, not the exact frame.
+    let rzb = AlgoSpec::parse("rzb:large=off").expect("a valid spec");
+    let mut config = CompareConfig::new([AlgoSpec::from(Algorithm::FRUSTUM), rzb], 96, 64);
+    config.options.raster.threads = 2;
+    let mut images = Vec::new();
+    let count = |config: &CompareConfig, images: &mut Vec<(String, usize, image::RgbaImage)>| {
+        let report = compare(cubes(), &cameras, config, &mut |e| {
+            if let CompareProgress::Differs { label, index, image } = e {
+                images.push((label.to_string(), index, image.clone()));
+            }
+        })
+        .expect("the comparison runs");
+        let rzb = report
+            .renderers
+            .iter()
+            .find(|r| r.name.starts_with("rzb"))
+            .expect("rzb took part");
+        rzb.frames - rzb.frames_identical.expect("frames are checked")
+    };
+    count(&config, &mut images);
+    assert!(images.is_empty(), "no images unless asked");
+    config.diff_images = true;
+    let differing = count(&config, &mut images);
+    assert!(differing > 0, "rzb's point samples differ from zbuffer on these views");
+    assert_eq!(
+        images.len(),
+        differing,
+        "one image per differing frame, none for frustum's"
+    );
+    for (label, index, image) in &images {
+        assert_eq!(label, "rzb:large=off");
+        assert!(*index < cameras.len());
+        assert_eq!(image.dimensions(), (96, 64));
+        let red = image.pixels().filter(|p| p.0 == [255, 0, 0, 255]).count();
+        let yellow = image.pixels().filter(|p| p.0 == [255, 200, 0, 255]).count();
+        assert!(red + yellow > 0, "a differing frame marks where it differs");
+    }
 }

@@ -212,6 +212,7 @@ pub fn run_suite(
         reference: Reference::Auto,
         image_complexity: false,
         peak_rss: None,
+        diff_images: false,
     };
     let mut done = Vec::with_capacity(cases.len());
     let mut skipped = Vec::new();
