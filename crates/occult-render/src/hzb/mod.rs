@@ -343,7 +343,7 @@ impl HzbOptions {
 /// Every counter ([`FrameStats::counters`](crate::FrameStats::counters)) a frame may report,
 /// whichever the settings, except the per-worker ones of `parallel=on` (`worker<k>_busy_us`,
 /// `worker<k>_idle_us`); [`INFO`]'s counters list those too.
-pub const COUNTERS: [&str; 20] = [
+pub const COUNTERS: [&str; 21] = [
     "occlusion_tests",
     "occlusion_culled",
     "frustum_culled",
@@ -360,6 +360,7 @@ pub const COUNTERS: [&str; 20] = [
     "visible_list_skipped",
     "visible_list_precision_pct",
     "refreshes",
+    "refreshes_paid",
     crate::payoff::COUNTERS[0],
     crate::payoff::COUNTERS[1],
     crate::direct::COUNTER,

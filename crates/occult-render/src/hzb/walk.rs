@@ -371,8 +371,9 @@ pub(super) struct Walk<'a> {
     from_list_triangles: u64,
     /// The precision measured by this frame's recheck, in percent (a counter).
     list_precision_pct: Option<u64>,
-    /// Batches drawn early for a test (`refresh`).
+    /// Batches drawn early for a test (`refresh`), and those after which the box was hidden.
     refreshes: u64,
+    refreshes_paid: u64,
 }
 
 impl<'a> Walk<'a> {
@@ -433,6 +434,7 @@ impl<'a> Walk<'a> {
             from_list_triangles: 0,
             list_precision_pct: None,
             refreshes: 0,
+            refreshes_paid: 0,
         }
     }
 
@@ -659,6 +661,7 @@ impl<'a> Walk<'a> {
             ("visible_list_retested", self.list_retested),
             ("visible_list_skipped", self.list_skipped),
             ("refreshes", self.refreshes),
+            ("refreshes_paid", self.refreshes_paid),
         ]);
         if let Some(p) = self.list_precision_pct {
             c.add("visible_list_precision_pct", p);
@@ -807,6 +810,7 @@ impl<'a> Walk<'a> {
             self.flush();
             self.refreshes += 1;
             hidden = self.occlusion().box_hidden(clip, b, eye, &mut pc);
+            self.refreshes_paid += u64::from(hidden);
         }
         self.pc = pc;
         if hidden {
