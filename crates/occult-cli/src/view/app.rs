@@ -703,8 +703,15 @@ impl App {
                 .collect();
             let line_height = self.text.line_height();
             let help_h = line_height * lines.len() as i32;
-            let help_w = HELP.iter().map(|l| l.len() as i32 * 7).max().unwrap_or(0);
-            let x = (w as i32 - help_w).max(0) / 2;
+            let help_w = HELP
+                .iter()
+                .map(|l| {
+                    l.split_once('\t')
+                        .map_or(0, |(a, b)| self.text.width(a) + self.text.width(b))
+                })
+                .max()
+                .unwrap_or(0);
+            let x = (w as i32 - help_w - 40).max(0) / 2;
             let y = (h as i32 - help_h).max(0) / 2;
             self.text.panel(&mut composed, width, x, y, false, &lines);
         } else {
@@ -983,7 +990,8 @@ impl ApplicationHandler<Event> for App {
             if !shooting {
                 self.tick(dt);
             }
-            if self.building.is_some() || self.message.is_some() {
+            let rendering = self.last.as_ref().is_some_and(|f| f.id < self.next_id);
+            if self.building.is_some() || self.message.is_some() || rendering {
                 if let Some(w) = &self.window {
                     w.request_redraw();
                 }
@@ -992,6 +1000,7 @@ impl ApplicationHandler<Event> for App {
         self.pump(event_loop);
         let animating = !self.held.is_empty()
             || self.orbit
+            || self.last.as_ref().is_some_and(|f| f.id < self.next_id)
             || self.building.is_some()
             || self.script.as_ref().is_some_and(|r| r.wait.is_some())
             || self
