@@ -83,6 +83,8 @@ enum Wait {
     Shot,
     /// The window as shown, once a frame of the current state is in it.
     Capture(PathBuf),
+    /// The statistics of a frame of the current state.
+    Stats(PathBuf),
     /// A moment.
     Until(Instant),
     /// Frames shown while flying.
@@ -531,6 +533,28 @@ impl App {
                     .with_context(|| format!("cannot write '{}'", path.display()))?;
                 None
             }
+            Wait::Stats(path) => {
+                let Some(frame) = self.last.as_ref().filter(|_| self.current()) else {
+                    return Ok(Some(Wait::Stats(path)));
+                };
+                let s = &frame.stats;
+                let json = serde_json::json!({
+                    "renderer": frame.label,
+                    "mode": frame.mode.name(),
+                    "width": frame.width,
+                    "height": frame.height,
+                    "frame_ms": frame.frame_ms,
+                    "render_ms": frame.render_ms,
+                    "phases_ms": s.phases_ms(),
+                    "triangles_submitted": s.triangles_submitted,
+                    "triangles_rasterized": s.triangles_rasterized,
+                    "triangles_visible": frame.triangles_visible,
+                    "differing_pixels": frame.differing_pixels,
+                    "counters": s.counters,
+                });
+                output::write_json(&path, &json)?;
+                None
+            }
             Wait::Until(t) => (Instant::now() < t).then_some(Wait::Until(t)),
             Wait::Fly {
                 until_frame,
@@ -635,6 +659,10 @@ impl App {
             Command::Capture(path) => {
                 output::check_output(&path)?;
                 Some(Wait::Capture(path))
+            }
+            Command::Stats(path) => {
+                output::check_output(&path)?;
+                Some(Wait::Stats(path))
             }
             Command::RecordStart => {
                 self.recording = Some(vec![self.fly.camera]);

@@ -16,6 +16,7 @@
 //! | `wait-frame` | waits for a frame of the current state, drawn by the chosen renderer |
 //! | `screenshot FILE` | a frame of the current state to PNG: the pixels `occult render` writes |
 //! | `capture FILE` | the window as shown, overlays included, to PNG |
+//! | `stats FILE` | what the overlay shows of a frame of the current state, as JSON |
 //! | `record start` / `record stop FILE` | records the flown cameras; writes them as a path file |
 //! | `fly FRAMES` | flies forward and turning, input every 10 ms, until FRAMES frames are shown; prints fps |
 //! | `sleep MS` | waits |
@@ -74,6 +75,8 @@ pub enum Command {
     Screenshot(PathBuf),
     /// The window's pixels to PNG.
     Capture(PathBuf),
+    /// The frame's statistics to JSON.
+    Stats(PathBuf),
     /// Starts recording the flown cameras.
     RecordStart,
     /// Stops recording and writes the path file.
@@ -176,6 +179,7 @@ fn parse_line(line: &str) -> Result<Command> {
         "wait-frame" if args.is_empty() => Command::WaitFrame,
         "screenshot" => Command::Screenshot(PathBuf::from(one()?)),
         "capture" => Command::Capture(PathBuf::from(one()?)),
+        "stats" => Command::Stats(PathBuf::from(one()?)),
         "record" => match args {
             ["start"] => Command::RecordStart,
             ["stop", file] => Command::RecordStop(PathBuf::from(file)),
@@ -189,7 +193,7 @@ fn parse_line(line: &str) -> Result<Command> {
         "exit" if args.is_empty() => Command::Exit,
         "wait-frame" | "exit" => bail!("'{verb}' takes no argument"),
         other => bail!(
-            "unknown command '{other}' (camera, view, move, turn, key, algo, mode, size, wait-frame, screenshot, capture, record, fly, sleep, exit)"
+            "unknown command '{other}' (camera, view, move, turn, key, algo, mode, size, wait-frame, screenshot, capture, stats, record, fly, sleep, exit)"
         ),
     })
 }
@@ -225,10 +229,10 @@ mod tests {
         let s = Script::parse(
             "# a comment\n\ncamera eye 1,2,3 target 0,0,0 up 0,0,1\nview circle:8:3\nmove forward 2.5\nturn 10 -5\n\
              key 3\nkey shift+tab\nalgo hzb:temporal=off\nmode depth\nsize 64x48\nwait-frame\nscreenshot a.png # shot\n\
-             capture b.png\nrecord start\nrecord stop p.json\nfly 10\nsleep 5\nexit\n",
+             capture b.png\nstats c.json\nrecord start\nrecord stop p.json\nfly 10\nsleep 5\nexit\n",
         )
         .expect("a good script parses");
-        assert_eq!(s.commands.len(), 17);
+        assert_eq!(s.commands.len(), 18);
         assert_eq!(s.commands[0].0, 3, "line numbers count comments and blanks");
     }
 

@@ -276,6 +276,37 @@ fn fly_reports_frame_rate_and_input_latency() {
 }
 
 #[test]
+fn exactness_mode_counts_no_differing_pixel_for_conservative_renderers() {
+    let Some(x) = Xvfb::start("exactness_mode_counts_no_differing_pixel_for_conservative_renderers") else {
+        return;
+    };
+    let dir = scratch("exactness");
+    let json = |name: &str| dir.join(format!("{name}.json"));
+    let mut script = String::from("view circle:8:5\nmode exactness\n");
+    for algo in ["hzb", "oqgrid", "rzb"] {
+        script.push_str(&format!("algo {algo}\nstats {}\n", s(&json(algo))));
+    }
+    script.push_str("exit\n");
+    let script_file = dir.join("script.txt");
+    std::fs::write(&script_file, script).expect("the script is written");
+    assert_ok(
+        &x.view(&[CITY, "--size", SIZE, "--script", s(&script_file)]),
+        "occult view --script",
+    );
+    let read = |name: &str| -> serde_json::Value {
+        serde_json::from_slice(&bytes(&json(name))).expect("the statistics are JSON")
+    };
+    for algo in ["hzb", "oqgrid"] {
+        let stats = read(algo);
+        assert_eq!(stats["renderer"], algo);
+        assert_eq!(stats["mode"], "exactness");
+        assert_eq!(stats["differing_pixels"], 0, "{algo}: {stats}");
+        assert!(stats["triangles_visible"].as_u64().is_some_and(|v| v > 0), "{stats}");
+    }
+    assert!(read("rzb")["differing_pixels"].as_u64().is_some(), "rzb is checked too");
+}
+
+#[test]
 fn no_display_is_one_line_naming_the_alternatives() {
     let out = Command::new(env!("CARGO_BIN_EXE_occult"))
         .args(["view", TERRAIN])
