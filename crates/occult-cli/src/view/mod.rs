@@ -103,5 +103,8 @@ pub fn run(a: ViewArgs) -> Result<()> {
 /// The error for a display that cannot be opened.
 fn no_display(cause: impl std::fmt::Display) -> anyhow::Error {
     let display = std::env::var("DISPLAY").unwrap_or_default();
-    anyhow::anyhow!("{NO_DISPLAY}, and display '{display}' cannot be opened ({cause}); {ALTERNATIVES}")
+    // winit's errors open with the source location of the platform code: keep the reason.
+    let cause = cause.to_string();
+    let reason = cause.rsplit(": ").next().unwrap_or(&cause).trim();
+    anyhow::anyhow!("{NO_DISPLAY}, and display '{display}' cannot be opened ({reason}); {ALTERNATIVES}")
 }
