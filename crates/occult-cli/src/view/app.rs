@@ -141,8 +141,8 @@ struct App {
     message: Option<(String, Instant)>,
     /// Inputs not yet reflected by a frame: request id, when, frames shown since.
     pending_inputs: Vec<(u64, Instant, u32)>,
-    /// Latency of each input: frames shown until the first that reflects it (that one
-    /// included), and milliseconds.
+    /// Latency of each input: frames finished after it until the first that reflects it
+    /// (that one included), and milliseconds until the window has that frame.
     latencies: Vec<(u32, f64)>,
     flights: Vec<String>,
     script: Option<Run>,
@@ -404,12 +404,15 @@ impl App {
         if self.frame_times.len() > 30 {
             self.frame_times.remove(0);
         }
+        // A frame counts for an input once it was finished after the input: one finished
+        // before, still on its way to the window, is not a frame the input could be in.
         let mut still = Vec::with_capacity(self.pending_inputs.len());
         for (id, at, seen) in self.pending_inputs.drain(..) {
+            let seen = seen + u32::from(frame.finished > at);
             if frame.id >= id {
-                self.latencies.push((seen + 1, (now - at).as_secs_f64() * 1e3));
+                self.latencies.push((seen.max(1), (now - at).as_secs_f64() * 1e3));
             } else {
-                still.push((id, at, seen + 1));
+                still.push((id, at, seen));
             }
         }
         self.pending_inputs = still;

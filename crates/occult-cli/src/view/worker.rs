@@ -105,6 +105,8 @@ pub struct Shown {
     pub differing_pixels: Option<u64>,
     /// The screenshot the request asked for: where it went, or why it failed.
     pub shot: Option<Result<PathBuf, String>>,
+    /// When the worker finished it.
+    pub finished: Instant,
 }
 
 /// What the worker tells the window.
@@ -382,6 +384,7 @@ impl Runner {
             triangles_visible,
             differing_pixels,
             shot,
+            finished: Instant::now(),
         };
         self.frame = Some(frame);
         Ok(shown)
