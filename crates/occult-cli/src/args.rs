@@ -44,6 +44,17 @@ pub enum Command {
     /// renderer on each; per case and renderer the speedup over zbuffer, the ratio to the
     /// oracle and identical frames, then per renderer the geometric mean and worst case.
     Suite(SuiteArgs),
+    /// Open a scene in a window: fly through it, switch renderers live, see what each costs
+    /// and culls (press H in the window for the controls).
+    #[cfg(feature = "view")]
+    View(crate::view::ViewArgs),
+    /// Open a scene in a window (this build has no viewer: build with `--features view`).
+    #[cfg(not(feature = "view"))]
+    View {
+        /// Ignored: this build has no viewer.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+        ignored: Vec<String>,
+    },
 }
 
 /// A frame size.

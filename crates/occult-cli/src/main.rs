@@ -14,6 +14,7 @@
 //! | `occult particles` | sprites among a scene, culled with an N-buffer or not |
 //! | `occult shadows` | spot-light shadow volumes, clamped with litmaps and N-buffers or not |
 //! | `occult suite` | the performance yardstick: every renderer on a fixed, versioned matrix of cases |
+//! | `occult view` | a window (feature `view`): fly through a scene, switch renderers live |
 //!
 //! Default sizes: 1920x1080 for `render` (a picture to look at), 640x480 for `walk` and
 //! `compare` (many frames, several renderers; brute force must stay bearable); `suite` fixes its
@@ -29,6 +30,8 @@ mod commands;
 mod plot;
 mod progress;
 mod scene;
+#[cfg(feature = "view")]
+mod view;
 
 use std::process::ExitCode;
 
@@ -71,6 +74,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Particles(a) => commands::particles::run(a),
         Command::Shadows(a) => commands::shadows::run(a),
         Command::Suite(a) => commands::suite::run(a),
+        #[cfg(feature = "view")]
+        Command::View(a) => view::run(a),
+        #[cfg(not(feature = "view"))]
+        Command::View { .. } => anyhow::bail!(
+            "this occult was built without the viewer: build it with `cargo build --release -p occult-cli --features view`"
+        ),
     }
 }
 

@@ -817,3 +817,12 @@ fn sweep_varies_a_parameter_and_plots_it() {
         );
     }
 }
+
+/// Without the `view` feature, `occult view` says on one line how to get it.
+#[cfg(not(feature = "view"))]
+#[test]
+fn view_without_the_feature_names_it() {
+    let (code, _, stderr) = fails(&["view", TERRAIN]);
+    assert_eq!(code, Some(1));
+    assert!(stderr.contains("--features view"), "{stderr}");
+}
