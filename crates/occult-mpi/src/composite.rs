@@ -89,21 +89,35 @@ pub fn composite(comm: &dyn Comm, frame: &mut Frame, replicate: bool) -> Result<
         send_range(comm, 0, frame, range, &mut cost)?;
     }
     if replicate {
-        let bytes = if rank == 0 {
-            encode(frame, 0..pixel_count)
-        } else {
-            Vec::new()
-        };
-        if rank == 0 {
-            cost.bytes_sent += (bytes.len() * tree_sends(0, size)) as u64;
-        }
-        let bytes = crate::comm::broadcast(comm, bytes)?;
-        if rank != 0 {
-            cost.bytes_received += bytes.len() as u64;
-            cost.bytes_sent += (bytes.len() * tree_sends(rank, size)) as u64;
-            // The broadcast's data comes from rank 0.
-            decode_into(0, &bytes, frame, 0..pixel_count, false)?;
-        }
+        let more = self::replicate(comm, frame)?;
+        cost.bytes_sent += more.bytes_sent;
+        cost.bytes_received += more.bytes_received;
+        cost.messages_sent += more.messages_sent;
+    }
+    Ok(cost)
+}
+
+/// Rank 0's frame (depth and items) on every rank, along a binary tree.
+///
+/// # Errors
+/// Transport errors; [`CommError::Malformed`] for frames of different sizes.
+pub fn replicate(comm: &dyn Comm, frame: &mut Frame) -> Result<CompositeCost, CommError> {
+    let (rank, size) = (comm.rank(), comm.size());
+    let pixel_count = frame.depth().len();
+    let mut cost = CompositeCost::default();
+    let bytes = if rank == 0 {
+        encode(frame, 0..pixel_count)
+    } else {
+        Vec::new()
+    };
+    let bytes = crate::comm::broadcast(comm, bytes)?;
+    let sends = tree_sends(rank, size) as u64;
+    cost.bytes_sent += bytes.len() as u64 * sends;
+    cost.messages_sent += sends;
+    if rank != 0 {
+        cost.bytes_received += bytes.len() as u64;
+        // The broadcast's data comes from rank 0.
+        decode_into(0, &bytes, frame, 0..pixel_count, false)?;
     }
     Ok(cost)
 }

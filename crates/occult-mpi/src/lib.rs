@@ -9,8 +9,10 @@
 //! | module | what |
 //! | --- | --- |
 //! | [`comm`] | the transport: [`Comm`], thread ranks, and the collectives built on send/receive |
+//! | [`model`] | communication per frame and rank: measured at a few ranks, modelled for many |
 //! | [`partition`] | the scene split among ranks, spatially and by cost, keeping item ids |
 //! | [`composite`] | binary swap compositing by (depth, item id), then gather to rank 0 |
+//! | [`plzb`] | Han & Zeiger §IV: the parallel local z-buffer (rays of the unfinished pixels shared, PVLs united) |
 //! | [`sortlast`] | the renderer wrapper and the [`occult_render::RenderOptions`] hook that builds every renderer sort-last |
 //!
 //! ```
@@ -35,10 +37,13 @@
 
 pub mod comm;
 pub mod composite;
+pub mod model;
 #[cfg(feature = "mpi")]
 pub mod mpi_comm;
 pub mod partition;
+pub mod plzb;
 pub mod sortlast;
 
 pub use comm::{agree, broadcast, gather, run_threads, Comm, CommError, ThreadComm};
+pub use plzb::ParallelLzb;
 pub use sortlast::{sort_last_options, SortLast, SortLastConfig};

@@ -31,6 +31,9 @@ pub struct SortLastConfig {
     pub replicate: bool,
     /// Fault injection for tests of failure handling: this rank fails to build its renderer.
     pub fail_rank: Option<usize>,
+    /// `lzb` as Han & Zeiger's §IV parallel local z-buffer ([`crate::plzb`]: the whole scene
+    /// on every rank, the rays shared) instead of sort-last.
+    pub parallel_lzb: bool,
 }
 
 /// Counters a sort-last frame reports on rank 0 (besides the inner renderer's, summed over
@@ -100,6 +103,16 @@ pub fn sort_last_options(comm: Arc<dyn Comm>, base: RenderOptions, config: SortL
     // one scene, which then share the part.
     let cache: Arc<PartCache> = Arc::new(Mutex::new(None));
     let hook = move |scene: Arc<Scene>, options: &RenderOptions, spec: &AlgoSpec| -> Result<Box<dyn Renderer>> {
+        if config.parallel_lzb && spec.algorithm.name() == "lzb" {
+            let built = if config.fail_rank == Some(comm.rank()) {
+                Err(RenderError::Ranks("failure injected for a test (fail_rank)".into()))
+            } else {
+                crate::plzb::ParallelLzb::new(Arc::clone(&comm), scene, options, spec, config.replicate)
+            };
+            let outcome = built.as_ref().map(|_| ()).map_err(|e| e.to_string());
+            agree(comm.as_ref(), outcome).map_err(ranks_error)?;
+            return Ok(Box::new(built.expect("agreed that every rank built")) as Box<dyn Renderer>);
+        }
         let built = build_part(&comm, &cache, &scene, options, spec, &config);
         let outcome = built.as_ref().map(|_| ()).map_err(|e| e.to_string());
         agree(comm.as_ref(), outcome).map_err(ranks_error)?;
@@ -130,6 +143,7 @@ fn build_part(
     if config.fail_rank == Some(comm.rank()) {
         return Err(RenderError::Ranks("failure injected for a test (fail_rank)".into()));
     }
+
     let mut cache = cache
         .lock()
         .map_err(|_| RenderError::Ranks("a rank's builder panicked".into()))?;

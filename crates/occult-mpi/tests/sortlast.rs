@@ -48,6 +48,10 @@ fn views(scene: &Scene, default: Camera) -> Vec<View> {
 }
 
 fn check(algo: &str) {
+    check_with(algo, SortLastConfig::default());
+}
+
+fn check_with(algo: &str, config: SortLastConfig) {
     let spec = AlgoSpec::parse(algo).expect("a valid spec");
     for &scene_spec in SCENES {
         let built = occult_scenes::parse_spec(scene_spec)
@@ -68,7 +72,7 @@ fn check(algo: &str) {
             .collect();
         for ranks in 1..=4 {
             let out = run_threads(ranks, |comm| {
-                let options = sort_last_options(comm.clone(), one_thread(), SortLastConfig::default());
+                let options = sort_last_options(comm.clone(), one_thread(), config.clone());
                 let mut r = spec.build(scene.clone(), &options).expect("builds on every rank");
                 views
                     .iter()
@@ -156,4 +160,33 @@ fn a_frame_of_the_wrong_size_is_one_error_on_every_rank() {
 fn nbuffer_and_oqgrid_sort_last_are_identical_on_every_generator() {
     check("nbuffer");
     check("oqgrid");
+}
+
+#[test]
+fn parallel_lzb_is_identical_on_every_generator() {
+    let config = SortLastConfig {
+        parallel_lzb: true,
+        ..SortLastConfig::default()
+    };
+    check_with("lzb:payoff=off", config.clone());
+    check_with("lzb:payoff=off,oor=off,coherence=off,plane=dynamic", config);
+}
+
+#[test]
+fn parallel_lzb_needs_payoff_off() {
+    let (scene, _) = small_terrain();
+    let out = run_threads(2, |comm| {
+        let config = SortLastConfig {
+            parallel_lzb: true,
+            ..SortLastConfig::default()
+        };
+        let options = sort_last_options(comm.clone(), one_thread(), config);
+        AlgoSpec::parse("lzb")
+            .expect("valid")
+            .build(scene.clone(), &options)
+            .map(|_| ())
+    });
+    for r in out {
+        assert!(matches!(r.expect("no rank panics"), Err(RenderError::Ranks(m)) if m.contains("payoff=off")));
+    }
 }
