@@ -24,6 +24,7 @@ fn one_thread() -> RenderOptions {
             threads: 1,
             ..RasterConfig::default()
         },
+        ..RenderOptions::default()
     }
 }
 

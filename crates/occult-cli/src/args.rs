@@ -14,6 +14,11 @@ pub struct Cli {
     /// Worker threads for everything (scene building and rasterizing); default: all cores.
     #[arg(long, global = true, value_name = "N", value_parser = parse_threads)]
     pub threads: Option<usize>,
+    /// Under `mpirun` (feature `mpi`): `lzb` runs as Han & Zeiger's §IV parallel local
+    /// z-buffer (the whole scene on every rank, the rays of the unfinished pixels shared; needs
+    /// `lzb:payoff=off`) instead of sort-last. Every other renderer stays sort-last.
+    #[arg(long, global = true)]
+    pub mpi_lzb: bool,
     #[command(subcommand)]
     pub command: Command,
 }
@@ -55,6 +60,10 @@ pub enum Command {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
         ignored: Vec<String>,
     },
+    /// Sort-last compositing's communication per frame and rank: measured over 2–8 thread
+    /// ranks on a scene, and binary swap's model for many ranks at a large frame size; a table,
+    /// JSON, CSV and a plot.
+    MpiModel(crate::commands::mpi_model::MpiModelArgs),
 }
 
 /// A frame size.

@@ -15,6 +15,11 @@
 //! | `occult shadows` | spot-light shadow volumes, clamped with litmaps and N-buffers or not |
 //! | `occult suite` | the performance yardstick: every renderer on a fixed, versioned matrix of cases |
 //! | `occult view` | a window (feature `view`): fly through a scene, switch renderers live |
+//! | `occult mpi-model` | sort-last compositing's communication per frame and rank, measured and modelled |
+//!
+//! Under `mpirun` (feature `mpi`) `render`, `walk` and `compare` run unchanged on every rank,
+//! their renderers sort-last over the ranks (`--mpi-lzb`: `lzb` as the paper's parallel local
+//! z-buffer); rank 0 alone prints and writes.
 //!
 //! Default sizes: 1920x1080 for `render` (a picture to look at), 640x480 for `walk` and
 //! `compare` (many frames, several renderers; brute force must stay bearable); `suite` fixes its
@@ -29,6 +34,7 @@ mod args;
 mod commands;
 mod plot;
 mod progress;
+mod ranks;
 mod scene;
 #[cfg(feature = "view")]
 mod view;
@@ -45,18 +51,41 @@ fn main() -> ExitCode {
         Err(e) => return usage_error(e),
     };
     install_panic_hook();
-    match run(cli) {
+    // Under `mpirun` (feature `mpi`): this rank's communicator, dropped (MPI finalised) last.
+    let comm = match ranks::start() {
+        Ok(comm) => comm,
+        Err(e) => {
+            eprintln!("error: cannot start MPI: {}", one_line(&e));
+            return ExitCode::from(1);
+        }
+    };
+    let code = match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         // The reader of our stdout went away (`occult compare ... | head`): not an error.
         Err(e) if is_broken_pipe(&e) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {}", one_line(&e));
+            if ranks::is_root() {
+                eprintln!("error: {}", one_line(&e));
+            }
+            if let Some(comm) = &comm {
+                // An error every rank has ends every rank alike; one of this rank alone ends
+                // the run at once, as the others may be waiting on this rank.
+                if !ranks::is_agreed(&e) {
+                    if !ranks::is_root() {
+                        eprintln!("error: rank {} of {}: {}", comm.rank(), comm.size(), one_line(&e));
+                    }
+                    ranks::abort(comm);
+                }
+            }
             ExitCode::from(1)
         }
-    }
+    };
+    drop(comm);
+    code
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
+    ranks::set_parallel_lzb(cli.mpi_lzb);
     if let Some(threads) = cli.threads {
         rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -80,6 +109,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::View { .. } => anyhow::bail!(
             "this occult was built without the viewer: build it with `cargo build --release -p occult-cli --features view`"
         ),
+        Command::MpiModel(a) => commands::mpi_model::run(a),
     }
 }
 
@@ -115,6 +145,10 @@ fn install_panic_hook() {
 /// (clap's first line, which names the argument and the problem) and exit status 2.
 fn usage_error(e: clap::Error) -> ExitCode {
     use clap::error::ErrorKind;
+    // Under `mpirun` every rank parses the same arguments: rank 0 alone speaks.
+    if ranks::launcher_rank() != 0 {
+        return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
+    }
     if matches!(
         e.kind(),
         ErrorKind::DisplayHelp | ErrorKind::DisplayVersion | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand

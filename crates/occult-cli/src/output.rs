@@ -1,10 +1,13 @@
 //! Files out (PNG, JSON, CSV) and the number formats of the text output.
 
 /// `println!` that returns an error instead of panicking when stdout is closed (`| head`).
+/// Under `mpirun`, rank 0 alone prints.
 macro_rules! say {
     ($($arg:tt)*) => {{
         use std::io::Write as _;
-        writeln!(std::io::stdout().lock(), $($arg)*)?;
+        if $crate::ranks::is_root() {
+            writeln!(std::io::stdout().lock(), $($arg)*)?;
+        }
     }};
 }
 
@@ -12,7 +15,9 @@ macro_rules! say {
 macro_rules! say_raw {
     ($($arg:tt)*) => {{
         use std::io::Write as _;
-        write!(std::io::stdout().lock(), $($arg)*)?;
+        if $crate::ranks::is_root() {
+            write!(std::io::stdout().lock(), $($arg)*)?;
+        }
     }};
 }
 
@@ -53,6 +58,11 @@ pub fn check_output(path: &Path) -> Result<()> {
 /// # Errors
 /// As [`check_output`]; two paths naming one file.
 pub fn check_outputs<'a>(paths: impl IntoIterator<Item = &'a Option<PathBuf>>) -> Result<()> {
+    // Under `mpirun` every rank checks, and all end alike when one path is bad.
+    crate::ranks::agree(check_each_output(paths))
+}
+
+fn check_each_output<'a>(paths: impl IntoIterator<Item = &'a Option<PathBuf>>) -> Result<()> {
     let mut seen: Vec<(PathBuf, &Path)> = Vec::new();
     for p in paths.into_iter().flatten() {
         check_output(p)?;
@@ -70,6 +80,9 @@ pub fn check_outputs<'a>(paths: impl IntoIterator<Item = &'a Option<PathBuf>>) -
 /// # Errors
 /// I/O and encoding errors, naming the file.
 pub fn write_color_png(frame: &Frame, path: &Path) -> Result<()> {
+    if !crate::ranks::is_root() {
+        return Ok(());
+    }
     frame
         .color_image()
         .save_with_format(path, image::ImageFormat::Png)
@@ -81,6 +94,9 @@ pub fn write_color_png(frame: &Frame, path: &Path) -> Result<()> {
 /// # Errors
 /// I/O and encoding errors, naming the file.
 pub fn write_depth_png(frame: &Frame, path: &Path) -> Result<()> {
+    if !crate::ranks::is_root() {
+        return Ok(());
+    }
     frame
         .depth_image()
         .save_with_format(path, image::ImageFormat::Png)
@@ -92,6 +108,9 @@ pub fn write_depth_png(frame: &Frame, path: &Path) -> Result<()> {
 /// # Errors
 /// I/O errors, naming the file.
 pub fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
+    if !crate::ranks::is_root() {
+        return Ok(());
+    }
     let mut text = serde_json::to_string_pretty(value).context("cannot serialize the report")?;
     text.push('\n');
     std::fs::write(path, text).with_context(|| format!("cannot write '{}'", path.display()))
@@ -102,6 +121,9 @@ pub fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
 /// # Errors
 /// I/O errors, naming the file.
 pub fn write_csv(path: &Path, header: &[&str], rows: &[Vec<String>]) -> Result<()> {
+    if !crate::ranks::is_root() {
+        return Ok(());
+    }
     let mut text = header.join(",");
     text.push('\n');
     for row in rows {

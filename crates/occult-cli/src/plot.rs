@@ -90,6 +90,9 @@ fn draw_stacked<P>(
     panels: &[P],
     draw_one: for<'a> fn(&Area<'a>, &P) -> DrawResult<'a>,
 ) -> Result<()> {
+    if !crate::ranks::is_root() {
+        return Ok(());
+    }
     register_font()?;
     let fail = |e: &dyn std::fmt::Display| anyhow!("cannot draw plot '{}': {e}", path.display());
     let root = BitMapBackend::new(path, size).into_drawing_area();

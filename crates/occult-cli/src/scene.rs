@@ -33,6 +33,12 @@ pub struct LoadedScene {
 /// # Errors
 /// Unreadable or malformed files, generator limits.
 pub fn load(arg: &SceneArg) -> Result<LoadedScene> {
+    // Under `mpirun` every rank loads the scene; one that fails (a file it cannot read, memory)
+    // ends every rank with one error.
+    crate::ranks::agree(load_here(arg))
+}
+
+fn load_here(arg: &SceneArg) -> Result<LoadedScene> {
     let spec = arg.text.as_str();
     let start = Instant::now();
     let progress = Progress::spinner(format!("building scene {spec}"));
@@ -42,7 +48,8 @@ pub fn load(arg: &SceneArg) -> Result<LoadedScene> {
     {
         use std::io::Write as _;
         let mut stderr = std::io::stderr().lock();
-        for w in &built.warnings {
+        // Under `mpirun`, rank 0 alone warns.
+        for w in built.warnings.iter().filter(|_| crate::ranks::is_root()) {
             // A closed stderr loses the warnings, not the run.
             let _ = writeln!(stderr, "warning: {w}");
         }

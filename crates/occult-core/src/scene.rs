@@ -215,6 +215,64 @@ impl SceneBuilder {
         }))
     }
 
+    /// A builder holding `scene`'s nodes under their ids, to which a new root over some of
+    /// them can be added (sort-last rendering builds each rank's part so: the part shares the
+    /// scene's DAG, and its meshes keep their ids).
+    ///
+    /// Cost: a copy of every node, meshes included.
+    pub fn from_scene(scene: &Scene) -> Self {
+        Self {
+            nodes: scene.nodes.clone(),
+        }
+    }
+
+    /// Adds a group whose instance `i` takes the item ids from `first_items[i]` on, instead
+    /// of the next free ones: a part of a scene built so keeps the scene's item ids (sort-last
+    /// rendering composites ranks' frames by item id, which must be the scene's).
+    /// `first_items` must be increasing and leave each instance room for its items; gaps
+    /// are allowed (items of the gaps exist in no instance). The group's item count is the
+    /// end of its last instance's range.
+    ///
+    /// # Errors
+    /// As [`SceneBuilder::add_group`]; [`CoreError::EmptyScene`] when `first_items` and
+    /// `instances` differ in length or the ranges overlap or are out of order.
+    pub fn add_group_at_items(
+        &mut self,
+        name: impl Into<String>,
+        instances: Vec<Instance>,
+        first_items: Vec<ItemId>,
+    ) -> Result<NodeId> {
+        let name = name.into();
+        if first_items.len() != instances.len() {
+            return Err(CoreError::EmptyScene(format!(
+                "group '{name}': {} instances but {} first items",
+                instances.len(),
+                first_items.len()
+            )));
+        }
+        let id = self.add_group(name.clone(), instances)?;
+        let node = &self.nodes[id.index()];
+        let mut end = 0u64;
+        for (i, inst) in node.instances().iter().enumerate() {
+            let first = first_items[i];
+            if first < end {
+                return Err(CoreError::EmptyScene(format!(
+                    "group '{name}': instance {i} starts at item {first}, inside the range of the one before"
+                )));
+            }
+            end = first
+                .checked_add(self.nodes[inst.child.index()].item_count)
+                .ok_or_else(|| CoreError::ItemOverflow(name.clone()))?;
+        }
+        if end == u64::MAX {
+            return Err(CoreError::ItemOverflow(name));
+        }
+        let node = &mut self.nodes[id.index()];
+        node.item_offsets = first_items;
+        node.item_count = end;
+        Ok(id)
+    }
+
     /// The node added as `id`, if any.
     pub fn node(&self, id: NodeId) -> Option<&Node> {
         self.nodes.get(id.index())
@@ -412,9 +470,13 @@ impl Scene {
                 }
                 NodeKind::Group(instances) => {
                     // The last instance whose range starts at or before `local` and is non-empty.
-                    let i = node.item_offsets.partition_point(|&o| o <= local) - 1;
+                    let i = node.item_offsets.partition_point(|&o| o <= local).checked_sub(1)?;
                     let i = (0..=i).rev().find(|&j| self.node(instances[j].child).item_count > 0)?;
                     local -= node.item_offsets[i];
+                    // A group built with `add_group_at_items` may leave gaps between ranges.
+                    if local >= self.node(instances[i].child).item_count {
+                        return None;
+                    }
                     base += node.item_offsets[i];
                     world = compose(&world, &instances[i].parent_from_child);
                     id = instances[i].child;
@@ -543,6 +605,41 @@ mod tests {
         }
         assert!(s.resolve_item(12).is_none());
         assert!(s.resolve_item(NO_ITEM).is_none());
+    }
+
+    #[test]
+    fn groups_at_items_keep_the_scene_ids() {
+        // A part of `two_level` (12 items): its instances 0 and 2 of the root, at their ids.
+        let s = two_level();
+        let root = s.node(s.root());
+        let picks = [0usize, 2];
+        let instances = picks.iter().map(|&i| root.instances()[i]).collect();
+        let firsts = picks.iter().map(|&i| root.item_offset(i)).collect();
+        let mut b = SceneBuilder::from_scene(&s);
+        let part_root = b.add_group_at_items("part", instances, firsts).unwrap();
+        let part = b.build(part_root).unwrap();
+        let mut whole = vec![];
+        s.for_each_mesh_instance(|w, _, _, base| whole.push((base, *w)));
+        let mut parts = vec![];
+        part.for_each_mesh_instance(|w, _, _, base| parts.push((base, *w)));
+        let expected: Vec<_> = whole
+            .into_iter()
+            .filter(|(base, _)| {
+                picks.iter().any(|&i| {
+                    let first = root.item_offset(i);
+                    (first..first + s.node(root.instances()[i].child).item_count()).contains(base)
+                })
+            })
+            .collect();
+        assert_eq!(parts, expected, "same ids, same placements");
+        assert!(part.item_count() <= s.item_count());
+        // An id in a gap (instance 1's range) names nothing.
+        assert!(part.resolve_item(root.item_offset(1)).is_none());
+        // Overlapping or mismatched ranges are errors.
+        let mut b = SceneBuilder::from_scene(&s);
+        let two = vec![root.instances()[0], root.instances()[0]];
+        assert!(b.add_group_at_items("overlap", two.clone(), vec![0, 1]).is_err());
+        assert!(b.add_group_at_items("short", two, vec![0]).is_err());
     }
 
     #[test]

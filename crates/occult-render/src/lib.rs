@@ -89,6 +89,10 @@ pub enum RenderError {
     /// A dynamic scene update that cannot be applied (the message names the entry and why).
     #[error("scene update: {0}")]
     Update(String),
+    /// A renderer spread over several ranks (processes or threads) failed on one of them, or
+    /// their exchange did (the message names the rank and the cause).
+    #[error("{0}")]
+    Ranks(String),
 }
 
 /// Result with [`RenderError`].
@@ -117,10 +121,40 @@ pub trait Renderer: Send {
 }
 
 /// Options every renderer takes.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Default)]
 pub struct RenderOptions {
     /// The rasterizer's configuration (threads, tiles, culling of back faces).
     pub raster: RasterConfig,
+    /// When set, [`AlgoSpec::build`] and [`Algorithm::build`] hand the scene, these options
+    /// (without the hook) and the spec to it instead of building the renderer themselves: a
+    /// renderer is then built around the one asked for. Sort-last rendering (`occult-mpi`)
+    /// sets it so that every renderer a command builds (`compare`'s line-up and reference
+    /// included) is built over this rank's part of the scene and composited across ranks,
+    /// with no change to the commands.
+    pub build_around: Option<BuildAround>,
+}
+
+/// Builds a renderer around the one a spec names; see [`RenderOptions::build_around`].
+pub type BuildAround = Arc<dyn Fn(Arc<Scene>, &RenderOptions, &AlgoSpec) -> Result<Box<dyn Renderer>> + Send + Sync>;
+
+impl std::fmt::Debug for RenderOptions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RenderOptions")
+            .field("raster", &self.raster)
+            .field("build_around", &self.build_around.as_ref().map(|_| "set"))
+            .finish()
+    }
+}
+
+impl RenderOptions {
+    /// These options without [`RenderOptions::build_around`], and the hook, if set.
+    fn split_hook(&self) -> (RenderOptions, Option<BuildAround>) {
+        let inner = RenderOptions {
+            raster: self.raster.clone(),
+            build_around: None,
+        };
+        (inner, self.build_around.clone())
+    }
 }
 
 /// Builds a renderer of a scene from options and its settings.
@@ -239,7 +273,11 @@ impl Algorithm {
     /// # Errors
     /// Bad options; see each renderer.
     pub fn build(self, scene: Arc<Scene>, options: &RenderOptions) -> Result<Box<dyn Renderer>> {
-        (self.0.build)(scene, options, &Params::new(self.0.name))
+        AlgoSpec {
+            algorithm: self,
+            params: Params::new(self.0.name),
+        }
+        .build(scene, options)
     }
 }
 
@@ -250,7 +288,10 @@ impl AlgoSpec {
     /// Unknown keys, bad values; see each renderer.
     pub fn build(&self, scene: Arc<Scene>, options: &RenderOptions) -> Result<Box<dyn Renderer>> {
         self.check_keys()?;
-        (self.algorithm.0.build)(scene, options, &self.params)
+        match options.split_hook() {
+            (inner, Some(hook)) => hook(scene, &inner, self),
+            (_, None) => (self.algorithm.0.build)(scene, options, &self.params),
+        }
     }
 }
 

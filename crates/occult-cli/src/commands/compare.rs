@@ -7,7 +7,7 @@ use occult_harness::compare::{
 };
 use occult_harness::memory::PeakRss;
 use occult_harness::sweep::counter_names;
-use occult_render::{AlgoSpec, RenderOptions};
+use occult_render::AlgoSpec;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -73,7 +73,9 @@ pub fn run(a: CompareArgs) -> Result<()> {
     }
     let config = CompareConfig {
         algorithms: a.algos.0.clone(),
-        options: RenderOptions::default(),
+        // Under `mpirun`: sort-last, with every rank ending a frame with the composite, as
+        // the comparison reads the frames (and renders more where they differ) on every rank.
+        options: crate::ranks::render_options(true),
         width: a.frames.size.width,
         height: a.frames.size.height,
         reference: a.reference.0.clone(),

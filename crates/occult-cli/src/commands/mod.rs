@@ -4,6 +4,7 @@
 pub mod algos;
 pub mod compare;
 pub mod info;
+pub mod mpi_model;
 pub mod particles;
 pub mod render;
 pub mod scenes;
@@ -15,12 +16,12 @@ pub mod walk;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use occult_render::{AlgoSpec, RenderOptions, Renderer};
+use occult_render::{AlgoSpec, Renderer};
 
 use crate::progress::Progress;
 use crate::scene::LoadedScene;
 
-/// Builds `algo` on `scene` behind a spinner (`preparing NAME`); returns the renderer, its
+/// Builds `algo` on `scene` (sort-last over the ranks under `mpirun`) behind a spinner (`preparing NAME`); returns the renderer, its
 /// preprocessing time in ms, and the spinner, still shown.
 ///
 /// # Errors
@@ -29,7 +30,7 @@ pub fn build_renderer(algo: &AlgoSpec, scene: &LoadedScene) -> Result<(Box<dyn R
     let progress = Progress::spinner(format!("preparing {}", algo.label()));
     let t = Instant::now();
     let renderer = algo
-        .build(scene.scene.clone(), &RenderOptions::default())
+        .build(scene.scene.clone(), &crate::ranks::render_options(false))
         .with_context(|| format!("building {}", algo.label()))?;
     Ok((renderer, t.elapsed().as_secs_f64() * 1e3, progress))
 }

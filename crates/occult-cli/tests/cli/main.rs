@@ -1,9 +1,11 @@
 //! End-to-end tests of the `occult` binary, one test binary: small generated scenes, small
 //! frames, and bad input that must end in one line on stderr and a non-zero status, never a
 //! panic. `commands` covers render, walk, compare, sweep, info, scenes and algos; `nbuffer`
-//! covers particles and shadows (Décoret 2005 §3.2, §3.3); `suite` the performance yardstick.
+//! covers particles and shadows (Décoret 2005 §3.2, §3.3); `suite` the performance yardstick; `mpi` (feature `mpi`) the same commands under `mpirun`.
 
 mod commands;
+#[cfg(feature = "mpi")]
+mod mpi;
 mod nbuffer;
 mod suite;
 

@@ -61,12 +61,14 @@ fn identical_when_zbuffer_and_frustum_take_different_raster_strategies() {
             threads: 2,
             ..RasterConfig::default()
         },
+        ..RenderOptions::default()
     };
     let binned = RenderOptions {
         raster: RasterConfig {
             strategy: Strategy::Binned,
             ..options.raster.clone()
         },
+        ..RenderOptions::default()
     };
     let mut z = Algorithm::ZBUFFER.build(scene.clone(), &options).unwrap();
     let mut f = Algorithm::FRUSTUM.build(scene.clone(), &binned).unwrap();

@@ -309,6 +309,7 @@ fn counters_and_multithreaded_pvl_match_single_threaded() {
                 threads,
                 ..Default::default()
             },
+            ..RenderOptions::default()
         };
         // The algorithm itself: with payoff a frame may be drawn directly, without rays.
         let mut r = spec("lzb:coherence=off,payoff=off").build(scene.clone(), &o).unwrap();

@@ -15,6 +15,7 @@ fn options(threads: usize) -> RenderOptions {
             threads,
             ..RasterConfig::default()
         },
+        ..RenderOptions::default()
     }
 }
 

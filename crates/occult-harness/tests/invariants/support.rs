@@ -108,6 +108,7 @@ fn options(threads: usize) -> RenderOptions {
             threads,
             ..RasterConfig::default()
         },
+        ..RenderOptions::default()
     }
 }
 

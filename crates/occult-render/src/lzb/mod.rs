@@ -81,6 +81,10 @@
 mod cast;
 mod near;
 mod oor;
+mod plane;
+pub mod shared;
+
+pub use plane::cost_plane;
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -109,62 +113,6 @@ const PRIOR_PVL_SHARE: f64 = 0.5;
 /// Wall ns per far leaf outside rays and rasterization (its object-oriented polygon over the
 /// unfinished pixels, its part of the PVL's assembly), before `plane=cost` measured it.
 const PRIOR_NS_PER_FAR_LEAF: f64 = 500.0;
-
-/// `plane=cost`: the partition plane's view distance whose frame is expected to cost least.
-/// `leaves`: every leaf in the frustum as (its least view distance, its triangles); `hits`:
-/// the coarse rays' first-hit distances (`None`: no hit), each standing for `pixels /
-/// hits.len()` pixels; `ns_per_triangle` and `ns_per_ray`: wall time of a rasterized triangle
-/// and of a ray; `near_share`: the share of the near leaves' triangles the near pass draws
-/// (1 without `near_cull`); `pvl_share`: the share of the far leaves' triangles the rays' PVL
-/// holds;
-/// `ns_per_far_leaf`: the rest of a far leaf's cost (its polygon, the PVL's assembly). A
-/// plane at `z` draws the leaves nearer than `z · (1 + NEAR_MARGIN)`, casts the pixels whose
-/// first hit lies at `z` or beyond (those nearer are finished by the near pass; those that hit
-/// nothing are left out, object-oriented casting skipping most of them) and draws their PVL.
-/// Candidates: `near`, every coarse hit distance, and beyond every leaf (`far`: all drawn
-/// near, no ray).
-#[allow(clippy::too_many_arguments)]
-pub fn cost_plane(
-    leaves: &[(f32, u32)],
-    hits: &[Option<f32>],
-    pixels: f64,
-    ns_per_triangle: f64,
-    ns_per_ray: f64,
-    near_share: f64,
-    pvl_share: f64,
-    ns_per_far_leaf: f64,
-    near: f32,
-    far: f32,
-) -> f32 {
-    let mut by_distance: Vec<(f32, u32)> = leaves.to_vec();
-    by_distance.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
-    let mut prefix = Vec::with_capacity(by_distance.len() + 1);
-    prefix.push(0u64);
-    for &(_, t) in &by_distance {
-        prefix.push(prefix.last().copied().unwrap_or(0) + u64::from(t));
-    }
-    let mut hit_distances: Vec<f32> = hits.iter().flatten().copied().filter(|d| d.is_finite()).collect();
-    hit_distances.sort_unstable_by(f32::total_cmp);
-    let per_ray = pixels / hits.len().max(1) as f64;
-    let cost = |z: f32| {
-        let limit = z * (1.0 + NEAR_MARGIN);
-        let near_leaves = by_distance.partition_point(|&(d, _)| d < limit);
-        let near_triangles = prefix[near_leaves] as f64;
-        let far_triangles = prefix[by_distance.len()] as f64 - near_triangles;
-        let far_leaves = (by_distance.len() - near_leaves) as f64;
-        let rays = (hit_distances.len() - hit_distances.partition_point(|&d| d < z)) as f64 * per_ray;
-        (near_triangles * near_share + far_triangles * pvl_share) * ns_per_triangle
-            + rays * ns_per_ray
-            + far_leaves * ns_per_far_leaf
-    };
-    std::iter::once(near)
-        .chain(hit_distances.iter().copied())
-        .chain(std::iter::once(far))
-        .map(|z| z.clamp(near, far))
-        .map(|z| (cost(z), z))
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-        .map_or(near, |(_, z)| z)
-}
 
 /// Pixels cast between two checks of the payoff balance (`payoff=on`): a few milliseconds of
 /// rays at the slowest rates measured, so an abandoned frame overshoots little.
@@ -1139,6 +1087,26 @@ impl Renderer for Lzb {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
+        self.render_frame(view, frame, None)
+    }
+
+    fn memory_bytes(&self) -> usize {
+        self.memory_bytes_of_all()
+    }
+
+    fn is_conservative(&self) -> bool {
+        self.opts.mode == Mode::Lazy
+    }
+}
+
+impl Lzb {
+    /// A frame, alone (`share` `None`) or as one rank of §IV's parallel LZB ([`shared`]).
+    fn render_frame(
+        &mut self,
+        view: &View,
+        frame: &mut Frame,
+        mut share: Option<&mut dyn shared::FrameShare>,
+    ) -> Result<FrameStats> {
         crate::check_frame(view, frame)?;
         if let Some(direct) = &mut self.direct {
             if let Some(stats) = direct.render_if_due(&mut self.raster, view, frame)? {
@@ -1167,7 +1135,8 @@ impl Renderer for Lzb {
             instances: Vec::new(),
             near: Vec::new(),
             far: Vec::new(),
-            deferred: matches!(choice, PlaneChoice::Cost(_)).then(Vec::new),
+            // §IV: every rank splits by rank 0's plane, known after the walk.
+            deferred: (matches!(choice, PlaneChoice::Cost(_)) || share.is_some()).then(Vec::new),
         };
         walk.walk.stats = stats;
         walk.run();
@@ -1180,22 +1149,27 @@ impl Renderer for Lzb {
             ..
         } = walk;
         stats = walk.finish("lzb")?;
-        if let (PlaneChoice::Cost(hits), Some(deferred)) = (&choice, deferred) {
-            let leaves: Vec<(f32, u32)> = deferred.iter().map(|&(_, _, d, n)| (d, n)).collect();
-            let pixels = f64::from(view.width()) * f64::from(view.height());
-            z_clip = cost_plane(
-                &leaves,
-                hits,
-                pixels,
-                self.ns_per_triangle,
-                self.ns_per_ray,
-                self.near_share,
-                self.pvl_share,
-                self.ns_per_far_leaf,
-                ctx.near,
-                ctx.far,
-            );
-            self.remember_plane(*view.camera(), z_clip);
+        if let Some(deferred) = deferred {
+            if let PlaneChoice::Cost(hits) = &choice {
+                let leaves: Vec<(f32, u32)> = deferred.iter().map(|&(_, _, d, n)| (d, n)).collect();
+                let pixels = f64::from(view.width()) * f64::from(view.height());
+                z_clip = cost_plane(
+                    &leaves,
+                    hits,
+                    pixels,
+                    self.ns_per_triangle,
+                    self.ns_per_ray,
+                    self.near_share,
+                    self.pvl_share,
+                    self.ns_per_far_leaf,
+                    ctx.near,
+                    ctx.far,
+                );
+                self.remember_plane(*view.camera(), z_clip);
+            }
+            if let Some(share) = share.as_deref_mut() {
+                z_clip = share.plane(z_clip)?;
+            }
             ctx.near_limit = z_clip * (1.0 + NEAR_MARGIN);
             for (inst, leaf, d, _) in deferred {
                 if d < ctx.near_limit {
@@ -1224,10 +1198,16 @@ impl Renderer for Lzb {
 
         // Step 3: local rendering of S_near with the z-buffer (occlusion-culled front to back
         // with `near_cull=on`).
-        if self.opts.near_cull {
-            self.draw_near_culled(view, frame, &instances, &near, &mut stats, &mut payoff)?;
-        } else {
-            self.draw_near(view, frame, &instances, &near, &mut stats);
+        // §IV: by rank 0, whose near depth buffer every rank then receives.
+        if share.as_deref().is_none_or(|s| s.rank() == 0) {
+            if self.opts.near_cull {
+                self.draw_near_culled(view, frame, &instances, &near, &mut stats, &mut payoff)?;
+            } else {
+                self.draw_near(view, frame, &instances, &near, &mut stats);
+            }
+        }
+        if let Some(share) = share.as_deref_mut() {
+            share.depth(frame)?;
         }
 
         // Step 4: the unfinished pixels: nothing drawn nearer than the plane.
@@ -1289,6 +1269,9 @@ impl Renderer for Lzb {
                 }
             }
         }
+        if let Some(share) = share.as_deref() {
+            shared::keep_share(&mut pixels, CHUNK, share.rank(), share.size());
+        }
         stats.phases.add(Phase::Other, t.elapsed());
 
         // Step 5: rays, in chunks over threads; PVLs merged without duplicates.
@@ -1336,6 +1319,13 @@ impl Renderer for Lzb {
             pairs.extend(c.pvl.iter().copied());
             recs.extend(c.instances.iter().map(|(k, v)| (*k, *v)));
             hits.extend(c.hits);
+        }
+        // §IV: the ranks' PVLs, united at rank 0, which alone draws.
+        if let Some(share) = share {
+            if !shared::unite_pvl(share, &mut pairs, &mut recs)? {
+                stats.total = start.elapsed();
+                return Ok(stats);
+            }
         }
         // The chunks' sets overlap: one entry per (instance, leaf).
         pairs.sort_unstable();
@@ -1448,15 +1438,11 @@ impl Renderer for Lzb {
         Ok(stats)
     }
 
-    fn memory_bytes(&self) -> usize {
+    fn memory_bytes_of_all(&self) -> usize {
         self.accel.iter().map(Accel::memory_bytes).sum::<usize>()
             + self.stamps.iter().map(|s| s.capacity() * 4).sum::<usize>()
             + self.raster.memory_bytes()
             + self.pyramid.as_ref().map_or(0, ZPyramid::memory_bytes)
-    }
-
-    fn is_conservative(&self) -> bool {
-        self.opts.mode == Mode::Lazy
     }
 }
 
