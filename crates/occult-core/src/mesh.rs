@@ -55,15 +55,17 @@ impl Mesh {
                 value: positions[vertex_index].to_array(),
             });
         }
-        // One pass over the indices: the range check and which vertices are used, in a bit set
-        // (an eighth of a byte a vertex); the first bad triangle is looked for only on failure.
+        // One pass over the indices: the range check and which vertices are used, a byte each
+        // (plain stores: a bit set's read-modify-write of one word for neighbouring indices
+        // chains through memory and costs several times as much); the first bad triangle is
+        // looked for only on failure.
         let vertex_count = positions.len();
-        let mut used = vec![0u64; vertex_count.div_ceil(64)];
+        let mut used = vec![0u8; vertex_count];
         let mut in_range = true;
         for &i in triangles.iter().flatten() {
-            in_range &= (i as usize) < vertex_count;
-            if let Some(word) = used.get_mut(i as usize / 64) {
-                *word |= 1 << (i % 64);
+            match used.get_mut(i as usize) {
+                Some(flag) => *flag = 1,
+                None => in_range = false,
             }
         }
         if !in_range {
@@ -78,18 +80,12 @@ impl Mesh {
             }
         }
         // The bounds are those of the vertices the triangles use: the box of all positions
-        // when every vertex is used (loaders' meshes), else the used ones picked from the bit set.
-        let used_count: usize = used.iter().map(|w| w.count_ones() as usize).sum();
+        // when every vertex is used (loaders' meshes), else the used ones picked out.
+        let used_count: usize = used.iter().map(|&u| usize::from(u)).sum();
         let bounds = if used_count == vertex_count {
             all
         } else {
-            Aabb::from_points(
-                positions
-                    .iter()
-                    .enumerate()
-                    .filter(|(i, _)| used[i / 64] & (1 << (i % 64)) != 0)
-                    .map(|(_, &p)| p),
-            )
+            Aabb::from_points(positions.iter().zip(&used).filter(|(_, &u)| u != 0).map(|(&p, _)| p))
         };
         Ok(Self {
             positions,
@@ -232,7 +228,7 @@ mod tests {
             Mesh::new(vec![Vec3::ONE, Vec3::new(0.0, f32::INFINITY, 0.0)], vec![[0, 0, 0]]),
             Err(CoreError::NonFiniteVertex { vertex_index: 1, .. })
         ));
-        // The first bad triangle is named, past the bit set's padding too.
+        // The first bad triangle is named.
         let m = Mesh::new(vec![Vec3::ZERO; 3], vec![[0, 1, 2], [2, 63, 0], [70, 0, 0]]);
         assert!(matches!(
             m,
