@@ -6,9 +6,11 @@
 //! `occult-harness` (`tests/invariants/`).
 #![deny(missing_docs)]
 
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use occult_core::{Camera, Mesh, Scene, Vec3, View};
+use occult_scenes::save::{glb_bytes, obj_bytes, ply_bytes, PlyEncoding};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
@@ -84,4 +86,86 @@ pub fn random_triangles(count: usize, size_px: f32, seed: u64) -> (Mesh, View) {
     }
     let t = (0..count as u32).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
     (Mesh::new(p, t).expect("finite positions, valid indices"), view)
+}
+
+/// Quads per side of the generated height field.
+pub const GRID: u32 = 512;
+
+/// A height field of `GRID` × `GRID` quads with irregular heights (so that the text formats
+/// carry full-length decimals, as scans do).
+pub fn height_field() -> Mesh {
+    let side = GRID + 1;
+    let positions: Vec<Vec3> = (0..side * side)
+        .map(|i| {
+            let (x, y) = ((i % side) as f32, (i / side) as f32);
+            let h = (x * 0.173).sin() * (y * 0.131).cos() * 7.31 + (i.wrapping_mul(2_654_435_761) % 1000) as f32 * 1e-4;
+            Vec3::new(x * 0.25, y * 0.25, h)
+        })
+        .collect();
+    let mut triangles = Vec::with_capacity((2 * GRID * GRID) as usize);
+    for y in 0..GRID {
+        for x in 0..GRID {
+            let i = y * side + x;
+            triangles.push([i, i + 1, i + side + 1]);
+            triangles.push([i, i + side + 1, i + side]);
+        }
+    }
+    Mesh::new(positions, triangles).expect("valid height field")
+}
+
+/// A file of the load benchmarks: its name, the path it is loaded as, and its bytes.
+pub type LoadFile = (String, PathBuf, Vec<u8>);
+
+/// The [`height_field`] written in every format the loaders read (OBJ, PLY ascii, binary
+/// little- and big-endian, GLB), in memory.
+pub fn load_grid_files() -> Vec<LoadFile> {
+    let mesh = height_field();
+    vec![
+        ("obj".to_string(), PathBuf::from("grid.obj"), obj_bytes(&mesh)),
+        (
+            "ply_ascii".to_string(),
+            PathBuf::from("grid.ply"),
+            ply_bytes(&mesh, PlyEncoding::Ascii),
+        ),
+        (
+            "ply_binary_le".to_string(),
+            PathBuf::from("grid.ply"),
+            ply_bytes(&mesh, PlyEncoding::BinaryLittleEndian),
+        ),
+        (
+            "ply_binary_be".to_string(),
+            PathBuf::from("grid.ply"),
+            ply_bytes(&mesh, PlyEncoding::BinaryBigEndian),
+        ),
+        ("glb".to_string(), PathBuf::from("grid.glb"), glb_bytes(&mesh)),
+    ]
+}
+
+/// The model files (those a loader reads) directly under each folder of `root`, sorted.
+///
+/// # Panics
+/// If a listed file cannot be read.
+pub fn model_files(root: &Path) -> Vec<LoadFile> {
+    let mut files = Vec::new();
+    let mut folders: Vec<PathBuf> = std::fs::read_dir(root)
+        .map(|entries| entries.flatten().map(|e| e.path()).filter(|p| p.is_dir()).collect())
+        .unwrap_or_default();
+    folders.sort();
+    for folder in folders {
+        let Ok(entries) = std::fs::read_dir(&folder) else {
+            continue;
+        };
+        let mut paths: Vec<PathBuf> = entries.flatten().map(|e| e.path()).collect();
+        paths.sort();
+        for path in paths {
+            if occult_scenes::load::Format::from_path(&path).is_some() {
+                let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("read {}: {e}", path.display()));
+                let name = path
+                    .file_name()
+                    .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+                files.push((name, path, bytes));
+            }
+        }
+    }
+    files
 }

@@ -41,23 +41,52 @@ impl Mesh {
         if positions.len() > u32::MAX as usize {
             return Err(CoreError::TooManyVertices(positions.len()));
         }
-        if let Some(vertex_index) = positions.iter().position(|p| !p.is_finite()) {
+        // One pass over the positions: finiteness and the box of them all.
+        let mut all = Aabb::EMPTY;
+        let mut finite = true;
+        for &p in &positions {
+            finite &= p.is_finite();
+            all = all.including(p);
+        }
+        if !finite {
+            let vertex_index = positions.iter().position(|p| !p.is_finite()).unwrap_or(0);
             return Err(CoreError::NonFiniteVertex {
                 vertex_index,
                 value: positions[vertex_index].to_array(),
             });
         }
+        // One pass over the indices: the range check and which vertices are used, a byte each
+        // (plain stores: a bit set's read-modify-write of one word for neighbouring indices
+        // chains through memory and costs several times as much); the first bad triangle is
+        // looked for only on failure.
         let vertex_count = positions.len();
-        for (triangle_index, t) in triangles.iter().enumerate() {
-            if let Some(&vertex_index) = t.iter().find(|&&i| i as usize >= vertex_count) {
-                return Err(CoreError::IndexOutOfRange {
-                    triangle_index,
-                    vertex_index,
-                    vertex_count,
-                });
+        let mut used = vec![0u8; vertex_count];
+        let mut in_range = true;
+        for &i in triangles.iter().flatten() {
+            match used.get_mut(i as usize) {
+                Some(flag) => *flag = 1,
+                None => in_range = false,
             }
         }
-        let bounds = Aabb::from_points(triangles.iter().flatten().map(|&i| positions[i as usize]));
+        if !in_range {
+            for (triangle_index, t) in triangles.iter().enumerate() {
+                if let Some(&vertex_index) = t.iter().find(|&&i| i as usize >= vertex_count) {
+                    return Err(CoreError::IndexOutOfRange {
+                        triangle_index,
+                        vertex_index,
+                        vertex_count,
+                    });
+                }
+            }
+        }
+        // The bounds are those of the vertices the triangles use: the box of all positions
+        // when every vertex is used (loaders' meshes), else the used ones picked out.
+        let used_count: usize = used.iter().map(|&u| usize::from(u)).sum();
+        let bounds = if used_count == vertex_count {
+            all
+        } else {
+            Aabb::from_points(positions.iter().zip(&used).filter(|(_, &u)| u != 0).map(|(&p, _)| p))
+        };
         Ok(Self {
             positions,
             triangles,
@@ -176,5 +205,38 @@ mod tests {
         let m = Mesh::new(vec![], vec![]).unwrap();
         assert!(m.bounds().is_empty());
         assert_eq!(m.triangle_count(), 0);
+    }
+
+    #[test]
+    fn bounds_hold_the_used_vertices_only() {
+        let positions = vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(100.0, -50.0, 7.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.0, 2.0, 3.0),
+        ];
+        let m = Mesh::new(positions.clone(), vec![[0, 2, 3]]).unwrap();
+        assert_eq!((m.bounds().min, m.bounds().max), (Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0)));
+        let m = Mesh::new(positions, vec![[0, 2, 3], [3, 1, 0]]).unwrap();
+        assert_eq!(
+            (m.bounds().min, m.bounds().max),
+            (Vec3::new(0.0, -50.0, 0.0), Vec3::new(100.0, 2.0, 7.0))
+        );
+        // Vertices but no triangles: an empty box; a non-finite vertex is refused even unused.
+        assert!(Mesh::new(vec![Vec3::ONE; 70], vec![]).unwrap().bounds().is_empty());
+        assert!(matches!(
+            Mesh::new(vec![Vec3::ONE, Vec3::new(0.0, f32::INFINITY, 0.0)], vec![[0, 0, 0]]),
+            Err(CoreError::NonFiniteVertex { vertex_index: 1, .. })
+        ));
+        // The first bad triangle is named.
+        let m = Mesh::new(vec![Vec3::ZERO; 3], vec![[0, 1, 2], [2, 63, 0], [70, 0, 0]]);
+        assert!(matches!(
+            m,
+            Err(CoreError::IndexOutOfRange {
+                triangle_index: 1,
+                vertex_index: 63,
+                vertex_count: 3
+            })
+        ));
     }
 }

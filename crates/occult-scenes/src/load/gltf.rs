@@ -45,6 +45,7 @@
 //! primitives without `POSITION`, triangle index counts not a multiple of 3, singular and
 //! projective node transforms, and a file with several scenes.
 
+use std::borrow::Cow;
 use std::cell::OnceCell;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -60,6 +61,10 @@ use super::meshopt::{self, CompressedView};
 use super::{compact_mesh, file_stem, linear_to_srgb_u8, read_bytes, unit_to_u8, LoadError, LoadedScene, Location};
 use super::{Disk, ExternalFiles};
 use super::{WarningKind, Warnings};
+
+/// The bytes of one buffer: borrowed from the GLB's BIN chunk, or read (a file, a data URI);
+/// shared by the buffers that name the same file.
+type Buffer<'d> = Rc<Cow<'d, [u8]>>;
 
 /// Deepest glTF node chain accepted; the scene model allows 64 levels in all (root group and
 /// mesh included).
@@ -116,13 +121,21 @@ pub fn load_gltf(path: &Path) -> Result<LoadedScene, LoadError> {
 /// are read from `files`.
 pub(super) fn gltf_from_bytes(path: &Path, data: &[u8], files: &dyn ExternalFiles) -> Result<LoadedScene, LoadError> {
     check_glb_header(path, data)?;
-    let gltf = ::gltf::Gltf::from_slice_without_validation(data).map_err(|e| document_error(path, e))?;
-    let mut json = gltf.document.into_json();
+    // A GLB's chunks are borrowed from `data`: the BIN chunk is read in place, not copied.
+    let glb = if data.starts_with(b"glTF") {
+        Some(::gltf::binary::Glb::from_slice(data).map_err(|e| document_error(path, e))?)
+    } else {
+        None
+    };
+    let json_bytes = glb.as_ref().map_or(data, |glb| &glb.json);
+    let blob = glb.as_ref().and_then(|glb| glb.bin.as_deref());
+    let mut json = ::gltf::json::deserialize::from_slice::<::gltf::json::Root>(json_bytes)
+        .map_err(|e| document_error(path, ::gltf::Error::Deserialize(e)))?;
     json.extensions_required
         .retain(|name| !EXTENSIONS_READ_HERE.contains(&name.as_str()));
     check_position_references(path, &json)?;
     let document = Document::from_json(json).map_err(|e| document_error(path, e))?;
-    let buffers = load_buffers(path, &document, gltf.blob, files)?;
+    let buffers = load_buffers(path, &document, blob, files)?;
     let mut loader = GltfLoader::new(path, &document, buffers);
     let root = loader.scene_root()?;
     let GltfLoader { builder, warnings, .. } = loader;
@@ -252,15 +265,15 @@ fn document_error(path: &Path, error: ::gltf::Error) -> LoadError {
 /// The bytes of every buffer of the document, in order. Buffers naming the same file share
 /// one read of it, so that memory stays bounded by the files' sizes however many buffers name
 /// them.
-fn load_buffers(
+fn load_buffers<'d>(
     path: &Path,
     document: &Document,
-    mut blob: Option<Vec<u8>>,
+    mut blob: Option<&'d [u8]>,
     files: &dyn ExternalFiles,
-) -> Result<Vec<Rc<Vec<u8>>>, LoadError> {
+) -> Result<Vec<Buffer<'d>>, LoadError> {
     let folder = path.parent().unwrap_or(Path::new(""));
-    let mut buffers = Vec::new();
-    let mut read_files: HashMap<PathBuf, Rc<Vec<u8>>> = HashMap::new();
+    let mut buffers: Vec<Buffer<'d>> = Vec::new();
+    let mut read_files: HashMap<PathBuf, Buffer<'d>> = HashMap::new();
     for buffer in document.buffers() {
         let buffer_error = |uri: &str, message: String| LoadError::Buffer {
             path: path.to_path_buf(),
@@ -271,7 +284,7 @@ fn load_buffers(
         if meshopt::is_fallback(buffer.extension_value(meshopt::EXTENSION)) {
             // Stands in for compressed views only, which name their data elsewhere; it may have
             // no data at all, and is never read (a view reading it is past its end).
-            buffers.push(Rc::new(Vec::new()));
+            buffers.push(Rc::new(Cow::Borrowed(&[])));
             continue;
         }
         let (uri, data) = match buffer.source() {
@@ -279,17 +292,17 @@ fn load_buffers(
                 let uri = "<GLB BIN chunk>";
                 (
                     uri,
-                    Rc::new(
+                    Rc::new(Cow::Borrowed(
                         blob.take()
                             .ok_or_else(|| buffer_error(uri, "the file has no BIN chunk".into()))?,
-                    ),
+                    )),
                 )
             }
             Source::Uri(uri) if uri.starts_with("data:") => {
                 // Base64 decoding by the `gltf` crate; no file access for data URIs.
                 let data = ::gltf::buffer::Data::from_source(buffer.source(), None)
                     .map_err(|e| buffer_error(uri, format!("bad data URI: {e}")))?;
-                (uri, Rc::new(data.0))
+                (uri, Rc::new(Cow::Owned(data.0)))
             }
             Source::Uri(uri) => {
                 let file = resolve_uri(folder, uri).map_err(|message| buffer_error(uri, message))?;
@@ -305,7 +318,7 @@ fn load_buffers(
                         let data = files
                             .read(&file)
                             .map_err(|e| buffer_error(uri, format!("cannot read {}: {e}", file.display())))?;
-                        let data = Rc::new(data);
+                        let data = Rc::new(Cow::Owned(data));
                         read_files.insert(file, Rc::clone(&data));
                         data
                     }
@@ -390,7 +403,7 @@ enum Visit {
 struct GltfLoader<'a> {
     path: &'a Path,
     document: &'a Document,
-    buffers: Vec<Rc<Vec<u8>>>,
+    buffers: Vec<Buffer<'a>>,
     /// Per buffer view: its `EXT_meshopt_compression` bytes once decoded.
     decoded_views: Vec<OnceCell<Vec<u8>>>,
     /// All buffer bytes and the declared sizes of the compressed views (a file named by several buffers counted once): no accessor may
@@ -404,7 +417,7 @@ struct GltfLoader<'a> {
 }
 
 impl<'a> GltfLoader<'a> {
-    fn new(path: &'a Path, document: &'a Document, buffers: Vec<Rc<Vec<u8>>>) -> Self {
+    fn new(path: &'a Path, document: &'a Document, buffers: Vec<Buffer<'a>>) -> Self {
         let mut counted = std::collections::HashSet::new();
         let buffer_bytes = buffers
             .iter()
@@ -621,11 +634,34 @@ impl<'a> GltfLoader<'a> {
                             location: Location::Part(part.clone()),
                             message: "more than 2^32 - 1 vertices in one mesh".into(),
                         })?;
-                    positions.extend(read);
+                    if positions.is_empty() {
+                        // The first accessor's vector becomes the mesh's: no copy.
+                        positions = read;
+                    } else {
+                        positions.extend(read);
+                    }
                     first_vertex_of_accessor.insert(position_accessor.index(), first);
                     first
                 }
             };
+            let first_triangle = triangles.len();
+            if mode == Mode::Triangles {
+                if let Some(accessor) = primitive.indices() {
+                    let read = self.read_triangle_list(&accessor, &part, first_vertex, vertex_count, &mut triangles)?;
+                    if let Some(index_count) = read {
+                        if index_count % 3 != 0 {
+                            self.warnings.add(
+                                self.path,
+                                INDEX_REMAINDER,
+                                Location::Part(part.clone()),
+                                format!("{index_count} indices"),
+                            );
+                        }
+                        color_runs.push((first_triangle, primitive_color(&primitive)));
+                        continue;
+                    }
+                }
+            }
             let indices: Vec<u32> = match primitive.indices() {
                 Some(accessor) => self.read_indices(&accessor, &part)?,
                 // Fits: the positions were read, so `vertex_count` <= u32::MAX (checked above).
@@ -639,7 +675,6 @@ impl<'a> GltfLoader<'a> {
                     vertex_count: vertex_count as u64,
                 });
             }
-            let first_triangle = triangles.len();
             let global = |i: u32| first_vertex + i;
             match mode {
                 Mode::Triangles => {
@@ -670,16 +705,7 @@ impl<'a> GltfLoader<'a> {
                     }
                 }
             }
-            let color = primitive.material().index().map(|_| {
-                let [r, g, b, a] = primitive.material().pbr_metallic_roughness().base_color_factor();
-                [
-                    linear_to_srgb_u8(r),
-                    linear_to_srgb_u8(g),
-                    linear_to_srgb_u8(b),
-                    unit_to_u8(a),
-                ]
-            });
-            color_runs.push((first_triangle, color));
+            color_runs.push((first_triangle, primitive_color(&primitive)));
         }
 
         let id = if triangles.is_empty() {
@@ -724,13 +750,28 @@ impl<'a> GltfLoader<'a> {
         let data_type = accessor.data_type();
         let normalized = accessor.normalized();
         let size = component_size(data_type);
-        let positions = self.read_accessor(accessor, 3 * size, Vec3::ZERO, &location, |bytes| {
-            Vec3::new(
-                component(data_type, normalized, &bytes[..size]),
-                component(data_type, normalized, &bytes[size..2 * size]),
-                component(data_type, normalized, &bytes[2 * size..]),
-            )
-        })?;
+        let positions = if data_type == DataType::F32 {
+            // The common case without a `match` per component.
+            self.read_accessor(accessor, 12, Vec3::ZERO, &location, |bytes| {
+                let x = bytes.first_chunk::<4>();
+                let y = bytes.get(4..).and_then(<[u8]>::first_chunk::<4>);
+                match (x, y, bytes.last_chunk::<4>()) {
+                    (Some(&x), Some(&y), Some(&z)) => {
+                        Vec3::new(f32::from_le_bytes(x), f32::from_le_bytes(y), f32::from_le_bytes(z))
+                    }
+                    // `read_accessor` passes 12 bytes.
+                    _ => Vec3::NAN,
+                }
+            })?
+        } else {
+            self.read_accessor(accessor, 3 * size, Vec3::ZERO, &location, |bytes| {
+                Vec3::new(
+                    component(data_type, normalized, &bytes[..size]),
+                    component(data_type, normalized, &bytes[size..2 * size]),
+                    component(data_type, normalized, &bytes[2 * size..]),
+                )
+            })?
+        };
         if let Some((vertex_index, p)) = positions.iter().enumerate().find(|(_, p)| !p.is_finite()) {
             let value = p.to_array().into_iter().find(|v| !v.is_finite()).unwrap_or(f32::NAN);
             return Err(LoadError::NonFinite {
@@ -759,6 +800,71 @@ impl<'a> GltfLoader<'a> {
         }
         let size = component_size(data_type);
         self.read_accessor(accessor, size, 0u32, &location, read_uint)
+    }
+
+    /// A `TRIANGLES` primitive's index accessor read straight into `triangles` (offset by
+    /// `first_vertex`, each index checked against `vertex_count`), without an index list
+    /// between: the number of indices, or `None` (nothing read) for what the general path
+    /// reads (sparse indices, no buffer view, a byte stride).
+    fn read_triangle_list(
+        &self,
+        accessor: &Accessor<'_>,
+        part: &str,
+        first_vertex: u32,
+        vertex_count: usize,
+        triangles: &mut Vec<[u32; 3]>,
+    ) -> Result<Option<usize>, LoadError> {
+        let location = || Location::Part(format!("{part}, index accessor {}", accessor.index()));
+        let data_type = accessor.data_type();
+        let size = component_size(data_type);
+        let Some(view) = accessor.view() else {
+            return Ok(None);
+        };
+        let count = accessor.count();
+        // What the general path refuses, it refuses with its own errors.
+        if accessor.sparse().is_some()
+            || view.stride().is_some_and(|stride| stride != size)
+            || accessor.dimensions() != Dimensions::Scalar
+            || !matches!(data_type, DataType::U8 | DataType::U16 | DataType::U32)
+            || count as u128 * size as u128 > self.buffer_bytes as u128
+        {
+            return Ok(None);
+        }
+        let bytes = self.view_bytes(&view, &location)?;
+        let what = || format!("accessor {}", accessor.index());
+        // Checks that the `count` indices fit the view; they are then contiguous.
+        let _ = self.strided(bytes, accessor.offset(), count, size, size, &what, &location)?;
+        let Some(bytes) = bytes.get(accessor.offset()..accessor.offset() + count * size) else {
+            return Ok(None);
+        };
+        // Bounded by the view's bytes, just checked.
+        triangles.reserve(count / 3);
+        let pushed = match data_type {
+            DataType::U32 => push_triangles(bytes, u32::from_le_bytes, first_vertex, vertex_count, triangles),
+            DataType::U16 => push_triangles(
+                bytes,
+                |b| u32::from(u16::from_le_bytes(b)),
+                first_vertex,
+                vertex_count,
+                triangles,
+            ),
+            _ => push_triangles(
+                bytes,
+                |[b]: [u8; 1]| u32::from(b),
+                first_vertex,
+                vertex_count,
+                triangles,
+            ),
+        };
+        match pushed {
+            Ok(()) => Ok(Some(count)),
+            Err(bad) => Err(LoadError::IndexOutOfRange {
+                path: self.path.to_path_buf(),
+                location: Location::Part(part.to_string()),
+                index: i64::from(bad),
+                vertex_count: vertex_count as u64,
+            }),
+        }
     }
 
     /// The elements of an accessor, each decoded from its `element_size` bytes; sparse
@@ -951,6 +1057,52 @@ fn uses_every_vertex(triangles: &[[u32; 3]], vertex_count: usize) -> bool {
         used[i as usize] = true;
     }
     used.iter().all(|&u| u)
+}
+
+/// The sRGB base color of a primitive's material; `None` without a material.
+fn primitive_color(primitive: &::gltf::Primitive<'_>) -> Option<Rgba8> {
+    primitive.material().index().map(|_| {
+        let [r, g, b, a] = primitive.material().pbr_metallic_roughness().base_color_factor();
+        [
+            linear_to_srgb_u8(r),
+            linear_to_srgb_u8(g),
+            linear_to_srgb_u8(b),
+            unit_to_u8(a),
+        ]
+    })
+}
+
+/// Index triples of `N`-byte little-endian indices straight into `triangles`, offset by
+/// `first_vertex`; a trailing partial triple is checked and left out. The first index not
+/// below `vertex_count` is the error.
+fn push_triangles<const N: usize>(
+    bytes: &[u8],
+    decode: impl Fn([u8; N]) -> u32,
+    first_vertex: u32,
+    vertex_count: usize,
+    triangles: &mut Vec<[u32; 3]>,
+) -> Result<(), u32> {
+    let triples = bytes.chunks_exact(3 * N);
+    let rest = triples.remainder();
+    for t in triples {
+        let a = t.first_chunk::<N>();
+        let b = t.get(N..).and_then(<[u8]>::first_chunk::<N>);
+        let (Some(&a), Some(&b), Some(&c)) = (a, b, t.last_chunk::<N>()) else {
+            // `chunks_exact` gives 3 N bytes.
+            continue;
+        };
+        let t = [decode(a), decode(b), decode(c)];
+        if let Some(&bad) = t.iter().find(|&&i| i as usize >= vertex_count) {
+            return Err(bad);
+        }
+        // No overflow: `first_vertex + vertex_count` <= u32::MAX was checked with the positions.
+        triangles.push(t.map(|i| first_vertex + i));
+    }
+    let rest = rest.chunks_exact(N).filter_map(<[u8]>::first_chunk::<N>);
+    match rest.map(|&b| decode(b)).find(|&i| i as usize >= vertex_count) {
+        Some(bad) => Err(bad),
+        None => Ok(()),
+    }
 }
 
 /// Per-mesh colors from the primitives' materials: `None` when no primitive has a material,

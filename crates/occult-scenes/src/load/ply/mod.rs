@@ -13,9 +13,10 @@
 //! The header is parsed by `ply-rs-bw`; then, **before** anything is allocated, each declared
 //! element count is checked against the bytes after the header (an element takes at least one
 //! byte per scalar in binary, two characters per value in ascii), so a header claiming 10^12
-//! vertices is an error, not an allocation attempt. Binary payloads are read element by element
-//! by `ply-rs-bw`; the ascii payload is tokenized here (see the module doc of `load`), so that
-//! errors name the line and the element and extra or missing values on a line are caught.
+//! vertices is an error, not an allocation attempt. Binary payloads are read here too, from
+//! layouts fixed by the header straight into the mesh's arrays (`binary.rs`); the ascii payload
+//! is tokenized here (see the module doc of `load`), so that errors name the line and the
+//! element and extra or missing values on a line are caught.
 //! Truncated data, data after the last declared element, non-finite coordinates and indices out
 //! of range are errors.
 //!
@@ -25,12 +26,14 @@
 //! or `end_header` (`elment vertex 8`), which stays an error with its line and column; faces
 //! of fewer than three corners are skipped.
 
+mod binary;
+
 use std::io::Cursor;
 use std::path::Path;
 
 use occult_core::Vec3;
 use ply_rs_bw::parser::{ParseError, Parser, Reader};
-use ply_rs_bw::ply::{ElementDef, Encoding, Header, PropertyAccess, PropertyAccessResult, PropertyType, ScalarType};
+use ply_rs_bw::ply::{DefaultElement, ElementDef, Encoding, Header, PropertyType, ScalarType};
 
 use super::{fan_triangulate, file_stem, quoted, read_bytes, scene_of_meshes, LoadError, LoadedScene, Location};
 use super::{WarningKind, Warnings, SHORT_FACE};
@@ -73,7 +76,7 @@ pub fn load_ply(path: &Path) -> Result<LoadedScene, LoadError> {
 
 /// [`load_ply`] of bytes in memory; `path` names them.
 pub(super) fn ply_from_bytes(path: &Path, data: &[u8]) -> Result<LoadedScene, LoadError> {
-    let parser = Parser::<PlyRecord>::new();
+    let parser = Parser::<DefaultElement>::new();
     let mut warnings = Warnings::default();
     let scan = HeaderScan::of(data);
     let header_len;
@@ -112,7 +115,7 @@ pub(super) fn ply_from_bytes(path: &Path, data: &[u8]) -> Result<LoadedScene, Lo
             read_ascii(path, &header, &layout, payload, header_line_count, &mut sink)?;
         }
         Encoding::BinaryLittleEndian | Encoding::BinaryBigEndian => {
-            read_binary(path, &parser, &header, &layout, payload, &mut sink)?;
+            binary::read_binary(path, &header, &layout, payload, &mut sink)?;
         }
     }
 
@@ -501,8 +504,8 @@ impl<'p> MeshSink<'p> {
     }
 }
 
-/// One element as `ply-rs-bw` reads it (binary): the coordinates and the index list, whatever
-/// their stored types; every other property is ignored.
+/// One ascii element as read: the coordinates and the index list; every other property is
+/// checked and dropped.
 #[derive(Default)]
 struct PlyRecord {
     xyz: [f64; 3],
@@ -510,58 +513,15 @@ struct PlyRecord {
 }
 
 impl PlyRecord {
-    fn scalar(&mut self, name: &str, value: f64) -> PropertyAccessResult {
+    fn scalar(&mut self, name: &str, value: f64) {
         let axis = match name {
             "x" => 0,
             "y" => 1,
             "z" => 2,
-            _ => return PropertyAccessResult::Ignored,
+            _ => return,
         };
         self.xyz[axis] = value;
-        PropertyAccessResult::Set
     }
-
-    fn list<T: Copy + Into<i64>>(&mut self, name: &str, values: Vec<T>) -> PropertyAccessResult {
-        if !INDEX_LIST_NAMES.contains(&name) {
-            return PropertyAccessResult::Ignored;
-        }
-        self.indices.clear();
-        self.indices.extend(values.iter().map(|&v| v.into()));
-        PropertyAccessResult::Set
-    }
-}
-
-/// `PropertyAccess` setters for the stored PLY types: scalars widen to `f64` for
-/// [`PlyRecord::scalar`], integer lists go to [`PlyRecord::list`].
-macro_rules! forward_setters {
-    (scalars: $($scalar:ident($scalar_ty:ty)),+; lists: $($list:ident($list_ty:ty)),+;) => {
-        $(
-            fn $scalar(&mut self, name: &str, value: $scalar_ty) -> PropertyAccessResult {
-                self.scalar(name, value.into())
-            }
-        )+
-        $(
-            fn $list(&mut self, name: &str, value: Vec<$list_ty>) -> PropertyAccessResult {
-                self.list(name, value)
-            }
-        )+
-    };
-}
-
-impl PropertyAccess for PlyRecord {
-    fn new() -> Self {
-        Self::default()
-    }
-    forward_setters! {
-        scalars: set_char(i8), set_uchar(u8), set_short(i16), set_ushort(u16), set_int(i32), set_uint(u32),
-            set_float(f32);
-        lists: set_list_char(i8), set_list_uchar(u8), set_list_short(i16), set_list_ushort(u16), set_list_int(i32),
-            set_list_uint(u32);
-    }
-    fn set_double(&mut self, name: &str, value: f64) -> PropertyAccessResult {
-        self.scalar(name, value)
-    }
-    // Float lists are ignored: `Layout::of` refused float index lists already.
 }
 
 fn header_error(path: &Path, error: ParseError) -> LoadError {
@@ -682,53 +642,6 @@ fn expected_tokens(dump: &str) -> Option<String> {
         1 => Some(tokens.remove(0)),
         n => Some(format!("one of {} or {}", tokens[..n - 1].join(", "), tokens[n - 1])),
     }
-}
-
-fn read_binary(
-    path: &Path,
-    parser: &Parser<PlyRecord>,
-    header: &Header,
-    layout: &Layout,
-    payload: &[u8],
-    sink: &mut MeshSink<'_>,
-) -> Result<(), LoadError> {
-    let big_endian = header.encoding == Encoding::BinaryBigEndian;
-    let mut rest = payload;
-    for (name, element) in &header.elements {
-        let role = layout.role(name);
-        for index in 0..element.count {
-            let location = || Location::element(name.as_str(), index as u64);
-            let read = if big_endian {
-                parser.read_big_endian_element(&mut rest, element)
-            } else {
-                parser.read_little_endian_element(&mut rest, element)
-            };
-            let record = read.map_err(|e| {
-                if e.kind() == std::io::ErrorKind::UnexpectedEof {
-                    LoadError::Truncated {
-                        path: path.to_path_buf(),
-                        location: location(),
-                        message: format!("the header declares {} '{name}' elements", element.count),
-                    }
-                } else {
-                    LoadError::Parse {
-                        path: path.to_path_buf(),
-                        location: location(),
-                        message: e.to_string().replace("\n\t", "; ").replace('\n', " "),
-                    }
-                }
-            })?;
-            sink.record(role, &record, location)?;
-        }
-    }
-    if !rest.is_empty() {
-        return Err(LoadError::CountMismatch {
-            path: path.to_path_buf(),
-            location: Location::File,
-            message: format!("{} bytes follow the last element the header declares", rest.len()),
-        });
-    }
-    Ok(())
 }
 
 fn read_ascii(
