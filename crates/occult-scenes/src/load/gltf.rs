@@ -120,6 +120,11 @@ pub fn load_gltf(path: &Path) -> Result<LoadedScene, LoadError> {
 /// [`load_gltf`] of bytes in memory; `path` names them and locates external buffers, which
 /// are read from `files`.
 pub(super) fn gltf_from_bytes(path: &Path, data: &[u8], files: &dyn ExternalFiles) -> Result<LoadedScene, LoadError> {
+    // JSON strings (URIs, names) may hold line breaks: the error stays one line.
+    read_document(path, data, files).map_err(LoadError::one_line)
+}
+
+fn read_document(path: &Path, data: &[u8], files: &dyn ExternalFiles) -> Result<LoadedScene, LoadError> {
     check_glb_header(path, data)?;
     // A GLB's chunks are borrowed from `data`: the BIN chunk is read in place, not copied.
     let glb = if data.starts_with(b"glTF") {

@@ -437,6 +437,55 @@ pub enum LoadError {
 }
 
 impl LoadError {
+    /// This error with the control characters of its texts escaped (`\n` for a line break), so
+    /// that it displays as one line: names and URIs come from the file, and a glTF's JSON
+    /// strings may hold any character.
+    fn one_line(mut self) -> Self {
+        fn escape(text: &mut String) {
+            if text.chars().any(char::is_control) {
+                *text = text
+                    .chars()
+                    .map(|c| {
+                        if c.is_control() {
+                            c.escape_default().to_string()
+                        } else {
+                            c.to_string()
+                        }
+                    })
+                    .collect();
+            }
+        }
+        fn escape_location(location: &mut Location) {
+            match location {
+                Location::Part(text)
+                | Location::Element { kind: text, .. }
+                | Location::ElementAtLine { kind: text, .. } => escape(text),
+                Location::File | Location::Line(_) | Location::LineColumn { .. } => {}
+            }
+        }
+        match &mut self {
+            LoadError::Parse { location, message, .. }
+            | LoadError::Truncated { location, message, .. }
+            | LoadError::CountMismatch { location, message, .. }
+            | LoadError::Unsupported { location, message, .. } => {
+                escape_location(location);
+                escape(message);
+            }
+            LoadError::IndexOutOfRange { location, .. } | LoadError::NonFinite { location, .. } => {
+                escape_location(location)
+            }
+            LoadError::Empty { reason: text, .. }
+            | LoadError::AbsurdCount { what: text, .. }
+            | LoadError::Core { part: text, .. } => escape(text),
+            LoadError::Buffer { uri, message, .. } => {
+                escape(uri);
+                escape(message);
+            }
+            LoadError::Io { .. } | LoadError::UnsupportedExtension { .. } => {}
+        }
+        self
+    }
+
     /// The file the error is about.
     pub fn path(&self) -> &Path {
         match self {

@@ -1274,3 +1274,38 @@ fn single_byte_corruptions_never_panic() {
         }
     }
 }
+
+/// Found by the `gltf` fuzz target: a data URI holding an escaped line break (`\n` in the JSON)
+/// made a two-line error. Names and URIs come from the file; errors escape their line breaks.
+#[test]
+fn gltf_line_breaks_in_uris_and_names_stay_escaped() {
+    let dir = scratch("gltf_line_breaks_in_uris_and_names_stay_escaped");
+    let uri =
+        r#"{"asset": {"version": "2.0"}, "buffers": [{"uri": "data:a-stream;base64,A\nSCALAR", "byteLength": 1}]}"#;
+    let e = load_err(&write(&dir, "uri.gltf", uri)).to_string();
+    assert!(!e.contains('\n') && e.contains(r"base64,A\nSCALAR"), "{e}");
+    // A mesh named with a line break whose index is out of range.
+    let name = format!(
+        r#"{{"asset": {{"version": "2.0"}},
+            "buffers": [{{"uri": "data:application/octet-stream;base64,{}", "byteLength": 42}}],
+            "bufferViews": [{{"buffer": 0, "byteLength": 36}}, {{"buffer": 0, "byteOffset": 36, "byteLength": 6}}],
+            "accessors": [
+              {{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}},
+              {{"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"}}],
+            "meshes": [{{"name": "two\nlines", "primitives": [{{"attributes": {{"POSITION": 0}}, "indices": 1}}]}}],
+            "nodes": [{{"mesh": 0}}], "scenes": [{{"nodes": [0]}}]}}"#,
+        base64(&{
+            let mut bytes = Vec::new();
+            for c in [0f32, 0., 0., 1., 0., 0., 0., 1., 0.] {
+                bytes.extend(c.to_le_bytes());
+            }
+            for i in [0u16, 1, 7, 0, 0, 0] {
+                bytes.extend(i.to_le_bytes());
+            }
+            bytes
+        })
+    );
+    let e = load_err(&write(&dir, "name.gltf", name));
+    assert!(matches!(e, LoadError::IndexOutOfRange { index: 7, .. }), "{e}");
+    assert!(e.to_string().contains(r"'two\nlines'"), "{e}");
+}
