@@ -215,15 +215,18 @@ mod tests {
             Vec3::new(1.0, 0.0, 0.0),
             Vec3::new(0.0, 2.0, 3.0),
         ];
-        let m = Mesh::new(positions.clone(), vec![[0, 2, 3]]).unwrap();
+        let m = Mesh::new(positions.clone(), vec![[0, 2, 3]]).expect("indices in range");
         assert_eq!((m.bounds().min, m.bounds().max), (Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0)));
-        let m = Mesh::new(positions, vec![[0, 2, 3], [3, 1, 0]]).unwrap();
+        let m = Mesh::new(positions, vec![[0, 2, 3], [3, 1, 0]]).expect("indices in range");
         assert_eq!(
             (m.bounds().min, m.bounds().max),
             (Vec3::new(0.0, -50.0, 0.0), Vec3::new(100.0, 2.0, 7.0))
         );
         // Vertices but no triangles: an empty box; a non-finite vertex is refused even unused.
-        assert!(Mesh::new(vec![Vec3::ONE; 70], vec![]).unwrap().bounds().is_empty());
+        assert!(Mesh::new(vec![Vec3::ONE; 70], vec![])
+            .expect("no triangles is a valid mesh")
+            .bounds()
+            .is_empty());
         assert!(matches!(
             Mesh::new(vec![Vec3::ONE, Vec3::new(0.0, f32::INFINITY, 0.0)], vec![[0, 0, 0]]),
             Err(CoreError::NonFiniteVertex { vertex_index: 1, .. })

@@ -616,8 +616,10 @@ mod tests {
         let instances = picks.iter().map(|&i| root.instances()[i]).collect();
         let firsts = picks.iter().map(|&i| root.item_offset(i)).collect();
         let mut b = SceneBuilder::from_scene(&s);
-        let part_root = b.add_group_at_items("part", instances, firsts).unwrap();
-        let part = b.build(part_root).unwrap();
+        let part_root = b
+            .add_group_at_items("part", instances, firsts)
+            .expect("first items ascending and in range");
+        let part = b.build(part_root).expect("the part is a valid scene");
         let mut whole = vec![];
         s.for_each_mesh_instance(|w, _, _, base| whole.push((base, *w)));
         let mut parts = vec![];

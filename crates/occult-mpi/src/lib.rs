@@ -21,17 +21,17 @@
 //! use occult_raster::Frame;
 //! use occult_render::{Algorithm, RenderOptions};
 //! use occult_mpi::{run_threads, sort_last_options, SortLastConfig};
-//! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).unwrap();
-//! let scene = Arc::new(Scene::from_mesh("tri", mesh).unwrap());
-//! let view = View::new(Camera::look_at(Vec3::new(0.3, 0.3, 2.0), Vec3::new(0.3, 0.3, 0.0)), 32, 32).unwrap();
+//! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).expect("a valid triangle");
+//! let scene = Arc::new(Scene::from_mesh("tri", mesh).expect("a valid scene"));
+//! let view = View::new(Camera::look_at(Vec3::new(0.3, 0.3, 2.0), Vec3::new(0.3, 0.3, 0.0)), 32, 32).expect("a valid view");
 //! let frames = run_threads(2, |comm| {
 //!     let options = sort_last_options(comm.clone(), RenderOptions::default(), SortLastConfig::default());
-//!     let mut r = Algorithm::ZBUFFER.build(scene.clone(), &options).unwrap();
-//!     let mut frame = Frame::new(32, 32).unwrap();
-//!     r.render(&view, &mut frame).unwrap();
+//!     let mut r = Algorithm::ZBUFFER.build(scene.clone(), &options).expect("zbuffer builds");
+//!     let mut frame = Frame::new(32, 32).expect("a small frame");
+//!     r.render(&view, &mut frame).expect("the frame renders");
 //!     frame.covered_pixel_count()
 //! });
-//! assert!(*frames[0].as_ref().unwrap() > 0);
+//! assert!(*frames[0].as_ref().expect("rank 0 holds the frame") > 0);
 //! ```
 #![deny(missing_docs)]
 
