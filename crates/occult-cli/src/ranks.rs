@@ -23,8 +23,9 @@ pub fn set_parallel_lzb(on: bool) {
     PARALLEL_LZB.store(on, Ordering::Relaxed);
 }
 
-/// Environment variable that makes one rank fail to build its renderers, for the tests of
-/// failure handling (a rank's out-of-memory is otherwise hard to cause on purpose).
+/// Environment variable that makes one rank fail, for the tests of failure handling (a rank's
+/// out-of-memory is otherwise hard to cause on purpose): `RANK` fails to build its renderers,
+/// `RANK:FRAME[:AGREEMENT]` fails in a frame ([`occult_mpi::Fault`]).
 pub const FAIL_RANK_VAR: &str = "OCCULT_MPI_FAIL_RANK";
 
 /// This process's rank as the launcher tells it, before MPI is started (0 outside `mpirun`).
@@ -77,7 +78,7 @@ pub fn render_options(replicate: bool) -> RenderOptions {
     };
     let config = SortLastConfig {
         replicate,
-        fail_rank: std::env::var(FAIL_RANK_VAR).ok().and_then(|v| v.parse().ok()),
+        fault: std::env::var(FAIL_RANK_VAR).ok().and_then(|v| v.parse().ok()),
         parallel_lzb: PARALLEL_LZB.load(Ordering::Relaxed),
     };
     occult_mpi::sort_last_options(comm, RenderOptions::default(), config)

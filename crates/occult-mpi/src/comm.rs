@@ -199,32 +199,53 @@ pub fn broadcast(comm: &dyn Comm, bytes: Vec<u8>) -> Result<Vec<u8>, CommError> 
 /// failed one). Call it after every step that may fail on some ranks only (loading, building,
 /// rendering) before the next exchange.
 ///
+/// A rank that failed between two agreements calls the next one with its error, and every
+/// rank returns there: so a frame whose exchanges each begin with an agreement ends on every
+/// rank at the same point, whichever rank failed where ([`crate::plzb`], [`crate::sortlast`]).
+///
 /// # Errors
 /// [`CommError::RankFailed`] naming the first failed rank; transport errors.
 pub fn agree(comm: &dyn Comm, outcome: Result<(), String>) -> Result<(), CommError> {
-    let mine = match &outcome {
+    let verdict = gather(comm, &outcome_bytes(&outcome))?.and_then(|all| first_failure(&all));
+    announce(comm, verdict)
+}
+
+/// `outcome` as a message: empty for success, a 1 and the error's text for a failure.
+pub(crate) fn outcome_bytes(outcome: &Result<(), String>) -> Vec<u8> {
+    match outcome {
         Ok(()) => Vec::new(),
         Err(message) => {
             let mut m = vec![1u8];
             m.extend_from_slice(message.as_bytes());
             m
         }
-    };
-    let verdict = match gather(comm, &mine)? {
-        Some(all) => {
-            let failed = all.iter().enumerate().find(|(_, m)| !m.is_empty());
-            match failed {
-                None => Vec::new(),
-                Some((rank, m)) => {
-                    let mut v = (rank as u64).to_le_bytes().to_vec();
-                    v.extend_from_slice(&m[1..]);
-                    v
-                }
-            }
+    }
+}
+
+/// The first failure, by rank, among the ranks' [`outcome_bytes`].
+pub(crate) fn first_failure(all: &[Vec<u8>]) -> Option<(usize, String)> {
+    all.iter()
+        .enumerate()
+        .find(|(_, m)| !m.is_empty())
+        .map(|(rank, m)| (rank, String::from_utf8_lossy(&m[1..]).into_owned()))
+}
+
+/// Rank 0's `verdict` (the first failure: rank and message; `None`: none) on every rank, the
+/// others' ignored: the second half of [`agree`], for callers that gathered the outcomes with
+/// other data.
+///
+/// # Errors
+/// [`CommError::RankFailed`] for a failure; transport errors.
+pub(crate) fn announce(comm: &dyn Comm, verdict: Option<(usize, String)>) -> Result<(), CommError> {
+    let bytes = match verdict {
+        Some((rank, message)) if comm.rank() == 0 => {
+            let mut v = (rank as u64).to_le_bytes().to_vec();
+            v.extend_from_slice(message.as_bytes());
+            v
         }
-        None => Vec::new(),
+        _ => Vec::new(),
     };
-    let verdict = broadcast(comm, verdict)?;
+    let verdict = broadcast(comm, bytes)?;
     if verdict.is_empty() {
         return Ok(());
     }

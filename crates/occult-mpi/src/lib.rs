@@ -46,4 +46,4 @@ pub mod sortlast;
 
 pub use comm::{agree, broadcast, gather, run_threads, Comm, CommError, ThreadComm};
 pub use plzb::ParallelLzb;
-pub use sortlast::{sort_last_options, SortLast, SortLastConfig};
+pub use sortlast::{sort_last_options, Fault, SortLast, SortLastConfig};

@@ -8,8 +8,16 @@
 //! `walk`, `render`) run unchanged, one process per rank, under `mpirun`.
 //!
 //! A frame, on every rank: render the part; [`agree`] on whether every rank succeeded (so a
-//! failed rank ends the run with one error, never a hang); composite; gather the ranks' times
-//! and counts to rank 0, which reports them as counters (`mpi_*`, below).
+//! failed rank ends the run with one error, never a hang); composite (which every rank takes to
+//! its end even when a message was malformed); gather the ranks' times, counts and compositing
+//! outcomes to rank 0, which announces the first failure, or reports them as counters
+//! (`mpi_*`, below). Every rank so returns from every frame with the same outcome.
+//!
+//! The counters split the exchange: `mpi_agree_us` is the wait at the first agreement, for the
+//! slowest rank's render (load imbalance, not compositing); `mpi_composite_wait_us` the time in
+//! the composite's sends and receives (waiting for the partner, and the transfer);
+//! `mpi_composite_work_us` its encoding and merging (rank 0's; `_max_us` the most of any
+//! rank).
 
 use std::sync::{Arc, Mutex, Weak};
 use std::time::Instant;
@@ -18,7 +26,7 @@ use occult_core::{Scene, View};
 use occult_raster::Frame;
 use occult_render::{AlgoSpec, FrameStats, Phase, RenderError, RenderOptions, Renderer, Result};
 
-use crate::comm::{agree, gather, Comm, CommError};
+use crate::comm::{agree, announce, first_failure, gather, outcome_bytes, Comm, CommError};
 use crate::composite::composite;
 use crate::partition;
 
@@ -29,11 +37,91 @@ pub struct SortLastConfig {
     /// whose later steps depend on the frame on every rank (`compare` checks frames and renders
     /// more where they differ). Off: only rank 0's frame is the composite.
     pub replicate: bool,
-    /// Fault injection for tests of failure handling: this rank fails to build its renderer.
-    pub fail_rank: Option<usize>,
+    /// A failure injected on purpose, for the tests of failure handling.
+    pub fault: Option<Fault>,
     /// `lzb` as Han & Zeiger's §IV parallel local z-buffer ([`crate::plzb`]: the whole scene
     /// on every rank, the rays shared) instead of sort-last.
     pub parallel_lzb: bool,
+}
+
+/// A failure injected on purpose, for the tests of failure handling (a rank's out of memory
+/// or bad data is hard to cause at a chosen moment otherwise): rank `rank` fails to build its
+/// renderer (`frame` `None`), or fails in frame `frame` (0-based, counted per renderer) just
+/// before the frame's agreement number `agreement` (0-based), as a renderer that failed there
+/// would. A sort-last frame agrees after rendering (0) and after compositing (1); a parallel
+/// local z-buffer frame ([`crate::plzb`]) before the exchanges of the plane (0), the depth
+/// buffer (1) and the PVLs (2), before the replication when asked (3), and at its end.
+///
+/// Written `RANK`, `RANK:FRAME` or `RANK:FRAME:AGREEMENT` (agreement 0 when left out).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Fault {
+    /// The rank that fails.
+    pub rank: usize,
+    /// The frame it fails in; `None`: it fails to build its renderer.
+    pub frame: Option<u64>,
+    /// The agreement of the frame just before which it fails.
+    pub agreement: usize,
+}
+
+impl Fault {
+    /// Whether the fault strikes `rank` when it builds its renderer.
+    pub fn strikes_build(&self, rank: usize) -> bool {
+        self.rank == rank && self.frame.is_none()
+    }
+
+    /// The error the fault makes, naming itself.
+    pub fn error(&self) -> RenderError {
+        RenderError::Ranks(format!("failure injected for a test ({self})"))
+    }
+}
+
+/// A renderer's frames, counted for its [`Fault`].
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct FaultClock {
+    fault: Option<Fault>,
+    frames: u64,
+}
+
+impl FaultClock {
+    pub(crate) fn new(fault: Option<Fault>) -> Self {
+        Self { fault, frames: 0 }
+    }
+
+    /// Begins a frame: the fault, when it strikes `rank` in this frame.
+    pub(crate) fn next_frame(&mut self, rank: usize) -> Option<Fault> {
+        let frame = self.frames;
+        self.frames += 1;
+        self.fault.filter(|f| f.rank == rank && f.frame == Some(frame))
+    }
+}
+
+impl std::fmt::Display for Fault {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.frame {
+            None => write!(f, "building the renderer"),
+            Some(frame) => write!(f, "frame {frame}, before agreement {}", self.agreement),
+        }
+    }
+}
+
+impl std::str::FromStr for Fault {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        let bad = || format!("'{s}' is not RANK, RANK:FRAME or RANK:FRAME:AGREEMENT");
+        let mut fields = s.split(':').map(|f| f.trim().parse::<u64>().map_err(|_| bad()));
+        let rank = fields.next().ok_or_else(bad)??;
+        let frame = fields.next().transpose()?;
+        let agreement = fields.next().transpose()?.unwrap_or(0);
+        if fields.next().is_some() {
+            return Err(bad());
+        }
+        Ok(Self {
+            rank: usize::try_from(rank).map_err(|_| bad())?,
+            frame,
+            agreement: usize::try_from(agreement).map_err(|_| bad())?,
+        })
+    }
 }
 
 /// Counters a sort-last frame reports on rank 0 (besides the inner renderer's, summed over
@@ -46,6 +134,12 @@ pub const COUNTERS: &[&str] = &[
     "mpi_comm_max_us",
     "mpi_bytes_sent_max",
     "mpi_bytes_total",
+    "mpi_agree_us",
+    "mpi_agree_max_us",
+    "mpi_composite_wait_us",
+    "mpi_composite_wait_max_us",
+    "mpi_composite_work_us",
+    "mpi_composite_work_max_us",
 ];
 
 /// Ranks whose own times are reported one by one (`mpi_rank{i}_render_us`,
@@ -104,10 +198,9 @@ pub fn sort_last_options(comm: Arc<dyn Comm>, base: RenderOptions, config: SortL
     let cache: Arc<PartCache> = Arc::new(Mutex::new(None));
     let hook = move |scene: Arc<Scene>, options: &RenderOptions, spec: &AlgoSpec| -> Result<Box<dyn Renderer>> {
         if config.parallel_lzb && spec.algorithm.name() == "lzb" {
-            let built = if config.fail_rank == Some(comm.rank()) {
-                Err(RenderError::Ranks("failure injected for a test (fail_rank)".into()))
-            } else {
-                crate::plzb::ParallelLzb::new(Arc::clone(&comm), scene, options, spec, config.replicate)
+            let built = match config.fault {
+                Some(fault) if fault.strikes_build(comm.rank()) => Err(fault.error()),
+                _ => crate::plzb::ParallelLzb::new(Arc::clone(&comm), scene, options, spec, &config),
             };
             let outcome = built.as_ref().map(|_| ()).map_err(|e| e.to_string());
             agree(comm.as_ref(), outcome).map_err(ranks_error)?;
@@ -123,6 +216,7 @@ pub fn sort_last_options(comm: Arc<dyn Comm>, base: RenderOptions, config: SortL
             conservative: inner.as_ref().is_none_or(|r| r.is_conservative()),
             inner,
             replicate: config.replicate,
+            faults: FaultClock::new(config.fault),
         }) as Box<dyn Renderer>)
     };
     RenderOptions {
@@ -140,8 +234,8 @@ fn build_part(
     spec: &AlgoSpec,
     config: &SortLastConfig,
 ) -> Result<Option<Box<dyn Renderer>>> {
-    if config.fail_rank == Some(comm.rank()) {
-        return Err(RenderError::Ranks("failure injected for a test (fail_rank)".into()));
+    if let Some(fault) = config.fault.filter(|f| f.strikes_build(comm.rank())) {
+        return Err(fault.error());
     }
 
     let mut cache = cache
@@ -167,20 +261,16 @@ pub struct SortLast {
     conservative: bool,
     inner: Option<Box<dyn Renderer>>,
     replicate: bool,
+    faults: FaultClock,
 }
 
-/// What one rank reports to rank 0 after a frame, as little-endian u64s.
-const REPORT_FIELDS: usize = 8;
+/// What one rank reports to rank 0 after a frame, as little-endian u64s (then its outcome).
+const REPORT_FIELDS: usize = 11;
 
-impl Renderer for SortLast {
-    fn name(&self) -> &'static str {
-        self.name
-    }
-
-    fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        let start = Instant::now();
-        let comm = self.comm.as_ref();
-        let rendered = match &mut self.inner {
+impl SortLast {
+    /// This rank's part of the frame (a cleared frame when the split left it nothing).
+    fn render_part(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
+        match &mut self.inner {
             Some(r) => r.render(view, frame),
             None => {
                 if frame.width() != view.width() || frame.height() != view.height() {
@@ -195,14 +285,41 @@ impl Renderer for SortLast {
                     Ok(FrameStats::default())
                 }
             }
+        }
+    }
+}
+
+impl Renderer for SortLast {
+    fn name(&self) -> &'static str {
+        self.name
+    }
+
+    fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
+        let start = Instant::now();
+        let comm = Arc::clone(&self.comm);
+        let comm = comm.as_ref();
+        let fault_now = self.faults.next_frame(comm.rank());
+        let fault = |agreement| fault_now.filter(|f| f.agreement == agreement);
+        let rendered = match fault(0) {
+            Some(f) => Err(f.error()),
+            None => self.render_part(view, frame),
         };
         let render_time = start.elapsed();
+        // Agreement 0: every rank rendered. Its time is the wait for the slowest rank's render.
         let outcome = rendered.as_ref().map(|_| ()).map_err(|e| e.to_string());
         let comm_start = Instant::now();
         agree(comm, outcome).map_err(ranks_error)?;
+        let agree_time = comm_start.elapsed();
         let mut stats = rendered.expect("agreed that every rank rendered");
         let cost = composite(comm, frame, self.replicate).map_err(ranks_error)?;
         let comm_time = comm_start.elapsed();
+        // Agreement 1, with the report: every rank composited (a defect found in the exchange,
+        // which every rank finished, is this rank's failure).
+        let outcome = match (&cost.defect, fault(1)) {
+            (Some(defect), _) => Err(defect.to_string()),
+            (None, Some(f)) => Err(f.error().to_string()),
+            (None, None) => Ok(()),
+        };
         let report: [u64; REPORT_FIELDS] = [
             render_time.as_micros() as u64,
             comm_time.as_micros() as u64,
@@ -212,38 +329,33 @@ impl Renderer for SortLast {
             stats.fragments_written,
             stats.nodes_visited,
             stats.boxes_tested,
+            agree_time.as_micros() as u64,
+            cost.wait.as_micros() as u64,
+            cost.work.as_micros() as u64,
         ];
-        let bytes: Vec<u8> = report.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let mut bytes: Vec<u8> = report.iter().flat_map(|v| v.to_le_bytes()).collect();
+        bytes.extend(outcome_bytes(&outcome));
         let all = gather(comm, &bytes).map_err(ranks_error)?;
-        stats.phases.add(Phase::Other, comm_time);
-        if let Some(all) = all {
-            let reports = all
+        let verdict = match &all {
+            None => None,
+            Some(all) => match all
                 .iter()
                 .enumerate()
                 .map(|(rank, b)| decode_report(rank, b))
                 .collect::<std::result::Result<Vec<_>, _>>()
-                .map_err(ranks_error)?;
-            // Counts are the whole scene's: every rank's added (rank 0's own are in `stats`).
-            for r in &reports[1..] {
-                stats.triangles_submitted += r[3];
-                stats.triangles_rasterized += r[4];
-                stats.fragments_written += r[5];
-                stats.nodes_visited += r[6];
-                stats.boxes_tested += r[7];
-            }
-            let c = &mut stats.counters;
-            c.add("mpi_ranks", reports.len() as u64);
-            c.add("mpi_render_max_us", reports.iter().map(|r| r[0]).max().unwrap_or(0));
-            c.add("mpi_render_min_us", reports.iter().map(|r| r[0]).min().unwrap_or(0));
-            c.add("mpi_comm_us", reports[0][1]);
-            c.add("mpi_comm_max_us", reports.iter().map(|r| r[1]).max().unwrap_or(0));
-            c.add("mpi_bytes_sent_max", reports.iter().map(|r| r[2]).max().unwrap_or(0));
-            c.add("mpi_bytes_total", reports.iter().map(|r| r[2]).sum());
-            for (rank, r) in reports.iter().enumerate().take(RANKS_REPORTED) {
-                c.add(RANK_RENDER_US[rank], r[0]);
-                c.add(RANK_COMM_US[rank], r[1]);
-            }
-        }
+            {
+                Err(e) => Some((0, e.to_string())),
+                Ok(reports) => {
+                    let failure = first_failure(&reports.iter().map(|(_, o)| o.clone()).collect::<Vec<_>>());
+                    if failure.is_none() {
+                        add_report(&mut stats, &reports);
+                    }
+                    failure
+                }
+            },
+        };
+        announce(comm, verdict).map_err(ranks_error)?;
+        stats.phases.add(Phase::Other, comm_time);
         stats.total = start.elapsed();
         Ok(stats)
     }
@@ -257,16 +369,55 @@ impl Renderer for SortLast {
     }
 }
 
-fn decode_report(rank: usize, bytes: &[u8]) -> std::result::Result<[u64; REPORT_FIELDS], CommError> {
-    if bytes.len() != REPORT_FIELDS * 8 {
+/// A rank's report: its fields and its outcome ([`outcome_bytes`]).
+type Report = ([u64; REPORT_FIELDS], Vec<u8>);
+
+fn decode_report(rank: usize, bytes: &[u8]) -> std::result::Result<Report, CommError> {
+    if bytes.len() < REPORT_FIELDS * 8 {
         return Err(CommError::Malformed {
             peer: rank,
             reason: format!("a frame report of {} bytes", bytes.len()),
         });
     }
+    let (fields, outcome) = bytes.split_at(REPORT_FIELDS * 8);
     let mut out = [0u64; REPORT_FIELDS];
-    for (o, b) in out.iter_mut().zip(bytes.chunks_exact(8)) {
+    for (o, b) in out.iter_mut().zip(fields.chunks_exact(8)) {
         *o = u64::from_le_bytes(b.try_into().expect("chunks of 8"));
     }
-    Ok(out)
+    Ok((out, outcome.to_vec()))
+}
+
+/// Rank 0's counters from every rank's report (its own among them).
+fn add_report(stats: &mut FrameStats, reports: &[Report]) {
+    // Counts are the whole scene's: every rank's added (rank 0's own are in `stats`).
+    for (r, _) in &reports[1..] {
+        stats.triangles_submitted += r[3];
+        stats.triangles_rasterized += r[4];
+        stats.fragments_written += r[5];
+        stats.nodes_visited += r[6];
+        stats.boxes_tested += r[7];
+    }
+    let max = |field: usize| reports.iter().map(|(r, _)| r[field]).max().unwrap_or(0);
+    let root = &reports[0].0;
+    let c = &mut stats.counters;
+    c.add("mpi_ranks", reports.len() as u64);
+    c.add("mpi_render_max_us", max(0));
+    c.add(
+        "mpi_render_min_us",
+        reports.iter().map(|(r, _)| r[0]).min().unwrap_or(0),
+    );
+    c.add("mpi_comm_us", root[1]);
+    c.add("mpi_comm_max_us", max(1));
+    c.add("mpi_bytes_sent_max", max(2));
+    c.add("mpi_bytes_total", reports.iter().map(|(r, _)| r[2]).sum());
+    c.add("mpi_agree_us", root[8]);
+    c.add("mpi_agree_max_us", max(8));
+    c.add("mpi_composite_wait_us", root[9]);
+    c.add("mpi_composite_wait_max_us", max(9));
+    c.add("mpi_composite_work_us", root[10]);
+    c.add("mpi_composite_work_max_us", max(10));
+    for (rank, (r, _)) in reports.iter().enumerate().take(RANKS_REPORTED) {
+        c.add(RANK_RENDER_US[rank], r[0]);
+        c.add(RANK_COMM_US[rank], r[1]);
+    }
 }

@@ -1,11 +1,13 @@
 //! Sort-last over thread ranks: frames bit-identical to the single-process `zbuffer` on every
 //! generator at 1, 2, 3 and 4 ranks, for brute force and culling renderers; failures end every
-//! rank with one error.
+//! rank with one error, never a hang, wherever in a frame a rank fails.
 
-use std::sync::Arc;
+use std::panic::AssertUnwindSafe;
+use std::sync::{mpsc, Arc, Barrier};
+use std::time::{Duration, Instant};
 
 use occult_core::{Camera, Scene, Vec3, View};
-use occult_mpi::{run_threads, sort_last_options, SortLastConfig};
+use occult_mpi::{run_threads, sort_last_options, Comm, Fault, SortLastConfig, ThreadComm};
 use occult_raster::{Frame, RasterConfig};
 use occult_render::{AlgoSpec, Algorithm, RenderError, RenderOptions};
 
@@ -126,7 +128,7 @@ fn a_rank_that_fails_to_build_is_one_error_on_every_rank() {
     let (scene, _) = small_terrain();
     let out = run_threads(3, |comm| {
         let config = SortLastConfig {
-            fail_rank: Some(1),
+            fault: Some("1".parse().expect("a valid fault")),
             ..SortLastConfig::default()
         };
         let options = sort_last_options(comm.clone(), one_thread(), config);
@@ -188,5 +190,152 @@ fn parallel_lzb_needs_payoff_off() {
     });
     for r in out {
         assert!(matches!(r.expect("no rank panics"), Err(RenderError::Ranks(m)) if m.contains("payoff=off")));
+    }
+}
+
+/// How long the ranks of one failure case may take before the case counts as hung. They take
+/// milliseconds; the bound times nothing, it turns a hang into a failed test.
+const HANG: Duration = Duration::from_secs(120);
+
+/// Runs `f` on `size` thread ranks, as [`run_threads`], but fails the test when they have not
+/// all returned within [`HANG`] instead of waiting forever. Each rank keeps its end of the
+/// group until every rank has returned, as an MPI process keeps its communicator until it
+/// ends: a rank that returned early stays reachable, as under `mpirun` (with thread ranks its
+/// channels would otherwise close, turning the others' wait into an error).
+fn run_bounded<R: Send + 'static>(size: usize, f: impl Fn(&Arc<dyn Comm>) -> R + Send + Sync + 'static) -> Vec<R> {
+    let f = Arc::new(f);
+    let all_returned = Arc::new(Barrier::new(size));
+    let (results, returned) = mpsc::channel();
+    for comm in ThreadComm::group(size) {
+        let (f, all_returned, results) = (Arc::clone(&f), Arc::clone(&all_returned), results.clone());
+        std::thread::spawn(move || {
+            let comm: Arc<dyn Comm> = Arc::new(comm);
+            let out = std::panic::catch_unwind(AssertUnwindSafe(|| f(&comm)));
+            // The test may have stopped listening (it failed): nothing to tell it then.
+            let _ = results.send((comm.rank(), out.ok()));
+            all_returned.wait();
+        });
+    }
+    drop(results);
+    let deadline = Instant::now() + HANG;
+    let mut out: Vec<Option<R>> = (0..size).map(|_| None).collect();
+    for _ in 0..size {
+        match returned.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+            Ok((rank, Some(r))) => out[rank] = Some(r),
+            Ok((rank, None)) => panic!("rank {rank} panicked"),
+            Err(_) => {
+                let waiting: Vec<usize> = (0..size).filter(|&r| out[r].is_none()).collect();
+                panic!("ranks {waiting:?} of {size} did not return within {HANG:?}: they wait on a rank that failed");
+            }
+        }
+    }
+    out.into_iter().map(|r| r.expect("every rank returned")).collect()
+}
+
+/// Renders `frames` frames of `view` with `spec` built over `size` thread ranks with
+/// `config`; on every rank, the frames it rendered before an error, and the error.
+fn render_frames(
+    size: usize,
+    spec: &str,
+    config: SortLastConfig,
+    frames: usize,
+    view_of: impl Fn(usize, usize) -> View + Send + Sync + 'static,
+) -> Vec<(usize, Option<RenderError>)> {
+    let (scene, _) = small_terrain();
+    let spec = AlgoSpec::parse(spec).expect("a valid spec");
+    run_bounded(size, move |comm| {
+        let options = sort_last_options(comm.clone(), one_thread(), config.clone());
+        let mut r = spec.build(scene.clone(), &options).expect("builds on every rank");
+        for k in 0..frames {
+            let view = view_of(comm.rank(), k);
+            let mut f = Frame::new(view.width(), view.height()).expect("small frame");
+            if let Err(e) = r.render(&view, &mut f) {
+                return (k, Some(e));
+            }
+        }
+        (frames, None)
+    })
+}
+
+/// Asserts that every rank ended frame `frame` with the same error, `expected`.
+fn assert_one_error(out: &[(usize, Option<RenderError>)], frame: usize, expected: &str, case: &str) {
+    for (rank, (frames, e)) in out.iter().enumerate() {
+        assert_eq!(*frames, frame, "{case}: rank {rank} ended at another frame ({e:?})");
+        match e {
+            Some(RenderError::Ranks(m)) => assert_eq!(m, expected, "{case}: rank {rank}"),
+            other => panic!("{case}: rank {rank}: expected the failure, got {other:?}"),
+        }
+    }
+}
+
+/// The small terrain's view at 32×24 on every rank and frame, and the pixel-wider view of
+/// `wider_rank` in frame 1.
+fn small_views(wider_rank: Option<usize>) -> impl Fn(usize, usize) -> View + Send + Sync + 'static {
+    let (_, camera) = small_terrain();
+    move |rank, frame| {
+        let wider = u32::from(wider_rank == Some(rank) && frame == 1);
+        View::new(camera, 32 + wider, 24).expect("a valid view")
+    }
+}
+
+/// For each of `sizes` ranks, the first and the last rank failing in frame 1 of 3 before
+/// each of `agreements`, with and without replication: every rank ends frame 1 with the one
+/// error naming the failed rank and the fault.
+fn check_faults(spec: &str, parallel_lzb: bool, sizes: &[usize], agreements: impl Fn(bool) -> usize) {
+    for &size in sizes {
+        for failing in [0, size - 1] {
+            for replicate in [false, true] {
+                for agreement in 0..agreements(replicate) {
+                    let fault = Fault {
+                        rank: failing,
+                        frame: Some(1),
+                        agreement,
+                    };
+                    let config = SortLastConfig {
+                        parallel_lzb,
+                        replicate,
+                        fault: Some(fault),
+                    };
+                    let out = render_frames(size, spec, config, 3, small_views(None));
+                    let expected = format!("rank {failing} of {size}: failure injected for a test ({fault})");
+                    let case = format!("{spec}, {size} ranks, rank {failing} fails at {fault}, replicate {replicate}");
+                    assert_one_error(&out, 1, &expected, &case);
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn parallel_lzb_ends_every_rank_with_one_error_when_a_rank_fails_mid_frame() {
+    // Before the plane, the depth buffer and the PVL exchanges, (the replication,) and at the
+    // frame's end.
+    check_faults("lzb:payoff=off", true, &[2, 4], |replicate| 4 + usize::from(replicate));
+}
+
+#[test]
+fn sort_last_ends_every_rank_with_one_error_when_a_rank_fails_in_a_frame() {
+    // After rendering, and after compositing.
+    check_faults("zbuffer", false, &[2, 3, 4], |_| 2);
+}
+
+#[test]
+fn a_rank_whose_view_changes_size_mid_run_is_one_error_on_every_rank() {
+    // The last rank's second frame is a pixel wider than the others': each rank renders its
+    // own frame, and the compositing finds the messages of the wrong size.
+    for size in [2, 3, 4] {
+        let out = render_frames(
+            size,
+            "zbuffer",
+            SortLastConfig::default(),
+            3,
+            small_views(Some(size - 1)),
+        );
+        let first = match &out[0].1 {
+            Some(RenderError::Ranks(m)) => m.clone(),
+            other => panic!("{size} ranks: expected a failure, got {other:?}"),
+        };
+        assert!(first.contains("frames of different sizes"), "{size} ranks: {first}");
+        assert_one_error(&out, 1, &first, &format!("{size} ranks"));
     }
 }

@@ -186,3 +186,69 @@ fn a_failed_rank_ends_the_run_with_one_error() {
     assert_eq!(stderr.matches("error:").count(), 1, "{stderr}");
     assert!(stderr.contains("rank 1 of 2"), "{stderr}");
 }
+
+/// `occult ARGS` on `ranks` MPI ranks with `OCCULT_MPI_FAIL_RANK=fault`, ended by `timeout`
+/// if it has not finished in 300 s (it takes a second or two): a hang fails the test instead
+/// of stopping the test run. `timeout` sends `mpirun` a SIGTERM, which `mpirun` passes on to
+/// its ranks.
+fn mpirun_failing(ranks: usize, fault: &str, args: &[&str]) -> Output {
+    let out = Command::new("timeout")
+        .args(["--kill-after=10", "300", "mpirun"])
+        .args(["-np", &ranks.to_string(), "--oversubscribe", "--allow-run-as-root"])
+        .args(["-x", &format!("OCCULT_MPI_FAIL_RANK={fault}")])
+        .arg(env!("CARGO_BIN_EXE_occult"))
+        .args(["--threads", "1"])
+        .args(args)
+        .output()
+        .expect("timeout and mpirun run");
+    assert_ne!(
+        out.status.code(),
+        Some(124),
+        "fault {fault}: the ranks hung (ended by timeout): {}",
+        text(&out.stderr)
+    );
+    out
+}
+
+#[test]
+fn a_rank_that_fails_mid_frame_ends_the_run_with_one_error() {
+    if !mpirun_present() {
+        return;
+    }
+    let walk = |algo: &'static str| {
+        [
+            "walk",
+            "--scene",
+            "terrain:g=8",
+            "--algo",
+            algo,
+            "--path",
+            "circle:3",
+            "--size",
+            "32x32",
+        ]
+    };
+    let lzb = walk("lzb:payoff=off");
+    let mut parallel_lzb = vec!["--mpi-lzb"];
+    parallel_lzb.extend(lzb);
+    // The parallel local z-buffer: rank 0 fails before the depth broadcast of frame 1 (the
+    // others waited for it there), rank 1 before the PVL gather (rank 0 waited for it);
+    // sort-last: rank 1 fails after compositing frame 1.
+    let cases: [(usize, &str, &[&str]); 4] = [
+        (2, "0:1:1", &parallel_lzb),
+        (2, "1:1:2", &parallel_lzb),
+        (4, "3:1:1", &parallel_lzb),
+        (2, "1:1:1", &walk("zbuffer")),
+    ];
+    for (ranks, fault, args) in cases {
+        let out = mpirun_failing(ranks, fault, args);
+        let stderr = text(&out.stderr);
+        assert!(!out.status.success(), "fault {fault}: {stderr}");
+        assert_eq!(stderr.matches("error:").count(), 1, "fault {fault}: {stderr}");
+        let rank = fault.split(':').next().expect("a rank");
+        assert!(
+            stderr.contains(&format!("rank {rank} of {ranks}: failure injected for a test (frame 1")),
+            "fault {fault}: {stderr}"
+        );
+    }
+}
