@@ -110,14 +110,19 @@ pub fn composite(comm: &dyn Comm, frame: &mut Frame, replicate: bool) -> Result<
             } else {
                 (mid..range.end, range.start..mid)
             };
-            // The lower rank sends first, so that neither waits on a send (see `comm`).
-            if rank < partner {
-                send_range(comm, partner, frame, give, &mut cost)?;
-                receive_range(comm, partner, frame, keep.clone(), true, &mut cost)?;
+            // Both encode, exchange, then merge: neither waits while the other merges. The
+            // lower rank sends first, so that neither waits on a send (see `comm`).
+            let out = encode_range(frame, give, &mut cost);
+            let received = if rank < partner {
+                send(comm, partner, &out, &mut cost)?;
+                recv(comm, partner, &mut cost)?
             } else {
-                receive_range(comm, partner, frame, keep.clone(), true, &mut cost)?;
-                send_range(comm, partner, frame, give, &mut cost)?;
-            }
+                let received = recv(comm, partner, &mut cost)?;
+                send(comm, partner, &out, &mut cost)?;
+                received
+            };
+            drop(out);
+            merge_range(partner, &received, frame, keep.clone(), true, &mut cost);
             range = keep;
             bit <<= 1;
         }
@@ -231,25 +236,28 @@ fn encode(frame: &Frame, range: Range<usize>) -> (Vec<u8>, u64) {
         runs.push(((active_start - empty_start) as u32, (i - active_start) as u32));
         active += i - active_start;
     }
-    let mut bytes = Vec::with_capacity(4 + runs.len() * BYTES_PER_RUN + active * BYTES_PER_PIXEL);
-    bytes.extend_from_slice(&(runs.len() as u32).to_le_bytes());
-    for &(e, a) in &runs {
-        bytes.extend_from_slice(&e.to_le_bytes());
-        bytes.extend_from_slice(&a.to_le_bytes());
+    // Written into a buffer of its final size: no capacity check per value.
+    let runs_end = 4 + runs.len() * BYTES_PER_RUN;
+    let mut bytes = vec![0u8; runs_end + active * BYTES_PER_PIXEL];
+    let (head, pixels) = bytes.split_at_mut(runs_end);
+    let (count, run_bytes) = head.split_at_mut(4);
+    count.copy_from_slice(&(runs.len() as u32).to_le_bytes());
+    for (out, &(e, a)) in run_bytes.chunks_exact_mut(BYTES_PER_RUN).zip(&runs) {
+        out[..4].copy_from_slice(&e.to_le_bytes());
+        out[4..].copy_from_slice(&a.to_le_bytes());
     }
+    let (depth_out, item_out) = pixels.split_at_mut(active * 4);
+    let (mut depth_out, mut item_out) = (depth_out.chunks_exact_mut(4), item_out.chunks_exact_mut(8));
     let mut at = 0usize;
     for &(e, a) in &runs {
         at += e as usize;
-        for d in &depth[at..at + a as usize] {
-            bytes.extend_from_slice(&d.to_bits().to_le_bytes());
+        let run = at..at + a as usize;
+        // The run's values first: zip would take one output chunk too many past the run.
+        for (d, out) in depth[run.clone()].iter().zip(depth_out.by_ref()) {
+            out.copy_from_slice(&d.to_bits().to_le_bytes());
         }
-        at += a as usize;
-    }
-    let mut at = 0usize;
-    for &(e, a) in &runs {
-        at += e as usize;
-        for it in &items[at..at + a as usize] {
-            bytes.extend_from_slice(&it.to_le_bytes());
+        for (it, out) in items[run].iter().zip(item_out.by_ref()) {
+            out.copy_from_slice(&it.to_le_bytes());
         }
         at += a as usize;
     }
@@ -309,12 +317,11 @@ fn decode_into(
             items[at..at + e].fill(NO_ITEM);
         }
         at += e;
-        for (d_out, i_out) in depth[at..at + a].iter_mut().zip(&mut items[at..at + a]) {
-            // Counted above: the message holds `active` of each.
-            let d = f32::from_bits(u32::from_le_bytes(
-                depth_in.next().expect("counted").try_into().expect("chunks of 4"),
-            ));
-            let it = u64::from_le_bytes(item_in.next().expect("counted").try_into().expect("chunks of 8"));
+        let frame_run = depth[at..at + a].iter_mut().zip(&mut items[at..at + a]);
+        // The frame's run first: zip would take one input chunk too many past the run.
+        for ((d_out, i_out), (d, it)) in frame_run.zip(depth_in.by_ref().zip(item_in.by_ref())) {
+            let d = f32::from_bits(u32::from_le_bytes(d.try_into().expect("chunks of 4")));
+            let it = u64::from_le_bytes(it.try_into().expect("chunks of 8"));
             if merge {
                 keep_fragment(d_out, i_out, d, it);
             } else {
@@ -327,6 +334,50 @@ fn decode_into(
     Ok(())
 }
 
+/// `range` of `frame` encoded ([`encode`]), counted in `cost`.
+fn encode_range(frame: &Frame, range: Range<usize>, cost: &mut CompositeCost) -> Vec<u8> {
+    let t = Instant::now();
+    let (bytes, active) = encode(frame, range);
+    cost.work += t.elapsed();
+    cost.active_pixels_sent += active;
+    bytes
+}
+
+fn send(comm: &dyn Comm, to: usize, bytes: &[u8], cost: &mut CompositeCost) -> Result<(), CommError> {
+    cost.bytes_sent += bytes.len() as u64;
+    cost.messages_sent += 1;
+    let t = Instant::now();
+    let sent = comm.send(to, bytes);
+    cost.wait += t.elapsed();
+    sent
+}
+
+fn recv(comm: &dyn Comm, from: usize, cost: &mut CompositeCost) -> Result<Vec<u8>, CommError> {
+    let t = Instant::now();
+    let bytes = comm.recv(from)?;
+    cost.wait += t.elapsed();
+    cost.bytes_received += bytes.len() as u64;
+    Ok(bytes)
+}
+
+/// Writes `bytes` from `from`, an encoded `range`, into `frame`: merged by (depth, item id)
+/// when `merge`, else copied (a finished range). A malformed message is recorded in
+/// `cost.defect`.
+fn merge_range(
+    from: usize,
+    bytes: &[u8],
+    frame: &mut Frame,
+    range: Range<usize>,
+    merge: bool,
+    cost: &mut CompositeCost,
+) {
+    let t = Instant::now();
+    if let Err(e) = decode_into(from, bytes, frame, range, merge) {
+        cost.defect.get_or_insert(e);
+    }
+    cost.work += t.elapsed();
+}
+
 fn send_range(
     comm: &dyn Comm,
     to: usize,
@@ -334,20 +385,10 @@ fn send_range(
     range: Range<usize>,
     cost: &mut CompositeCost,
 ) -> Result<(), CommError> {
-    let t = Instant::now();
-    let (bytes, active) = encode(frame, range);
-    cost.work += t.elapsed();
-    cost.bytes_sent += bytes.len() as u64;
-    cost.messages_sent += 1;
-    cost.active_pixels_sent += active;
-    let t = Instant::now();
-    let sent = comm.send(to, &bytes);
-    cost.wait += t.elapsed();
-    sent
+    let bytes = encode_range(frame, range, cost);
+    send(comm, to, &bytes, cost)
 }
 
-/// Receives `range` from `from` into `frame`: merged by (depth, item id) when `merge`, else
-/// copied (a finished range). A malformed message is recorded in `cost.defect`.
 fn receive_range(
     comm: &dyn Comm,
     from: usize,
@@ -356,15 +397,8 @@ fn receive_range(
     merge: bool,
     cost: &mut CompositeCost,
 ) -> Result<(), CommError> {
-    let t = Instant::now();
-    let bytes = comm.recv(from)?;
-    cost.wait += t.elapsed();
-    cost.bytes_received += bytes.len() as u64;
-    let t = Instant::now();
-    if let Err(e) = decode_into(from, &bytes, frame, range, merge) {
-        cost.defect.get_or_insert(e);
-    }
-    cost.work += t.elapsed();
+    let bytes = recv(comm, from, cost)?;
+    merge_range(from, &bytes, frame, range, merge, cost);
     Ok(())
 }
 
