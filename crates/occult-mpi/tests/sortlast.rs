@@ -339,3 +339,26 @@ fn a_rank_whose_view_changes_size_mid_run_is_one_error_on_every_rank() {
         assert_one_error(&out, 1, &first, &format!("{size} ranks"));
     }
 }
+
+#[test]
+fn rank_0_reports_the_exchange_split_and_sends_only_active_pixels() {
+    let (scene, camera) = small_terrain();
+    let view = View::new(camera, 64, 48).expect("a valid view");
+    let out = run_threads(4, |comm| {
+        let options = sort_last_options(comm.clone(), one_thread(), SortLastConfig::default());
+        let mut r = Algorithm::ZBUFFER.build(scene.clone(), &options).expect("builds");
+        let mut f = Frame::new(64, 48).expect("small frame");
+        let stats = r.render(&view, &mut f).expect("renders");
+        (stats, f.covered_pixel_count())
+    });
+    let (stats, covered) = out.into_iter().next().expect("rank 0").expect("no panic");
+    let names: Vec<&str> = stats.counters.0.iter().map(|&(k, _)| k).collect();
+    for counter in occult_mpi::sortlast::COUNTERS {
+        assert!(names.contains(counter), "{counter} missing from {names:?}");
+    }
+    // Binary swap over 4 ranks sends at most a whole frame from its busiest rank (12 bytes a
+    // pixel); with active pixels only, no more than the covered pixels and the run lengths.
+    let pixels = 64 * 48;
+    assert!(covered < pixels, "the view leaves some pixels empty");
+    assert!(stats.counters.get("mpi_bytes_sent_max") < pixels * 12);
+}
