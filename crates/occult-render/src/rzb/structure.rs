@@ -32,23 +32,39 @@ pub struct Structure {
     /// reaches its vertices in one load instead of three dependent ones (entry, indices,
     /// positions); empty for groups.
     pub soup: Vec<[Vec3; 3]>,
+    /// Groups: each list position's instance, in list order, so that a pick from the alias
+    /// table reaches the child in one load instead of two dependent ones (entry, instance);
+    /// empty for meshes.
+    pub links: Vec<Link>,
     /// §5.4 (`dynamic=on`): the distribution tree over the octree's nodes; sampling and the
     /// areas and item counts of boxes then come from it, and entries can be removed and
     /// inserted. `None`: the static lists.
     pub tree: Option<DistributionTree>,
 }
 
+/// A group's list position as a descent reads it ([`Structure::links`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Link {
+    /// The instance's child node.
+    pub child: u32,
+    /// The instance's index in the group.
+    pub instance: u32,
+    /// Items before the instance's first (the group's item offset of it).
+    pub item_offset: u64,
+}
+
 /// Walker's alias table over list positions (weights = entry areas): one uniform number picks
 /// a position with probability proportional to its area in O(1).
 ///
-/// Deviation from §5.2: used only where a whole structure gives a single sample (an instance
-/// entered once); sections of the list and several samples still invert the distribution
-/// list. Same distribution, fewer dependent loads on deep instancing.
+/// Deviation from §5.2: used for the samples of a whole structure (an entered instance);
+/// sections of the list (the selected boxes) still invert the distribution list. Same
+/// distribution, fewer dependent loads on deep instancing. Integer arithmetic only: the high
+/// half of a random word picks the slot, the low half decides between it and its alias.
 #[derive(Clone, Debug, Default)]
 pub struct AliasTable {
-    /// Per position: probability of keeping it, and its alias (8 bytes, so that the table of a
-    /// 20 K-triangle tree stays in the L2 cache).
-    slots: Vec<(f32, u32)>,
+    /// Per position: probability of keeping it (in units of 2^-32), and its alias (8 bytes, so
+    /// that the table of a 20 K-triangle tree stays in the L2 cache).
+    slots: Vec<(u32, u32)>,
 }
 
 impl AliasTable {
@@ -62,11 +78,11 @@ impl AliasTable {
         }
         // Vose's method.
         let mut scaled: Vec<f64> = w.iter().map(|&x| x * n as f64 / total).collect();
-        let mut slots = vec![(1.0f32, 0u32); n];
+        let mut slots = vec![(u32::MAX, 0u32); n];
         let (mut small, mut large): (Vec<u32>, Vec<u32>) = (0..n as u32).partition(|&i| scaled[i as usize] < 1.0);
         while let (Some(&l), Some(&g)) = (small.last(), large.last()) {
             small.pop();
-            slots[l as usize] = (scaled[l as usize] as f32, g);
+            slots[l as usize] = ((scaled[l as usize] * 4_294_967_296.0) as u32, g);
             scaled[g as usize] = (scaled[g as usize] + scaled[l as usize]) - 1.0;
             if scaled[g as usize] < 1.0 {
                 large.pop();
@@ -74,7 +90,7 @@ impl AliasTable {
             }
         }
         for i in large.into_iter().chain(small) {
-            slots[i as usize] = (1.0, i);
+            slots[i as usize] = (u32::MAX, i);
         }
         Self { slots }
     }
@@ -84,13 +100,12 @@ impl AliasTable {
         self.slots.is_empty()
     }
 
-    /// The position picked by `u ∈ [0, 1)`.
+    /// The position picked by the uniformly random word `r`.
     #[inline]
-    pub fn pick(&self, u: f64) -> u32 {
-        let x = u * self.slots.len() as f64;
-        let i = (x as usize).min(self.slots.len() - 1);
+    pub fn pick(&self, r: u64) -> u32 {
+        let i = (((r >> 32) * self.slots.len() as u64) >> 32) as usize;
         let (keep, alias) = self.slots[i];
-        if x - (i as f64) < keep as f64 {
+        if (r as u32) < keep {
             i as u32
         } else {
             alias
@@ -180,6 +195,7 @@ impl Structure {
             + tree
             + self.alias.memory_bytes()
             + self.soup.len() * std::mem::size_of::<[Vec3; 3]>()
+            + self.links.len() * std::mem::size_of::<Link>()
     }
 }
 
@@ -241,8 +257,22 @@ pub fn build_all(
             let mut st = build_one(scene, NodeId(i as u32), &areas, config, area_ratio, orientation)?;
             let o = &st.octree;
             st.alias = AliasTable::new((0..o.entries().len() as u32).map(|p| o.area(p..p + 1)));
-            if let NodeKind::Mesh(m) = scene.node(NodeId(i as u32)).kind() {
-                st.soup = o.entries().iter().map(|&e| m.triangle_positions(e as usize)).collect();
+            let node = scene.node(NodeId(i as u32));
+            match node.kind() {
+                NodeKind::Mesh(m) => {
+                    st.soup = o.entries().iter().map(|&e| m.triangle_positions(e as usize)).collect();
+                }
+                NodeKind::Group(g) => {
+                    st.links = o
+                        .entries()
+                        .iter()
+                        .map(|&e| Link {
+                            child: g[e as usize].child.0,
+                            instance: e,
+                            item_offset: node.item_offset(e as usize),
+                        })
+                        .collect();
+                }
             }
             if dynamic {
                 let (areas, weights) = entry_areas(scene, NodeId(i as u32), &areas);
@@ -322,6 +352,7 @@ fn build_one(
                     tree: None,
                     alias: AliasTable::default(),
                     soup: Vec::new(),
+                    links: Vec::new(),
                 });
             }
             // §5.3.4: class = area class × orientation class; each class's cone bounds the
@@ -373,6 +404,7 @@ fn build_one(
                 tree: None,
                 alias: AliasTable::default(),
                 soup: Vec::new(),
+                links: Vec::new(),
             })
         }
         NodeKind::Group(g) => {
@@ -401,6 +433,7 @@ fn build_one(
                 tree: None,
                 alias: AliasTable::default(),
                 soup: Vec::new(),
+                links: Vec::new(),
             })
         }
     }
@@ -419,7 +452,7 @@ mod tests {
         let mut h = [0u32; 6];
         let n = 200_000;
         for _ in 0..n {
-            h[t.pick(rng.random::<f64>()) as usize] += 1;
+            h[t.pick(rng.random::<u64>()) as usize] += 1;
         }
         assert_eq!(h[1], 0);
         // χ² with 4 degrees of freedom: 25 is far beyond the 0.1 % point (18.5).
@@ -434,6 +467,6 @@ mod tests {
             .sum();
         assert!(chi < 25.0, "chi² {chi}");
         assert!(AliasTable::new([0.0, 0.0].into_iter()).is_empty());
-        assert_eq!(AliasTable::new([2.0].into_iter()).pick(0.999), 0);
+        assert_eq!(AliasTable::new([2.0].into_iter()).pick(u64::MAX), 0);
     }
 }
