@@ -51,6 +51,10 @@ const MOUSE_DEG_PER_PX: f32 = 0.2;
 const ORBIT_DEG_PER_S: f32 = 20.0;
 /// How often held keys move the camera (and the spinner turns).
 const TICK: Duration = Duration::from_millis(10);
+/// A frame in flight this long gets a progress bar (a shorter one would only flicker).
+const PROGRESS_AFTER: Duration = Duration::from_millis(100);
+/// The progress bar's height, pixels.
+const PROGRESS_BAR_ROWS: usize = 4;
 /// A scripted key press of a held key acts for this long.
 const SCRIPT_PRESS_S: f32 = 1.0 / 30.0;
 /// The longest a script waits for one frame (a renderer's build included).
@@ -79,6 +83,8 @@ pub fn run(setup: Setup) -> Result<()> {
 enum Wait {
     /// A frame of the current state.
     Frame,
+    /// A frame of the current state under way (progress reported), or shown.
+    Progress,
     /// A frame holding the screenshot asked for.
     Shot,
     /// The window as shown, once a frame of the current state is in it.
@@ -132,6 +138,8 @@ struct App {
     next_id: u64,
     last: Option<Box<Shown>>,
     frames_shown: u64,
+    /// Frames cancelled by a newer state before they were complete (never shown).
+    frames_cancelled: u64,
     frame_times: Vec<Instant>,
     pending_shot: Option<PathBuf>,
     shot_count: u32,
@@ -180,6 +188,7 @@ impl App {
             next_id: 0,
             last: None,
             frames_shown: 0,
+            frames_cancelled: 0,
             frame_times: Vec::new(),
             pending_shot: None,
             shot_count: 0,
@@ -208,6 +217,7 @@ impl App {
         }
         if self.script.is_some() {
             say!("{}", latency_line(&self.latencies, self.frames_shown));
+            say!("frames cancelled: {}", self.frames_cancelled);
             for line in &self.flights {
                 say!("{line}");
             }
@@ -451,6 +461,12 @@ impl App {
         }
     }
 
+    /// True while the window waits for a frame of a newer state than it shows (or for its
+    /// first frame).
+    fn awaiting_frame(&self) -> bool {
+        self.last.as_ref().map_or(self.next_id > 0, |f| f.id < self.next_id)
+    }
+
     /// True when the last frame shows the current state, drawn by the chosen renderer.
     fn current(&self) -> bool {
         self.last.as_ref().is_some_and(|f| {
@@ -518,6 +534,13 @@ impl App {
     fn waited(&mut self, wait: Wait) -> Result<Option<Wait>> {
         Ok(match wait {
             Wait::Frame => (!self.current()).then_some(Wait::Frame),
+            Wait::Progress => {
+                let under_way = self
+                    .worker
+                    .in_flight()
+                    .is_some_and(|(id, progress, _)| id >= self.next_id && progress > 0.0);
+                (!under_way && !self.current()).then_some(Wait::Progress)
+            }
             Wait::Shot => self.pending_shot.is_some().then_some(Wait::Shot),
             Wait::Capture(path) => {
                 if !self.current() {
@@ -653,6 +676,7 @@ impl App {
                 None
             }
             Command::WaitFrame => Some(Wait::Frame),
+            Command::WaitProgress => Some(Wait::Progress),
             Command::Screenshot(path) => {
                 output::check_output(&path)?;
                 self.pending_shot = Some(path);
@@ -719,6 +743,17 @@ impl App {
             }
         }
         let width = w as usize;
+        // The frame in flight's progress: a bar along the window's bottom edge.
+        if let Some((_, progress, ran)) = self.worker.in_flight() {
+            if ran >= PROGRESS_AFTER && self.awaiting_frame() {
+                let filled = (f64::from(progress) * f64::from(w)).round() as usize;
+                for row in self.composed.chunks_exact_mut(width).rev().take(PROGRESS_BAR_ROWS) {
+                    for (x, p) in row.iter_mut().enumerate() {
+                        *p = if x < filled { 0x00ff_d040 } else { 0x0040_4040 };
+                    }
+                }
+            }
+        }
         let mut composed = std::mem::take(&mut self.composed);
         if self.show_stats {
             let lines = self.stats_lines();
@@ -846,9 +881,25 @@ impl App {
                 ),
                 0x00ff_d040,
             ));
-        } else if self.last.as_ref().is_some_and(|f| f.id < self.next_id) {
+        } else if self.awaiting_frame() {
             let spin = SPINNER[(self.last_tick.elapsed().as_millis() / 120) as usize % SPINNER.len()];
-            lines.push((format!("{spin} rendering"), DIM));
+            let line = match self.worker.in_flight() {
+                Some((id, progress, ran)) => format!(
+                    "{spin} rendering {:.0} % ({:.1} s){}",
+                    progress * 100.0,
+                    ran.as_secs_f64(),
+                    if id < self.next_id {
+                        "; a newer view waits"
+                    } else {
+                        ""
+                    }
+                ),
+                None => format!("{spin} rendering"),
+            };
+            lines.push((line, DIM));
+        }
+        if self.frames_cancelled > 0 {
+            lines.push((format!("frames cancelled: {}", self.frames_cancelled), DIM));
         }
         if let Some(cameras) = &self.recording {
             lines.push((format!("recording: {} cameras (C stops)", cameras.len()), 0x00ff_6060));
@@ -990,6 +1041,7 @@ impl ApplicationHandler<Event> for App {
     fn user_event(&mut self, event_loop: &ActiveEventLoop, event: Event) {
         match event {
             Event::Frame(frame) => self.shown(event_loop, frame),
+            Event::Cancelled => self.frames_cancelled += 1,
             Event::Built { label, ms } => self.say(format!("built {label} in {} ms", output::millis(ms))),
             Event::Failed { label, error } => {
                 if self.script.is_some() {
@@ -1021,7 +1073,11 @@ impl ApplicationHandler<Event> for App {
             if !shooting {
                 self.tick(dt);
             }
-            let rendering = self.last.as_ref().is_some_and(|f| f.id < self.next_id);
+            let rendering = self.awaiting_frame();
+            if rendering {
+                // A slow frame of an older state is cancelled once due, input or not.
+                self.worker.supersede();
+            }
             if self.building.is_some() || self.message.is_some() || rendering {
                 if let Some(w) = &self.window {
                     w.request_redraw();
@@ -1031,7 +1087,7 @@ impl ApplicationHandler<Event> for App {
         self.pump(event_loop);
         let animating = !self.held.is_empty()
             || self.orbit
-            || self.last.as_ref().is_some_and(|f| f.id < self.next_id)
+            || self.awaiting_frame()
             || self.building.is_some()
             || self.script.as_ref().is_some_and(|r| r.wait.is_some())
             || self
