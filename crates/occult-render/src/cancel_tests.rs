@@ -247,3 +247,38 @@ fn progress_rises_to_one_and_stops_short_when_cancelled() {
     }
     assert!(partial, "lzb reported no part of a cancelled frame");
 }
+
+/// Watched, `zbuffer` draws a scene of over 2^20 triangles in chunks: the same frame as in one
+/// call, and a frame cancelled between two chunks has reported the first.
+#[test]
+fn zbuffer_in_chunks_draws_the_same_frame_and_reports_each() {
+    let mut b = SceneBuilder::new();
+    let tile = b.add_mesh("tile", crate::test_grid(8)).expect("a grid is a valid mesh");
+    // 100 × 100 tiles of 128 triangles: 1,280,000 triangles, two chunks.
+    let instances = (0..10_000)
+        .map(|i| Instance {
+            parent_from_child: Affine3A::from_translation(Vec3::new((i % 100) as f32, 0.0, -((i / 100) as f32))),
+            child: tile,
+        })
+        .collect();
+    let root = b.add_group("tiles", instances).expect("a valid group");
+    let scene = Arc::new(b.build(root).expect("a valid scene"));
+    let view = View::new(
+        Camera::look_at(Vec3::new(50.0, 30.0, 20.0), Vec3::new(50.0, 0.0, -50.0)),
+        64,
+        48,
+    )
+    .expect("a valid view");
+    let inert = FrameControl::default();
+    let one_call = frame_of(&mut *build("zbuffer", &scene, &options(&inert)), &inert, &view);
+    let control = FrameControl::new();
+    let mut r = build("zbuffer", &scene, &options(&control));
+    assert!(same(&frame_of(&mut *r, &control, &view), &one_call), "chunks draw the same frame");
+    // Checks: the frame's start, before the first chunk, before the second.
+    control.reset();
+    control.cancel_at_check(3);
+    let mut frame = Frame::new(64, 48).expect("a valid frame size");
+    assert!(matches!(r.render(&view, &mut frame), Err(RenderError::Cancelled)));
+    let p = control.progress();
+    assert!(p > 0.5 && p < 1.0, "the first chunk's 2^20 of 1,280,000 triangles: {p}");
+}

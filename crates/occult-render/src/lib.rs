@@ -390,31 +390,40 @@ pub(crate) fn rasterize_counted(
     progress: Option<(u64, u64)>,
 ) {
     let control = raster.config().control.clone();
-    if control.is_cancelled() || draws.is_empty() {
+    if !control.is_live() {
+        draw_timed(raster, view, frame, draws, stats);
         return;
     }
     let mut done = progress.map_or(0, |p| p.0);
     let mut rest = draws;
-    while !rest.is_empty() {
-        // The whole list in one call without a live control; else whole draws up to a chunk.
+    while !rest.is_empty() && !control.is_cancelled() {
+        // Whole draws, up to a chunk.
         let (mut n, mut triangles) = (0, 0u64);
-        while n < rest.len() && (!control.is_live() || n == 0 || triangles < CONTROLLED_CHUNK_TRIANGLES) {
+        while n < rest.len() && (n == 0 || triangles < CONTROLLED_CHUNK_TRIANGLES) {
             triangles += draw_triangle_count(&rest[n]);
             n += 1;
         }
-        let t = Instant::now();
-        let counts = raster.draw(view, frame, &rest[..n], occult_raster::RasterMode::Full);
-        stats.phases.add(Phase::Raster, t.elapsed());
-        stats.add_raster(counts);
+        draw_timed(raster, view, frame, &rest[..n], stats);
         rest = &rest[n..];
         done += triangles;
         if let Some((_, total)) = progress {
             report_part(raster, done, total);
         }
-        if control.is_cancelled() {
-            return;
-        }
     }
+}
+
+/// Draws `draws` in one call, adding the time to [`Phase::Raster`] and the counts to `stats`.
+fn draw_timed(
+    raster: &mut occult_raster::Rasterizer,
+    view: &View,
+    frame: &mut Frame,
+    draws: &[occult_raster::Draw<'_>],
+    stats: &mut FrameStats,
+) {
+    let t = Instant::now();
+    let counts = raster.draw(view, frame, draws, occult_raster::RasterMode::Full);
+    stats.phases.add(Phase::Raster, t.elapsed());
+    stats.add_raster(counts);
 }
 
 /// The triangles `draw` submits.
