@@ -2,7 +2,7 @@
 
 use std::collections::HashSet;
 use std::num::NonZeroU32;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -146,6 +146,8 @@ struct App {
     recording: Option<Vec<Camera>>,
     record_to: Option<PathBuf>,
     building: Option<(String, Instant)>,
+    /// The renderers the worker reported built.
+    built: HashSet<String>,
     message: Option<(String, Instant)>,
     /// Inputs not yet reflected by a frame: request id, when, frames shown since.
     pending_inputs: Vec<(u64, Instant, u32)>,
@@ -195,6 +197,7 @@ impl App {
             recording: None,
             record_to: setup.record_to,
             building: None,
+            built: HashSet::new(),
             message: None,
             pending_inputs: Vec::new(),
             latencies: Vec::new(),
@@ -264,7 +267,7 @@ impl App {
     }
 
     fn algo_known(&self) -> bool {
-        self.last.as_ref().is_some_and(|f| f.label == self.algo.label())
+        self.built.contains(&self.algo.label()) || self.last.as_ref().is_some_and(|f| f.label == self.algo.label())
     }
 
     fn set_camera(&mut self, camera: Camera) {
@@ -546,17 +549,7 @@ impl App {
                 if !self.current() {
                     return Ok(Some(Wait::Capture(path)));
                 }
-                self.compose();
-                let (w, h) = self.composed_size;
-                let raw: Vec<u8> = self
-                    .composed
-                    .iter()
-                    .flat_map(|p| [(p >> 16) as u8, (p >> 8) as u8, *p as u8])
-                    .collect();
-                let image = image::RgbImage::from_raw(w, h, raw).context("the window's pixels")?;
-                image
-                    .save_with_format(&path, image::ImageFormat::Png)
-                    .with_context(|| format!("cannot write '{}'", path.display()))?;
+                self.capture(&path)?;
                 None
             }
             Wait::Stats(path) => {
@@ -613,6 +606,21 @@ impl App {
                 None
             }
         })
+    }
+
+    /// Writes the window as it is now, overlays included, to `path` as PNG.
+    fn capture(&mut self, path: &Path) -> Result<()> {
+        self.compose();
+        let (w, h) = self.composed_size;
+        let raw: Vec<u8> = self
+            .composed
+            .iter()
+            .flat_map(|p| [(p >> 16) as u8, (p >> 8) as u8, *p as u8])
+            .collect();
+        let image = image::RgbImage::from_raw(w, h, raw).context("the window's pixels")?;
+        image
+            .save_with_format(path, image::ImageFormat::Png)
+            .with_context(|| format!("cannot write '{}'", path.display()))
     }
 
     /// Does one script command; returns what it waits for.
@@ -686,6 +694,11 @@ impl App {
             Command::Capture(path) => {
                 output::check_output(&path)?;
                 Some(Wait::Capture(path))
+            }
+            Command::CaptureNow(path) => {
+                output::check_output(&path)?;
+                self.capture(&path)?;
+                None
             }
             Command::Stats(path) => {
                 output::check_output(&path)?;
@@ -881,7 +894,8 @@ impl App {
                 ),
                 0x00ff_d040,
             ));
-        } else if self.awaiting_frame() {
+        }
+        if self.awaiting_frame() {
             let spin = SPINNER[(self.last_tick.elapsed().as_millis() / 120) as usize % SPINNER.len()];
             let line = match self.worker.in_flight() {
                 Some((id, progress, ran)) => format!(
@@ -1042,7 +1056,13 @@ impl ApplicationHandler<Event> for App {
         match event {
             Event::Frame(frame) => self.shown(event_loop, frame),
             Event::Cancelled => self.frames_cancelled += 1,
-            Event::Built { label, ms } => self.say(format!("built {label} in {} ms", output::millis(ms))),
+            Event::Built { label, ms } => {
+                self.say(format!("built {label} in {} ms", output::millis(ms)));
+                if self.building.as_ref().is_some_and(|(b, _)| *b == label) {
+                    self.building = None;
+                }
+                self.built.insert(label);
+            }
             Event::Failed { label, error } => {
                 if self.script.is_some() {
                     return self.fail(event_loop, anyhow!(error));

@@ -17,6 +17,7 @@
 //! | `wait-progress` | waits until a frame of the current state is under way (has reported progress) or shown |
 //! | `screenshot FILE` | a frame of the current state to PNG: the pixels `occult render` writes |
 //! | `capture FILE` | the window as shown, overlays included, to PNG |
+//! | `capture-now FILE` | the same at once, without waiting for a frame of the current state (a frame in flight's progress shows) |
 //! | `stats FILE` | what the overlay shows of a frame of the current state, as JSON |
 //! | `record start` / `record stop FILE` | records the flown cameras; writes them as a path file |
 //! | `fly FRAMES` | flies forward and turning, input every 10 ms, until FRAMES frames are shown; prints fps |
@@ -78,6 +79,8 @@ pub enum Command {
     Screenshot(PathBuf),
     /// The window's pixels to PNG.
     Capture(PathBuf),
+    /// The window's pixels to PNG at once.
+    CaptureNow(PathBuf),
     /// The frame's statistics to JSON.
     Stats(PathBuf),
     /// Starts recording the flown cameras.
@@ -183,6 +186,7 @@ fn parse_line(line: &str) -> Result<Command> {
         "wait-progress" if args.is_empty() => Command::WaitProgress,
         "screenshot" => Command::Screenshot(PathBuf::from(one()?)),
         "capture" => Command::Capture(PathBuf::from(one()?)),
+        "capture-now" => Command::CaptureNow(PathBuf::from(one()?)),
         "stats" => Command::Stats(PathBuf::from(one()?)),
         "record" => match args {
             ["start"] => Command::RecordStart,
@@ -197,7 +201,7 @@ fn parse_line(line: &str) -> Result<Command> {
         "exit" if args.is_empty() => Command::Exit,
         "wait-frame" | "wait-progress" | "exit" => bail!("'{verb}' takes no argument"),
         other => bail!(
-            "unknown command '{other}' (camera, view, move, turn, key, algo, mode, size, wait-frame, wait-progress, screenshot, capture, stats, record, fly, sleep, exit)"
+            "unknown command '{other}' (camera, view, move, turn, key, algo, mode, size, wait-frame, wait-progress, screenshot, capture, capture-now, stats, record, fly, sleep, exit)"
         ),
     })
 }
@@ -233,10 +237,10 @@ mod tests {
         let s = Script::parse(
             "# a comment\n\ncamera eye 1,2,3 target 0,0,0 up 0,0,1\nview circle:8:3\nmove forward 2.5\nturn 10 -5\n\
              key 3\nkey shift+tab\nalgo hzb:temporal=off\nmode depth\nsize 64x48\nwait-frame\nwait-progress\nscreenshot a.png # shot\n\
-             capture b.png\nstats c.json\nrecord start\nrecord stop p.json\nfly 10\nsleep 5\nexit\n",
+             capture b.png\ncapture-now d.png\nstats c.json\nrecord start\nrecord stop p.json\nfly 10\nsleep 5\nexit\n",
         )
         .expect("a good script parses");
-        assert_eq!(s.commands.len(), 19);
+        assert_eq!(s.commands.len(), 20);
         assert_eq!(s.commands[0].0, 3, "line numbers count comments and blanks");
     }
 

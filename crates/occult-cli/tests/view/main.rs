@@ -319,10 +319,13 @@ fn a_slow_frame_is_cancelled_by_moving_and_the_next_is_the_new_view() {
     let dir = scratch("cancel");
     let shot = dir.join("moved.png");
     let stats = dir.join("moved.json");
+    let during = dir.join("during.png");
     // `wait-progress`: the first view's frame is under way (drawing samples) when the camera
-    // moves, so it is in flight, not merely pending, and is cancelled, not replaced.
+    // moves, so it is in flight, not merely pending, and is cancelled, not replaced. The
+    // window is captured while it draws, its progress bar showing.
     let script = format!(
-        "view circle:8:1\nwait-progress\nview circle:8:3\nscreenshot {}\nstats {}\nexit\n",
+        "view circle:8:1\nwait-progress\nsleep 300\ncapture-now {}\nview circle:8:3\nscreenshot {}\nstats {}\nexit\n",
+        s(&during),
         s(&shot),
         s(&stats)
     );
@@ -340,6 +343,12 @@ fn a_slow_frame_is_cancelled_by_moving_and_the_next_is_the_new_view() {
     assert!(cancelled >= 1, "the first view's frame was not cancelled: {stdout}");
     let json: serde_json::Value = serde_json::from_slice(&bytes(&stats)).expect("the statistics are JSON");
     assert_eq!(json["renderer"], "rzb", "{json}");
+    // The bar along the bottom edge: filled (amber) from the left as far as the frame got.
+    let window = image::open(&during).expect("the capture is a PNG").to_rgb8();
+    let bottom = window.height() - 1;
+    let amber = image::Rgb([0xff, 0xd0, 0x40]);
+    assert_eq!(window.get_pixel(0, bottom), &amber, "no progress bar in the window while drawing");
+
     let out = dir.join("render.png");
     assert_ok(
         &occult(&[
