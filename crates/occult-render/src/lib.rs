@@ -48,12 +48,13 @@
 //! use occult_core::{Camera, Mesh, Scene, View, Vec3};
 //! use occult_raster::Frame;
 //! use occult_render::{Algorithm, RenderOptions};
-//! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).unwrap();
-//! let scene = Arc::new(Scene::from_mesh("tri", mesh).unwrap());
-//! let view = View::new(Camera::look_at(Vec3::new(0.3, 0.3, 2.0), Vec3::new(0.3, 0.3, 0.0)), 32, 32).unwrap();
-//! let mut renderer = Algorithm::FRUSTUM.build(Arc::clone(&scene), &RenderOptions::default()).unwrap();
-//! let mut frame = Frame::new(32, 32).unwrap();
-//! let stats = renderer.render(&view, &mut frame).unwrap();
+//! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).expect("a valid mesh");
+//! let scene = Arc::new(Scene::from_mesh("tri", mesh).expect("a valid scene"));
+//! let eye = Vec3::new(0.3, 0.3, 2.0);
+//! let view = View::new(Camera::look_at(eye, Vec3::new(0.3, 0.3, 0.0)), 32, 32).expect("a valid view");
+//! let mut renderer = Algorithm::FRUSTUM.build(Arc::clone(&scene), &RenderOptions::default()).expect("frustum builds");
+//! let mut frame = Frame::new(32, 32).expect("a valid frame size");
+//! let stats = renderer.render(&view, &mut frame).expect("the frame renders");
 //! assert_eq!(stats.triangles_rasterized, 1);
 //! assert!(frame.covered_pixel_count() > 0);
 //!
