@@ -634,6 +634,57 @@ mod tests {
         assert_eq!(d.count(&[], 100), 0);
     }
 
+    fn request(id: u64, eye_x: f32, algo: &str, shot: bool) -> Request {
+        Request {
+            id,
+            camera: Camera::look_at(occult_core::Vec3::new(eye_x, 0.0, 5.0), occult_core::Vec3::ZERO),
+            width: 64,
+            height: 48,
+            algo: AlgoSpec::parse(algo).expect("a valid spec"),
+            mode: Mode::Color,
+            shot: shot.then(|| PathBuf::from("shot.png")),
+            strict: false,
+        }
+    }
+
+    /// The state with `flying` in flight for `ran` and `waiting` requested.
+    fn state(flying: &Request, ran: Duration, waiting: Request) -> State {
+        State {
+            request: Some(waiting),
+            in_flight: Some(InFlight {
+                id: flying.id,
+                shows: Shows::of(flying),
+                started: Instant::now().checked_sub(ran).expect("the clock reaches back a second"),
+                shot: flying.shot.is_some(),
+            }),
+            ..State::default()
+        }
+    }
+
+    #[test]
+    fn only_a_long_frame_of_another_state_without_a_shot_is_cancelled() {
+        let long = CANCEL_AFTER + Duration::from_millis(50);
+        let flying = request(1, 0.0, "rzb", false);
+        let cases = [
+            ("another camera, long", state(&flying, long, request(2, 1.0, "rzb", false)), true),
+            ("another renderer, long", state(&flying, long, request(2, 0.0, "hzb", false)), true),
+            ("the same state again", state(&flying, long, request(2, 0.0, "rzb", false)), false),
+            ("a short frame", state(&flying, Duration::ZERO, request(2, 1.0, "rzb", false)), false),
+            ("the frame's own request", state(&flying, long, request(1, 0.0, "rzb", false)), false),
+        ];
+        for (what, state, due) in cases {
+            let control = FrameControl::new();
+            assert_eq!(Worker::supersede_locked(&state, &control), due, "{what}");
+            assert_eq!(control.is_cancelled(), due, "{what}");
+        }
+        let shooting = request(1, 0.0, "rzb", true);
+        let control = FrameControl::new();
+        let s = state(&shooting, long, request(2, 1.0, "rzb", false));
+        assert!(!Worker::supersede_locked(&s, &control), "a frame writing a screenshot finishes");
+        assert!(!Worker::supersede_locked(&State::default(), &control), "nothing in flight");
+        assert!(!control.is_cancelled());
+    }
+
     #[test]
     fn item_colors_are_never_black_except_for_none() {
         assert_eq!(item_color(NO_ITEM), 0);
