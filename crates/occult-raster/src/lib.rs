@@ -37,6 +37,7 @@
 //! ```
 #![deny(missing_docs)]
 
+mod control;
 mod frame;
 pub mod nbuffer;
 mod query;
@@ -44,6 +45,7 @@ mod raster;
 mod shade;
 pub mod zpyramid;
 
+pub use control::FrameControl;
 pub use frame::{keep_fragment, Frame, CLEAR_DEPTH};
 pub use nbuffer::{Extremum, NBuffer};
 pub use query::{query_box, query_box_counted, query_rect, BoxQuery, PixelRect};

@@ -184,7 +184,10 @@ impl Hierarchies {
         stats.phases.add(Phase::Cull, t.elapsed());
         let mut done = 0;
         loop {
-            crate::rasterize(raster, view, frame, &draws, &mut stats);
+            // Progress: triangles submitted of those the first walk met.
+            let before = stats.triangles_submitted;
+            crate::rasterize_counted(raster, view, frame, &draws, &mut stats, Some((before, triangles)));
+            crate::check_cancel(raster)?;
             done += draws.len();
             if !more {
                 break;
@@ -197,6 +200,8 @@ impl Hierarchies {
         }
         debug_assert_eq!((done, stats.triangles_submitted), (met, triangles));
         stats.total = start.elapsed();
+        // Not `end_frame`: a culling renderer's direct frame is part of its frame.
+        crate::check_cancel(raster)?;
         Ok(stats)
     }
 
@@ -437,7 +442,8 @@ impl Renderer for FrustumCulling {
     }
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
-        self.culling.render(&mut self.raster, view, frame)
+        let stats = self.culling.render(&mut self.raster, view, frame)?;
+        crate::end_frame(&self.raster, stats)
     }
 
     fn memory_bytes(&self) -> usize {

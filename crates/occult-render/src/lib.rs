@@ -13,22 +13,67 @@
 //! | [`walk`] | the one walk over the scene DAG every renderer uses (placements, counted frustum tests) |
 //! | `occult_harness::compare` | runs several renderers over one camera path and measures them against each other |
 //!
+//! # Cancelling a frame, and its progress
+//!
+//! A caller that may give up a frame (the viewer, when the camera moves during a slow one)
+//! puts a live [`FrameControl`] in [`RenderOptions`]' `raster.control` before building the
+//! renderer, calls [`FrameControl::reset`] before each frame and [`FrameControl::cancel`] from
+//! any thread to stop the frame in flight. The renderer checks at its batch boundaries: the
+//! frame's start, every batch it hands the rasterizer (with a live control, draws
+//! of over 2^20 triangles go in chunks of that size, checked between), the nodes of its own
+//! hierarchy (`hzb`'s octree nodes, `oqgrid`'s query batches), `lzb`'s waves of 4,096 rays and
+//! `rzb`'s work units of samples, and its end. A cancelled frame returns
+//! [`RenderError::Cancelled`] (the frame's buffers then hold nothing to show) and changes
+//! nothing the next frame reads: `hzb`'s visible list is conservative whatever it holds,
+//! `oqgrid`'s and `nbuffer`'s lists and occluders stay last complete frame's, `lzb`'s rates and
+//! `rzb`'s sample caches take nothing from it; the payoff measures none of it. The tests cancel
+//! a frame at every check in turn and hold the frames after it identical to `zbuffer`'s.
+//!
+//! [`FrameControl::progress`] is the part of the frame done, 0 to 1, never decreasing within a
+//! frame, 1 only once the frame is complete. What it counts:
+//!
+//! | renderer | progress |
+//! | --- | --- |
+//! | `zbuffer` | triangle instances submitted, of the scene's (in steps of 2^20) |
+//! | `frustum`, and every culling renderer's direct frames | triangles submitted, of those the walk met, batch by batch |
+//! | `hzb`, `oqgrid`, `nbuffer` | nothing until the frame is complete (their walks do not know their total ahead) |
+//! | `lzb` | rays cast, of the unfinished pixels to cast, wave by wave |
+//! | `rzb` | samples drawn, of those the box selection expects, unit by unit |
+//!
+//! Without a live control (the default) nothing is checked or reported, and draws are not
+//! split.
+//!
 //! ```
 //! use std::sync::Arc;
 //! use occult_core::{Camera, Mesh, Scene, View, Vec3};
 //! use occult_raster::Frame;
 //! use occult_render::{Algorithm, RenderOptions};
-//! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).unwrap();
-//! let scene = Arc::new(Scene::from_mesh("tri", mesh).unwrap());
-//! let view = View::new(Camera::look_at(Vec3::new(0.3, 0.3, 2.0), Vec3::new(0.3, 0.3, 0.0)), 32, 32).unwrap();
-//! let mut renderer = Algorithm::FRUSTUM.build(scene, &RenderOptions::default()).unwrap();
-//! let mut frame = Frame::new(32, 32).unwrap();
-//! let stats = renderer.render(&view, &mut frame).unwrap();
+//! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).expect("a valid mesh");
+//! let scene = Arc::new(Scene::from_mesh("tri", mesh).expect("a valid scene"));
+//! let eye = Vec3::new(0.3, 0.3, 2.0);
+//! let view = View::new(Camera::look_at(eye, Vec3::new(0.3, 0.3, 0.0)), 32, 32).expect("a valid view");
+//! let mut renderer = Algorithm::FRUSTUM.build(Arc::clone(&scene), &RenderOptions::default()).expect("frustum builds");
+//! let mut frame = Frame::new(32, 32).expect("a valid frame size");
+//! let stats = renderer.render(&view, &mut frame).expect("the frame renders");
 //! assert_eq!(stats.triangles_rasterized, 1);
 //! assert!(frame.covered_pixel_count() > 0);
+//!
+//! // The same, watched: cancelled, then complete.
+//! use occult_render::{FrameControl, RenderError};
+//! let control = FrameControl::new();
+//! let mut options = RenderOptions::default();
+//! options.raster.control = control.clone();
+//! let mut renderer = Algorithm::FRUSTUM.build(scene, &options).expect("frustum builds");
+//! control.cancel();
+//! assert!(matches!(renderer.render(&view, &mut frame), Err(RenderError::Cancelled)));
+//! control.reset();
+//! renderer.render(&view, &mut frame).expect("an uncancelled frame renders");
+//! assert_eq!(control.progress(), 1.0);
 //! ```
 #![deny(missing_docs)]
 
+#[cfg(test)]
+mod cancel_tests;
 pub mod direct;
 pub mod frustum;
 mod hash;
@@ -48,6 +93,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use occult_core::{Scene, View};
+pub use occult_raster::FrameControl;
 use occult_raster::{Frame, RasterConfig, RasterError, Rasterizer};
 pub use params::{AlgoSpec, ParamDoc, Params};
 pub use stats::{Counters, FrameStats, FrameStatsMs, Phase, PhaseTimes};
@@ -89,6 +135,11 @@ pub enum RenderError {
     /// A dynamic scene update that cannot be applied (the message names the entry and why).
     #[error("scene update: {0}")]
     Update(String),
+    /// The frame was cancelled through its [`FrameControl`] ([`RenderOptions`]'
+    /// `raster.control`) before it was complete: the frame's buffers hold no frame, and the
+    /// renderer's next frame is drawn as if this one had not been asked for.
+    #[error("frame cancelled")]
+    Cancelled,
     /// A renderer spread over several ranks (processes or threads) failed on one of them, or
     /// their exchange did (the message names the rank and the cause).
     #[error("{0}")]
@@ -123,7 +174,8 @@ pub trait Renderer: Send {
 /// Options every renderer takes.
 #[derive(Clone, Default)]
 pub struct RenderOptions {
-    /// The rasterizer's configuration (threads, tiles, culling of back faces).
+    /// The rasterizer's configuration (threads, tiles, culling of back faces), and the
+    /// [`FrameControl`] that cancels frames and reads their progress (see the crate doc).
     pub raster: RasterConfig,
     /// When set, [`AlgoSpec::build`] and [`Algorithm::build`] hand the scene, these options
     /// (without the hook) and the spec to it instead of building the renderer themselves: a
@@ -309,7 +361,8 @@ pub(crate) fn scene_rasterizer(scene: &Scene, options: &RenderOptions) -> Result
 }
 
 /// Rasterizes `draws` into `frame`, adding the time to [`Phase::Raster`] and the counts to
-/// `stats`: the last step every renderer shares.
+/// `stats`: the last step every renderer shares. Nothing once the frame is cancelled (the
+/// renderer's next check, at the latest [`end_frame`], returns [`RenderError::Cancelled`]).
 pub(crate) fn rasterize(
     raster: &mut occult_raster::Rasterizer,
     view: &View,
@@ -317,10 +370,104 @@ pub(crate) fn rasterize(
     draws: &[occult_raster::Draw<'_>],
     stats: &mut FrameStats,
 ) {
-    let t = std::time::Instant::now();
+    rasterize_counted(raster, view, frame, draws, stats, None);
+}
+
+/// Triangles per draw call while a live [`FrameControl`] watches: the cancellation check and
+/// progress report between two calls come at most this much work apart (tens of milliseconds
+/// on two cores). Without a live control, draws go to the rasterizer in one call, as before.
+const CONTROLLED_CHUNK_TRIANGLES: u64 = 1 << 20;
+
+/// [`rasterize`], reporting progress when `progress` is `(triangles done before these draws,
+/// triangles of the whole frame)`: the frame's fraction after each chunk of
+/// [`CONTROLLED_CHUNK_TRIANGLES`] (with a live control, the draws go in such chunks, the
+/// cancellation checked before each).
+pub(crate) fn rasterize_counted(
+    raster: &mut occult_raster::Rasterizer,
+    view: &View,
+    frame: &mut Frame,
+    draws: &[occult_raster::Draw<'_>],
+    stats: &mut FrameStats,
+    progress: Option<(u64, u64)>,
+) {
+    let control = raster.config().control.clone();
+    if !control.is_live() {
+        draw_timed(raster, view, frame, draws, stats);
+        return;
+    }
+    let mut done = progress.map_or(0, |p| p.0);
+    let mut rest = draws;
+    while !rest.is_empty() && !control.is_cancelled() {
+        // Whole draws, up to a chunk.
+        let (mut n, mut triangles) = (0, 0u64);
+        while n < rest.len() && (n == 0 || triangles < CONTROLLED_CHUNK_TRIANGLES) {
+            triangles += draw_triangle_count(&rest[n]);
+            n += 1;
+        }
+        draw_timed(raster, view, frame, &rest[..n], stats);
+        rest = &rest[n..];
+        done += triangles;
+        if let Some((_, total)) = progress {
+            report_part(raster, done, total);
+        }
+    }
+}
+
+/// Draws `draws` in one call, adding the time to [`Phase::Raster`] and the counts to `stats`.
+fn draw_timed(
+    raster: &mut occult_raster::Rasterizer,
+    view: &View,
+    frame: &mut Frame,
+    draws: &[occult_raster::Draw<'_>],
+    stats: &mut FrameStats,
+) {
+    let t = Instant::now();
     let counts = raster.draw(view, frame, draws, occult_raster::RasterMode::Full);
     stats.phases.add(Phase::Raster, t.elapsed());
     stats.add_raster(counts);
+}
+
+/// The triangles `draw` submits.
+fn draw_triangle_count(draw: &occult_raster::Draw<'_>) -> u64 {
+    match &draw.triangles {
+        occult_raster::DrawTriangles::All => draw.mesh.triangle_count() as u64,
+        occult_raster::DrawTriangles::Range(r) => u64::from(r.end.saturating_sub(r.start)),
+        occult_raster::DrawTriangles::List(l) => l.len() as u64,
+    }
+}
+
+/// [`RenderError::Cancelled`] when the frame drawn with `raster` was cancelled
+/// ([`RasterConfig::control`]).
+///
+/// # Errors
+/// [`RenderError::Cancelled`].
+pub(crate) fn check_cancel(raster: &Rasterizer) -> Result<()> {
+    if raster.config().control.is_cancelled() {
+        return Err(RenderError::Cancelled);
+    }
+    Ok(())
+}
+
+/// Reports `done` of `total` units of the frame drawn with `raster` to its control: below 1
+/// until [`end_frame`], so that 1 means a complete frame.
+pub(crate) fn report_part(raster: &Rasterizer, done: u64, total: u64) {
+    if total > 0 {
+        raster.config().control.report((done as f64 / total as f64).min(PART_MAX));
+    }
+}
+
+/// The largest progress a frame reports before it is complete.
+const PART_MAX: f64 = 0.999;
+
+/// Ends a frame as every renderer does: [`RenderError::Cancelled`] if it was cancelled, else
+/// the progress is 1 and `stats` are returned.
+///
+/// # Errors
+/// [`RenderError::Cancelled`].
+pub(crate) fn end_frame(raster: &Rasterizer, stats: FrameStats) -> Result<FrameStats> {
+    check_cancel(raster)?;
+    raster.config().control.report(1.0);
+    Ok(stats)
 }
 
 /// Starts a frame as every renderer does: checks that `frame` matches `view`, clears it with
@@ -328,13 +475,15 @@ pub(crate) fn rasterize(
 /// renderer's next phase starts) and statistics holding the clear's time ([`Phase::Clear`]).
 ///
 /// # Errors
-/// [`RenderError::FrameSizeMismatch`].
+/// [`RenderError::FrameSizeMismatch`]; [`RenderError::Cancelled`] when the frame was cancelled
+/// before it began.
 pub(crate) fn begin_frame(
     raster: &mut Rasterizer,
     view: &View,
     frame: &mut Frame,
 ) -> Result<(Instant, Instant, FrameStats)> {
     check_frame(view, frame)?;
+    check_cancel(raster)?;
     let start = Instant::now();
     let mut stats = FrameStats::default();
     raster.clear(frame);

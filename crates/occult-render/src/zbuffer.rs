@@ -71,9 +71,11 @@ impl Renderer for ZBuffer {
                 }
             });
         stats.phases.add(Phase::Other, t.elapsed());
-        crate::rasterize(&mut self.raster, view, frame, &draws, &mut stats);
+        // Progress: triangles submitted of the scene's.
+        let total = self.scene.item_count();
+        crate::rasterize_counted(&mut self.raster, view, frame, &draws, &mut stats, Some((0, total)));
         stats.total = start.elapsed();
-        Ok(stats)
+        crate::end_frame(&self.raster, stats)
     }
 
     fn memory_bytes(&self) -> usize {

@@ -2,7 +2,7 @@
 
 use std::collections::HashSet;
 use std::num::NonZeroU32;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -51,6 +51,10 @@ const MOUSE_DEG_PER_PX: f32 = 0.2;
 const ORBIT_DEG_PER_S: f32 = 20.0;
 /// How often held keys move the camera (and the spinner turns).
 const TICK: Duration = Duration::from_millis(10);
+/// A frame in flight this long gets a progress bar (a shorter one would only flicker).
+const PROGRESS_AFTER: Duration = Duration::from_millis(100);
+/// The progress bar's height, pixels.
+const PROGRESS_BAR_ROWS: usize = 4;
 /// A scripted key press of a held key acts for this long.
 const SCRIPT_PRESS_S: f32 = 1.0 / 30.0;
 /// The longest a script waits for one frame (a renderer's build included).
@@ -79,6 +83,8 @@ pub fn run(setup: Setup) -> Result<()> {
 enum Wait {
     /// A frame of the current state.
     Frame,
+    /// A frame of the current state under way (progress reported), or shown.
+    Progress,
     /// A frame holding the screenshot asked for.
     Shot,
     /// The window as shown, once a frame of the current state is in it.
@@ -132,12 +138,16 @@ struct App {
     next_id: u64,
     last: Option<Box<Shown>>,
     frames_shown: u64,
+    /// Frames cancelled by a newer state before they were complete (never shown).
+    frames_cancelled: u64,
     frame_times: Vec<Instant>,
     pending_shot: Option<PathBuf>,
     shot_count: u32,
     recording: Option<Vec<Camera>>,
     record_to: Option<PathBuf>,
     building: Option<(String, Instant)>,
+    /// The renderers the worker reported built.
+    built: HashSet<String>,
     message: Option<(String, Instant)>,
     /// Inputs not yet reflected by a frame: request id, when, frames shown since.
     pending_inputs: Vec<(u64, Instant, u32)>,
@@ -180,12 +190,14 @@ impl App {
             next_id: 0,
             last: None,
             frames_shown: 0,
+            frames_cancelled: 0,
             frame_times: Vec::new(),
             pending_shot: None,
             shot_count: 0,
             recording: None,
             record_to: setup.record_to,
             building: None,
+            built: HashSet::new(),
             message: None,
             pending_inputs: Vec::new(),
             latencies: Vec::new(),
@@ -208,6 +220,7 @@ impl App {
         }
         if self.script.is_some() {
             say!("{}", latency_line(&self.latencies, self.frames_shown));
+            say!("frames cancelled: {}", self.frames_cancelled);
             for line in &self.flights {
                 say!("{line}");
             }
@@ -254,7 +267,7 @@ impl App {
     }
 
     fn algo_known(&self) -> bool {
-        self.last.as_ref().is_some_and(|f| f.label == self.algo.label())
+        self.built.contains(&self.algo.label()) || self.last.as_ref().is_some_and(|f| f.label == self.algo.label())
     }
 
     fn set_camera(&mut self, camera: Camera) {
@@ -451,6 +464,12 @@ impl App {
         }
     }
 
+    /// True while the window waits for a frame of a newer state than it shows (or for its
+    /// first frame).
+    fn awaiting_frame(&self) -> bool {
+        self.last.as_ref().map_or(self.next_id > 0, |f| f.id < self.next_id)
+    }
+
     /// True when the last frame shows the current state, drawn by the chosen renderer.
     fn current(&self) -> bool {
         self.last.as_ref().is_some_and(|f| {
@@ -518,22 +537,19 @@ impl App {
     fn waited(&mut self, wait: Wait) -> Result<Option<Wait>> {
         Ok(match wait {
             Wait::Frame => (!self.current()).then_some(Wait::Frame),
+            Wait::Progress => {
+                let under_way = self
+                    .worker
+                    .in_flight()
+                    .is_some_and(|(id, progress, _)| id >= self.next_id && progress > 0.0);
+                (!under_way && !self.current()).then_some(Wait::Progress)
+            }
             Wait::Shot => self.pending_shot.is_some().then_some(Wait::Shot),
             Wait::Capture(path) => {
                 if !self.current() {
                     return Ok(Some(Wait::Capture(path)));
                 }
-                self.compose();
-                let (w, h) = self.composed_size;
-                let raw: Vec<u8> = self
-                    .composed
-                    .iter()
-                    .flat_map(|p| [(p >> 16) as u8, (p >> 8) as u8, *p as u8])
-                    .collect();
-                let image = image::RgbImage::from_raw(w, h, raw).context("the window's pixels")?;
-                image
-                    .save_with_format(&path, image::ImageFormat::Png)
-                    .with_context(|| format!("cannot write '{}'", path.display()))?;
+                self.capture(&path)?;
                 None
             }
             Wait::Stats(path) => {
@@ -590,6 +606,21 @@ impl App {
                 None
             }
         })
+    }
+
+    /// Writes the window as it is now, overlays included, to `path` as PNG.
+    fn capture(&mut self, path: &Path) -> Result<()> {
+        self.compose();
+        let (w, h) = self.composed_size;
+        let raw: Vec<u8> = self
+            .composed
+            .iter()
+            .flat_map(|p| [(p >> 16) as u8, (p >> 8) as u8, *p as u8])
+            .collect();
+        let image = image::RgbImage::from_raw(w, h, raw).context("the window's pixels")?;
+        image
+            .save_with_format(path, image::ImageFormat::Png)
+            .with_context(|| format!("cannot write '{}'", path.display()))
     }
 
     /// Does one script command; returns what it waits for.
@@ -653,6 +684,7 @@ impl App {
                 None
             }
             Command::WaitFrame => Some(Wait::Frame),
+            Command::WaitProgress => Some(Wait::Progress),
             Command::Screenshot(path) => {
                 output::check_output(&path)?;
                 self.pending_shot = Some(path);
@@ -662,6 +694,11 @@ impl App {
             Command::Capture(path) => {
                 output::check_output(&path)?;
                 Some(Wait::Capture(path))
+            }
+            Command::CaptureNow(path) => {
+                output::check_output(&path)?;
+                self.capture(&path)?;
+                None
             }
             Command::Stats(path) => {
                 output::check_output(&path)?;
@@ -719,6 +756,17 @@ impl App {
             }
         }
         let width = w as usize;
+        // The frame in flight's progress: a bar along the window's bottom edge.
+        if let Some((_, progress, ran)) = self.worker.in_flight() {
+            if ran >= PROGRESS_AFTER && self.awaiting_frame() {
+                let filled = (f64::from(progress) * f64::from(w)).round() as usize;
+                for row in self.composed.chunks_exact_mut(width).rev().take(PROGRESS_BAR_ROWS) {
+                    for (x, p) in row.iter_mut().enumerate() {
+                        *p = if x < filled { 0x00ff_d040 } else { 0x0040_4040 };
+                    }
+                }
+            }
+        }
         let mut composed = std::mem::take(&mut self.composed);
         if self.show_stats {
             let lines = self.stats_lines();
@@ -846,9 +894,26 @@ impl App {
                 ),
                 0x00ff_d040,
             ));
-        } else if self.last.as_ref().is_some_and(|f| f.id < self.next_id) {
+        }
+        if self.awaiting_frame() {
             let spin = SPINNER[(self.last_tick.elapsed().as_millis() / 120) as usize % SPINNER.len()];
-            lines.push((format!("{spin} rendering"), DIM));
+            let line = match self.worker.in_flight() {
+                Some((id, progress, ran)) => format!(
+                    "{spin} rendering {:.0} % ({:.1} s){}",
+                    progress * 100.0,
+                    ran.as_secs_f64(),
+                    if id < self.next_id {
+                        "; a newer view waits"
+                    } else {
+                        ""
+                    }
+                ),
+                None => format!("{spin} rendering"),
+            };
+            lines.push((line, DIM));
+        }
+        if self.frames_cancelled > 0 {
+            lines.push((format!("frames cancelled: {}", self.frames_cancelled), DIM));
         }
         if let Some(cameras) = &self.recording {
             lines.push((format!("recording: {} cameras (C stops)", cameras.len()), 0x00ff_6060));
@@ -990,7 +1055,14 @@ impl ApplicationHandler<Event> for App {
     fn user_event(&mut self, event_loop: &ActiveEventLoop, event: Event) {
         match event {
             Event::Frame(frame) => self.shown(event_loop, frame),
-            Event::Built { label, ms } => self.say(format!("built {label} in {} ms", output::millis(ms))),
+            Event::Cancelled => self.frames_cancelled += 1,
+            Event::Built { label, ms } => {
+                self.say(format!("built {label} in {} ms", output::millis(ms)));
+                if self.building.as_ref().is_some_and(|(b, _)| *b == label) {
+                    self.building = None;
+                }
+                self.built.insert(label);
+            }
             Event::Failed { label, error } => {
                 if self.script.is_some() {
                     return self.fail(event_loop, anyhow!(error));
@@ -1021,7 +1093,11 @@ impl ApplicationHandler<Event> for App {
             if !shooting {
                 self.tick(dt);
             }
-            let rendering = self.last.as_ref().is_some_and(|f| f.id < self.next_id);
+            let rendering = self.awaiting_frame();
+            if rendering {
+                // A slow frame of an older state is cancelled once due, input or not.
+                self.worker.supersede();
+            }
             if self.building.is_some() || self.message.is_some() || rendering {
                 if let Some(w) = &self.window {
                     w.request_redraw();
@@ -1031,7 +1107,7 @@ impl ApplicationHandler<Event> for App {
         self.pump(event_loop);
         let animating = !self.held.is_empty()
             || self.orbit
-            || self.last.as_ref().is_some_and(|f| f.id < self.next_id)
+            || self.awaiting_frame()
             || self.building.is_some()
             || self.script.as_ref().is_some_and(|r| r.wait.is_some())
             || self

@@ -14,8 +14,10 @@
 //! | `mode color|depth|items|exactness` | the display mode |
 //! | `size WxH` | the frame size (the window is resized) |
 //! | `wait-frame` | waits for a frame of the current state, drawn by the chosen renderer |
+//! | `wait-progress` | waits until a frame of the current state is under way (has reported progress) or shown |
 //! | `screenshot FILE` | a frame of the current state to PNG: the pixels `occult render` writes |
 //! | `capture FILE` | the window as shown, overlays included, to PNG |
+//! | `capture-now FILE` | the same at once, without waiting for a frame of the current state (a frame in flight's progress shows) |
 //! | `stats FILE` | what the overlay shows of a frame of the current state, as JSON |
 //! | `record start` / `record stop FILE` | records the flown cameras; writes them as a path file |
 //! | `fly FRAMES` | flies forward and turning, input every 10 ms, until FRAMES frames are shown; prints fps |
@@ -71,10 +73,14 @@ pub enum Command {
     Size(Size),
     /// Waits for a frame of the current state.
     WaitFrame,
+    /// Waits for a frame of the current state to be under way (or shown).
+    WaitProgress,
     /// A frame's colors to PNG.
     Screenshot(PathBuf),
     /// The window's pixels to PNG.
     Capture(PathBuf),
+    /// The window's pixels to PNG at once.
+    CaptureNow(PathBuf),
     /// The frame's statistics to JSON.
     Stats(PathBuf),
     /// Starts recording the flown cameras.
@@ -177,8 +183,10 @@ fn parse_line(line: &str) -> Result<Command> {
         }
         "size" => Command::Size(parse_size(one()?).map_err(anyhow::Error::msg)?),
         "wait-frame" if args.is_empty() => Command::WaitFrame,
+        "wait-progress" if args.is_empty() => Command::WaitProgress,
         "screenshot" => Command::Screenshot(PathBuf::from(one()?)),
         "capture" => Command::Capture(PathBuf::from(one()?)),
+        "capture-now" => Command::CaptureNow(PathBuf::from(one()?)),
         "stats" => Command::Stats(PathBuf::from(one()?)),
         "record" => match args {
             ["start"] => Command::RecordStart,
@@ -191,9 +199,9 @@ fn parse_line(line: &str) -> Result<Command> {
         }
         "sleep" => Command::Sleep(one()?.parse().context("expected milliseconds")?),
         "exit" if args.is_empty() => Command::Exit,
-        "wait-frame" | "exit" => bail!("'{verb}' takes no argument"),
+        "wait-frame" | "wait-progress" | "exit" => bail!("'{verb}' takes no argument"),
         other => bail!(
-            "unknown command '{other}' (camera, view, move, turn, key, algo, mode, size, wait-frame, screenshot, capture, stats, record, fly, sleep, exit)"
+            "unknown command '{other}' (camera, view, move, turn, key, algo, mode, size, wait-frame, wait-progress, screenshot, capture, capture-now, stats, record, fly, sleep, exit)"
         ),
     })
 }
@@ -228,11 +236,11 @@ mod tests {
     fn every_command_parses() {
         let s = Script::parse(
             "# a comment\n\ncamera eye 1,2,3 target 0,0,0 up 0,0,1\nview circle:8:3\nmove forward 2.5\nturn 10 -5\n\
-             key 3\nkey shift+tab\nalgo hzb:temporal=off\nmode depth\nsize 64x48\nwait-frame\nscreenshot a.png # shot\n\
-             capture b.png\nstats c.json\nrecord start\nrecord stop p.json\nfly 10\nsleep 5\nexit\n",
+             key 3\nkey shift+tab\nalgo hzb:temporal=off\nmode depth\nsize 64x48\nwait-frame\nwait-progress\nscreenshot a.png # shot\n\
+             capture b.png\ncapture-now d.png\nstats c.json\nrecord start\nrecord stop p.json\nfly 10\nsleep 5\nexit\n",
         )
         .expect("a good script parses");
-        assert_eq!(s.commands.len(), 18);
+        assert_eq!(s.commands.len(), 20);
         assert_eq!(s.commands[0].0, 3, "line numbers count comments and blanks");
     }
 
@@ -250,6 +258,7 @@ mod tests {
             ("fly 0", "above 0"),
             ("jump", "unknown command"),
             ("exit now", "no argument"),
+            ("wait-progress 5", "no argument"),
             ("move forward nan", "finite"),
         ] {
             let e = format!("{:#}", Script::parse(&format!("wait-frame\n{text}\n")).unwrap_err());

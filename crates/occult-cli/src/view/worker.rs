@@ -5,15 +5,21 @@
 //! and is told of each finished frame through the callback given to [`Worker::start`]. A
 //! request whose renderer is still being built is drawn with the renderer of the previous
 //! frame (the overlay says so), unless it is `strict` (script screenshots), which waits.
+//!
+//! Every renderer is built watched by one [`FrameControl`]: the window reads the progress of
+//! the frame in flight from it ([`Worker::in_flight`]), and [`Worker::supersede`] cancels that
+//! frame once it has run [`CANCEL_AFTER`] while a request that shows something else waits. A
+//! cancelled frame is never shown nor written ([`Event::Cancelled`]); the window keeps the
+//! last complete one.
 
 use std::collections::{HashMap, HashSet};
 use std::path::PathBuf;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use occult_core::{Camera, ItemId, Scene, View, NO_ITEM};
 use occult_raster::{shade, Frame};
-use occult_render::{AlgoSpec, Algorithm, FrameStats, RenderOptions, Renderer};
+use occult_render::{AlgoSpec, Algorithm, FrameControl, FrameStats, RenderError, RenderOptions, Renderer};
 
 use crate::output;
 
@@ -109,6 +115,41 @@ pub struct Shown {
     pub finished: Instant,
 }
 
+/// How long a frame runs before a newer request that shows something else cancels it: a
+/// shorter frame is let finish, so that flying (a new camera every 10 ms) keeps showing
+/// frames; a longer one (seconds, `rzb` on 10^14 triangles) starts over with the new camera,
+/// and is shown once the camera rests that long.
+pub const CANCEL_AFTER: Duration = Duration::from_millis(200);
+
+/// What a request shows: two requests alike in it draw the same frame.
+#[derive(Clone, Debug, PartialEq)]
+struct Shows {
+    camera: Camera,
+    size: (u32, u32),
+    algo: String,
+    mode: Mode,
+}
+
+impl Shows {
+    fn of(request: &Request) -> Self {
+        Self {
+            camera: request.camera,
+            size: (request.width, request.height),
+            algo: request.algo.label(),
+            mode: request.mode,
+        }
+    }
+}
+
+/// The frame being drawn.
+struct InFlight {
+    id: u64,
+    shows: Shows,
+    started: Instant,
+    /// It writes a screenshot: never cancelled (the shot is of the state it was asked in).
+    shot: bool,
+}
+
 /// What the worker tells the window.
 pub enum Event {
     /// A frame is ready.
@@ -120,6 +161,8 @@ pub enum Event {
         /// Build time, ms.
         ms: f64,
     },
+    /// The frame in flight was cancelled ([`Worker::supersede`]): nothing to show.
+    Cancelled,
     /// A renderer could not be built, or a frame not rendered.
     Failed {
         /// The renderer's label.
@@ -136,6 +179,7 @@ struct State {
     request: Option<Request>,
     built: Vec<BuildResult>,
     quit: bool,
+    in_flight: Option<InFlight>,
 }
 
 type Shared = Arc<(Mutex<State>, Condvar)>;
@@ -148,6 +192,7 @@ fn lock(shared: &Shared) -> MutexGuard<'_, State> {
 /// The handle the window holds.
 pub struct Worker {
     shared: Shared,
+    control: FrameControl,
 }
 
 impl Worker {
@@ -156,17 +201,61 @@ impl Worker {
     pub fn start(scene: Arc<Scene>, notify: impl Fn(Event) + Send + Sync + 'static) -> Self {
         let shared: Shared = Arc::new((Mutex::new(State::default()), Condvar::new()));
         let inner = Arc::clone(&shared);
+        let control = FrameControl::new();
+        let options = RenderOptions {
+            raster: occult_raster::RasterConfig {
+                control: control.clone(),
+                ..Default::default()
+            },
+            ..Default::default()
+        };
         std::thread::Builder::new()
             .name("occult-view-render".into())
-            .spawn(move || Runner::new(scene, inner, Arc::new(notify)).run())
+            .spawn(move || Runner::new(scene, inner, Arc::new(notify), options).run())
             .expect("the OS refused a thread for the renderer");
-        Self { shared }
+        Self { shared, control }
     }
 
-    /// Replaces the pending request (a request not yet started is dropped).
+    /// Replaces the pending request (a request not yet started is dropped), and cancels the
+    /// frame in flight if it is due ([`Worker::supersede`]).
     pub fn submit(&self, request: Request) {
-        lock(&self.shared).request = Some(request);
+        let mut state = lock(&self.shared);
+        state.request = Some(request);
+        Self::supersede_locked(&state, &self.control);
+        drop(state);
         self.shared.1.notify_all();
+    }
+
+    /// Cancels the frame in flight when it has run [`CANCEL_AFTER`] and a newer request that
+    /// shows something else (camera, size, renderer, mode) waits; never a frame that writes a
+    /// screenshot. The window calls it as it ticks, so that a slow frame is cancelled once it
+    /// is due even when no new input comes. Returns whether it cancelled.
+    pub fn supersede(&self) -> bool {
+        Self::supersede_locked(&lock(&self.shared), &self.control)
+    }
+
+    // Under the lock: the worker starts a frame (and resets the control) under it too, so a
+    // cancel never reaches the frame after the one meant.
+    fn supersede_locked(state: &State, control: &FrameControl) -> bool {
+        let (Some(flight), Some(request)) = (&state.in_flight, &state.request) else {
+            return false;
+        };
+        let due = !flight.shot
+            && request.id > flight.id
+            && flight.started.elapsed() >= CANCEL_AFTER
+            && Shows::of(request) != flight.shows;
+        if due && !control.is_cancelled() {
+            control.cancel();
+        }
+        due
+    }
+
+    /// The frame in flight: the request it answers, the part of it done (0 to 1, as the
+    /// renderer reports it: see `occult_render`'s doc) and how long it has run.
+    pub fn in_flight(&self) -> Option<(u64, f32, Duration)> {
+        let state = lock(&self.shared);
+        let flight = state.in_flight.as_ref()?;
+        Some((flight.id, self.control.progress(), flight.started.elapsed()))
     }
 }
 
@@ -184,6 +273,8 @@ struct Runner {
     scene: Arc<Scene>,
     shared: Shared,
     notify: Notify,
+    /// What every renderer is built with: the control the window cancels through.
+    options: RenderOptions,
     renderers: HashMap<String, Box<dyn Renderer>>,
     building: HashSet<String>,
     failed: HashSet<String>,
@@ -197,11 +288,12 @@ struct Runner {
 const REFERENCE: &str = "zbuffer";
 
 impl Runner {
-    fn new(scene: Arc<Scene>, shared: Shared, notify: Notify) -> Self {
+    fn new(scene: Arc<Scene>, shared: Shared, notify: Notify, options: RenderOptions) -> Self {
         Self {
             scene,
             shared,
             notify,
+            options,
             renderers: HashMap::new(),
             building: HashSet::new(),
             failed: HashSet::new(),
@@ -215,6 +307,7 @@ impl Runner {
     fn run(mut self) {
         while let Some((request, label)) = self.next() {
             self.draw(&request, &label);
+            lock(&self.shared).in_flight = None;
         }
     }
 
@@ -243,6 +336,14 @@ impl Runner {
             }
             if let Some(request) = state.request.clone() {
                 if let Some(label) = self.choice(&request) {
+                    // Under the lock, as the window cancels (`Worker::supersede_locked`).
+                    self.options.raster.control.reset();
+                    state.in_flight = Some(InFlight {
+                        id: request.id,
+                        shows: Shows::of(&request),
+                        started: Instant::now(),
+                        shot: request.shot.is_some(),
+                    });
                     return Some((request, label));
                 }
             }
@@ -291,12 +392,13 @@ impl Runner {
         }
         self.building.insert(label.clone());
         let (scene, shared, algo) = (Arc::clone(&self.scene), Arc::clone(&self.shared), algo.clone());
+        let options = self.options.clone();
         let spawned = std::thread::Builder::new()
             .name(format!("occult-view-build-{label}"))
             .spawn(move || {
                 let t = Instant::now();
                 let result = algo
-                    .build(scene, &RenderOptions::default())
+                    .build(scene, &options)
                     .map_err(|e| format!("building {}: {e}", algo.label()));
                 let ms = t.elapsed().as_secs_f64() * 1e3;
                 lock(&shared).built.push((algo.label(), result, ms));
@@ -314,7 +416,9 @@ impl Runner {
 
     fn draw(&mut self, request: &Request, label: &str) {
         match self.try_draw(request, label) {
-            Ok(shown) => (self.notify)(Event::Frame(Box::new(shown))),
+            Ok(Some(shown)) => (self.notify)(Event::Frame(Box::new(shown))),
+            // Not marked done: the newer request that cancelled it is drawn next.
+            Ok(None) => (self.notify)(Event::Cancelled),
             Err(error) => {
                 // Marked done, so that the same request is not retried in a loop.
                 self.done = Some((request.id, label.to_string(), true));
@@ -326,7 +430,8 @@ impl Runner {
         }
     }
 
-    fn try_draw(&mut self, request: &Request, label: &str) -> Result<Shown, String> {
+    /// The frame for `request` drawn with `label`; `None` when it was cancelled.
+    fn try_draw(&mut self, request: &Request, label: &str) -> Result<Option<Shown>, String> {
         let start = Instant::now();
         let (width, height) = (request.width, request.height);
         let view = View::new(request.camera, width, height).map_err(|e| format!("view: {e}"))?;
@@ -339,9 +444,14 @@ impl Runner {
             .get_mut(label)
             .ok_or_else(|| format!("{label} is not built"))?;
         let t = Instant::now();
-        let stats = renderer
-            .render(&view, &mut frame)
-            .map_err(|e| format!("{label} failed: {e}"))?;
+        let stats = match renderer.render(&view, &mut frame) {
+            Ok(stats) => stats,
+            Err(RenderError::Cancelled) => {
+                self.frame = Some(frame);
+                return Ok(None);
+            }
+            Err(e) => return Err(format!("{label} failed: {e}")),
+        };
         let render_ms = t.elapsed().as_secs_f64() * 1e3;
         let triangles_visible = self.distinct.count(frame.items(), self.scene.item_count());
         shade(&mut frame, &self.scene, &view);
@@ -352,7 +462,14 @@ impl Runner {
         });
         let mut differing_pixels = None;
         if request.mode == Mode::Exactness {
-            differing_pixels = self.reference_diff(&view, &frame)?;
+            match self.reference_diff(&view, &frame)? {
+                Diff::Cancelled => {
+                    self.frame = Some(frame);
+                    return Ok(None);
+                }
+                Diff::Pixels(d) => differing_pixels = Some(d),
+                Diff::Unbuilt => {}
+            }
         }
         let pixels = match request.mode {
             Mode::Color => color_pixels(&frame),
@@ -387,22 +504,27 @@ impl Runner {
             finished: Instant::now(),
         };
         self.frame = Some(frame);
-        Ok(shown)
+        Ok(Some(shown))
     }
 
     /// Renders `view` with `zbuffer` into the reference frame and counts the pixels whose
-    /// item differs from `frame`'s; `None` while `zbuffer` is being built.
-    fn reference_diff(&mut self, view: &View, frame: &Frame) -> Result<Option<u64>, String> {
+    /// item differs from `frame`'s.
+    fn reference_diff(&mut self, view: &View, frame: &Frame) -> Result<Diff, String> {
         let Some(zbuffer) = self.renderers.get_mut(REFERENCE) else {
-            return Ok(None);
+            return Ok(Diff::Unbuilt);
         };
         let mut reference = match self.reference.take() {
             Some(f) if f.width() == frame.width() && f.height() == frame.height() => f,
             _ => Frame::new(frame.width(), frame.height()).map_err(|e| e.to_string())?,
         };
-        zbuffer
-            .render(view, &mut reference)
-            .map_err(|e| format!("{REFERENCE} failed: {e}"))?;
+        match zbuffer.render(view, &mut reference) {
+            Ok(_) => {}
+            Err(RenderError::Cancelled) => {
+                self.reference = Some(reference);
+                return Ok(Diff::Cancelled);
+            }
+            Err(e) => return Err(format!("{REFERENCE} failed: {e}")),
+        }
         let differing = frame
             .items()
             .iter()
@@ -410,8 +532,18 @@ impl Runner {
             .filter(|(a, b)| a != b)
             .count() as u64;
         self.reference = Some(reference);
-        Ok(Some(differing))
+        Ok(Diff::Pixels(differing))
     }
+}
+
+/// What [`Runner::reference_diff`] found.
+enum Diff {
+    /// Pixels whose item differs from `zbuffer`'s.
+    Pixels(u64),
+    /// `zbuffer` is being built.
+    Unbuilt,
+    /// The reference frame was cancelled.
+    Cancelled,
 }
 
 /// Counts the distinct items of a frame (the exactly visible triangles) without sorting: a
@@ -500,6 +632,57 @@ mod tests {
         assert_eq!(d.count(&items, 100), 4, "the bits are cleared after a count");
         assert_eq!(d.count(&items, Distinct::MAX_BITS + 1), 4);
         assert_eq!(d.count(&[], 100), 0);
+    }
+
+    fn request(id: u64, eye_x: f32, algo: &str, shot: bool) -> Request {
+        Request {
+            id,
+            camera: Camera::look_at(occult_core::Vec3::new(eye_x, 0.0, 5.0), occult_core::Vec3::ZERO),
+            width: 64,
+            height: 48,
+            algo: AlgoSpec::parse(algo).expect("a valid spec"),
+            mode: Mode::Color,
+            shot: shot.then(|| PathBuf::from("shot.png")),
+            strict: false,
+        }
+    }
+
+    /// The state with `flying` in flight for `ran` and `waiting` requested.
+    fn state(flying: &Request, ran: Duration, waiting: Request) -> State {
+        State {
+            request: Some(waiting),
+            in_flight: Some(InFlight {
+                id: flying.id,
+                shows: Shows::of(flying),
+                started: Instant::now().checked_sub(ran).expect("the clock reaches back a second"),
+                shot: flying.shot.is_some(),
+            }),
+            ..State::default()
+        }
+    }
+
+    #[test]
+    fn only_a_long_frame_of_another_state_without_a_shot_is_cancelled() {
+        let long = CANCEL_AFTER + Duration::from_millis(50);
+        let flying = request(1, 0.0, "rzb", false);
+        let cases = [
+            ("another camera, long", state(&flying, long, request(2, 1.0, "rzb", false)), true),
+            ("another renderer, long", state(&flying, long, request(2, 0.0, "hzb", false)), true),
+            ("the same state again", state(&flying, long, request(2, 0.0, "rzb", false)), false),
+            ("a short frame", state(&flying, Duration::ZERO, request(2, 1.0, "rzb", false)), false),
+            ("the frame's own request", state(&flying, long, request(1, 0.0, "rzb", false)), false),
+        ];
+        for (what, state, due) in cases {
+            let control = FrameControl::new();
+            assert_eq!(Worker::supersede_locked(&state, &control), due, "{what}");
+            assert_eq!(control.is_cancelled(), due, "{what}");
+        }
+        let shooting = request(1, 0.0, "rzb", true);
+        let control = FrameControl::new();
+        let s = state(&shooting, long, request(2, 1.0, "rzb", false));
+        assert!(!Worker::supersede_locked(&s, &control), "a frame writing a screenshot finishes");
+        assert!(!Worker::supersede_locked(&State::default(), &control), "nothing in flight");
+        assert!(!control.is_cancelled());
     }
 
     #[test]

@@ -306,6 +306,72 @@ fn exactness_mode_counts_no_differing_pixel_for_conservative_renderers() {
     assert!(read("rzb")["differing_pixels"].as_u64().is_some(), "rzb is checked too");
 }
 
+/// `rzb` on the forest of 1.4·10^14 triangles at 640×480: a frame of seconds on two cores,
+/// which a camera move cancels; the frame after it is the new view's, as `occult render`
+/// draws it, and the cancelled one is never shown.
+#[test]
+fn a_slow_frame_is_cancelled_by_moving_and_the_next_is_the_new_view() {
+    let Some(x) = Xvfb::start("a_slow_frame_is_cancelled_by_moving_and_the_next_is_the_new_view") else {
+        return;
+    };
+    const FOREST: &str = "forest:replicate=73,levels=2";
+    const BIG: &str = "640x480";
+    let dir = scratch("cancel");
+    let shot = dir.join("moved.png");
+    let stats = dir.join("moved.json");
+    let during = dir.join("during.png");
+    // `wait-progress`: the first view's frame is under way (drawing samples) when the camera
+    // moves, so it is in flight, not merely pending, and is cancelled, not replaced. The
+    // window is captured while it draws, its progress bar showing.
+    let script = format!(
+        "view circle:8:1\nwait-progress\nsleep 300\ncapture-now {}\nview circle:8:3\nscreenshot {}\nstats {}\nexit\n",
+        s(&during),
+        s(&shot),
+        s(&stats)
+    );
+    let script_file = dir.join("script.txt");
+    std::fs::write(&script_file, script).expect("the script is written");
+    let stdout = assert_ok(
+        &x.view(&[FOREST, "--algo", "rzb", "--size", BIG, "--script", s(&script_file)]),
+        "occult view --script",
+    );
+    let cancelled: u64 = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("frames cancelled: "))
+        .and_then(|n| n.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no count of cancelled frames: {stdout}"));
+    assert!(cancelled >= 1, "the first view's frame was not cancelled: {stdout}");
+    let json: serde_json::Value = serde_json::from_slice(&bytes(&stats)).expect("the statistics are JSON");
+    assert_eq!(json["renderer"], "rzb", "{json}");
+    // The bar along the bottom edge: filled (amber) from the left as far as the frame got.
+    let window = image::open(&during).expect("the capture is a PNG").to_rgb8();
+    let bottom = window.height() - 1;
+    let amber = image::Rgb([0xff, 0xd0, 0x40]);
+    assert_eq!(window.get_pixel(0, bottom), &amber, "no progress bar in the window while drawing");
+
+    let out = dir.join("render.png");
+    assert_ok(
+        &occult(&[
+            "render",
+            "--scene",
+            FOREST,
+            "--view",
+            "circle:8:3",
+            "--size",
+            BIG,
+            "--algo",
+            "rzb",
+            "--out",
+            s(&out),
+        ]),
+        "occult render",
+    );
+    assert!(
+        bytes(&shot) == bytes(&out),
+        "the screenshot after the cancelled frame differs from occult render's frame of the new view"
+    );
+}
+
 #[test]
 fn no_display_is_one_line_naming_the_alternatives() {
     let out = Command::new(env!("CARGO_BIN_EXE_occult"))

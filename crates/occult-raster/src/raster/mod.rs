@@ -110,7 +110,8 @@ const GUARD_PIXELS: f32 = 32768.0;
 /// stay in L2.
 pub const CHUNK_TRIANGLES: usize = 2 * 1024;
 
-/// Rasterizer configuration. Results never depend on it, only speed does.
+/// Rasterizer configuration. Results never depend on it, only speed does (and, through
+/// [`RasterConfig::control`], whether a renderer finishes its frame).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct RasterConfig {
     /// Worker threads; 0 uses the pool the caller runs in (outside any, rayon's global pool:
@@ -128,6 +129,11 @@ pub struct RasterConfig {
     /// How triangles are spread over threads (see the module doc). Frames are bit-identical
     /// whichever is used (tested); only speed differs.
     pub strategy: Strategy,
+    /// Cancellation and progress of the frame being drawn ([`crate::FrameControl`]): inert by
+    /// default. The rasterizer never reads it; it travels here so that the renderers, which
+    /// hold a rasterizer wherever they submit a batch, check it there without passing it
+    /// along (`occult-render`'s `RenderError::Cancelled`).
+    pub control: crate::FrameControl,
 }
 
 /// How a draw is spread over threads.
@@ -158,6 +164,7 @@ impl Default for RasterConfig {
             cull_backfaces: false,
             simd: true,
             strategy: Strategy::Auto,
+            control: crate::FrameControl::default(),
         }
     }
 }

@@ -859,7 +859,7 @@ impl Renderer for Hzb {
         let start = Instant::now();
         if let Some(direct) = &mut self.direct {
             if let Some(stats) = direct.render_if_due(&mut self.workers[0].raster, view, frame)? {
-                return Ok(stats);
+                return crate::end_frame(&self.workers[0].raster, stats);
             }
             for w in &mut self.workers {
                 direct.arm(&mut w.payoff, w.raster.thread_count());
@@ -896,6 +896,7 @@ impl Renderer for Hzb {
         } else {
             self.render_distributed(view, frame, recheck)?
         };
+        crate::check_cancel(&self.workers[0].raster)?;
         if let Some(direct) = &mut self.direct {
             if self.workers.iter().any(|w| w.payoff.last_abandoned()) {
                 direct.redraw(&mut self.workers[0].raster, view, frame, &mut stats)?;
@@ -908,7 +909,7 @@ impl Renderer for Hzb {
         let p = &stats.phases;
         let accounted = p.get(Phase::Clear) + p.get(Phase::Raster) + p.get(Phase::DepthStructure) + p.get(Phase::Other);
         stats.phases.add(Phase::Cull, stats.total.saturating_sub(accounted));
-        Ok(stats)
+        crate::end_frame(&self.workers[0].raster, stats)
     }
 
     fn memory_bytes(&self) -> usize {

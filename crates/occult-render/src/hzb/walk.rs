@@ -842,8 +842,8 @@ impl<'a> Walk<'a> {
 
     /// §3.2: test the node's box, draw its own primitives, then its children front to back.
     fn octree_node(&mut self, inst: &Instance<'a>, n: u32, inside: bool) {
-        if self.payoff.abandoned() {
-            return; // the frame is redrawn directly (`crate::direct`)
+        if self.payoff.abandoned() || self.raster.config().control.is_cancelled() {
+            return; // the frame is redrawn directly (`crate::direct`), or not at all
         }
         let node = &inst.octree.nodes()[n as usize];
         let stats = &mut self.walk.stats;

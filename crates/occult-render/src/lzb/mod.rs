@@ -1110,7 +1110,7 @@ impl Lzb {
         crate::check_frame(view, frame)?;
         if let Some(direct) = &mut self.direct {
             if let Some(stats) = direct.render_if_due(&mut self.raster, view, frame)? {
-                return Ok(stats);
+                return crate::end_frame(&self.raster, stats);
             }
             direct.arm(&mut self.payoff, self.raster.thread_count());
         }
@@ -1206,6 +1206,7 @@ impl Lzb {
                 self.draw_near(view, frame, &instances, &near, &mut stats);
             }
         }
+        crate::check_cancel(&self.raster)?;
         if let Some(share) = share.as_deref_mut() {
             share.depth(frame)?;
         }
@@ -1279,13 +1280,18 @@ impl Lzb {
         let naive = self.opts.mode == Mode::Naive;
         let this: &Lzb = self;
         // With payoff, in waves: before each, the frame is abandoned once its rays do not pay.
-        let wave = if self.direct.is_some() {
+        // With a live frame control, in waves too: the cancellation is checked and the
+        // progress (rays cast of the rays to cast) reported between two.
+        let control = &this.raster.config().control;
+        let wave = if self.direct.is_some() || control.is_live() {
             RAY_WAVE
         } else {
             pixels.len().max(1)
         };
         let mut results: Vec<Caster<'_>> = Vec::new();
         for (k, pixels_of_wave) in pixels.chunks(wave).enumerate() {
+            crate::check_cancel(&this.raster)?;
+            crate::report_part(&this.raster, (k * wave) as u64, pixels.len() as u64);
             if self.direct.is_some() && payoff.progressed((k * wave) as f64 / pixels.len() as f64) {
                 break;
             }
@@ -1304,6 +1310,7 @@ impl Lzb {
                     .collect::<Vec<_>>()
             }));
         }
+        crate::check_cancel(&self.raster)?;
         let mut pairs: Vec<(ItemId, u32)> = Vec::new();
         let mut recs = std::collections::HashMap::<ItemId, InstanceRec, crate::hash::FxBuild>::default();
         let mut hits = Vec::new();
@@ -1324,7 +1331,7 @@ impl Lzb {
         if let Some(share) = share {
             if !shared::unite_pvl(share, &mut pairs, &mut recs)? {
                 stats.total = start.elapsed();
-                return Ok(stats);
+                return crate::end_frame(&self.raster, stats);
             }
         }
         // The chunks' sets overlap: one entry per (instance, leaf).
@@ -1370,6 +1377,8 @@ impl Lzb {
             let draws = make_draws(&self.scene, view, &lists, &pool);
             crate::rasterize(&mut self.raster, view, frame, &draws, &mut stats);
         }
+        // A cancelled frame measures nothing: the rates below stay as they were.
+        crate::check_cancel(&self.raster)?;
         // The rays paid when the time outside rasterization is no more than what the
         // triangles they removed from a direct frame's work would have cost at this frame's
         // rate (with the payoff's least allowance). The in-frame balance is not fed with the
@@ -1435,7 +1444,7 @@ impl Lzb {
             stats.phases.add(Phase::Other, t.elapsed());
         }
         stats.total = start.elapsed();
-        Ok(stats)
+        crate::end_frame(&self.raster, stats)
     }
 
     fn memory_bytes_of_all(&self) -> usize {

@@ -901,7 +901,7 @@ impl Renderer for NBufferCulling {
         let begun = Instant::now();
         if let Some(direct) = &mut self.direct {
             if let Some(stats) = direct.render_if_due(&mut self.raster, view, frame)? {
-                return Ok(stats);
+                return crate::end_frame(&self.raster, stats);
             }
         }
         let (w, h) = (view.width(), view.height());
@@ -950,7 +950,7 @@ impl Renderer for NBufferCulling {
             let mut stats = direct.render(&mut self.raster, view, frame)?;
             stats.counters.add("no_occluders", 1);
             stats.phases.add(Phase::Cull, t.elapsed());
-            return Ok(stats);
+            return crate::end_frame(&self.raster, stats);
         }
         let selection = t.elapsed();
         let (start, cleared_at, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
@@ -967,6 +967,7 @@ impl Renderer for NBufferCulling {
         stats.phases.add(Phase::Cull, t.elapsed());
         rasterize_weighed(&mut self.raster, view, frame, &draws, &mut stats, &mut payoff);
         drop(draws);
+        crate::check_cancel(&self.raster)?;
         stats.counters.add("occluders_drawn", occluders.len() as u64);
 
         // §2: the N-buffer of the occluders' depth (min variant: farthest depth); none for
@@ -1140,6 +1141,8 @@ impl Renderer for NBufferCulling {
             }
         }
 
+        // A cancelled frame leaves last frame's occluders in place.
+        crate::check_cancel(&self.raster)?;
         // The exactly visible objects become the next frame's occluders.
         if self.options.occluders.visible() {
             let t = Instant::now();
@@ -1157,7 +1160,7 @@ impl Renderer for NBufferCulling {
             stats.phases.add(Phase::Other, t.elapsed());
         }
         stats.total = start.elapsed();
-        Ok(stats)
+        crate::end_frame(&self.raster, stats)
     }
 
     fn memory_bytes(&self) -> usize {

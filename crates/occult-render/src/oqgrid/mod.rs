@@ -882,8 +882,8 @@ impl<'a> Walk<'a> {
     /// Queries the cells of one batch against the same depth state, then draws the visible
     /// ones (§3.4) and recurses into the visible ones' subgrids (§3.2) and instances.
     fn batch(&mut self, occ: &Occurrence<'a>, level_index: u32, batch: &[(i64, u32)]) {
-        if self.payoff.abandoned() {
-            return; // the frame is redrawn directly (`crate::direct`)
+        if self.payoff.abandoned() || self.raster.config().control.is_cancelled() {
+            return; // the frame is redrawn directly (`crate::direct`), or not at all
         }
         let cells: &'a [GridCell] = &occ.grid.levels()[level_index as usize].cells;
         let options = self.options;
@@ -1283,11 +1283,12 @@ impl Renderer for OqGrid {
         crate::check_frame(view, frame)?;
         if let Some(direct) = &mut self.direct {
             if let Some(stats) = direct.render_if_due(&mut self.raster, view, frame)? {
-                return Ok(stats);
+                return crate::end_frame(&self.raster, stats);
             }
             direct.arm(&mut self.payoff, self.raster.thread_count());
         }
         let (start, t, cleared) = crate::begin_frame(&mut self.raster, view, frame)?;
+        let control = self.raster.config().control.clone();
         let pyramid = match self.options.test {
             CellTest::Query => None,
             CellTest::Pyramid => {
@@ -1348,6 +1349,10 @@ impl Renderer for OqGrid {
         self.predrawn = predrawn;
         let recorded = record.is_some();
         drop(record);
+        // A cancelled frame's list is incomplete, and its costs are no measure: both dropped.
+        if control.is_cancelled() {
+            return Err(crate::RenderError::Cancelled);
+        }
         self.payoff.end(&payoff);
         let mut stats = walk.finish("oqgrid")?;
         if recorded && !payoff.abandoned() {
@@ -1381,7 +1386,7 @@ impl Renderer for OqGrid {
         }
         stats.total = start.elapsed();
         self.last_counts = counts;
-        Ok(stats)
+        crate::end_frame(&self.raster, stats)
     }
 
     fn memory_bytes(&self) -> usize {

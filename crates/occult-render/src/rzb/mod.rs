@@ -89,6 +89,7 @@ pub mod sample;
 pub mod select;
 pub mod structure;
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -1024,7 +1025,18 @@ impl Renderer for Rzb {
         let mut units: Vec<Unit> = Vec::new();
         let mut counts: Vec<SampleCounts> = Vec::new();
         let batch_count = batches.len();
+        // Progress: samples drawn of those expected (cap included), counted per work unit, where
+        // the cancellation is checked too.
+        let control = self.raster.config().control.clone();
+        let samples_drawn = AtomicU64::new(0);
+        let samples_total = (expected * cap).min(u64::MAX as f64) as u64;
+        let raster: &Rasterizer = &self.raster;
+        let unit_done = |len: usize| {
+            let done = samples_drawn.fetch_add(len as u64, Ordering::Relaxed) + len as u64;
+            crate::report_part(raster, done, samples_total);
+        };
         for (batch_index, batch) in batches.into_iter().enumerate() {
+            crate::check_cancel(&self.raster)?;
             if let Some(p) = pyramid.as_mut() {
                 let t = Instant::now();
                 p.rebuild(frame);
@@ -1090,6 +1102,9 @@ impl Renderer for Rzb {
                 to_build[first_build..]
                     .par_iter()
                     .map(|&k| {
+                        if control.is_cancelled() {
+                            return (Vec::new(), 0); // never stored: the frame returns first
+                        }
                         let job = &jobs[k];
                         let mut rng = box_rng(sampler.seed, job);
                         let n = sample_count(job.samples * cap * (tol * tol) as f64, &mut rng);
@@ -1114,6 +1129,7 @@ impl Renderer for Rzb {
                     })
                     .collect()
             });
+            crate::check_cancel(&self.raster)?;
             built.extend(new_sets);
             // Work units of at most PIECE samples: a direct box's pieces each have their own
             // generator (seeded from the box and the piece index), so the frame does not depend
@@ -1197,6 +1213,9 @@ impl Renderer for Rzb {
                     .map(|(c, target)| {
                         let mut counts = SampleCounts::default();
                         for u in &units[bounds[c]..bounds[c + 1]] {
+                            if control.is_cancelled() {
+                                break;
+                            }
                             let job = &jobs[u.job];
                             match sources[u.job] {
                                 Some(Source::Direct) => {
@@ -1221,6 +1240,7 @@ impl Renderer for Rzb {
                                 }
                                 None => {}
                             }
+                            unit_done(u.len);
                         }
                         counts
                     })
@@ -1304,6 +1324,8 @@ impl Renderer for Rzb {
                 .collect();
             frame.resolved_color_mut().copy_from_slice(&resolved);
         }
+        // A cancelled frame stores nothing (its sets may be incomplete).
+        crate::check_cancel(&self.raster)?;
         // Store the new sets (LRU eviction under the budget).
         let mut evictions = 0u64;
         let mut built_samples = 0u64;
@@ -1354,7 +1376,7 @@ impl Renderer for Rzb {
             a.record((select_time + samples_time).as_secs_f64());
         }
         stats.total = start.elapsed();
-        Ok(stats)
+        crate::end_frame(&self.raster, stats)
     }
 
     fn memory_bytes(&self) -> usize {
