@@ -568,9 +568,21 @@ mod tests {
 
     #[test]
     fn algorithm_lists() {
-        let all: Vec<Algorithm> = parse_algorithms("all").unwrap().0.iter().map(|s| s.algorithm).collect();
+        let all: Vec<Algorithm> = parse_algorithms("all")
+            .expect("all is a valid algorithm list")
+            .0
+            .iter()
+            .map(|s| s.algorithm)
+            .collect();
         assert_eq!(all, Algorithm::all());
-        let labels = |s: &str| -> Vec<String> { parse_algorithms(s).unwrap().0.iter().map(|a| a.label()).collect() };
+        let labels = |s: &str| -> Vec<String> {
+            parse_algorithms(s)
+                .expect("every listed algorithm list is valid")
+                .0
+                .iter()
+                .map(|a| a.label())
+                .collect()
+        };
         assert_eq!(labels("frustum, zbuffer,frustum"), ["frustum", "zbuffer"]);
         assert_eq!(
             labels("frustum:leaf=8,group_leaf=2,frustum,frustum:leaf=8,group_leaf=2"),
@@ -608,16 +620,21 @@ mod tests {
             let e = r.camera.overrides.check().unwrap_err().to_string();
             assert!(e.contains(value), "{flag}: {e}");
         }
-        let cli = parse(&["--eye", "-1,2,3", "--target", "-1,2,3"]).unwrap();
+        let cli =
+            parse(&["--eye", "-1,2,3", "--target", "-1,2,3"]).expect("negative coordinates parse as values, not flags");
         let Command::Render(r) = cli.command else {
             unreachable!()
         };
         assert!(r.camera.overrides.check().unwrap_err().to_string().contains("coincide"));
-        let cli = parse(&["--fov", "45", "--near", "0.5", "--eye", "0,5,0", "--target", "0,0,0"]).unwrap();
+        let cli = parse(&["--fov", "45", "--near", "0.5", "--eye", "0,5,0", "--target", "0,0,0"])
+            .expect("a valid camera parses");
         let Command::Render(r) = cli.command else {
             unreachable!()
         };
-        r.camera.overrides.check().unwrap();
+        r.camera
+            .overrides
+            .check()
+            .expect("fov 45, near 0.5 and distinct eye and target are valid");
     }
 
     #[test]
@@ -626,7 +643,13 @@ mod tests {
         assert!(parse_scene("no/such/model.obj").unwrap_err().contains("model.obj"));
         assert!(parse_path("circle:0").is_err());
         assert!(parse_view("circle:0").is_err(), "as --path circle:0");
-        assert_eq!(parse_view("circle:8:3").unwrap().spec.index, 3);
+        assert_eq!(
+            parse_view("circle:8:3")
+                .expect("an index below the count is a valid view")
+                .spec
+                .index,
+            3
+        );
         assert!(parse_view("circle:8:8").unwrap_err().contains("index 8"));
     }
 

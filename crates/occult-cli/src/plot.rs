@@ -500,7 +500,7 @@ mod tests {
     #[test]
     fn plots_render_text_with_the_embedded_font() {
         let dir = std::env::temp_dir().join(format!("occult-plot-test-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::create_dir_all(&dir).expect("the temporary directory is writable");
         let path = dir.join("p.png");
         let panel = Panel {
             title: "title".into(),
@@ -526,16 +526,16 @@ mod tests {
                 },
             ],
         };
-        draw(&path, &[panel]).unwrap();
-        let img = image::open(&path).unwrap();
+        draw(&path, &[panel]).expect("a plot with an empty series draws");
+        let img = image::open(&path).expect("the plot just drawn is a PNG");
         assert_eq!((img.width(), img.height()), (1100, 480));
-        std::fs::remove_dir_all(&dir).unwrap();
+        std::fs::remove_dir_all(&dir).expect("the test's scratch directory can be removed");
     }
 
     #[test]
     fn bar_charts_draw_groups_with_missing_and_extreme_values() {
         let dir = std::env::temp_dir().join(format!("occult-bars-test-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::create_dir_all(&dir).expect("the temporary directory is writable");
         let path = dir.join("b.png");
         let panel = |groups: Vec<BarGroup>| BarPanel {
             title: "speedup".into(),
@@ -550,9 +550,10 @@ mod tests {
                 values: vec![Some(1.0), if g == 3 { None } else { Some(0.01 + g as f64 * 3.0) }],
             })
             .collect();
-        draw_bars(&path, &[panel(groups), panel(Vec::new())]).unwrap();
-        let img = image::open(&path).unwrap();
+        draw_bars(&path, &[panel(groups), panel(Vec::new())])
+            .expect("bar charts with a missing value and an empty panel draw");
+        let img = image::open(&path).expect("the chart just drawn is a PNG");
         assert_eq!((img.width(), img.height()), (140 * 12 + 160 + LEGEND_WIDTH, 1040));
-        std::fs::remove_dir_all(&dir).unwrap();
+        std::fs::remove_dir_all(&dir).expect("the test's scratch directory can be removed");
     }
 }

@@ -273,14 +273,14 @@ mod tests {
         // |target - eye|^2 overflows f32, the direction does not: a valid, distant camera.
         let mut c = Camera::look_at(Vec3::new(1e30, 0.0, 0.0), Vec3::ZERO);
         c.far = 1e31;
-        let v = View::new(c, 10, 10).unwrap();
+        let v = View::new(c, 10, 10).expect("a camera 1e30 away with a far plane past it is valid");
         assert!(v.clip_from_world().is_finite());
         assert!((c.direction() - Vec3::NEG_X).length() < 1e-6);
         // A scene at ±1e20 framed from 2e20: the view works.
         let mut c = Camera::look_at(Vec3::new(0.0, 1e20, 2e20), Vec3::ZERO);
         c.near = 1e18;
         c.far = 1e21;
-        View::new(c, 10, 10).unwrap();
+        View::new(c, 10, 10).expect("a scene at 1e20 framed from 2e20 is a valid view");
         // target - eye overflows: said so, not "coincide".
         let c = Camera::look_at(Vec3::new(3e38, 0.0, 0.0), Vec3::new(-3e38, 0.0, 0.0));
         let e = c.validate().unwrap_err().to_string();
@@ -288,7 +288,7 @@ mod tests {
         // A huge up vector is a direction like any other.
         let mut c = cam();
         c.up = Vec3::new(0.0, 1e30, 0.0);
-        View::new(c, 10, 10).unwrap();
+        View::new(c, 10, 10).expect("a huge up vector is a valid direction");
         // The translation of the view matrix overflows: said so.
         let c = Camera::look_at(Vec3::splat(3e38), Vec3::new(3e38, 3e38, 2e38));
         let e = View::new(c, 10, 10).unwrap_err().to_string();
@@ -309,7 +309,7 @@ mod tests {
 
     #[test]
     fn reversed_z_depth_is_near_over_distance() {
-        let v = View::new(cam(), 100, 100).unwrap();
+        let v = View::new(cam(), 100, 100).expect("a 100x100 view of the test camera");
         let p = v.clip_from_world() * glam::Vec4::new(0.0, 0.0, 0.0, 1.0);
         assert!((p.w - 5.0).abs() < 1e-5);
         assert!((p.z / p.w - 0.1 / 5.0).abs() < 1e-6);
@@ -317,7 +317,7 @@ mod tests {
 
     #[test]
     fn frustum_culls_behind_and_beyond() {
-        let v = View::new(cam(), 100, 100).unwrap();
+        let v = View::new(cam(), 100, 100).expect("a 100x100 view of the test camera");
         let f = v.frustum(&Affine3A::IDENTITY);
         let unit = |c: Vec3| crate::Aabb::new(c - 0.5, c + 0.5);
         assert!(f.intersects_aabb(&unit(Vec3::ZERO)));

@@ -22,13 +22,16 @@
 //!
 //! ```
 //! use occult_core::{Camera, Mesh, SceneBuilder, View, Vec3};
-//! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).unwrap();
+//! # fn main() -> Result<(), occult_core::CoreError> {
+//! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]])?;
 //! let mut builder = SceneBuilder::new();
-//! let node = builder.add_mesh("triangle", mesh).unwrap();
-//! let scene = builder.build(node).unwrap();
+//! let node = builder.add_mesh("triangle", mesh)?;
+//! let scene = builder.build(node)?;
 //! assert_eq!(scene.item_count(), 1);
-//! let view = View::new(Camera::look_at(Vec3::new(0.3, 0.3, 2.0), Vec3::ZERO), 64, 64).unwrap();
+//! let view = View::new(Camera::look_at(Vec3::new(0.3, 0.3, 2.0), Vec3::ZERO), 64, 64)?;
 //! assert!(view.frustum(&glam::Affine3A::IDENTITY).intersects_aabb(&scene.bounds()));
+//! # Ok(())
+//! # }
 //! ```
 #![deny(missing_docs)]
 

@@ -195,14 +195,14 @@ mod tests {
             })
         ));
         assert!(Mesh::new(vec![Vec3::ZERO; 3], vec![[0, 1, 2]])
-            .unwrap()
+            .expect("three vertices and one in-range triangle make a mesh")
             .with_colors(MeshColors::PerTriangle(vec![]))
             .is_err());
     }
 
     #[test]
     fn empty_mesh_has_empty_bounds() {
-        let m = Mesh::new(vec![], vec![]).unwrap();
+        let m = Mesh::new(vec![], vec![]).expect("an empty mesh is valid");
         assert!(m.bounds().is_empty());
         assert_eq!(m.triangle_count(), 0);
     }

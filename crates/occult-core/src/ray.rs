@@ -134,7 +134,7 @@ mod tests {
     #[test]
     fn hits_center_and_misses_outside() {
         let r = Ray::new(Vec3::new(0.25, 0.25, 1.0), Vec3::new(0.0, 0.0, -1.0));
-        let h = intersect_ray_triangle(&r, Vec3::ZERO, Vec3::X, Vec3::Y).unwrap();
+        let h = intersect_ray_triangle(&r, Vec3::ZERO, Vec3::X, Vec3::Y).expect("the ray hits the triangle's interior");
         assert!((h.t - 1.0).abs() < 1e-6);
         let r = Ray::new(Vec3::new(1.25, 0.25, 1.0), Vec3::new(0.0, 0.0, -1.0));
         assert!(intersect_ray_triangle(&r, Vec3::ZERO, Vec3::X, Vec3::Y).is_none());

@@ -525,7 +525,7 @@ mod tests {
     use super::*;
 
     fn tri() -> Mesh {
-        Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).unwrap()
+        Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).expect("one in-range triangle is a valid mesh")
     }
 
     /// `count` instances of `child`, the `i`-th moved by `i × step`.
@@ -540,10 +540,14 @@ mod tests {
 
     fn two_level() -> Scene {
         let mut b = SceneBuilder::new();
-        let m = b.add_mesh("tri", tri()).unwrap();
-        let g = b.add_group("row", row_of(m, 3, Vec3::X * 2.0)).unwrap();
-        let root = b.add_group("grid", row_of(g, 4, Vec3::Y * 2.0)).unwrap();
-        b.build(root).unwrap()
+        let m = b.add_mesh("tri", tri()).expect("a valid mesh adds");
+        let g = b
+            .add_group("row", row_of(m, 3, Vec3::X * 2.0))
+            .expect("a row of a known node adds");
+        let root = b
+            .add_group("grid", row_of(g, 4, Vec3::Y * 2.0))
+            .expect("a grid of a known node adds");
+        b.build(root).expect("the grid has triangles and builds")
     }
 
     #[test]
@@ -553,14 +557,19 @@ mod tests {
         let mut b = SceneBuilder::new();
         let big = |n: u32| {
             let p = (0..n + 2).map(|i| Vec3::new(i as f32, (i % 2) as f32, 0.0)).collect();
-            Mesh::new(p, (0..n).map(|i| [i, i + 1, i + 2]).collect()).unwrap()
+            Mesh::new(p, (0..n).map(|i| [i, i + 1, i + 2]).collect())
+                .expect("a strip of in-range triangles is a valid mesh")
         };
-        let used = b.add_mesh("used", tri()).unwrap();
-        let unused = b.add_mesh("unused", big(1000)).unwrap();
-        let _orphan = b.add_mesh("orphan", big(500)).unwrap();
-        let _unused_group = b.add_group("unused group", row_of(unused, 2, Vec3::Z)).unwrap();
-        let root = b.add_group("root", row_of(used, 2, Vec3::Z)).unwrap();
-        let s = b.build(root).unwrap();
+        let used = b.add_mesh("used", tri()).expect("a valid mesh adds");
+        let unused = b.add_mesh("unused", big(1000)).expect("a valid mesh adds");
+        let _orphan = b.add_mesh("orphan", big(500)).expect("a valid mesh adds");
+        let _unused_group = b
+            .add_group("unused group", row_of(unused, 2, Vec3::Z))
+            .expect("a row of a known node adds");
+        let root = b
+            .add_group("root", row_of(used, 2, Vec3::Z))
+            .expect("a row of a known node adds");
+        let s = b.build(root).expect("the root reaches a triangle and builds");
         assert_eq!(s.item_count(), 2);
         assert_eq!(s.unique_triangle_count(), 1);
         assert!(s.unique_triangle_count() <= s.item_count());
@@ -574,7 +583,7 @@ mod tests {
             6,
             "two instances of a 3-vertex triangle, nothing unreachable"
         );
-        let one = Scene::from_mesh("one", tri()).unwrap();
+        let one = Scene::from_mesh("one", tri()).expect("one triangle is a valid scene");
         assert_eq!((one.unique_triangle_count(), one.instance_count()), (1, 0));
     }
 
@@ -594,10 +603,10 @@ mod tests {
     #[test]
     fn resolve_matches_flatten() {
         let s = two_level();
-        let flat = s.flatten(100).unwrap();
+        let flat = s.flatten(100).expect("12 items are under the limit of 100");
         for item in 0..s.item_count() {
-            let loc = s.resolve_item(item).unwrap();
-            let mesh = s.node(loc.mesh_node).mesh().unwrap();
+            let loc = s.resolve_item(item).expect("every item below item_count resolves");
+            let mesh = s.node(loc.mesh_node).mesh().expect("an item resolves to a mesh node");
             let p = loc
                 .world_from_object
                 .transform_point3(mesh.triangle_positions(loc.triangle_index as usize)[0]);
@@ -647,7 +656,9 @@ mod tests {
     #[test]
     fn empty_and_bad_scenes_are_errors() {
         let mut b = SceneBuilder::new();
-        let m = b.add_mesh("empty", Mesh::new(vec![], vec![]).unwrap()).unwrap();
+        let m = b
+            .add_mesh("empty", Mesh::new(vec![], vec![]).expect("an empty mesh is valid"))
+            .expect("an empty mesh adds");
         assert!(matches!(b.build(m), Err(CoreError::EmptyScene(_))));
         let mut b = SceneBuilder::new();
         assert!(matches!(
@@ -660,7 +671,7 @@ mod tests {
             ),
             Err(CoreError::UnknownNode { .. })
         ));
-        let m = b.add_mesh("tri", tri()).unwrap();
+        let m = b.add_mesh("tri", tri()).expect("a valid mesh adds");
         let bad = Affine3A::from_scale(Vec3::new(1.0, 0.0, 1.0));
         assert!(matches!(
             b.add_group(
@@ -686,13 +697,15 @@ mod tests {
     #[test]
     fn huge_instancing_counts_without_overflow() {
         let mut b = SceneBuilder::new();
-        let mut id = b.add_mesh("tri", tri()).unwrap();
+        let mut id = b.add_mesh("tri", tri()).expect("a valid mesh adds");
         for level in 0..14 {
-            id = b.add_group(format!("l{level}"), row_of(id, 10, Vec3::X)).unwrap();
+            id = b
+                .add_group(format!("l{level}"), row_of(id, 10, Vec3::X))
+                .expect("a row of a known node adds");
         }
-        let s = b.build(id).unwrap();
+        let s = b.build(id).expect("10^14 instances of a triangle build");
         assert_eq!(s.item_count(), 10u64.pow(14));
-        let loc = s.resolve_item(10u64.pow(14) - 1).unwrap();
+        let loc = s.resolve_item(10u64.pow(14) - 1).expect("the last item resolves");
         assert_eq!(loc.instance_base, 10u64.pow(14) - 1);
     }
 }

@@ -92,12 +92,12 @@ mod tests {
         // 64 MiB touched and freed, then the mark reset: the process peak still holds it.
         let block = vec![1u8; 64 << 20];
         assert_eq!(block.iter().step_by(4096).map(|&b| b as usize).sum::<usize>(), 16384);
-        let grown = rss.process_peak_bytes().unwrap();
+        let grown = rss.process_peak_bytes().expect("the process peak was readable above");
         drop(block);
         assert!(grown >= 64 << 20, "{grown}");
         let window = rss.clone().window_owned();
-        assert!(rss.process_peak_bytes().unwrap() >= grown);
-        assert!(window.is_none_or(|a| a <= rss.process_peak_bytes().unwrap()));
+        assert!(rss.process_peak_bytes().expect("the process peak was readable above") >= grown);
+        assert!(window.is_none_or(|a| a <= rss.process_peak_bytes().expect("the process peak was readable above")));
     }
 
     impl PeakRss {

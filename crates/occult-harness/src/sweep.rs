@@ -279,14 +279,17 @@ mod tests {
     #[test]
     fn lineups_set_the_value_and_check_it() {
         let mut config = SweepConfig {
-            algorithms: vec![AlgoSpec::parse("zbuffer").unwrap(), AlgoSpec::parse("frustum").unwrap()],
+            algorithms: vec![
+                AlgoSpec::parse("zbuffer").expect("zbuffer is a known renderer"),
+                AlgoSpec::parse("frustum").expect("frustum is a known renderer"),
+            ],
             vary: vary("frustum", "leaf"),
             options: RenderOptions::default(),
             width: 32,
             height: 32,
             reference: Reference::Auto,
         };
-        let lineups = config.lineups().unwrap();
+        let lineups = config.lineups().expect("frustum has a leaf parameter to vary");
         let labels: Vec<Vec<String>> = lineups
             .iter()
             .map(|l| l.iter().map(AlgoSpec::label).collect())

@@ -261,8 +261,8 @@ mod tests {
     #[test]
     fn fragment_rule_is_order_independent() {
         let frags = [(0.5f32, 7u64), (0.5, 3), (0.25, 1), (0.5, 9)];
-        let mut a = Frame::new(1, 1).unwrap();
-        let mut b = Frame::new(1, 1).unwrap();
+        let mut a = Frame::new(1, 1).expect("a 1x1 frame");
+        let mut b = Frame::new(1, 1).expect("a 1x1 frame");
         for &(d, i) in &frags {
             a.write_fragment(0, 0, d, i);
         }

@@ -26,14 +26,17 @@
 //! ```
 //! use occult_core::{Camera, Mesh, View, Vec3, glam::Affine3A};
 //! use occult_raster::{Draw, DrawTriangles, Frame, RasterConfig, Rasterizer, RasterMode};
-//! let mesh = Mesh::new(vec![Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, -1.0, 0.0), Vec3::new(0.0, 1.0, 0.0)], vec![[0, 1, 2]]).unwrap();
-//! let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO), 64, 48).unwrap();
-//! let mut frame = Frame::new(64, 48).unwrap();
-//! let mut raster = Rasterizer::new(RasterConfig::default()).unwrap();
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let mesh = Mesh::new(vec![Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, -1.0, 0.0), Vec3::new(0.0, 1.0, 0.0)], vec![[0, 1, 2]])?;
+//! let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO), 64, 48)?;
+//! let mut frame = Frame::new(64, 48)?;
+//! let mut raster = Rasterizer::new(RasterConfig::default())?;
 //! let draw = Draw { mesh: &mesh, triangles: DrawTriangles::All, clip_from_object: view.clip_from_object(&Affine3A::IDENTITY), first_item: 0 };
 //! let counts = raster.draw(&view, &mut frame, &[draw], RasterMode::Full);
 //! assert_eq!(counts.triangles_rasterized, 1);
 //! assert!(frame.covered_pixel_count() > 100);
+//! # Ok(())
+//! # }
 //! ```
 #![deny(missing_docs)]
 

@@ -938,7 +938,8 @@ mod tests {
         let (w, h) = (rng.random_range(1..300u32), rng.random_range(1..300u32));
         let depth: Vec<f32> = (0..w * h).map(|_| rng.random::<f32>()).collect();
         let levels = rng.random_range(1..=NBuffer::full_level_count(w, h));
-        let nb = NBuffer::with_levels(Extremum::Min, &depth, w, h, levels).unwrap();
+        let nb = NBuffer::with_levels(Extremum::Min, &depth, w, h, levels)
+            .expect("a random map below 300x300 with at most the full level count builds");
         (nb, w, h, levels)
     }
 
@@ -985,7 +986,7 @@ mod tests {
                     Cover::Empty => assert!(fast.is_none()),
                     Cover::Whole => assert_eq!(fast, Some(([nb.whole; 4], 1))),
                     _ => {
-                        let (keys, lookups) = fast.unwrap();
+                        let (keys, lookups) = fast.expect("a cover that is neither empty nor whole has four keys");
                         let mut want: Vec<Key> = p.iter().map(|&(x, y)| nb.at(level, x, y)).collect();
                         let mut got = keys.to_vec();
                         want.sort_unstable();
@@ -1015,7 +1016,8 @@ mod tests {
         for &(w, h) in &[(1u32, 1u32), (7, 5), (13, 31), (64, 64), (33, 17)] {
             let depth: Vec<f32> = (0..w * h).map(|_| rng.random::<f32>()).collect();
             for ext in [Extremum::Max, Extremum::Min] {
-                let nb = NBuffer::with_levels(ext, &depth, w, h, NBuffer::full_level_count(w, h)).unwrap();
+                let nb = NBuffer::with_levels(ext, &depth, w, h, NBuffer::full_level_count(w, h))
+                    .expect("a map with its full level count builds");
                 for l in 0..nb.level_count() {
                     let s = 1 << l;
                     for y in 0..h {
@@ -1043,7 +1045,7 @@ mod tests {
                 })
                 .collect();
             for ext in [Extremum::Max, Extremum::Min] {
-                let nb = NBuffer::new(ext, &depth, w, h).unwrap();
+                let nb = NBuffer::new(ext, &depth, w, h).expect("a map of matching length builds");
                 for _ in 0..300 {
                     let x0 = rng.random_range(0..w + 10);
                     let y0 = rng.random_range(0..h + 10);
@@ -1081,7 +1083,7 @@ mod tests {
 
     #[test]
     fn empty_and_offscreen_rects_answer_identity_without_lookups() {
-        let nb = NBuffer::new(Extremum::Min, &[0.5; 12], 4, 3).unwrap();
+        let nb = NBuffer::new(Extremum::Min, &[0.5; 12], 4, 3).expect("a 4x3 map of 12 depths builds");
         for r in [
             rect(2, 2, 2, 3),
             rect(3, 1, 1, 2),
@@ -1108,8 +1110,8 @@ mod tests {
     fn nan_reads_as_worst_case() {
         let mut depth = vec![0.5f32; 16];
         depth[5] = f32::NAN;
-        let max = NBuffer::new(Extremum::Max, &depth, 4, 4).unwrap();
-        let min = NBuffer::new(Extremum::Min, &depth, 4, 4).unwrap();
+        let max = NBuffer::new(Extremum::Max, &depth, 4, 4).expect("a 4x4 map of 16 depths builds");
+        let min = NBuffer::new(Extremum::Min, &depth, 4, 4).expect("a 4x4 map of 16 depths builds");
         assert_eq!(max.query_four(rect(0, 0, 4, 4)).depth, f32::INFINITY);
         assert_eq!(min.query_four(rect(0, 0, 4, 4)).depth, f32::NEG_INFINITY);
         assert_eq!(min.query_four(rect(2, 2, 4, 4)).depth, 0.5);
@@ -1120,7 +1122,7 @@ mod tests {
 
     #[test]
     fn five_covers_of_fig_3() {
-        let nb = NBuffer::new(Extremum::Min, &vec![0.5; 64 * 64], 64, 64).unwrap();
+        let nb = NBuffer::new(Extremum::Min, &vec![0.5; 64 * 64], 64, 64).expect("a 64x64 map builds");
         assert_eq!(nb.cover(rect(0, 0, 1, 1)), Cover::Pixel);
         assert_eq!(nb.cover(rect(3, 3, 23, 20)), Cover::Quadrants);
         assert_eq!(nb.cover(rect(3, 3, 23, 13)), Cover::Row2);
@@ -1129,14 +1131,15 @@ mod tests {
         assert_eq!(nb.cover(rect(3, 3, 5, 23)), Cover::Column4);
         // A 64-wide rectangle needs level 5 = the top of the default 6 levels.
         assert_eq!(nb.cover(rect(0, 0, 64, 64)), Cover::Quadrants);
-        let small = NBuffer::with_levels(Extremum::Min, &vec![0.5; 64 * 64], 64, 64, 3).unwrap();
+        let small = NBuffer::with_levels(Extremum::Min, &vec![0.5; 64 * 64], 64, 64, 3)
+            .expect("a 64x64 map with 3 levels builds");
         assert_eq!(small.cover(rect(0, 0, 40, 40)), Cover::Whole);
         assert_eq!(small.query_four(rect(0, 0, 40, 40)).depth, 0.5);
     }
 
     #[test]
     fn occludes_is_strict_and_counts_lookups() {
-        let nb = NBuffer::new(Extremum::Min, &vec![0.5; 32 * 32], 32, 32).unwrap();
+        let nb = NBuffer::new(Extremum::Min, &vec![0.5; 32 * 32], 32, 32).expect("a 32x32 map builds");
         assert_eq!(nb.occludes(rect(1, 1, 20, 20), 0.4), (true, 4));
         assert_eq!(nb.occludes(rect(1, 1, 20, 20), 0.5), (false, 4));
         assert_eq!(nb.occludes(rect(1, 1, 20, 11), 0.4), (true, 4));
@@ -1144,7 +1147,7 @@ mod tests {
         assert_eq!(nb.occludes_one(rect(1, 1, 17, 17), 0.4), (true, 1));
         assert_eq!(nb.occludes_one(rect(1, 1, 17, 17), 0.5), (false, 1));
         assert_eq!(nb.occludes_one(rect(40, 1, 47, 17), 0.5), (true, 0));
-        let max = NBuffer::new(Extremum::Max, &vec![0.5; 32 * 32], 32, 32).unwrap();
+        let max = NBuffer::new(Extremum::Max, &vec![0.5; 32 * 32], 32, 32).expect("a 32x32 map builds");
         assert_eq!(max.occludes(rect(1, 1, 20, 20), 0.1), (false, 0));
     }
 
@@ -1157,7 +1160,8 @@ mod tests {
             let mut depth: Vec<f32> = (0..w * h).map(|_| rng.random::<f32>()).collect();
             for ext in [Extremum::Max, Extremum::Min] {
                 let levels = NBuffer::full_level_count(w, h);
-                let mut nb = NBuffer::with_levels(ext, &depth, w, h, levels).unwrap();
+                let mut nb =
+                    NBuffer::with_levels(ext, &depth, w, h, levels).expect("a map with its full level count builds");
                 let x0 = rng.random_range(0..w);
                 let y0 = rng.random_range(0..h);
                 let r = rect(x0, y0, x0 + rng.random_range(1..10), y0 + rng.random_range(1..10));
@@ -1170,8 +1174,9 @@ mod tests {
                         };
                     }
                 }
-                nb.update_region(&depth, r).unwrap();
-                let fresh = NBuffer::with_levels(ext, &depth, w, h, levels).unwrap();
+                nb.update_region(&depth, r).expect("the depths keep the map's size");
+                let fresh =
+                    NBuffer::with_levels(ext, &depth, w, h, levels).expect("a map with its full level count builds");
                 for l in 0..levels {
                     assert_eq!(nb.level(l), fresh.level(l), "{w}x{h} {ext:?} level {l} after {r:?}");
                 }
@@ -1213,11 +1218,13 @@ mod tests {
             let depth = odd_depths(&mut rng, (w * h) as usize);
             for ext in [Extremum::Max, Extremum::Min] {
                 let levels = NBuffer::full_level_count(w, h);
-                let mut base = NBuffer::with_levels(ext, &[0.0], 1, 1, 1).unwrap();
-                base.rebuild_with(Isa::Baseline, &depth, w, h, levels).unwrap();
+                let mut base = NBuffer::with_levels(ext, &[0.0], 1, 1, 1).expect("a 1x1 map builds");
+                base.rebuild_with(Isa::Baseline, &depth, w, h, levels)
+                    .expect("a map with its full level count rebuilds");
                 for isa in Isa::available() {
-                    let mut nb = NBuffer::with_levels(ext, &[0.0], 1, 1, 1).unwrap();
-                    nb.rebuild_with(isa, &depth, w, h, levels).unwrap();
+                    let mut nb = NBuffer::with_levels(ext, &[0.0], 1, 1, 1).expect("a 1x1 map builds");
+                    nb.rebuild_with(isa, &depth, w, h, levels)
+                        .expect("a map with its full level count rebuilds");
                     for l in 0..levels {
                         assert_eq!(nb.level(l), base.level(l), "{isa:?} {w}x{h} {ext:?} level {l}");
                     }
@@ -1293,7 +1300,8 @@ mod tests {
             let depth = odd_depths(&mut rng, (w * h) as usize);
             let levels = rng.random_range(1..=NBuffer::full_level_count(w, h));
             for ext in [Extremum::Max, Extremum::Min] {
-                let nb = NBuffer::with_levels(ext, &depth, w, h, levels).unwrap();
+                let nb = NBuffer::with_levels(ext, &depth, w, h, levels)
+                    .expect("a map with at most the full level count builds");
                 let count = [0, 1, 15, 16, 17, 33, 200][rng.random_range(0..7)];
                 let rects: Vec<PixelRect> = (0..count).map(|_| random_rect(&mut rng, w, h)).collect();
                 let nearest: Vec<f32> = (0..count)
@@ -1306,13 +1314,17 @@ mod tests {
                     })
                     .collect();
                 let mut out = vec![0.0; count];
-                let lookups = nb.query_four_batch(&rects, &mut out).unwrap();
+                let lookups = nb
+                    .query_four_batch(&rects, &mut out)
+                    .expect("rects and outputs of equal length");
                 let single: Vec<Query> = rects.iter().map(|&r| nb.query_four(r)).collect();
                 let want: Vec<u32> = single.iter().map(|q| q.depth.to_bits()).collect();
                 assert_eq!(out.iter().map(|d| d.to_bits()).collect::<Vec<_>>(), want);
                 assert_eq!(lookups, single.iter().map(|q| u64::from(q.lookups)).sum::<u64>());
                 let mut hidden = vec![true; count];
-                let lookups = nb.occludes_batch(&rects, &nearest, &mut hidden).unwrap();
+                let lookups = nb
+                    .occludes_batch(&rects, &nearest, &mut hidden)
+                    .expect("rects, depths and outputs of equal length");
                 let single: Vec<(bool, u32)> = rects.iter().zip(&nearest).map(|(&r, &z)| nb.occludes(r, z)).collect();
                 assert_eq!(hidden, single.iter().map(|s| s.0).collect::<Vec<_>>());
                 assert_eq!(lookups, single.iter().map(|s| u64::from(s.1)).sum::<u64>());
@@ -1322,13 +1334,17 @@ mod tests {
 
     #[test]
     fn batches_of_unequal_lengths_are_errors() {
-        let nb = NBuffer::new(Extremum::Min, &[0.5; 16], 4, 4).unwrap();
+        let nb = NBuffer::new(Extremum::Min, &[0.5; 16], 4, 4).expect("a 4x4 map of 16 depths builds");
         let rects = [rect(0, 0, 2, 2); 3];
         assert!(nb.query_four_batch(&rects, &mut [0.0; 2]).is_err());
         assert!(nb.occludes_batch(&rects, &[0.1; 3], &mut [false; 4]).is_err());
         assert!(nb.occludes_batch(&rects, &[0.1; 2], &mut [false; 3]).is_err());
         let mut hidden = [false; 3];
-        assert_eq!(nb.occludes_batch(&rects, &[0.1; 3], &mut hidden).unwrap(), 12);
+        assert_eq!(
+            nb.occludes_batch(&rects, &[0.1; 3], &mut hidden)
+                .expect("rects, depths and outputs of equal length"),
+            12
+        );
         assert_eq!(hidden, [true; 3]);
     }
 
@@ -1339,7 +1355,7 @@ mod tests {
         assert!(NBuffer::with_levels(Extremum::Min, &[0.0; 4], 2, 2, 0).is_err());
         assert!(NBuffer::with_levels(Extremum::Min, &[0.0; 4], 2, 2, 3).is_err());
         assert!(NBuffer::with_levels(Extremum::Min, &[0.0; 4], 2, 2, 2).is_ok());
-        let mut nb = NBuffer::new(Extremum::Max, &[0.0; 4], 2, 2).unwrap();
+        let mut nb = NBuffer::new(Extremum::Max, &[0.0; 4], 2, 2).expect("a 2x2 map of 4 depths builds");
         assert!(nb.update_region(&[0.0; 3], rect(0, 0, 1, 1)).is_err());
     }
 }

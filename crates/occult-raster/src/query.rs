@@ -209,7 +209,7 @@ mod tests {
 
     #[test]
     fn rect_query_edge_cases() {
-        let f = Frame::new(8, 8).unwrap();
+        let f = Frame::new(8, 8).expect("an 8x8 frame");
         let rect = |x0, y0, x1, y1| PixelRect { x0, y0, x1, y1 };
         // (rectangle, depth, samples): whole frame, empty, clipped, outside, NaN depth.
         for (r, depth, want) in [

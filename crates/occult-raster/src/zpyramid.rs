@@ -309,7 +309,7 @@ mod tests {
     use super::*;
 
     fn frame_with(w: u32, h: u32, f: impl Fn(u32, u32) -> f32) -> Frame {
-        let mut frame = Frame::new(w, h).unwrap();
+        let mut frame = Frame::new(w, h).expect("a test frame of a valid size");
         for y in 0..h {
             for x in 0..w {
                 frame.write_fragment(x, y, f(x, y), 1);
@@ -345,7 +345,7 @@ mod tests {
     fn zero_size_is_an_error() {
         assert!(ZPyramid::new(0, 5).is_err());
         assert!(ZPyramid::new(5, 0).is_err());
-        assert_eq!(ZPyramid::new(1, 1).unwrap().level_count(), 1);
+        assert_eq!(ZPyramid::new(1, 1).expect("a 1x1 pyramid").level_count(), 1);
     }
 
     #[test]
@@ -363,7 +363,7 @@ mod tests {
                     0.1 + ((x ^ y) % 9) as f32 * 0.1
                 }
             });
-            let mut p = ZPyramid::new(w, h).unwrap();
+            let mut p = ZPyramid::new(w, h).expect("a pyramid of the frame's size");
             p.rebuild(&frame);
             let min_all = frame.depth().iter().copied().fold(f32::INFINITY, f32::min);
             assert_eq!(p.farthest(&frame), min_all);
@@ -392,8 +392,8 @@ mod tests {
 
     #[test]
     fn stale_pyramid_is_conservative_and_update_refreshes() {
-        let mut frame = Frame::new(40, 30).unwrap();
-        let mut p = ZPyramid::new(40, 30).unwrap();
+        let mut frame = Frame::new(40, 30).expect("a 40x30 frame");
+        let mut p = ZPyramid::new(40, 30).expect("a 40x30 pyramid");
         let r = PixelRect {
             x0: 4,
             y0: 4,
@@ -441,7 +441,7 @@ mod tests {
     #[test]
     fn global_reject_needs_a_full_frame() {
         let frame = frame_with(17, 9, |_, _| 0.4);
-        let mut p = ZPyramid::new(17, 9).unwrap();
+        let mut p = ZPyramid::new(17, 9).expect("a 17x9 pyramid");
         p.rebuild(&frame);
         let mut c = PyramidCounts::default();
         let r = PixelRect {

@@ -465,7 +465,7 @@ mod tests {
             format!("frustum:{params}")
         };
         let mut r = crate::AlgoSpec::parse(&spec)?.build(scene.clone(), &RenderOptions::default())?;
-        let mut f = Frame::new(view.width(), view.height()).unwrap();
+        let mut f = Frame::new(view.width(), view.height())?;
         let stats = r.render(view, &mut f)?;
         Ok((stats, f))
     }
@@ -474,8 +474,8 @@ mod tests {
     #[test]
     fn batches_draw_what_one_batch_draws() {
         let mut b = SceneBuilder::new();
-        let big = b.add_mesh("big", grid(40)).unwrap();
-        let small = b.add_mesh("small", grid(3)).unwrap();
+        let big = b.add_mesh("big", grid(40)).expect("a valid mesh adds");
+        let small = b.add_mesh("small", grid(3)).expect("a valid mesh adds");
         let instances = (0..30)
             .map(|i| Instance {
                 parent_from_child: Affine3A::from_translation(Vec3::new(
@@ -486,15 +486,16 @@ mod tests {
                 child: if i % 3 == 0 { big } else { small },
             })
             .collect();
-        let root = b.add_group("grid", instances).unwrap();
-        let scene = Arc::new(b.build(root).unwrap());
+        let root = b.add_group("grid", instances).expect("a group of known nodes adds");
+        let scene = Arc::new(b.build(root).expect("the grid has triangles and builds"));
         // Close to the grid, so that the big meshes are cut by the frustum (index lists).
         let camera = Camera::look_at(Vec3::new(2.0, 2.5, 3.0), Vec3::new(3.0, 3.0, 0.0));
-        let view = View::new(camera, 64, 48).unwrap();
-        let (one, frame) = render(&scene, "leaf=16", &view).unwrap();
+        let view = View::new(camera, 64, 48).expect("a 64x48 view of the grid");
+        let (one, frame) = render(&scene, "leaf=16", &view).expect("frustum renders the grid");
         assert!(one.triangles_rasterized > 100, "the view shows the grid");
         for batch in [1, 2, 7] {
-            let (s, f) = render(&scene, &format!("leaf=16,batch={batch}"), &view).unwrap();
+            let (s, f) =
+                render(&scene, &format!("leaf=16,batch={batch}"), &view).expect("frustum renders the grid in batches");
             assert_eq!(f.items(), frame.items(), "batch={batch}");
             assert_eq!(
                 (
@@ -524,7 +525,7 @@ mod tests {
     fn too_many_triangles_in_view_is_an_error() {
         let mut b = SceneBuilder::new();
         // 20,000 triangles, under levels of 100, 10, 10 and 100 instances: 2·10^10 in view.
-        let mut id = b.add_mesh("grid", grid(100)).unwrap();
+        let mut id = b.add_mesh("grid", grid(100)).expect("a valid mesh adds");
         for (level, count) in [100, 10, 10, 100].into_iter().enumerate() {
             let instances = (0..count)
                 .map(|i| Instance {
@@ -532,15 +533,17 @@ mod tests {
                     child: id,
                 })
                 .collect();
-            id = b.add_group(format!("level{level}"), instances).unwrap();
+            id = b
+                .add_group(format!("level{level}"), instances)
+                .expect("a group of a known node adds");
         }
-        let scene = Arc::new(b.build(id).unwrap());
+        let scene = Arc::new(b.build(id).expect("2x10^10 instances build"));
         let view = View::new(
             Camera::look_at(Vec3::new(0.5, 0.5, 3.0), Vec3::new(0.5, 0.5, 0.0)),
             32,
             32,
         )
-        .unwrap();
+        .expect("a 32x32 view of the grid");
         let e = render(&scene, "", &view).unwrap_err();
         assert!(
             matches!(
@@ -555,10 +558,10 @@ mod tests {
         assert!(e.to_string().contains("more than 2000000000 triangle instances"), "{e}");
         // lzb walks the view in the same way, collecting leaves.
         let lzb = crate::AlgoSpec::parse("lzb")
-            .unwrap()
+            .expect("lzb is a known renderer")
             .build(scene.clone(), &RenderOptions::default())
-            .unwrap()
-            .render(&view, &mut Frame::new(32, 32).unwrap())
+            .expect("lzb builds for any scene")
+            .render(&view, &mut Frame::new(32, 32).expect("a 32x32 frame"))
             .map(drop);
         assert!(
             matches!(lzb, Err(RenderError::TooManyInView { renderer: "lzb", .. })),

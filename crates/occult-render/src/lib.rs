@@ -452,7 +452,10 @@ pub(crate) fn check_cancel(raster: &Rasterizer) -> Result<()> {
 /// until [`end_frame`], so that 1 means a complete frame.
 pub(crate) fn report_part(raster: &Rasterizer, done: u64, total: u64) {
     if total > 0 {
-        raster.config().control.report((done as f64 / total as f64).min(PART_MAX));
+        raster
+            .config()
+            .control
+            .report((done as f64 / total as f64).min(PART_MAX));
     }
 }
 
@@ -586,7 +589,12 @@ mod tests {
             [1, 6, 5],
         ];
         let mut b = SceneBuilder::new();
-        let cube = b.add_mesh("cube", Mesh::new(p.to_vec(), t).unwrap()).unwrap();
+        let cube = b
+            .add_mesh(
+                "cube",
+                Mesh::new(p.to_vec(), t).expect("a cube of in-range triangles is a valid mesh"),
+            )
+            .expect("a valid mesh adds");
         let [x0, x1, z0, z1] = ground;
         let ground = Mesh::new(
             vec![
@@ -597,8 +605,8 @@ mod tests {
             ],
             vec![[0, 2, 1], [0, 3, 2]],
         )
-        .unwrap();
-        let ground = b.add_mesh("ground", ground).unwrap();
+        .expect("a quad of in-range triangles is a valid mesh");
+        let ground = b.add_mesh("ground", ground).expect("a valid mesh adds");
         let mut instances = vec![Instance {
             parent_from_child: Affine3A::IDENTITY,
             child: ground,
@@ -607,8 +615,8 @@ mod tests {
             parent_from_child: Affine3A::from_translation(at),
             child: cube,
         }));
-        let root = b.add_group("cubes", instances).unwrap();
-        Arc::new(b.build(root).unwrap())
+        let root = b.add_group("cubes", instances).expect("a group of known nodes adds");
+        Arc::new(b.build(root).expect("the ground has triangles and builds"))
     }
 
     /// Nine instanced boxes in a row along the view, on a ground quad: near boxes hide far ones.
@@ -628,7 +636,9 @@ mod tests {
             Vec3::new(6.0, 3.0, 4.0),
         ]
         .iter()
-        .map(|&eye| View::new(Camera::look_at(eye, Vec3::new(0.0, 0.0, -8.0)), 64, 48).unwrap())
+        .map(|&eye| {
+            View::new(Camera::look_at(eye, Vec3::new(0.0, 0.0, -8.0)), 64, 48).expect("a 64x48 view of the boxes")
+        })
         .collect();
         let specs = [
             "zbuffer",
@@ -651,12 +661,16 @@ mod tests {
         let mut options = RenderOptions::default();
         options.raster.threads = 1;
         for spec in specs {
-            let spec = AlgoSpec::parse(spec).unwrap();
+            let spec = AlgoSpec::parse(spec).expect("every listed spec parses");
             let declared = spec.algorithm.counter_names();
-            let mut renderer = spec.build(Arc::clone(&scene), &options).unwrap();
-            let mut frame = Frame::new(64, 48).unwrap();
+            let mut renderer = spec
+                .build(Arc::clone(&scene), &options)
+                .expect("every listed spec builds for the boxes");
+            let mut frame = Frame::new(64, 48).expect("a 64x48 frame");
             for view in &views {
-                let stats = renderer.render(view, &mut frame).unwrap();
+                let stats = renderer
+                    .render(view, &mut frame)
+                    .expect("every listed renderer renders the boxes");
                 for (name, _) in &stats.counters.0 {
                     assert!(declared.contains(name), "{spec}: counter {name} is not declared");
                 }

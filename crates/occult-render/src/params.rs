@@ -4,12 +4,15 @@
 //!
 //! ```
 //! use occult_render::{AlgoSpec, Algorithm};
-//! let list = AlgoSpec::parse_list("zbuffer, frustum:leaf=64,group_leaf=2, frustum").unwrap();
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let list = AlgoSpec::parse_list("zbuffer, frustum:leaf=64,group_leaf=2, frustum")?;
 //! assert_eq!(list.len(), 3);
 //! assert_eq!(list[1].algorithm, Algorithm::FRUSTUM);
 //! assert_eq!(list[1].label(), "frustum:leaf=64,group_leaf=2");
-//! assert_eq!(list[1].params.get("leaf", 256usize).unwrap(), 64);
+//! assert_eq!(list[1].params.get("leaf", 256usize)?, 64);
 //! assert!(AlgoSpec::parse("frustum:leef=64").is_err()); // unknown keys are refused
+//! # Ok(())
+//! # }
 //! ```
 
 use std::fmt;
@@ -318,11 +321,15 @@ mod tests {
             .with("on", "OFF")
             .with("mode", "Nested")
             .with("bad", "-1");
-        assert_eq!(p.get("n", 0usize).unwrap(), 12);
-        assert_eq!(p.get("absent", 7u32).unwrap(), 7);
-        assert!(!p.flag("on", true).unwrap());
-        assert!(p.flag("absent", true).unwrap());
-        assert_eq!(p.choice("mode", &["uniform", "nested"], "uniform").unwrap(), "nested");
+        assert_eq!(p.get("n", 0usize).expect("n=12 is a non-negative integer"), 12);
+        assert_eq!(p.get("absent", 7u32).expect("an absent key takes its default"), 7);
+        assert!(!p.flag("on", true).expect("OFF is a flag, in any case"));
+        assert!(p.flag("absent", true).expect("an absent flag takes its default"));
+        assert_eq!(
+            p.choice("mode", &["uniform", "nested"], "uniform")
+                .expect("Nested is a listed choice, in any case"),
+            "nested"
+        );
         let e = p.get("bad", 0usize).unwrap_err().to_string();
         assert!(e.contains("x: bad=-1") && e.contains("non-negative integer"), "{e}");
         assert!(p.flag("n", true).is_err());
@@ -335,9 +342,12 @@ mod tests {
 
     #[test]
     fn specs_and_lists() {
-        let s = AlgoSpec::parse(" frustum : leaf = 8 ").unwrap();
+        let s = AlgoSpec::parse(" frustum : leaf = 8 ").expect("a spaced spec parses");
         assert_eq!(s.label(), "frustum:leaf=8");
-        assert_eq!(AlgoSpec::parse("zbuffer").unwrap().label(), "zbuffer");
+        assert_eq!(
+            AlgoSpec::parse("zbuffer").expect("a bare name parses").label(),
+            "zbuffer"
+        );
         for bad in [
             "frustum:leaf",
             "frustum:=3",
@@ -348,7 +358,8 @@ mod tests {
         ] {
             assert!(AlgoSpec::parse(bad).is_err(), "{bad}");
         }
-        let l = AlgoSpec::parse_list("zbuffer,frustum:leaf=8,group_leaf=2,frustum,leaf=4").unwrap();
+        let l = AlgoSpec::parse_list("zbuffer,frustum:leaf=8,group_leaf=2,frustum,leaf=4")
+            .expect("a list with repeated renderers parses");
         let labels: Vec<String> = l.iter().map(AlgoSpec::label).collect();
         assert_eq!(labels, ["zbuffer", "frustum:leaf=8,group_leaf=2", "frustum:leaf=4"]);
         assert!(AlgoSpec::parse_list("leaf=3,frustum").is_err());
@@ -359,7 +370,11 @@ mod tests {
 
     #[test]
     fn validate_checks_values_without_a_scene() {
-        let check = |s: &str| AlgoSpec::parse(s).unwrap().validate();
+        let check = |s: &str| {
+            AlgoSpec::parse(s)
+                .expect("every checked spec parses; validate judges its values")
+                .validate()
+        };
         for bad in [
             "frustum:leaf=abc",
             "frustum:leaf=0",
@@ -372,17 +387,23 @@ mod tests {
             "rzb:eps=x",
         ] {
             let e = check(bad).expect_err(bad).to_string();
-            let key = bad.split_once(':').unwrap().1.split('=').next().unwrap();
+            let key = bad
+                .split_once(':')
+                .expect("every bad spec has a colon")
+                .1
+                .split('=')
+                .next()
+                .expect("split yields at least one piece");
             assert!(e.contains(key), "{bad}: {e}");
         }
         // Every documented default, set explicitly, is valid.
         for a in Algorithm::all() {
-            check(a.name()).unwrap();
+            check(a.name()).expect("a bare renderer name is valid");
             for d in a.info().params {
                 check(&format!("{}:{}={}", a.name(), d.key, d.default)).unwrap_or_else(|e| panic!("{}: {e}", d.key));
             }
         }
-        check("frustum:leaf=8,group_leaf=2").unwrap();
-        check("rzb:eps=auto").unwrap();
+        check("frustum:leaf=8,group_leaf=2").expect("valid frustum settings pass");
+        check("rzb:eps=auto").expect("eps=auto is valid");
     }
 }

@@ -46,14 +46,17 @@
 //!     }
 //! }
 //!
-//! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).unwrap();
-//! let scene = Scene::from_mesh("tri", mesh).unwrap();
-//! let view = View::new(Camera::look_at(Vec3::new(0.3, 0.3, 2.0), Vec3::new(0.3, 0.3, 0.0)), 32, 32).unwrap();
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]])?;
+//! let scene = Scene::from_mesh("tri", mesh)?;
+//! let view = View::new(Camera::look_at(Vec3::new(0.3, 0.3, 2.0), Vec3::new(0.3, 0.3, 0.0)), 32, 32)?;
 //! let mut count = Count { walk: SceneWalk::new(&scene, &view), triangles: 0 };
 //! count.run();
 //! assert_eq!(count.triangles, 1);
-//! let stats = count.walk.finish("count").unwrap();
+//! let stats = count.walk.finish("count")?;
 //! assert_eq!((stats.nodes_visited, stats.boxes_tested, stats.boxes_culled), (1, 1, 0));
+//! # Ok(())
+//! # }
 //! ```
 
 use occult_core::{compose, Aabb, Affine3A, Containment, Frustum, ItemId, Node, NodeId, Scene, View};
@@ -390,7 +393,7 @@ mod tests {
     }
 
     fn view_from(eye: Vec3, target: Vec3) -> View {
-        View::new(Camera::look_at(eye, target), 64, 48).unwrap()
+        View::new(Camera::look_at(eye, target), 64, 48).expect("a 64x48 view")
     }
 
     #[test]
@@ -418,7 +421,10 @@ mod tests {
         assert_eq!(m.entered[0].first_item, 0);
         assert_eq!(m.entered[1].first_item, 2, "after the ground's 2 triangles");
         // The root lies wholly inside: its children are neither tested nor culled.
-        let stats = m.walk.finish("test").unwrap();
+        let stats = m
+            .walk
+            .finish("test")
+            .expect("a box and a quad are not too many to draw");
         assert_eq!((stats.nodes_visited, stats.boxes_tested, stats.boxes_culled), (3, 1, 0));
     }
 
@@ -428,7 +434,7 @@ mod tests {
         let view = view_from(Vec3::new(0.0, 0.0, 5.0), Vec3::new(0.0, 0.0, 10.0));
         let m = run(&scene, &view);
         assert!(m.entered.is_empty());
-        let stats = m.walk.finish("test").unwrap();
+        let stats = m.walk.finish("test").expect("nothing in view is not too many to draw");
         assert_eq!((stats.nodes_visited, stats.boxes_tested, stats.boxes_culled), (1, 1, 1));
     }
 

@@ -912,8 +912,14 @@ mod tests {
 
     #[test]
     fn counts_parse_strictly() {
-        assert_eq!(parse_count("circle", None).unwrap(), DEFAULT_VIEW_COUNT);
-        assert_eq!(parse_count("circle:1_000", Some("1_000")).unwrap(), 1000);
+        assert_eq!(
+            parse_count("circle", None).expect("a bare path takes the default count"),
+            DEFAULT_VIEW_COUNT
+        );
+        assert_eq!(
+            parse_count("circle:1_000", Some("1_000")).expect("an underscored count parses"),
+            1000
+        );
         for bad in ["0", "-1", "", "1.5", "x", "1000001", "99999999999999999999999"] {
             assert!(parse_count("circle", Some(bad)).is_err(), "{bad}");
         }
@@ -935,7 +941,7 @@ mod tests {
         // A triangle in the yz plane: the default direction lies in its plane.
         let yz = Aabb::new(Vec3::new(0.0, -1.0, -1.0), Vec3::new(0.0, 1.0, 1.0));
         let c = framing_camera(&yz, front, 60.0);
-        c.validate().unwrap();
+        c.validate().expect("framing a flat box gives a valid camera");
         let d = c.direction();
         assert!(d.x.abs() > 0.4, "looks along {d}, within its plane");
         // Flat in y (ground) and z (a wall facing the camera): the direction is kept.
@@ -953,34 +959,37 @@ mod tests {
     fn views_take_an_index_only_where_it_cannot_be_a_count() {
         let v = |s: &str| ViewSpec::parse(s);
         assert_eq!(
-            v("circle:8").unwrap(),
+            v("circle:8").expect("a count alone parses"),
             ViewSpec {
                 path: PathSpec::Circle(8),
                 index: 0
             }
         );
         assert_eq!(
-            v("circle:8:3").unwrap(),
+            v("circle:8:3").expect("a count and an index below it parse"),
             ViewSpec {
                 path: PathSpec::Circle(8),
                 index: 3
             }
         );
         assert_eq!(
-            v("default").unwrap(),
+            v("default").expect("the default path parses"),
             ViewSpec {
                 path: PathSpec::Default,
                 index: 0
             }
         );
         assert_eq!(
-            v("default:0").unwrap(),
+            v("default:0").expect("index 0 of the default path parses"),
             ViewSpec {
                 path: PathSpec::Default,
                 index: 0
             }
         );
-        assert_eq!(v("circle").unwrap().path, PathSpec::Circle(DEFAULT_VIEW_COUNT));
+        assert_eq!(
+            v("circle").expect("a bare circle parses").path,
+            PathSpec::Circle(DEFAULT_VIEW_COUNT)
+        );
         // As --path circle:0 is refused, so is --view circle:0 (not camera 0 of `circle`).
         assert!(matches!(v("circle:0"), Err(PathError::BadCount { .. })));
         assert!(matches!(v("street:0"), Err(PathError::BadCount { .. })));
@@ -995,7 +1004,7 @@ mod tests {
     #[test]
     fn framing_of_a_point_is_not_degenerate() {
         let c = framing_camera(&Aabb::new(Vec3::ONE, Vec3::ONE), Vec3::Y + Vec3::Z, 60.0);
-        c.validate().unwrap();
+        c.validate().expect("framing a point gives a valid camera");
     }
 
     #[test]

@@ -12,10 +12,13 @@
 //!
 //! ```
 //! use occult_scenes::spec::parse_spec;
-//! let built = parse_spec("terrain:g=2").unwrap().build().unwrap();
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let built = parse_spec("terrain:g=2")?.build()?;
 //! assert_eq!(built.scene.item_count(), 8);
 //! assert_eq!(built.name, "terrain:g=2");
 //! assert!(parse_spec("city:blocks=0").unwrap_err().to_string().contains("blocks"));
+//! # Ok(())
+//! # }
 //! ```
 
 use crate::generate::{GenerateError, Generator, GENERATORS};
@@ -241,22 +244,22 @@ mod tests {
     #[test]
     fn bare_names_are_generators_with_defaults() {
         assert_eq!(
-            parse_spec("city").unwrap(),
+            parse_spec("city").expect("a bare generator name parses"),
             SceneSpec::Generator(Generator::City(CityParams::default()))
         );
         assert_eq!(
-            parse_spec("  terrain ").unwrap(),
+            parse_spec("  terrain ").expect("a padded generator name parses"),
             SceneSpec::Generator(Generator::Terrain(TerrainParams::default()))
         );
         assert_eq!(
-            parse_spec("city:").unwrap(),
+            parse_spec("city:").expect("a name with an empty setting list parses"),
             SceneSpec::Generator(Generator::City(CityParams::default()))
         );
     }
 
     #[test]
     fn settings_are_applied() {
-        let s = parse_spec("city:blocks=32, detail=2").unwrap();
+        let s = parse_spec("city:blocks=32, detail=2").expect("valid city settings parse");
         assert_eq!(
             s,
             SceneSpec::Generator(Generator::City(CityParams {
@@ -265,31 +268,41 @@ mod tests {
                 ..Default::default()
             }))
         );
-        let f = parse_spec("forest:replicate=73,levels=2").unwrap();
+        let f = parse_spec("forest:replicate=73,levels=2").expect("valid forest settings parse");
         assert_eq!(
             f,
             SceneSpec::Generator(Generator::Forest(ForestParams::replicated_1e14()))
         );
         assert_eq!(
-            parse_spec("terrain:g=1e3").unwrap(),
+            parse_spec("terrain:g=1e3").expect("an integer in e notation parses"),
             SceneSpec::Generator(Generator::Terrain(TerrainParams { g: 1000, tiles: 1 }))
         );
     }
 
     #[test]
     fn names_list_changed_parameters_only() {
-        assert_eq!(parse_spec("city").unwrap().name(), "city");
+        assert_eq!(parse_spec("city").expect("a bare generator name parses").name(), "city");
         assert_eq!(
-            parse_spec("city:detail=2,blocks=3,seed=1").unwrap().name(),
+            parse_spec("city:detail=2,blocks=3,seed=1")
+                .expect("valid city settings parse")
+                .name(),
             "city:blocks=3,detail=2"
         );
-        assert_eq!(parse_spec("models/bunny.ply").unwrap().name(), "bunny.ply");
+        assert_eq!(
+            parse_spec("models/bunny.ply")
+                .expect("a path parses as a file spec")
+                .name(),
+            "bunny.ply"
+        );
     }
 
     #[test]
     fn paths_are_files() {
         for p in ["models/bunny.ply", "bunny.obj", "./x", "C:\\m\\a", "scene.glb"] {
-            assert!(matches!(parse_spec(p).unwrap(), SceneSpec::File(_)), "{p}");
+            assert!(
+                matches!(parse_spec(p).expect("a path parses as a file spec"), SceneSpec::File(_)),
+                "{p}"
+            );
         }
     }
 
@@ -341,7 +354,10 @@ mod tests {
 
     #[test]
     fn missing_file_is_a_load_error() {
-        let e = parse_spec("no/such/file.obj").unwrap().build().unwrap_err();
+        let e = parse_spec("no/such/file.obj")
+            .expect("a path parses as a file spec")
+            .build()
+            .unwrap_err();
         assert!(matches!(e, SpecError::Load(_)));
         assert!(e.to_string().contains("file.obj"));
     }

@@ -36,13 +36,16 @@
 //! ```
 //! use occult_core::{Mesh, Vec3};
 //! use occult_spatial::grid::{GridConfig, MeshTriangles, NestedGrid, Resolution};
-//! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::new(4.0, 0.0, 0.0), Vec3::new(0.0, 4.0, 0.0)], vec![[0, 1, 2]]).unwrap();
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::new(4.0, 0.0, 0.0), Vec3::new(0.0, 4.0, 0.0)], vec![[0, 1, 2]])?;
 //! let config = GridConfig { resolution: Resolution::Cells(4), cells_per_element: 16.0, ..GridConfig::default() };
-//! let grid = NestedGrid::build(&MeshTriangles(&mesh), mesh.bounds(), &config).unwrap();
+//! let grid = NestedGrid::build(&MeshTriangles(&mesh), mesh.bounds(), &config)?;
 //! // A 4 x 4 x 1 grid; the triangle is in the 10 cells below its hypotenuse and in those that
 //! // touch it there.
 //! assert_eq!(grid.levels()[0].dims, [4, 4, 1]);
 //! assert!(grid.levels()[0].cells.len() >= 10 && grid.levels()[0].cells.len() < 16);
+//! # Ok(())
+//! # }
 //! ```
 
 use occult_core::{tri_box_overlap, Aabb, Mesh, Vec3};
@@ -485,7 +488,7 @@ mod tests {
                 t.push([i, i + n + 2, i + n + 1]);
             }
         }
-        Mesh::new(p, t).unwrap()
+        Mesh::new(p, t).expect("a grid of in-range triangles is a valid mesh")
     }
 
     /// Every triangle is in every cell whose (widened) box it overlaps, and in no other.
@@ -496,7 +499,8 @@ mod tests {
             resolution: Resolution::Cells(5),
             ..GridConfig::default()
         };
-        let g = NestedGrid::build(&MeshTriangles(&mesh), mesh.bounds(), &cfg).unwrap();
+        let g = NestedGrid::build(&MeshTriangles(&mesh), mesh.bounds(), &cfg)
+            .expect("a 5-cell grid of a 16x16 quad mesh is within the memory bound");
         let top = &g.levels()[0];
         assert_eq!(top.dims, [5, 5, 1]);
         let mut seen = vec![0u32; mesh.triangle_count()];
@@ -522,7 +526,8 @@ mod tests {
             max_depth: 2,
             ..GridConfig::default()
         };
-        let g = NestedGrid::build(&MeshTriangles(&mesh), mesh.bounds(), &cfg).unwrap();
+        let g = NestedGrid::build(&MeshTriangles(&mesh), mesh.bounds(), &cfg)
+            .expect("a nested grid of a quad mesh is within the memory bound");
         assert!(g.levels().len() > 1);
         for l in g.levels() {
             for c in &l.cells {
@@ -543,7 +548,7 @@ mod tests {
                 ..cfg.clone()
             },
         )
-        .unwrap();
+        .expect("a uniform grid of a quad mesh is within the memory bound");
         assert_eq!(uniform.levels().len(), 1);
     }
 
@@ -586,7 +591,7 @@ mod tests {
             ],
             vec![[0, 1, 2]],
         )
-        .unwrap();
+        .expect("one huge in-range triangle is a valid mesh");
         let cfg = GridConfig {
             resolution: Resolution::Cells(60_000),
             cells_per_element: 1e30,
@@ -599,8 +604,9 @@ mod tests {
 
     #[test]
     fn empty_and_degenerate_inputs() {
-        let mesh = Mesh::new(vec![Vec3::ZERO; 3], vec![[0, 1, 2]]).unwrap();
-        let g = NestedGrid::build(&MeshTriangles(&mesh), mesh.bounds(), &GridConfig::default()).unwrap();
+        let mesh = Mesh::new(vec![Vec3::ZERO; 3], vec![[0, 1, 2]]).expect("a point-sized triangle is a valid mesh");
+        let g = NestedGrid::build(&MeshTriangles(&mesh), mesh.bounds(), &GridConfig::default())
+            .expect("a point-sized triangle grids into one cell");
         // A point-sized triangle: one 1x1x1 level, one cell holding it.
         assert_eq!(g.levels()[0].dims, [1, 1, 1]);
         assert_eq!(g.elements(), &[0]);
@@ -608,7 +614,8 @@ mod tests {
             boxes: vec![],
             weights: vec![],
         };
-        let g = NestedGrid::build(&none, Aabb::EMPTY, &GridConfig::default()).unwrap();
+        let g = NestedGrid::build(&none, Aabb::EMPTY, &GridConfig::default())
+            .expect("no elements grid into an empty level");
         assert!(g.levels()[0].cells.is_empty());
     }
 
@@ -629,7 +636,7 @@ mod tests {
                 ..GridConfig::default()
             },
         )
-        .unwrap();
+        .expect("four boxes in a 50-cell grid are within the memory bound");
         let d = g.levels()[0].dims;
         assert!(d[0] * d[1] * d[2] <= 4, "{d:?}");
         assert_eq!(g.levels()[0].cells.iter().map(|c| c.weight).sum::<u64>(), 20);

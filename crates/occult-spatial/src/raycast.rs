@@ -553,7 +553,7 @@ mod tests {
             max_depth: 6,
             max_leaf_size: 8,
         };
-        let plain = RayOctree::build_triangles(&p, &t, cfg).unwrap();
+        let plain = RayOctree::build_triangles(&p, &t, cfg).expect("a triangle soup builds");
         // And with leaves tightened to their triangles' bounds clipped to the octant, as lzb
         // does: the same nearest hits.
         let mut tight = plain.clone();
@@ -607,7 +607,7 @@ mod tests {
                 max_leaf_size: 4,
             },
         )
-        .unwrap();
+        .expect("a triangle soup builds");
         for k in 0..50 {
             let origin = Vec3::new(-5.0, k as f32 * 0.3, 2.0);
             let ray = FatRay::new(origin, Vec3::new(1.0, 0.05, 0.1), 0.01, 0.001);
@@ -650,7 +650,7 @@ mod tests {
                     max_leaf_size: 4,
                 },
             )
-            .unwrap();
+            .expect("a triangle soup builds");
             for k in 0..400 {
                 let mut origin = Vec3::new(rnd(), rnd(), rnd()) * 16.0 - 3.0;
                 let mut dir = Vec3::new(rnd(), rnd(), rnd()) * 2.0 - 1.0;
@@ -805,7 +805,7 @@ mod tests {
                     max_leaf_size: 4,
                 },
             )
-            .unwrap();
+            .expect("a triangle soup builds");
             let mut internal = 0;
             for (n, node) in o.nodes().iter().enumerate() {
                 if node.is_leaf() {

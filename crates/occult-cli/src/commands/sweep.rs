@@ -208,7 +208,7 @@ mod tests {
 
     #[test]
     fn vary_parses_and_refuses() {
-        let v = parse_vary("oqgrid.res=10, 20,40").unwrap();
+        let v = parse_vary("oqgrid.res=10, 20,40").expect("a renderer, key and spaced values parse");
         assert_eq!((v.algorithm.as_str(), v.key.as_str()), ("oqgrid", "res"));
         assert_eq!(v.values, ["10", "20", "40"]);
         for bad in [

@@ -309,7 +309,10 @@ mod tests {
             I32x8::select(m, la, lb).to_array(),
             std::array::from_fn(|i| if on(i) { a[i] } else { b[i] })
         );
-        assert_eq!(la.reduce_min_u32(), a.iter().map(|&x| x as u32).min().unwrap());
+        assert_eq!(
+            la.reduce_min_u32(),
+            a.iter().map(|&x| x as u32).min().expect("eight lanes are not empty")
+        );
         assert_eq!(la.reduce_max(), i32::MAX);
         assert_eq!(lb.reduce_max(), 9);
         assert_eq!(la.low_f64().to_array(), [a[0], a[1], a[2], a[3]].map(f64::from));

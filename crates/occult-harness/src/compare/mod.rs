@@ -57,14 +57,19 @@
 //! use occult_core::{Camera, Mesh, Scene, Vec3};
 //! use occult_harness::compare::{compare, CompareConfig};
 //! use occult_render::Algorithm;
-//! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).unwrap();
-//! let scene = Arc::new(Scene::from_mesh("tri", mesh).unwrap());
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]])?;
+//! let scene = Arc::new(Scene::from_mesh("tri", mesh)?);
 //! let cameras = [Camera::look_at(Vec3::new(0.3, 0.3, 2.0), Vec3::new(0.3, 0.3, 0.0))];
 //! let config = CompareConfig::new(vec![Algorithm::FRUSTUM], 32, 32);
-//! let report = compare(scene, &cameras, &config, &mut |_| {}).unwrap();
+//! let report = compare(scene, &cameras, &config, &mut |_| {})?;
 //! assert_eq!(report.reference.as_deref(), Some("zbuffer")); // rendered although not requested
-//! assert_eq!(report.renderer("frustum").unwrap().frames_identical, Some(1));
-//! assert_eq!(report.oracle.as_ref().unwrap().triangles_visible, [1]);
+//! let frustum = report.renderer("frustum").expect("frustum is in the report");
+//! assert_eq!(frustum.frames_identical, Some(1));
+//! let oracle = report.oracle.as_ref().expect("a brute-force reference comes with an oracle");
+//! assert_eq!(oracle.triangles_visible, [1]);
+//! # Ok(())
+//! # }
 //! ```
 //!
 //! Deviation from the harness first sketched (`views: &[View]`): it takes cameras and one

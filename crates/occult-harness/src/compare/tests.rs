@@ -25,11 +25,15 @@ fn cubes() -> Arc<Scene> {
     let triangles = faces.iter().flat_map(|&[a, b, c, d]| [[a, b, c], [a, c, d]]).collect();
     let mut builder = SceneBuilder::new();
     let cube = builder
-        .add_mesh("cube", Mesh::new(corners, triangles).unwrap())
-        .unwrap();
+        .add_mesh(
+            "cube",
+            Mesh::new(corners, triangles).expect("a cube of in-range triangles is a valid mesh"),
+        )
+        .expect("a valid mesh adds");
     let ground = [[-8.0, -8.0], [8.0, -8.0], [8.0, 8.0], [-8.0, 8.0]].map(|[x, z]| Vec3::new(x, -0.5, z));
-    let ground = Mesh::new(ground.to_vec(), vec![[0, 2, 1], [0, 3, 2]]).unwrap();
-    let ground = builder.add_mesh("ground", ground).unwrap();
+    let ground =
+        Mesh::new(ground.to_vec(), vec![[0, 2, 1], [0, 3, 2]]).expect("a quad of in-range triangles is a valid mesh");
+    let ground = builder.add_mesh("ground", ground).expect("a valid mesh adds");
     let at = (0..36).map(|k| Vec3::new((k / 6) as f32 * 2.0 - 5.0, 0.0, (k % 6) as f32 * 2.0 - 5.0));
     let mut instances = vec![Instance {
         parent_from_child: Affine3A::IDENTITY,
@@ -39,8 +43,10 @@ fn cubes() -> Arc<Scene> {
         parent_from_child: Affine3A::from_translation(at),
         child: cube,
     }));
-    let root = builder.add_group("cubes", instances).unwrap();
-    Arc::new(builder.build(root).unwrap())
+    let root = builder
+        .add_group("cubes", instances)
+        .expect("a group of known nodes adds");
+    Arc::new(builder.build(root).expect("the cubes have triangles and build"))
 }
 
 fn circle(n: usize) -> Vec<Camera> {
@@ -61,7 +67,8 @@ fn run(algorithms: Vec<Algorithm>, cameras: &[Camera]) -> Result<CompareReport> 
 #[test]
 fn frustum_is_identical_to_zbuffer_on_every_frame() {
     let cameras = circle(6);
-    let report = run(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], &cameras).unwrap();
+    let report =
+        run(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], &cameras).expect("zbuffer and frustum compare on the cubes");
     assert_eq!(report.reference.as_deref(), Some("zbuffer"));
     assert_eq!(report.frames, 6);
     for r in &report.renderers {
@@ -75,7 +82,11 @@ fn frustum_is_identical_to_zbuffer_on_every_frame() {
         assert!(r.min_psnr_db.is_none());
     }
     assert_eq!(
-        report.oracle.as_ref().unwrap().frames_identical,
+        report
+            .oracle
+            .as_ref()
+            .expect("a brute-force reference comes with an oracle")
+            .frames_identical,
         6,
         "rasterizing the visible set must reproduce the frame"
     );
@@ -88,15 +99,21 @@ fn report_numbers_are_consistent() {
         vec![Algorithm::FRUSTUM, Algorithm::ZBUFFER, Algorithm::FRUSTUM],
         &cameras,
     )
-    .unwrap();
+    .expect("zbuffer and frustum compare on the cubes");
     let names: Vec<_> = report.renderers.iter().map(|r| r.name.as_str()).collect();
     assert_eq!(names, ["frustum", "zbuffer"], "requested order, duplicates dropped");
     assert_eq!(report.scene_triangles, 2 + 36 * 12);
-    let z = report.renderer("zbuffer").unwrap();
-    let f = report.renderer("frustum").unwrap();
+    let z = report.renderer("zbuffer").expect("zbuffer is in the report");
+    let f = report.renderer("frustum").expect("frustum is in the report");
     assert!(z.is_reference && !f.is_reference && z.requested && f.requested);
     assert_eq!(z.speedup_vs_zbuffer, Some(1.0));
-    assert!((f.speedup_vs_zbuffer.unwrap() - z.mean_ms / f.mean_ms).abs() < 1e-9);
+    assert!(
+        (f.speedup_vs_zbuffer
+            .expect("frustum is timed against a zbuffer in the report")
+            - z.mean_ms / f.mean_ms)
+            .abs()
+            < 1e-9
+    );
     // zbuffer submits everything; frustum never more.
     assert_eq!(z.stats.triangles_submitted, report.scene_triangles as f64);
     for r in [z, f] {
@@ -108,17 +125,38 @@ fn report_numbers_are_consistent() {
         let mean_ms = r.per_frame.iter().map(|p| p.time_ms).sum::<f64>() / 5.0;
         assert!((r.mean_ms - mean_ms).abs() < 1e-9);
         assert!(r.time.min_ms <= r.time.median_ms && r.time.median_ms <= r.p95_ms && r.p95_ms <= r.time.max_ms);
-        assert!(r.vs_oracle.unwrap() > 0.0);
+        assert!(r.vs_oracle.expect("every renderer is compared with the oracle") > 0.0);
         assert!(r.prepare_ms >= 0.0);
         assert!(!r.phases.is_empty());
     }
     assert!(f.stats.triangles_submitted <= z.stats.triangles_submitted);
     // Visible triangles: from the item buffer, never more than rasterized.
-    assert_eq!(report.oracle.as_ref().unwrap().triangles_visible.len(), 5);
-    let visible: u64 = report.oracle.as_ref().unwrap().triangles_visible.iter().sum();
+    assert_eq!(
+        report
+            .oracle
+            .as_ref()
+            .expect("a brute-force reference comes with an oracle")
+            .triangles_visible
+            .len(),
+        5
+    );
+    let visible: u64 = report
+        .oracle
+        .as_ref()
+        .expect("a brute-force reference comes with an oracle")
+        .triangles_visible
+        .iter()
+        .sum();
     assert_eq!(z.triangles_visible_total, visible);
     assert!(visible > 0);
-    for (i, &v) in report.oracle.as_ref().unwrap().triangles_visible.iter().enumerate() {
+    for (i, &v) in report
+        .oracle
+        .as_ref()
+        .expect("a brute-force reference comes with an oracle")
+        .triangles_visible
+        .iter()
+        .enumerate()
+    {
         assert!(v <= z.per_frame[i].triangles_rasterized && v < report.scene_triangles);
     }
     assert!(report.process_peak_rss_bytes.is_none_or(|b| b > 0));
@@ -129,7 +167,7 @@ fn peak_memory_is_measured_per_renderer_where_the_kernel_allows() {
     let mut config = CompareConfig::new(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], 96, 64);
     config.options.raster.threads = 2;
     config.peak_rss = Some(PeakRss::new());
-    let report = compare(cubes(), &circle(2), &config, &mut |_| {}).unwrap();
+    let report = compare(cubes(), &circle(2), &config, &mut |_| {}).expect("zbuffer and frustum compare on the cubes");
     let process = report.process_peak_rss_bytes;
     let measurable = cfg!(target_os = "linux") && std::fs::write("/proc/self/clear_refs", "5").is_ok();
     for r in &report.renderers {
@@ -138,7 +176,11 @@ fn peak_memory_is_measured_per_renderer_where_the_kernel_allows() {
                 assert!(measurable, "{}: a peak where none can be measured", r.name);
                 assert!(peak > 0);
                 // Each reading is of the whole process, so never above its peak.
-                assert!(peak <= process.unwrap(), "{}: {peak} > {process:?}", r.name);
+                assert!(
+                    peak <= process.expect("a renderer's peak implies the process peak"),
+                    "{}: {peak} > {process:?}",
+                    r.name
+                );
             }
             None => assert!(!measurable, "{}: no peak although the mark can be reset", r.name),
         }
@@ -147,14 +189,15 @@ fn peak_memory_is_measured_per_renderer_where_the_kernel_allows() {
 
 #[test]
 fn process_memory_is_left_alone_unless_asked_for() {
-    let report = run(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], &circle(2)).unwrap();
+    let report = run(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], &circle(2))
+        .expect("zbuffer and frustum compare on the cubes");
     assert_eq!(report.process_peak_rss_bytes, None);
     assert!(report.renderers.iter().all(|r| r.peak_rss_bytes.is_none()));
 }
 
 #[test]
 fn reference_is_added_when_not_requested() {
-    let report = run(vec![Algorithm::FRUSTUM], &circle(2)).unwrap();
+    let report = run(vec![Algorithm::FRUSTUM], &circle(2)).expect("frustum compares on the cubes");
     let z = &report.renderers[0];
     assert_eq!((z.name.as_str(), z.is_reference, z.requested), ("zbuffer", true, false));
     assert!(report.reference_note.contains("not requested"));
@@ -170,8 +213,8 @@ fn scenes_too_large_for_brute_force_use_frustum_as_reference() {
         vec![Vec3::ZERO, Vec3::new(0.8, 0.0, 0.0), Vec3::new(0.0, 0.8, 0.0)],
         vec![[0, 1, 2]],
     )
-    .unwrap();
-    let mut id = b.add_mesh("tri", tri).unwrap();
+    .expect("one in-range triangle is a valid mesh");
+    let mut id = b.add_mesh("tri", tri).expect("a valid mesh adds");
     for level in 0..10 {
         let pitch = 10f32.powi(level);
         let row: Vec<_> = (0..10)
@@ -180,14 +223,17 @@ fn scenes_too_large_for_brute_force_use_frustum_as_reference() {
                 child: id,
             })
             .collect();
-        id = b.add_group(format!("level{level}"), row).unwrap();
+        id = b
+            .add_group(format!("level{level}"), row)
+            .expect("a row of a known node adds");
     }
-    let scene = Arc::new(b.build(id).unwrap());
+    let scene = Arc::new(b.build(id).expect("10^10 instances build"));
     assert!(scene.item_count() > MAX_BRUTE_FORCE_ITEMS);
     let mut camera = Camera::look_at(Vec3::new(4.0, 0.5, 6.0), Vec3::new(4.0, 0.5, 0.0));
     camera.far = 30.0;
     let config = CompareConfig::new(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], 64, 48);
-    let report = compare(scene, &[camera, camera], &config, &mut |_| {}).unwrap();
+    let report = compare(scene, &[camera, camera], &config, &mut |_| {})
+        .expect("frustum compares as the reference on a scene too large for brute force");
     assert_eq!(report.reference.as_deref(), Some("frustum"));
     assert!(
         report.reference_note.contains("more than brute force accepts"),
@@ -200,8 +246,22 @@ fn scenes_too_large_for_brute_force_use_frustum_as_reference() {
     let f = &report.renderers[0];
     assert!(f.is_reference && f.requested && f.speedup_vs_zbuffer.is_none());
     assert_eq!(f.frames_identical, Some(2));
-    assert!(report.oracle.as_ref().unwrap().triangles_visible[0] > 0);
-    assert_eq!(report.oracle.as_ref().unwrap().frames_identical, 2);
+    assert!(
+        report
+            .oracle
+            .as_ref()
+            .expect("a frustum reference comes with an oracle")
+            .triangles_visible[0]
+            > 0
+    );
+    assert_eq!(
+        report
+            .oracle
+            .as_ref()
+            .expect("a frustum reference comes with an oracle")
+            .frames_identical,
+        2
+    );
 }
 
 #[test]
@@ -228,8 +288,16 @@ fn degenerate_camera_and_bad_size_are_errors() {
 #[test]
 fn views_that_see_nothing_are_fine() {
     let away = Camera::look_at(Vec3::new(0.0, 50.0, 0.0), Vec3::new(0.0, 100.0, 1.0));
-    let report = run(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], &[away]).unwrap();
-    assert_eq!(report.oracle.as_ref().unwrap().triangles_visible, vec![0]);
+    let report = run(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], &[away])
+        .expect("zbuffer and frustum compare on a view of nothing");
+    assert_eq!(
+        report
+            .oracle
+            .as_ref()
+            .expect("a brute-force reference comes with an oracle")
+            .triangles_visible,
+        vec![0]
+    );
     assert!(report.renderers.iter().all(|r| r.frames_identical == Some(1)));
 }
 
@@ -272,12 +340,12 @@ fn paper_error_accepts_what_is_visible_in_the_pixel() {
 #[test]
 fn differing_frames_are_measured() {
     let scene = cubes();
-    let view = View::new(circle(1)[0], 32, 24).unwrap();
-    let mut a = Frame::new(32, 24).unwrap();
+    let view = View::new(circle(1)[0], 32, 24).expect("a 32x24 view of the cubes");
+    let mut a = Frame::new(32, 24).expect("a 32x24 frame");
     let mut r = Algorithm::ZBUFFER
         .build(Arc::clone(&scene), &RenderOptions::default())
-        .unwrap();
-    r.render(&view, &mut a).unwrap();
+        .expect("zbuffer builds for any scene");
+    r.render(&view, &mut a).expect("zbuffer renders the cubes");
     let mut b = a.clone();
     assert_eq!(item_error(&a, &b), 0.0);
     b.clear();
@@ -290,19 +358,31 @@ fn reference_can_be_chosen_or_none() {
     let cameras = circle(4);
     let mut config = CompareConfig::new(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], 96, 64);
     config.reference = Reference::Spec(AlgoSpec::from(Algorithm::FRUSTUM));
-    let report = compare(cubes(), &cameras, &config, &mut |_| {}).unwrap();
+    let report = compare(cubes(), &cameras, &config, &mut |_| {})
+        .expect("zbuffer and frustum compare with frustum as the reference");
     assert_eq!(report.reference.as_deref(), Some("frustum"));
-    assert!(report.renderer("frustum").unwrap().is_reference);
-    assert_eq!(report.renderer("zbuffer").unwrap().frames_identical, Some(4));
+    assert!(
+        report
+            .renderer("frustum")
+            .expect("frustum is in the report")
+            .is_reference
+    );
+    assert_eq!(
+        report
+            .renderer("zbuffer")
+            .expect("zbuffer is in the report")
+            .frames_identical,
+        Some(4)
+    );
     assert!(report.oracle.is_some());
 
     config.algorithms = vec![AlgoSpec::from(Algorithm::FRUSTUM)];
     config.reference = Reference::None;
-    let report = compare(cubes(), &cameras, &config, &mut |_| {}).unwrap();
+    let report = compare(cubes(), &cameras, &config, &mut |_| {}).expect("frustum compares with no reference");
     assert_eq!(report.reference, None);
     assert!(report.oracle.is_none());
     assert_eq!(report.renderers.len(), 1, "no reference is added");
-    let f = report.renderer("frustum").unwrap();
+    let f = report.renderer("frustum").expect("frustum is in the report");
     assert!(!f.is_reference);
     assert_eq!(f.frames_identical, None, "nothing is checked");
     assert_eq!(f.vs_oracle, None);
@@ -321,11 +401,11 @@ fn approximate_or_impossible_references_are_refused() {
     // them from views where the ground passes close to the eye.
     let cameras = circle(1);
     let mut config = CompareConfig::new(vec![Algorithm::FRUSTUM], 32, 32);
-    config.reference = Reference::Spec(AlgoSpec::parse("rzb").unwrap());
+    config.reference = Reference::Spec(AlgoSpec::parse("rzb").expect("rzb is a known renderer"));
     let e = compare(cubes(), &cameras, &config, &mut |_| {}).unwrap_err();
     assert!(matches!(e, CompareError::BadReference { .. }), "{e}");
     assert!(e.to_string().contains("conservative"), "{e}");
-    config.reference = Reference::Spec(AlgoSpec::parse("lzb:mode=naive").unwrap());
+    config.reference = Reference::Spec(AlgoSpec::parse("lzb:mode=naive").expect("lzb:mode=naive is a valid spec"));
     let e = compare(cubes(), &cameras, &config, &mut |_| {}).unwrap_err();
     assert!(e.to_string().contains("approximate"), "{e}");
 }
@@ -344,11 +424,11 @@ fn image_complexity_is_the_clipped_screen_area_of_every_layer() {
             ],
             vec![[0, 1, 2], [0, 2, 3]],
         )
-        .unwrap()
+        .expect("a quad of in-range triangles is a valid mesh")
     };
     let mut b = SceneBuilder::new();
-    let near = b.add_mesh("near", quad(0.0)).unwrap();
-    let far = b.add_mesh("far", quad(-5.0)).unwrap();
+    let near = b.add_mesh("near", quad(0.0)).expect("a valid mesh adds");
+    let far = b.add_mesh("far", quad(-5.0)).expect("a valid mesh adds");
     let root = b
         .add_group(
             "layers",
@@ -359,10 +439,10 @@ fn image_complexity_is_the_clipped_screen_area_of_every_layer() {
                 })
                 .to_vec(),
         )
-        .unwrap();
-    let scene = Arc::new(b.build(root).unwrap());
+        .expect("a group of known nodes adds");
+    let scene = Arc::new(b.build(root).expect("the layers have triangles and build"));
     let camera = Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO);
-    let view = View::new(camera, 64, 48).unwrap();
+    let view = View::new(camera, 64, 48).expect("a 64x48 view of the layers");
     let area = image_complexity(&scene, &view);
     assert!((area - 2.0 * 64.0 * 48.0).abs() < 1e-3 * area, "{area}");
 
@@ -375,9 +455,9 @@ fn image_complexity_is_the_clipped_screen_area_of_every_layer() {
         ],
         vec![[0, 1, 2]],
     )
-    .unwrap();
-    let scene = Arc::new(Scene::from_mesh("tri", tri).unwrap());
-    let view = View::new(camera, 100, 100).unwrap();
+    .expect("one in-range triangle is a valid mesh");
+    let scene = Arc::new(Scene::from_mesh("tri", tri).expect("one triangle is a valid scene"));
+    let view = View::new(camera, 100, 100).expect("a 100x100 view of the triangle");
     let c = view.clip_from_world();
     let px = |p: Vec3| {
         let v = c * p.extend(1.0);
@@ -390,8 +470,11 @@ fn image_complexity_is_the_clipped_screen_area_of_every_layer() {
 
     let mut config = CompareConfig::new(vec![Algorithm::ZBUFFER], 64, 48);
     config.image_complexity = true;
-    let report = compare(cubes(), &circle(2), &config, &mut |_| {}).unwrap();
-    let dc = report.image.mean_depth_complexity().unwrap();
+    let report = compare(cubes(), &circle(2), &config, &mut |_| {}).expect("zbuffer compares on the cubes");
+    let dc = report
+        .image
+        .mean_depth_complexity()
+        .expect("image complexity was asked for");
     assert!(dc >= 1.0, "depth complexity {dc}");
 }
 

@@ -187,7 +187,7 @@ mod tests {
             );
             assert!(CASES[..i].iter().all(|d| d.name != c.name), "{} twice", c.name);
             assert!(c.frames >= 1);
-            let path = PathSpec::parse(&c.path_spec()).unwrap();
+            let path = PathSpec::parse(&c.path_spec()).expect("every case's path spec parses");
             assert_eq!(path.len(), c.frames as usize, "{}", c.name);
             match c.scene {
                 CaseScene::Generated(spec) => {
@@ -201,9 +201,9 @@ mod tests {
 
     #[test]
     fn selection_by_name_quick_and_frames() {
-        let all = select(None, false, None).unwrap();
+        let all = select(None, false, None).expect("selecting all cases succeeds");
         assert_eq!(all, CASES);
-        let quick = select(None, true, None).unwrap();
+        let quick = select(None, true, None).expect("selecting the quick cases succeeds");
         assert!(quick.iter().all(|c| c.quick && c.frames <= QUICK_MAX_FRAMES));
         assert_eq!(quick.len(), CASES.iter().filter(|c| c.quick).count());
         let names = [
@@ -211,7 +211,7 @@ mod tests {
             "city-street".into(),
             "terrain-flyover".into(),
         ];
-        let some = select(Some(&names), false, Some(3)).unwrap();
+        let some = select(Some(&names), false, Some(3)).expect("known case names select");
         assert_eq!(
             some.iter().map(|c| c.name).collect::<Vec<_>>(),
             ["terrain-flyover", "city-street"]

@@ -42,6 +42,7 @@
 //! ```
 //! use occult_harness::suite::{run_suite, Case, CaseScene, SuiteConfig};
 //! use occult_render::Algorithm;
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let cases = [Case {
 //!     name: "tiny-orbit",
 //!     scene: CaseScene::Generated("terrain:g=8"),
@@ -50,10 +51,12 @@
 //!     quick: true,
 //! }];
 //! let config = SuiteConfig::new([Algorithm::ZBUFFER, Algorithm::FRUSTUM], 32, 24);
-//! let report = run_suite(&cases, &config, &mut |_| {}).unwrap();
-//! let frustum = report.summary.iter().find(|r| r.name == "frustum").unwrap();
+//! let report = run_suite(&cases, &config, &mut |_| {})?;
+//! let frustum = report.summary.iter().find(|r| r.name == "frustum").expect("frustum is in the summary");
 //! assert_eq!(frustum.frames_identical, Some(2));
 //! assert!(frustum.speedup_geomean.is_some());
+//! # Ok(())
+//! # }
 //! ```
 
 mod cases;

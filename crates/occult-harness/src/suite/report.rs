@@ -461,15 +461,26 @@ mod tests {
     fn geometric_means_skip_what_is_not_a_ratio() {
         assert_eq!(geomean(&[]), None);
         assert_eq!(geomean(&[("a", 0.0), ("b", f64::NAN)]), None);
-        let g = geomean(&[("a", 2.0), ("b", 8.0), ("c", f64::INFINITY)]).unwrap();
+        let g =
+            geomean(&[("a", 2.0), ("b", 8.0), ("c", f64::INFINITY)]).expect("two finite ratios have a geometric mean");
         assert!((g - 4.0).abs() < 1e-12, "{g}");
     }
 
     #[test]
     fn worst_is_the_first_extreme() {
         let v = [("a", 2.0), ("b", 0.5), ("c", 0.5), ("d", 3.0)];
-        assert_eq!(worst(&v, |a, b| a < b).unwrap().case, "b");
-        assert_eq!(worst(&v, |a, b| a > b).unwrap().case, "d");
+        assert_eq!(
+            worst(&v, |a, b| a < b)
+                .expect("a non-empty list has a worst entry")
+                .case,
+            "b"
+        );
+        assert_eq!(
+            worst(&v, |a, b| a > b)
+                .expect("a non-empty list has a worst entry")
+                .case,
+            "d"
+        );
         assert_eq!(worst(&[], |a, b| a < b), None);
     }
 

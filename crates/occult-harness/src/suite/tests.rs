@@ -39,7 +39,7 @@ fn config<A: Into<AlgoSpec>>(algorithms: impl IntoIterator<Item = A>) -> SuiteCo
 fn scratch(test: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("occult-suite-{test}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::create_dir_all(&dir).expect("the temporary directory is writable");
     dir
 }
 
@@ -54,7 +54,7 @@ fn every_renderer_is_summarised_over_every_case() {
             SuiteProgress::Done(c) => format!("done {}", c.name),
         })
     })
-    .unwrap();
+    .expect("the tiny cases run with every renderer");
     assert_eq!(report.suite_version, SUITE_VERSION);
     assert_eq!((report.width, report.height), (48, 32));
     assert_eq!(report.cases.len(), 2);
@@ -69,10 +69,26 @@ fn every_renderer_is_summarised_over_every_case() {
         assert_eq!(r.frames, 5);
         assert!(r.speedup_geomean.is_some_and(|s| s > 0.0), "{}", r.name);
         assert!(r.oracle_geomean.is_some_and(|s| s > 0.0), "{}", r.name);
-        let worst = r.speedup_worst.as_ref().unwrap();
+        let worst = r
+            .speedup_worst
+            .as_ref()
+            .expect("a renderer timed on two cases has a worst case");
         assert!(worst.case.starts_with("tiny-"));
-        assert!(worst.value <= r.speedup_geomean.unwrap() * (1.0 + 1e-12));
-        assert!(r.oracle_worst.as_ref().unwrap().value >= r.oracle_geomean.unwrap() * (1.0 - 1e-12));
+        assert!(
+            worst.value
+                <= r.speedup_geomean
+                    .expect("a renderer timed on two cases has a mean speedup")
+                    * (1.0 + 1e-12)
+        );
+        assert!(
+            r.oracle_worst
+                .as_ref()
+                .expect("a renderer checked on two cases has a worst case")
+                .value
+                >= r.oracle_geomean
+                    .expect("a renderer checked on two cases has a mean ratio to the oracle")
+                    * (1.0 - 1e-12)
+        );
         if r.conservative {
             assert_eq!(r.frames_identical, Some(5), "{}: DESIGN invariant 2", r.name);
         }
@@ -98,24 +114,31 @@ fn every_renderer_is_summarised_over_every_case() {
             .iter()
             .all(|r| r.direct_frames == 0 || !never.contains(&r.name.as_str())));
     }
-    let zbuffer = report.renderer("zbuffer").unwrap();
+    let zbuffer = report.renderer("zbuffer").expect("zbuffer is in the summary");
     assert_eq!(zbuffer.speedup_geomean, Some(1.0));
     assert_eq!(zbuffer.violations, 0);
     // Only speed can be violated here: conservative frames are identical.
     assert!(report
         .violations
         .iter()
-        .all(|v| v.kind == ViolationKind::SlowerThanZbuffer && v.speedup_vs_zbuffer.unwrap() < 1.0));
+        .all(|v| v.kind == ViolationKind::SlowerThanZbuffer
+            && v.speedup_vs_zbuffer.expect("a speed violation names its speedup") < 1.0));
     assert!(report.violations.iter().all(|v| v.renderer != "rzb"));
     assert_eq!(report.violation_count, report.violations.len());
     assert_eq!(
         report.violation_count,
         report.summary.iter().map(|r| r.violations).sum::<usize>()
     );
-    assert_eq!(events.first().unwrap(), "case tiny-city-street");
-    assert_eq!(events.last().unwrap(), "done tiny-terrain-orbit");
+    assert_eq!(
+        events.first().expect("the suite reports its first case"),
+        "case tiny-city-street"
+    );
+    assert_eq!(
+        events.last().expect("the suite reports that it is done"),
+        "done tiny-terrain-orbit"
+    );
     assert!(events.contains(&"compare".to_string()));
-    let json = serde_json::to_value(&report).unwrap();
+    let json = serde_json::to_value(&report).expect("a report serialises to JSON");
     for field in [
         "suite_version",
         "cases",
@@ -131,18 +154,24 @@ fn every_renderer_is_summarised_over_every_case() {
 
 #[test]
 fn zbuffer_is_measured_although_not_requested() {
-    let report = run_suite(&TINY[1..], &config([Algorithm::FRUSTUM]), &mut |_| {}).unwrap();
+    let report = run_suite(&TINY[1..], &config([Algorithm::FRUSTUM]), &mut |_| {})
+        .expect("the tiny terrain case runs with frustum");
     assert_eq!(report.algorithms, ["frustum"]);
     let case = &report.cases[0];
     assert_eq!(case.reference.as_deref(), Some("zbuffer"));
-    assert!(case.renderer("frustum").unwrap().speedup_vs_zbuffer.is_some());
+    assert!(case
+        .renderer("frustum")
+        .expect("frustum is in the case's report")
+        .speedup_vs_zbuffer
+        .is_some());
     assert!(case.oracle_ms.is_some());
 }
 
 #[test]
 fn model_cases_are_skipped_without_their_file_and_run_with_it() {
     // No models folder: skipped, saying so.
-    let report = run_suite(&[CUBE_CASE], &config([Algorithm::ZBUFFER]), &mut |_| {}).unwrap();
+    let report = run_suite(&[CUBE_CASE], &config([Algorithm::ZBUFFER]), &mut |_| {})
+        .expect("a suite without models skips its model cases");
     assert!(report.cases.is_empty());
     assert_eq!(report.skipped[0].name, "cube-orbit");
     assert_eq!(report.skipped[0].path, None);
@@ -154,27 +183,40 @@ fn model_cases_are_skipped_without_their_file_and_run_with_it() {
     let mut c = config([Algorithm::ZBUFFER, Algorithm::FRUSTUM]);
     c.models = Some(dir.clone());
     let cases = [CUBE_CASE, TINY[1]];
-    let report = run_suite(&cases, &c, &mut |_| {}).unwrap();
+    let report = run_suite(&cases, &c, &mut |_| {}).expect("a suite with a models folder skips missing files");
     assert_eq!(report.cases.len(), 1);
     let skipped = &report.skipped[0];
-    assert!(skipped.path.as_ref().unwrap().ends_with("cube.obj"), "{skipped:?}");
+    assert!(
+        skipped
+            .path
+            .as_ref()
+            .expect("a missing model names the path looked for")
+            .ends_with("cube.obj"),
+        "{skipped:?}"
+    );
     assert!(skipped.reason.contains("missing"));
 
     // With the file.
-    std::fs::create_dir_all(dir.join("cube")).unwrap();
+    std::fs::create_dir_all(dir.join("cube")).expect("the temporary directory is writable");
     let mut obj = String::new();
     for i in 0..8 {
         obj += &format!("v {} {} {}\n", i & 1, i >> 1 & 1, i >> 2 & 1);
     }
     obj += "f 1 3 4 2\nf 5 6 8 7\nf 1 2 6 5\nf 3 7 8 4\nf 1 5 7 3\nf 2 4 8 6\n";
-    std::fs::write(dir.join("cube/cube.obj"), obj).unwrap();
-    let report = run_suite(&cases, &c, &mut |_| {}).unwrap();
+    std::fs::write(dir.join("cube/cube.obj"), obj).expect("the temporary directory is writable");
+    let report = run_suite(&cases, &c, &mut |_| {}).expect("the cube model and the tiny terrain case run");
     assert_eq!(report.cases.len(), 2);
     assert!(report.skipped.is_empty());
     assert_eq!(report.cases[0].triangles, 12);
     assert_eq!(report.cases[0].scene_name, "cube.obj");
-    assert_eq!(report.renderer("frustum").unwrap().frames_identical, Some(5));
-    std::fs::remove_dir_all(&dir).unwrap();
+    assert_eq!(
+        report
+            .renderer("frustum")
+            .expect("frustum is in the summary")
+            .frames_identical,
+        Some(5)
+    );
+    std::fs::remove_dir_all(&dir).expect("the test's scratch directory can be removed");
 }
 
 #[test]

@@ -398,7 +398,7 @@ mod tests {
     fn view(w: u32, h: u32) -> View {
         let mut c = Camera::look_at(Vec3::new(0.5, 1.0, 6.0), Vec3::ZERO);
         c.far = 1.0e6;
-        View::new(c, w, h).unwrap()
+        View::new(c, w, h).expect("a valid test view")
     }
 
     fn world_plane(t: [Vec3; 3]) -> [f64; 4] {
@@ -447,18 +447,19 @@ mod tests {
             };
             // Receivers: a few triangles forming the frame's depth.
             let recv: Vec<Vec3> = (0..9).map(|_| rp()).collect();
-            let recv = Mesh::new(recv, vec![[0, 1, 2], [3, 4, 5], [6, 7, 8]]).unwrap();
+            let recv = Mesh::new(recv, vec![[0, 1, 2], [3, 4, 5], [6, 7, 8]])
+                .expect("three in-range triangles are a valid mesh");
             let mut raster = Rasterizer::new(RasterConfig {
                 threads: 2,
                 ..Default::default()
             })
-            .unwrap();
+            .expect("two threads are a valid raster config");
             let mut culling = Rasterizer::new(RasterConfig {
                 cull_backfaces: true,
                 ..Default::default()
             })
-            .unwrap();
-            let mut frame = Frame::new(w, h).unwrap();
+            .expect("backface culling is a valid raster config");
+            let mut frame = Frame::new(w, h).expect("a frame of the view's size");
             let m = v.clip_from_object(&Affine3A::IDENTITY);
             let draw = |mesh, first_item| Draw {
                 mesh,
@@ -480,7 +481,7 @@ mod tests {
                 }
             }
             let tris: Vec<[u32; 3]> = (0..face_count as u32).map(|k| [3 * k, 3 * k + 1, 3 * k + 2]).collect();
-            let faces_mesh = Mesh::new(pos, tris).unwrap();
+            let faces_mesh = Mesh::new(pos, tris).expect("in-range face triangles are a valid mesh");
             let planes: Vec<[f64; 4]> = (0..face_count)
                 .map(|k| world_plane(faces_mesh.triangle_positions(k)))
                 .collect();
@@ -498,15 +499,20 @@ mod tests {
                     faces: StencilFaces::Planes(&planes),
                 },
             ];
-            let mut stencil = StencilBuffer::new(w, h).unwrap();
-            let counts = raster.draw_stencil(&v, &frame, &mut stencil, &draws).unwrap();
+            let mut stencil = StencilBuffer::new(w, h).expect("a stencil of the view's size");
+            let counts = raster
+                .draw_stencil(&v, &frame, &mut stencil, &draws)
+                .expect("a stencil of the frame's size and complete face lists");
 
             // Brute force.
             let mut expected = vec![0i32; (w * h) as usize];
             let mut ambiguous = vec![false; (w * h) as usize];
             let mut fragments = 0u64;
             let mut one = |mesh: &Mesh, k: usize, by_plane: Option<[f64; 4]>| {
-                let (mut all, mut front) = (Frame::new(w, h).unwrap(), Frame::new(w, h).unwrap());
+                let (mut all, mut front) = (
+                    Frame::new(w, h).expect("a frame of the view's size"),
+                    Frame::new(w, h).expect("a frame of the view's size"),
+                );
                 let d = Draw {
                     mesh,
                     triangles: DrawTriangles::Range(k as u32..k as u32 + 1),
@@ -586,7 +592,7 @@ mod tests {
             ],
             vec![[0, 1, 2]],
         )
-        .unwrap();
+        .expect("one in-range triangle is a valid mesh");
         let m = v.clip_from_object(&Affine3A::IDENTITY);
         let d = Draw {
             mesh: &mesh,
@@ -594,15 +600,17 @@ mod tests {
             clip_from_object: m,
             first_item: 5,
         };
-        let mut raster = Rasterizer::new(RasterConfig::default()).unwrap();
-        let mut frame = Frame::new(32, 32).unwrap();
+        let mut raster = Rasterizer::new(RasterConfig::default()).expect("the default raster config is valid");
+        let mut frame = Frame::new(32, 32).expect("a 32x32 frame");
         raster.draw(&v, &mut frame, std::slice::from_ref(&d), RasterMode::Full);
-        let mut stencil = StencilBuffer::new(32, 32).unwrap();
+        let mut stencil = StencilBuffer::new(32, 32).expect("a 32x32 stencil");
         let sd = StencilDraw {
             draw: d,
             faces: StencilFaces::Interpolated,
         };
-        let c = raster.draw_stencil(&v, &frame, &mut stencil, &[sd]).unwrap();
+        let c = raster
+            .draw_stencil(&v, &frame, &mut stencil, &[sd])
+            .expect("a stencil of the frame's size and interpolated faces");
         assert_eq!(c.fragments, frame.covered_pixel_count());
         assert_eq!(c.updates, c.fragments);
         // Counter-clockwise toward the eye: a front face, −1 wherever it is the visible surface.
@@ -613,19 +621,20 @@ mod tests {
     #[test]
     fn bad_stencil_inputs_are_errors() {
         let v = view(16, 8);
-        let frame = Frame::new(16, 8).unwrap();
-        let mut raster = Rasterizer::new(RasterConfig::default()).unwrap();
-        let mut wrong = StencilBuffer::new(8, 8).unwrap();
+        let frame = Frame::new(16, 8).expect("a 16x8 frame");
+        let mut raster = Rasterizer::new(RasterConfig::default()).expect("the default raster config is valid");
+        let mut wrong = StencilBuffer::new(8, 8).expect("an 8x8 stencil");
         assert!(raster.draw_stencil(&v, &frame, &mut wrong, &[]).is_err());
         assert!(StencilBuffer::new(0, 8).is_err());
-        let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).unwrap();
+        let mesh = Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]])
+            .expect("one in-range triangle is a valid mesh");
         let d = Draw {
             mesh: &mesh,
             triangles: DrawTriangles::All,
             clip_from_object: Mat4::IDENTITY,
             first_item: 0,
         };
-        let mut s = StencilBuffer::new(16, 8).unwrap();
+        let mut s = StencilBuffer::new(16, 8).expect("a 16x8 stencil");
         let short = StencilDraw {
             draw: d.clone(),
             faces: StencilFaces::Planes(&[]),

@@ -20,7 +20,7 @@ fn grid(n: u32, side: f32) -> Mesh {
             })
         })
         .collect();
-    Mesh::new(positions, triangles).unwrap()
+    Mesh::new(positions, triangles).expect("a grid of in-range triangles is a valid mesh")
 }
 
 /// On several threads, a fresh rasterizer's automatic strategy draws fewer than
@@ -30,7 +30,8 @@ fn grid(n: u32, side: f32) -> Mesh {
 #[test]
 fn small_draws_stay_on_the_calling_thread() {
     // One pixel is 2·10·tan 30° / 960 ≈ 0.012 units at the grid's distance.
-    let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 1280, 960).unwrap();
+    let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 1280, 960)
+        .expect("a 1280x960 view of the grid");
     let (tiny, large) = (grid(60, 0.012), grid(20, 0.5));
     let whole = |mesh| Draw {
         mesh,
@@ -44,13 +45,13 @@ fn small_draws_stay_on_the_calling_thread() {
         ..whole(&tiny)
     };
     let pass = |strategy, draws: &[Draw<'_>]| {
-        let mut frame = Frame::new(1280, 960).unwrap();
+        let mut frame = Frame::new(1280, 960).expect("a 1280x960 frame");
         let mut r = Rasterizer::new(RasterConfig {
             threads: 2,
             strategy,
             ..RasterConfig::default()
         })
-        .unwrap();
+        .expect("two threads and a strategy are a valid raster config");
         let counts = r.draw(&view, &mut frame, draws, RasterMode::Full);
         let (on_caller, used) = r.last_pass.expect("the draw recorded its pass");
         (on_caller, used, counts)
@@ -77,14 +78,17 @@ fn small_draws_stay_on_the_calling_thread() {
     );
     // Frames: the same draw, automatic and binned.
     let draw = [whole(&tiny), whole(&large)];
-    let mut frames = [Frame::new(1280, 960).unwrap(), Frame::new(1280, 960).unwrap()];
+    let mut frames = [
+        Frame::new(1280, 960).expect("a 1280x960 frame"),
+        Frame::new(1280, 960).expect("a 1280x960 frame"),
+    ];
     for (f, strategy) in frames.iter_mut().zip([Strategy::Auto, Strategy::Binned]) {
         let mut r = Rasterizer::new(RasterConfig {
             threads: 2,
             strategy,
             ..RasterConfig::default()
         })
-        .unwrap();
+        .expect("two threads and a strategy are a valid raster config");
         r.draw(&view, f, &draw, RasterMode::Full);
     }
     assert_eq!(frames[0].items(), frames[1].items());
@@ -209,7 +213,7 @@ fn passes_bounding_projected_vertices_change_nothing() {
         w,
         h,
     )
-    .unwrap();
+    .expect("a 96x64 view of the strip");
     // A strip of 40 quads (82 vertices) and a fan (11 vertices), each instanced thrice,
     // with an index-list draw between them.
     let strip = Mesh::new(
@@ -225,7 +229,7 @@ fn passes_bounding_projected_vertices_change_nothing() {
             .flat_map(|i| [[2 * i, 2 * i + 2, 2 * i + 1], [2 * i + 1, 2 * i + 2, 2 * i + 3]])
             .collect(),
     )
-    .unwrap();
+    .expect("a strip of in-range triangles is a valid mesh");
     let fan = Mesh::new(
         std::iter::once(Vec3::ZERO)
             .chain((0..10).map(|i| {
@@ -235,7 +239,7 @@ fn passes_bounding_projected_vertices_change_nothing() {
             .collect(),
         (1..10u32).map(|i| [0, i, i + 1]).collect(),
     )
-    .unwrap();
+    .expect("a fan of in-range triangles is a valid mesh");
     let list = [1u32, 5, 7, 30, 31];
     let mut draws = Vec::new();
     for k in 0..3 {
@@ -260,13 +264,13 @@ fn passes_bounding_projected_vertices_change_nothing() {
             strategy,
             ..RasterConfig::default()
         })
-        .unwrap();
+        .expect("one or two threads and a strategy are a valid raster config");
         let vp = Viewport::new(&view, r.config());
         let pool = r.pool.clone();
         let mut runs = Vec::new();
         // One pass; each whole mesh alone (82 > 50 goes alone, two fans fit); every draw alone.
         for max_vertices in [usize::MAX, 50, 1] {
-            let mut f = Frame::new(w, h).unwrap();
+            let mut f = Frame::new(w, h).expect("a frame of the view's size");
             let single = threads == 1;
             let mut pass = || r.draw_in_passes(&vp, &mut f, &draws, RasterMode::Full, max_vertices, single);
             let counts = match pool.clone() {

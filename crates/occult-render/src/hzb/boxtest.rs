@@ -127,27 +127,32 @@ mod tests {
     #[test]
     fn rect_covers_query_box_pixels() {
         let (view, clip) = crate::test_view(Vec3::new(0.3, 0.2, 5.0), Vec3::ZERO, 64, 48);
-        let frame = Frame::new(64, 48).unwrap();
+        let frame = Frame::new(64, 48).expect("a 64x48 frame");
         for b in [
             Aabb::new(Vec3::splat(-1.0), Vec3::splat(1.0)),
             Aabb::new(Vec3::new(2.0, 1.0, -3.0), Vec3::new(2.5, 1.2, -2.0)),
         ] {
-            let r = screen_rect(&clip, &b, 64, 48).unwrap();
+            let r = screen_rect(&clip, &b, 64, 48).expect("a box in view has a screen rectangle");
             let all = occult_raster::query_box(&frame, &view, &clip, &b);
             assert_eq!(occult_raster::query_rect(&frame, r, 1.0), r.area());
             assert!(all <= r.area());
         }
         // Near-crossing: the whole frame; empty box: nothing.
         let b = Aabb::new(Vec3::new(0.0, 0.0, 4.95), Vec3::new(1.0, 1.0, 6.0));
-        assert_eq!(screen_rect(&clip, &b, 64, 48).unwrap().area(), 64 * 48);
+        assert_eq!(
+            screen_rect(&clip, &b, 64, 48)
+                .expect("a box through the near plane covers the screen")
+                .area(),
+            64 * 48
+        );
         assert!(screen_rect(&clip, &Aabb::EMPTY, 64, 48).is_none());
     }
 
     #[test]
     fn hidden_only_behind_a_full_wall() {
         let (view, clip) = crate::test_view(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, 32, 32);
-        let mut frame = Frame::new(32, 32).unwrap();
-        let mut pyramid = ZPyramid::new(32, 32).unwrap();
+        let mut frame = Frame::new(32, 32).expect("a 32x32 frame");
+        let mut pyramid = ZPyramid::new(32, 32).expect("a 32x32 pyramid");
         let eye = Vec3::new(0.0, 0.0, 5.0);
         let b = Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5));
         let mut counts = PyramidCounts::default();

@@ -970,7 +970,7 @@ mod tests {
                 .with("order", "count")
                 .with("temporal", "off"),
         )
-        .unwrap();
+        .expect("recheck, order and temporal in range build");
         assert_eq!(o.recheck_every, 30);
         assert_eq!(o.order, ChildOrder::Count);
         assert!(!o.temporal);

@@ -1196,8 +1196,8 @@ mod tests {
     /// A big wall in front of rows of small grids: most of them hidden.
     fn wall_scene() -> (Arc<Scene>, View) {
         let mut b = SceneBuilder::new();
-        let wall = b.add_mesh("wall", grid(8)).unwrap();
-        let small = b.add_mesh("small", grid(4)).unwrap();
+        let wall = b.add_mesh("wall", grid(8)).expect("a valid mesh adds");
+        let small = b.add_mesh("small", grid(4)).expect("a valid mesh adds");
         let mut instances = vec![Instance {
             parent_from_child: Affine3A::from_scale_rotation_translation(
                 Vec3::splat(6.0),
@@ -1214,19 +1214,19 @@ mod tests {
             )),
             child: small,
         }));
-        let root = b.add_group("scene", instances).unwrap();
-        let scene = Arc::new(b.build(root).unwrap());
+        let root = b.add_group("scene", instances).expect("a group of known nodes adds");
+        let scene = Arc::new(b.build(root).expect("the wall has triangles and builds"));
         let camera = Camera::look_at(Vec3::new(2.0, 1.5, 6.0), Vec3::new(2.0, 1.5, 0.0));
-        (scene, View::new(camera, 96, 64).unwrap())
+        (scene, View::new(camera, 96, 64).expect("a 96x64 view of the wall"))
     }
 
     fn zbuffer_frame(scene: &Arc<Scene>, view: &View) -> Frame {
         let mut z = crate::AlgoSpec::parse("zbuffer")
-            .unwrap()
+            .expect("zbuffer is a known renderer")
             .build(scene.clone(), &RenderOptions::default())
-            .unwrap();
-        let mut f = Frame::new(view.width(), view.height()).unwrap();
-        z.render(view, &mut f).unwrap();
+            .expect("zbuffer builds for any scene");
+        let mut f = Frame::new(view.width(), view.height()).expect("a frame of the view's size");
+        z.render(view, &mut f).expect("zbuffer renders the wall scene");
         f
     }
 
@@ -1281,11 +1281,11 @@ mod tests {
             ",occluders=both",
         ] {
             let mut r = crate::AlgoSpec::parse(&format!("nbuffer:near_max=1{params}"))
-                .unwrap()
+                .expect("every listed nbuffer spec parses")
                 .build(scene.clone(), &RenderOptions::default())
-                .unwrap();
-            let mut f = Frame::new(view.width(), view.height()).unwrap();
-            let s = r.render(&view, &mut f).unwrap();
+                .expect("every listed nbuffer spec builds");
+            let mut f = Frame::new(view.width(), view.height()).expect("a frame of the view's size");
+            let s = r.render(&view, &mut f).expect("nbuffer renders the wall scene");
             assert!(f.same_visibility(&reference), "{params}");
             assert_eq!(
                 s.counters.get("near_occluders"),
@@ -1298,11 +1298,12 @@ mod tests {
         // A frame drawn directly (as after a frame whose culling did not pay) tests nothing
         // and draws the same frame; the run of direct frames ends with a culling frame.
         let no = NBufferOptions::default();
-        let mut r = NBufferCulling::with_options(scene.clone(), &RenderOptions::default(), &no).unwrap();
+        let mut r = NBufferCulling::with_options(scene.clone(), &RenderOptions::default(), &no)
+            .expect("the default nbuffer options build");
         r.direct.as_mut().expect("payoff is on by default").force(2, false);
         for i in 0..3 {
-            let mut f = Frame::new(view.width(), view.height()).unwrap();
-            let s = r.render(&view, &mut f).unwrap();
+            let mut f = Frame::new(view.width(), view.height()).expect("a frame of the view's size");
+            let s = r.render(&view, &mut f).expect("nbuffer renders the wall scene");
             assert!(f.same_visibility(&reference), "frame {i}");
             let direct = i < 2;
             assert_eq!(s.counters.get("payoff_direct"), u64::from(direct), "frame {i}");
@@ -1324,9 +1325,9 @@ mod tests {
             "payoff=maybe",
             "near_max=-1",
         ] {
-            let key = bad.split('=').next().unwrap();
+            let key = bad.split('=').next().expect("split yields at least one piece");
             match crate::AlgoSpec::parse(&format!("nbuffer:{bad}"))
-                .unwrap()
+                .expect("bad values parse; build refuses them")
                 .build(scene.clone(), &RenderOptions::default())
             {
                 Err(RenderError::BadParameter(m)) => assert!(m.contains("nbuffer") && m.contains(key), "{bad}: {m}"),

@@ -291,14 +291,14 @@ mod tests {
             }
             t.push([3 * i, 3 * i + 1, 3 * i + 2]);
         }
-        let mesh = Mesh::new(p, t).unwrap();
-        let mut raster = Rasterizer::new(RasterConfig::default()).unwrap();
+        let mesh = Mesh::new(p, t).expect("a soup of in-range triangles is a valid mesh");
+        let mut raster = Rasterizer::new(RasterConfig::default()).expect("the default raster config is valid");
         let mut disagreements = 0;
         let mut total = 0;
         for v in 0..8 {
             let eye = Vec3::new(rng.random_range(-9.0..9.0), rng.random_range(-3.0..3.0), 9.0 + v as f32);
-            let view = View::new(Camera::look_at(eye, Vec3::ZERO), 96, 64).unwrap();
-            let mut frame = Frame::new(96, 64).unwrap();
+            let view = View::new(Camera::look_at(eye, Vec3::ZERO), 96, 64).expect("a 96x64 view of the soup");
+            let mut frame = Frame::new(96, 64).expect("a 96x64 frame");
             let clip = view.clip_from_object(&Affine3A::IDENTITY);
             let draw = Draw {
                 mesh: &mesh,
@@ -347,7 +347,7 @@ mod tests {
             ],
             vec![[0, 1, 2], [0, 2, 3]],
         )
-        .unwrap();
+        .expect("two in-range triangles are a valid mesh");
         let small = Mesh::new(
             vec![
                 Vec3::new(1.0, 0.0, 1.0),
@@ -356,11 +356,12 @@ mod tests {
             ],
             vec![[0, 1, 2]],
         )
-        .unwrap();
-        let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 8.0), Vec3::ZERO), 96, 64).unwrap();
+        .expect("one in-range triangle is a valid mesh");
+        let view =
+            View::new(Camera::look_at(Vec3::new(0.0, 0.0, 8.0), Vec3::ZERO), 96, 64).expect("a 96x64 view of the wall");
         let clip = view.clip_from_object(&Affine3A::IDENTITY);
-        let mut raster = Rasterizer::new(RasterConfig::default()).unwrap();
-        let mut frame = Frame::new(96, 64).unwrap();
+        let mut raster = Rasterizer::new(RasterConfig::default()).expect("the default raster config is valid");
+        let mut frame = Frame::new(96, 64).expect("a 96x64 frame");
         fn draw(mesh: &Mesh, clip_from_object: Mat4) -> Draw<'_> {
             Draw {
                 mesh,
@@ -370,10 +371,10 @@ mod tests {
             }
         }
         raster.draw(&view, &mut frame, &[draw(&wall, clip)], RasterMode::Full);
-        let mut stale = ZPyramid::new(96, 64).unwrap();
+        let mut stale = ZPyramid::new(96, 64).expect("a 96x64 pyramid");
         stale.rebuild(&frame);
         raster.draw(&view, &mut frame, &[draw(&small, clip)], RasterMode::Full);
-        let mut fresh = ZPyramid::new(96, 64).unwrap();
+        let mut fresh = ZPyramid::new(96, 64).expect("a 96x64 pyramid");
         fresh.rebuild(&frame);
         let mut by_pyramid = 0;
         for _ in 0..2000 {
@@ -402,19 +403,25 @@ mod tests {
     /// box reaches the near plane; nothing for an empty or off-screen box.
     #[test]
     fn screen_rect_bounds_the_box() {
-        let view = View::new(Camera::look_at(Vec3::new(0.3, 0.2, 5.0), Vec3::ZERO), 64, 48).unwrap();
+        let view = View::new(Camera::look_at(Vec3::new(0.3, 0.2, 5.0), Vec3::ZERO), 64, 48)
+            .expect("a 64x48 view of the boxes");
         let clip = view.clip_from_object(&Affine3A::IDENTITY);
-        let frame = Frame::new(64, 48).unwrap();
+        let frame = Frame::new(64, 48).expect("a 64x48 frame");
         for b in [
             Aabb::new(Vec3::splat(-1.0), Vec3::splat(1.0)),
             Aabb::new(Vec3::new(2.0, 1.0, -3.0), Vec3::new(2.5, 1.2, -2.0)),
         ] {
-            let r = screen_rect(&clip, &b, 64, 48).unwrap();
+            let r = screen_rect(&clip, &b, 64, 48).expect("a box in view has a screen rectangle");
             assert!(query_box(&frame, &view, &clip, &b) <= r.area());
             assert!(r.x1 <= 64 && r.y1 <= 48 && r.x0 < r.x1 && r.y0 < r.y1);
         }
         let near = Aabb::new(Vec3::new(0.0, 0.0, 4.95), Vec3::new(1.0, 1.0, 6.0));
-        assert_eq!(screen_rect(&clip, &near, 64, 48).unwrap().area(), 64 * 48);
+        assert_eq!(
+            screen_rect(&clip, &near, 64, 48)
+                .expect("a box through the near plane covers the screen")
+                .area(),
+            64 * 48
+        );
         let nan = Aabb::new(Vec3::splat(f32::NAN), Vec3::splat(1.0));
         assert!(screen_rect(&clip, &nan, 64, 48).is_none_or(|r| r.area() == 64 * 48));
         assert!(screen_rect(&clip, &Aabb::EMPTY, 64, 48).is_none());
@@ -424,8 +431,9 @@ mod tests {
 
     #[test]
     fn empty_and_behind_boxes() {
-        let view = occult_core::View::new(Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO), 32, 32).unwrap();
-        let frame = Frame::new(32, 32).unwrap();
+        let view = occult_core::View::new(Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO), 32, 32)
+            .expect("a 32x32 view");
+        let frame = Frame::new(32, 32).expect("a 32x32 frame");
         let clip = view.clip_from_object(&Affine3A::IDENTITY);
         assert!(!any_sample_passes(&frame, &view, &clip, &Aabb::EMPTY));
         // Behind the camera.

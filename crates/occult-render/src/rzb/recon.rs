@@ -176,7 +176,8 @@ mod tests {
     }
 
     static EMPTY: std::sync::LazyLock<Scene> = std::sync::LazyLock::new(|| {
-        let mesh = occult_core::Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]]).unwrap();
-        Scene::from_mesh("one", mesh).unwrap()
+        let mesh = occult_core::Mesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0, 1, 2]])
+            .expect("one in-range triangle is a valid mesh");
+        Scene::from_mesh("one", mesh).expect("one triangle is a valid scene")
     });
 }

@@ -196,7 +196,9 @@ mod tests {
 
     fn color_at(scene: &Scene, i: u32, j: u32, n: u32) -> Rgba8 {
         // The centre of square (i, j), found by brute force over the flattened board.
-        let flat = scene.flatten(1 << 20).unwrap();
+        let flat = scene
+            .flatten(1 << 20)
+            .expect("a board of up to 37x37 squares is under 2^20 triangles");
         let square = BOARD_SIDE / n as f32;
         let c = Vec3::new(
             -50.0 + (i as f32 + 0.5) * square,
@@ -210,14 +212,14 @@ mod tests {
                 let hi = a.max(b).max(cc);
                 c.x > lo.x && c.x < hi.x && c.z > lo.z && c.z < hi.z
             })
-            .unwrap();
-        flat.triangle_color(t).unwrap()
+            .expect("a triangle covers the centre of every square");
+        flat.triangle_color(t).expect("a board has per-triangle colours")
     }
 
     #[test]
     fn counts_and_bounds_for_awkward_sizes() {
         for n in [1, 2, 15, 16, 17, 33, 255, 257, 300] {
-            let s = generate(&ChessboardParams { n }).unwrap();
+            let s = generate(&ChessboardParams { n }).expect("every board size in range generates");
             assert_eq!(s.item_count(), 2 * (n as u64).pow(2), "n = {n}");
             let b = s.bounds();
             assert!(
@@ -230,7 +232,7 @@ mod tests {
     #[test]
     fn parity_is_a_checkerboard_across_blocks() {
         let n = 37;
-        let s = generate(&ChessboardParams { n }).unwrap();
+        let s = generate(&ChessboardParams { n }).expect("a 37x37 board generates");
         for (i, j) in [(0, 0), (1, 0), (16, 0), (17, 3), (32, 32), (36, 35), (36, 36)] {
             let want = if (i + j) % 2 == 0 { BLACK } else { WHITE };
             assert_eq!(color_at(&s, i, j, n), want, "square ({i}, {j})");
@@ -239,7 +241,7 @@ mod tests {
 
     #[test]
     fn huge_board_is_small() {
-        let s = generate(&ChessboardParams { n: 10_000_000 }).unwrap();
+        let s = generate(&ChessboardParams { n: 10_000_000 }).expect("a 10^7 x 10^7 board generates as instances");
         assert_eq!(s.item_count(), 2 * 10u64.pow(14));
         assert!(s.memory_bytes() < 1 << 20, "{}", s.memory_bytes());
     }

@@ -378,7 +378,7 @@ mod tests {
         for detail in [0, 1, 3, 8] {
             for v in 0..8 {
                 let b = building_variant(7, v);
-                let m = building_mesh(&b, detail).unwrap();
+                let m = building_mesh(&b, detail).expect("every building variant builds at every detail");
                 assert_eq!(m.triangle_count() as u64, building_triangles(b.floors, detail));
             }
         }
@@ -388,7 +388,7 @@ mod tests {
     fn buildings_fit_their_lots() {
         for v in 0..64 {
             let b = building_variant(3, v);
-            let m = building_mesh(&b, 2).unwrap();
+            let m = building_mesh(&b, 2).expect("every building variant builds");
             let half_lot = 0.25 * (BLOCK_SIZE - 2.0 * SIDEWALK);
             // Ledges protrude 0.35 m: the footprint stays inside the lot.
             assert!(
@@ -406,12 +406,12 @@ mod tests {
             detail: 1,
             ..CityParams::default()
         };
-        let s = generate(&p).unwrap();
+        let s = generate(&p).expect("a 3x3 city generates");
         let h = p.half_side();
         assert_eq!(s.bounds().min.x, -h);
         assert_eq!(s.bounds().max.z, h);
         // Every block child's box stays off the street centre lines (plus half a street).
-        let flat = s.flatten(1 << 24).unwrap();
+        let flat = s.flatten(1 << 24).expect("a 3x3 city is under 2^24 triangles");
         for t in 2..flat.triangle_count() {
             for c in flat.triangle_positions(t) {
                 let along = |v: f32| ((v + h) / BLOCK_PITCH - ((v + h) / BLOCK_PITCH).round()).abs() * BLOCK_PITCH;

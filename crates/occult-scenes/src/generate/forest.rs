@@ -505,7 +505,7 @@ mod tests {
     fn trees_have_the_documented_count() {
         assert_eq!(TREE_TRIANGLES, 19_500);
         for v in 0..3 {
-            let t = tree_mesh(5, v).unwrap();
+            let t = tree_mesh(5, v).expect("a tree of every variant builds");
             assert_eq!(t.triangle_count() as u64, TREE_TRIANGLES);
             let b = t.bounds();
             assert!(b.max.y > 8.0 && b.max.y < 20.0 && b.min.y >= -0.6, "{b:?}");
@@ -516,7 +516,7 @@ mod tests {
     fn heightfield_is_periodic_and_matches_its_mesh() {
         let f = Heightfield::new(3, 16, 64.0);
         assert_eq!(f.height_at(0.0, 10.0), f.height_at(64.0, 10.0));
-        let mesh = f.mesh().unwrap();
+        let mesh = f.mesh().expect("a 16x16 heightfield is a valid mesh");
         // A vertex's height is the surface height at its position.
         for p in mesh.positions().iter().step_by(7) {
             assert!((f.height_at(p.x, p.z) - p.y).abs() < 1e-4);

@@ -435,10 +435,11 @@ mod tests {
     #[test]
     fn every_info_default_parses_to_the_default_params() {
         for info in &GENERATORS {
-            let default = Generator::from_name(info.name).unwrap();
+            let default = Generator::from_name(info.name).expect("every listed generator name is known");
             let mut g = default.clone();
             for p in info.params {
-                g.set(p.name, p.default).unwrap();
+                g.set(p.name, p.default)
+                    .expect("every listed default is a valid setting");
             }
             assert_eq!(g, default, "{}", info.name);
             assert_eq!(g.name(), info.name);
@@ -447,9 +448,18 @@ mod tests {
 
     #[test]
     fn integers_parse_in_three_spellings() {
-        assert_eq!(parse_integer("t", "k", "1000000", u64::MAX).unwrap(), 1_000_000);
-        assert_eq!(parse_integer("t", "k", "1_000_000", u64::MAX).unwrap(), 1_000_000);
-        assert_eq!(parse_integer("t", "k", "1e6", u64::MAX).unwrap(), 1_000_000);
+        assert_eq!(
+            parse_integer("t", "k", "1000000", u64::MAX).expect("a plain integer parses"),
+            1_000_000
+        );
+        assert_eq!(
+            parse_integer("t", "k", "1_000_000", u64::MAX).expect("an underscored integer parses"),
+            1_000_000
+        );
+        assert_eq!(
+            parse_integer("t", "k", "1e6", u64::MAX).expect("an integer in e notation parses"),
+            1_000_000
+        );
         for bad in ["", "-1", "1.5", "abc", "nan", "inf", "1e30"] {
             assert!(parse_integer("t", "k", bad, u32::MAX as u64).is_err(), "{bad}");
         }
@@ -458,7 +468,7 @@ mod tests {
 
     #[test]
     fn unknown_key_lists_the_valid_ones() {
-        let mut g = Generator::from_name("city").unwrap();
+        let mut g = Generator::from_name("city").expect("city is a known generator");
         let e = g.set("blokcs", "3").unwrap_err().to_string();
         assert!(e.contains("blocks") && e.contains("detail"), "{e}");
     }

@@ -183,7 +183,7 @@ mod tests {
     fn counts_match_formula() {
         for (objects, tessellation) in [(1, 2), (3, 5), (10, 64)] {
             let p = OccluderParams { objects, tessellation };
-            let s = generate(&p).unwrap();
+            let s = generate(&p).expect("small occluder params generate");
             assert_eq!(s.item_count() as u128, p.item_count());
         }
         assert_eq!(OccluderParams::default().item_count(), 1_612_812);
@@ -195,11 +195,14 @@ mod tests {
             objects: 4,
             tessellation: 4,
         };
-        let s = generate(&p).unwrap();
+        let s = generate(&p).expect("small occluder params generate");
         let cam = default_camera(&p, &s);
-        cam.validate().unwrap();
+        cam.validate()
+            .expect("the default camera of a generated scene is valid");
         // Every sphere vertex: the segment to the eye crosses the wall's plane inside the wall.
-        let flat = s.flatten(1 << 20).unwrap();
+        let flat = s
+            .flatten(1 << 20)
+            .expect("four spheres and a wall are under 2^20 triangles");
         for v in flat.positions() {
             if v.z <= WALL_THICKNESS {
                 continue;

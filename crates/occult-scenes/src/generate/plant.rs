@@ -436,8 +436,8 @@ mod tests {
             variants: 2,
             seed: 9,
         };
-        let s = generate(&p).unwrap();
-        let flat = s.flatten(1 << 24).unwrap();
+        let s = generate(&p).expect("small plant params generate");
+        let flat = s.flatten(1 << 24).expect("a small plant is under 2^24 triangles");
         let h = p.half_side();
         for k in 0..2 {
             let c = -h + (k as f32 + 0.5) * UNIT_SIZE;

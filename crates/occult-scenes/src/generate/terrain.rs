@@ -197,9 +197,12 @@ mod tests {
 
     #[test]
     fn small_grid_layout_and_winding() {
-        let s = generate(&TerrainParams { g: 2, tiles: 1 }).unwrap();
+        let s = generate(&TerrainParams { g: 2, tiles: 1 }).expect("a 2x2 terrain generates");
         assert_eq!(s.item_count(), 8);
-        let m = s.node(s.root()).mesh().unwrap();
+        let m = s
+            .node(s.root())
+            .mesh()
+            .expect("the root of a one-tile terrain is its mesh");
         assert_eq!(m.positions().len(), 9);
         assert_eq!(m.positions()[0].x, -100.0);
         assert_eq!(m.positions()[8].z, 100.0);

@@ -1212,11 +1212,11 @@ mod tests {
     #[test]
     fn uris_resolve_relative_to_the_file() {
         assert_eq!(
-            resolve_uri(Path::new("m"), "x%20y.bin").unwrap(),
+            resolve_uri(Path::new("m"), "x%20y.bin").expect("a percent-encoded relative URI resolves"),
             Path::new("m/x y.bin")
         );
         assert_eq!(
-            resolve_uri(Path::new("m"), "file:///tmp/a.bin").unwrap(),
+            resolve_uri(Path::new("m"), "file:///tmp/a.bin").expect("a file URI resolves"),
             Path::new("/tmp/a.bin")
         );
         assert!(resolve_uri(Path::new("m"), "https://example.com/a.bin").is_err());

@@ -28,14 +28,15 @@
 //! ```
 //! use occult_scenes::load::{load_bytes, load_file, LoadError};
 //! use std::path::Path;
+//! # fn main() -> Result<(), LoadError> {
 //!
 //! let square = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n";
-//! let loaded = load_bytes(Path::new("square.obj"), square).unwrap();
+//! let loaded = load_bytes(Path::new("square.obj"), square)?;
 //! assert_eq!(loaded.scene.item_count(), 2); // the quad, fan-triangulated
 //!
 //! // Faces of fewer than three corners are skipped: one warning with their count.
 //! let short = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\nf 1 2 3\nf 3\n";
-//! let loaded = load_bytes(Path::new("short.obj"), short).unwrap();
+//! let loaded = load_bytes(Path::new("short.obj"), short)?;
 //! assert_eq!(loaded.scene.item_count(), 1);
 //! assert_eq!(
 //!     loaded.warnings,
@@ -46,6 +47,8 @@
 //! assert_eq!(err.to_string(), "bad.obj line 2: vertex index 9 is out of range (vertex count 1)");
 //! let err = load_file(Path::new("no/such/model.ply")).unwrap_err();
 //! assert!(matches!(err, LoadError::Io { .. }) && err.to_string().contains("model.ply"));
+//! # Ok(())
+//! # }
 //! ```
 //!
 //! ## What each format becomes
@@ -736,7 +739,7 @@ mod tests {
         use occult_core::Vec3;
         let positions: Vec<Vec3> = (0..6).map(|i| Vec3::splat(i as f32)).collect();
         let mut remap = vec![u32::MAX; positions.len()];
-        let mesh = compact_mesh(&positions, &[[5, 3, 4]], &mut remap).unwrap();
+        let mesh = compact_mesh(&positions, &[[5, 3, 4]], &mut remap).expect("indices within the positions");
         assert_eq!(
             mesh.positions(),
             &[Vec3::splat(5.0), Vec3::splat(3.0), Vec3::splat(4.0)]

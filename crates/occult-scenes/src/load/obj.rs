@@ -560,7 +560,7 @@ mod tests {
         let mut reader = ObjReader::new(path);
         reader
             .parse(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\nf 1 2 4\nv 1 1 0\n")
-            .unwrap();
+            .expect("forward references are checked at finish, not while parsing");
         assert_eq!(reader.chunks[0].triangles, vec![[0, 1, 2], [0, 1, 3]]);
         let loaded = reader.finish(&Disk).expect("the relative indices resolve");
         assert_eq!(loaded.scene.item_count(), 2);
@@ -569,7 +569,9 @@ mod tests {
     #[test]
     fn forward_reference_past_the_end_names_its_line() {
         let mut reader = ObjReader::new(Path::new("t.obj"));
-        reader.parse(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n").unwrap();
+        reader
+            .parse(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n")
+            .expect("forward references are checked at finish, not while parsing");
         let error = reader.finish(&Disk).unwrap_err().to_string();
         assert_eq!(error, "t.obj line 5: vertex index 9 is out of range (vertex count 3)");
     }

@@ -369,7 +369,7 @@ mod tests {
             max_depth,
             small_fraction,
         };
-        let t = HybridOctree::build(boxes, &config).unwrap();
+        let t = HybridOctree::build(boxes, &config).expect("a valid configuration builds");
         check(&t, boxes, &config);
         t
     }
@@ -386,7 +386,7 @@ mod tests {
 
     #[test]
     fn empty_input_has_no_nodes() {
-        let t = HybridOctree::build(&[], &HybridOctreeConfig::default()).unwrap();
+        let t = HybridOctree::build(&[], &HybridOctreeConfig::default()).expect("an empty input builds");
         assert!(t.nodes().is_empty());
         assert!(t.indices().is_empty());
     }
@@ -394,7 +394,7 @@ mod tests {
     #[test]
     fn small_input_is_one_leaf() {
         let boxes = grid_boxes(10, 0.5);
-        let t = HybridOctree::build(&boxes, &HybridOctreeConfig::default()).unwrap();
+        let t = HybridOctree::build(&boxes, &HybridOctreeConfig::default()).expect("ten boxes build");
         assert_eq!(t.nodes().len(), 1);
         assert!(t.nodes()[0].is_leaf());
         assert_eq!(t.nodes()[0].count, 10);
@@ -484,7 +484,7 @@ mod tests {
     #[test]
     fn children_order_starts_at_the_eye() {
         let boxes = grid_boxes(2000, 0.2);
-        let t = HybridOctree::build(&boxes, &HybridOctreeConfig::default()).unwrap();
+        let t = HybridOctree::build(&boxes, &HybridOctreeConfig::default()).expect("2000 boxes build");
         let root = &t.nodes()[0];
         let eye = root.center + Vec3::new(-100.0, -100.0, -100.0);
         let (order, k) = t.children_front_to_back(0, eye);

@@ -393,7 +393,7 @@ mod tests {
             max_depth: 8,
             max_leaf_size: 16,
         };
-        let o = RayOctree::build_triangles(&p, &t, cfg).unwrap();
+        let o = RayOctree::build_triangles(&p, &t, cfg).expect("a 40x40 grid mesh builds within the limits");
         let mut seen = vec![false; t.len()];
         for (i, n) in o.nodes().iter().enumerate() {
             if n.is_leaf() {
@@ -412,7 +412,7 @@ mod tests {
 
     #[test]
     fn empty_degenerate_and_bad_configs() {
-        let o = RayOctree::build_triangles(&[], &[], RayOctreeConfig::default()).unwrap();
+        let o = RayOctree::build_triangles(&[], &[], RayOctreeConfig::default()).expect("an empty input builds");
         assert!(o.is_empty());
         let bad = RayOctreeConfig {
             max_depth: 3,
@@ -434,7 +434,7 @@ mod tests {
             max_depth: 5,
             max_leaf_size: 1,
         };
-        let o = RayOctree::build_triangles(&p, &t, cfg).unwrap();
+        let o = RayOctree::build_triangles(&p, &t, cfg).expect("triangles meeting in one point build one leaf");
         assert!(o.leaf_count() >= 1);
         // The same split to depth 20: stopped early or refused by the reference budget, never
         // an unbounded build.
@@ -457,7 +457,7 @@ mod tests {
                 max_leaf_size: 4,
             },
         )
-        .unwrap();
+        .expect("a flat grid mesh builds");
         for n in o.nodes().iter().filter(|n| !n.is_leaf()) {
             for c in n.children().filter(|c| (c - n.first) & 2 != 0) {
                 let child = &o.nodes()[c as usize];
@@ -465,7 +465,8 @@ mod tests {
             }
         }
         // A zero-area (collinear) triangle still lands somewhere.
-        let o = RayOctree::build_triangles(&[Vec3::ZERO, Vec3::X, Vec3::X * 2.0], &[[0, 1, 2]], cfg).unwrap();
+        let o = RayOctree::build_triangles(&[Vec3::ZERO, Vec3::X, Vec3::X * 2.0], &[[0, 1, 2]], cfg)
+            .expect("a collinear triangle builds");
         assert_eq!(o.primitives(), &[0]);
     }
 
@@ -498,7 +499,7 @@ mod tests {
                 max_leaf_size: 4,
             },
         )
-        .unwrap();
+        .expect("a triangle soup builds");
         let centroid = (p[0] + p[1] + p[2]) / 3.0;
         let holds =
             o.nodes().iter().enumerate().any(|(i, n)| {
@@ -510,7 +511,7 @@ mod tests {
     #[test]
     fn leaves_sorted_by_key() {
         let (p, t) = grid_mesh(10);
-        let mut o = RayOctree::build_triangles(&p, &t, RayOctreeConfig::default()).unwrap();
+        let mut o = RayOctree::build_triangles(&p, &t, RayOctreeConfig::default()).expect("a 10x10 grid mesh builds");
         o.sort_leaves_by_key_descending(|i| i as f32);
         for (i, n) in o.nodes().iter().enumerate() {
             if n.is_leaf() {

@@ -779,7 +779,8 @@ mod tests {
     fn sections_partition_the_list_and_entries_fit_their_extended_cells() {
         let (boxes, areas) = random_triangles(5000, 1);
         let classes = vec![0; boxes.len()];
-        let t = SampleOctree::build(&boxes, &areas, &classes, 1, &SampleOctreeConfig::default()).unwrap();
+        let t = SampleOctree::build(&boxes, &areas, &classes, 1, &SampleOctreeConfig::default())
+            .expect("5000 random triangles build");
         assert_eq!(t.entries().len(), 5000);
         let mut seen = vec![false; 5000];
         for &e in t.entries() {
@@ -806,7 +807,7 @@ mod tests {
                 assert!(n.end - n.first <= 32 || n.first == n.own_first);
             }
         }
-        let root = t.nodes()[t.roots()[0].unwrap() as usize];
+        let root = t.nodes()[t.roots()[0].expect("5000 entries of class 0 have a root") as usize];
         assert_eq!(root.section(), 0..5000);
         assert!((t.area(root.section()) - areas.iter().sum::<f64>()).abs() < 1e-6 * t.total_area());
     }
@@ -816,7 +817,8 @@ mod tests {
         let (boxes, mut areas) = random_triangles(300, 2);
         areas[7] = 0.0; // never sampled
         let classes: Vec<u32> = (0..300).map(|i| (i % 3) as u32).collect();
-        let t = SampleOctree::build(&boxes, &areas, &classes, 3, &SampleOctreeConfig::default()).unwrap();
+        let t = SampleOctree::build(&boxes, &areas, &classes, 3, &SampleOctreeConfig::default())
+            .expect("300 random triangles in three classes build");
         assert_eq!(t.entries().len(), 299);
         for n in t.nodes() {
             let r = n.section();
@@ -845,7 +847,8 @@ mod tests {
         let boxes = vec![Aabb::new(Vec3::ONE, Vec3::ONE); 1000];
         let areas = vec![1.0; 1000];
         let build = |boxes: &[Aabb], areas: &[f64], classes: &[u32], class_count: usize| {
-            SampleOctree::build(boxes, areas, classes, class_count, &SampleOctreeConfig::default()).unwrap()
+            SampleOctree::build(boxes, areas, classes, class_count, &SampleOctreeConfig::default())
+                .expect("coincident or no entries build")
         };
         let t = build(&boxes, &areas, &[0; 1000], 1);
         assert_eq!(t.entries().len(), 1000);
@@ -906,7 +909,7 @@ mod tests {
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
         let mut h = vec![0u32; bins];
         for _ in 0..n {
-            h[t.sample(0, rng.random::<f64>()).unwrap() as usize] += 1;
+            h[t.sample(0, rng.random::<f64>()).expect("the tree has positive area") as usize] += 1;
         }
         h
     }
@@ -939,7 +942,7 @@ mod tests {
                 ..Default::default()
             },
         )
-        .unwrap();
+        .expect("400 random triangles build");
         let mut d = DistributionTree::from_octree(&t, &areas, &[]);
         let before_total = d.total_area();
         let samples = 400_000;
@@ -948,7 +951,7 @@ mod tests {
         assert!(chi_square(&h0[..400], &areas) < 550.0);
         for i in 0..100 {
             d.insert(400 + i, extra_boxes[i as usize], extra_areas[i as usize])
-                .unwrap();
+                .expect("a new id with a non-empty box inserts");
         }
         let mut all = areas.clone();
         all.extend_from_slice(&extra_areas);
@@ -956,7 +959,7 @@ mod tests {
         assert!(chi_square(&h1, &all) < 650.0);
         assert!(h1[400..].iter().sum::<u32>() > 0);
         for i in 0..100 {
-            d.remove(400 + i).unwrap();
+            d.remove(400 + i).expect("an inserted entry is present");
         }
         assert!((d.total_area() - before_total).abs() < 1e-9 * before_total);
         let h2 = histogram(&d, samples, 500, 9);
@@ -972,12 +975,13 @@ mod tests {
         let before = sums(&d);
         let h_before = histogram(&d, 10_000, 500, 11);
         for i in (0..400).step_by(7) {
-            d.remove(i).unwrap();
+            d.remove(i).expect("a static entry is present");
         }
         assert!(sums(&d) != before);
         for i in (0..400).step_by(7).rev() {
-            let home = d.home(i).unwrap();
-            d.insert_at(i, home, areas[i as usize], 1).unwrap();
+            let home = d.home(i).expect("a removed static entry keeps its home node");
+            d.insert_at(i, home, areas[i as usize], 1)
+                .expect("an absent entry reinserts at its home node");
         }
         assert_eq!(sums(&d), before);
         assert_eq!(histogram(&d, 10_000, 500, 11), h_before);

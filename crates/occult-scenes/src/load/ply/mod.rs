@@ -791,10 +791,10 @@ mod tests {
     #[test]
     fn header_errors_are_one_line_with_line_column_and_what_was_expected() {
         let dir = std::env::temp_dir().join(format!("occult-ply-header-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::create_dir_all(&dir).expect("the temporary directory is writable");
         let error = |name: &str, text: &str| {
             let path = dir.join(name);
-            std::fs::write(&path, text).unwrap();
+            std::fs::write(&path, text).expect("the temporary directory is writable");
             load_ply(&path).unwrap_err().to_string()
         };
         let e = error("typo.ply", "ply\nformat ascii 1.0\nelment vertex 3\nend_header\n");
@@ -908,7 +908,8 @@ mod tests {
     #[test]
     fn strips_restart_flip_and_drop_degenerates() {
         let mut sink = sink_of(5);
-        sink.strips(&[0, 1, 2, 3, -1, 4, 4, 1, 2], || Location::File).unwrap();
+        sink.strips(&[0, 1, 2, 3, -1, 4, 4, 1, 2], || Location::File)
+            .expect("strip indices within the 5 vertices");
         // The second strip starts with a swap (4 4 1, dropped), so 4 1 2 is odd: flipped.
         assert_eq!(sink.triangles, vec![[0, 1, 2], [2, 1, 3], [1, 4, 2]]);
         assert!(matches!(
@@ -924,8 +925,10 @@ mod tests {
     #[test]
     fn faces_of_fewer_than_three_corners_are_counted_not_drawn() {
         let mut sink = sink_of(3);
-        sink.face(&[0, 1], || Location::File).unwrap();
-        sink.face(&[], || Location::File).unwrap();
+        sink.face(&[0, 1], || Location::File)
+            .expect("a short face is skipped, not an error");
+        sink.face(&[], || Location::File)
+            .expect("an empty face is skipped, not an error");
         assert!(sink.triangles.is_empty());
         assert_eq!(sink.short_face_count, 2);
     }
