@@ -486,11 +486,11 @@ pub(crate) mod tests {
         let at = (0..40).map(|i| Vec3::new((i % 8) as f32 * 1.5 - 6.0, 0.0, -((i / 8) as f32) * 2.0));
         let scene = crate::tests::cubes_on_ground([-9.0, 9.0, -20.0, 2.0], at);
         let (view, _) = crate::test_view(Vec3::new(0.5, 1.0, 4.0), Vec3::new(0.0, 0.0, -4.0), 96, 64);
-        let mut reference = Frame::new(96, 64).unwrap();
+        let mut reference = Frame::new(96, 64).expect("a 96x64 frame");
         crate::zbuffer::ZBuffer::new(scene.clone(), &RenderOptions::default())
-            .unwrap()
+            .expect("zbuffer builds")
             .render(&view, &mut reference)
-            .unwrap();
+            .expect("zbuffer renders the view");
         (scene, view, reference)
     }
 
@@ -501,10 +501,10 @@ pub(crate) mod tests {
     fn direct_and_abandoned_frames_are_identical() {
         let (scene, view, reference) = scene_view_reference();
         let options = RenderOptions::default();
-        let hzb = crate::hzb::Hzb::new(scene.clone(), &options, &crate::hzb::HzbOptions::default()).unwrap();
+        let hzb = crate::hzb::Hzb::new(scene.clone(), &options, &crate::hzb::HzbOptions::default()).expect("hzb builds");
         let oqgrid =
             crate::oqgrid::OqGrid::with_options(scene.clone(), &options, &crate::oqgrid::OqGridOptions::default())
-                .unwrap();
+                .expect("oqgrid builds");
         // The paper's plane, so that rays are cast (abandonment comes between waves of them).
         let lzb_options = crate::lzb::LzbOptions {
             plane: crate::lzb::Plane::Dynamic,
@@ -519,14 +519,14 @@ pub(crate) mod tests {
         for (name, r) in &mut renderers {
             r.force(2, false);
             for i in 0..3 {
-                let mut f = Frame::new(96, 64).unwrap();
-                let s = r.render(&view, &mut f).unwrap();
+                let mut f = Frame::new(96, 64).expect("a 96x64 frame");
+                let s = r.render(&view, &mut f).expect("the renderer renders the view");
                 assert!(f.same_visibility(&reference), "{name} frame {i}");
                 assert_eq!(s.counters.get(COUNTER), u64::from(i < 2), "{name} frame {i}");
             }
             r.force(0, true);
-            let mut f = Frame::new(96, 64).unwrap();
-            let s = r.render(&view, &mut f).unwrap();
+            let mut f = Frame::new(96, 64).expect("a 96x64 frame");
+            let s = r.render(&view, &mut f).expect("the renderer renders the view");
             assert!(f.same_visibility(&reference), "{name} abandoned");
             assert_eq!(
                 s.counters.get(COUNTER),
