@@ -47,7 +47,11 @@ fn fresh_samples(c: &mut Criterion) {
         .expect("rzb builds");
     let view = occult_core::View::new(w.camera, 640, 480).expect("a valid view");
     let mut frame = occult_raster::Frame::new(640, 480).expect("a frame");
-    let samples = r.render(&view, &mut frame).expect("renders").counters.get("samples_generated");
+    let samples = r
+        .render(&view, &mut frame)
+        .expect("renders")
+        .counters
+        .get("samples_generated");
     let mut group = c.benchmark_group("rzb_fresh_samples");
     group.sample_size(10);
     group.throughput(Throughput::Elements(samples));

@@ -50,7 +50,9 @@ fn scene() -> Arc<Scene> {
 /// renderers' own hierarchies (octrees, grids), where they check within a mesh.
 fn walls() -> Arc<Scene> {
     let mut b = SceneBuilder::new();
-    let wall = b.add_mesh("wall", crate::test_grid(48)).expect("a grid is a valid mesh");
+    let wall = b
+        .add_mesh("wall", crate::test_grid(48))
+        .expect("a grid is a valid mesh");
     let instances = (0..6)
         .map(|i| Instance {
             parent_from_child: Affine3A::from_scale_rotation_translation(
@@ -105,7 +107,11 @@ fn frame_of(r: &mut dyn Renderer, control: &FrameControl, view: &View) -> Frame 
 }
 
 fn same(a: &Frame, b: &Frame) -> bool {
-    a.items() == b.items() && a.depth().iter().map(|d| d.to_bits()).eq(b.depth().iter().map(|d| d.to_bits()))
+    a.items() == b.items()
+        && a.depth()
+            .iter()
+            .map(|d| d.to_bits())
+            .eq(b.depth().iter().map(|d| d.to_bits()))
 }
 
 #[test]
@@ -121,7 +127,11 @@ fn every_renderer_refuses_a_frame_cancelled_before_it_begins() {
             Err(RenderError::Cancelled) => {}
             other => panic!("{}: a cancelled frame gave {:?}", info.name, other.map(|s| s.total)),
         }
-        assert!(control.progress() < 1.0, "{}: a cancelled frame is not complete", info.name);
+        assert!(
+            control.progress() < 1.0,
+            "{}: a cancelled frame is not complete",
+            info.name
+        );
         assert_eq!(RenderError::Cancelled.to_string(), "frame cancelled");
         // The next frame, uncancelled, is whole.
         frame_of(&mut *r, &control, view);
@@ -147,7 +157,9 @@ fn cancel_at_every_check(scene: &Arc<Scene>) {
         raster: options(&FrameControl::default()).raster,
         ..RenderOptions::default()
     };
-    let mut zbuffer = Algorithm::ZBUFFER.build(Arc::clone(scene), &inert).expect("zbuffer builds");
+    let mut zbuffer = Algorithm::ZBUFFER
+        .build(Arc::clone(scene), &inert)
+        .expect("zbuffer builds");
     let reference: Vec<Frame> = views
         .iter()
         .map(|v| frame_of(&mut *zbuffer, &FrameControl::default(), v))
@@ -170,7 +182,10 @@ fn cancel_at_every_check(scene: &Arc<Scene>) {
             k = if k < 64 { k + 1 } else { k + k / 16 };
             assert!(k < 1 << 20, "{spec}: a frame that checks without end");
             let mut r = build(&spec, scene, &options);
-            assert!(same(&frame_of(&mut *r, &control, &views[0]), &expected[0]), "{spec}: frame 0");
+            assert!(
+                same(&frame_of(&mut *r, &control, &views[0]), &expected[0]),
+                "{spec}: frame 0"
+            );
             let mut frame = Frame::new(64, 48).expect("a valid frame size");
             control.reset();
             control.cancel_at_check(k);
@@ -189,7 +204,10 @@ fn cancel_at_every_check(scene: &Arc<Scene>) {
             }
             for (i, view) in views.iter().enumerate().skip(1) {
                 let f = frame_of(&mut *r, &control, view);
-                assert!(same(&f, &expected[i]), "{spec}: frame {i} after a frame cancelled at check {k}");
+                assert!(
+                    same(&f, &expected[i]),
+                    "{spec}: frame {i} after a frame cancelled at check {k}"
+                );
             }
         }
     }
@@ -273,7 +291,10 @@ fn zbuffer_in_chunks_draws_the_same_frame_and_reports_each() {
     let one_call = frame_of(&mut *build("zbuffer", &scene, &options(&inert)), &inert, &view);
     let control = FrameControl::new();
     let mut r = build("zbuffer", &scene, &options(&control));
-    assert!(same(&frame_of(&mut *r, &control, &view), &one_call), "chunks draw the same frame");
+    assert!(
+        same(&frame_of(&mut *r, &control, &view), &one_call),
+        "chunks draw the same frame"
+    );
     // Checks: the frame's start, before the first chunk, before the second.
     control.reset();
     control.cancel_at_check(3);

@@ -501,7 +501,8 @@ pub(crate) mod tests {
     fn direct_and_abandoned_frames_are_identical() {
         let (scene, view, reference) = scene_view_reference();
         let options = RenderOptions::default();
-        let hzb = crate::hzb::Hzb::new(scene.clone(), &options, &crate::hzb::HzbOptions::default()).expect("hzb builds");
+        let hzb =
+            crate::hzb::Hzb::new(scene.clone(), &options, &crate::hzb::HzbOptions::default()).expect("hzb builds");
         let oqgrid =
             crate::oqgrid::OqGrid::with_options(scene.clone(), &options, &crate::oqgrid::OqGridOptions::default())
                 .expect("oqgrid builds");

@@ -902,11 +902,7 @@ impl App {
                     "{spin} rendering {:.0} % ({:.1} s){}",
                     progress * 100.0,
                     ran.as_secs_f64(),
-                    if id < self.next_id {
-                        "; a newer view waits"
-                    } else {
-                        ""
-                    }
+                    if id < self.next_id { "; a newer view waits" } else { "" }
                 ),
                 None => format!("{spin} rendering"),
             };

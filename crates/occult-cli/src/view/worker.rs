@@ -654,7 +654,9 @@ mod tests {
             in_flight: Some(InFlight {
                 id: flying.id,
                 shows: Shows::of(flying),
-                started: Instant::now().checked_sub(ran).expect("the clock reaches back a second"),
+                started: Instant::now()
+                    .checked_sub(ran)
+                    .expect("the clock reaches back a second"),
                 shot: flying.shot.is_some(),
             }),
             ..State::default()
@@ -666,11 +668,31 @@ mod tests {
         let long = CANCEL_AFTER + Duration::from_millis(50);
         let flying = request(1, 0.0, "rzb", false);
         let cases = [
-            ("another camera, long", state(&flying, long, request(2, 1.0, "rzb", false)), true),
-            ("another renderer, long", state(&flying, long, request(2, 0.0, "hzb", false)), true),
-            ("the same state again", state(&flying, long, request(2, 0.0, "rzb", false)), false),
-            ("a short frame", state(&flying, Duration::ZERO, request(2, 1.0, "rzb", false)), false),
-            ("the frame's own request", state(&flying, long, request(1, 0.0, "rzb", false)), false),
+            (
+                "another camera, long",
+                state(&flying, long, request(2, 1.0, "rzb", false)),
+                true,
+            ),
+            (
+                "another renderer, long",
+                state(&flying, long, request(2, 0.0, "hzb", false)),
+                true,
+            ),
+            (
+                "the same state again",
+                state(&flying, long, request(2, 0.0, "rzb", false)),
+                false,
+            ),
+            (
+                "a short frame",
+                state(&flying, Duration::ZERO, request(2, 1.0, "rzb", false)),
+                false,
+            ),
+            (
+                "the frame's own request",
+                state(&flying, long, request(1, 0.0, "rzb", false)),
+                false,
+            ),
         ];
         for (what, state, due) in cases {
             let control = FrameControl::new();
@@ -680,8 +702,14 @@ mod tests {
         let shooting = request(1, 0.0, "rzb", true);
         let control = FrameControl::new();
         let s = state(&shooting, long, request(2, 1.0, "rzb", false));
-        assert!(!Worker::supersede_locked(&s, &control), "a frame writing a screenshot finishes");
-        assert!(!Worker::supersede_locked(&State::default(), &control), "nothing in flight");
+        assert!(
+            !Worker::supersede_locked(&s, &control),
+            "a frame writing a screenshot finishes"
+        );
+        assert!(
+            !Worker::supersede_locked(&State::default(), &control),
+            "nothing in flight"
+        );
         assert!(!control.is_cancelled());
     }
 

@@ -347,7 +347,11 @@ fn a_slow_frame_is_cancelled_by_moving_and_the_next_is_the_new_view() {
     let window = image::open(&during).expect("the capture is a PNG").to_rgb8();
     let bottom = window.height() - 1;
     let amber = image::Rgb([0xff, 0xd0, 0x40]);
-    assert_eq!(window.get_pixel(0, bottom), &amber, "no progress bar in the window while drawing");
+    assert_eq!(
+        window.get_pixel(0, bottom),
+        &amber,
+        "no progress bar in the window while drawing"
+    );
 
     let out = dir.join("render.png");
     assert_ok(
