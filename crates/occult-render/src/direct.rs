@@ -13,10 +13,7 @@
 //!   part (clear, walk) and its rasterization, a rate per triangle of work; the model is the
 //!   least of each over the last [`DIRECT_KEPT`] direct frames (noise only adds time);
 //! - a culled frame's time is compared with what the model predicts for its work, so that
-//!   frames of different views compare, and at least the model's fixed part plus the culled
-//!   frame's own drawing (a direct frame draws every pixel it drew, and more: on a view whose
-//!   time is fill the model's triangles say too little), and its gain (or loss) added to a
-//!   decaying balance: a
+//!   frames of different views compare, and its gain (or loss) added to a decaying balance: a
 //!   frame that loses while the balance is negative starts a **run** of direct frames when its
 //!   tests did not pay by their own measure or the culled frame before lost too (the model
 //!   knows triangles, not pixels: a near wall, few triangles and much to fill, is predicted
@@ -228,8 +225,7 @@ impl DirectFrames {
         }
         self.choice.last_culled = Some((total, submitted));
         self.choice.last_culled_age = 0;
-        let raster = stats.phases.get(Phase::Raster);
-        self.choice.culled(total, raster, work, tests_paid, plainly, cannot_pay);
+        self.choice.culled(total, work, tests_paid, plainly, cannot_pay);
         Ok(self.choice.direct_left > 0)
     }
 
@@ -295,9 +291,9 @@ impl Model {
 struct Choice {
     /// The last direct frames' models, newest last, at most [`DIRECT_KEPT`].
     measured: Vec<Model>,
-    /// Culled frames (time, rasterization time, work, whether their tests paid) not yet
-    /// weighed: those before the first direct frame.
-    unweighed: Vec<(Duration, Duration, u64, bool)>,
+    /// Culled frames (time, work, whether their tests paid) not yet weighed: those before the
+    /// first direct frame.
+    unweighed: Vec<(Duration, u64, bool)>,
     /// Culled frames in a row that did not plainly pay, before the first direct frame.
     unplain: u32,
     /// The balance of the recent culled frames: each one's gain (the predicted direct time of
@@ -331,19 +327,10 @@ impl Choice {
         Some(Model { fixed_ns, rate_ns })
     }
 
-    /// What a direct frame of the view of a culled frame is expected to take, ns: the
-    /// model's time for its `work`, and at least the model's fixed part plus the culled
-    /// frame's own rasterization (`raster`). The model knows triangles, not pixels; a direct
-    /// frame draws every pixel the culled one drew, and more, so on a view whose time is fill
-    /// (a near wall: few triangles, much to fill) the culled frame's drawing bounds it better.
-    fn predicted(&self, raster: Duration, work: u64) -> Option<f64> {
+    /// A culled frame's time over what a direct frame of its work is expected to take.
+    fn ratio(&self, total: Duration, work: u64) -> Option<f64> {
         let m = self.model()?;
-        Some(m.predict(work).max(m.fixed_ns + raster.as_nanos() as f64))
-    }
-
-    /// A culled frame's time over what a direct frame of its view is expected to take.
-    fn ratio(&self, total: Duration, raster: Duration, work: u64) -> Option<f64> {
-        Some(total.as_nanos() as f64 / self.predicted(raster, work)?.max(1.0))
+        Some(total.as_nanos() as f64 / m.predict(work).max(1.0))
     }
 
     /// Whether a run's last direct frame screens the coming probe: a direct frame and a
@@ -385,15 +372,7 @@ impl Choice {
     /// Weighs a culled frame of `work` triangles that took `total`; `cannot_pay`: before the
     /// first measurement, its own depth showed that culling cannot pay
     /// ([`DirectFrames::culled`]).
-    fn culled(
-        &mut self,
-        total: Duration,
-        raster: Duration,
-        work: u64,
-        tests_paid: bool,
-        paid_plainly: bool,
-        cannot_pay: bool,
-    ) {
+    fn culled(&mut self, total: Duration, work: u64, tests_paid: bool, paid_plainly: bool, cannot_pay: bool) {
         self.since_direct = self.since_direct.saturating_add(1);
         self.last_work = work;
         if total < MIN_ALLOWANCE_TIME {
@@ -413,15 +392,15 @@ impl Choice {
             if self.unweighed.len() == DIRECT_KEPT {
                 self.unweighed.remove(0);
             }
-            self.unweighed.push((total, raster, work, tests_paid));
+            self.unweighed.push((total, work, tests_paid));
             return;
         }
-        if self.judge(total, raster, work, tests_paid) {
+        if self.judge(total, work, tests_paid) {
             self.start_run();
         } else if !self.lost_last {
             self.run = 0;
             // A thin win against a direct frame measured long ago is measured again.
-            let thin = self.ratio(total, raster, work) > Some(REMEASURE_SHARE);
+            let thin = self.ratio(total, work) > Some(REMEASURE_SHARE);
             if thin && self.since_direct >= REMEASURE_AFTER {
                 self.direct_left = 1;
             }
@@ -433,16 +412,16 @@ impl Choice {
     /// culled frame before lost too. A single loss of a frame whose tests paid is a view the
     /// model predicts badly (a near wall: few triangles, much to fill), not a reason to stop
     /// culling.
-    fn judge(&mut self, total: Duration, raster: Duration, work: u64, tests_paid: bool) -> bool {
-        let lost = self.weigh(total, raster, work);
+    fn judge(&mut self, total: Duration, work: u64, tests_paid: bool) -> bool {
+        let lost = self.weigh(total, work);
         let due = self.balance < 0.0 && lost && (!tests_paid || self.lost_last);
         self.lost_last = lost;
         due
     }
 
     /// Adds a culled frame's gain to the balance; true when it lost.
-    fn weigh(&mut self, total: Duration, raster: Duration, work: u64) -> bool {
-        let predicted = self.predicted(raster, work).unwrap_or(0.0);
+    fn weigh(&mut self, total: Duration, work: u64) -> bool {
+        let predicted = self.model().map_or(0.0, |m| m.predict(work));
         let gain = predicted - total.as_nanos() as f64;
         self.balance = 0.5 * self.balance + gain;
         gain < 0.0
@@ -462,8 +441,8 @@ impl Choice {
         // The culled frames before the first measurement, weighed now: straight into a run
         // when the last of them makes one due.
         let mut due = false;
-        for (t, r, w, paid) in std::mem::take(&mut self.unweighed) {
-            due = self.judge(t, r, w, paid);
+        for (t, w, paid) in std::mem::take(&mut self.unweighed) {
+            due = self.judge(t, w, paid);
         }
         if due {
             self.start_run();
@@ -557,7 +536,7 @@ pub(crate) mod tests {
                 c.direct(10 * MS, 9 * MS, 1000);
             } else {
                 ways.push('c');
-                c.culled(20 * MS, Duration::ZERO, 1000, false, false, false);
+                c.culled(20 * MS, 1000, false, false, false);
             }
         }
         let expected = format!(
@@ -594,11 +573,11 @@ pub(crate) mod tests {
         }
         assert!(!c.screens(), "the culled frame is too old");
         let mut c = Choice::default();
-        c.culled(20 * MS, Duration::ZERO, 1000, true, false, true);
+        c.culled(20 * MS, 1000, true, false, true);
         assert!(c.take_direct(), "a first culled frame that cannot pay");
         let mut c = Choice::default();
-        c.culled(20 * MS, Duration::ZERO, 1000, true, true, false);
-        c.culled(5 * MS, Duration::ZERO, 1000, true, false, true);
+        c.culled(20 * MS, 1000, true, true, false);
+        c.culled(5 * MS, 1000, true, false, true);
         assert!(!c.take_direct(), "unless small beside the frames before");
     }
 
@@ -633,20 +612,20 @@ pub(crate) mod tests {
     #[test]
     fn culling_that_wins_keeps_culling() {
         let mut c = Choice::default();
-        c.culled(20 * MS, Duration::ZERO, 1000, false, false, false);
+        c.culled(20 * MS, 1000, false, false, false);
         for _ in 0..FIRST_MEASURED {
             assert!(c.take_direct());
             c.direct(40 * MS, 39 * MS, 1000);
         }
         for _ in 0..40 {
-            c.culled(20 * MS, Duration::ZERO, 1000, true, false, false);
+            c.culled(20 * MS, 1000, true, false, false);
             assert!(!c.take_direct(), "a wide margin never remeasures");
         }
         // A thin margin (36 of 40) remeasures at once (the measurement is 40 frames old),
         // then every 16th frame.
         let mut remeasured = 0;
         for _ in 0..40 {
-            c.culled(36 * MS, Duration::ZERO, 1000, true, false, false);
+            c.culled(36 * MS, 1000, true, false, false);
             if c.take_direct() {
                 remeasured += 1;
                 c.direct(40 * MS, 39 * MS, 1000);
@@ -670,18 +649,18 @@ pub(crate) mod tests {
             measured: model.clone(),
             ..Choice::default()
         };
-        c.culled(30 * MS, Duration::ZERO, 1000, true, false, false);
+        c.culled(30 * MS, 1000, true, false, false);
         assert!(!c.take_direct(), "one loss, tests paid");
-        c.culled(9 * MS, Duration::ZERO, 1000, true, false, false);
-        c.culled(11 * MS, Duration::ZERO, 1000, true, false, false);
+        c.culled(9 * MS, 1000, true, false, false);
+        c.culled(11 * MS, 1000, true, false, false);
         assert!(!c.take_direct(), "a win between");
-        c.culled(11 * MS, Duration::ZERO, 1000, true, false, false);
+        c.culled(11 * MS, 1000, true, false, false);
         assert!(c.take_direct(), "two losses in a row");
         let mut c = Choice {
             measured: model,
             ..Choice::default()
         };
-        c.culled(11 * MS, Duration::ZERO, 1000, false, false, false);
+        c.culled(11 * MS, 1000, false, false, false);
         assert!(c.take_direct(), "a loss whose tests did not pay");
     }
 
@@ -690,20 +669,20 @@ pub(crate) mod tests {
     #[test]
     fn when_direct_is_first_measured() {
         let mut c = Choice::default();
-        c.culled(20 * MS, Duration::ZERO, 1000, true, true, false);
+        c.culled(20 * MS, 1000, true, true, false);
         assert!(!c.take_direct(), "plainly paid");
-        c.culled(20 * MS, Duration::ZERO, 1000, true, false, false);
+        c.culled(20 * MS, 1000, true, false, false);
         assert!(!c.take_direct(), "once not plainly");
-        c.culled(20 * MS, Duration::ZERO, 1000, true, false, false);
+        c.culled(20 * MS, 1000, true, false, false);
         assert!(c.take_direct(), "twice not plainly");
         let mut c = Choice::default();
-        c.culled(20 * MS, Duration::ZERO, 1000, true, true, false);
-        c.culled(5 * MS, Duration::ZERO, 1000, false, false, false);
+        c.culled(20 * MS, 1000, true, true, false);
+        c.culled(5 * MS, 1000, false, false, false);
         assert!(!c.take_direct(), "small beside the frames before");
-        c.culled(20 * MS, Duration::ZERO, 1000, false, false, false);
+        c.culled(20 * MS, 1000, false, false, false);
         assert!(c.take_direct(), "tests that did not pay");
         let mut c = Choice::default();
-        c.culled(MIN_ALLOWANCE_TIME / 2, Duration::ZERO, 1000, false, false, false);
+        c.culled(MIN_ALLOWANCE_TIME / 2, 1000, false, false, false);
         assert!(!c.take_direct(), "short frames keep their tests");
         assert!(c.unweighed.is_empty());
     }
@@ -723,16 +702,16 @@ pub(crate) mod tests {
             ..Choice::default()
         };
         assert_eq!(c.model().map(|m| m.predict(1000)), Some(10e6));
-        c.culled(3 * MS, Duration::ZERO, 1, false, false, false);
+        c.culled(3 * MS, 1, false, false, false);
         assert!(
             !c.take_direct(),
             "3 ms beats the 8 ms a direct frame needs whatever its work"
         );
-        c.culled(5 * MS, Duration::ZERO, 1000, false, false, false);
-        c.culled(5 * MS, Duration::ZERO, 1000, false, false, false);
-        c.culled(11 * MS, Duration::ZERO, 1, false, false, false);
+        c.culled(5 * MS, 1000, false, false, false);
+        c.culled(5 * MS, 1000, false, false, false);
+        c.culled(11 * MS, 1, false, false, false);
         assert!(!c.take_direct(), "3 ms lost after 2 × 5 ms won");
-        c.culled(11 * MS, Duration::ZERO, 1, false, false, false);
+        c.culled(11 * MS, 1, false, false, false);
         assert!(c.take_direct(), "lost again");
         // Submitted a third of the work, or took less than half of the work at its own rate.
         assert!(DirectFrames::plainly(true, 100 * MS, 100, 1.0, 300));
@@ -740,30 +719,5 @@ pub(crate) mod tests {
         assert!(!DirectFrames::plainly(false, 100 * MS, 1, 1.0, 300));
         assert!(DirectFrames::plainly(true, 100 * MS, 200, 1e6, 300));
         assert!(!DirectFrames::plainly(true, 200 * MS, 200, 1e6, 300));
-    }
-
-    /// A culled frame whose time is fill (a near wall: few triangles, much drawing) is
-    /// weighed against a direct frame that draws at least what it drew: losses the
-    /// triangle-only model would see there are not losses.
-    #[test]
-    fn fill_bounds_the_predicted_direct_frame() {
-        let model = Model {
-            fixed_ns: 2e6,
-            rate_ns: 8000.0,
-        };
-        let mut c = Choice {
-            measured: vec![model; 2],
-            ..Choice::default()
-        };
-        // 100 triangles of work: 2.8 ms by the model, but the culled frame drew for 8.5 ms.
-        assert_eq!(c.predicted(8500 * Duration::from_micros(1), 100), Some(10.5e6));
-        for _ in 0..4 {
-            c.culled(9 * MS, 8500 * Duration::from_micros(1), 100, false, false, false);
-            assert!(!c.take_direct(), "9 ms beats the 10.5 ms a direct frame needs");
-        }
-        // The same times with little drawing are losses: a run starts.
-        c.culled(9 * MS, MS, 100, false, false, false);
-        c.culled(9 * MS, MS, 100, false, false, false);
-        assert!(c.take_direct(), "9 ms against 3 ms predicted, twice");
     }
 }
