@@ -223,12 +223,20 @@ fn points_of<F: FnMut(&Place, Vec3, Vec3, ItemId)>(
 ) {
     let normal = (b - a).cross(c - a);
     for _ in 0..count {
-        let (mut r1, mut r2) = (rng.random::<f32>(), rng.random::<f32>());
-        if r1 + r2 > 1.0 {
-            r1 = 1.0 - r1;
-            r2 = 1.0 - r2;
-        }
+        let (r1, r2) = uniform_on_triangle(rng);
         f(place, a + (b - a) * r1 + (c - a) * r2, normal, place.base + e as u64);
+    }
+}
+
+/// Barycentric weights `(r1, r2)` of a uniform point on a triangle `a + (b - a) r1 + (c - a) r2`
+/// (§5.2: the unit square folded onto the triangle).
+#[inline]
+fn uniform_on_triangle(rng: &mut Pcg64Mcg) -> (f32, f32) {
+    let (r1, r2) = (rng.random::<f32>(), rng.random::<f32>());
+    if r1 + r2 > 1.0 {
+        (1.0 - r1, 1.0 - r2)
+    } else {
+        (r1, r2)
     }
 }
 
@@ -429,11 +437,7 @@ impl Sampler<'_> {
         }
         let [a, b, c] = st.soup[pos];
         let e = st.octree.entries()[pos];
-        let (mut r1, mut r2) = (rng.random::<f32>(), rng.random::<f32>());
-        if r1 + r2 > 1.0 {
-            r1 = 1.0 - r1;
-            r2 = 1.0 - r2;
-        }
+        let (r1, r2) = uniform_on_triangle(rng);
         let (mut e1, mut e2) = (b - a, c - a);
         let mut p = a + e1 * r1 + e2 * r2;
         for &(group, k) in d.chain[..d.depth].iter().rev() {
