@@ -1215,13 +1215,22 @@ impl Lzb {
         let t = Instant::now();
         let (w, h) = (view.width(), view.height());
         let d_clip = ctx.near / z_clip;
-        let mut cast_mask: Vec<bool> = frame.depth().iter().map(|&d| d.is_nan() || d <= d_clip).collect();
-        stats
-            .counters
-            .add("unfinished_pixels", cast_mask.iter().filter(|&&u| u).count() as u64);
+        let unfinished = |d: f32| d.is_nan() || d <= d_clip;
+        stats.counters.add(
+            "unfinished_pixels",
+            frame.depth().iter().filter(|&&d| unfinished(d)).count() as u64,
+        );
         // §III.C: object-oriented ray casting: only unfinished pixels inside the projection of
-        // a far leaf, each once (the done-mask).
-        if self.opts.oor {
+        // a far leaf, each once (the done-mask). Without far leaves no pixel is cast: the
+        // masks and the tile walk below are skipped (a frame whose plane lies at the far
+        // plane, every leaf near).
+        let no_rays = self.opts.oor && far.is_empty();
+        let mut cast_mask: Vec<bool> = if no_rays {
+            Vec::new()
+        } else {
+            frame.depth().iter().map(|&d| unfinished(d)).collect()
+        };
+        if self.opts.oor && !no_rays {
             let mut done = vec![false; cast_mask.len()];
             let mut polygons = 0u64;
             for &(inst, leaf) in &far {
@@ -1252,13 +1261,15 @@ impl Lzb {
             }
             stats.counters.add("oor_polygons", polygons);
             cast_mask = done;
+        } else if no_rays {
+            stats.counters.add("oor_polygons", 0);
         }
         // In tiles of 8×8 pixels, row-major within a tile: neighbouring rays meet the same
         // nodes and triangles, which a chunk then finds in cache (and §III.D's neighbour is
         // still the previous ray).
         const TILE: u32 = 8;
         let mut pixels: Vec<u32> = Vec::new();
-        for ty in (0..h).step_by(TILE as usize) {
+        for ty in (0..h).step_by(TILE as usize).filter(|_| !no_rays) {
             for tx in (0..w).step_by(TILE as usize) {
                 for y in ty..(ty + TILE).min(h) {
                     for x in tx..(tx + TILE).min(w) {
