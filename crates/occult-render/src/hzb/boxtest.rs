@@ -25,6 +25,52 @@ fn clip_corners(clip_from_object: &Mat4, b: &Aabb) -> Option<[Vec4; 8]> {
     Some(c)
 }
 
+/// A corner's position on screen, pixels (`x` right, `y` down), for a `w × h` frame.
+#[inline]
+fn screen_xy(v: Vec4, w: f64, h: f64) -> (f64, f64) {
+    let cw = v.w as f64;
+    ((v.x as f64 / cw * 0.5 + 0.5) * w, (0.5 - v.y as f64 / cw * 0.5) * h)
+}
+
+/// `ceil(x)` clamped to `[0, hi]` (`hi` a whole number below 2^31; NaN gives 0), as
+/// `x.ceil().clamp(0.0, hi) as u32` computes it, without the library call that `f64::ceil` is
+/// on the baseline instruction set (a box test makes four).
+#[inline]
+fn ceil_clamped(x: f64, hi: f64) -> u32 {
+    let v = x.clamp(0.0, hi);
+    let i = v as u32; // truncation: the floor of a value in [0, hi]; NaN → 0
+    if f64::from(i) < v {
+        i + 1
+    } else {
+        i
+    }
+}
+
+/// `floor(x) + 1` clamped to `[0, hi]`, as `(x.floor() + 1.0).clamp(0.0, hi) as u32` computes
+/// it (see [`ceil_clamped`]).
+#[inline]
+fn floor_plus_one_clamped(x: f64, hi: f64) -> u32 {
+    if !(x > -1.0) {
+        return 0; // at most -1, or NaN
+    }
+    let v = x.min(hi);
+    let t = v as i64; // truncation toward zero
+    let floor = if t as f64 > v { t - 1 } else { t };
+    (floor + 1).clamp(0, hi as i64) as u32
+}
+
+/// The pixels whose centres a projection spanning `[minx, maxx] × [miny, maxy]` (pixels) may
+/// reach (empty rectangle when none), for a `w × h` frame.
+#[inline]
+fn rect_of_span(minx: f64, maxx: f64, miny: f64, maxy: f64, w: f64, h: f64) -> PixelRect {
+    PixelRect {
+        x0: ceil_clamped(minx - SNAP_MARGIN - 0.5, w),
+        y0: ceil_clamped(miny - SNAP_MARGIN - 0.5, h),
+        x1: floor_plus_one_clamped(maxx + SNAP_MARGIN - 0.5, w),
+        y1: floor_plus_one_clamped(maxy + SNAP_MARGIN - 0.5, h),
+    }
+}
+
 /// The pixels whose centres the projection of the given corners may reach (empty rectangle
 /// when none), for a `width × height` frame.
 #[inline]
@@ -32,20 +78,13 @@ fn rect_of(c: &[Vec4; 8], corners: impl Iterator<Item = usize>, width: u32, heig
     let (w, h) = (width as f64, height as f64);
     let (mut minx, mut maxx, mut miny, mut maxy) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
     for i in corners {
-        let v = c[i];
-        let cw = v.w as f64;
-        let x = (v.x as f64 / cw * 0.5 + 0.5) * w;
-        let y = (0.5 - v.y as f64 / cw * 0.5) * h;
+        let (x, y) = screen_xy(c[i], w, h);
         minx = minx.min(x);
         maxx = maxx.max(x);
         miny = miny.min(y);
         maxy = maxy.max(y);
     }
-    let x0 = (minx - SNAP_MARGIN - 0.5).ceil().clamp(0.0, w) as u32;
-    let y0 = (miny - SNAP_MARGIN - 0.5).ceil().clamp(0.0, h) as u32;
-    let x1 = ((maxx + SNAP_MARGIN - 0.5).floor() + 1.0).clamp(0.0, w) as u32;
-    let y1 = ((maxy + SNAP_MARGIN - 0.5).floor() + 1.0).clamp(0.0, h) as u32;
-    PixelRect { x0, y0, x1, y1 }
+    rect_of_span(minx, maxx, miny, maxy, w, h)
 }
 
 /// The screen rectangle `b` may draw into (the whole frame when it reaches the near plane);
@@ -91,7 +130,10 @@ impl Occlusion<'_> {
         let Some(c) = clip_corners(clip_from_object, b) else {
             return false;
         };
-        let (w, h) = (self.frame.width(), self.frame.height());
+        let (w, h) = (self.frame.width() as f64, self.frame.height() as f64);
+        // Each corner projected once (screen position and depth), shared by the faces it is on.
+        let xy = c.map(|v| screen_xy(v, w, h));
+        let depth = c.map(|v| v.z / v.w);
         // Front faces: the eye is strictly outside the face's plane. Their projections cover the
         // box's silhouette, and every point of the box lies behind a point of one of them.
         for axis in 0..3 {
@@ -105,12 +147,26 @@ impl Occlusion<'_> {
                     continue;
                 }
                 let bit = 1usize << axis;
-                let face = (0..8).filter(move |i| (i & bit != 0) == high);
-                let nearest = face.clone().map(|i| c[i].z / c[i].w).fold(0.0f32, f32::max) * (1.0 + DEPTH_MARGIN);
+                let (mut nearest, mut minx, mut maxx, mut miny, mut maxy) = (
+                    0.0f32,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                );
+                for i in (0..8).filter(|i| (i & bit != 0) == high) {
+                    nearest = nearest.max(depth[i]);
+                    let (x, y) = xy[i];
+                    minx = minx.min(x);
+                    maxx = maxx.max(x);
+                    miny = miny.min(y);
+                    maxy = maxy.max(y);
+                }
+                let nearest = nearest * (1.0 + DEPTH_MARGIN);
                 if nearest < self.far_depth * (1.0 - DEPTH_MARGIN) {
                     continue; // beyond the far plane: draws nothing
                 }
-                let r = rect_of(&c, face, w, h);
+                let r = rect_of_span(minx, maxx, miny, maxy, w, h);
                 if !self.pyramid.occludes(self.frame, r, nearest, self.how, counts) {
                     return false;
                 }
@@ -123,6 +179,34 @@ impl Occlusion<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn inline_rounding_is_the_library_rounding() {
+        let w = 1280.0;
+        let mut xs = vec![
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            -0.0,
+            0.0,
+            w,
+            w + 0.5,
+            1e12,
+            -1e12,
+        ];
+        for k in -40..=1320 * 4 {
+            let x = k as f64 / 4.0;
+            xs.extend([x, x.next_up(), x.next_down(), x + 1e-9, x - 1e-9]);
+        }
+        for x in xs {
+            assert_eq!(ceil_clamped(x, w), x.ceil().clamp(0.0, w) as u32, "ceil of {x}");
+            assert_eq!(
+                floor_plus_one_clamped(x, w),
+                (x.floor() + 1.0).clamp(0.0, w) as u32,
+                "floor of {x}"
+            );
+        }
+    }
 
     #[test]
     fn rect_covers_query_box_pixels() {
