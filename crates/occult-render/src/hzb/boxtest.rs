@@ -50,7 +50,7 @@ fn ceil_clamped(x: f64, hi: f64) -> u32 {
 /// it (see [`ceil_clamped`]).
 #[inline]
 fn floor_plus_one_clamped(x: f64, hi: f64) -> u32 {
-    if !(x > -1.0) {
+    if x.is_nan() || x <= -1.0 {
         return 0; // at most -1, or NaN
     }
     let v = x.min(hi);
