@@ -101,7 +101,7 @@ use rayon::prelude::*;
 
 use crate::params::read_params;
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
-use cache::{quantize, CachedSample, SampleCache};
+use cache::{quantize, CachedSample, Plan, SampleCache};
 use sample::{box_rng, piece_rng, sample_count, SampleCounts, Sampler, Target};
 use select::Selection;
 use structure::Structure;
@@ -916,11 +916,6 @@ fn occlusion_batches(order: &[usize], samples: impl Fn(usize) -> f64, pixels: f6
     batches
 }
 
-/// The cache key of a selected box.
-fn job_key(job: &select::Job) -> cache::BoxKey {
-    (job.structure, job.base, job.range.start, job.range.end)
-}
-
 /// Where a selected box's samples come from this frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Source {
@@ -1051,23 +1046,45 @@ impl Renderer for Rzb {
                 let k = work[next];
                 next += 1;
                 let job = &jobs[k];
+                // §7.2: a valid set, one to build (the box was selected in the frame before at
+                // a similar distance), or fresh samples ([`cache`]'s admission rule).
+                // The parts of a split box (`occlude=on`) are sampled fresh: a part is an
+                // instance or an octree node with a few samples, whose set would cost more to
+                // look up and keep than to draw; the box itself is remembered and cached whole.
+                let key = job.key();
+                let plan = match &self.cache {
+                    Some(_) if k >= selected => Plan::Direct,
+                    Some(c) => match c.plan(&key, job.z_min, frame_index) {
+                        Plan::Build if !c.fits(job.samples * cap * (tol * tol) as f64) => Plan::Direct,
+                        p => p,
+                    },
+                    None => Plan::Direct,
+                };
                 if let Some(p) = &pyramid {
                     // Cached sets are quantized to cells of at most a splat at the box's
                     // distance, which may move a sample that far out of the box.
-                    let bounds = match self.cache {
-                        Some(_) => {
+                    let bounds = match plan {
+                        Plan::Hit | Plan::Build => {
                             let cell = (consts.splat as f64 * job.z_min as f64 / consts.focal_px) as f32
                                 / job.scale.max(f32::MIN_POSITIVE);
                             Aabb::new(job.bounds.min - Vec3::splat(cell), job.bounds.max + Vec3::splat(cell))
                         }
-                        None => job.bounds,
+                        Plan::Direct => job.bounds,
                     };
                     if occluded(p, frame, &job.clip_from_structure, &bounds, reach, &mut pyramid_counts) {
                         hidden.0 += 1;
                         hidden.1 += job.samples * cap;
                         continue;
                     }
-                    if let Some(parts) = split(&self.scene, view, &self.structures, job, self.opts.split) {
+                    // A box drawn from a cached set is not split: its set is drawn whole.
+                    let parts = match plan {
+                        Plan::Direct => split(&self.scene, view, &self.structures, job, self.opts.split),
+                        Plan::Hit | Plan::Build => None,
+                    };
+                    if let Some(parts) = parts {
+                        if let (Some(c), true) = (self.cache.as_mut(), k < selected) {
+                            c.note(&key, job.z_min);
+                        }
                         split_count += 1;
                         for part in parts {
                             jobs.push(part);
@@ -1079,20 +1096,22 @@ impl Renderer for Rzb {
                 }
                 let job = &jobs[k];
                 accepted.push(k);
-                let key = (job.structure, job.base, job.range.start, job.range.end);
-                let src = match self.cache.as_mut() {
-                    Some(c) => {
-                        if c.lookup(&key, job.z_min, frame_index) {
-                            hits += 1;
-                            Source::Hit
-                        } else if c.fits(job.samples * cap * (tol * tol) as f64) {
-                            to_build.push(k);
-                            Source::Built(to_build.len() - 1)
-                        } else {
-                            Source::Direct
-                        }
+                let src = match (self.cache.as_mut(), plan) {
+                    (Some(c), Plan::Hit) => {
+                        c.touch(&key, frame_index);
+                        hits += 1;
+                        Source::Hit
                     }
-                    None => Source::Direct,
+                    (_, Plan::Build) => {
+                        to_build.push(k);
+                        Source::Built(to_build.len() - 1)
+                    }
+                    (c, _) => {
+                        if let (Some(c), true) = (c, k < selected) {
+                            c.note(&key, job.z_min);
+                        }
+                        Source::Direct
+                    }
                 };
                 sources[k] = Some(src);
             }
@@ -1143,7 +1162,7 @@ impl Renderer for Rzb {
                         let mut rng = box_rng(sampler.seed, job);
                         sample_count(job.samples * cap, &mut rng)
                     }
-                    Source::Hit => self.cache.as_ref().map_or(0, |c| c.samples(&job_key(job)).len() as u64),
+                    Source::Hit => self.cache.as_ref().map_or(0, |c| c.samples(&job.key()).len() as u64),
                     Source::Built(b) => built[*b].0.len() as u64,
                 };
                 let mut first = 0u64;
@@ -1224,7 +1243,7 @@ impl Renderer for Rzb {
                                 }
                                 Some(Source::Hit) => {
                                     if let Some(c) = cache {
-                                        let set = &c.samples(&job_key(job))[u.first..u.first + u.len];
+                                        let set = &c.samples(&job.key())[u.first..u.first + u.len];
                                         sampler.draw_cached(
                                             &job.clip_from_structure,
                                             job.base,
@@ -1298,7 +1317,7 @@ impl Renderer for Rzb {
                                     sampler.project_job(job, u.len as u64, &mut rng, &mut counts, &mut emit);
                                     None
                                 }
-                                Some(Source::Hit) => cache.map(|c| &c.samples(&job_key(job))[u.first..u.first + u.len]),
+                                Some(Source::Hit) => cache.map(|c| &c.samples(&job.key())[u.first..u.first + u.len]),
                                 Some(Source::Built(b)) => Some(&built[b].0[u.first..u.first + u.len]),
                                 None => None,
                             };
@@ -1333,13 +1352,9 @@ impl Renderer for Rzb {
             for (b, (set, generated)) in built.into_iter().enumerate() {
                 let job = &jobs[to_build[b]];
                 built_samples += generated;
-                evictions += c.insert(
-                    (job.structure, job.base, job.range.start, job.range.end),
-                    set,
-                    job.z_min,
-                    frame_index,
-                );
+                evictions += c.insert(job.key(), set, job.z_min, frame_index);
             }
+            c.end_frame(frame_index);
         }
         let samples_time = t_samples.elapsed();
         stats.phases.add(Phase::Samples, samples_time);
@@ -1381,7 +1396,7 @@ impl Renderer for Rzb {
 
     fn memory_bytes(&self) -> usize {
         self.structures.iter().map(Structure::memory_bytes).sum::<usize>()
-            + self.cache.as_ref().map_or(0, SampleCache::bytes)
+            + self.cache.as_ref().map_or(0, |c| c.bytes() + c.seen_bytes())
             + self
                 .scratch
                 .iter()
