@@ -58,7 +58,9 @@
 //!   generators use; for non-uniform scales the child's own-space distribution is used.
 //! - Cached sets are built at the density needed at `z / tolerance`, so that they never fall
 //!   below the required density while valid; back faces are not rejected from cached sets (as
-//!   in the paper, so that validity depends on distance only).
+//!   in the paper, so that validity depends on distance only). A set is built on a box's second
+//!   request, not its first, and never for a split part ([`cache`]'s admission rule): over a
+//!   walk that jumps, the paper's rule built sets that were never drawn again.
 //! - §4.2 Gaussian reconstruction regenerates the samples in a second pass instead of keeping
 //!   them (no memory per sample); it does not raise the sample count by itself (the paper uses
 //!   about ten times the per-pixel count: `oversample=10`).
@@ -1016,6 +1018,9 @@ impl Renderer for Rzb {
         let mut hits = 0u64;
         let mut sources: Vec<Option<Source>> = vec![None; jobs.len()];
         let mut to_build: Vec<usize> = Vec::new();
+        // §7.2: the sets drawn and the boxes sampled fresh this frame, told to the cache once
+        // the frame is whole (a cancelled frame leaves the cache as it was).
+        let (mut touched, mut noted): (Vec<cache::BoxKey>, Vec<(cache::BoxKey, f32)>) = (Vec::new(), Vec::new());
         let mut built: Vec<(Vec<CachedSample>, u64)> = Vec::new();
         let mut units: Vec<Unit> = Vec::new();
         let mut counts: Vec<SampleCounts> = Vec::new();
@@ -1082,8 +1087,8 @@ impl Renderer for Rzb {
                         Plan::Hit | Plan::Build => None,
                     };
                     if let Some(parts) = parts {
-                        if let (Some(c), true) = (self.cache.as_mut(), k < selected) {
-                            c.note(&key, job.z_min);
+                        if self.cache.is_some() && k < selected {
+                            noted.push((key, job.z_min));
                         }
                         split_count += 1;
                         for part in parts {
@@ -1096,19 +1101,19 @@ impl Renderer for Rzb {
                 }
                 let job = &jobs[k];
                 accepted.push(k);
-                let src = match (self.cache.as_mut(), plan) {
-                    (Some(c), Plan::Hit) => {
-                        c.touch(&key, frame_index);
+                let src = match plan {
+                    Plan::Hit => {
+                        touched.push(key);
                         hits += 1;
                         Source::Hit
                     }
-                    (_, Plan::Build) => {
+                    Plan::Build => {
                         to_build.push(k);
                         Source::Built(to_build.len() - 1)
                     }
-                    (c, _) => {
-                        if let (Some(c), true) = (c, k < selected) {
-                            c.note(&key, job.z_min);
+                    Plan::Direct => {
+                        if self.cache.is_some() && k < selected {
+                            noted.push((key, job.z_min));
                         }
                         Source::Direct
                     }
@@ -1343,19 +1348,7 @@ impl Renderer for Rzb {
                 .collect();
             frame.resolved_color_mut().copy_from_slice(&resolved);
         }
-        // A cancelled frame stores nothing (its sets may be incomplete).
-        crate::check_cancel(&self.raster)?;
-        // Store the new sets (LRU eviction under the budget).
-        let mut evictions = 0u64;
-        let mut built_samples = 0u64;
-        if let Some(c) = self.cache.as_mut() {
-            for (b, (set, generated)) in built.into_iter().enumerate() {
-                let job = &jobs[to_build[b]];
-                built_samples += generated;
-                evictions += c.insert(job.key(), set, job.z_min, frame_index);
-            }
-            c.end_frame(frame_index);
-        }
+        let built_samples: u64 = built.iter().map(|(_, generated)| generated).sum();
         let samples_time = t_samples.elapsed();
         stats.phases.add(Phase::Samples, samples_time);
         let sum = counts.iter().fold(SampleCounts::default(), |a, c| SampleCounts {
@@ -1375,12 +1368,6 @@ impl Renderer for Rzb {
         c.add("samples_backfacing", sum.backfacing);
         c.add("samples_capped", (cap < 1.0) as u64);
         c.add("samples_expected", expected.min(u64::MAX as f64) as u64);
-        if self.cache.is_some() {
-            c.add("cache_hits", hits);
-            c.add("cache_builds", to_build.len() as u64);
-            c.add("cache_evictions", evictions);
-            c.add("cache_kib", (self.cache_bytes() >> 10) as u64);
-        }
         c.add("eps_milli", (eps * 1000.0).round() as u64);
         if self.opts.occlude {
             c.add("boxes_hidden", hidden.0);
@@ -1391,7 +1378,33 @@ impl Renderer for Rzb {
             a.record((select_time + samples_time).as_secs_f64());
         }
         stats.total = start.elapsed();
-        crate::end_frame(&self.raster, stats)
+        // A cancelled frame leaves the cache as it was (its sets may be incomplete): the cache
+        // learns of the frame only after its last check.
+        let mut stats = crate::end_frame(&self.raster, stats)?;
+        if let Some(c) = self.cache.as_mut() {
+            let t_store = Instant::now();
+            for key in &touched {
+                c.touch(key, frame_index);
+            }
+            for (key, z_min) in &noted {
+                c.note(key, *z_min);
+            }
+            let mut evictions = 0u64;
+            for (b, (set, _)) in built.into_iter().enumerate() {
+                let job = &jobs[to_build[b]];
+                evictions += c.insert(job.key(), set, job.z_min, frame_index);
+            }
+            c.end_frame(frame_index);
+            let store_time = t_store.elapsed();
+            stats.phases.add(Phase::Samples, store_time);
+            stats.total += store_time;
+            let counters = &mut stats.counters;
+            counters.add("cache_hits", hits);
+            counters.add("cache_builds", to_build.len() as u64);
+            counters.add("cache_evictions", evictions);
+            counters.add("cache_kib", (c.bytes() >> 10) as u64);
+        }
+        Ok(stats)
     }
 
     fn memory_bytes(&self) -> usize {
