@@ -36,6 +36,8 @@ pub const SAMPLE_BYTES: usize = std::mem::size_of::<CachedSample>();
 pub const ENTRY_BYTES: usize = 128;
 /// Frames a box whose set did not fit is sampled fresh before it may be built again.
 pub const DECLINE_FRAMES: u64 = 8;
+/// The longest a declined box waits: each decline of a box declined before doubles its wait.
+pub const DECLINE_MAX_FRAMES: u64 = 1024;
 /// Bytes one remembered request costs (key fingerprint, distance, hash table slot, estimated).
 const SEEN_BYTES: usize = 24;
 
@@ -102,9 +104,10 @@ pub struct SampleCache {
     seen: HashMap<u64, f32, FxBuild>,
     /// The same for the frame before.
     seen_before: HashMap<u64, f32, FxBuild>,
-    /// Boxes whose set did not fit beside the sets of its frame → that frame
-    /// ([`DECLINE_FRAMES`]).
-    declined: HashMap<u64, u64, FxBuild>,
+    /// Boxes whose set did not fit beside the sets of its frame → (first frame it may be
+    /// built again, its wait): [`DECLINE_FRAMES`], doubled at each decline while remembered
+    /// (one more wait after it ends).
+    declined: HashMap<u64, (u64, u64), FxBuild>,
 }
 
 impl SampleCache {
@@ -155,7 +158,7 @@ impl SampleCache {
             return Plan::Hit;
         }
         let f = key_hash(key);
-        if self.declined.get(&f).is_some_and(|&d| frame < d + DECLINE_FRAMES) {
+        if self.declined.get(&f).is_some_and(|&(until, _)| frame < until) {
             return Plan::Direct;
         }
         let near = |z: f32| {
@@ -174,11 +177,11 @@ impl SampleCache {
     }
 
     /// Ends `frame`: its requests become the frame before's, those of the frame before are
-    /// forgotten, and so are declined boxes after [`DECLINE_FRAMES`].
+    /// forgotten, and so are declined boxes one wait after theirs ended.
     pub fn end_frame(&mut self, frame: u64) {
         std::mem::swap(&mut self.seen, &mut self.seen_before);
         self.seen.clear();
-        self.declined.retain(|_, d| frame + 1 < *d + DECLINE_FRAMES);
+        self.declined.retain(|_, &mut (until, wait)| frame + 1 < until + wait);
     }
 
     fn valid(&self, e: &Entry, z_min: f32) -> bool {
@@ -215,7 +218,8 @@ impl SampleCache {
     /// Stores `samples` for `key`, built in `frame`, replacing a stale set and evicting the
     /// least recently used sets of earlier frames until the budget holds. Returns the number
     /// of sets evicted. A set that does not fit beside the sets used in `frame` is not stored,
-    /// and its box is sampled fresh for [`DECLINE_FRAMES`] frames: a view whose sets exceed the
+    /// and its box is sampled fresh for [`DECLINE_FRAMES`] frames, twice as long at each
+    /// decline that follows (up to [`DECLINE_MAX_FRAMES`]): a view whose sets exceed the
     /// budget would otherwise evict its own sets and rebuild them frame after frame.
     pub fn insert(&mut self, key: BoxKey, samples: Vec<CachedSample>, z_built: f32, frame: u64) -> u64 {
         self.remove(&key);
@@ -225,7 +229,11 @@ impl SampleCache {
             evicted += 1;
         }
         if self.bytes + need > self.budget {
-            self.declined.insert(key_hash(&key), frame);
+            let wait = match self.declined.get(&key_hash(&key)) {
+                Some(&(_, wait)) => (wait * 2).min(DECLINE_MAX_FRAMES),
+                None => DECLINE_FRAMES,
+            };
+            self.declined.insert(key_hash(&key), (frame + wait, wait));
             return evicted;
         }
         self.bytes += need;
@@ -330,6 +338,34 @@ mod tests {
         // Too large for the budget: not stored.
         assert_eq!(c.insert((2, 0, 0, 1), set(100_000), 1.0, 63), 0);
         assert!(!c.lookup(&(2, 0, 0, 1), 1.0, 64));
+    }
+
+    /// A set that does not fit beside its own frame's sets is not stored; its box is sampled
+    /// fresh for DECLINE_FRAMES, then twice as long after a second decline.
+    #[test]
+    fn sets_that_do_not_fit_beside_their_frame_are_declined_with_a_growing_wait() {
+        let budget = 2 * (100 * SAMPLE_BYTES + ENTRY_BYTES);
+        let mut c = SampleCache::new(budget, 1.5);
+        let key = (9, 0, 0, 1);
+        c.insert((0, 0, 0, 1), set(100), 1.0, 1);
+        c.insert((0, 1, 0, 1), set(100), 1.0, 1);
+        assert_eq!(c.insert(key, set(100), 1.0, 1), 0);
+        assert_eq!(c.len(), 2);
+        c.note(&key, 1.0);
+        c.end_frame(1);
+        assert_eq!(c.plan(&key, 1.0, 2), Plan::Direct);
+        assert_eq!(c.plan(&key, 1.0, 1 + DECLINE_FRAMES - 1), Plan::Direct);
+        // The wait over (and the box seen the frame before): built again, declined again.
+        let f = 1 + DECLINE_FRAMES;
+        c.note(&key, 1.0);
+        c.end_frame(f - 1);
+        assert_eq!(c.plan(&key, 1.0, f), Plan::Build);
+        c.touch(&(0, 0, 0, 1), f);
+        c.touch(&(0, 1, 0, 1), f);
+        c.insert(key, set(100), 1.0, f);
+        assert_eq!(c.plan(&key, 1.0, f + 2 * DECLINE_FRAMES - 1), Plan::Direct);
+        // Sets of earlier frames are evicted for it.
+        assert_eq!(c.insert((9, 1, 0, 1), set(100), 1.0, f + 1), 1);
     }
 
     #[test]
