@@ -282,24 +282,64 @@ impl SampleCache {
 
 /// §7.2: snaps points to the centres of a grid of side `cell` and keeps one per cell (the
 /// first), removing the oversampling of random selection.
-pub fn quantize(points: impl ExactSizeIterator<Item = (Vec3, ItemId)>, cell: f32) -> Vec<CachedSample> {
-    let mut seen: HashSet<(i64, i64, i64), FxBuild> =
-        HashSet::with_capacity_and_hasher(points.len(), FxBuild::default());
-    let mut out = Vec::new();
+///
+/// Cells are told apart by one 64-bit word (21 bits an axis from the lowest cell) where the
+/// points span fewer than 2^21 cells an axis, as a selected box does: the table is a third of
+/// that of three 64-bit coordinates, and a set's build (at `tolerance²` times a view's samples,
+/// ~25 a kept cell) spends most of its time in it.
+pub fn quantize(points: &[(Vec3, ItemId)], cell: f32) -> Vec<CachedSample> {
     let inv = 1.0 / cell as f64;
-    for (p, item) in points {
-        let k = (
-            (p.x as f64 * inv).floor() as i64,
-            (p.y as f64 * inv).floor() as i64,
-            (p.z as f64 * inv).floor() as i64,
-        );
-        if seen.insert(k) {
-            let q = Vec3::new(
-                ((k.0 as f64 + 0.5) * cell as f64) as f32,
-                ((k.1 as f64 + 0.5) * cell as f64) as f32,
-                ((k.2 as f64 + 0.5) * cell as f64) as f32,
-            );
-            out.push(CachedSample { position: q, item });
+    // floor without a call into the C library (the values are far inside i64's range).
+    let floor = |v: f64| {
+        let t = v as i64;
+        t - (v < t as f64) as i64
+    };
+    let cell_of = |p: Vec3| {
+        [
+            floor(p.x as f64 * inv),
+            floor(p.y as f64 * inv),
+            floor(p.z as f64 * inv),
+        ]
+    };
+    let centre = |k: [i64; 3]| {
+        let c = |i: i64| ((i as f64 + 0.5) * cell as f64) as f32;
+        Vec3::new(c(k[0]), c(k[1]), c(k[2]))
+    };
+    let (mut lo, mut hi) = ([i64::MAX; 3], [i64::MIN; 3]);
+    for &(p, _) in points {
+        let k = cell_of(p);
+        for a in 0..3 {
+            lo[a] = lo[a].min(k[a]);
+            hi[a] = hi[a].max(k[a]);
+        }
+    }
+    const BITS: u32 = 21;
+    let packed = (0..3).all(|a| hi[a].checked_sub(lo[a]).is_some_and(|d| d < 1 << BITS));
+    let mut out = Vec::new();
+    if packed {
+        let mut seen: HashSet<u64, KeyBuild> = HashSet::with_capacity_and_hasher(points.len() / 8, KeyBuild::default());
+        for &(p, item) in points {
+            let k = cell_of(p);
+            let word =
+                ((k[0] - lo[0]) as u64) | ((k[1] - lo[1]) as u64) << BITS | ((k[2] - lo[2]) as u64) << (2 * BITS);
+            if seen.insert(word) {
+                out.push(CachedSample {
+                    position: centre(k),
+                    item,
+                });
+            }
+        }
+    } else {
+        let mut seen: HashSet<[i64; 3], KeyBuild> =
+            HashSet::with_capacity_and_hasher(points.len() / 8, KeyBuild::default());
+        for &(p, item) in points {
+            let k = cell_of(p);
+            if seen.insert(k) {
+                out.push(CachedSample {
+                    position: centre(k),
+                    item,
+                });
+            }
         }
     }
     out
@@ -385,10 +425,21 @@ mod tests {
             (Vec3::new(0.2, 0.3, 0.4), 2),
             (Vec3::new(1.5, 0.1, 0.1), 3),
         ];
-        let q = quantize(pts.into_iter(), 1.0);
+        let q = quantize(&pts, 1.0);
         assert_eq!(q.len(), 2);
         assert_eq!(q[0].item, 1);
         assert_eq!(q[0].position, Vec3::splat(0.5));
         assert_eq!(q[1].position, Vec3::new(1.5, 0.5, 0.5));
+        // Cells far apart (beyond 2^21 an axis) and negative coordinates: the same rule.
+        let far = [
+            (Vec3::new(-0.5, 0.2, 0.0), 1),
+            (Vec3::new(-0.7, 0.9, 0.1), 2),
+            (Vec3::new(3.0e6, 0.0, 0.0), 3),
+            (Vec3::new(-0.1, 0.0, 0.0), 4),
+        ];
+        let q = quantize(&far, 1.0);
+        assert_eq!(q.iter().map(|s| s.item).collect::<Vec<_>>(), [1, 3]);
+        assert_eq!(q[0].position, Vec3::new(-0.5, 0.5, 0.5));
+        assert!(quantize(&[], 1.0).is_empty());
     }
 }

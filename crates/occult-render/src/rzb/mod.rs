@@ -1148,8 +1148,7 @@ impl Renderer for Rzb {
                                 points.push((pl.job_from_space.transform_point3(p), item - job.base));
                             },
                         );
-                        let points = points.into_iter();
-                        (quantize(points, cell.max(f32::MIN_POSITIVE)), n)
+                        (quantize(&points, cell.max(f32::MIN_POSITIVE)), n)
                     })
                     .collect()
             });
