@@ -260,7 +260,7 @@ impl SampleCache {
                 self.queue.sort_unstable_by(|a, b| b.cmp(a));
                 continue;
             };
-            if !self.map.get(&key).is_some_and(|e| e.last_used == used) {
+            if self.map.get(&key).is_none_or(|e| e.last_used != used) {
                 self.queue.pop();
                 continue;
             }
