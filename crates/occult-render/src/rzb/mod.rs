@@ -58,7 +58,9 @@
 //!   generators use; for non-uniform scales the child's own-space distribution is used.
 //! - Cached sets are built at the density needed at `z / tolerance`, so that they never fall
 //!   below the required density while valid; back faces are not rejected from cached sets (as
-//!   in the paper, so that validity depends on distance only).
+//!   in the paper, so that validity depends on distance only). A set is built on a box's second
+//!   request, not its first, and never for a split part ([`cache`]'s admission rule): over a
+//!   walk that jumps, the paper's rule built sets that were never drawn again.
 //! - §4.2 Gaussian reconstruction regenerates the samples in a second pass instead of keeping
 //!   them (no memory per sample); it does not raise the sample count by itself (the paper uses
 //!   about ten times the per-pixel count: `oversample=10`).
@@ -101,7 +103,7 @@ use rayon::prelude::*;
 
 use crate::params::read_params;
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
-use cache::{quantize, CachedSample, SampleCache};
+use cache::{quantize, CachedSample, Plan, SampleCache};
 use sample::{box_rng, piece_rng, sample_count, SampleCounts, Sampler, Target};
 use select::Selection;
 use structure::Structure;
@@ -916,11 +918,6 @@ fn occlusion_batches(order: &[usize], samples: impl Fn(usize) -> f64, pixels: f6
     batches
 }
 
-/// The cache key of a selected box.
-fn job_key(job: &select::Job) -> cache::BoxKey {
-    (job.structure, job.base, job.range.start, job.range.end)
-}
-
 /// Where a selected box's samples come from this frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Source {
@@ -1021,6 +1018,9 @@ impl Renderer for Rzb {
         let mut hits = 0u64;
         let mut sources: Vec<Option<Source>> = vec![None; jobs.len()];
         let mut to_build: Vec<usize> = Vec::new();
+        // §7.2: the sets drawn and the boxes sampled fresh this frame, told to the cache once
+        // the frame is whole (a cancelled frame leaves the cache as it was).
+        let (mut touched, mut noted): (Vec<cache::BoxKey>, Vec<(cache::BoxKey, f32)>) = (Vec::new(), Vec::new());
         let mut built: Vec<(Vec<CachedSample>, u64)> = Vec::new();
         let mut units: Vec<Unit> = Vec::new();
         let mut counts: Vec<SampleCounts> = Vec::new();
@@ -1051,23 +1051,45 @@ impl Renderer for Rzb {
                 let k = work[next];
                 next += 1;
                 let job = &jobs[k];
+                // §7.2: a valid set, one to build (the box was selected in the frame before at
+                // a similar distance), or fresh samples ([`cache`]'s admission rule).
+                // The parts of a split box (`occlude=on`) are sampled fresh: a part is an
+                // instance or an octree node with a few samples, whose set would cost more to
+                // look up and keep than to draw; the box itself is remembered and cached whole.
+                let key = job.key();
+                let plan = match &self.cache {
+                    Some(_) if k >= selected => Plan::Direct,
+                    Some(c) => match c.plan(&key, job.z_min, frame_index) {
+                        Plan::Build if !c.fits(job.samples * cap * (tol * tol) as f64) => Plan::Direct,
+                        p => p,
+                    },
+                    None => Plan::Direct,
+                };
                 if let Some(p) = &pyramid {
                     // Cached sets are quantized to cells of at most a splat at the box's
                     // distance, which may move a sample that far out of the box.
-                    let bounds = match self.cache {
-                        Some(_) => {
+                    let bounds = match plan {
+                        Plan::Hit | Plan::Build => {
                             let cell = (consts.splat as f64 * job.z_min as f64 / consts.focal_px) as f32
                                 / job.scale.max(f32::MIN_POSITIVE);
                             Aabb::new(job.bounds.min - Vec3::splat(cell), job.bounds.max + Vec3::splat(cell))
                         }
-                        None => job.bounds,
+                        Plan::Direct => job.bounds,
                     };
                     if occluded(p, frame, &job.clip_from_structure, &bounds, reach, &mut pyramid_counts) {
                         hidden.0 += 1;
                         hidden.1 += job.samples * cap;
                         continue;
                     }
-                    if let Some(parts) = split(&self.scene, view, &self.structures, job, self.opts.split) {
+                    // A box drawn from a cached set is not split: its set is drawn whole.
+                    let parts = match plan {
+                        Plan::Direct => split(&self.scene, view, &self.structures, job, self.opts.split),
+                        Plan::Hit | Plan::Build => None,
+                    };
+                    if let Some(parts) = parts {
+                        if self.cache.is_some() && k < selected {
+                            noted.push((key, job.z_min));
+                        }
                         split_count += 1;
                         for part in parts {
                             jobs.push(part);
@@ -1079,20 +1101,22 @@ impl Renderer for Rzb {
                 }
                 let job = &jobs[k];
                 accepted.push(k);
-                let key = (job.structure, job.base, job.range.start, job.range.end);
-                let src = match self.cache.as_mut() {
-                    Some(c) => {
-                        if c.lookup(&key, job.z_min, frame_index) {
-                            hits += 1;
-                            Source::Hit
-                        } else if c.fits(job.samples * cap * (tol * tol) as f64) {
-                            to_build.push(k);
-                            Source::Built(to_build.len() - 1)
-                        } else {
-                            Source::Direct
-                        }
+                let src = match plan {
+                    Plan::Hit => {
+                        touched.push(key);
+                        hits += 1;
+                        Source::Hit
                     }
-                    None => Source::Direct,
+                    Plan::Build => {
+                        to_build.push(k);
+                        Source::Built(to_build.len() - 1)
+                    }
+                    Plan::Direct => {
+                        if self.cache.is_some() && k < selected {
+                            noted.push((key, job.z_min));
+                        }
+                        Source::Direct
+                    }
                 };
                 sources[k] = Some(src);
             }
@@ -1124,8 +1148,7 @@ impl Renderer for Rzb {
                                 points.push((pl.job_from_space.transform_point3(p), item - job.base));
                             },
                         );
-                        let points = points.into_iter();
-                        (quantize(points, cell.max(f32::MIN_POSITIVE)), n)
+                        (quantize(&points, cell.max(f32::MIN_POSITIVE)), n)
                     })
                     .collect()
             });
@@ -1143,7 +1166,7 @@ impl Renderer for Rzb {
                         let mut rng = box_rng(sampler.seed, job);
                         sample_count(job.samples * cap, &mut rng)
                     }
-                    Source::Hit => self.cache.as_ref().map_or(0, |c| c.samples(&job_key(job)).len() as u64),
+                    Source::Hit => self.cache.as_ref().map_or(0, |c| c.samples(&job.key()).len() as u64),
                     Source::Built(b) => built[*b].0.len() as u64,
                 };
                 let mut first = 0u64;
@@ -1224,7 +1247,7 @@ impl Renderer for Rzb {
                                 }
                                 Some(Source::Hit) => {
                                     if let Some(c) = cache {
-                                        let set = &c.samples(&job_key(job))[u.first..u.first + u.len];
+                                        let set = &c.samples(&job.key())[u.first..u.first + u.len];
                                         sampler.draw_cached(
                                             &job.clip_from_structure,
                                             job.base,
@@ -1298,7 +1321,7 @@ impl Renderer for Rzb {
                                     sampler.project_job(job, u.len as u64, &mut rng, &mut counts, &mut emit);
                                     None
                                 }
-                                Some(Source::Hit) => cache.map(|c| &c.samples(&job_key(job))[u.first..u.first + u.len]),
+                                Some(Source::Hit) => cache.map(|c| &c.samples(&job.key())[u.first..u.first + u.len]),
                                 Some(Source::Built(b)) => Some(&built[b].0[u.first..u.first + u.len]),
                                 None => None,
                             };
@@ -1324,23 +1347,7 @@ impl Renderer for Rzb {
                 .collect();
             frame.resolved_color_mut().copy_from_slice(&resolved);
         }
-        // A cancelled frame stores nothing (its sets may be incomplete).
-        crate::check_cancel(&self.raster)?;
-        // Store the new sets (LRU eviction under the budget).
-        let mut evictions = 0u64;
-        let mut built_samples = 0u64;
-        if let Some(c) = self.cache.as_mut() {
-            for (b, (set, generated)) in built.into_iter().enumerate() {
-                let job = &jobs[to_build[b]];
-                built_samples += generated;
-                evictions += c.insert(
-                    (job.structure, job.base, job.range.start, job.range.end),
-                    set,
-                    job.z_min,
-                    frame_index,
-                );
-            }
-        }
+        let built_samples: u64 = built.iter().map(|(_, generated)| generated).sum();
         let samples_time = t_samples.elapsed();
         stats.phases.add(Phase::Samples, samples_time);
         let sum = counts.iter().fold(SampleCounts::default(), |a, c| SampleCounts {
@@ -1360,12 +1367,6 @@ impl Renderer for Rzb {
         c.add("samples_backfacing", sum.backfacing);
         c.add("samples_capped", (cap < 1.0) as u64);
         c.add("samples_expected", expected.min(u64::MAX as f64) as u64);
-        if self.cache.is_some() {
-            c.add("cache_hits", hits);
-            c.add("cache_builds", to_build.len() as u64);
-            c.add("cache_evictions", evictions);
-            c.add("cache_kib", (self.cache_bytes() >> 10) as u64);
-        }
         c.add("eps_milli", (eps * 1000.0).round() as u64);
         if self.opts.occlude {
             c.add("boxes_hidden", hidden.0);
@@ -1376,12 +1377,38 @@ impl Renderer for Rzb {
             a.record((select_time + samples_time).as_secs_f64());
         }
         stats.total = start.elapsed();
-        crate::end_frame(&self.raster, stats)
+        // A cancelled frame leaves the cache as it was (its sets may be incomplete): the cache
+        // learns of the frame only after its last check.
+        let mut stats = crate::end_frame(&self.raster, stats)?;
+        if let Some(c) = self.cache.as_mut() {
+            let t_store = Instant::now();
+            for key in &touched {
+                c.touch(key, frame_index);
+            }
+            for (key, z_min) in &noted {
+                c.note(key, *z_min);
+            }
+            let mut evictions = 0u64;
+            for (b, (set, _)) in built.into_iter().enumerate() {
+                let job = &jobs[to_build[b]];
+                evictions += c.insert(job.key(), set, job.z_min, frame_index);
+            }
+            c.end_frame(frame_index);
+            let store_time = t_store.elapsed();
+            stats.phases.add(Phase::Samples, store_time);
+            stats.total += store_time;
+            let counters = &mut stats.counters;
+            counters.add("cache_hits", hits);
+            counters.add("cache_builds", to_build.len() as u64);
+            counters.add("cache_evictions", evictions);
+            counters.add("cache_kib", (c.bytes() >> 10) as u64);
+        }
+        Ok(stats)
     }
 
     fn memory_bytes(&self) -> usize {
         self.structures.iter().map(Structure::memory_bytes).sum::<usize>()
-            + self.cache.as_ref().map_or(0, SampleCache::bytes)
+            + self.cache.as_ref().map_or(0, |c| c.bytes() + c.seen_bytes())
             + self
                 .scratch
                 .iter()

@@ -6,7 +6,7 @@ use occult_raster::keep_fragment;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
-use super::cache::CachedSample;
+use super::cache::{BoxKey, CachedSample};
 use super::select::Job;
 use super::structure::Structure;
 
@@ -187,26 +187,27 @@ impl Place {
 
 /// SplitMix64 finaliser: decorrelates the per-box seeds.
 #[inline]
-fn mix(mut z: u64) -> u64 {
+pub(super) fn mix(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
     z ^ (z >> 31)
 }
 
+/// A 64-bit hash of a box's key (structure, structure instance, list section): the root of
+/// its generators, and the fingerprint by which the cache remembers requests.
+pub fn key_hash(&(structure, base, start, end): &BoxKey) -> u64 {
+    mix(structure as u64 ^ mix(base ^ mix(((start as u64) << 32) | end as u64)))
+}
+
 /// The generator of a box: a function of the seed and the box alone, so a frame does not depend
 /// on the order boxes are processed in or on the thread count.
 pub fn box_rng(seed: u64, job: &Job) -> Pcg64Mcg {
-    let h =
-        mix(seed
-            ^ mix(job.structure as u64 ^ mix(job.base ^ mix(((job.range.start as u64) << 32) | job.range.end as u64))));
-    Pcg64Mcg::seed_from_u64(h)
+    Pcg64Mcg::seed_from_u64(mix(seed ^ key_hash(&job.key())))
 }
 
 /// The generator of piece `piece` of a box's samples.
 pub fn piece_rng(seed: u64, job: &Job, piece: u64) -> Pcg64Mcg {
-    let h =
-        mix(seed
-            ^ mix(job.structure as u64 ^ mix(job.base ^ mix(((job.range.start as u64) << 32) | job.range.end as u64))));
+    let h = mix(seed ^ key_hash(&job.key()));
     Pcg64Mcg::seed_from_u64(mix(h ^ mix(piece.wrapping_add(0x9e37_79b9_7f4a_7c15))))
 }
 

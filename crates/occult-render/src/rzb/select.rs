@@ -77,6 +77,13 @@ pub struct Job {
     pub scale: f32,
 }
 
+impl Job {
+    /// Identifies the box across frames (the cache's key, the root of its generators).
+    pub fn key(&self) -> super::cache::BoxKey {
+        (self.structure, self.base, self.range.start, self.range.end)
+    }
+}
+
 /// The result of selection for one frame.
 pub struct Selection<'a> {
     walk: SceneWalk<'a>,
