@@ -31,6 +31,21 @@ identical_on_every_generator! {
     /// Rays record triangles, not leaves; almost every pixel goes to the rays.
     triangle_pvl_everything_behind_the_plane_is_identical_on_every_generator:
         assert_variant_identical_on_every_generator("lzb:payoff=off,pvl=triangles,plane=static,plane_fraction=0.0001", 1);
+    /// The paper's octree as the rays' structure (the default is the BVH), with its leaves as
+    /// the PVL; almost every pixel goes to the rays.
+    octree_caster_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("lzb:payoff=off,caster=octree", 1);
+    octree_caster_everything_behind_the_plane_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("lzb:payoff=off,caster=octree,plane=static,plane_fraction=0.0001,leaf=32", 2);
+    /// BVH leaves of one and of eight triangles, everything to the rays.
+    bvh_leaf_sizes_are_identical_on_every_generator: assert_variant_identical_on_every_generator(
+        "lzb:payoff=off,bvh_leaf=1,plane=static,plane_fraction=0.0001,select=all",
+        0
+    );
+    bvh_large_leaves_are_identical_on_every_generator: assert_variant_identical_on_every_generator(
+        "lzb:payoff=off,bvh_leaf=8,plane=static,plane_fraction=0.0001,pvl=triangles",
+        1
+    );
 }
 
 #[test]
@@ -39,6 +54,7 @@ fn identical_on_paths() {
         "lzb",
         "lzb:payoff=off,select=all,oor=off",
         "lzb:payoff=off,plane=static,plane_fraction=0.3,select=static",
+        "lzb:payoff=off,caster=octree,plane=static,plane_fraction=0.3",
     ] {
         assert_identical_on_path(&spec(algo), "city:blocks=3,detail=1", "circle:12", 128, 96);
         assert_identical_on_path(&spec(algo), "forest:trees=2,patches=2", "flyover:8", 96, 64);
@@ -123,6 +139,10 @@ const RAY_HEAVY: &[&str] = &[
     "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=static,k=1,leaf=4",
     "lzb:payoff=off,plane=dynamic,select=dynamic,base_cos=1,leaf=2",
     "lzb:payoff=off,plane=static,plane_fraction=0.0001,pvl=triangles,select=all",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,caster=octree",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=all,oor=off,caster=octree,leaf=1,depth=8",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=all,bvh_leaf=1",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,bvh_leaf=8,coherence=off",
 ];
 
 #[test]
@@ -250,6 +270,9 @@ fn bad_parameters_are_errors() {
         ("lzb:select=some", "select"),
         ("lzb:mode=fast", "mode"),
         ("lzb:pvl=some", "pvl"),
+        ("lzb:caster=kd", "caster"),
+        ("lzb:bvh_leaf=0", "bvh_leaf"),
+        ("lzb:bvh_leaf=9", "bvh_leaf"),
         ("lzb:leaf=many", "leaf"),
         ("lzb:mode=naive,payoff=on", "payoff"),
         ("lzb:payoff=maybe", "payoff"),
