@@ -22,7 +22,7 @@
 //! so an ancestor's grown box is entered no later than its descendant's).
 
 use crate::raycast::TraversalCounters;
-use crate::FatRay;
+use crate::{prefetch_triangles, FatRay, LeafTriangle};
 use occult_core::simd::{Avx2, Isa};
 #[cfg(target_arch = "x86_64")]
 use occult_core::simd::{F32x8, M32x8};
@@ -90,7 +90,12 @@ pub struct RayBvhConfig {
 #[derive(Clone, Debug, Default)]
 pub struct RayBvh {
     nodes: Vec<RayBvhNode>,
+    /// Per node, its parent's index (the root's: itself).
+    parents: Vec<u32>,
     order: Vec<u32>,
+    /// The triangles as the ray caster reads them, in the order's slots
+    /// ([`RayBvh::attach_triangles`]); prefetched when a leaf is pushed.
+    tris: Vec<LeafTriangle>,
     bounds: Aabb,
 }
 
@@ -297,16 +302,49 @@ impl RayBvh {
         let root = b.build(&mut order, 0, 0, &mut binary);
         let mut nodes = Vec::new();
         collapse(&binary, root, &mut nodes);
+        let mut parents = vec![0u32; nodes.len()];
+        for (i, n) in nodes.iter().enumerate() {
+            for lane in 0..8 {
+                if n.valid & (1 << lane) != 0 && !Self::is_leaf(n.child[lane]) {
+                    parents[n.child[lane] as usize] = i as u32;
+                }
+            }
+        }
         Ok(Self {
             bounds: binary[root as usize].bounds,
             nodes,
+            parents,
             order,
+            tris: Vec::new(),
         })
     }
 
     /// The wide nodes; the root is node 0 (absent when there is no triangle).
     pub fn nodes(&self) -> &[RayBvhNode] {
         &self.nodes
+    }
+
+    /// Keeps `tris`, triangle `slot` of [`RayBvh::triangles`] at index `slot`, for
+    /// [`RayBvh::leaf_triangles`]; the traversal then asks for a leaf's triangles as it pushes
+    /// the leaf, so that the misses of the leaves met at one node overlap.
+    ///
+    /// # Panics
+    /// When `tris` does not hold one triangle per slot.
+    pub fn attach_triangles(&mut self, tris: Vec<LeafTriangle>) {
+        assert_eq!(tris.len(), self.order.len(), "one triangle per slot");
+        self.tris = tris;
+    }
+
+    /// The attached triangles of leaf `code` ([`RayBvh::attach_triangles`]; empty when none).
+    #[inline]
+    pub fn leaf_triangles(&self, code: u32) -> &[LeafTriangle] {
+        self.tris.get(Self::leaf_range(code)).unwrap_or(&[])
+    }
+
+    /// The parent of node `node` (the root's is the root).
+    #[inline]
+    pub fn parent(&self, node: u32) -> u32 {
+        self.parents[node as usize]
     }
 
     /// The triangles in leaf order: a leaf's triangles are [`RayBvh::leaf_range`] of it.
@@ -343,11 +381,14 @@ impl RayBvh {
 
     /// Heap bytes.
     pub fn memory_bytes(&self) -> usize {
-        self.nodes.capacity() * std::mem::size_of::<RayBvhNode>() + self.order.capacity() * 4
+        self.nodes.capacity() * std::mem::size_of::<RayBvhNode>()
+            + (self.order.capacity() + self.parents.capacity()) * 4
+            + self.tris.capacity() * std::mem::size_of::<LeafTriangle>()
     }
 
-    /// Sorts each leaf's triangles by `key`, largest first.
+    /// Sorts each leaf's triangles by `key`, largest first (before triangles are attached).
     pub fn sort_leaves_by_key_descending(&mut self, key: impl Fn(u32) -> f32) {
+        debug_assert!(self.tris.is_empty(), "sorted before triangles are attached");
         let codes: Vec<u32> = self.leaves().map(|(c, _)| c).collect();
         for code in codes {
             self.order[Self::leaf_range(code)].sort_by(|&a, &b| key(b).total_cmp(&key(a)));
@@ -461,31 +502,85 @@ fn children_scalar(ray: &FatRay, node: &RayBvhNode, t_limit: f32) -> (u32, [f32;
     (hits, near)
 }
 
+/// The ray's constants in AVX2 lanes, made once per traversal.
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+struct RayLanes {
+    o: [F32x8; 3],
+    inv: [F32x8; 3],
+    spread: F32x8,
+    margin: F32x8,
+    inv_length: F32x8,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl RayLanes {
+    #[inline(always)]
+    fn new(avx2: Avx2, ray: &FatRay) -> Self {
+        Self {
+            o: ray.origin.to_array().map(|v| F32x8::splat(avx2, v)),
+            inv: ray.inv_direction.to_array().map(|v| F32x8::splat(avx2, v)),
+            spread: F32x8::splat(avx2, ray.spread),
+            margin: F32x8::splat(avx2, ray.margin),
+            inv_length: F32x8::splat(avx2, ray.inv_length),
+        }
+    }
+}
+
 /// [`children_scalar`] in AVX2 lanes: the same operations on the same values, so the same bits.
+/// `THIN`: the ray has no cone (no growth: `lo - 0 = lo` exactly); `NAN`: a direction
+/// component is zero, so `0 · ∞` may make NaNs, which the minima and maxima skip as
+/// [`children_scalar`]'s do (without such a component no lane of a child that exists is NaN,
+/// and the plain instructions are the same operations).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-fn children_avx2(avx2: Avx2, ray: &FatRay, node: &RayBvhNode, t_limit: f32) -> (u32, [f32; 8]) {
-    let mn = |a: F32x8, b: F32x8| F32x8::select(b.is_nan(), a, a.min(b));
-    let mx = |a: F32x8, b: F32x8| F32x8::select(b.is_nan(), a, a.max(b));
-    let lo = node.lo.map(|v| F32x8::from_array(avx2, v));
-    let hi = node.hi.map(|v| F32x8::from_array(avx2, v));
-    let o = ray.origin.to_array().map(|v| F32x8::splat(avx2, v));
-    let inv = ray.inv_direction.to_array().map(|v| F32x8::splat(avx2, v));
-    let grow = if ray.spread == 0.0 && ray.margin == 0.0 {
-        F32x8::zero(avx2)
+fn children_avx2<const THIN: bool, const NAN: bool>(
+    avx2: Avx2,
+    r: &RayLanes,
+    node: &RayBvhNode,
+    t_limit: f32,
+) -> (u32, [f32; 8]) {
+    let mn = |a: F32x8, b: F32x8| {
+        if NAN {
+            F32x8::select(b.is_nan(), a, a.min(b))
+        } else {
+            a.min(b)
+        }
+    };
+    let mx = |a: F32x8, b: F32x8| {
+        if NAN {
+            F32x8::select(b.is_nan(), a, a.max(b))
+        } else {
+            a.max(b)
+        }
+    };
+    let load = |v: &[f32; 8]| F32x8::from_array(avx2, *v);
+    let (lx, ly, lz) = (load(&node.lo[0]), load(&node.lo[1]), load(&node.lo[2]));
+    let (hx, hy, hz) = (load(&node.hi[0]), load(&node.hi[1]), load(&node.hi[2]));
+    let [ox, oy, oz] = r.o;
+    let [ix, iy, iz] = r.inv;
+    let (t0, t1) = if THIN {
+        (
+            [(lx - ox) * ix, (ly - oy) * iy, (lz - oz) * iz],
+            [(hx - ox) * ix, (hy - oy) * iy, (hz - oz) * iz],
+        )
     } else {
         let half = F32x8::splat(avx2, 0.5);
-        let c = |a: usize| ((lo[a] + hi[a]) * half - o[a]).abs();
-        let h = |a: usize| (hi[a] - lo[a]) * half;
-        let far_t = ((c(0) + c(1)) + c(2) + ((h(0) + h(1)) + h(2))) * F32x8::splat(avx2, ray.inv_length);
-        F32x8::splat(avx2, ray.spread) * far_t + F32x8::splat(avx2, ray.margin)
+        let c = |l: F32x8, h: F32x8, o: F32x8| ((l + h) * half - o).abs();
+        let h = |l: F32x8, h: F32x8| (h - l) * half;
+        let far_t =
+            ((c(lx, hx, ox) + c(ly, hy, oy)) + c(lz, hz, oz) + ((h(lx, hx) + h(ly, hy)) + h(lz, hz))) * r.inv_length;
+        let g = r.spread * far_t + r.margin;
+        (
+            [((lx - g) - ox) * ix, ((ly - g) - oy) * iy, ((lz - g) - oz) * iz],
+            [((hx + g) - ox) * ix, ((hy + g) - oy) * iy, ((hz + g) - oz) * iz],
+        )
     };
-    let t0 = |a: usize| ((lo[a] - grow) - o[a]) * inv[a];
-    let t1 = |a: usize| ((hi[a] + grow) - o[a]) * inv[a];
-    let e = |a: usize| mn(t0(a), t1(a));
-    let x = |a: usize| mx(t0(a), t1(a));
-    let n = mx(mx(mx(e(0), e(1)), e(2)), F32x8::zero(avx2));
-    let f = mn(mn(x(0), x(1)), x(2));
+    let n = mx(
+        mx(mx(mn(t0[0], t1[0]), mn(t0[1], t1[1])), mn(t0[2], t1[2])),
+        F32x8::zero(avx2),
+    );
+    let f = mn(mn(mx(t0[0], t1[0]), mx(t0[1], t1[1])), mx(t0[2], t1[2]));
     let enter: M32x8 = n.le(f).and(n.le(F32x8::splat(avx2, t_limit)));
     (enter.bits() & node.valid, n.to_array())
 }
@@ -501,13 +596,26 @@ pub fn traverse_bvh(
     counters: &mut TraversalCounters,
     leaf: impl FnMut(u32, f32, &Aabb, u32, &mut f32),
 ) {
+    traverse_bvh_from(bvh, 0, ray, t_limit, counters, leaf);
+}
+
+/// [`traverse_bvh`] below node `start` only (the root: all of it): the leaves of that subtree
+/// the cone enters before the bound.
+pub fn traverse_bvh_from(
+    bvh: &RayBvh,
+    start: u32,
+    ray: &FatRay,
+    t_limit: &mut f32,
+    counters: &mut TraversalCounters,
+    leaf: impl FnMut(u32, f32, &Aabb, u32, &mut f32),
+) {
     #[cfg(target_arch = "x86_64")]
     if let Some(avx2) = Isa::detected().avx2() {
         // SAFETY: the token proves AVX2, the kernel's one feature.
-        unsafe { traverse_bvh_avx2(avx2, bvh, ray, t_limit, counters, leaf) };
+        unsafe { traverse_bvh_avx2(avx2, bvh, start, ray, t_limit, counters, leaf) };
         return;
     }
-    traverse_bvh_body(None, bvh, ray, t_limit, counters, leaf);
+    traverse_bvh_body::<false, true>(None, bvh, start, ray, t_limit, counters, leaf);
 }
 
 /// [`traverse_bvh`] on the scalar path whatever the machine: the reference the AVX2 path is
@@ -519,7 +627,7 @@ pub fn traverse_bvh_scalar(
     counters: &mut TraversalCounters,
     leaf: impl FnMut(u32, f32, &Aabb, u32, &mut f32),
 ) {
-    traverse_bvh_body(None, bvh, ray, t_limit, counters, leaf);
+    traverse_bvh_body::<false, true>(None, bvh, 0, ray, t_limit, counters, leaf);
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -527,38 +635,59 @@ pub fn traverse_bvh_scalar(
 fn traverse_bvh_avx2(
     avx2: Avx2,
     bvh: &RayBvh,
+    start: u32,
     ray: &FatRay,
     t_limit: &mut f32,
     counters: &mut TraversalCounters,
     leaf: impl FnMut(u32, f32, &Aabb, u32, &mut f32),
 ) {
-    traverse_bvh_body(Some(avx2), bvh, ray, t_limit, counters, leaf);
+    let thin = ray.spread == 0.0 && ray.margin == 0.0;
+    let nan = !ray.inv_direction.is_finite();
+    // Instantiated per kind of ray, so that each skips what it does not need (no closure
+    // between: a closure would not be compiled for AVX2, and its lanes' operations would be
+    // calls).
+    match (thin, nan) {
+        (true, false) => traverse_bvh_body::<true, false>(Some(avx2), bvh, start, ray, t_limit, counters, leaf),
+        (false, false) => traverse_bvh_body::<false, false>(Some(avx2), bvh, start, ray, t_limit, counters, leaf),
+        (true, true) => traverse_bvh_body::<true, true>(Some(avx2), bvh, start, ray, t_limit, counters, leaf),
+        (false, true) => traverse_bvh_body::<false, true>(Some(avx2), bvh, start, ray, t_limit, counters, leaf),
+    }
 }
 
+/// The body of [`traverse_bvh`], on AVX2 lanes when `avx2` is given (`THIN`, `NAN`: see
+/// [`children_avx2`]), else on [`children_scalar`].
 #[inline(always)]
-fn traverse_bvh_body(
+fn traverse_bvh_body<const THIN: bool, const NAN: bool>(
     avx2: Option<Avx2>,
     bvh: &RayBvh,
+    start: u32,
     ray: &FatRay,
     t_limit: &mut f32,
     counters: &mut TraversalCounters,
     mut leaf: impl FnMut(u32, f32, &Aabb, u32, &mut f32),
 ) {
+    #[cfg(target_arch = "x86_64")]
+    let lanes = match avx2 {
+        Some(a) => Some((a, RayLanes::new(a, ray))),
+        None => None,
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = avx2;
     let nodes = bvh.nodes();
-    if nodes.is_empty() || ray.enter(&bvh.bounds).is_none_or(|(e, _)| e > *t_limit) {
+    if nodes.is_empty() || (start == 0 && ray.enter(&bvh.bounds).is_none_or(|(e, _)| e > *t_limit)) {
         return;
     }
     // Entries `(parent node · 8 + lane, entry)`: a leaf's box is read from its parent's lanes.
     let mut stack = [const { std::mem::MaybeUninit::<(u32, f32)>::uninit() }; STACK];
     let mut top = 0usize;
-    let mut current = Some(0u32);
+    let mut current = Some(start);
     loop {
         if let Some(index) = current.take() {
             counters.nodes_visited += 1;
             let node = &nodes[index as usize];
-            let (hits, near) = match avx2 {
+            let (hits, near) = match &lanes {
                 #[cfg(target_arch = "x86_64")]
-                Some(avx2) => children_avx2(avx2, ray, node, *t_limit),
+                Some((a, r)) => children_avx2::<THIN, NAN>(*a, r, node, *t_limit),
                 _ => children_scalar(ray, node, *t_limit),
             };
             // Farthest first onto the stack, so the nearest pops first (insertion by entry;
@@ -568,6 +697,9 @@ fn traverse_bvh_body(
             while rest != 0 {
                 let i = rest.trailing_zeros() as usize;
                 rest &= rest - 1;
+                if RayBvh::is_leaf(node.child[i]) {
+                    prefetch_triangles(bvh.leaf_triangles(node.child[i]));
+                }
                 let item = (index * 8 + i as u32, near[i]);
                 let mut j = top;
                 // SAFETY: slots `base..top` were written.

@@ -32,7 +32,9 @@ pub mod octree;
 pub mod raycast;
 
 pub use bvh::{Bvh, BvhNode};
-pub use bvh8::{traverse_bvh, traverse_bvh_scalar, RayBvh, RayBvhConfig, RayBvhError, RayBvhNode, MAX_BVH_LEAF};
+pub use bvh8::{
+    traverse_bvh, traverse_bvh_from, traverse_bvh_scalar, RayBvh, RayBvhConfig, RayBvhError, RayBvhNode, MAX_BVH_LEAF,
+};
 pub use octree::{
     DistributionTree, HybridOctree, HybridOctreeConfig, HybridOctreeNode, OctreeConfigError, RayOctree,
     RayOctreeConfig, RayOctreeError, RayOctreeNode, SampleOctree, SampleOctreeConfig, SampleOctreeNode,

@@ -5,7 +5,7 @@
 use std::collections::{HashMap, HashSet};
 
 use occult_core::{compose, Aabb, Affine3A, ItemId, Mat4, NodeId, Vec3, Vec4};
-use occult_spatial::{traverse, traverse_bvh, FatRay, RayBvh, ShearedRay, TraversalCounters};
+use occult_spatial::{traverse, traverse_bvh, traverse_bvh_from, FatRay, RayBvh, ShearedRay, TraversalCounters};
 
 use super::{Accel, FrameCtx, Lzb, Mode, Selection};
 use crate::hash::FxBuild;
@@ -22,6 +22,9 @@ pub(super) struct InstanceRec {
 pub(super) const DEPTH_EPS: f32 = 2e-3;
 /// A robust hit covers the pixel centre by at least this many pixels on every edge.
 const EDGE_MARGIN_PX: f64 = 1.0 / 32.0;
+/// With `caster=bvh`, the next ray's coherence start (§III.D) is the BVH subtree this many
+/// levels above the leaf of the hit (1: the node holding the leaf).
+const START_LEVELS: u32 = 2;
 /// Absolute margin of a fat ray, relative to the magnitude of the coordinates.
 const ABS_EPS: f32 = 1e-5;
 
@@ -29,7 +32,7 @@ const ABS_EPS: f32 = 1e-5;
 #[derive(Clone, Copy)]
 struct LastHit {
     node: NodeId,
-    /// The octree leaf, or with `caster=bvh` the BVH node holding the leaf.
+    /// The octree leaf, or with `caster=bvh` the root of a BVH subtree holding the leaf.
     leaf: u32,
     object_from_world: Affine3A,
     clip_from_object: Mat4,
@@ -124,8 +127,7 @@ impl<'a> Caster<'a> {
                 // the whole traversal that follows.
                 let o = h.object_from_world.transform_point3(origin);
                 let d = h.object_from_world.transform_vector3(dir);
-                let sheared = ShearedRay::new(o, d);
-                if let Some(t) = self.test_start(&h, &sheared, d, t_limit) {
+                if let Some(t) = self.test_start(&h, o, d, t_limit) {
                     t_limit = t * (1.0 + DEPTH_EPS);
                     self.found = Some(h);
                     self.coherent_starts += 1;
@@ -161,25 +163,31 @@ impl<'a> Caster<'a> {
     }
 
     /// §III.D: the nearest robust hit before `t_max` in the region where the neighbour's ray
-    /// ended: its octree leaf, or with `caster=bvh` every leaf of the BVH node that held its
-    /// leaf (a leaf of a few triangles alone would seldom be hit again).
-    fn test_start(&mut self, h: &LastHit, sheared: &ShearedRay, d: Vec3, t_max: f32) -> Option<f32> {
+    /// ended: its octree leaf, or with `caster=bvh` the BVH subtree [`START_LEVELS`] above its
+    /// leaf, walked by the thin ray (a leaf of a few triangles alone would seldom be hit again).
+    fn test_start(&mut self, h: &LastHit, o: Vec3, d: Vec3, t_max: f32) -> Option<f32> {
         let lzb = self.lzb;
+        let sheared = ShearedRay::new(o, d);
         let Accel::Mesh { bvh: Some(b), .. } = &lzb.accel[h.node.index()] else {
-            return self.test_leaf(h.node, h.leaf, sheared, d, &h.clip_from_object, t_max, 0);
+            return self.test_leaf(h.node, h.leaf, &sheared, d, &h.clip_from_object, t_max, 0);
         };
-        let node = &b.bvh.nodes()[h.leaf as usize];
-        let mut best: Option<f32> = None;
-        for lane in 0..8 {
-            let code = node.child[lane];
-            if node.valid & (1 << lane) == 0 || !RayBvh::is_leaf(code) {
-                continue;
-            }
-            let bound = best.unwrap_or(t_max);
-            if let Some(t) = self.test_leaf(h.node, code, sheared, d, &h.clip_from_object, bound, 0) {
-                best = Some(best.map_or(t, |b| b.min(t)));
-            }
-        }
+        let ray = FatRay::new(o, d, 0.0, 0.0);
+        let mut bound = t_max;
+        let mut best = None;
+        let mut counters = TraversalCounters::default();
+        traverse_bvh_from(
+            &b.bvh,
+            h.leaf,
+            &ray,
+            &mut bound,
+            &mut counters,
+            |leaf, _, _, _, bound| {
+                if let Some(t) = self.test_leaf(h.node, leaf, &sheared, d, &h.clip_from_object, *bound, 0) {
+                    *bound = t;
+                    best = Some(t);
+                }
+            },
+        );
         best
     }
 
@@ -213,7 +221,7 @@ impl<'a> Caster<'a> {
             Some(b) => {
                 let range = RayBvh::leaf_range(leaf);
                 let base_vis = b.leaf_base[range.start];
-                (&b.bvh.triangles()[range.clone()], &b.tris[range], base_vis)
+                (&b.bvh.triangles()[range], b.bvh.leaf_triangles(leaf), base_vis)
             }
             None => {
                 let range = octree.nodes()[leaf as usize].range();
@@ -329,16 +337,17 @@ impl<'a> Caster<'a> {
             let Accel::Mesh { octree, refs, bvh, .. } = &lzb.accel[met.node.index()] else {
                 continue;
             };
-            if bvh.is_none() && !lzb.opts.pvl_triangles {
+            if !lzb.opts.pvl_triangles {
+                // The leaf (with `caster=bvh` a BVH leaf of a few triangles, listed when the
+                // PVL is assembled).
                 self.pvl.insert((met.base, leaf));
                 met.recorded = true;
                 continue;
             }
-            // The leaf's triangles (with `caster=bvh` a few: the PVL is of triangles).
             let (list, ids) = match bvh {
                 Some(b) => {
                     let range = RayBvh::leaf_range(leaf);
-                    (&b.tris[range.clone()], &b.bvh.triangles()[range])
+                    (b.bvh.leaf_triangles(leaf), &b.bvh.triangles()[range])
                 }
                 None => {
                     let range = octree.nodes()[leaf as usize].range();
@@ -346,11 +355,10 @@ impl<'a> Caster<'a> {
                 }
             };
             for (r, &t) in list.iter().zip(ids) {
-                if !lzb.opts.pvl_triangles
-                    || met
-                        .ray
-                        .enter(&Aabb::from_points(r.corners))
-                        .is_some_and(|(e, _)| e <= t_limit)
+                if met
+                    .ray
+                    .enter(&Aabb::from_points(r.corners))
+                    .is_some_and(|(e, _)| e <= t_limit)
                 {
                     self.pvl.insert((met.base, t));
                     met.recorded = true;
@@ -433,7 +441,12 @@ impl<'a> Caster<'a> {
             Accel::Empty => {}
             Accel::Mesh { octree, bvh, .. } => {
                 let ray = FatRay::new(o, d, spread, if self.naive { 0.0 } else { margin(&octree.bounds()) });
-                let clip = self.ctx.view.clip_from_object(world_from_node);
+                // Naive rays take any hit: the projection serves only the robustness test.
+                let clip = if self.naive {
+                    Mat4::IDENTITY
+                } else {
+                    self.ctx.view.clip_from_object(world_from_node)
+                };
                 let w_row = row_w(&clip);
                 let keep = !self.naive && lzb.opts.mode == Mode::Lazy;
                 let mut met: Option<u32> = None;
@@ -453,8 +466,9 @@ impl<'a> Caster<'a> {
                                 self.candidates.push((m, leaf, t_enter));
                             }
                             if let Some(t) = self.test_leaf(id, leaf, &sheared, d, &clip, *t_limit, base) {
-                                // The coherence start of the next ray is the leaf's BVH node.
-                                self.lower_bound(t, t_limit, id, parent, node_from_world, clip);
+                                // The coherence start of the next ray: a subtree holding the leaf.
+                                let start = (1..START_LEVELS).fold(parent, |n, _| b.bvh.parent(n));
+                                self.lower_bound(t, t_limit, id, start, node_from_world, clip);
                             }
                         },
                     );

@@ -498,8 +498,6 @@ fn leaf_triangles(m: &occult_core::Mesh, normals: &[Vec3], ids: &[u32]) -> Vec<R
 pub(crate) struct MeshBvh {
     /// Leaves sorted by triangle area, largest first (as the octree's, for `select=`).
     bvh: RayBvh,
-    /// Per slot of `bvh.triangles()`: the triangle's corners and area-scaled normal.
-    tris: Vec<RefTriangle>,
     /// Per slot (meaningful at a leaf's first): the leaf's base visibility.
     leaf_base: Vec<f32>,
 }
@@ -515,6 +513,7 @@ impl MeshBvh {
         let mut bvh = RayBvh::build_triangles(m.positions(), m.triangles(), RayBvhConfig { max_leaf_size: leaf })?;
         bvh.sort_leaves_by_key_descending(|t| normals[t as usize].length());
         let tris = leaf_triangles(m, normals, bvh.triangles());
+        bvh.attach_triangles(tris);
         let mut leaf_base = vec![0.0; bvh.triangles().len()];
         for (code, _) in bvh.leaves() {
             let r = RayBvh::leaf_range(code);
@@ -524,13 +523,11 @@ impl MeshBvh {
                 .sum();
             leaf_base[r.start] = base_cos * sum / r.len() as f32;
         }
-        Ok(Self { bvh, tris, leaf_base })
+        Ok(Self { bvh, leaf_base })
     }
 
     fn memory_bytes(&self) -> usize {
-        self.bvh.memory_bytes()
-            + self.tris.capacity() * std::mem::size_of::<RefTriangle>()
-            + self.leaf_base.capacity() * 4
+        self.bvh.memory_bytes() + self.leaf_base.capacity() * 4
     }
 }
 
@@ -980,7 +977,8 @@ impl Lzb {
     }
 
     /// Builds index lists for `(key, leaf)` pairs grouped by key (consecutive), one draw per
-    /// instance, each triangle once (stamps). `stamps_of`: the stamp of each group, reserved
+    /// instance, each triangle once (stamps); `entries` says what the pairs' leaves are.
+    /// `stamps_of`: the stamp of each group, reserved
     /// by the caller ([`Lzb::reserve_stamps`]) so that several calls skip what earlier ones
     /// listed for the same instance; `None`: a fresh stamp per group.
     fn emit(
@@ -988,7 +986,7 @@ impl Lzb {
         groups: &[(InstanceRec, ItemId, std::ops::Range<usize>)],
         leaves: &[u32],
         pool: &mut Vec<u32>,
-        triangles: bool,
+        entries: Entries,
         stamps_of: Option<&[u32]>,
     ) -> Vec<(InstanceRec, ItemId, std::ops::Range<usize>)> {
         let mut out = Vec::with_capacity(groups.len());
@@ -997,17 +995,17 @@ impl Lzb {
                 Some(s) => s[g],
                 None => self.reserve_stamps(1),
             };
-            let Accel::Mesh { octree, .. } = &self.accel[rec.node.index()] else {
+            let Accel::Mesh { octree, bvh, .. } = &self.accel[rec.node.index()] else {
                 continue;
             };
             let stamps = &mut self.stamps[rec.node.index()];
             let start = pool.len();
             for &leaf in &leaves[range.clone()] {
                 let one = [leaf];
-                let list = if triangles {
-                    &one[..]
-                } else {
-                    octree.leaf_primitives(leaf)
+                let list = match (entries, bvh) {
+                    (Entries::Triangles, _) => &one[..],
+                    (Entries::BvhLeaves, Some(b)) => &b.bvh.triangles()[RayBvh::leaf_range(leaf)],
+                    _ => octree.leaf_primitives(leaf),
                 };
                 for &t in list {
                     if stamps[t as usize] != stamp {
@@ -1022,6 +1020,17 @@ impl Lzb {
         }
         out
     }
+}
+
+/// What the `(instance, leaf)` pairs given to [`Lzb::emit`] name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Entries {
+    /// Octree leaves.
+    OctreeLeaves,
+    /// BVH leaf codes (`caster=bvh`).
+    BvhLeaves,
+    /// Triangles.
+    Triangles,
 }
 
 /// What the near pass tests as one box (`near_cull=on`).
@@ -1467,15 +1476,19 @@ impl Lzb {
                 .map(|(key, r)| (recs[&key], key, r))
                 .collect();
             let pvl_leaves: Vec<u32> = pairs.iter().map(|&(_, l)| l).collect();
-            let triangles = self.opts.pvl_triangles || self.opts.caster == CasterKind::Bvh;
-            let entries = if triangles {
+            let entries = match (self.opts.pvl_triangles, self.opts.caster) {
+                (true, _) => Entries::Triangles,
+                (false, CasterKind::Bvh) => Entries::BvhLeaves,
+                (false, CasterKind::Octree) => Entries::OctreeLeaves,
+            };
+            let counter = if entries == Entries::Triangles {
                 "pvl_entries_triangles"
             } else {
                 "pvl_leaves"
             };
-            stats.counters.add(entries, pvl_leaves.len() as u64);
+            stats.counters.add(counter, pvl_leaves.len() as u64);
             let mut pool = Vec::new();
-            let lists = self.emit(&groups, &pvl_leaves, &mut pool, triangles, None);
+            let lists = self.emit(&groups, &pvl_leaves, &mut pool, entries, None);
             stats.counters.add("pvl_triangles", pool.len() as u64);
             stats.phases.add(Phase::Other, t.elapsed());
             let draws = make_draws(&self.scene, view, &lists, &pool);
