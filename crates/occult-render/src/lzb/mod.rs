@@ -73,6 +73,17 @@
 //!   ones, probed between runs. DESIGN's invariant 5 (never slower than brute force) asks it of
 //!   every conservative renderer. Counters `payoff_direct`, `payoff_stopped`; `payoff=off`
 //!   measures the paper's algorithm alone.
+//! - The rays' structure in a mesh (`caster=bvh`, the default): an 8-wide BVH per unique mesh
+//!   ([`occult_spatial::RayBvh`]: binned SAH, one reference per triangle, leaves of up to
+//!   `bvh_leaf` triangles stored contiguously), not the paper's octree, which stays for the
+//!   frustum walk, the near/far split, the object-oriented polygons and the near pass. Its
+//!   8 children's boxes are tested in SIMD lanes, each grown by the cone's radius at its far
+//!   side as the octree's leaves are ([`occult_spatial::traverse_bvh`]), nearest first. The PVL
+//!   is made of the BVH leaves on the ray paths (a few triangles each: near triangle-exact);
+//!   a BVH leaf whose box lies wholly nearer than the near limit is not recorded (every
+//!   octree leaf holding a part of its triangles is near: the near pass draws them or finds
+//!   them hidden). §III.D's start is the BVH subtree two levels above the neighbour's hit
+//!   leaf. `caster=octree` casts through the octree as the paper does.
 //! - `pvl=triangles` (an option; leaves by default, as the paper): the ray's record keeps,
 //!   of each leaf on the path, only the triangles whose box the ray's cone enters before the
 //!   bound. Conservative for the same reason as the leaves: the pixel's winner lies within the
