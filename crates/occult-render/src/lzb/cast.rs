@@ -219,9 +219,17 @@ impl<'a> Caster<'a> {
         };
         let (ids, list, base_vis) = match bvh {
             Some(b) => {
-                let range = RayBvh::leaf_range(leaf);
-                let base_vis = b.leaf_base[range.start];
-                (&b.bvh.triangles()[range], b.bvh.leaf_triangles(leaf), base_vis)
+                let list = b.bvh.leaf_triangles(leaf);
+                // The base visibility from the leaf's own few triangles (the sum the octree's
+                // leaves keep, in the same order), read with them rather than from a side
+                // array, which would be one more miss per leaf.
+                let base_vis = if lzb.opts.selection == Selection::All || self.naive {
+                    0.0
+                } else {
+                    let sum: f32 = list.iter().map(|r| r.normal.length()).sum();
+                    lzb.opts.base_cos * sum / list.len() as f32
+                };
+                (&b.bvh.triangles()[RayBvh::leaf_range(leaf)], list, base_vis)
             }
             None => {
                 let range = octree.nodes()[leaf as usize].range();

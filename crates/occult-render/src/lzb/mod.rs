@@ -509,36 +509,20 @@ fn leaf_triangles(m: &occult_core::Mesh, normals: &[Vec3], ids: &[u32]) -> Vec<R
 pub(crate) struct MeshBvh {
     /// Leaves sorted by triangle area, largest first (as the octree's, for `select=`).
     bvh: RayBvh,
-    /// Per slot (meaningful at a leaf's first): the leaf's base visibility.
-    leaf_base: Vec<f32>,
 }
 
 impl MeshBvh {
     /// The BVH of mesh `m`, each leaf sorted by area, with its triangles (`normals`: area-scaled).
-    fn build(
-        m: &occult_core::Mesh,
-        normals: &[Vec3],
-        leaf: usize,
-        base_cos: f32,
-    ) -> std::result::Result<Self, RayBvhError> {
+    fn build(m: &occult_core::Mesh, normals: &[Vec3], leaf: usize) -> std::result::Result<Self, RayBvhError> {
         let mut bvh = RayBvh::build_triangles(m.positions(), m.triangles(), RayBvhConfig { max_leaf_size: leaf })?;
         bvh.sort_leaves_by_key_descending(|t| normals[t as usize].length());
         let tris = leaf_triangles(m, normals, bvh.triangles());
         bvh.attach_triangles(tris);
-        let mut leaf_base = vec![0.0; bvh.triangles().len()];
-        for (code, _) in bvh.leaves() {
-            let r = RayBvh::leaf_range(code);
-            let sum: f32 = bvh.triangles()[r.clone()]
-                .iter()
-                .map(|&t| normals[t as usize].length())
-                .sum();
-            leaf_base[r.start] = base_cos * sum / r.len() as f32;
-        }
-        Ok(Self { bvh, leaf_base })
+        Ok(Self { bvh })
     }
 
     fn memory_bytes(&self) -> usize {
-        self.bvh.memory_bytes() + self.leaf_base.capacity() * 4
+        self.bvh.memory_bytes()
     }
 }
 
@@ -794,11 +778,9 @@ impl Lzb {
                             });
                             let refs = leaf_triangles(m, &normals, octree.primitives());
                             let bvh = match opts.caster {
-                                CasterKind::Bvh => {
-                                    Some(MeshBvh::build(m, &normals, opts.bvh_leaf, base_cos).map_err(|e| {
-                                        RenderError::BadParameter(format!("lzb: BVH of node '{}': {e}", node.name()))
-                                    })?)
-                                }
+                                CasterKind::Bvh => Some(MeshBvh::build(m, &normals, opts.bvh_leaf).map_err(|e| {
+                                    RenderError::BadParameter(format!("lzb: BVH of node '{}': {e}", node.name()))
+                                })?),
                                 CasterKind::Octree => None,
                             };
                             (
