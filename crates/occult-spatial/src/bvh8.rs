@@ -682,7 +682,10 @@ fn traverse_bvh_body<const THIN: bool, const NAN: bool>(
     counters: &mut TraversalCounters,
     mut leaf: impl FnMut(u32, f32, &Aabb, u32, &mut f32),
 ) {
+    // A match, not `Option::map`: a closure would not be compiled for AVX2 (see
+    // `traverse_bvh_avx2`).
     #[cfg(target_arch = "x86_64")]
+    #[allow(clippy::manual_map)]
     let lanes = match avx2 {
         Some(a) => Some((a, RayLanes::new(a, ray))),
         None => None,
