@@ -1,5 +1,5 @@
 //! Local z-buffering (`lzb`): the ray caster's throughput on `terrain` (first-hit rays through
-//! the octree, one thread, every pixel cast: `mode=naive,plane=static,plane_fraction=0.0001,
+//! the BVH, `caster=bvh`, and through the octree, `caster=octree`; one thread, every pixel cast: `mode=naive,plane=static,plane_fraction=0.0001,
 //! oor=off`), printed as rays per second per thread beside criterion's frame time; and `lzb`
 //! frames on `city` along a circle, beside `zbuffer`.
 //!
@@ -32,27 +32,35 @@ fn terrain_rays(c: &mut Criterion) {
     let w = occult_bench::workload("terrain");
     let view = View::new(w.camera, 640, 360).expect("valid view");
     let scene = Arc::new(w.scene);
-    let spec = AlgoSpec::parse("lzb:mode=naive,plane=static,plane_fraction=0.0001,oor=off").expect("valid spec");
-    let mut r = spec.build(scene, &one_thread()).expect("renderer builds");
-    let mut frame = Frame::new(640, 360).expect("valid size");
-    let (mut rays, mut secs) = (0u64, 0f64);
-    let mut group = c.benchmark_group("lzb_terrain_640x360");
-    group.sample_size(10);
-    group.bench_function("naive_rays_1_thread", |b| {
-        b.iter(|| {
-            let s = r.render(&view, &mut frame).expect("render");
-            rays += s.rays_cast;
-            secs += s.phases.get(Phase::Rays).as_secs_f64();
-        })
-    });
-    group.finish();
-    let occult_rate = rays as f64 / secs;
-    eprintln!(
-        "lzb ray caster on terrain: {:.2} Mrays/s per thread ({rays} rays in {secs:.3} s of the rays phase)",
-        occult_rate / 1e6
-    );
+    let mut rates = Vec::new();
+    // The default caster (the BVH) and the paper's octree.
+    for caster in ["bvh", "octree"] {
+        let spec = AlgoSpec::parse(&format!(
+            "lzb:mode=naive,plane=static,plane_fraction=0.0001,oor=off,caster={caster}"
+        ))
+        .expect("valid spec");
+        let mut r = spec.build(scene.clone(), &one_thread()).expect("renderer builds");
+        let mut frame = Frame::new(640, 360).expect("valid size");
+        let (mut rays, mut secs) = (0u64, 0f64);
+        let mut group = c.benchmark_group("lzb_terrain_640x360");
+        group.sample_size(10);
+        group.bench_function(format!("naive_rays_1_thread_{caster}"), |b| {
+            b.iter(|| {
+                let s = r.render(&view, &mut frame).expect("render");
+                rays += s.rays_cast;
+                secs += s.phases.get(Phase::Rays).as_secs_f64();
+            })
+        });
+        group.finish();
+        let rate = rays as f64 / secs;
+        eprintln!(
+            "lzb ray caster ({caster}) on terrain: {:.2} Mrays/s per thread ({rays} rays in {secs:.3} s of the rays phase)",
+            rate / 1e6
+        );
+        rates.push(rate);
+    }
     #[cfg(feature = "embree")]
-    anchor::embree_terrain(c, &view, occult_rate);
+    anchor::embree_terrain(c, &view, rates[0]);
 }
 
 fn city_circle(c: &mut Criterion) {
@@ -200,7 +208,7 @@ mod anchor {
         );
         if occult_rate.is_finite() {
             eprintln!(
-                "occult's caster over Embree's, same run: {:.3}x single rays, {:.3}x packets",
+                "occult's caster (bvh) over Embree's, same run: {:.3}x single rays, {:.3}x packets",
                 occult_rate / rates[0],
                 occult_rate / rates[1]
             );

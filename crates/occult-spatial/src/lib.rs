@@ -6,6 +6,7 @@
 //! | --- | --- | --- |
 //! | [`Bvh`]: bounding volume hierarchy over boxes | `bvh` | `frustum`, `nbuffer` |
 //! | [`RayOctree`] and fat-ray traversal ([`traverse`]) | [`octree::ray`], [`raycast`] | `lzb` |
+//! | [`RayBvh`]: 8-wide BVH over triangles, fat-ray traversal ([`traverse_bvh`]) | [`bvh8`] | `lzb` (`caster=bvh`) |
 //! | [`HybridOctree`]: hybrid redistribution of straddlers | [`octree::hybrid`] | `hzb` |
 //! | [`SampleOctree`] and [`DistributionTree`]: distribution lists | [`octree::sample`] | `rzb` |
 //! | uniform and nested grids | [`grid`] | `oqgrid` |
@@ -25,11 +26,15 @@
 #![deny(missing_docs)]
 
 mod bvh;
+pub mod bvh8;
 pub mod grid;
 pub mod octree;
 pub mod raycast;
 
 pub use bvh::{Bvh, BvhNode};
+pub use bvh8::{
+    traverse_bvh, traverse_bvh_from, traverse_bvh_scalar, RayBvh, RayBvhConfig, RayBvhError, RayBvhNode, MAX_BVH_LEAF,
+};
 pub use octree::{
     DistributionTree, HybridOctree, HybridOctreeConfig, HybridOctreeNode, OctreeConfigError, RayOctree,
     RayOctreeConfig, RayOctreeError, RayOctreeNode, SampleOctree, SampleOctreeConfig, SampleOctreeNode,

@@ -34,8 +34,8 @@ pub struct FatRay {
     pub origin: Vec3,
     /// Direction (any length; `t` is in its units).
     pub direction: Vec3,
-    inv_direction: Vec3,
-    inv_length: f32,
+    pub(crate) inv_direction: Vec3,
+    pub(crate) inv_length: f32,
     /// Radius per unit of `t`.
     pub spread: f32,
     /// Radius at `t = 0`.
@@ -515,13 +515,13 @@ fn traverse_body(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::octree::RayOctreeConfig;
     use occult_core::{intersect_ray_triangle, Ray};
 
     /// Uniform numbers in [0, 1) from a xorshift generator.
-    fn xorshift(mut s: u64) -> impl FnMut() -> f32 {
+    pub(crate) fn xorshift(mut s: u64) -> impl FnMut() -> f32 {
         move || {
             s ^= s << 13;
             s ^= s >> 7;
@@ -530,7 +530,24 @@ mod tests {
         }
     }
 
-    fn soup(n: usize, seed: u64) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    /// Ray `k` of a series for comparing traversals: random, thin and fat in turn, some along
+    /// axes (zero direction components), some on the slab plane `y = slab_y` and along it.
+    pub(crate) fn awkward_ray(rnd: &mut impl FnMut() -> f32, k: usize, slab_y: f32) -> FatRay {
+        let mut origin = Vec3::new(rnd(), rnd(), rnd()) * 16.0 - 3.0;
+        let mut dir = Vec3::new(rnd(), rnd(), rnd()) * 2.0 - 1.0;
+        if k % 5 == 0 {
+            dir[k % 3] = 0.0;
+        }
+        if k % 7 == 0 {
+            origin.y = slab_y;
+            dir.y = 0.0;
+        }
+        let (spread, margin) = if k % 2 == 0 { (0.0, 0.0) } else { (0.002, 0.01) };
+        FatRay::new(origin, dir, spread, margin)
+    }
+
+    /// `n` random triangles of about 1.5 units in a 10-unit cube.
+    pub(crate) fn soup(n: usize, seed: u64) -> (Vec<Vec3>, Vec<[u32; 3]>) {
         let mut rnd = xorshift(seed);
         let mut p = Vec::new();
         let mut t = Vec::new();
@@ -652,18 +669,7 @@ mod tests {
             )
             .expect("a triangle soup builds");
             for k in 0..400 {
-                let mut origin = Vec3::new(rnd(), rnd(), rnd()) * 16.0 - 3.0;
-                let mut dir = Vec3::new(rnd(), rnd(), rnd()) * 2.0 - 1.0;
-                if k % 5 == 0 {
-                    dir[k % 3] = 0.0;
-                }
-                if k % 7 == 0 {
-                    // On a slab plane of the root's box, along it.
-                    origin.y = o.bounds().min.y;
-                    dir.y = 0.0;
-                }
-                let (spread, margin) = if k % 2 == 0 { (0.0, 0.0) } else { (0.002, 0.01) };
-                let ray = FatRay::new(origin, dir, spread, margin);
+                let ray = awkward_ray(&mut rnd, k, o.bounds().min.y);
                 let run = |scalar: bool| {
                     let mut seen = vec![];
                     let mut limit = 40.0f32;

@@ -31,6 +31,25 @@ identical_on_every_generator! {
     /// Rays record triangles, not leaves; almost every pixel goes to the rays.
     triangle_pvl_everything_behind_the_plane_is_identical_on_every_generator:
         assert_variant_identical_on_every_generator("lzb:payoff=off,pvl=triangles,plane=static,plane_fraction=0.0001", 1);
+    /// The BVH as the rays' structure (the default in lazy mode is the paper's octree), with
+    /// its leaves as the PVL; then almost every pixel goes to the rays.
+    bvh_caster_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("lzb:payoff=off,caster=bvh", 1);
+    bvh_caster_everything_behind_the_plane_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("lzb:payoff=off,caster=bvh,plane=static,plane_fraction=0.0001", 2);
+    bvh_caster_dynamic_selection_is_identical_on_every_generator: assert_variant_identical_on_every_generator(
+        "lzb:payoff=off,caster=bvh,select=dynamic,base_cos=0.9,plane_reuse=1,coarse_rays=16,group_leaf=1",
+        1
+    );
+    /// BVH leaves of one and of eight triangles, everything to the rays.
+    bvh_leaf_sizes_are_identical_on_every_generator: assert_variant_identical_on_every_generator(
+        "lzb:payoff=off,caster=bvh,bvh_leaf=1,plane=static,plane_fraction=0.0001,select=all",
+        0
+    );
+    bvh_large_leaves_are_identical_on_every_generator: assert_variant_identical_on_every_generator(
+        "lzb:payoff=off,caster=bvh,bvh_leaf=8,plane=static,plane_fraction=0.0001,pvl=triangles",
+        1
+    );
 }
 
 #[test]
@@ -39,6 +58,8 @@ fn identical_on_paths() {
         "lzb",
         "lzb:payoff=off,select=all,oor=off",
         "lzb:payoff=off,plane=static,plane_fraction=0.3,select=static",
+        "lzb:payoff=off,caster=bvh,plane=static,plane_fraction=0.3",
+        "lzb:payoff=off,caster=bvh,select=all,oor=off",
     ] {
         assert_identical_on_path(&spec(algo), "city:blocks=3,detail=1", "circle:12", 128, 96);
         assert_identical_on_path(&spec(algo), "forest:trees=2,patches=2", "flyover:8", 96, 64);
@@ -123,6 +144,10 @@ const RAY_HEAVY: &[&str] = &[
     "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=static,k=1,leaf=4",
     "lzb:payoff=off,plane=dynamic,select=dynamic,base_cos=1,leaf=2",
     "lzb:payoff=off,plane=static,plane_fraction=0.0001,pvl=triangles,select=all",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,caster=bvh",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=static,k=1,caster=bvh",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=all,caster=bvh,bvh_leaf=1",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,caster=bvh,bvh_leaf=8,coherence=off",
 ];
 
 #[test]
@@ -250,6 +275,9 @@ fn bad_parameters_are_errors() {
         ("lzb:select=some", "select"),
         ("lzb:mode=fast", "mode"),
         ("lzb:pvl=some", "pvl"),
+        ("lzb:caster=kd", "caster"),
+        ("lzb:bvh_leaf=0", "bvh_leaf"),
+        ("lzb:bvh_leaf=9", "bvh_leaf"),
         ("lzb:leaf=many", "leaf"),
         ("lzb:mode=naive,payoff=on", "payoff"),
         ("lzb:payoff=maybe", "payoff"),
@@ -302,28 +330,33 @@ fn counters_and_multithreaded_pvl_match_single_threaded() {
         .unwrap();
     let scene = Arc::new(built.scene);
     let view = View::new(built.default_camera, 160, 120).unwrap();
-    let mut counts = Vec::new();
-    for threads in [1, 3] {
-        let o = RenderOptions {
-            raster: occult_raster::RasterConfig {
-                threads,
-                ..Default::default()
-            },
-            ..RenderOptions::default()
-        };
-        // The algorithm itself: with payoff a frame may be drawn directly, without rays.
-        let mut r = spec("lzb:coherence=off,payoff=off").build(scene.clone(), &o).unwrap();
-        let mut f = Frame::new(160, 120).unwrap();
-        let s = r.render(&view, &mut f).unwrap();
-        assert_eq!(s.rays_cast, s.counters.get("rays"));
-        assert!(s.counters.get("ray_tri_tests") > 0 && s.nodes_visited > 0);
-        assert!(s.phases.get(occult_render::Phase::Rays) > std::time::Duration::ZERO);
-        counts.push((
-            s.counters.get("pvl_triangles"),
-            s.counters.get("pvl_leaves"),
-            s.rays_cast,
-        ));
+    for caster in ["octree", "bvh"] {
+        let mut counts = Vec::new();
+        for threads in [1, 3] {
+            let o = RenderOptions {
+                raster: occult_raster::RasterConfig {
+                    threads,
+                    ..Default::default()
+                },
+                ..RenderOptions::default()
+            };
+            // The algorithm itself: with payoff a frame may be drawn directly, without rays.
+            let mut r = spec(&format!("lzb:coherence=off,payoff=off,caster={caster}"))
+                .build(scene.clone(), &o)
+                .unwrap();
+            let mut f = Frame::new(160, 120).unwrap();
+            let s = r.render(&view, &mut f).unwrap();
+            assert_eq!(s.rays_cast, s.counters.get("rays"));
+            assert!(s.counters.get("ray_tri_tests") > 0 && s.nodes_visited > 0);
+            assert!(s.phases.get(occult_render::Phase::Rays) > std::time::Duration::ZERO);
+            counts.push((
+                s.counters.get("pvl_triangles"),
+                s.counters.get("pvl_leaves"),
+                s.rays_cast,
+            ));
+        }
+        // Without coherence each ray's path is independent of the split: the merged PVL is the
+        // same.
+        assert_eq!(counts[0], counts[1], "{caster}");
     }
-    // Without coherence each ray's path is independent of the split: the merged PVL is the same.
-    assert_eq!(counts[0], counts[1]);
 }

@@ -5,7 +5,7 @@
 use std::collections::{HashMap, HashSet};
 
 use occult_core::{compose, Aabb, Affine3A, ItemId, Mat4, NodeId, Vec3, Vec4};
-use occult_spatial::{traverse, FatRay, ShearedRay, TraversalCounters};
+use occult_spatial::{traverse, traverse_bvh, traverse_bvh_from, FatRay, RayBvh, ShearedRay, TraversalCounters};
 
 use super::{Accel, FrameCtx, Lzb, Mode, Selection};
 use crate::hash::FxBuild;
@@ -22,6 +22,9 @@ pub(super) struct InstanceRec {
 pub(super) const DEPTH_EPS: f32 = 2e-3;
 /// A robust hit covers the pixel centre by at least this many pixels on every edge.
 const EDGE_MARGIN_PX: f64 = 1.0 / 32.0;
+/// With `caster=bvh`, the next ray's coherence start (§III.D) is the BVH subtree this many
+/// levels above the leaf of the hit (1: the node holding the leaf).
+const START_LEVELS: u32 = 2;
 /// Absolute margin of a fat ray, relative to the magnitude of the coordinates.
 const ABS_EPS: f32 = 1e-5;
 
@@ -29,6 +32,7 @@ const ABS_EPS: f32 = 1e-5;
 #[derive(Clone, Copy)]
 struct LastHit {
     node: NodeId,
+    /// The octree leaf, or with `caster=bvh` the root of a BVH subtree holding the leaf.
     leaf: u32,
     object_from_world: Affine3A,
     clip_from_object: Mat4,
@@ -123,8 +127,7 @@ impl<'a> Caster<'a> {
                 // the whole traversal that follows.
                 let o = h.object_from_world.transform_point3(origin);
                 let d = h.object_from_world.transform_vector3(dir);
-                let sheared = ShearedRay::new(o, d);
-                if let Some(t) = self.test_leaf(h.node, h.leaf, &sheared, d, &h.clip_from_object, t_limit, 0) {
+                if let Some(t) = self.test_start(&h, o, d, t_limit) {
                     t_limit = t * (1.0 + DEPTH_EPS);
                     self.found = Some(h);
                     self.coherent_starts += 1;
@@ -159,7 +162,37 @@ impl<'a> Caster<'a> {
         self.best
     }
 
-    /// Tests the candidate triangles of mesh leaf `leaf` (per the selection, §III.B) and returns
+    /// §III.D: the nearest robust hit before `t_max` in the region where the neighbour's ray
+    /// ended: its octree leaf, or with `caster=bvh` the BVH subtree [`START_LEVELS`] above its
+    /// leaf, walked by the thin ray (a leaf of a few triangles alone would seldom be hit again).
+    fn test_start(&mut self, h: &LastHit, o: Vec3, d: Vec3, t_max: f32) -> Option<f32> {
+        let lzb = self.lzb;
+        let sheared = ShearedRay::new(o, d);
+        let Accel::Mesh { bvh: Some(b), .. } = &lzb.accel[h.node.index()] else {
+            return self.test_leaf(h.node, h.leaf, &sheared, d, &h.clip_from_object, t_max, 0);
+        };
+        let ray = FatRay::new(o, d, 0.0, 0.0);
+        let mut bound = t_max;
+        let mut best = None;
+        let mut counters = TraversalCounters::default();
+        traverse_bvh_from(
+            &b.bvh,
+            h.leaf,
+            &ray,
+            &mut bound,
+            &mut counters,
+            |leaf, _, _, _, bound| {
+                if let Some(t) = self.test_leaf(h.node, leaf, &sheared, d, &h.clip_from_object, *bound, 0) {
+                    *bound = t;
+                    best = Some(t);
+                }
+            },
+        );
+        best
+    }
+
+    /// Tests the candidate triangles of mesh leaf `leaf` (an octree node, or with `caster=bvh` a
+    /// BVH leaf code; per the selection, §III.B) and returns
     /// the nearest robust hit before `t_max` (lazy), or records the nearest hit (naive).
     /// `sheared` is the ray `o + t·d` (object space) prepared for the watertight test.
     #[allow(clippy::too_many_arguments)]
@@ -178,14 +211,35 @@ impl<'a> Caster<'a> {
             octree,
             refs,
             leaf_base,
+            bvh,
             ..
         } = &lzb.accel[node.index()]
         else {
             return None;
         };
-        let range = octree.nodes()[leaf as usize].range();
-        let ids = &octree.primitives()[range.clone()];
-        let list = &refs[range];
+        let (ids, list, base_vis) = match bvh {
+            Some(b) => {
+                let list = b.bvh.leaf_triangles(leaf);
+                // The base visibility from the leaf's own few triangles (the sum the octree's
+                // leaves keep, in the same order), read with them rather than from a side
+                // array, which would be one more miss per leaf.
+                let base_vis = if lzb.opts.selection == Selection::All || self.naive {
+                    0.0
+                } else {
+                    let sum: f32 = list.iter().map(|r| r.normal.length()).sum();
+                    lzb.opts.base_cos * sum / list.len() as f32
+                };
+                (&b.bvh.triangles()[RayBvh::leaf_range(leaf)], list, base_vis)
+            }
+            None => {
+                let range = octree.nodes()[leaf as usize].range();
+                (
+                    &octree.primitives()[range.clone()],
+                    &refs[range],
+                    leaf_base[leaf as usize],
+                )
+            }
+        };
         let (n, filter) = if self.naive {
             (list.len(), false)
         } else {
@@ -201,7 +255,6 @@ impl<'a> Caster<'a> {
         };
         occult_spatial::prefetch_triangles(&list[..n]);
         let dn = if filter { d.normalize() } else { d };
-        let base_vis = leaf_base[leaf as usize];
         let mut best: Option<f32> = None;
         // Eight triangles at a time (the same hits and parameters as one at a time), the hits
         // then taken in list order as a one-at-a-time loop would.
@@ -289,16 +342,27 @@ impl<'a> Caster<'a> {
                 continue;
             }
             let met = &mut self.met[m as usize];
+            let Accel::Mesh { octree, refs, bvh, .. } = &lzb.accel[met.node.index()] else {
+                continue;
+            };
             if !lzb.opts.pvl_triangles {
+                // The leaf (with `caster=bvh` a BVH leaf of a few triangles, listed when the
+                // PVL is assembled).
                 self.pvl.insert((met.base, leaf));
                 met.recorded = true;
                 continue;
             }
-            let Accel::Mesh { octree, refs, .. } = &lzb.accel[met.node.index()] else {
-                continue;
+            let (list, ids) = match bvh {
+                Some(b) => {
+                    let range = RayBvh::leaf_range(leaf);
+                    (b.bvh.leaf_triangles(leaf), &b.bvh.triangles()[range])
+                }
+                None => {
+                    let range = octree.nodes()[leaf as usize].range();
+                    (&refs[range.clone()], &octree.primitives()[range])
+                }
             };
-            let range = octree.nodes()[leaf as usize].range();
-            for (r, &t) in refs[range.clone()].iter().zip(&octree.primitives()[range]) {
+            for (r, &t) in list.iter().zip(ids) {
                 if met
                     .ray
                     .enter(&Aabb::from_points(r.corners))
@@ -313,6 +377,53 @@ impl<'a> Caster<'a> {
             self.instances.entry(met.base).or_insert(InstanceRec {
                 node: met.node,
                 world_from_object: met.world_from_object,
+            });
+        }
+    }
+
+    /// The index in `met` of mesh instance `id` (first item `base`) the current ray meets
+    /// (`slot`: its index once known), added on first use.
+    fn meet(
+        &mut self,
+        slot: &mut Option<u32>,
+        base: ItemId,
+        id: NodeId,
+        world_from_node: &Affine3A,
+        ray: &FatRay,
+    ) -> u32 {
+        *slot.get_or_insert_with(|| {
+            self.met.push(Met {
+                base,
+                node: id,
+                world_from_object: *world_from_node,
+                ray: *ray,
+                recorded: false,
+            });
+            (self.met.len() - 1) as u32
+        })
+    }
+
+    /// Lowers the bound to hit `t` of leaf `leaf` of mesh `node` (by the depth margin when
+    /// lazy), keeping the hit for the next ray's coherence start.
+    #[inline]
+    fn lower_bound(
+        &mut self,
+        t: f32,
+        t_limit: &mut f32,
+        node: NodeId,
+        leaf: u32,
+        node_from_world: &Affine3A,
+        clip: Mat4,
+    ) {
+        if self.naive {
+            *t_limit = t;
+        } else if t * (1.0 + DEPTH_EPS) < *t_limit {
+            *t_limit = t * (1.0 + DEPTH_EPS);
+            self.found = Some(LastHit {
+                node,
+                leaf,
+                object_from_world: *node_from_world,
+                clip_from_object: clip,
             });
         }
     }
@@ -336,13 +447,43 @@ impl<'a> Caster<'a> {
         let mut counters = TraversalCounters::default();
         match &lzb.accel[id.index()] {
             Accel::Empty => {}
-            Accel::Mesh { octree, .. } => {
+            Accel::Mesh { octree, bvh, .. } => {
                 let ray = FatRay::new(o, d, spread, if self.naive { 0.0 } else { margin(&octree.bounds()) });
-                let clip = self.ctx.view.clip_from_object(world_from_node);
+                // Naive rays take any hit: the projection serves only the robustness test.
+                let clip = if self.naive {
+                    Mat4::IDENTITY
+                } else {
+                    self.ctx.view.clip_from_object(world_from_node)
+                };
                 let w_row = row_w(&clip);
                 let keep = !self.naive && lzb.opts.mode == Mode::Lazy;
                 let mut met: Option<u32> = None;
                 let sheared = ShearedRay::new(o, d);
+                if let Some(b) = bvh {
+                    // `caster=bvh` (deviation): the mesh's BVH. A leaf all of whose box lies
+                    // nearer than the near limit holds only triangles the near pass draws; the
+                    // others are candidates of the path.
+                    traverse_bvh(
+                        &b.bvh,
+                        &ray,
+                        t_limit,
+                        &mut counters,
+                        |leaf, t_enter, bounds, parent, t_limit| {
+                            if keep && !self.ctx.is_wholly_near(w_row, bounds) {
+                                let m = self.meet(&mut met, base, id, world_from_node, &ray);
+                                self.candidates.push((m, leaf, t_enter));
+                            }
+                            if let Some(t) = self.test_leaf(id, leaf, &sheared, d, &clip, *t_limit, base) {
+                                // The coherence start of the next ray: a subtree holding the leaf.
+                                let start = (1..START_LEVELS).fold(parent, |n, _| b.bvh.parent(n));
+                                self.lower_bound(t, t_limit, id, start, node_from_world, clip);
+                            }
+                        },
+                    );
+                    self.counters.nodes_visited += counters.nodes_visited;
+                    self.counters.leaves_visited += counters.leaves_visited;
+                    return;
+                }
                 // Deviation: the leaves' boxes are their tight boxes, not their octants
                 // (`RayOctree::tighten_leaves`): the traversal hands over only leaves whose tight
                 // box the cone enters before the bound.
@@ -351,30 +492,11 @@ impl<'a> Caster<'a> {
                     // is recorded once the bound is final (`record`); near leaves are drawn
                     // already (step 3).
                     if keep && !self.ctx.is_near(w_row, &octree.nodes()[leaf as usize].bounds) {
-                        let m = *met.get_or_insert_with(|| {
-                            self.met.push(Met {
-                                base,
-                                node: id,
-                                world_from_object: *world_from_node,
-                                ray,
-                                recorded: false,
-                            });
-                            (self.met.len() - 1) as u32
-                        });
+                        let m = self.meet(&mut met, base, id, world_from_node, &ray);
                         self.candidates.push((m, leaf, t_enter));
                     }
                     if let Some(t) = self.test_leaf(id, leaf, &sheared, d, &clip, *t_limit, base) {
-                        if self.naive {
-                            *t_limit = t;
-                        } else if t * (1.0 + DEPTH_EPS) < *t_limit {
-                            *t_limit = t * (1.0 + DEPTH_EPS);
-                            self.found = Some(LastHit {
-                                node: id,
-                                leaf,
-                                object_from_world: *node_from_world,
-                                clip_from_object: clip,
-                            });
-                        }
+                        self.lower_bound(t, t_limit, id, leaf, node_from_world, clip);
                     }
                 });
             }

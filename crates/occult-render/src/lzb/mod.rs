@@ -73,6 +73,19 @@
 //!   ones, probed between runs. DESIGN's invariant 5 (never slower than brute force) asks it of
 //!   every conservative renderer. Counters `payoff_direct`, `payoff_stopped`; `payoff=off`
 //!   measures the paper's algorithm alone.
+//! - The rays' structure in a mesh (`caster=bvh`, the default in naive mode; `caster=octree`,
+//!   the paper's, is the default in lazy mode, where its cone rays measured faster): an
+//!   8-wide BVH per unique mesh
+//!   ([`occult_spatial::RayBvh`]: binned SAH, one reference per triangle, leaves of up to
+//!   `bvh_leaf` triangles stored contiguously), not the paper's octree, which stays for the
+//!   frustum walk, the near/far split, the object-oriented polygons and the near pass. Its
+//!   8 children's boxes are tested in SIMD lanes, each grown by the cone's radius at its far
+//!   side as the octree's leaves are ([`occult_spatial::traverse_bvh`]), nearest first. The PVL
+//!   is made of the BVH leaves on the ray paths (a few triangles each: near triangle-exact);
+//!   a BVH leaf whose box lies wholly nearer than the near limit is not recorded (every
+//!   octree leaf holding a part of its triangles is near: the near pass draws them or finds
+//!   them hidden). §III.D's start is the BVH subtree two levels above the neighbour's hit
+//!   leaf. `caster=octree` casts through the octree as the paper does.
 //! - `pvl=triangles` (an option; leaves by default, as the paper): the ray's record keeps,
 //!   of each leaf on the path, only the triangles whose box the ray's cone enters before the
 //!   bound. Conservative for the same reason as the leaves: the pixel's winner lies within the
@@ -91,7 +104,7 @@ use std::time::{Duration, Instant};
 
 use occult_core::{Aabb, Affine3A, Camera, Containment, Frustum, ItemId, Mat4, NodeKind, Scene, Vec3, Vec4, View};
 use occult_raster::{Draw, DrawTriangles, Frame, PixelRect, PyramidCounts, PyramidTest, Rasterizer, ZPyramid};
-use occult_spatial::{RayOctree, RayOctreeConfig, RayOctreeError};
+use occult_spatial::{RayBvh, RayBvhConfig, RayBvhError, RayOctree, RayOctreeConfig, RayOctreeError};
 use rayon::prelude::*;
 
 /// The least view distance of box `b` (object space; `w_row` the clip-w row of its
@@ -155,6 +168,16 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             key: "depth",
             default: "10",
             help: "max octree depth (0..=24; §II.A)",
+        },
+        ParamDoc {
+            key: "caster",
+            default: "octree",
+            help: "what the rays walk in a mesh: bvh (an 8-wide SAH BVH per unique mesh, one reference per triangle, leaves of up to bvh_leaf triangles; the PVL is made of the BVH leaves on the path; not in the paper; the default in naive mode, where its first-hit rays are 2.5x faster) or octree (the paper's octree of §II.A, whose leaves make the PVL; the default in lazy mode, where its cone rays are faster)",
+        },
+        ParamDoc {
+            key: "bvh_leaf",
+            default: "4",
+            help: "max triangles per BVH leaf with caster=bvh, 1..=8",
         },
         ParamDoc {
             key: "group_leaf",
@@ -289,6 +312,16 @@ pub enum Selection {
     Hybrid,
 }
 
+/// What the rays walk in a mesh.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CasterKind {
+    /// An 8-wide BVH per unique mesh ([`occult_spatial::RayBvh`]); the PVL holds the
+    /// triangles of the BVH leaves on the ray paths.
+    Bvh,
+    /// The mesh's octree (§II.A); the PVL holds octree leaves.
+    Octree,
+}
+
 /// Tunables of [`Lzb`] (see [`INFO`] for each one's meaning and paper section).
 #[derive(Clone, Debug, PartialEq)]
 pub struct LzbOptions {
@@ -298,6 +331,10 @@ pub struct LzbOptions {
     pub depth: u32,
     /// Max instances per group octree leaf.
     pub group_leaf: usize,
+    /// What the rays walk in a mesh.
+    pub caster: CasterKind,
+    /// Max triangles per BVH leaf (`caster=bvh`).
+    pub bvh_leaf: usize,
     /// Ray mode.
     pub mode: Mode,
     /// Occluder selection.
@@ -347,6 +384,17 @@ impl LzbOptions {
             leaf: p.get("leaf", 150usize)?,
             depth: p.get("depth", 10u32)?,
             group_leaf: p.get("group_leaf", 8usize)?,
+            // Measured (docs/lzb.md): the BVH's thin first-hit rays are faster, the octree's
+            // cone rays (with `select=`'s few tests per large leaf) are.
+            caster: match p.choice(
+                "caster",
+                &["bvh", "octree"],
+                if mode == Mode::Lazy { "octree" } else { "bvh" },
+            )? {
+                "octree" => CasterKind::Octree,
+                _ => CasterKind::Bvh,
+            },
+            bvh_leaf: p.get("bvh_leaf", 4usize)?,
             mode,
             selection: match p.choice("select", &["all", "static", "dynamic", "hybrid"], "hybrid")? {
                 "all" => Selection::All,
@@ -386,6 +434,13 @@ impl LzbOptions {
         }
         if self.depth > MAX_DEPTH {
             return bad(format!("depth={} exceeds {MAX_DEPTH}", self.depth));
+        }
+        if !(1..=occult_spatial::MAX_BVH_LEAF).contains(&self.bvh_leaf) {
+            return bad(format!(
+                "bvh_leaf={} is not in 1..={}",
+                self.bvh_leaf,
+                occult_spatial::MAX_BVH_LEAF
+            ));
         }
         if self.group_leaf == 0 {
             return bad("group_leaf=0: a group leaf must hold at least 1 instance".into());
@@ -433,6 +488,8 @@ pub(crate) enum Accel {
         leaf_base: Vec<f32>,
         /// Its non-empty leaves (all of them near: the mesh is drawn whole).
         leaves: u32,
+        /// What the rays walk with `caster=bvh`.
+        bvh: Option<MeshBvh>,
     },
     /// A group: octree over its instances' boxes.
     Group {
@@ -446,6 +503,37 @@ pub(crate) enum Accel {
     },
 }
 
+/// Triangles `ids` of mesh `m` as a ray caster reads them (`normals`: area-scaled).
+fn leaf_triangles(m: &occult_core::Mesh, normals: &[Vec3], ids: &[u32]) -> Vec<RefTriangle> {
+    ids.iter()
+        .map(|&t| RefTriangle {
+            corners: m.triangle_positions(t as usize),
+            normal: normals[t as usize],
+        })
+        .collect()
+}
+
+/// A mesh's ray BVH (`caster=bvh`) with its triangles in leaf order.
+pub(crate) struct MeshBvh {
+    /// Leaves sorted by triangle area, largest first (as the octree's, for `select=`).
+    bvh: RayBvh,
+}
+
+impl MeshBvh {
+    /// The BVH of mesh `m`, each leaf sorted by area, with its triangles (`normals`: area-scaled).
+    fn build(m: &occult_core::Mesh, normals: &[Vec3], leaf: usize) -> std::result::Result<Self, RayBvhError> {
+        let mut bvh = RayBvh::build_triangles(m.positions(), m.triangles(), RayBvhConfig { max_leaf_size: leaf })?;
+        bvh.sort_leaves_by_key_descending(|t| normals[t as usize].length());
+        let tris = leaf_triangles(m, normals, bvh.triangles());
+        bvh.attach_triangles(tris);
+        Ok(Self { bvh })
+    }
+
+    fn memory_bytes(&self) -> usize {
+        self.bvh.memory_bytes()
+    }
+}
+
 impl Accel {
     fn memory_bytes(&self) -> usize {
         match self {
@@ -454,9 +542,13 @@ impl Accel {
                 octree,
                 refs,
                 leaf_base,
+                bvh,
                 ..
             } => {
-                octree.memory_bytes() + refs.capacity() * std::mem::size_of::<RefTriangle>() + leaf_base.capacity() * 4
+                octree.memory_bytes()
+                    + refs.capacity() * std::mem::size_of::<RefTriangle>()
+                    + leaf_base.capacity() * 4
+                    + bvh.as_ref().map_or(0, MeshBvh::memory_bytes)
             }
             Accel::Group {
                 octree,
@@ -610,6 +702,15 @@ impl FrameCtx {
     fn is_near(&self, w_row: Vec4, b: &Aabb) -> bool {
         near_distance(w_row, b) < self.near_limit
     }
+
+    /// True when all of box `b` lies nearer than the near limit: every octree leaf holding a
+    /// part of a triangle inside it reaches nearer than the limit, so the near pass draws that
+    /// triangle wherever it is in the frustum (or finds it hidden).
+    #[inline]
+    fn is_wholly_near(&self, w_row: Vec4, b: &Aabb) -> bool {
+        let n = w_row.truncate();
+        n.dot(b.center()) + w_row.w + n.abs().dot(b.half_extent()) < self.near_limit
+    }
 }
 
 impl Lzb {
@@ -683,20 +784,20 @@ impl Lzb {
                                     })
                                     .intersection(Aabb::new(b.min - grow, b.max + grow))
                             });
-                            let refs = octree
-                                .primitives()
-                                .iter()
-                                .map(|&t| RefTriangle {
-                                    corners: m.triangle_positions(t as usize),
-                                    normal: normals[t as usize],
-                                })
-                                .collect();
+                            let refs = leaf_triangles(m, &normals, octree.primitives());
+                            let bvh = match opts.caster {
+                                CasterKind::Bvh => Some(MeshBvh::build(m, &normals, opts.bvh_leaf).map_err(|e| {
+                                    RenderError::BadParameter(format!("lzb: BVH of node '{}': {e}", node.name()))
+                                })?),
+                                CasterKind::Octree => None,
+                            };
                             (
                                 Accel::Mesh {
                                     leaves: octree.nodes().iter().filter(|n| n.is_leaf() && n.count > 0).count() as u32,
                                     octree,
                                     refs,
                                     leaf_base,
+                                    bvh,
                                 },
                                 shallower,
                             )
@@ -877,7 +978,8 @@ impl Lzb {
     }
 
     /// Builds index lists for `(key, leaf)` pairs grouped by key (consecutive), one draw per
-    /// instance, each triangle once (stamps). `stamps_of`: the stamp of each group, reserved
+    /// instance, each triangle once (stamps); `entries` says what the pairs' leaves are.
+    /// `stamps_of`: the stamp of each group, reserved
     /// by the caller ([`Lzb::reserve_stamps`]) so that several calls skip what earlier ones
     /// listed for the same instance; `None`: a fresh stamp per group.
     fn emit(
@@ -885,7 +987,7 @@ impl Lzb {
         groups: &[(InstanceRec, ItemId, std::ops::Range<usize>)],
         leaves: &[u32],
         pool: &mut Vec<u32>,
-        triangles: bool,
+        entries: Entries,
         stamps_of: Option<&[u32]>,
     ) -> Vec<(InstanceRec, ItemId, std::ops::Range<usize>)> {
         let mut out = Vec::with_capacity(groups.len());
@@ -894,17 +996,17 @@ impl Lzb {
                 Some(s) => s[g],
                 None => self.reserve_stamps(1),
             };
-            let Accel::Mesh { octree, .. } = &self.accel[rec.node.index()] else {
+            let Accel::Mesh { octree, bvh, .. } = &self.accel[rec.node.index()] else {
                 continue;
             };
             let stamps = &mut self.stamps[rec.node.index()];
             let start = pool.len();
             for &leaf in &leaves[range.clone()] {
                 let one = [leaf];
-                let list = if triangles {
-                    &one[..]
-                } else {
-                    octree.leaf_primitives(leaf)
+                let list = match (entries, bvh) {
+                    (Entries::Triangles, _) => &one[..],
+                    (Entries::BvhLeaves, Some(b)) => &b.bvh.triangles()[RayBvh::leaf_range(leaf)],
+                    _ => octree.leaf_primitives(leaf),
                 };
                 for &t in list {
                     if stamps[t as usize] != stamp {
@@ -919,6 +1021,17 @@ impl Lzb {
         }
         out
     }
+}
+
+/// What the `(instance, leaf)` pairs given to [`Lzb::emit`] name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Entries {
+    /// Octree leaves.
+    OctreeLeaves,
+    /// BVH leaf codes (`caster=bvh`).
+    BvhLeaves,
+    /// Triangles.
+    Triangles,
 }
 
 /// What the near pass tests as one box (`near_cull=on`).
@@ -1375,14 +1488,19 @@ impl Lzb {
                 .map(|(key, r)| (recs[&key], key, r))
                 .collect();
             let pvl_leaves: Vec<u32> = pairs.iter().map(|&(_, l)| l).collect();
-            let entries = if self.opts.pvl_triangles {
+            let entries = match (self.opts.pvl_triangles, self.opts.caster) {
+                (true, _) => Entries::Triangles,
+                (false, CasterKind::Bvh) => Entries::BvhLeaves,
+                (false, CasterKind::Octree) => Entries::OctreeLeaves,
+            };
+            let counter = if entries == Entries::Triangles {
                 "pvl_entries_triangles"
             } else {
                 "pvl_leaves"
             };
-            stats.counters.add(entries, pvl_leaves.len() as u64);
+            stats.counters.add(counter, pvl_leaves.len() as u64);
             let mut pool = Vec::new();
-            let lists = self.emit(&groups, &pvl_leaves, &mut pool, self.opts.pvl_triangles, None);
+            let lists = self.emit(&groups, &pvl_leaves, &mut pool, entries, None);
             stats.counters.add("pvl_triangles", pool.len() as u64);
             stats.phases.add(Phase::Other, t.elapsed());
             let draws = make_draws(&self.scene, view, &lists, &pool);

@@ -32,7 +32,7 @@ impl Lzb {
         }
         let near_leaves: Vec<u32> = near.iter().map(|&(_, l)| l).collect();
         let mut pool = Vec::new();
-        let near_lists = self.emit(&near_groups, &near_leaves, &mut pool, false, None);
+        let near_lists = self.emit(&near_groups, &near_leaves, &mut pool, Entries::OctreeLeaves, None);
         let whole_triangles: usize = whole
             .iter()
             .filter_map(|(rec, _)| self.scene.node(rec.node).mesh().map(|m| m.triangle_count()))
@@ -196,7 +196,7 @@ impl Lzb {
                 .collect();
             let leaves: Vec<u32> = pairs.iter().map(|&(_, l)| l).collect();
             let mut pool = Vec::new();
-            let lists = self.emit(&groups, &leaves, &mut pool, false, Some(&stamps));
+            let lists = self.emit(&groups, &leaves, &mut pool, Entries::OctreeLeaves, Some(&stamps));
             let mut draws = make_draws(&self.scene, view, &lists, &pool);
             draws.extend(whole.iter().filter_map(|(rec, base)| {
                 Some(Draw {
