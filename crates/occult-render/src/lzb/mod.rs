@@ -177,7 +177,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc {
             key: "bvh_leaf",
             default: "4",
-            help: "max triangles per BVH leaf with caster=bvh, 1..=8",
+            help: "max triangles per BVH leaf, 1..=8; needs caster=bvh (refused with caster=octree)",
         },
         ParamDoc {
             key: "group_leaf",
@@ -423,6 +423,13 @@ impl LzbOptions {
             payoff: p.flag("payoff", mode == Mode::Lazy)?,
             near_cull: p.flag("near_cull", true)?,
         };
+        if p.raw("bvh_leaf").is_some() && o.caster == CasterKind::Octree {
+            return Err(RenderError::BadParameter(
+                "lzb: bvh_leaf sizes the leaves of the BVH of caster=bvh, which these rays do not walk \
+                 (caster=octree, the default in lazy mode): add caster=bvh"
+                    .into(),
+            ));
+        }
         o.check()?;
         Ok(o)
     }
