@@ -396,13 +396,22 @@ mod tests {
                 .expect("split yields at least one piece");
             assert!(e.contains(key), "{bad}: {e}");
         }
-        // Every documented default, set explicitly, is valid.
+        // Every documented default, set explicitly, is valid (beside the setting its help says
+        // it needs, as `needs caster=bvh`).
         for a in Algorithm::all() {
             check(a.name()).expect("a bare renderer name is valid");
             for d in a.info().params {
-                check(&format!("{}:{}={}", a.name(), d.key, d.default)).unwrap_or_else(|e| panic!("{}: {e}", d.key));
+                let needs = d
+                    .help
+                    .split_once("needs ")
+                    .and_then(|(_, rest)| rest.split([' ', ',', ';', ')']).next())
+                    .filter(|setting| setting.contains('='))
+                    .map_or(String::new(), |setting| format!(",{setting}"));
+                check(&format!("{}:{}={}{needs}", a.name(), d.key, d.default))
+                    .unwrap_or_else(|e| panic!("{}: {e}", d.key));
             }
         }
+        check("lzb:bvh_leaf=4").expect_err("bvh_leaf without caster=bvh sizes nothing");
         check("frustum:leaf=8,group_leaf=2").expect("valid frustum settings pass");
         check("rzb:eps=auto").expect("eps=auto is valid");
     }
