@@ -32,6 +32,7 @@ fn specs() -> Vec<String> {
             "nbuffer:test=query,hierarchy=flat",
             "rzb:cache=on",
             "rzb:occlude=off",
+            "rzb:eps=auto",
         ]
         .map(String::from),
     );

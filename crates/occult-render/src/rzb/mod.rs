@@ -936,7 +936,9 @@ impl Renderer for Rzb {
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
         let (start, _, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
-        self.frame_index += 1;
+        // This frame's number; the renderer counts it only once the frame is whole (a
+        // cancelled frame leaves the renderer as it was, as the cache and ε below).
+        let frame_index = self.frame_index + 1;
         let eps = match (&self.auto, self.opts.eps) {
             (Some(a), _) => a.next(),
             (None, Epsilon::Fixed(e)) => e,
@@ -983,7 +985,6 @@ impl Renderer for Rzb {
             height: view.height(),
         };
         let consts = select::ViewConsts::new(view, self.opts.splat);
-        let frame_index = self.frame_index;
         let tol = self.opts.cache_tolerance;
         let (width, height) = (frame.width(), frame.height());
         let pixels = width as usize * height as usize;
@@ -1373,13 +1374,15 @@ impl Renderer for Rzb {
             c.add("samples_hidden", hidden.1.min(u64::MAX as f64) as u64);
             c.add("boxes_split", split_count);
         }
+        stats.total = start.elapsed();
+        // A cancelled frame leaves the renderer as it was: the cache (its sets may be
+        // incomplete), §8.2's search for ε and the frame count learn of the frame only after
+        // its last check.
+        let mut stats = crate::end_frame(&self.raster, stats)?;
+        self.frame_index = frame_index;
         if let Some(a) = self.auto.as_mut() {
             a.record((select_time + samples_time).as_secs_f64());
         }
-        stats.total = start.elapsed();
-        // A cancelled frame leaves the cache as it was (its sets may be incomplete): the cache
-        // learns of the frame only after its last check.
-        let mut stats = crate::end_frame(&self.raster, stats)?;
         if let Some(c) = self.cache.as_mut() {
             let t_store = Instant::now();
             for key in &touched {
