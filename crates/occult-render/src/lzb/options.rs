@@ -1,0 +1,330 @@
+//! `lzb`'s registry entry, its parameters and their checks.
+
+use super::{Lzb, MAX_DEPTH};
+use crate::{AlgorithmInfo, ParamDoc, Params, RenderError, Result};
+
+/// The registry entry of `lzb`.
+pub static INFO: AlgorithmInfo = AlgorithmInfo {
+    name: "lzb",
+    summary: "local z-buffering: near z-buffer + lazy/selective/object-oriented ray casting to a PVL (Han & Zeiger)",
+    params: &[
+        ParamDoc {
+            key: "leaf",
+            default: "150",
+            help: "max triangles per mesh octree leaf (>= 1; §II.A, the paper's Octree-o used 150)",
+        },
+        ParamDoc {
+            key: "depth",
+            default: "10",
+            help: "max octree depth (0..=24; §II.A)",
+        },
+        ParamDoc {
+            key: "caster",
+            default: "octree",
+            help: "what the rays walk in a mesh: bvh (an 8-wide SAH BVH per unique mesh, one reference per triangle, leaves of up to bvh_leaf triangles; the PVL is made of the BVH leaves on the path; not in the paper; the default in naive mode, where its first-hit rays are 2.5x faster) or octree (the paper's octree of §II.A, whose leaves make the PVL; the default in lazy mode, where its cone rays are faster)",
+        },
+        ParamDoc {
+            key: "bvh_leaf",
+            default: "4",
+            help: "max triangles per BVH leaf, 1..=8; needs caster=bvh (refused with caster=octree)",
+        },
+        ParamDoc {
+            key: "group_leaf",
+            default: "8",
+            help: "max instances per group octree leaf (>= 1)",
+        },
+        ParamDoc {
+            key: "mode",
+            default: "lazy",
+            help: "lazy: rays build a PVL drawn by the z-buffer (§III.A, exact); naive: rays shade first hits (§II, approximate)",
+        },
+        ParamDoc {
+            key: "select",
+            default: "hybrid",
+            help: "local occluders tested per leaf: all (§III.A), static (k largest, §III.B.1), dynamic (visibility, §III.B.2), hybrid",
+        },
+        ParamDoc {
+            key: "k",
+            default: "5",
+            help: "local occluders per leaf for select=static|hybrid (>= 1)",
+        },
+        ParamDoc {
+            key: "base_cos",
+            default: "0.5",
+            help: "preset |v.n| of the base visibility (x mean leaf area) for select=dynamic|hybrid, in [0, 1]",
+        },
+        ParamDoc {
+            key: "plane",
+            default: "cost",
+            help: "partition plane: static (plane_fraction of the depth), dynamic (coarse rays' mean hit distance, §II.B) or cost (the plane whose near rasterization and rays are expected to cost least, from the coarse rays' hits, the leaves' triangles and last frame's rates; the default in lazy mode, dynamic in naive mode)",
+        },
+        ParamDoc {
+            key: "plane_fraction",
+            default: "0.2",
+            help: "static plane depth as a fraction of the frustum depth over the scene, in (0, 1]",
+        },
+        ParamDoc {
+            key: "coarse_rays",
+            default: "256",
+            help: "rays of the dynamic plane's coarse ray casting, 1..=65536",
+        },
+        ParamDoc {
+            key: "plane_reuse",
+            default: "8",
+            help: "frames a dynamic plane is reused while the camera moves little (>= 1; 1 = every frame)",
+        },
+        ParamDoc {
+            key: "oor",
+            default: "on",
+            help: "object-oriented ray casting: rays only inside the screen polygons of far leaves (§III.C)",
+        },
+        ParamDoc {
+            key: "pvl",
+            default: "leaves",
+            help: "what a ray records: leaves (§III.A, every leaf on its path) or triangles (those of the path's leaves whose box the ray's cone enters before its bound)",
+        },
+        ParamDoc {
+            key: "coherence",
+            default: "on",
+            help: "start each ray from its neighbour's hit (§III.D)",
+        },
+        ParamDoc {
+            key: "near_cull",
+            default: "on",
+            help: "draw the near set front to back in growing batches, testing each near leaf (or mesh) against the depth drawn so far through a pyramid, as hzb does, and skipping the hidden ones (not in the paper; off: one draw, §II)",
+        },
+        ParamDoc {
+            key: "payoff",
+            default: "on",
+            help: "abandon a frame whose rays would take longer than drawing it directly, and draw runs of frames as frustum does while lzb frames are slower than such direct frames (not in the paper; lazy mode only: off, and refused, with mode=naive, whose frames are approximate)",
+        },
+    ],
+    counters: &[
+        "plane_reused",
+        "coarse_rays",
+        "near_leaves",
+        "far_leaves",
+        "near_triangles",
+        "oor_polygons",
+        "rays",
+        "ray_tri_tests",
+        "ray_leaves_visited",
+        "ray_nodes_visited",
+        "coherent_starts",
+        "rays_resolved",
+        "unfinished_pixels",
+        "z_clip_permille_of_far",
+        "pvl_leaves",
+        "pvl_entries_triangles",
+        "pvl_triangles",
+        "near_culled_units",
+        "near_culled_triangles",
+        crate::payoff::COUNTERS[0],
+        crate::payoff::COUNTERS[1],
+        crate::direct::COUNTER,
+        crate::direct::SCREENED,
+    ],
+    conservative: true,
+    build: |scene, options, params| Ok(Box::new(Lzb::new(scene, options, &LzbOptions::from_params(params)?)?)),
+};
+
+/// What the rays do.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    /// Rays record their paths into a PVL drawn by the z-buffer (§III.A).
+    Lazy,
+    /// Rays shade their first hits (§II): approximate.
+    Naive,
+}
+
+/// How the partition plane is chosen (§II.B).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Plane {
+    /// At `plane_fraction` of the depth over which the scene lies in the frustum.
+    Static,
+    /// At the mean first-hit distance of coarse rays (the paper's dynamic plane).
+    Dynamic,
+    /// Where the near pass and the rays are expected to cost least ([`cost_plane`]).
+    Cost,
+}
+
+/// Which triangles of a leaf a ray tests (§III.B).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Selection {
+    /// All of them (lazy ray casting, §III.A).
+    All,
+    /// The `k` largest (Octree-o).
+    Static,
+    /// Those whose visibility exceeds the leaf's base visibility.
+    Dynamic,
+    /// The `k` largest, filtered by visibility.
+    Hybrid,
+}
+
+/// What the rays walk in a mesh.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CasterKind {
+    /// An 8-wide BVH per unique mesh ([`occult_spatial::RayBvh`]); the PVL holds the
+    /// triangles of the BVH leaves on the ray paths.
+    Bvh,
+    /// The mesh's octree (§II.A); the PVL holds octree leaves.
+    Octree,
+}
+
+/// Tunables of [`Lzb`] (see [`INFO`] for each one's meaning and paper section).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LzbOptions {
+    /// Max triangles per mesh octree leaf.
+    pub leaf: usize,
+    /// Max octree depth.
+    pub depth: u32,
+    /// Max instances per group octree leaf.
+    pub group_leaf: usize,
+    /// What the rays walk in a mesh.
+    pub caster: CasterKind,
+    /// Max triangles per BVH leaf (`caster=bvh`).
+    pub bvh_leaf: usize,
+    /// Ray mode.
+    pub mode: Mode,
+    /// Occluder selection.
+    pub selection: Selection,
+    /// Occluders per leaf.
+    pub k: usize,
+    /// Preset `|v·n|` of the base visibility.
+    pub base_cos: f32,
+    /// How the partition plane is chosen.
+    pub plane: Plane,
+    /// Static plane fraction.
+    pub plane_fraction: f32,
+    /// Coarse rays of the dynamic plane.
+    pub coarse_rays: u32,
+    /// Frames a dynamic plane is reused.
+    pub plane_reuse: u32,
+    /// Object-oriented ray casting.
+    pub oor: bool,
+    /// Coherence start.
+    pub coherence: bool,
+    /// Rays record triangles instead of whole leaves.
+    pub pvl_triangles: bool,
+    /// Abandon frames whose rays do not pay, and draw frames directly while they do not
+    /// (lazy mode only).
+    pub payoff: bool,
+    /// Occlusion-cull the near set front to back (not in the paper).
+    pub near_cull: bool,
+}
+
+impl Default for LzbOptions {
+    fn default() -> Self {
+        Self::from_params(&Params::new("lzb")).expect("defaults are valid")
+    }
+}
+
+impl LzbOptions {
+    /// Reads and checks the settings.
+    ///
+    /// # Errors
+    /// [`RenderError::BadParameter`] naming the key for values out of range.
+    pub fn from_params(p: &Params) -> Result<Self> {
+        let mode = match p.choice("mode", &["lazy", "naive"], "lazy")? {
+            "naive" => Mode::Naive,
+            _ => Mode::Lazy,
+        };
+        let o = Self {
+            leaf: p.get("leaf", 150usize)?,
+            depth: p.get("depth", 10u32)?,
+            group_leaf: p.get("group_leaf", 8usize)?,
+            // Measured (docs/lzb.md): the BVH's thin first-hit rays are faster, the octree's
+            // cone rays (with `select=`'s few tests per large leaf) are.
+            caster: match p.choice(
+                "caster",
+                &["bvh", "octree"],
+                if mode == Mode::Lazy { "octree" } else { "bvh" },
+            )? {
+                "octree" => CasterKind::Octree,
+                _ => CasterKind::Bvh,
+            },
+            bvh_leaf: p.get("bvh_leaf", 4usize)?,
+            mode,
+            selection: match p.choice("select", &["all", "static", "dynamic", "hybrid"], "hybrid")? {
+                "all" => Selection::All,
+                "static" => Selection::Static,
+                "dynamic" => Selection::Dynamic,
+                _ => Selection::Hybrid,
+            },
+            k: p.get("k", 5usize)?,
+            base_cos: p.get("base_cos", 0.5f32)?,
+            // The cost model weighs lazy rays and their PVL; naive rays shade, as §II measures.
+            plane: match p.choice(
+                "plane",
+                &["static", "dynamic", "cost"],
+                if mode == Mode::Lazy { "cost" } else { "dynamic" },
+            )? {
+                "static" => Plane::Static,
+                "cost" => Plane::Cost,
+                _ => Plane::Dynamic,
+            },
+            plane_fraction: p.get("plane_fraction", 0.2f32)?,
+            coarse_rays: p.get("coarse_rays", 256u32)?,
+            plane_reuse: p.get("plane_reuse", 8u32)?,
+            oor: p.flag("oor", true)?,
+            coherence: p.flag("coherence", true)?,
+            pvl_triangles: p.choice("pvl", &["leaves", "triangles"], "leaves")? == "triangles",
+            payoff: p.flag("payoff", mode == Mode::Lazy)?,
+            near_cull: p.flag("near_cull", true)?,
+        };
+        if p.raw("bvh_leaf").is_some() && o.caster == CasterKind::Octree {
+            return Err(RenderError::BadParameter(
+                "lzb: bvh_leaf sizes the leaves of the BVH of caster=bvh, which these rays do not walk \
+                 (caster=octree, the default in lazy mode): add caster=bvh"
+                    .into(),
+            ));
+        }
+        o.check()?;
+        Ok(o)
+    }
+
+    pub(super) fn check(&self) -> Result<()> {
+        let bad = |m: String| Err(RenderError::BadParameter(format!("lzb: {m}")));
+        if self.leaf == 0 {
+            return bad("leaf=0: an octree leaf must hold at least 1 triangle".into());
+        }
+        if self.depth > MAX_DEPTH {
+            return bad(format!("depth={} exceeds {MAX_DEPTH}", self.depth));
+        }
+        if !(1..=occult_spatial::MAX_BVH_LEAF).contains(&self.bvh_leaf) {
+            return bad(format!(
+                "bvh_leaf={} is not in 1..={}",
+                self.bvh_leaf,
+                occult_spatial::MAX_BVH_LEAF
+            ));
+        }
+        if self.group_leaf == 0 {
+            return bad("group_leaf=0: a group leaf must hold at least 1 instance".into());
+        }
+        if self.k == 0 {
+            return bad("k=0: a leaf needs at least 1 local occluder".into());
+        }
+        if !(0.0..=1.0).contains(&self.base_cos) {
+            return bad(format!("base_cos={} is not in [0, 1]", self.base_cos));
+        }
+        if !(self.plane_fraction > 0.0 && self.plane_fraction <= 1.0) {
+            return bad(format!(
+                "plane_fraction={} puts the partition plane outside the frustum (must be in (0, 1])",
+                self.plane_fraction
+            ));
+        }
+        if self.coarse_rays == 0 || self.coarse_rays > 65536 {
+            return bad(format!("coarse_rays={} is not in 1..=65536", self.coarse_rays));
+        }
+        if self.plane_reuse == 0 {
+            return bad("plane_reuse=0: a plane is used for at least 1 frame".into());
+        }
+        if self.payoff && self.mode == Mode::Naive {
+            return bad(
+                "payoff=on needs mode=lazy: naive frames are approximate, and drawing them directly would change them"
+                    .into(),
+            );
+        }
+        Ok(())
+    }
+}
