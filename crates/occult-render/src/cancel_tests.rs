@@ -32,7 +32,6 @@ fn specs() -> Vec<String> {
             "nbuffer:test=query,hierarchy=flat",
             "rzb:cache=on",
             "rzb:occlude=off",
-            "rzb:eps=auto",
         ]
         .map(String::from),
     );
@@ -303,4 +302,38 @@ fn zbuffer_in_chunks_draws_the_same_frame_and_reports_each() {
     assert!(matches!(r.render(&view, &mut frame), Err(RenderError::Cancelled)));
     let p = control.progress();
     assert!(p > 0.5 && p < 1.0, "the first chunk's 2^20 of 1,280,000 triangles: {p}");
+}
+
+/// `rzb:eps=auto` chooses ε from measured times, so its frames differ between runs and the
+/// walks above cannot compare them; what a cancelled frame must leave as it was is checked
+/// instead: §8.2's search and the frame count, whatever check the frame stops at.
+#[test]
+fn a_cancelled_rzb_frame_leaves_the_epsilon_search_as_it_was() {
+    let scene = scene();
+    let views = views(64, 48);
+    let control = FrameControl::new();
+    let params = AlgoSpec::parse("rzb:eps=auto").expect("a valid spec").params;
+    let opts = crate::rzb::RzbOptions::from_params(&params).expect("valid rzb options");
+    let mut cancelled = 0;
+    for k in 1u64.. {
+        assert!(k < 1 << 16, "a frame that checks without end");
+        let mut r = crate::rzb::Rzb::with_options(Arc::clone(&scene), &options(&control), &opts).expect("rzb builds");
+        frame_of(&mut r, &control, &views[0]);
+        let before = r.learnt_state();
+        let mut frame = Frame::new(64, 48).expect("a valid frame size");
+        control.reset();
+        control.cancel_at_check(k);
+        match r.render(&views[1], &mut frame) {
+            Err(RenderError::Cancelled) => {
+                cancelled += 1;
+                assert_eq!(r.learnt_state(), before, "cancelled at check {k}");
+            }
+            Ok(_) => {
+                assert_ne!(r.learnt_state(), before, "a whole frame is learnt");
+                assert!(cancelled > 0, "never checked");
+                break;
+            }
+            Err(e) => panic!("{e}"),
+        }
+    }
 }

@@ -440,6 +440,13 @@ pub struct Rzb {
 }
 
 impl Rzb {
+    /// What the renderer learns from a whole frame besides its cache: the frame count and
+    /// §8.2's search for ε (tests: a cancelled frame leaves them as they were).
+    #[cfg(test)]
+    pub(crate) fn learnt_state(&self) -> String {
+        format!("{} {:?}", self.frame_index, self.auto)
+    }
+
     /// Builds the sampling structures of `scene` (§5.3.1, §7.1, §7.3).
     ///
     /// # Errors
