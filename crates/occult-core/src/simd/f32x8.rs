@@ -28,6 +28,29 @@ impl F32x8 {
         Self(unsafe { _mm256_setzero_ps() })
     }
 
+    /// Lane `i` is `*src.add(i)` where `m` is set, +0.0 elsewhere (one masked load: the
+    /// lanes not set are not read and cannot fault).
+    ///
+    /// # Safety
+    /// `src.add(i)` must be valid for reads for every lane `i` set in `m`.
+    #[inline(always)]
+    pub unsafe fn load_masked(_: Avx2, src: *const f32, m: M32x8) -> Self {
+        // SAFETY: the token proves AVX2; the caller vouches for the lanes read.
+        Self(unsafe { _mm256_maskload_ps(src, m.0) })
+    }
+
+    /// Writes lane `i` to `*dst.add(i)` for every lane `i` set in `m`, nothing elsewhere (one
+    /// masked store).
+    ///
+    /// # Safety
+    /// `dst.add(i)` must be valid for writes for every lane `i` set in `m`.
+    #[inline(always)]
+    pub unsafe fn store_masked(self, dst: *mut f32, m: M32x8) {
+        // SAFETY: a lane value exists only where AVX2 was proven (its token); the caller
+        // vouches for the lanes written.
+        unsafe { _mm256_maskstore_ps(dst, m.0, self.0) }
+    }
+
     /// Lane `i` is `v[i]`.
     #[inline(always)]
     pub fn from_array(_: Avx2, v: [f32; 8]) -> Self {
@@ -326,5 +349,32 @@ mod tests {
             }
         });
         assert!(same(got.to_array(), want));
+    }
+
+    /// Masked loads and stores touch the set lanes only (the others may lie outside memory
+    /// held, as at a span's end); the conversion rounds as `as f32` does.
+    #[test]
+    fn masked_loads_and_stores_touch_the_set_lanes_only() {
+        let Some(avx2) = Isa::detected().avx2() else {
+            eprintln!("note: no AVX2 here; nothing to compare");
+            return;
+        };
+        let on = 0b0000_0111;
+        let m = M32x8::from_bits(avx2, on);
+        let held = [1.5f32, -2.0, 3.25];
+        // SAFETY: the three set lanes read `held`.
+        let got = unsafe { F32x8::load_masked(avx2, held.as_ptr(), m) };
+        assert!(same(got.to_array(), [1.5, -2.0, 3.25, 0.0, 0.0, 0.0, 0.0, 0.0]));
+        let mut out = [9.0f32; 3];
+        // SAFETY: the three set lanes write `out`.
+        unsafe { F32x8::splat(avx2, 4.0).store_masked(out.as_mut_ptr(), m) };
+        assert_eq!(out, [4.0; 3]);
+        let mut items = [7u64; 8];
+        // SAFETY: every lane lies in `items`.
+        unsafe { M32x8::from_bits(avx2, 0b1001_0010).store_u64(items.as_mut_ptr(), u64::MAX - 1) };
+        let want: [u64; 8] = std::array::from_fn(|i| if 0b1001_0010 & (1 << i) != 0 { u64::MAX - 1 } else { 7 });
+        assert_eq!(items, want);
+        let ints = [0, -1, 16_777_217, i32::MAX, i32::MIN, 3, -16_777_219, 12_345];
+        assert!(same(I32x8::from_array(avx2, ints).to_f32().to_array(), ints.map(|i| i as f32)));
     }
 }

@@ -245,6 +245,14 @@ impl I32x8 {
         F64x4(unsafe { _mm256_cvtepi32_pd(_mm256_extracti128_si256::<1>(self.0)) })
     }
 
+    /// Lane-wise conversion to `f32`, rounding to nearest as `i32 as f32` does (exact below
+    /// 2^24 in magnitude).
+    #[inline(always)]
+    pub fn to_f32(self) -> F32x8 {
+        // SAFETY: as in `wrapping_add`.
+        F32x8(unsafe { _mm256_cvtepi32_ps(self.0) })
+    }
+
     /// The lanes' bits as `f32` lanes (no instruction; see [`F32x8::to_bits`]).
     #[inline(always)]
     pub fn to_f32_bits(self) -> F32x8 {

@@ -49,6 +49,25 @@ impl M32x8 {
         Self(self.to_i32x8().and_not(o.to_i32x8()).0)
     }
 
+    /// Writes `v` to `*dst.add(i)` for every lane `i` set, nothing elsewhere (two masked
+    /// stores of four 64-bit lanes).
+    ///
+    /// # Safety
+    /// `dst.add(i)` must be valid for writes for every lane `i` set.
+    #[inline(always)]
+    pub unsafe fn store_u64(self, dst: *mut u64, v: u64) {
+        // SAFETY: a lane value exists only where AVX2 was proven (its token); the caller
+        // vouches for the lanes written. Each 32-bit flag widened by sign extension is the
+        // 64-bit lane's flag.
+        unsafe {
+            let value = _mm256_set1_epi64x(v as i64);
+            let low = _mm256_cvtepi32_epi64(_mm256_castsi256_si128(self.0));
+            let high = _mm256_cvtepi32_epi64(_mm256_extracti128_si256::<1>(self.0));
+            _mm256_maskstore_epi64(dst.cast(), low, value);
+            _mm256_maskstore_epi64(dst.add(4).cast(), high, value);
+        }
+    }
+
     /// The flags as integers: -1 where set, 0 elsewhere (no instruction).
     #[inline(always)]
     pub fn to_i32x8(self) -> super::I32x8 {

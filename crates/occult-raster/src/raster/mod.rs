@@ -31,7 +31,9 @@
 //! ([`setup8`]), with the same operations in the same order as the scalar path (tested bit
 //! for bit). The scan derives exact integer edge functions (the 8-lane setup hands them over
 //! for small boxes) and finds covered pixels with branch-free 8-pixel masks (boxes up to 64
-//! pixels) or per-row integer span solving (larger ones).
+//! pixels) or per-row integer span solving (larger ones: a reciprocal's estimate moved to the
+//! exact bound, no division per row); with AVX2 a span's fragments are depth-tested and
+//! written eight at a time, items written without being read unless a depth ties.
 //!
 //! The result cannot depend on the strategy, the split or the thread count: every fragment's
 //! depth is a function of the triangle and the pixel alone, and pixels keep the nearest

@@ -292,3 +292,35 @@ fn passes_bounding_projected_vertices_change_nothing() {
         }
     }
 }
+
+/// The span bounds found with reciprocals are the divisions' exactly, on edge values as large
+/// as the guard band allows, on exact multiples of the step (a centre on the edge) and next to
+/// them.
+#[test]
+fn spans_without_divisions_are_the_divisions_spans() {
+    use super::scan::{solve_span, solve_span_with, span_reciprocals};
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(3);
+    for case in 0..200_000 {
+        let step = |rng: &mut rand_pcg::Pcg64Mcg| match rng.random_range(0..8) {
+            0 => 0,
+            1 => rng.random_range(-4i64..=4) * SUB,
+            _ => rng.random_range(-(1i64 << 24)..(1i64 << 24)) * SUB,
+        };
+        let step_x = [step(&mut rng), step(&mut rng), step(&mut rng)];
+        let row = std::array::from_fn(|k| {
+            let s = step_x[k];
+            match rng.random_range(0..3) {
+                // On a pixel centre, or one off it.
+                0 if s != 0 => -s * rng.random_range(-5000i64..5000) + rng.random_range(-1i64..=1),
+                _ => rng.random_range(-(1i64 << 50)..(1i64 << 50)),
+            }
+        });
+        let (lo, hi) = (rng.random_range(0i64..10), rng.random_range(0i64..9000));
+        assert_eq!(
+            solve_span_with(row, step_x, span_reciprocals(step_x), lo, hi),
+            solve_span(row, step_x, lo, hi),
+            "case {case}: {row:?} {step_x:?}"
+        );
+    }
+}
