@@ -28,6 +28,21 @@ impl F32x8 {
         Self(unsafe { _mm256_setzero_ps() })
     }
 
+    /// Lane `i` is `src[i]` (one unaligned load).
+    #[inline(always)]
+    pub fn load(_: Avx2, src: &[f32; 8]) -> Self {
+        // SAFETY: the token proves AVX2; `src` holds the 32 bytes read.
+        Self(unsafe { _mm256_loadu_ps(src.as_ptr()) })
+    }
+
+    /// Writes lane `i` to `dst[i]` (one unaligned store).
+    #[inline(always)]
+    pub fn store(self, dst: &mut [f32; 8]) {
+        // SAFETY: a lane value exists only where AVX2 was proven (its token); `dst` holds the
+        // 32 bytes written.
+        unsafe { _mm256_storeu_ps(dst.as_mut_ptr(), self.0) }
+    }
+
     /// Lane `i` is `*src.add(i)` where `m` is set, +0.0 elsewhere (one masked load: the
     /// lanes not set are not read and cannot fault).
     ///
@@ -365,6 +380,9 @@ mod tests {
         // SAFETY: the three set lanes read `held`.
         let got = unsafe { F32x8::load_masked(avx2, held.as_ptr(), m) };
         assert!(same(got.to_array(), [1.5, -2.0, 3.25, 0.0, 0.0, 0.0, 0.0, 0.0]));
+        let mut whole = [0.0f32; 8];
+        F32x8::from_array(avx2, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]).store(&mut whole);
+        assert!(same(F32x8::load(avx2, &whole).to_array(), [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]));
         let mut out = [9.0f32; 3];
         // SAFETY: the three set lanes write `out`.
         unsafe { F32x8::splat(avx2, 4.0).store_masked(out.as_mut_ptr(), m) };

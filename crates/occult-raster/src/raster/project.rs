@@ -2,7 +2,7 @@
 //! the per-draw vertex cache of index-list draws, and the homogeneous clipping of the rare
 //! triangle that crosses the near plane or the guard band.
 
-use super::setup::setup_snapped;
+use super::setup::{setup_snapped, TriSetup};
 #[cfg(target_arch = "x86_64")]
 use super::setup8;
 use super::sinks::SetupSink;
@@ -242,7 +242,11 @@ impl VertexCache {
 /// corner's `w` could round to or below 0 and lose the whole triangle. The f64 products of the
 /// f32 inputs are exact. A corner that no plane moves is still projected from its f32 clip
 /// coordinates, which give it the bits every other path gives it, so that neighbours meet.
-#[cold]
+///
+/// The pieces are handed to `out` by the caller's inlined code, not from here: this cold
+/// function is compiled for the baseline instruction set, and a sink's scan inlined into it
+/// would call its AVX2 operations out of line.
+#[inline(always)]
 pub(super) fn clip_and_setup(
     vp: &Viewport,
     clip_from_object: &Mat4,
@@ -250,6 +254,33 @@ pub(super) fn clip_and_setup(
     item: ItemId,
     out: &mut impl SetupSink,
 ) {
+    let pieces = clip_pieces(vp, clip_from_object, p, item);
+    let n = pieces.len() as u32;
+    for t in pieces {
+        out.push(vp, t);
+    }
+    // One triangle, counted once however many pieces it was cut into.
+    out.uncount(n.saturating_sub(1));
+}
+
+/// Set-up triangles kept in order (the pieces of a clipped triangle).
+struct Pieces(Vec<TriSetup>);
+
+impl SetupSink for Pieces {
+    fn push(&mut self, _: &Viewport, t: TriSetup) {
+        self.0.push(t);
+    }
+
+    fn count_uncovered(&mut self, _: u32) {}
+
+    fn uncount(&mut self, _: u32) {}
+}
+
+/// The set-up pieces of a triangle that needs clipping, in order ([`clip_and_setup`]).
+#[cold]
+fn clip_pieces(vp: &Viewport, clip_from_object: &Mat4, p: [Vec3; 3], item: ItemId) -> Vec<TriSetup> {
+    let mut out = Pieces(Vec::new());
+    let out = &mut out;
     /// A corner of the clipped polygon: its clip coordinates in f64, and in f32 for a corner
     /// of the triangle itself.
     #[derive(Clone, Copy)]
@@ -296,12 +327,12 @@ pub(super) fn clip_and_setup(
         }
         std::mem::swap(&mut poly, &mut next);
         if poly.len() < 3 {
-            return;
+            return Vec::new();
         }
     }
     // A NaN w also fails this test.
     if !poly.iter().all(|c| c.clip.w > 0.0) {
-        return;
+        return Vec::new();
     }
     // Clipped vertices lie on or inside every clip plane up to rounding: project them directly.
     let p: Vec<(i32, i32, f32)> = poly
@@ -323,11 +354,10 @@ pub(super) fn clip_and_setup(
         })
         .collect();
     if p.iter().any(|v| !v.2.is_finite()) || poly.iter().any(|c| !c.clip.is_finite()) {
-        return;
+        return Vec::new();
     }
-    let pieces = (1..p.len() - 1)
-        .filter(|&i| setup_snapped(vp, [p[0], p[i], p[i + 1]], item, out))
-        .count() as u32;
-    // One triangle, counted once however many pieces it was cut into.
-    out.uncount(pieces.saturating_sub(1));
+    for i in 1..p.len() - 1 {
+        setup_snapped(vp, [p[0], p[i], p[i + 1]], item, out);
+    }
+    std::mem::take(&mut out.0)
 }

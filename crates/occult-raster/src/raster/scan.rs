@@ -327,12 +327,14 @@ pub(super) fn write_span_in<const AVX2: bool>(
     write_span(vp, t, row_depth, xa, depth, items, mode)
 }
 
-/// [`write_span`] eight pixels at a time: each lane's depth is [`depth_at`]'s (the same
-/// operations in the same order, nothing contracted), the depth buffer is read and written
-/// under lane masks (a span's last lanes lie past it), and the item buffer is only written,
-/// where the fragment wins on depth alone. A group of eight where some fragment ties the
-/// stored depth (rare: coplanar surfaces) is written pixel by pixel as [`write_span`] does,
-/// the item read to break the tie.
+/// [`write_span`] eight pixels at a time for long spans: each lane's depth is [`depth_at`]'s
+/// (the same operations in the same order, nothing contracted); the depths are read and
+/// written back whole (a lane that loses keeps its own value), the items only written, under
+/// a lane mask, where the fragment wins on depth alone. A group of eight where some fragment
+/// ties the stored depth (coplanar surfaces), and the last pixels of the span, are written
+/// pixel by pixel as [`write_span`] does. Short spans are [`write_span`]'s: there, masked
+/// loads and stores cost more than they save (a masked store does not forward to the next
+/// triangle's load of the same pixels).
 #[cfg(target_arch = "x86_64")]
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -346,50 +348,52 @@ fn write_span_avx2(
     items: &mut [ItemId],
     mode: RasterMode,
 ) -> u64 {
-    use occult_core::simd::{F32x8, I32x8, M32x8};
+    use occult_core::simd::{F32x8, I32x8};
     let n = depth.len();
-    assert_eq!(items.len(), n, "a span's depths and items");
+    if n < SHORT_SPAN {
+        return write_span(vp, t, row_depth, xa, depth, items, mode);
+    }
+    let items = &mut items[..n];
     let splat = |v: f32| F32x8::splat(avx2, v);
     let (rd, dzdx, zmin, zmax, far) = (splat(row_depth), splat(t.dzdx), splat(t.zmin), splat(t.zmax), splat(vp.far_depth));
     // Lane k of group i is pixel xa + i + k, at offset (xa - px0) + i + k from the box's
     // corner: below 2^24, as a frame's width is, so the conversion is exact.
     let offsets = I32x8::lane_index(avx2).wrapping_add(I32x8::splat(avx2, (xa - t.px0 as u32) as i32));
-    let all = M32x8::from_bits(avx2, 0xff);
     let mut written = 0u64;
     let mut i = 0;
-    while i < n {
-        let left = n - i;
-        let valid = if left >= 8 { all } else { M32x8::from_bits(avx2, (1 << left) - 1) };
+    let by_pixel = |i: usize, end: usize, depth: &mut [f32], items: &mut [ItemId]| {
+        let mut written = 0;
+        for (k, (d, it)) in depth[i..end].iter_mut().zip(&mut items[i..end]).enumerate() {
+            let z = depth_at(t, row_depth, xa + (i + k) as u32);
+            if z >= vp.far_depth {
+                written += write_fragment(d, it, z, t.item, mode) as u64;
+            }
+        }
+        written
+    };
+    while i + 8 <= n {
         let x = offsets.wrapping_add(I32x8::splat(avx2, i as i32)).to_f32();
         let z = zmax.min(zmin.max(rd + dzdx * x));
-        // SAFETY: the set lanes are pixels i..i + left of the span, inside `depth`.
-        let stored = unsafe { F32x8::load_masked(avx2, depth.as_ptr().add(i), valid) };
-        let front = z.ge(far).and(valid);
+        let group: &mut [f32; 8] = (&mut depth[i..i + 8]).try_into().expect("eight pixels");
+        let stored = F32x8::load(avx2, group);
+        let front = z.ge(far);
         if mode == RasterMode::Full && front.and(z.eq(stored)).bits() != 0 {
-            let end = (i + 8).min(n);
-            for (k, (d, it)) in depth[i..end].iter_mut().zip(&mut items[i..end]).enumerate() {
-                let z = depth_at(t, row_depth, xa + (i + k) as u32);
-                if z >= vp.far_depth {
-                    written += write_fragment(d, it, z, t.item, mode) as u64;
-                }
-            }
+            written += by_pixel(i, i + 8, depth, items);
         } else {
             let keep = front.and(z.gt(stored));
             let bits = keep.bits();
             if bits != 0 {
-                // SAFETY: the set lanes lie inside the span, as above.
-                unsafe {
-                    z.store_masked(depth.as_mut_ptr().add(i), keep);
-                    if mode == RasterMode::Full {
-                        keep.store_u64(items.as_mut_ptr().add(i), t.item);
-                    }
+                F32x8::select(keep, z, stored).store(group);
+                if mode == RasterMode::Full {
+                    // SAFETY: the eight lanes are pixels i..i + 8 of the span, inside `items`.
+                    unsafe { keep.store_u64(items.as_mut_ptr().add(i), t.item) };
                 }
                 written += u64::from(bits.count_ones());
             }
         }
         i += 8;
     }
-    written
+    written + by_pixel(i, n, depth, items)
 }
 
 /// Depth of a triangle at the centre of pixel `(px0, y)`.
