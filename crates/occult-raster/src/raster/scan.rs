@@ -587,6 +587,12 @@ pub(super) unsafe fn scan_triangle<const AVX2: bool>(
             let row_depth = row_depth(t, y);
             let (xa, xb) = (x0 + lo as u32, x0 + hi as u32);
             let base = y as usize * target.width;
+            if y + 2 <= y1 {
+                // The span two rows down starts near this one's: fetch it ahead (each row is
+                // a new stream to the hardware prefetcher, its first lines a wait each).
+                prefetch(target, base + 2 * target.width + xa as usize);
+                prefetch(target, base + 2 * target.width + xb as usize);
+            }
             // SAFETY: the span lies in `rect` (inside the frame), owned by this task.
             let (depth, items) = unsafe {
                 (
