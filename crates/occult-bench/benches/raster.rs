@@ -1,16 +1,32 @@
 //! Rasterizer throughput: the `terrain` anchor view (1 and 2 threads, exact depth and item
-//! ids), the same mesh from behind (projection and outcode rejection only) and random
-//! triangles of three sizes. Times are for one `Rasterizer::draw` of all the
-//! triangles into a frame cleared before each (the clear is not timed; `clear` benchmarks it).
+//! ids), the same mesh from behind (projection and outcode rejection only), random triangles
+//! of three sizes, and the two-thread strategies forced on random triangles. Times are for one
+//! `Rasterizer::draw` of all the triangles into a frame cleared before each (the clear is not
+//! timed; `clear` benchmarks it).
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use occult_core::glam::Affine3A;
 use occult_core::{Camera, Vec3, View};
-use occult_raster::{Draw, DrawTriangles, Frame, RasterConfig, RasterMode, Rasterizer};
+use occult_raster::{Draw, DrawTriangles, Frame, RasterConfig, RasterMode, Rasterizer, Strategy};
 
 fn draw_all(c: &mut Criterion, name: &str, mesh: &occult_core::Mesh, view: &occult_core::View, threads: usize) {
+    draw_with(c, name, mesh, view, threads, Strategy::Auto);
+}
+
+/// One draw of `mesh` per iteration, the frame cleared (untimed) before each, named
+/// `{name}/threads={threads}/{isa}` under the automatic strategy and
+/// `{name}/threads={threads}/{strategy}` under a forced one.
+fn draw_with(
+    c: &mut Criterion,
+    name: &str,
+    mesh: &occult_core::Mesh,
+    view: &occult_core::View,
+    threads: usize,
+    strategy: Strategy,
+) {
     let mut raster = Rasterizer::new(RasterConfig {
         threads,
+        strategy,
         ..RasterConfig::default()
     })
     .expect("valid config");
@@ -21,10 +37,14 @@ fn draw_all(c: &mut Criterion, name: &str, mesh: &occult_core::Mesh, view: &occu
         clip_from_object: view.clip_from_object(&Affine3A::IDENTITY),
         first_item: 0,
     };
+    let label = match strategy {
+        Strategy::Auto => format!("{name}/threads={threads}/{}", raster.isa_name()),
+        s => format!("{name}/threads={threads}/{s:?}"),
+    };
     let mut group = c.benchmark_group("raster");
     group.throughput(Throughput::Elements(mesh.triangle_count() as u64));
     group.sample_size(20);
-    group.bench_function(format!("{name}/threads={threads}/{}", raster.isa_name()), |b| {
+    group.bench_function(label, |b| {
         b.iter_custom(|iterations| {
             let mut total = std::time::Duration::ZERO;
             for _ in 0..iterations {
@@ -69,6 +89,17 @@ fn clear(c: &mut Criterion) {
         });
     }
     group.finish();
+}
+
+/// Large and medium random triangles on two threads, drawn directly, by bands and sort-last
+/// (the strategies forced): what sharing the fill and sharing the setup each gain.
+fn strategies(c: &mut Criterion) {
+    for (name, count, size) in [("large_300px", 200, 300.0), ("medium_10px", 2000, 10.0)] {
+        let (mesh, view) = occult_bench::random_triangles(count, size, 1);
+        for s in [Strategy::Direct, Strategy::Banded, Strategy::SortLast] {
+            draw_with(c, name, &mesh, &view, 2, s);
+        }
+    }
 }
 
 fn random(c: &mut Criterion) {
@@ -154,5 +185,5 @@ fn small_draws(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, terrain, clear, random, small_draws);
+criterion_group!(benches, terrain, clear, random, small_draws, strategies);
 criterion_main!(benches);

@@ -240,6 +240,8 @@ fn frames_independent_of_order_threads_and_tiles() {
             (2, 1024, false, Strategy::Binned),
             (2, 64, true, Strategy::Auto),
             (1, 64, false, Strategy::Auto),
+            (2, 64, true, Strategy::Banded),
+            (3, 64, false, Strategy::Banded),
         ] {
             let mut r = Rasterizer::new(RasterConfig {
                 threads,
@@ -276,7 +278,7 @@ fn counts_do_not_depend_on_the_instruction_set() {
             view = View::new(cam, 157, 113).unwrap();
         }
         let order: Vec<u32> = (0..mesh.triangle_count() as u32).collect();
-        for strategy in [Strategy::Direct, Strategy::Binned, Strategy::SortLast] {
+        for strategy in [Strategy::Direct, Strategy::Binned, Strategy::SortLast, Strategy::Banded] {
             let counts: Vec<_> = [true, false]
                 .map(|simd| {
                     let mut r = Rasterizer::new(RasterConfig {
@@ -332,7 +334,11 @@ fn depth_ties_go_to_the_least_item_in_every_instruction_set() {
     let mut p = Vec::new();
     let mut t = Vec::new();
     for _ in 0..40 {
-        let c = Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-0.2..0.2));
+        let c = Vec3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-0.2..0.2),
+        );
         let s = rng.random_range(0.02..1.5);
         let corners = [c, c + Vec3::new(s, 0.1 * s, 0.05), c + Vec3::new(0.3 * s, s, -0.05)];
         // Three copies of each triangle: the same corners, the same depths, three items.
@@ -358,8 +364,15 @@ fn depth_ties_go_to_the_least_item_in_every_instruction_set() {
             let mut f = Frame::new(131, 97).unwrap();
             let c = r.draw(&view, &mut f, &list_draws(&mesh, &order, 7, m), RasterMode::Full);
             // Of three coplanar copies, the first (least item) shows wherever the triangle does.
-            assert!(f.items().iter().all(|&i| i == NO_ITEM || i % 3 == 0), "round {round}, simd {simd}");
-            (c, f.depth().iter().map(|d| d.to_bits()).collect::<Vec<_>>(), f.items().to_vec())
+            assert!(
+                f.items().iter().all(|&i| i == NO_ITEM || i % 3 == 0),
+                "round {round}, simd {simd}"
+            );
+            (
+                c,
+                f.depth().iter().map(|d| d.to_bits()).collect::<Vec<_>>(),
+                f.items().to_vec(),
+            )
         });
         assert!(a.0.fragments_written > 2000, "round {round}: large spans drawn");
         assert_eq!(a.0, b.0, "round {round}: counts, AVX2 and baseline");

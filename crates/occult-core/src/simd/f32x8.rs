@@ -382,7 +382,10 @@ mod tests {
         assert!(same(got.to_array(), [1.5, -2.0, 3.25, 0.0, 0.0, 0.0, 0.0, 0.0]));
         let mut whole = [0.0f32; 8];
         F32x8::from_array(avx2, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]).store(&mut whole);
-        assert!(same(F32x8::load(avx2, &whole).to_array(), [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]));
+        assert!(same(
+            F32x8::load(avx2, &whole).to_array(),
+            [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]
+        ));
         let mut out = [9.0f32; 3];
         // SAFETY: the three set lanes write `out`.
         unsafe { F32x8::splat(avx2, 4.0).store_masked(out.as_mut_ptr(), m) };
@@ -393,6 +396,9 @@ mod tests {
         let want: [u64; 8] = std::array::from_fn(|i| if 0b1001_0010 & (1 << i) != 0 { u64::MAX - 1 } else { 7 });
         assert_eq!(items, want);
         let ints = [0, -1, 16_777_217, i32::MAX, i32::MIN, 3, -16_777_219, 12_345];
-        assert!(same(I32x8::from_array(avx2, ints).to_f32().to_array(), ints.map(|i| i as f32)));
+        assert!(same(
+            I32x8::from_array(avx2, ints).to_f32().to_array(),
+            ints.map(|i| i as f32)
+        ));
     }
 }

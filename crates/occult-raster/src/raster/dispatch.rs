@@ -67,6 +67,23 @@ hot_loop! {
 }
 
 hot_loop! {
+    /// Sets up every triangle of `range` of the stream and scans it over the rows of bands
+    /// `band, band + bands, …` only; returns (triangles rasterized, fragments written).
+    ///
+    /// # Safety
+    /// No other thread may access the rows of those bands in `target` during the call.
+    pub(super) unsafe fn draw_banded(
+        vp: &Viewport,
+        stream: &TriStream<'_>,
+        range: Range<usize>,
+        target: &FrameTarget<'_>,
+        mode: RasterMode,
+        band: u32,
+        bands: u32,
+    ) -> (u64, u64) = super::sinks::draw_banded::<false>, super::sinks::draw_banded::<true>;
+}
+
+hot_loop! {
     /// Scans every triangle binned to `tile`.
     ///
     /// # Safety

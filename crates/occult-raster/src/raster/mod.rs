@@ -1,7 +1,13 @@
-//! The exact triangle rasterizer: one triangle setup and one scan, driven three ways.
+//! The exact triangle rasterizer: one triangle setup and one scan, driven four ways.
 //!
 //! - **Direct** (one thread): each triangle is set up and scanned at once, in submission order;
 //!   consecutive triangles of a mesh touch neighbouring pixels, so the frame stays in cache.
+//! - **Banded** (several threads, shorter draws whose fill is the cost): every thread sets up
+//!   every triangle and scans it over its own bands of rows (interleaved bands of 32 rows) of
+//!   the frame itself; no private frames, no merge. The caller takes bands too, beside helper
+//!   threads of the rasterizer's own that wait for the next draw spinning a while
+//!   ([`helpers`]): the culling renderers' batches last a tenth of a millisecond to a few, too
+//!   short to wait for a sleeping pool thread.
 //! - **Sort-last** (several threads, draws of at least 200,000 triangles): worker `k` of
 //!   `threads` (a job any thread of the pool may run) draws the blocks `k, k + threads, …` of
 //!   the triangle stream directly into its own frame (worker 0 into the real one); the other
@@ -13,15 +19,15 @@
 //!   2. *rasterization* (parallel over tiles): each tile scans the triangles of its bins.
 //!
 //!   The automatic strategy draws a draw too small for sort-last directly on the calling
-//!   thread: binning it cost more than it saved in every renderer measured (see
-//!   `Rasterizer::on_caller`).
+//!   thread, or by bands when it is expected to be long: binning it cost more than it saved in
+//!   every renderer measured (see `Rasterizer::shared_as`).
 //!
 //! The calling thread drives every draw (and the stencil pass). On one thread it does all the
 //! work itself (the rasterizer's one-thread pool serves only [`Rasterizer::install`]); on
 //! several it hands each parallel phase to the pool as jobs that any thread may take (see
 //! `Workers::share`) and waits for them.
 //!
-//! Setup, shared by all three: transform vertices (whole meshes: each vertex once per draw, in
+//! Setup, shared by all four: transform vertices (whole meshes: each vertex once per draw, in
 //! parallel; index lists and ranges: per triangle, through a small per-draw cache so that the
 //! corners neighbouring triangles share are mostly transformed once, or with AVX2 every corner,
 //! eight at a time, which costs less), trivially reject by
@@ -68,6 +74,7 @@ macro_rules! add_assign_fields {
 }
 
 mod dispatch;
+mod helpers;
 mod merge;
 mod project;
 mod scan;
@@ -86,6 +93,7 @@ use occult_core::{ItemId, Mat4, Mesh, View};
 use std::ops::Range;
 use std::time::Instant;
 
+use helpers::Helpers;
 use project::{
     clip_and_setup, ProjVertex, Viewport, NEEDS_CLIP, NOT_FINITE, OUT_BOTTOM, OUT_LEFT, OUT_NEAR, OUT_OF_VIEW,
     OUT_RIGHT, OUT_TOP,
@@ -142,10 +150,12 @@ pub struct RasterConfig {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Strategy {
     /// Direct on the calling thread on one thread. On several: sort-last over the threads for
-    /// draws of 200,000 triangles or more, and for smaller ones (of at least 4,096) that this
-    /// rasterizer's measured cost of a triangle makes long (see `Rasterizer::on_caller`);
-    /// the rest directly on the calling thread. The split was measured on two cores: on many,
-    /// draws of large triangles may gain from [`Strategy::Binned`].
+    /// draws of 200,000 triangles or more; below, by bands for draws that this rasterizer's
+    /// measured cost of a triangle makes long enough to share, unless their triangles are
+    /// cheap (setup-bound) and the draw long beside the frame, which go sort-last (see
+    /// `Rasterizer::shared_as`); the rest directly on the calling thread. The split was
+    /// measured on two cores: on many, draws of large triangles may gain from
+    /// [`Strategy::Binned`].
     #[default]
     Auto,
     /// Set up and scan each triangle at once, on the calling thread, whatever the thread
@@ -156,6 +166,10 @@ pub enum Strategy {
     /// Direct workers into private frames, merged (falls back to tile-binned when the private
     /// frames cannot be allocated).
     SortLast,
+    /// Every thread sets up every triangle and scans its own bands of rows (interleaved bands
+    /// of 32 rows) of the frame itself: no private frames, no merge, the setup repeated. For
+    /// draws whose fill outweighs their setup (few large triangles).
+    Banded,
 }
 
 impl Default for RasterConfig {
@@ -256,8 +270,10 @@ pub struct Rasterizer {
     scratch_clean: bool,
     isa: Isa,
     /// Decaying sums of the thread time and the triangles of the measured draws (see
-    /// [`Rasterizer::on_caller`]): their ratio is what a triangle costs one thread.
+    /// [`Rasterizer::shared_as`]): their ratio is what a triangle costs one thread.
     measured: (f64, f64),
+    /// The helper threads of banded draws, started at the first ([`helpers`]).
+    helpers: Option<Helpers>,
     /// Whether the last pass drawn ran on the calling thread alone, and its strategy, for
     /// tests of the choice.
     #[cfg(test)]
@@ -334,6 +350,7 @@ impl Rasterizer {
             scratch: Vec::new(),
             scratch_clean: true,
             measured: (0.0, 0.0),
+            helpers: None,
             #[cfg(test)]
             last_pass: None,
             isa,
@@ -429,37 +446,57 @@ impl Rasterizer {
             "frame and view sizes differ"
         );
         let vp = Viewport::new(view, &self.config);
-        let single = self.on_caller(draws, u64::from(view.width()) * u64::from(view.height()));
-        self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES, single)
+        let shared = self.shared_as(draws, u64::from(view.width()) * u64::from(view.height()));
+        self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES, shared)
     }
 
-    /// True when `draws` run directly on the calling thread, without binning or private
-    /// frames (a one-thread rasterizer never hands work to its pool, whatever the strategy):
+    /// How `draws` are shared over the threads; `None` when they run directly on the calling
+    /// thread, without binning, private frames or bands (a one-thread rasterizer never hands
+    /// work to its pool, whatever the strategy):
     /// - on a one-thread rasterizer unless tile binning is forced;
     /// - under [`Strategy::Direct`], as it says;
-    /// - under [`Strategy::Auto`], draws of fewer than [`SORT_LAST_MIN_TRIANGLES`] triangles,
-    ///   unless they are expected to take one thread longer than [`SHARED_MIN_NS_PER_PIXEL`]
-    ///   per pixel of the frame (`pixels`) at the cost of a triangle measured on this
-    ///   rasterizer's recent draws (fill-heavy draws: few large triangles, much overdraw).
-    ///   Sharing costs a fixed part (waking the threads, merging the private frames over the
-    ///   rows they drew), which was more than it saved for every renderer's usual draws
-    ///   measured on two cores; tile binning costs more still (each set-up triangle stored
-    ///   and read back, a large triangle's spans found again in every tile it touches).
-    ///   Frames and counts are those of the binned path (both scan each pixel's fragments in
-    ///   stream order).
-    fn on_caller(&self, draws: &[Draw<'_>], pixels: u64) -> bool {
+    /// - under [`Strategy::Auto`], draws of fewer than [`SORT_LAST_MIN_TRIANGLES`] triangles
+    ///   expected to take one thread less than [`BANDED_MIN_NS`] at the cost of a triangle
+    ///   measured on this rasterizer's recent draws, or of fewer than [`BANDED_MIN_TRIANGLES`].
+    ///   Longer ones are shared by bands ([`Strategy::Banded`]): each thread repeats the setup
+    ///   and scans its share of the rows, which takes no longer than one thread doing both and
+    ///   shares the fill, at the cost of handing the draw to a helper that waits spinning.
+    ///   Only a long draw of cheap triangles (below [`FILL_HEAVY_NS`] each: setup-bound, the
+    ///   part bands repeat), of at least [`SHARED_MIN_TRIANGLES`] and expected to take one
+    ///   thread longer than [`SHARED_MIN_NS_PER_PIXEL`] per pixel of the frame (`pixels`),
+    ///   goes sort-last below 200,000: sort-last's fixed part (waking the pool, merging the
+    ///   private frames over the rows they drew) is more than it saves on shorter draws; tile
+    ///   binning costs more still (each set-up triangle stored and read back, a large
+    ///   triangle's spans found again in every tile it touches).
+    ///
+    /// Frames and counts are those of the binned path whichever is chosen (each scans a
+    /// pixel's fragments in stream order).
+    fn shared_as(&self, draws: &[Draw<'_>], pixels: u64) -> Option<Strategy> {
         match self.config.strategy {
-            Strategy::Direct => true,
-            Strategy::Binned => false,
-            Strategy::SortLast => self.config.threads == 1,
+            Strategy::Direct => None,
+            Strategy::Binned => Some(Strategy::Binned),
+            Strategy::SortLast | Strategy::Banded if self.config.threads == 1 => None,
+            s @ (Strategy::SortLast | Strategy::Banded) => Some(s),
             Strategy::Auto => {
                 if self.config.threads == 1 {
-                    return true;
+                    return None;
                 }
                 let total: usize = draws.iter().map(|d| d.triangles.len(d.mesh)).sum();
-                total < SORT_LAST_MIN_TRIANGLES
-                    && (total < SHARED_MIN_TRIANGLES
-                        || total as f64 * self.triangle_ns() < SHARED_MIN_NS_PER_PIXEL * pixels as f64)
+                let triangle_ns = self.triangle_ns();
+                let expected = total as f64 * triangle_ns;
+                if total >= SORT_LAST_MIN_TRIANGLES {
+                    Some(Strategy::SortLast)
+                } else if total < BANDED_MIN_TRIANGLES || expected < BANDED_MIN_NS {
+                    None
+                } else if triangle_ns < FILL_HEAVY_NS
+                    && total >= SHARED_MIN_TRIANGLES
+                    && expected >= SHARED_MIN_NS_PER_PIXEL * pixels as f64
+                {
+                    // Setup-bound and long: sort-last shares the setup, which bands repeat.
+                    Some(Strategy::SortLast)
+                } else {
+                    Some(Strategy::Banded)
+                }
             }
         }
     }
@@ -494,7 +531,7 @@ impl Rasterizer {
         draws: &[Draw<'_>],
         mode: RasterMode,
         max_vertices: usize,
-        single: bool,
+        shared: Option<Strategy>,
     ) -> RasterCounts {
         let mut counts = RasterCounts::default();
         let mut rest = draws;
@@ -512,7 +549,7 @@ impl Rasterizer {
                 n += 1;
             }
             let (pass, tail) = rest.split_at(n);
-            counts += self.draw_pass(vp, frame, pass, mode, single);
+            counts += self.draw_pass(vp, frame, pass, mode, shared);
             rest = tail;
             if rest.is_empty() {
                 return counts;
@@ -520,17 +557,17 @@ impl Rasterizer {
         }
     }
 
-    /// Draws one pass: on the calling thread alone when `single`, else over this rasterizer's
-    /// threads (see [`Workers`]).
+    /// Draws one pass: on the calling thread alone when `shared` is `None`, else over this
+    /// rasterizer's threads (see [`Workers`]) as `shared` says.
     fn draw_pass(
         &mut self,
         vp: &Viewport,
         frame: &mut Frame,
         draws: &[Draw<'_>],
         mode: RasterMode,
-        single: bool,
+        shared: Option<Strategy>,
     ) -> RasterCounts {
-        let threads = if single { 1 } else { self.thread_count() };
+        let threads = if shared.is_none() { 1 } else { self.thread_count() };
         // A handle of our own, apart from `self`'s fields that the phases borrow.
         let pool = self.pool.clone();
         let workers = Workers {
@@ -577,12 +614,15 @@ impl Rasterizer {
         let total = draw_starts[draws.len()];
         counts.triangles_submitted = total as u64;
 
-        let strategy = match self.config.strategy {
+        let strategy = match shared {
+            None => Strategy::Direct,
+            Some(Strategy::Binned) => Strategy::Binned,
+            Some(_) if threads == 1 => Strategy::Direct,
             // A small pass of a large draw (see `draw_in_passes`) is drawn directly too.
-            Strategy::Auto if threads > 1 && total >= SHARED_MIN_TRIANGLES => Strategy::SortLast,
-            Strategy::Auto => Strategy::Direct,
-            Strategy::SortLast if threads == 1 => Strategy::Direct,
-            s => s,
+            Some(Strategy::SortLast) if self.config.strategy == Strategy::Auto && total < SHARED_MIN_TRIANGLES => {
+                Strategy::Direct
+            }
+            Some(s) => s,
         };
         #[cfg(test)]
         {
@@ -599,6 +639,41 @@ impl Rasterizer {
             self.measure(total, t.elapsed().as_nanos() as f64);
             counts.triangles_rasterized = rasterized;
             counts.fragments_written = written;
+            return counts;
+        }
+        if strategy == Strategy::Banded {
+            if self.helpers.as_ref().is_none_or(|h| h.count() != threads - 1) {
+                // Without helpers (a thread that cannot start), the bands are all the caller's.
+                self.helpers = Helpers::new(threads - 1).ok();
+            }
+            let target = FrameTarget::new(frame);
+            let stream = TriStream::new(draws, &draw_starts, &vertex_offsets, &self.vertices);
+            let bands = threads as u32;
+            let (target, stream) = (&target, &stream);
+            let results: Vec<std::sync::Mutex<(u64, u64, f64)>> =
+                (0..bands).map(|_| std::sync::Mutex::new((0, 0, 0.0))).collect();
+            let job = |band: usize| {
+                let t = Instant::now();
+                // SAFETY: each band is drawn once, and band `band` writes only its own rows.
+                let (rasterized, written) =
+                    unsafe { dispatch::draw_banded(isa, vp, stream, 0..total, target, mode, band as u32, bands) };
+                *results[band].lock().unwrap_or_else(std::sync::PoisonError::into_inner) =
+                    (rasterized, written, t.elapsed().as_nanos() as f64);
+            };
+            match &self.helpers {
+                Some(h) => h.run(bands as usize, &job),
+                None => (0..bands as usize).for_each(job),
+            }
+            let results: Vec<(u64, u64, f64)> = results
+                .into_iter()
+                .map(|r| r.into_inner().unwrap_or_else(std::sync::PoisonError::into_inner))
+                .collect();
+            // Every band set up every triangle: each counted them all.
+            counts.triangles_rasterized = results[0].0;
+            counts.fragments_written = results.iter().map(|r| r.1).sum();
+            // The threads' time together: the setup counted once per band, so a triangle's
+            // cost is overestimated by the setup (draws stay banded the more readily).
+            self.measure(total, results.iter().map(|r| r.2).sum());
             return counts;
         }
         if strategy == Strategy::SortLast {
@@ -659,14 +734,24 @@ impl Rasterizer {
 const MAX_PROJECTED_VERTICES: usize = 1 << 22;
 
 /// Draws at least this large go sort-last on several threads (below it, the calling thread
-/// draws them directly unless they are long: see `Rasterizer::on_caller`).
+/// draws them directly unless they are long: see `Rasterizer::shared_as`).
 const SORT_LAST_MIN_TRIANGLES: usize = 200_000;
-/// Draws smaller than this are drawn on the calling thread however long they are measured to
-/// take (a few triangles' cost is no guide to a draw's).
+/// Draws smaller than this never go sort-last below [`SORT_LAST_MIN_TRIANGLES`].
 const SHARED_MIN_TRIANGLES: usize = 4096;
 /// Draws whose triangles at least this many take the rasterizer's threads are measured.
-const MEASURED_MIN_TRIANGLES: usize = 1024;
-/// A draw of fewer than [`SORT_LAST_MIN_TRIANGLES`] is shared when expected to take one thread
-/// more than this per pixel of the frame, ns (a whole frame's merge is a few ns a pixel;
-/// chosen from 1, 2 and 4 on the suite's fill-heavy model views, on two cores).
+const MEASURED_MIN_TRIANGLES: usize = 64;
+/// Draws smaller than this stay on the calling thread however long they are measured to take
+/// (a few triangles' cost is no guide to a draw's).
+const BANDED_MIN_TRIANGLES: usize = 64;
+/// A draw the automatic strategy keeps off sort-last is shared by bands when expected to take
+/// one thread longer than this, ns (a helper that waits spinning takes a few microseconds to
+/// start; one asleep, tens).
+const BANDED_MIN_NS: f64 = 50_000.0;
+/// Draws whose triangles cost one thread at least this much each, ns, are fill-bound: bands
+/// share their fill (sort-last would share their setup, and pay a merge).
+const FILL_HEAVY_NS: f64 = 100.0;
+/// A setup-bound draw of fewer than [`SORT_LAST_MIN_TRIANGLES`] goes sort-last when expected
+/// to take one thread more than this per pixel of the frame, ns (a whole frame's merge is a
+/// few ns a pixel; chosen from 1, 2 and 4 on the suite's fill-heavy model views, on two cores,
+/// before draws were banded).
 const SHARED_MIN_NS_PER_PIXEL: f64 = 2.0;

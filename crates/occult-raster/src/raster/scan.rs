@@ -275,14 +275,7 @@ pub(super) fn write_span(
     let mut written = 0u32;
     let far = vp.far_depth;
     if depth.len() < SHORT_SPAN {
-        // Short spans: per pixel, without reading the item buffer (see `write_fragment`).
-        for (i, (d, it)) in depth.iter_mut().zip(items.iter_mut()).enumerate() {
-            let z = depth_at(t, row_depth, xa + i as u32);
-            if z >= far {
-                written += write_fragment(d, it, z, t.item, mode) as u32;
-            }
-        }
-        return written as u64;
+        return write_pixels(vp, t, row_depth, xa, depth, items, mode);
     }
     match mode {
         RasterMode::Full => {
@@ -304,6 +297,28 @@ pub(super) fn write_span(
         }
     }
     written as u64
+}
+
+/// [`write_span`] pixel by pixel, each with a branch, the item buffer read only on a depth tie
+/// (see [`write_fragment`]): for short spans.
+#[inline(always)]
+fn write_pixels(
+    vp: &Viewport,
+    t: &TriSetup,
+    row_depth: f32,
+    xa: u32,
+    depth: &mut [f32],
+    items: &mut [ItemId],
+    mode: RasterMode,
+) -> u64 {
+    let mut written = 0;
+    for (i, (d, it)) in depth.iter_mut().zip(items.iter_mut()).enumerate() {
+        let z = depth_at(t, row_depth, xa + i as u32);
+        if z >= vp.far_depth {
+            written += write_fragment(d, it, z, t.item, mode) as u64;
+        }
+    }
+    written
 }
 
 /// [`write_span`] in the instruction set of the scan's instantiation: with `AVX2`, eight
@@ -355,21 +370,28 @@ fn write_span_avx2(
     }
     let items = &mut items[..n];
     let splat = |v: f32| F32x8::splat(avx2, v);
-    let (rd, dzdx, zmin, zmax, far) = (splat(row_depth), splat(t.dzdx), splat(t.zmin), splat(t.zmax), splat(vp.far_depth));
+    let (rd, dzdx, zmin, zmax, far) = (
+        splat(row_depth),
+        splat(t.dzdx),
+        splat(t.zmin),
+        splat(t.zmax),
+        splat(vp.far_depth),
+    );
     // Lane k of group i is pixel xa + i + k, at offset (xa - px0) + i + k from the box's
     // corner: below 2^24, as a frame's width is, so the conversion is exact.
     let offsets = I32x8::lane_index(avx2).wrapping_add(I32x8::splat(avx2, (xa - t.px0 as u32) as i32));
     let mut written = 0u64;
     let mut i = 0;
     let by_pixel = |i: usize, end: usize, depth: &mut [f32], items: &mut [ItemId]| {
-        let mut written = 0;
-        for (k, (d, it)) in depth[i..end].iter_mut().zip(&mut items[i..end]).enumerate() {
-            let z = depth_at(t, row_depth, xa + (i + k) as u32);
-            if z >= vp.far_depth {
-                written += write_fragment(d, it, z, t.item, mode) as u64;
-            }
-        }
-        written
+        write_pixels(
+            vp,
+            t,
+            row_depth,
+            xa + i as u32,
+            &mut depth[i..end],
+            &mut items[i..end],
+            mode,
+        )
     };
     while i + 8 <= n {
         let x = offsets.wrapping_add(I32x8::splat(avx2, i as i32)).to_f32();

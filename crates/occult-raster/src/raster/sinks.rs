@@ -1,5 +1,6 @@
 //! Where set-up triangles go: the tile bins of the binned strategy, or the scan at once (the
-//! direct path of one thread and of each sort-last worker).
+//! direct path of one thread and of each sort-last worker), over the whole frame or over one
+//! thread's bands of rows (the banded strategy).
 
 use super::project::Viewport;
 use super::scan::{prefetch, scan_small, scan_triangle, FrameTarget, SmallCover};
@@ -200,5 +201,129 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
         let rect = [t.px0 as u32, t.py0 as u32, t.px1 as u32, t.py1 as u32];
         // SAFETY: as in `push`.
         self.written += unsafe { scan_small::<AVX2>(vp, &t, rect, cover, self.target, self.mode) };
+    }
+}
+
+/// Rows in a band of the banded strategy (a power of two): worker `k` of `n` scans the bands
+/// `k, k + n, …` of the frame, so that each gets a share of every part of the screen.
+pub(super) const BAND_SHIFT: u32 = 5;
+
+/// The body of [`super::dispatch::draw_banded`], compiled once per instruction set: sets up
+/// every triangle of `range` and scans the rows of bands `band, band + bands, …` (of
+/// `1 << BAND_SHIFT` rows) only; returns (triangles rasterized, fragments written).
+///
+/// # Safety
+/// No other thread may access the rows of those bands in `target` during the call.
+#[inline(always)]
+pub(super) unsafe fn draw_banded<const AVX2: bool>(
+    vp: &Viewport,
+    stream: &TriStream<'_>,
+    range: Range<usize>,
+    target: &FrameTarget<'_>,
+    mode: RasterMode,
+    band: u32,
+    bands: u32,
+) -> (u64, u64) {
+    let mut sink = BandSink::<AVX2> {
+        target,
+        mode,
+        own: band,
+        stride: bands,
+        last: [vp.width - 1, vp.height - 1],
+        rasterized: 0,
+        written: 0,
+    };
+    setup_range::<AVX2>(vp, stream, range, &mut sink);
+    (sink.rasterized, sink.written)
+}
+
+/// Scans each triangle as soon as it is set up, over one worker's bands of rows: every worker
+/// sets up every triangle (the setup is repeated, the fill shared), and writes rows no other
+/// worker writes, in stream order, so frames and counts are the direct path's.
+pub(super) struct BandSink<'a, const AVX2: bool> {
+    target: &'a FrameTarget<'a>,
+    mode: RasterMode,
+    /// This worker's first band, and the workers: its bands are `own, own + stride, …`.
+    own: u32,
+    stride: u32,
+    /// The frame's last column and row.
+    last: [u32; 2],
+    rasterized: u64,
+    written: u64,
+}
+
+impl<const AVX2: bool> BandSink<'_, AVX2> {
+    #[inline(always)]
+    fn mine(&self, band: u32) -> bool {
+        band % self.stride == self.own
+    }
+
+    /// Scans `t` over this worker's bands that its box meets.
+    #[inline(always)]
+    fn scan_bands(&mut self, vp: &Viewport, t: &TriSetup) {
+        let (first, last) = (t.py0 as u32 >> BAND_SHIFT, t.py1 as u32 >> BAND_SHIFT);
+        let mut band = first + (self.own + self.stride - first % self.stride) % self.stride;
+        while band <= last {
+            let top = band << BAND_SHIFT;
+            let rect = [0, top, self.last[0], (top + (1 << BAND_SHIFT) - 1).min(self.last[1])];
+            // SAFETY: the rows of this worker's bands are its own (`draw_banded`'s caller).
+            self.written += unsafe { scan_triangle::<AVX2>(vp, t, rect, self.target, self.mode) };
+            band += self.stride;
+        }
+    }
+}
+
+impl<const AVX2: bool> SetupSink for BandSink<'_, AVX2> {
+    #[inline(always)]
+    fn will_touch(&mut self, x: u32, y: u32, two_rows: bool) {
+        if self.mine(y >> BAND_SHIFT) {
+            let i = y as usize * self.target.width + x as usize;
+            prefetch(self.target, i);
+            prefetch(self.target, i + if two_rows { self.target.width } else { 0 });
+        }
+    }
+
+    #[inline(always)]
+    fn push(&mut self, vp: &Viewport, t: TriSetup) {
+        self.rasterized += 1;
+        self.scan_bands(vp, &t);
+    }
+
+    #[inline(always)]
+    fn push_lane(&mut self, vp: &Viewport, t: TriSetup) {
+        self.scan_bands(vp, &t);
+    }
+
+    const TAKES_EDGES: bool = true;
+    const COUNTS_LANES: bool = true;
+
+    #[inline(always)]
+    fn count_lanes(&mut self, n: u32, _bounds: [u32; 4]) {
+        self.rasterized += n as u64;
+    }
+
+    #[inline(always)]
+    fn count_uncovered(&mut self, n: u32) {
+        self.rasterized += n as u64;
+    }
+
+    fn uncount(&mut self, n: u32) {
+        self.rasterized -= n as u64;
+    }
+
+    #[inline(always)]
+    fn push_small(&mut self, vp: &Viewport, t: TriSetup, cover: SmallCover) {
+        let (first, last) = (t.py0 as u32 >> BAND_SHIFT, t.py1 as u32 >> BAND_SHIFT);
+        if first == last {
+            if self.mine(first) {
+                // As the direct sink: the box, in one of this worker's bands, is the rectangle.
+                let rect = [t.px0 as u32, t.py0 as u32, t.px1 as u32, t.py1 as u32];
+                // SAFETY: the box's rows are this worker's.
+                self.written += unsafe { scan_small::<AVX2>(vp, &t, rect, cover, self.target, self.mode) };
+            }
+        } else {
+            // Across bands: scanned again from its setup in each of this worker's.
+            self.scan_bands(vp, &t);
+        }
     }
 }

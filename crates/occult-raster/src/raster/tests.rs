@@ -129,12 +129,72 @@ fn long_small_draws_are_shared() {
     r.measured = (ns * 1000.0, 1000.0);
     r.draw(&view, &mut frame, &[draw(SHARED_MIN_TRIANGLES)], RasterMode::Full);
     assert_eq!(r.last_pass, Some((false, Strategy::SortLast)), "long: shared");
+    // As long, but fill-bound (each triangle costing more than FILL_HEAVY_NS): bands.
+    r.measured = (2.0 * FILL_HEAVY_NS * 1000.0, 1000.0);
+    r.draw(&view, &mut frame, &[draw(SHARED_MIN_TRIANGLES)], RasterMode::Full);
+    assert_eq!(r.last_pass, Some((false, Strategy::Banded)), "fill-bound: bands");
     r.measured = (ns * 1000.0, 1000.0);
     r.draw(&view, &mut frame, &[draw(SHARED_MIN_TRIANGLES - 1)], RasterMode::Full);
+    assert_eq!(
+        r.last_pass,
+        Some((false, Strategy::Banded)),
+        "too few for sort-last, long enough for bands"
+    );
+    r.measured = (ns * 1000.0, 1000.0);
+    r.draw(&view, &mut frame, &[draw(BANDED_MIN_TRIANGLES - 1)], RasterMode::Full);
     assert_eq!(r.last_pass, Some((true, Strategy::Direct)), "too few to judge");
-    r.measured = (ns * 250.0, 1000.0);
+    // Expected to take one thread less than BANDED_MIN_NS.
+    let short = 0.5 * BANDED_MIN_NS / SHARED_MIN_TRIANGLES as f64;
+    r.measured = (short * 1000.0, 1000.0);
     r.draw(&view, &mut frame, &[draw(SHARED_MIN_TRIANGLES)], RasterMode::Full);
     assert_eq!(r.last_pass, Some((true, Strategy::Direct)), "short: on the caller");
+}
+
+/// A banded draw gives the direct draw's frame and counts, on any number of threads, bands
+/// split across every triangle size (tiny, spanning bands, larger than the frame).
+#[test]
+fn banded_draws_are_direct_draws() {
+    let view =
+        View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 301, 203).expect("a valid 301 × 203 view");
+    let meshes = [grid(60, 0.01), grid(40, 0.08), grid(30, 0.25), grid(6, 4.0)];
+    let draws: Vec<Draw<'_>> = meshes
+        .iter()
+        .enumerate()
+        .map(|(k, mesh)| Draw {
+            mesh,
+            triangles: DrawTriangles::All,
+            clip_from_object: view.clip_from_object(&Affine3A::from_translation(Vec3::new(
+                0.3 * k as f32,
+                0.0,
+                -(k as f32),
+            ))),
+            first_item: 100_000 * k as u64,
+        })
+        .collect();
+    let run = |threads, strategy| {
+        let mut r = Rasterizer::new(RasterConfig {
+            threads,
+            strategy,
+            ..RasterConfig::default()
+        })
+        .expect("a valid configuration");
+        let mut frame = Frame::new(301, 203).expect("a 301 × 203 frame");
+        let counts = r.draw(&view, &mut frame, &draws, RasterMode::Full);
+        assert_eq!(r.last_pass.map(|p| p.1), Some(strategy), "{threads} threads");
+        (counts, frame)
+    };
+    let (counts, frame) = run(1, Strategy::Direct);
+    assert!(counts.fragments_written > 10_000, "the view shows the grids");
+    for threads in [2, 3, 5] {
+        let (c, f) = run(threads, Strategy::Banded);
+        assert_eq!(c, counts, "{threads} threads");
+        assert!(f.same_visibility(&frame), "{threads} threads");
+        assert!(f
+            .depth()
+            .iter()
+            .zip(frame.depth())
+            .all(|(a, b)| a.to_bits() == b.to_bits()));
+    }
 }
 
 /// A sort-last draw and a clear finish, with the frame and counts of one thread, while one
@@ -271,8 +331,8 @@ fn passes_bounding_projected_vertices_change_nothing() {
         // One pass; each whole mesh alone (82 > 50 goes alone, two fans fit); every draw alone.
         for max_vertices in [usize::MAX, 50, 1] {
             let mut f = Frame::new(w, h).expect("a frame of the view's size");
-            let single = threads == 1;
-            let mut pass = || r.draw_in_passes(&vp, &mut f, &draws, RasterMode::Full, max_vertices, single);
+            let shared = (threads > 1).then_some(Strategy::Binned);
+            let mut pass = || r.draw_in_passes(&vp, &mut f, &draws, RasterMode::Full, max_vertices, shared);
             let counts = match pool.clone() {
                 Some(p) => p.install(pass),
                 None => pass(),

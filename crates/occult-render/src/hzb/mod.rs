@@ -72,9 +72,9 @@
 //!   per-frame filters over the shared octrees rather than copies of the data, and every
 //!   worker of `structure`/`hybrid` still walks (and tests) the shared upper octree levels.
 //!   With `parallel=off` (the default) parallelism is the rasterizer's own: sort-last within
-//!   a batch of at least 200,000 triangles, or of fewer that its measured cost of a triangle
-//!   makes long; the usual batches are drawn on the calling thread (sharing them over two
-//!   cores measured slower).
+//!   a batch of at least 200,000 triangles; a shorter batch that its measured cost of a
+//!   triangle makes long is shared by bands of rows (its fill split over the threads, the
+//!   setup repeated), the rest drawn on the calling thread.
 //! - Two additions beyond the paper, both conservative: an inner octree node's own primitives
 //!   (its large straddlers) are tested against their own box before they are drawn, and the
 //!   instances held by one node of a group's octree are visited nearest first (the octants

@@ -93,8 +93,8 @@
 //!   full, but the culling lost to a batch (cells of a batch do not see each other's geometry)
 //!   is the same as in §3.4.
 //! - A batch's visible triangles are one draw (or gathered with later ones, `flush`); the
-//!   rasterizer draws it on the calling thread unless it is large enough to share over its
-//!   threads (sort-last). Frames do not depend on it.
+//!   rasterizer draws it on the calling thread unless it is long enough to share over its
+//!   threads (by bands of rows, or sort-last when large). Frames do not depend on it.
 //! - Deviation: cells are queried with their *tight* box (cell ∩ bounds of its contents), never
 //!   larger than the cube of the paper, so at least as much is culled.
 //! - Deviation: slabs are bands of the cell centres' distance along the view direction, one
