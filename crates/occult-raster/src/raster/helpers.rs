@@ -25,6 +25,8 @@ use std::time::{Duration, Instant};
 const SPIN: Duration = Duration::from_micros(50);
 /// How long it waits in all (spinning, then yielding) before it sleeps.
 const WAIT: Duration = Duration::from_micros(500);
+/// How long the caller spins for active helpers to finish before it yields its core.
+const CLOSE_SPIN: Duration = Duration::from_micros(20);
 
 /// A job's function, its lifetime erased: only called between publication and close.
 #[derive(Clone, Copy)]
@@ -94,7 +96,7 @@ impl Helpers {
     ///
     /// # Panics
     /// When a job panicked (on a helper: its panic is reported there first).
-    pub(super) fn run(&self, bands: usize, job: &(dyn Fn(usize) + Sync)) {
+    pub(super) fn run(&mut self, bands: usize, job: &(dyn Fn(usize) + Sync)) {
         let s = &*self.shared;
         // SAFETY: only the lifetime is erased; the job is closed and no helper is active
         // before this function returns (module doc), so the reference is never used after.
@@ -116,8 +118,14 @@ impl Helpers {
         impl Drop for Close<'_> {
             fn drop(&mut self) {
                 self.0.closed.store(true, SeqCst);
+                // A helper counted active may be descheduled: spin briefly, then yield the core.
+                let since = Instant::now();
                 while self.0.active.load(SeqCst) != 0 {
-                    std::hint::spin_loop();
+                    if since.elapsed() < CLOSE_SPIN {
+                        std::hint::spin_loop();
+                    } else {
+                        std::thread::yield_now();
+                    }
                 }
                 *self.0.job.lock().unwrap_or_else(PoisonError::into_inner) = None;
             }
@@ -175,15 +183,22 @@ fn help(s: &Shared) {
             } else if waited < WAIT {
                 std::thread::yield_now();
             } else {
+                // Counted asleep before the generation is read again, and the caller reads the
+                // count after bumping it: one of the two sees the other, so no wake-up is lost
+                // (and an unpark that comes first leaves its token for the park).
                 s.sleeping.fetch_add(1, SeqCst);
                 if s.generation.load(SeqCst) == seen && !s.quit.load(SeqCst) {
-                    // A bounded sleep: a wake-up lost to a race costs a millisecond, not a hang.
-                    std::thread::park_timeout(Duration::from_millis(1));
+                    std::thread::park();
                 }
                 s.sleeping.fetch_sub(1, SeqCst);
             }
         }
         seen = s.generation.load(SeqCst);
+        if s.closed.load(SeqCst) {
+            // Finished already: not worth announcing (the check after announcing is the one
+            // that counts).
+            continue;
+        }
         s.active.fetch_add(1, SeqCst);
         if !s.closed.load(SeqCst) {
             let job = *s.job.lock().unwrap_or_else(PoisonError::into_inner);
@@ -209,7 +224,7 @@ mod tests {
     #[test]
     fn every_band_runs_once_and_panics_reach_the_caller() {
         use std::sync::atomic::AtomicU32;
-        let helpers = Helpers::new(3).expect("three threads start");
+        let mut helpers = Helpers::new(3).expect("three threads start");
         let counts: Vec<AtomicU32> = (0..7).map(|_| AtomicU32::new(0)).collect();
         for round in 0..2000u32 {
             let bands = 1 + (round % 7) as usize;

@@ -274,6 +274,8 @@ pub struct Rasterizer {
     measured: (f64, f64),
     /// The helper threads of banded draws, started at the first ([`helpers`]).
     helpers: Option<Helpers>,
+    /// The helper threads could not be started (banded draws then run on the caller alone).
+    helpers_failed: bool,
     /// Whether the last pass drawn ran on the calling thread alone, and its strategy, for
     /// tests of the choice.
     #[cfg(test)]
@@ -351,6 +353,7 @@ impl Rasterizer {
             scratch_clean: true,
             measured: (0.0, 0.0),
             helpers: None,
+            helpers_failed: false,
             #[cfg(test)]
             last_pass: None,
             isa,
@@ -642,9 +645,11 @@ impl Rasterizer {
             return counts;
         }
         if strategy == Strategy::Banded {
-            if self.helpers.as_ref().is_none_or(|h| h.count() != threads - 1) {
-                // Without helpers (a thread that cannot start), the bands are all the caller's.
+            if !self.helpers_failed && self.helpers.as_ref().is_none_or(|h| h.count() != threads - 1) {
+                // Without helpers (a thread that cannot start), the bands are all the caller's,
+                // and starting them is not tried again.
                 self.helpers = Helpers::new(threads - 1).ok();
+                self.helpers_failed = self.helpers.is_none();
             }
             let target = FrameTarget::new(frame);
             let stream = TriStream::new(draws, &draw_starts, &vertex_offsets, &self.vertices);
@@ -660,7 +665,7 @@ impl Rasterizer {
                 *results[band].lock().unwrap_or_else(std::sync::PoisonError::into_inner) =
                     (rasterized, written, t.elapsed().as_nanos() as f64);
             };
-            match &self.helpers {
+            match &mut self.helpers {
                 Some(h) => h.run(bands as usize, &job),
                 None => (0..bands as usize).for_each(job),
             }
