@@ -38,7 +38,7 @@
 //! for bit). The scan derives exact integer edge functions (the 8-lane setup hands them over
 //! for small boxes) and finds covered pixels with branch-free 8-pixel masks (boxes up to 64
 //! pixels) or per-row integer span solving (larger ones: a reciprocal's estimate moved to the
-//! exact bound, no division per row); with AVX2 a long span's fragments are depth-tested and
+//! exact bound, no division per row); with AVX2 a span's fragments are depth-tested and
 //! written eight at a time, items written without being read unless a depth ties.
 //!
 //! The result cannot depend on the strategy, the split or the thread count: every fragment's

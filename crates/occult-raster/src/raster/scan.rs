@@ -342,14 +342,13 @@ pub(super) fn write_span_in<const AVX2: bool>(
     write_span(vp, t, row_depth, xa, depth, items, mode)
 }
 
-/// [`write_span`] eight pixels at a time for long spans: each lane's depth is [`depth_at`]'s
-/// (the same operations in the same order, nothing contracted); the depths are read and
-/// written back whole (a lane that loses keeps its own value), the items only written, under
-/// a lane mask, where the fragment wins on depth alone. A group of eight where some fragment
-/// ties the stored depth (coplanar surfaces), and the last pixels of the span, are written
-/// pixel by pixel as [`write_span`] does. Short spans are [`write_span`]'s: there, masked
-/// loads and stores cost more than they save (a masked store does not forward to the next
-/// triangle's load of the same pixels).
+/// [`write_span`] eight pixels at a time: each lane's depth is [`depth_at`]'s (the same
+/// operations in the same order, nothing contracted); the depths of a whole group of eight are
+/// read and written back whole (a lane that loses keeps its own value), those of the span's
+/// last pixels under a lane mask (the lanes past the span are neither read nor written); the
+/// items are only written, under a lane mask, where the fragment wins on depth alone. A group
+/// where some fragment ties the stored depth (coplanar surfaces) is written pixel by pixel as
+/// [`write_span`] does, the item read to break the tie.
 #[cfg(target_arch = "x86_64")]
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -363,11 +362,8 @@ fn write_span_avx2(
     items: &mut [ItemId],
     mode: RasterMode,
 ) -> u64 {
-    use occult_core::simd::{F32x8, I32x8};
+    use occult_core::simd::{F32x8, I32x8, M32x8};
     let n = depth.len();
-    if n < SHORT_SPAN {
-        return write_span(vp, t, row_depth, xa, depth, items, mode);
-    }
     let items = &mut items[..n];
     let splat = |v: f32| F32x8::splat(avx2, v);
     let (rd, dzdx, zmin, zmax, far) = (
@@ -415,7 +411,33 @@ fn write_span_avx2(
         }
         i += 8;
     }
-    written + by_pixel(i, n, depth, items)
+    if i < n {
+        // The last pixels, under a lane mask: the lanes past the span are neither read nor
+        // written.
+        let valid = M32x8::from_bits(avx2, (1 << (n - i)) - 1);
+        let x = offsets.wrapping_add(I32x8::splat(avx2, i as i32)).to_f32();
+        let z = zmax.min(zmin.max(rd + dzdx * x));
+        // SAFETY: the set lanes are pixels i..n of the span, inside `depth`.
+        let stored = unsafe { F32x8::load_masked(avx2, depth.as_ptr().add(i), valid) };
+        let front = z.ge(far).and(valid);
+        if mode == RasterMode::Full && front.and(z.eq(stored)).bits() != 0 {
+            written += by_pixel(i, n, depth, items);
+        } else {
+            let keep = front.and(z.gt(stored));
+            let bits = keep.bits();
+            if bits != 0 {
+                // SAFETY: the set lanes lie inside the span, as above.
+                unsafe {
+                    z.store_masked(depth.as_mut_ptr().add(i), keep);
+                    if mode == RasterMode::Full {
+                        keep.store_u64(items.as_mut_ptr().add(i), t.item);
+                    }
+                }
+                written += u64::from(bits.count_ones());
+            }
+        }
+    }
+    written
 }
 
 /// Depth of a triangle at the centre of pixel `(px0, y)`.
