@@ -366,78 +366,103 @@ fn write_span_avx2(
     let n = depth.len();
     let items = &mut items[..n];
     let splat = |v: f32| F32x8::splat(avx2, v);
-    let (rd, dzdx, zmin, zmax, far) = (
-        splat(row_depth),
-        splat(t.dzdx),
-        splat(t.zmin),
-        splat(t.zmax),
-        splat(vp.far_depth),
-    );
-    // Lane k of group i is pixel xa + i + k, at offset (xa - px0) + i + k from the box's
-    // corner: below 2^24, as a frame's width is, so the conversion is exact.
-    let offsets = I32x8::lane_index(avx2).wrapping_add(I32x8::splat(avx2, (xa - t.px0 as u32) as i32));
+    let lanes = SpanLanes {
+        avx2,
+        vp,
+        t,
+        row_depth,
+        xa,
+        mode,
+        rd: splat(row_depth),
+        dzdx: splat(t.dzdx),
+        zmin: splat(t.zmin),
+        zmax: splat(t.zmax),
+        far: splat(vp.far_depth),
+        // Lane k of group i is pixel xa + i + k, at offset (xa - px0) + i + k from the box's
+        // corner: below 2^24, as a frame's width is, so the conversion is exact.
+        offsets: I32x8::lane_index(avx2).wrapping_add(I32x8::splat(avx2, (xa - t.px0 as u32) as i32)),
+    };
     let mut written = 0u64;
     let mut i = 0;
-    let by_pixel = |i: usize, end: usize, depth: &mut [f32], items: &mut [ItemId]| {
-        write_pixels(
-            vp,
-            t,
-            row_depth,
-            xa + i as u32,
-            &mut depth[i..end],
-            &mut items[i..end],
-            mode,
-        )
-    };
     while i + 8 <= n {
-        let x = offsets.wrapping_add(I32x8::splat(avx2, i as i32)).to_f32();
-        let z = zmax.min(zmin.max(rd + dzdx * x));
-        let group: &mut [f32; 8] = (&mut depth[i..i + 8]).try_into().expect("eight pixels");
-        let stored = F32x8::load(avx2, group);
-        let front = z.ge(far);
-        if mode == RasterMode::Full && front.and(z.eq(stored)).bits() != 0 {
-            written += by_pixel(i, i + 8, depth, items);
-        } else {
-            let keep = front.and(z.gt(stored));
-            let bits = keep.bits();
-            if bits != 0 {
-                F32x8::select(keep, z, stored).store(group);
-                if mode == RasterMode::Full {
-                    // SAFETY: the eight lanes are pixels i..i + 8 of the span, inside `items`.
-                    unsafe { keep.store_u64(items.as_mut_ptr().add(i), t.item) };
-                }
-                written += u64::from(bits.count_ones());
-            }
-        }
+        written += lanes.group(i, i + 8, None, depth, items);
         i += 8;
     }
     if i < n {
-        // The last pixels, under a lane mask: the lanes past the span are neither read nor
-        // written.
         let valid = M32x8::from_bits(avx2, (1 << (n - i)) - 1);
-        let x = offsets.wrapping_add(I32x8::splat(avx2, i as i32)).to_f32();
-        let z = zmax.min(zmin.max(rd + dzdx * x));
-        // SAFETY: the set lanes are pixels i..n of the span, inside `depth`.
-        let stored = unsafe { F32x8::load_masked(avx2, depth.as_ptr().add(i), valid) };
-        let front = z.ge(far).and(valid);
-        if mode == RasterMode::Full && front.and(z.eq(stored)).bits() != 0 {
-            written += by_pixel(i, n, depth, items);
-        } else {
-            let keep = front.and(z.gt(stored));
-            let bits = keep.bits();
-            if bits != 0 {
-                // SAFETY: the set lanes lie inside the span, as above.
-                unsafe {
-                    z.store_masked(depth.as_mut_ptr().add(i), keep);
-                    if mode == RasterMode::Full {
-                        keep.store_u64(items.as_mut_ptr().add(i), t.item);
-                    }
-                }
-                written += u64::from(bits.count_ones());
-            }
-        }
+        written += lanes.group(i, n, Some(valid), depth, items);
     }
     written
+}
+
+/// One span's constants in lanes ([`write_span_avx2`]).
+#[cfg(target_arch = "x86_64")]
+struct SpanLanes<'a> {
+    avx2: occult_core::simd::Avx2,
+    vp: &'a Viewport,
+    t: &'a TriSetup,
+    row_depth: f32,
+    xa: u32,
+    mode: RasterMode,
+    rd: occult_core::simd::F32x8,
+    dzdx: occult_core::simd::F32x8,
+    zmin: occult_core::simd::F32x8,
+    zmax: occult_core::simd::F32x8,
+    far: occult_core::simd::F32x8,
+    offsets: occult_core::simd::I32x8,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl SpanLanes<'_> {
+    /// Writes the group of pixels `i..end` of the span: eight, or fewer at its end, whose
+    /// lanes are then `valid`; returns the fragments written.
+    #[inline(always)]
+    fn group(
+        &self,
+        i: usize,
+        end: usize,
+        valid: Option<occult_core::simd::M32x8>,
+        depth: &mut [f32],
+        items: &mut [ItemId],
+    ) -> u64 {
+        use occult_core::simd::{F32x8, I32x8};
+        let x = self.offsets.wrapping_add(I32x8::splat(self.avx2, i as i32)).to_f32();
+        let z = self.zmax.min(self.zmin.max(self.rd + self.dzdx * x));
+        let (stored, front) = match valid {
+            None => {
+                let whole: &[f32; 8] = depth[i..end].try_into().expect("eight pixels");
+                (F32x8::load(self.avx2, whole), z.ge(self.far))
+            }
+            // SAFETY: the set lanes are pixels i..end of the span, inside `depth`.
+            Some(m) => (
+                unsafe { F32x8::load_masked(self.avx2, depth.as_ptr().add(i), m) },
+                z.ge(self.far).and(m),
+            ),
+        };
+        let (t, mode) = (self.t, self.mode);
+        if mode == RasterMode::Full && front.and(z.eq(stored)).bits() != 0 {
+            let (depth, items) = (&mut depth[i..end], &mut items[i..end]);
+            return write_pixels(self.vp, t, self.row_depth, self.xa + i as u32, depth, items, mode);
+        }
+        let keep = front.and(z.gt(stored));
+        let bits = keep.bits();
+        if bits == 0 {
+            return 0;
+        }
+        match valid {
+            None => {
+                let whole: &mut [f32; 8] = (&mut depth[i..end]).try_into().expect("eight pixels");
+                F32x8::select(keep, z, stored).store(whole);
+            }
+            // SAFETY: the set lanes of `keep` are lanes of `valid`, inside the span.
+            Some(_) => unsafe { z.store_masked(depth.as_mut_ptr().add(i), keep) },
+        }
+        if mode == RasterMode::Full {
+            // SAFETY: the set lanes of `keep` are pixels of i..end, inside `items`.
+            unsafe { keep.store_u64(items.as_mut_ptr().add(i), t.item) };
+        }
+        u64::from(bits.count_ones())
+    }
 }
 
 /// Depth of a triangle at the centre of pixel `(px0, y)`.
