@@ -125,6 +125,19 @@ impl SetupSink for ChunkBins {
     }
 }
 
+/// Fetches the pixel `(x, y)` where a triangle's box starts, and the one below when
+/// `two_rows` ([`SetupSink::will_touch`]): the rest of the setup (area, depth plane) overlaps
+/// with the fetch of pixels the scan is about to test, first touches of the frame being the
+/// direct scan's main stall.
+#[inline(always)]
+fn prefetch_box_start(target: &FrameTarget<'_>, x: u32, y: u32, two_rows: bool) {
+    let i = y as usize * target.width + x as usize;
+    prefetch(target, i);
+    // Without a branch (it mispredicts on tiny triangles): the first row again when the box
+    // has one.
+    prefetch(target, i + if two_rows { target.width } else { 0 });
+}
+
 /// Scans each triangle as soon as it is set up, over the whole frame: the single-threaded path,
 /// where binning would only add work. Same scan, same results.
 pub(super) struct DirectSink<'a, const AVX2: bool> {
@@ -149,13 +162,7 @@ impl<const AVX2: bool> DirectSink<'_, AVX2> {
 impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
     #[inline(always)]
     fn will_touch(&mut self, x: u32, y: u32, two_rows: bool) {
-        // The rest of the setup (area, depth plane) overlaps with the fetch of pixels the scan
-        // is about to test: first touches of the frame are this loop's main stall.
-        let i = y as usize * self.target.width + x as usize;
-        prefetch(self.target, i);
-        // Without a branch (it mispredicts on tiny triangles): the first row again when the
-        // box has one.
-        prefetch(self.target, i + if two_rows { self.target.width } else { 0 });
+        prefetch_box_start(self.target, x, y, two_rows);
     }
 
     #[inline(always)]
@@ -277,9 +284,7 @@ impl<const AVX2: bool> SetupSink for BandSink<'_, AVX2> {
     #[inline(always)]
     fn will_touch(&mut self, x: u32, y: u32, two_rows: bool) {
         if self.mine(y >> BAND_SHIFT) {
-            let i = y as usize * self.target.width + x as usize;
-            prefetch(self.target, i);
-            prefetch(self.target, i + if two_rows { self.target.width } else { 0 });
+            prefetch_box_start(self.target, x, y, two_rows);
         }
     }
 
