@@ -53,7 +53,10 @@ pub use frame::{keep_fragment, Frame, CLEAR_DEPTH};
 pub use nbuffer::{Extremum, NBuffer};
 pub use query::{query_box, query_box_counted, query_rect, BoxQuery, PixelRect};
 pub use raster::stencil::{StencilBuffer, StencilCounts, StencilDraw, StencilFaces};
-pub use raster::{Draw, DrawTriangles, RasterConfig, RasterCounts, RasterMode, Rasterizer, Strategy, SUBPIXEL_BITS};
+pub use raster::{
+    Draw, DrawTriangles, Meshlets, RasterConfig, RasterCounts, RasterMode, Rasterizer, Strategy, MAX_CLUSTER_VERTICES,
+    SUBPIXEL_BITS,
+};
 pub use shade::{item_color, light_direction, shade, BACKGROUND};
 pub use zpyramid::{PyramidCounts, PyramidTest, ZPyramid};
 

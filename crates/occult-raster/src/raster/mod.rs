@@ -76,6 +76,7 @@ macro_rules! add_assign_fields {
 mod dispatch;
 mod helpers;
 mod merge;
+mod meshlets;
 mod project;
 mod scan;
 mod setup;
@@ -94,6 +95,7 @@ use std::ops::Range;
 use std::time::Instant;
 
 use helpers::Helpers;
+pub use meshlets::{Meshlets, MAX_CLUSTER_VERTICES};
 use project::{
     clip_and_setup, ProjVertex, Viewport, NEEDS_CLIP, NOT_FINITE, OUT_BOTTOM, OUT_LEFT, OUT_NEAR, OUT_OF_VIEW,
     OUT_RIGHT, OUT_TOP,
@@ -196,14 +198,28 @@ pub enum DrawTriangles<'a> {
     /// processor has AVX2, else through a small per-draw cache: shared corners of neighbouring
     /// triangles mostly once).
     List(&'a [u32]),
+    /// The triangles of some clusters of the mesh's [`Meshlets`] (`list`: cluster indices, in
+    /// drawing order): each cluster's vertices transformed once, eight at a time where the
+    /// processor has AVX2, and shared by its triangles.
+    Clusters {
+        /// The mesh's clusters (built for this draw's mesh).
+        meshlets: &'a Meshlets,
+        /// Which of them.
+        list: &'a [u32],
+    },
 }
 
 impl DrawTriangles<'_> {
+    /// The triangles sent, of `mesh`'s.
+    pub fn count(&self, mesh: &Mesh) -> usize {
+        self.len(mesh)
+    }
     fn len(&self, mesh: &Mesh) -> usize {
         match self {
             Self::All => mesh.triangle_count(),
             Self::Range(r) => r.len(),
             Self::List(l) => l.len(),
+            Self::Clusters { meshlets, list } => meshlets.list_len(list),
         }
     }
     #[inline]
@@ -212,6 +228,7 @@ impl DrawTriangles<'_> {
             Self::All => j as u32,
             Self::Range(r) => r.start + j as u32,
             Self::List(l) => l[j],
+            Self::Clusters { meshlets, list } => meshlets.list_triangle(list, j),
         }
     }
 }

@@ -6,7 +6,7 @@ use super::project::{clip_and_setup, ProjVertex, VertexCache, Viewport, NEEDS_CL
 #[cfg(target_arch = "x86_64")]
 use super::setup8;
 use super::sinks::SetupSink;
-use super::{Draw, DrawTriangles, HALF, SUB, SUBPIXEL_BITS};
+use super::{Draw, DrawTriangles, HALF, MAX_CLUSTER_VERTICES, SUB, SUBPIXEL_BITS};
 use occult_core::{ItemId, Mat4, Vec3};
 use std::ops::Range;
 
@@ -170,6 +170,60 @@ pub(super) fn setup_range<const AVX2: bool>(
                         ]
                     };
                     emit(v, [i0, i1, i2], d, first_item + j as u64, out);
+                }
+            }
+            #[cfg(target_arch = "x86_64")]
+            DrawTriangles::Clusters { meshlets, list } if AVX2 => {
+                // Each cluster's vertices projected once, eight at a time, into `local`; its
+                // triangles then read their corners there (a range may begin or end inside a
+                // cluster: it is projected whole).
+                let m = &draw.clip_from_object;
+                let (mut j, last) = (t - draw_starts[d], end - draw_starts[d]);
+                let (mut k, mut base) = meshlets.seek(list, j);
+                let mut local = [ProjVertex::default(); MAX_CLUSTER_VERTICES];
+                while j < last {
+                    let c = list[k] as usize;
+                    let n = meshlets.triangle_count(c);
+                    let (_, first) = meshlets.cluster(c);
+                    // The cluster's positions lie in a row, padded to whole lanes: loaded as
+                    // they are, no gather.
+                    let p = meshlets.positions(c);
+                    for (chunk, out) in p.chunks_exact(setup8::LANES).zip(local.chunks_exact_mut(setup8::LANES)) {
+                        // SAFETY: the AVX2 instantiation only runs where the dispatcher found AVX2.
+                        unsafe { setup8::project8_avx2(vp, m, chunk, out) };
+                    }
+                    let to = (base + n).min(last);
+                    for i in first + (j - base)..first + (to - base) {
+                        let (corner, ti) = meshlets.triangle(i);
+                        let v = corner.map(|a| &local[a as usize]);
+                        emit(v, tris[ti as usize], d, first_item + ti as u64, out);
+                    }
+                    j = to;
+                    base += n;
+                    k += 1;
+                }
+            }
+            DrawTriangles::Clusters { meshlets, list } => {
+                let m = &draw.clip_from_object;
+                let (mut j, last) = (t - draw_starts[d], end - draw_starts[d]);
+                let (mut k, mut base) = meshlets.seek(list, j);
+                let mut local = [ProjVertex::default(); MAX_CLUSTER_VERTICES];
+                while j < last {
+                    let c = list[k] as usize;
+                    let n = meshlets.triangle_count(c);
+                    let (verts, first) = meshlets.cluster(c);
+                    for (slot, &p) in local.iter_mut().zip(&meshlets.positions(c)[..verts.len()]) {
+                        *slot = vp.project(m, p);
+                    }
+                    let to = (base + n).min(last);
+                    for i in first + (j - base)..first + (to - base) {
+                        let (corner, ti) = meshlets.triangle(i);
+                        let v = corner.map(|a| &local[a as usize]);
+                        emit(v, tris[ti as usize], d, first_item + ti as u64, out);
+                    }
+                    j = to;
+                    base += n;
+                    k += 1;
                 }
             }
             #[cfg(target_arch = "x86_64")]

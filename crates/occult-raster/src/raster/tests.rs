@@ -384,3 +384,72 @@ fn spans_without_divisions_are_the_divisions_spans() {
         );
     }
 }
+
+/// A draw of some clusters of a mesh's [`Meshlets`] gives the frame and counts of a list
+/// draw of the same triangles in the same order, under every strategy, with AVX2 and without
+/// (the ranges that sort-last and tile binning hand out begin and end inside clusters); the
+/// grid reaches through the near plane, so that clipped triangles take their corners from
+/// the mesh.
+#[test]
+fn cluster_draws_are_list_draws() {
+    let view = View::new(
+        Camera::look_at(Vec3::new(0.3, -4.0, 1.5), Vec3::new(0.0, 2.0, 0.0)),
+        320,
+        240,
+    )
+    .expect("a 320 × 240 view of the grid");
+    let mesh = grid(120, 0.1);
+    // Clusters of 2 × 2 quads... and of uneven sizes, rows of quads, and an empty one.
+    let mut triangles = Vec::new();
+    let mut starts = vec![0u32];
+    for t in (0..mesh.triangle_count() as u32).step_by(48) {
+        let end = (t + 48 - (t / 48) % 5).min(mesh.triangle_count() as u32);
+        triangles.extend(t..end);
+        starts.push(triangles.len() as u32);
+    }
+    starts.push(triangles.len() as u32);
+    let meshlets = Meshlets::new(&mesh, &triangles, &starts).expect("valid clusters");
+    let mut list_of_clusters: Vec<u32> = (0..meshlets.len() as u32).filter(|c| c % 3 != 1).collect();
+    list_of_clusters.reverse();
+    let flat: Vec<u32> = list_of_clusters
+        .iter()
+        .flat_map(|&c| meshlets.triangles(c as usize).to_vec())
+        .collect();
+    let clip = view.clip_from_object(&Affine3A::IDENTITY);
+    let as_clusters = Draw {
+        mesh: &mesh,
+        triangles: DrawTriangles::Clusters {
+            meshlets: &meshlets,
+            list: &list_of_clusters,
+        },
+        clip_from_object: clip,
+        first_item: 5,
+    };
+    let as_list = Draw {
+        triangles: DrawTriangles::List(&flat),
+        ..as_clusters.clone()
+    };
+    assert_eq!(as_clusters.triangles.count(&mesh), flat.len());
+    for simd in [true, false] {
+        for strategy in [Strategy::Direct, Strategy::Binned, Strategy::SortLast, Strategy::Banded] {
+            let draw = |d: &Draw<'_>| {
+                let mut frame = Frame::new(320, 240).expect("a 320 × 240 frame");
+                let mut r = Rasterizer::new(RasterConfig {
+                    threads: 2,
+                    strategy,
+                    simd,
+                    ..RasterConfig::default()
+                })
+                .expect("a valid configuration");
+                let counts = r.draw(&view, &mut frame, std::slice::from_ref(d), RasterMode::Full);
+                (frame, counts)
+            };
+            let (a, ca) = draw(&as_clusters);
+            let (b, cb) = draw(&as_list);
+            assert_eq!(ca, cb, "{strategy:?}, simd {simd}");
+            assert!(ca.fragments_written > 1000, "{ca:?}");
+            assert_eq!(a.items(), b.items(), "{strategy:?}, simd {simd}");
+            assert!(a.depth().iter().zip(b.depth()).all(|(x, y)| x.to_bits() == y.to_bits()));
+        }
+    }
+}
