@@ -461,7 +461,7 @@ pub(crate) mod tests {
 
     /// A row of cubes before more cubes on the ground, a view along the row, and the
     /// reference frame.
-    fn scene_view_reference() -> (Arc<Scene>, View, Frame) {
+    pub(crate) fn scene_view_reference() -> (Arc<Scene>, View, Frame) {
         let at = (0..40).map(|i| Vec3::new((i % 8) as f32 * 1.5 - 6.0, 0.0, -((i / 8) as f32) * 2.0));
         let scene = crate::tests::cubes_on_ground([-9.0, 9.0, -20.0, 2.0], at);
         let (view, _) = crate::test_view(Vec3::new(0.5, 1.0, 4.0), Vec3::new(0.0, 0.0, -4.0), 96, 64);

@@ -16,7 +16,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use occult_core::{NodeKind, Scene, View};
-use occult_raster::{Draw, DrawTriangles, Frame, PyramidCounts, PyramidTest, Rasterizer, ZPyramid};
+use occult_raster::{Draw, DrawTriangles, Frame, PyramidCounts, Rasterizer, ZPyramid};
 use occult_spatial::Bvh;
 
 use crate::hzb::boxtest::Occlusion;
@@ -221,15 +221,7 @@ impl Hierarchies {
         let mut w = Hidden {
             walk: SceneWalk::new(&self.scene, view),
             hierarchies: &self.hierarchies,
-            occlusion: Occlusion {
-                frame,
-                pyramid,
-                how: PyramidTest {
-                    global: true,
-                    hierarchical: true,
-                },
-                far_depth: view.far_depth(),
-            },
+            occlusion: Occlusion::hierarchical(frame, pyramid, view),
             counts: PyramidCounts::default(),
             hidden: 0,
         };

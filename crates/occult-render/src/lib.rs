@@ -74,6 +74,7 @@
 
 #[cfg(test)]
 mod cancel_tests;
+pub mod clusters;
 pub mod direct;
 pub mod frustum;
 mod hash;
@@ -236,6 +237,7 @@ pub static ALGORITHMS: &[&AlgorithmInfo] = &[
     &zbuffer::INFO,
     &frustum::INFO,
     &hzb::INFO,
+    &clusters::INFO,
     &oqgrid::INFO,
     &nbuffer::INFO,
     &lzb::INFO,
@@ -429,11 +431,7 @@ fn draw_timed(
 
 /// The triangles `draw` submits.
 fn draw_triangle_count(draw: &occult_raster::Draw<'_>) -> u64 {
-    match &draw.triangles {
-        occult_raster::DrawTriangles::All => draw.mesh.triangle_count() as u64,
-        occult_raster::DrawTriangles::Range(r) => u64::from(r.end.saturating_sub(r.start)),
-        occult_raster::DrawTriangles::List(l) => l.len() as u64,
-    }
+    draw.triangles.count(draw.mesh) as u64
 }
 
 /// [`RenderError::Cancelled`] when the frame drawn with `raster` was cancelled

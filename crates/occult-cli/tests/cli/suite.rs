@@ -48,7 +48,11 @@ fn suite_reports_every_renderer_per_case_with_summary_and_violations() {
     assert_eq!(case["frames"], 2);
     assert_eq!(case["reference"], "zbuffer");
     let renderers = case["renderers"].as_array().unwrap();
-    assert_eq!(renderers.len(), 7, "every renderer by default");
+    assert_eq!(
+        renderers.len(),
+        occult_render::Algorithm::all().len(),
+        "every renderer by default"
+    );
     for r in renderers {
         for field in [
             "name",
@@ -68,7 +72,7 @@ fn suite_reports_every_renderer_per_case_with_summary_and_violations() {
     }
     assert!(case["compare"]["renderers"].is_array(), "the full comparison is kept");
     let summary = report["summary"].as_array().unwrap();
-    assert_eq!(summary.len(), 7);
+    assert_eq!(summary.len(), occult_render::Algorithm::all().len());
     for s in summary {
         for field in [
             "speedup_geomean",
