@@ -1,8 +1,11 @@
 //! Occlusion culling of mesh clusters through a max z-pyramid, in two passes.
 //!
+//! See docs/clusters.md for the measurements and what limits it.
+//!
 //! # References
 //! - N. Greene, M. Kass, G. Miller, *Hierarchical Z-Buffer Visibility* (SIGGRAPH 1993): the
-//!   box test through a max z-pyramid (here [`crate::hzb`]'s face test, `boxtest`).
+//!   box test through a max z-pyramid (`hzb::boxtest`: the whole box for clusters, Georges'
+//!   faces for instances).
 //! - C. Georges, *Obscuration Culling on Parallel Graphics Architectures* (1995), §3.3: last
 //!   frame's visible set drawn first, untested, as the occluders of the frame.
 //! - A. Kapoulkine, meshoptimizer's clusterizer (`meshopt_buildMeshletsSpatial`), through the
@@ -19,34 +22,40 @@
 //! its clusters in a bit set of the scene's cluster instances). A frame
 //!
 //! 1. **draws last frame's visible clusters** of the instances in view, untested, in one
-//!    batch over the rasterizer's threads (`temporal`), and builds the pyramid over them;
-//! 2. walks the instances in view **front to back** (nearest box point first): an instance
-//!    whose box is hidden is skipped whole; otherwise each of its clusters is tested (frustum,
-//!    then the face test through the pyramid), and those not hidden that the first pass did
-//!    not draw are gathered. Gathered triangles are drawn in **growing batches** (`batch`
-//!    triangles first, then twice as many each time up to [`MAX_BATCH`]), the pyramid updated
-//!    over each batch's screen region: the first batches hold the near occluders, the later
-//!    ones are large enough for the rasterizer's threads;
+//!    call over the rasterizer's threads (`temporal`; only while at least `trust` of last
+//!    frame's set in view stayed visible: after a jump of the view it is hidden geometry, not
+//!    occluders), and builds the pyramid over them;
+//! 2. takes the instances in view **front to back** (nearest box point first) in windows of
+//!    at least `batch` triangles (or a quarter of what the first pass drew, if more), each
+//!    next window twice as large, up to [`MAX_BATCH`]. The instances of a window are tested in
+//!    parallel against the pyramid as it stands: an instance whose box is hidden (Georges'
+//!    face test) is skipped whole; otherwise each of its clusters is tested (the frustum,
+//!    unless the instance is wholly inside it, then Greene's whole-box test, one pyramid test
+//!    a cluster). The clusters not hidden that the first pass did not draw are drawn as one
+//!    batch, and the pyramid is updated over the batch's screen region: the first windows
+//!    hold the near occluders, the later ones are large enough for the rasterizer's threads;
 //! 3. keeps as visible for the next frame the clusters the second pass found not hidden
 //!    (those the first pass drew included: they are tested too, and drop out once hidden).
 //!
-//! An instance all of whose clusters are drawn is drawn whole (its vertices projected once);
-//! otherwise each run of consecutive clusters is one draw of a triangle list.
+//! An instance all of whose clusters are drawn is drawn whole; otherwise its clusters are one
+//! cluster draw ([`DrawTriangles::Clusters`]: each cluster's vertices projected once).
 //!
 //! **Exact.** A cluster is skipped only when its box is hidden behind depth already drawn
 //! this frame, and depth only grows while a frame is drawn: the frame is `zbuffer`'s,
 //! bit for bit (item ids are the meshes' own triangle indices; the clusters only list them).
 //!
-//! Cost: O(instances in view + clusters of the instances not hidden) tests per frame, and at
-//! most `log2(MAX_BATCH / batch) + 2` batches beyond the first pass. The flattened instances
+//! Cost: O(instances in view + clusters of the instances not hidden) tests per frame, and
+//! about `log2(MAX_BATCH / batch)` batches beyond the first pass, one more per [`MAX_BATCH`]
+//! triangles in view after that. The flattened instances
 //! are bounded ([`MAX_INSTANCES`], checked before anything is allocated): scenes of more mesh
 //! instances are for `hzb`, whose walk never flattens the scene.
 //!
 //! # Counters
 //! `clusters_tested`, `clusters_culled` (hidden or outside the frustum), `instances_culled`
 //! (boxes hidden whole), `first_triangles` (triangles the first pass drew), `batches` (draws of
-//! the second pass), `removed_triangles` (triangles of the instances in view not drawn), and
-//! the payoff's `payoff_direct` and `payoff_screened` ([`crate::direct`]).
+//! the second pass), `removed_triangles` (triangles of the instances in view not drawn),
+//! `precision_pct` (the share of last frame's visible clusters in view still visible, that
+//! `trust` weighs), and the payoff's `payoff_direct` and `payoff_screened` ([`crate::direct`]).
 
 use std::sync::Arc;
 use std::time::Instant;

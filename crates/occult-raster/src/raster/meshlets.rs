@@ -20,7 +20,9 @@ const LANES: usize = 8;
 /// Most distinct vertices of one cluster (local corner indices are bytes).
 pub const MAX_CLUSTER_VERTICES: usize = 256;
 
-/// Clusters of one mesh's triangles, each with its distinct vertices ([module doc](self)).
+/// Clusters of one mesh's triangles, each with its distinct vertices: a draw of some of them
+/// ([`DrawTriangles::Clusters`](super::DrawTriangles::Clusters)) projects each cluster's
+/// vertices once.
 #[derive(Clone, Debug, Default)]
 pub struct Meshlets {
     /// Cluster `c`'s triangles are `triangles[triangle_starts[c]..triangle_starts[c + 1]]`.
