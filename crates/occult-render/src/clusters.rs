@@ -206,7 +206,12 @@ pub(crate) struct MeshClusters {
 
 impl MeshClusters {
     /// Splits `mesh` into clusters of at most `size` triangles (one when it has no more).
-    pub(crate) fn build(mesh: &Mesh, size: usize) -> Self {
+    ///
+    /// # Errors
+    /// [`RenderError::Raster`] when a cluster would break [`Meshlets::new`]'s rules (none
+    /// does by construction: meshoptimizer's clusters have at most 255 vertices, the others
+    /// are split before they reach 256).
+    pub(crate) fn build(mesh: &Mesh, size: usize) -> Result<Self> {
         let n = mesh.triangle_count();
         let mut triangles: Vec<u32> = Vec::with_capacity(n);
         let mut starts = vec![0u32];
@@ -291,12 +296,11 @@ impl MeshClusters {
             })
             .collect();
         let bounds = boxes.iter().fold(Aabb::EMPTY, |u: Aabb, b| u.union(*b));
-        Self {
-            meshlets: Meshlets::new(mesh, &triangles, &starts)
-                .expect("clusters of the mesh's own triangles, of at most 256 vertices each"),
+        Ok(Self {
+            meshlets: Meshlets::new(mesh, &triangles, &starts)?,
             boxes,
             bounds,
-        }
+        })
     }
 
     /// Number of clusters.
@@ -360,10 +364,11 @@ impl ClusterCulling {
             )));
         }
         let raster = crate::scene_rasterizer(&scene, options)?;
-        let clusters: Vec<Option<MeshClusters>> = per_node(&raster, &scene, |node| match node.kind() {
-            NodeKind::Mesh(m) => Some(MeshClusters::build(m, co.size)),
-            NodeKind::Group(_) => None,
-        });
+        let clusters: Vec<Option<MeshClusters>> =
+            per_node::<_, Result<Vec<_>>>(&raster, &scene, |node| match node.kind() {
+                NodeKind::Mesh(m) => MeshClusters::build(m, co.size).map(Some),
+                NodeKind::Group(_) => Ok(None),
+            })?;
         let mut placed = Vec::with_capacity(instances as usize);
         let mut base = 0u64;
         scene.for_each_mesh_instance(|world_from_object, node, mesh, first_item| {
@@ -813,7 +818,7 @@ mod tests {
     /// Every triangle in exactly one cluster, each cluster at most `size` triangles in
     /// ascending order and inside its box.
     fn check(mesh: &Mesh, size: usize) -> MeshClusters {
-        let mc = MeshClusters::build(mesh, size);
+        let mc = MeshClusters::build(mesh, size).expect("a valid mesh clusters");
         let mut seen = vec![0u32; mesh.triangle_count()];
         for c in 0..mc.len() {
             let tris = mc.meshlets.triangles(c);
@@ -849,7 +854,7 @@ mod tests {
         let mut triangles = vec![[0, 1, 2]; 30];
         triangles.extend([[0, 0, 1]; 20]);
         triangles.extend([[1, 2, 3]; 30]);
-        check(&Mesh::new(positions, triangles).unwrap(), 8);
+        check(&Mesh::new(positions, triangles).expect("indices in range"), 8);
     }
 
     #[test]
@@ -877,10 +882,14 @@ mod tests {
                 .collect()
         };
         let mut b = SceneBuilder::new();
-        let mesh = b.add_mesh("quad", crate::test_grid(1)).unwrap();
-        let row = b.add_group("row", row_of(1 << 12, Vec3::X, mesh)).unwrap();
-        let all = b.add_group("all", row_of(1 << 11, Vec3::Y, row)).unwrap();
-        let scene = Arc::new(b.build(all).unwrap());
+        let mesh = b.add_mesh("quad", crate::test_grid(1)).expect("a mesh node");
+        let row = b
+            .add_group("row", row_of(1 << 12, Vec3::X, mesh))
+            .expect("a group of the mesh");
+        let all = b
+            .add_group("all", row_of(1 << 11, Vec3::Y, row))
+            .expect("a group of rows");
+        let scene = Arc::new(b.build(all).expect("a scene of groups"));
         assert_eq!(mesh_instance_count(&scene), 1 << 23);
         let e = ClusterCulling::new(scene, &RenderOptions::default(), &ClusterOptions::default())
             .err()
@@ -896,18 +905,18 @@ mod tests {
             batch: 12,
             ..ClusterOptions::default()
         };
-        let mut r = ClusterCulling::new(scene, &RenderOptions::default(), &co).unwrap();
+        let mut r = ClusterCulling::new(scene, &RenderOptions::default(), &co).expect("clusters build");
         // Culled first (no direct frame measured yet): the row of cubes hides most of those
         // behind it.
-        let mut f = Frame::new(96, 64).unwrap();
-        let s = r.render(&view, &mut f).unwrap();
+        let mut f = Frame::new(96, 64).expect("a 96x64 frame");
+        let s = r.render(&view, &mut f).expect("the view renders");
         assert!(f.same_visibility(&reference));
         assert_eq!(s.counters.get(crate::direct::COUNTER), 0);
         assert!(s.counters.get("removed_triangles") > 0);
         r.direct.as_mut().expect("payoff is on by default").force(2, false);
         for i in 0..2 {
-            let mut f = Frame::new(96, 64).unwrap();
-            let s = r.render(&view, &mut f).unwrap();
+            let mut f = Frame::new(96, 64).expect("a 96x64 frame");
+            let s = r.render(&view, &mut f).expect("the view renders");
             assert!(f.same_visibility(&reference), "frame {i}");
             assert_eq!(s.counters.get(crate::direct::COUNTER), 1, "frame {i}");
         }

@@ -207,13 +207,13 @@ mod tests {
 
     fn strip(n: u32) -> Mesh {
         let positions = (0..n + 2).map(|i| Vec3::new(i as f32, (i % 2) as f32, 0.0)).collect();
-        Mesh::new(positions, (0..n).map(|i| [i, i + 1, i + 2]).collect()).unwrap()
+        Mesh::new(positions, (0..n).map(|i| [i, i + 1, i + 2]).collect()).expect("a strip is a valid mesh")
     }
 
     #[test]
     fn clusters_share_their_vertices_and_keep_triangle_indices() {
         let mesh = strip(10);
-        let m = Meshlets::new(&mesh, &[0, 1, 2, 9, 5, 4], &[0, 3, 3, 6]).unwrap();
+        let m = Meshlets::new(&mesh, &[0, 1, 2, 9, 5, 4], &[0, 3, 3, 6]).expect("valid clusters");
         assert_eq!(m.len(), 3);
         assert_eq!(m.triangles(0), &[0, 1, 2]);
         assert!(m.triangles(1).is_empty());
