@@ -37,7 +37,7 @@ pub const MAX_BVH_TRIANGLES: usize = (1 << 27) - 1;
 const SAH_DEPTH: u32 = 48;
 /// Entries of the traversal stack: a wide level pops one entry and pushes at most 8, and the
 /// tree is at most `SAH_DEPTH + 32` levels deep.
-const STACK: usize = 7 * (SAH_DEPTH as usize + 32) + 8;
+pub(crate) const STACK: usize = 7 * (SAH_DEPTH as usize + 32) + 8;
 /// Bins per axis of the build.
 const BINS: usize = 16;
 /// A child code's leaf flag.
@@ -470,7 +470,7 @@ fn mx(a: f32, b: f32) -> f32 {
 /// The children of `node` the ray enters no later than `t_limit` (bit `i` = child `i`), with
 /// each child's entry: [`FatRay::enter`]'s rule per child, one lane at a time.
 #[inline(always)]
-fn children_scalar(ray: &FatRay, node: &RayBvhNode, t_limit: f32) -> (u32, [f32; 8]) {
+pub(crate) fn children_scalar(ray: &FatRay, node: &RayBvhNode, t_limit: f32) -> (u32, [f32; 8]) {
     let o = ray.origin;
     let inv = ray.inv_direction;
     let thin = ray.spread == 0.0 && ray.margin == 0.0;
@@ -670,6 +670,56 @@ fn prefetch_node(node: &RayBvhNode) {
     let _ = node;
 }
 
+/// Asks for child `i` of `node`: its triangles if a leaf, else its node (a hint).
+#[inline(always)]
+pub(crate) fn prefetch_child(bvh: &RayBvh, node: &RayBvhNode, i: usize) {
+    if RayBvh::is_leaf(node.child[i]) {
+        prefetch_triangles(bvh.leaf_triangles(node.child[i]));
+    } else {
+        prefetch_node(&bvh.nodes()[node.child[i] as usize]);
+    }
+}
+
+/// A traversal stack entry whose last field is the entry parameter that orders siblings.
+pub(crate) trait StackEntry: Copy {
+    /// The entry parameter.
+    fn entry(&self) -> f32;
+}
+
+impl StackEntry for (u32, f32) {
+    #[inline(always)]
+    fn entry(&self) -> f32 {
+        self.1
+    }
+}
+
+impl StackEntry for (u32, u64, f32) {
+    #[inline(always)]
+    fn entry(&self) -> f32 {
+        self.2
+    }
+}
+
+/// Pushes `item` onto `stack[..*top]`, the siblings pushed since `base` kept farthest first so
+/// that the nearest pops first (insertion by entry; equal entries keep their push order).
+#[inline(always)]
+pub(crate) fn push_by_entry<T: StackEntry>(
+    stack: &mut [std::mem::MaybeUninit<T>],
+    base: usize,
+    top: &mut usize,
+    item: T,
+) {
+    let mut j = *top;
+    // SAFETY: slots `base..top` were written.
+    while j > base && unsafe { stack[j - 1].assume_init() }.entry() < item.entry() {
+        let moved = unsafe { stack[j - 1].assume_init() };
+        stack[j].write(moved);
+        j -= 1;
+    }
+    stack[j].write(item);
+    *top += 1;
+}
+
 /// The body of [`traverse_bvh`], on AVX2 lanes when `avx2` is given (`THIN`, `NAN`: see
 /// [`children_avx2`]), else on [`children_scalar`].
 #[inline(always)]
@@ -716,21 +766,8 @@ fn traverse_bvh_body<const THIN: bool, const NAN: bool>(
             while rest != 0 {
                 let i = rest.trailing_zeros() as usize;
                 rest &= rest - 1;
-                if RayBvh::is_leaf(node.child[i]) {
-                    prefetch_triangles(bvh.leaf_triangles(node.child[i]));
-                } else {
-                    prefetch_node(&nodes[node.child[i] as usize]);
-                }
-                let item = (index * 8 + i as u32, near[i]);
-                let mut j = top;
-                // SAFETY: slots `base..top` were written.
-                while j > base && unsafe { stack[j - 1].assume_init() }.1 < item.1 {
-                    let moved = unsafe { stack[j - 1].assume_init() };
-                    stack[j].write(moved);
-                    j -= 1;
-                }
-                stack[j].write(item);
-                top += 1;
+                prefetch_child(bvh, node, i);
+                push_by_entry(&mut stack, base, &mut top, (index * 8 + i as u32, near[i]));
             }
         }
         if top == 0 {

@@ -29,6 +29,7 @@ mod bvh;
 pub mod bvh8;
 pub mod grid;
 pub mod octree;
+pub mod packet;
 pub mod raycast;
 
 pub use bvh::{Bvh, BvhNode};
@@ -40,4 +41,8 @@ pub use octree::{
     RayOctreeConfig, RayOctreeError, RayOctreeNode, SampleOctree, SampleOctreeConfig, SampleOctreeNode,
     MAX_OCTREE_DEPTH,
 };
-pub use raycast::{prefetch_triangles, traverse, traverse_scalar, FatRay, LeafTriangle, ShearedRay, TraversalCounters};
+pub use packet::{traverse_bvh_packet, traverse_bvh_packet_scalar, RayPacket, PACKET};
+pub use raycast::{
+    intersect8_packet, intersect8_packet_scalar, prefetch_triangles, traverse, traverse_scalar, FatRay, LeafTriangle,
+    ShearedRay, TraversalCounters,
+};

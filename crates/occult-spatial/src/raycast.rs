@@ -217,24 +217,35 @@ impl ShearedRay {
         t_min: f32,
         t_max: f32,
     ) -> (u32, [f32; 8]) {
-        const STRIDE: i32 = (std::mem::size_of::<LeafTriangle>() / 4) as i32;
         debug_assert!(active >> tris.len().min(8) == 0);
         let [kx, ky, kz] = self.k;
-        let [sx, sy, sz] = self.s.map(|v| F32x8::splat(avx2, v));
-        let [ox, oy, oz] = self.origin.map(|v| F32x8::splat(avx2, v));
-        let base = tris.as_ptr().cast::<f32>();
-        let lanes = I32x8::lane_index(avx2).wrapping_mul(I32x8::splat(avx2, STRIDE));
-        let on = M32x8::from_bits(avx2, active);
+        let o = self.origin.map(|v| F32x8::splat(avx2, v));
         // Coordinate `axis` of corner `corner` of every active triangle, minus the origin's.
-        let rel = |corner: usize, axis: usize, o: F32x8| {
-            // SAFETY: only active lanes are read, and the caller named only triangles of
-            // `tris`: lane `i` reads float `12 i + 3 corner + axis` of triangle `i`.
-            let v = unsafe { F32x8::gather_masked(avx2, base.wrapping_add(3 * corner + axis), lanes, on) };
-            v - o
-        };
-        let (a0, a1, a2) = (rel(0, kx, ox), rel(0, ky, oy), rel(0, kz, oz));
-        let (b0, b1, b2) = (rel(1, kx, ox), rel(1, ky, oy), rel(1, kz, oz));
-        let (c0, c1, c2) = (rel(2, kx, ox), rel(2, ky, oy), rel(2, kz, oz));
+        // SAFETY: only `active` lanes are read, all below `tris.len()` (the caller's promise).
+        let rel = |corner: usize, axis: usize, o: F32x8| unsafe { gather_corner(avx2, tris, active, corner, axis) } - o;
+        let corners = [
+            [rel(0, kx, o[0]), rel(0, ky, o[1]), rel(0, kz, o[2])],
+            [rel(1, kx, o[0]), rel(1, ky, o[1]), rel(1, kz, o[2])],
+            [rel(2, kx, o[0]), rel(2, ky, o[1]), rel(2, kz, o[2])],
+        ];
+        self.finish8(avx2, corners, tris, active, t_min, t_max)
+    }
+
+    /// The rest of [`ShearedRay::intersect8_avx2`] from the corners relative to the origin, in
+    /// the ray's permuted axes (`corners[c][j]`: corner `c`, axis `k[j]`).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn finish8(
+        &self,
+        avx2: Avx2,
+        corners: [[F32x8; 3]; 3],
+        tris: &[LeafTriangle],
+        active: u32,
+        t_min: f32,
+        t_max: f32,
+    ) -> (u32, [f32; 8]) {
+        let [sx, sy, sz] = self.s.map(|v| F32x8::splat(avx2, v));
+        let [[a0, a1, a2], [b0, b1, b2], [c0, c1, c2]] = corners;
         let shear = |p: F32x8, q: F32x8, s: F32x8| p - s * q;
         let (ax, ay) = (shear(a0, a2, sx), shear(a1, a2, sy));
         let (bx, by) = (shear(b0, b2, sx), shear(b1, b2, sy));
@@ -267,6 +278,118 @@ impl ShearedRay {
             }
         }
         (hits, out)
+    }
+}
+
+/// Axis `axis` of corner `corner` of the `active` triangles of `tris`, in lanes.
+///
+/// # Safety
+/// Every bit of `active` names a triangle of `tris`.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn gather_corner(avx2: Avx2, tris: &[LeafTriangle], active: u32, corner: usize, axis: usize) -> F32x8 {
+    const STRIDE: i32 = (std::mem::size_of::<LeafTriangle>() / 4) as i32;
+    let lanes = I32x8::lane_index(avx2).wrapping_mul(I32x8::splat(avx2, STRIDE));
+    // SAFETY: lane `i` (read only where `active` is set) reads float `12 i + 3 corner + axis`
+    // of triangle `i`, which the caller vouches exists.
+    unsafe {
+        F32x8::gather_masked(
+            avx2,
+            tris.as_ptr().cast::<f32>().wrapping_add(3 * corner + axis),
+            lanes,
+            M32x8::from_bits(avx2, active),
+        )
+    }
+}
+
+/// The eight-triangle test of [`ShearedRay::intersect8`] for each ray `r` of `rays` named by
+/// bit `r` of `mask`, all of them from `origin` (`rays[r]` made by `ShearedRay::new(origin,
+/// ·)`), against the same up to 8 triangles with `t` in `[t_min, t_max[r]]`: `hit(r, hits,
+/// t)` for each ray that hits any, with the bits and parameters `intersect8` gives. The
+/// triangles are read once for all the rays (AVX2 lanes where present, their corners relative
+/// to the common origin computed once: the same subtractions each ray's own test makes).
+pub fn intersect8_packet(
+    tris: &[LeafTriangle],
+    origin: Vec3,
+    rays: &[ShearedRay],
+    mask: u64,
+    t_min: f32,
+    t_max: &[f32],
+    hit: impl FnMut(usize, u32, &[f32; 8]),
+) {
+    let active = ((1u64 << tris.len().min(8)) - 1) as u32;
+    if active == 0 || mask == 0 {
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if let Some(avx2) = Isa::detected().avx2() {
+        // SAFETY: the token proves AVX2, the kernel's one feature.
+        unsafe { intersect8_packet_avx2(avx2, tris, origin, rays, mask, t_min, t_max, hit) };
+        return;
+    }
+    intersect8_packet_scalar(tris, rays, mask, t_min, t_max, hit);
+}
+
+/// [`intersect8_packet`] one ray at a time through [`ShearedRay::intersect8_scalar`].
+pub fn intersect8_packet_scalar(
+    tris: &[LeafTriangle],
+    rays: &[ShearedRay],
+    mask: u64,
+    t_min: f32,
+    t_max: &[f32],
+    mut hit: impl FnMut(usize, u32, &[f32; 8]),
+) {
+    let active = ((1u64 << tris.len().min(8)) - 1) as u32;
+    let mut rest = mask;
+    while rest != 0 {
+        let r = rest.trailing_zeros() as usize;
+        rest &= rest - 1;
+        let (hits, t) = rays[r].intersect8_scalar(tris, active, t_min, t_max[r]);
+        if hits != 0 {
+            hit(r, hits, &t);
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
+fn intersect8_packet_avx2(
+    avx2: Avx2,
+    tris: &[LeafTriangle],
+    origin: Vec3,
+    rays: &[ShearedRay],
+    mask: u64,
+    t_min: f32,
+    t_max: &[f32],
+    mut hit: impl FnMut(usize, u32, &[f32; 8]),
+) {
+    let active = ((1u64 << tris.len().min(8)) - 1) as u32;
+    // Every corner relative to the common origin, once: `rel[c][a]`, unpermuted axes.
+    let o = origin.to_array().map(|v| F32x8::splat(avx2, v));
+    // SAFETY: `active` names exactly the triangles of `tris` (at most 8).
+    let g = |c: usize, a: usize| unsafe { gather_corner(avx2, tris, active, c, a) } - o[a];
+    // Written out, not through `array::map`, whose closure is not always inlined.
+    let rel = [
+        [g(0, 0), g(0, 1), g(0, 2)],
+        [g(1, 0), g(1, 1), g(1, 2)],
+        [g(2, 0), g(2, 1), g(2, 2)],
+    ];
+    let mut rest = mask;
+    while rest != 0 {
+        let r = rest.trailing_zeros() as usize;
+        rest &= rest - 1;
+        let ray = &rays[r];
+        let [kx, ky, kz] = ray.k;
+        let corners = [
+            [rel[0][kx], rel[0][ky], rel[0][kz]],
+            [rel[1][kx], rel[1][ky], rel[1][kz]],
+            [rel[2][kx], rel[2][ky], rel[2][kz]],
+        ];
+        let (hits, t) = ray.finish8(avx2, corners, tris, active, t_min, t_max[r]);
+        if hits != 0 {
+            hit(r, hits, &t);
+        }
     }
 }
 

@@ -5,7 +5,10 @@
 use std::collections::{HashMap, HashSet};
 
 use occult_core::{compose, Aabb, Affine3A, ItemId, Mat4, NodeId, Vec3, Vec4};
-use occult_spatial::{traverse, traverse_bvh, traverse_bvh_from, FatRay, RayBvh, ShearedRay, TraversalCounters};
+use occult_spatial::{
+    intersect8_packet, traverse, traverse_bvh, traverse_bvh_from, traverse_bvh_packet, FatRay, RayBvh, RayPacket,
+    ShearedRay, TraversalCounters, PACKET,
+};
 
 use super::{Accel, FrameCtx, Lzb, Mode, Selection};
 use crate::hash::FxBuild;
@@ -160,6 +163,163 @@ impl<'a> Caster<'a> {
         self.last = self.found;
         self.resolved += self.found.is_some() as u64;
         self.best
+    }
+
+    /// Casts the naive rays (§II) of up to [`PACKET`] neighbouring pixels (`pixels`, indices
+    /// into rows of `width`) together (`packets=on`; not in the paper): through each mesh's BVH
+    /// as one packet ([`traverse_bvh_packet`]), through a group's octree as one cone holding
+    /// them all. Pushes each ray's first hit to `hits` (ties: [`PacketHit::before`]).
+    pub fn cast_packet(&mut self, pixels: &[u32], width: u32) {
+        debug_assert!(self.naive && pixels.len() <= PACKET);
+        self.rays += pixels.len() as u64;
+        self.visited.clear();
+        let mut dirs = [Vec3::ZERO; PACKET];
+        for (d, &i) in dirs.iter_mut().zip(pixels) {
+            *d = self
+                .ctx
+                .pixel_direction((i % width) as f32 + 0.5, (i / width) as f32 + 0.5);
+        }
+        let mut rays = Rays {
+            t_limit: [self.ctx.far * (1.0 + DEPTH_EPS); PACKET],
+            best: [None; PACKET],
+        };
+        let all = u64::MAX >> (PACKET - pixels.len());
+        if !pixels.is_empty() {
+            let root = self.lzb.scene.root();
+            self.visit_packet(root, self.ctx.eye, &dirs, all, 0, &mut rays);
+        }
+        // The hits' items, read only now: loads of the rays' triangle ids that do not wait on
+        // one another, rather than one in each ray's chain of dependent misses.
+        for (&i, best) in pixels.iter().zip(rays.best) {
+            if let Some(hit) = best {
+                let Accel::Mesh { bvh: Some(b), .. } = &self.lzb.accel[hit.node as usize] else {
+                    unreachable!("a packet hit is in a mesh with a BVH");
+                };
+                self.hits
+                    .push((i, hit.t, hit.base + u64::from(b.bvh.triangles()[hit.slot as usize])));
+            }
+        }
+    }
+
+    /// Casts the rays `o + t·dirs[r]` (node space) named by `mask` through node `id`, whose
+    /// first item is `base`.
+    fn visit_packet(&mut self, id: NodeId, o: Vec3, dirs: &[Vec3; PACKET], mask: u64, base: ItemId, rays: &mut Rays) {
+        let lzb = self.lzb;
+        let mut counters = TraversalCounters::default();
+        match &lzb.accel[id.index()] {
+            Accel::Empty => {}
+            Accel::Mesh { bvh: Some(b), .. } => {
+                let count = 64 - mask.leading_zeros() as usize;
+                let packet = RayPacket::new(o, &dirs[..count]);
+                // Each ray's shear for the triangle test, made when it first reaches a leaf.
+                let mut sheared = [ShearedRay::new(o, Vec3::X); PACKET];
+                let mut made = 0u64;
+                traverse_bvh_packet(
+                    &b.bvh,
+                    &packet,
+                    mask,
+                    &mut rays.t_limit,
+                    &mut counters,
+                    |leaf, m, t_limit| {
+                        let mut new = m & !made;
+                        made |= m;
+                        while new != 0 {
+                            let r = new.trailing_zeros() as usize;
+                            new &= new - 1;
+                            sheared[r] = ShearedRay::new(o, dirs[r]);
+                        }
+                        let range = RayBvh::leaf_range(leaf);
+                        let tris = b.bvh.leaf_triangles(leaf);
+                        self.tri_tests += u64::from(m.count_ones()) * tris.len() as u64;
+                        let best = &mut rays.best;
+                        intersect8_packet(tris, o, &sheared, m, 0.0, t_limit, |r, hits, ts| {
+                            let mut h = hits;
+                            while h != 0 {
+                                let i = h.trailing_zeros() as usize;
+                                h &= h - 1;
+                                let hit = PacketHit {
+                                    t: ts[i],
+                                    base,
+                                    slot: (range.start + i) as u32,
+                                    node: id.index() as u32,
+                                };
+                                if best[r].is_none_or(|b| hit.before(&b)) {
+                                    best[r] = Some(hit);
+                                }
+                            }
+                        });
+                        let mut rest = m;
+                        while rest != 0 {
+                            let r = rest.trailing_zeros() as usize;
+                            rest &= rest - 1;
+                            if let Some(hit) = best[r] {
+                                t_limit[r] = t_limit[r].min(hit.t);
+                            }
+                        }
+                    },
+                );
+            }
+            Accel::Mesh { bvh: None, .. } => unreachable!("packets=on needs caster=bvh (options)"),
+            Accel::Group {
+                octree,
+                bounds,
+                child_from_parent,
+                ..
+            } => {
+                let node = lzb.scene.node(id);
+                let instances = node.instances();
+                self.serial += 1;
+                let serial = self.serial;
+                let cone = enclosing_cone(o, dirs, mask);
+                let mut cone_limit = max_limit(&rays.t_limit, mask);
+                traverse(
+                    octree,
+                    &cone,
+                    &mut cone_limit,
+                    &mut counters,
+                    |leaf, _, _, cone_limit| {
+                        for &i in octree.leaf_primitives(leaf) {
+                            // Mailbox: an instance spanning several leaves is cast once per packet.
+                            if !self.visited.insert((serial, i)) {
+                                continue;
+                            }
+                            let i = i as usize;
+                            // The rays that enter the instance's box before their bounds, each as a
+                            // single ray would test it.
+                            let mut sub = 0u64;
+                            let mut rest = mask;
+                            while rest != 0 {
+                                let r = rest.trailing_zeros() as usize;
+                                rest &= rest - 1;
+                                let ray = FatRay::new(o, dirs[r], 0.0, 0.0);
+                                let enters = ray.enter(&bounds[i]).is_some_and(|(e, _)| e <= rays.t_limit[r]);
+                                sub |= u64::from(enters) << r;
+                            }
+                            if sub == 0 {
+                                continue;
+                            }
+                            let cfp = &child_from_parent[i];
+                            let mut child_dirs = [Vec3::ZERO; PACKET];
+                            let count = 64 - sub.leading_zeros() as usize;
+                            for (c, d) in child_dirs.iter_mut().zip(&dirs[..count]) {
+                                *c = cfp.transform_vector3(*d);
+                            }
+                            self.visit_packet(
+                                instances[i].child,
+                                cfp.transform_point3(o),
+                                &child_dirs,
+                                sub,
+                                base + node.item_offset(i),
+                                rays,
+                            );
+                            *cone_limit = max_limit(&rays.t_limit, mask);
+                        }
+                    },
+                );
+            }
+        }
+        self.counters.nodes_visited += counters.nodes_visited;
+        self.counters.leaves_visited += counters.leaves_visited;
     }
 
     /// §III.D: the nearest robust hit before `t_max` in the region where the neighbour's ray
@@ -547,4 +707,142 @@ impl<'a> Caster<'a> {
 #[inline]
 pub(super) fn row_w(m: &Mat4) -> Vec4 {
     Vec4::new(m.x_axis.w, m.y_axis.w, m.z_axis.w, m.w_axis.w)
+}
+
+/// The bounds and first hits of the rays of a packet (`Caster::cast_packet`).
+struct Rays {
+    t_limit: [f32; PACKET],
+    best: [Option<PacketHit>; PACKET],
+}
+
+/// A hit of a packet's ray: its parameter, and where its triangle is (the item is read once
+/// the packet is done).
+#[derive(Clone, Copy)]
+struct PacketHit {
+    t: f32,
+    /// First item of the mesh instance.
+    base: ItemId,
+    /// The triangle's slot in its mesh's BVH order.
+    slot: u32,
+    /// The mesh.
+    node: u32,
+}
+
+impl PacketHit {
+    /// The nearer, and of equal parameters the one of the smaller instance base, then BVH
+    /// slot: a total order, so the first hit does not depend on the order of the visits.
+    fn before(&self, o: &Self) -> bool {
+        (self.t, self.base, self.slot) < (o.t, o.base, o.slot)
+    }
+}
+
+/// The largest bound among the rays of `mask`.
+fn max_limit(t_limit: &[f32; PACKET], mask: u64) -> f32 {
+    let mut m = f32::NEG_INFINITY;
+    let mut rest = mask;
+    while rest != 0 {
+        let r = rest.trailing_zeros() as usize;
+        rest &= rest - 1;
+        m = m.max(t_limit[r]);
+    }
+    m
+}
+
+/// A cone from `o` holding the rays `o + t·dirs[r]` of `mask` at every `t` (as its own
+/// parameter): around their mean direction `c`, with the radius per unit of `t`
+/// `max |d_r − c|`, scaled by `|c| / min |d_r|` because [`FatRay::enter`] measures a box's far
+/// side along `c` while a ray reaches a point at `t` along its own, longer or shorter,
+/// direction; then widened by a thousandth against rounding. Every box a ray enters at `t_e`
+/// is entered by the cone no later than `t_e`.
+fn enclosing_cone(o: Vec3, dirs: &[Vec3; PACKET], mask: u64) -> FatRay {
+    let (mut sum, mut n) = (Vec3::ZERO, 0.0f32);
+    let mut rest = mask;
+    while rest != 0 {
+        let r = rest.trailing_zeros() as usize;
+        rest &= rest - 1;
+        sum += dirs[r];
+        n += 1.0;
+    }
+    let c = sum / n;
+    let (mut spread, mut shortest) = (0.0f32, f32::INFINITY);
+    let mut rest = mask;
+    while rest != 0 {
+        let r = rest.trailing_zeros() as usize;
+        rest &= rest - 1;
+        spread = spread.max((dirs[r] - c).length());
+        shortest = shortest.min(dirs[r].length());
+    }
+    let spread = spread * (c.length() / shortest).max(1.0) * 1.001 + c.length() * 1e-6;
+    FatRay::new(o, c, spread, ABS_EPS * (o.abs().max_element() + 1.0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// Every box a ray of the packet enters at `t_e` (before its bound) is entered by the
+    /// enclosing cone no later than `t_e`: the group traversal of a packet misses no instance a
+    /// single ray would meet. Tiles of pixel directions (their forward component 1, as
+    /// `pixel_direction` makes them), then stretched and sheared as instance placements do.
+    #[test]
+    fn enclosing_cone_enters_every_box_a_ray_enters() {
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(7);
+        let mut checked = 0;
+        for k in 0..400 {
+            let o = Vec3::new(
+                rng.random_range(-50.0..50.0),
+                rng.random_range(-5.0..5.0),
+                rng.random_range(-50.0..50.0),
+            );
+            let (w, h) = (rng.random_range(0.2..2.0f32), rng.random_range(0.2..2.0f32));
+            let (cx, cy) = (rng.random_range(-1.0..1.0f32), rng.random_range(-1.0..1.0f32));
+            let pixel = rng.random_range(0.001..0.05f32);
+            let mut dirs = [Vec3::ZERO; PACKET];
+            for (r, d) in dirs.iter_mut().enumerate() {
+                let (i, j) = ((r % 8) as f32, (r / 8) as f32);
+                *d = Vec3::new((cx + i * pixel) * w, (cy + j * pixel) * h, 1.0);
+            }
+            if k % 2 == 1 {
+                // An instance's placement: a stretch and a shear.
+                let m = occult_core::Mat3::from_cols(
+                    Vec3::new(rng.random_range(0.2..3.0), 0.3, 0.0),
+                    Vec3::new(0.0, rng.random_range(0.2..3.0), -0.4),
+                    Vec3::new(0.5, 0.0, rng.random_range(0.2..3.0)),
+                );
+                dirs = dirs.map(|d| m * d);
+            }
+            let mask = u64::MAX >> rng.random_range(0..40);
+            let cone = enclosing_cone(o, &dirs, mask);
+            for _ in 0..50 {
+                // Near a ray of the packet, often at its edge: some rays enter, some miss.
+                let r = rng.random_range(0..PACKET - mask.leading_zeros() as usize);
+                let e = Vec3::new(
+                    rng.random_range(0.01..3.0),
+                    rng.random_range(0.01..3.0),
+                    rng.random_range(0.01..3.0),
+                );
+                let jitter = Vec3::new(
+                    rng.random_range(-1.2..1.2),
+                    rng.random_range(-1.2..1.2),
+                    rng.random_range(-1.2..1.2),
+                );
+                let c = o + dirs[r] * rng.random_range(0.5..100.0f32) + jitter * e;
+                let b = Aabb::new(c - e, c + e);
+                let first = (0..PACKET)
+                    .filter(|r| mask & (1 << r) != 0)
+                    .filter_map(|r| FatRay::new(o, dirs[r], 0.0, 0.0).enter(&b).map(|(t, _)| t))
+                    .fold(f32::INFINITY, f32::min);
+                if first.is_finite() {
+                    checked += 1;
+                    let entry = cone.enter(&b).map(|(t, _)| t);
+                    assert!(
+                        entry.is_some_and(|t| t <= first),
+                        "packet {k}: a ray enters at {first}, the cone at {entry:?}"
+                    );
+                }
+            }
+        }
+        assert!(checked > 10_000, "{checked}");
+    }
 }

@@ -1107,9 +1107,17 @@ impl Lzb {
                     .par_chunks(CHUNK)
                     .map(|chunk| {
                         let mut caster = Caster::new(this, &ctx, naive);
-                        for &i in chunk {
-                            if let Some((t, item)) = caster.cast(i % w, i / w) {
-                                caster.hits.push((i, t, item));
+                        if this.opts.packets {
+                            // The pixels come in 8×8 tiles (step 4), so a run of 64 is one
+                            // tile or a few rows of neighbours.
+                            for packet in chunk.chunks(occult_spatial::PACKET) {
+                                caster.cast_packet(packet, w);
+                            }
+                        } else {
+                            for &i in chunk {
+                                if let Some((t, item)) = caster.cast(i % w, i / w) {
+                                    caster.hits.push((i, t, item));
+                                }
                             }
                         }
                         caster

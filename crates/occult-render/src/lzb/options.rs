@@ -29,6 +29,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             help: "max triangles per BVH leaf, 1..=8; needs caster=bvh (refused with caster=octree)",
         },
         ParamDoc {
+            key: "packets",
+            default: "off",
+            help: "naive rays of up to 64 neighbouring pixels (8x8 tiles) cast together: one packet through each mesh's BVH, each ray tested as alone, one cone through a group's octree (not in the paper); on by default in naive mode, where on needs caster=bvh (refused otherwise, and in lazy mode, whose cone rays go one at a time); off: one ray at a time",
+        },
+        ParamDoc {
             key: "group_leaf",
             default: "8",
             help: "max instances per group octree leaf (>= 1)",
@@ -184,6 +189,8 @@ pub struct LzbOptions {
     pub caster: CasterKind,
     /// Max triangles per BVH leaf (`caster=bvh`).
     pub bvh_leaf: usize,
+    /// Naive rays cast in packets of neighbouring pixels (`caster=bvh`, `mode=naive`).
+    pub packets: bool,
     /// Ray mode.
     pub mode: Mode,
     /// Occluder selection.
@@ -244,6 +251,7 @@ impl LzbOptions {
                 _ => CasterKind::Bvh,
             },
             bvh_leaf: p.get("bvh_leaf", 4usize)?,
+            packets: false,
             mode,
             selection: match p.choice("select", &["all", "static", "dynamic", "hybrid"], "hybrid")? {
                 "all" => Selection::All,
@@ -271,6 +279,10 @@ impl LzbOptions {
             pvl_triangles: p.choice("pvl", &["leaves", "triangles"], "leaves")? == "triangles",
             payoff: p.flag("payoff", mode == Mode::Lazy)?,
             near_cull: p.flag("near_cull", true)?,
+        };
+        let o = Self {
+            packets: p.flag("packets", o.mode == Mode::Naive && o.caster == CasterKind::Bvh)?,
+            ..o
         };
         if p.raw("bvh_leaf").is_some() && o.caster == CasterKind::Octree {
             return Err(RenderError::BadParameter(
@@ -318,6 +330,12 @@ impl LzbOptions {
         }
         if self.plane_reuse == 0 {
             return bad("plane_reuse=0: a plane is used for at least 1 frame".into());
+        }
+        if self.packets && (self.mode != Mode::Naive || self.caster != CasterKind::Bvh) {
+            return bad(
+                "packets=on casts naive first-hit rays through the BVH: it needs mode=naive and caster=bvh (the default in naive mode)"
+                    .into(),
+            );
         }
         if self.payoff && self.mode == Mode::Naive {
             return bad(
