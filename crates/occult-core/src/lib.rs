@@ -38,6 +38,7 @@
 mod camera;
 mod error;
 mod geom;
+pub mod memory;
 mod mesh;
 mod ray;
 mod scene;

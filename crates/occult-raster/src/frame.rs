@@ -1,6 +1,7 @@
 //! The frame: depth, item id and color per pixel.
 
 use crate::RasterError;
+use occult_core::memory::advise_huge_pages;
 use occult_core::{ItemId, NO_ITEM};
 
 /// Depth of a cleared pixel: reversed-Z zero, infinitely far.
@@ -44,6 +45,9 @@ impl Frame {
         color
             .try_reserve_exact(n)
             .map_err(|_| RasterError::OutOfMemory(bytes))?;
+        // A tile of a row-major frame spans 64 rows, each in another 4 KiB page.
+        // A tile of a row-major frame spans 64 rows, each in another 4 KiB page: huge pages
+        // spare the scan their walks.
         advise_huge_pages(depth.as_mut_ptr() as *mut u8, n * 4);
         advise_huge_pages(items.as_mut_ptr() as *mut u8, n * 8);
         depth.resize(n, CLEAR_DEPTH);
@@ -212,26 +216,6 @@ impl Frame {
         let i = y as usize * self.width as usize + x as usize;
         keep_fragment(&mut self.depth[i], &mut self.items[i], depth, item)
     }
-}
-
-/// Asks the kernel to back a large buffer with huge pages: a tile of a row-major frame spans
-/// 64 rows, each in another 4 KiB page, and the page walks would otherwise dominate the scan.
-pub(crate) fn advise_huge_pages(ptr: *mut u8, len: usize) {
-    #[cfg(target_os = "linux")]
-    {
-        const HUGE: usize = 2 << 20;
-        let start = (ptr as usize).div_ceil(HUGE) * HUGE;
-        let end = (ptr as usize + len) / HUGE * HUGE;
-        if end > start {
-            // SAFETY: the range lies inside an allocation this frame owns; MADV_HUGEPAGE only
-            // changes how the kernel backs it, never its contents, and failure is harmless.
-            unsafe {
-                libc::madvise(start as *mut libc::c_void, end - start, libc::MADV_HUGEPAGE);
-            }
-        }
-    }
-    #[cfg(not(target_os = "linux"))]
-    let _ = (ptr, len);
 }
 
 /// DESIGN invariant 1: a pixel keeps the fragment nearest by depth, ties broken by the smaller

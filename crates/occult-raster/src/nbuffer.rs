@@ -323,7 +323,7 @@ impl NBuffer {
             self.data
                 .try_reserve_exact(total + 1)
                 .map_err(|_| RasterError::OutOfMemory((total + 1) * 2))?;
-            crate::frame::advise_huge_pages(self.data.as_mut_ptr() as *mut u8, (total + 1) * 2);
+            occult_core::memory::advise_huge_pages(self.data.as_mut_ptr() as *mut u8, (total + 1) * 2);
             self.data.resize(total + 1, 0);
         }
         self.width = width;

@@ -332,7 +332,10 @@ impl RayBvh {
     /// When `tris` does not hold one triangle per slot.
     pub fn attach_triangles(&mut self, tris: Vec<LeafTriangle>) {
         assert_eq!(tris.len(), self.order.len(), "one triangle per slot");
-        self.tris = tris;
+        // Rays read leaves at scattered places: on huge pages, a leaf's first read is one
+        // miss, not a page walk and a miss.
+        self.tris = occult_core::memory::huge_page_copy(&tris);
+        self.nodes = occult_core::memory::huge_page_copy(&self.nodes);
     }
 
     /// The attached triangles of leaf `code` ([`RayBvh::attach_triangles`]; empty when none).
