@@ -86,6 +86,11 @@
 //!   octree leaf holding a part of its triangles is near: the near pass draws them or finds
 //!   them hidden). §III.D's start is the BVH subtree two levels above the neighbour's hit
 //!   leaf. `caster=octree` casts through the octree as the paper does.
+//! - Naive rays in packets (`packets=on`, the default in naive mode, with `caster=bvh`): the
+//!   rays of an 8×8 tile walk each mesh's BVH together ([`occult_spatial::traverse_bvh_packet`]:
+//!   each ray tested as alone at every node it reaches, a leaf's triangles read once for its
+//!   rays) and a group's octree as one cone that holds them (`Caster::cast_packet`). The same
+//!   hits as one at a time, but for ties within rounding.
 //! - `pvl=triangles` (an option; leaves by default, as the paper): the ray's record keeps,
 //!   of each leaf on the path, only the triangles whose box the ray's cone enters before the
 //!   bound. Conservative for the same reason as the leaves: the pixel's winner lies within the
