@@ -23,11 +23,13 @@ pub fn advise_huge_pages(ptr: *mut u8, len: usize) {
     let _ = (ptr, len);
 }
 
-/// `items` copied into a new vector whose memory was advised huge pages
-/// ([`advise_huge_pages`]) before it was written.
-pub fn huge_page_copy<T: Copy>(items: &[T]) -> Vec<T> {
-    let mut v: Vec<T> = Vec::with_capacity(items.len());
-    advise_huge_pages(v.as_mut_ptr().cast::<u8>(), std::mem::size_of_val(items));
-    v.extend_from_slice(items);
+/// An empty vector with room for `capacity` items whose memory was advised huge pages
+/// ([`advise_huge_pages`]) before anything was written to it: fill it within that capacity.
+pub fn huge_page_vec<T>(capacity: usize) -> Vec<T> {
+    let mut v: Vec<T> = Vec::with_capacity(capacity);
+    advise_huge_pages(
+        v.as_mut_ptr().cast::<u8>(),
+        capacity.saturating_mul(std::mem::size_of::<T>()),
+    );
     v
 }

@@ -45,7 +45,6 @@ impl Frame {
         color
             .try_reserve_exact(n)
             .map_err(|_| RasterError::OutOfMemory(bytes))?;
-        // A tile of a row-major frame spans 64 rows, each in another 4 KiB page.
         // A tile of a row-major frame spans 64 rows, each in another 4 KiB page: huge pages
         // spare the scan their walks.
         advise_huge_pages(depth.as_mut_ptr() as *mut u8, n * 4);

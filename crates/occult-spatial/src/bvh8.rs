@@ -300,7 +300,9 @@ impl RayBvh {
         let mut order: Vec<u32> = (0..triangles.len() as u32).collect();
         let mut binary = Vec::with_capacity(2 * triangles.len() / config.max_leaf_size + 1);
         let root = b.build(&mut order, 0, 0, &mut binary);
-        let mut nodes = Vec::new();
+        // Rays read nodes at scattered places: on huge pages, a node's first read is one miss,
+        // not a page walk and a miss. A wide node takes at least one internal binary node.
+        let mut nodes = occult_core::memory::huge_page_vec(binary.len() / 2 + 1);
         collapse(&binary, root, &mut nodes);
         let mut parents = vec![0u32; nodes.len()];
         for (i, n) in nodes.iter().enumerate() {
@@ -326,16 +328,14 @@ impl RayBvh {
 
     /// Keeps `tris`, triangle `slot` of [`RayBvh::triangles`] at index `slot`, for
     /// [`RayBvh::leaf_triangles`]; the traversal then asks for a leaf's triangles as it pushes
-    /// the leaf, so that the misses of the leaves met at one node overlap.
+    /// the leaf, so that the misses of the leaves met at one node overlap. Rays read them at
+    /// scattered places, so they are best on huge pages ([`occult_core::memory::huge_page_vec`]).
     ///
     /// # Panics
     /// When `tris` does not hold one triangle per slot.
     pub fn attach_triangles(&mut self, tris: Vec<LeafTriangle>) {
         assert_eq!(tris.len(), self.order.len(), "one triangle per slot");
-        // Rays read leaves at scattered places: on huge pages, a leaf's first read is one
-        // miss, not a page walk and a miss.
-        self.tris = occult_core::memory::huge_page_copy(&tris);
-        self.nodes = occult_core::memory::huge_page_copy(&self.nodes);
+        self.tris = tris;
     }
 
     /// The attached triangles of leaf `code` ([`RayBvh::attach_triangles`]; empty when none).

@@ -259,8 +259,11 @@ fn children_of_rays_avx2<const KIND: u8>(
     let load = |v: &[f32; 8], o: f32| F32x8::from_array(avx2, *v) - F32x8::splat(avx2, o);
     let mut lo = [load(&node.lo[0], o.x), load(&node.lo[1], o.y), load(&node.lo[2], o.z)];
     let mut hi = [load(&node.hi[0], o.x), load(&node.hi[1], o.y), load(&node.hi[2], o.z)];
-    if let Kind::Uniform(negative) = packet.kind {
+    if KIND == UNIFORM {
         // `lo` becomes the entry planes, `hi` the exit planes.
+        let Kind::Uniform(negative) = packet.kind else {
+            unreachable!("the uniform kernel runs on uniform packets only");
+        };
         for a in 0..3 {
             if negative & (1 << a) != 0 {
                 std::mem::swap(&mut lo[a], &mut hi[a]);
@@ -414,8 +417,9 @@ mod tests {
         let flat: Vec<Vec3> = p.iter().map(|v| Vec3::new(v.x, 2.0, v.z)).collect();
         let mut rnd = xorshift(17);
         let (mut hit_rays, mut rounded) = (0, 0);
-        for pos in [&p, &flat] {
-            let bvh = build(pos, &t, 4);
+        let mut kinds = [0u32; 3];
+        for (pos, leaf_size) in [(&p, 4), (&flat, 4), (&p, 1), (&flat, 8)] {
+            let bvh = build(pos, &t, leaf_size);
             let tris: Vec<crate::LeafTriangle> = bvh
                 .triangles()
                 .iter()
@@ -428,11 +432,21 @@ mod tests {
                 })
                 .collect();
             for k in 0..60 {
-                let origin = Vec3::new(rnd(), rnd(), rnd()) * 30.0 - 10.0;
+                let mut origin = Vec3::new(rnd(), rnd(), rnd()) * 30.0 - 10.0;
+                if k % 5 == 3 {
+                    // On a slab plane of the root's box: with a zero direction component,
+                    // `0 · ∞` in the slab test.
+                    origin.y = bvh.bounds().min.y;
+                }
                 let centre = Vec3::new(rnd(), rnd(), rnd()) * 10.0 - origin * 0.2;
-                let dirs = tile(centre, [0.002, 0.05, 0.5][k % 3], k % 4 == 1);
+                let dirs = tile(centre, [0.002, 0.05, 0.5][k % 3], k % 4 == 1 || k % 5 == 3);
                 let n = PACKET - (k % 7);
                 let packet = RayPacket::new(origin, &dirs[..n]);
+                kinds[match packet.kind {
+                    Kind::Nan => 0,
+                    Kind::Mixed => 1,
+                    Kind::Uniform(_) => 2,
+                }] += 1;
                 let sheared: Vec<ShearedRay> = dirs.iter().map(|&d| ShearedRay::new(origin, d)).collect();
                 let run = |scalar: bool| {
                     let mut limit = [40.0f32; PACKET];
@@ -443,9 +457,9 @@ mod tests {
                         let range = RayBvh::leaf_range(code);
                         let mut found = [f32::INFINITY; PACKET];
                         intersect8_packet(&tris[range], origin, &sheared, rays, 0.0, limit, |r, hits, ts| {
-                            for i in 0..8 {
+                            for (i, &t) in ts.iter().enumerate() {
                                 if hits & (1 << i) != 0 {
-                                    found[r] = found[r].min(ts[i]);
+                                    found[r] = found[r].min(t);
                                 }
                             }
                         });
@@ -503,7 +517,8 @@ mod tests {
                 assert_eq!(limits[n..].iter().filter(|&&l| l != 40f32.to_bits()).count(), 0);
             }
         }
-        assert!(hit_rays > 400, "{hit_rays}");
+        assert!(hit_rays > 800, "{hit_rays}");
+        assert!(kinds.iter().all(|&k| k >= 10), "packets of each kind: {kinds:?}");
         assert!(
             rounded * 200 < hit_rays,
             "{rounded} of {hit_rays} rays differ in rounding"

@@ -112,6 +112,11 @@ impl ShearedRay {
         }
     }
 
+    /// True when the ray starts at `origin`.
+    pub fn is_from(&self, origin: Vec3) -> bool {
+        self.origin == self.k.map(|k| origin[k])
+    }
+
     /// The hit parameter `t` of triangle `p` when the ray hits it with `t` in
     /// `[t_min, t_max]` (both faces; shared edges hit by at least one of their triangles).
     #[inline]
@@ -317,6 +322,11 @@ pub fn intersect8_packet(
     t_max: &[f32],
     hit: impl FnMut(usize, u32, &[f32; 8]),
 ) {
+    debug_assert!(tris.len() <= 8, "a leaf of {} triangles", tris.len());
+    debug_assert!(
+        (0..rays.len()).all(|r| mask & (1 << r) == 0 || rays[r].is_from(origin)),
+        "every ray of the packet starts at its origin"
+    );
     let active = ((1u64 << tris.len().min(8)) - 1) as u32;
     if active == 0 || mask == 0 {
         return;
@@ -917,6 +927,63 @@ pub(crate) mod tests {
                 }
             }
         }
+    }
+
+    /// The packet's leaf test gives each ray of its mask the bits and parameters of that ray's
+    /// own `intersect8` (all eight lanes when there is AVX2; the scalar path otherwise), for
+    /// leaves of 1 to 8 triangles, sparse masks, rays through corners, along edges and with
+    /// zero direction components, and per-ray bounds.
+    #[test]
+    fn packet_leaf_test_is_each_rays_own() {
+        let (p, t) = soup(400, 29);
+        let tris: Vec<LeafTriangle> = t
+            .iter()
+            .map(|tri| LeafTriangle {
+                corners: tri.map(|v| p[v as usize]),
+                normal: Vec3::ZERO,
+            })
+            .collect();
+        let mut rnd = xorshift(31);
+        let mut hits = 0;
+        for k in 0..300 {
+            let origin = Vec3::new(rnd(), rnd(), rnd()) * 20.0 - 5.0;
+            let start = (k * 7) % (tris.len() - 8);
+            let leaf = &tris[start..start + 1 + k % 8];
+            let rays: Vec<ShearedRay> = (0..64)
+                .map(|r| {
+                    let aim = leaf[r % leaf.len()].corners;
+                    let mut dir = match r % 3 {
+                        0 => (aim[0] + aim[1] + aim[2]) / 3.0 - origin,
+                        1 => aim[r % 3] - origin,
+                        _ => (aim[0] + aim[1]) * 0.5 - origin,
+                    };
+                    if r % 13 == 0 {
+                        dir[r % 3] = 0.0;
+                    }
+                    ShearedRay::new(origin, dir)
+                })
+                .collect();
+            let mask = match k % 3 {
+                0 => u64::MAX,
+                1 => 0x8000_0001_0100_0010,
+                _ => (k as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15),
+            };
+            let t_max: Vec<f32> = (0..64).map(|r| if r % 4 == 0 { 0.6 } else { f32::INFINITY }).collect();
+            let mut got = vec![(0u32, [0f32; 8]); 64];
+            intersect8_packet(leaf, origin, &rays, mask, 0.0, &t_max, |r, h, ts| got[r] = (h, *ts));
+            for r in 0..64 {
+                let (h1, t1) = rays[r].intersect8(leaf, 0xff, 0.0, t_max[r]);
+                let want = if mask & (1 << r) != 0 { h1 } else { 0 };
+                assert_eq!(got[r].0, want, "leaf {k}, ray {r}");
+                for i in 0..8 {
+                    if want & (1 << i) != 0 {
+                        assert_eq!(got[r].1[i].to_bits(), t1[i].to_bits(), "leaf {k}, ray {r}, lane {i}");
+                    }
+                }
+                hits += want.count_ones();
+            }
+        }
+        assert!(hits > 2000, "{hits}");
     }
 
     /// The children's boxes the traversal derives from the parent's box are the stored ones.

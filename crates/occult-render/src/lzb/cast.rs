@@ -171,6 +171,9 @@ impl<'a> Caster<'a> {
     /// them all. Pushes each ray's first hit to `hits` (ties: [`PacketHit::before`]).
     pub fn cast_packet(&mut self, pixels: &[u32], width: u32) {
         debug_assert!(self.naive && pixels.len() <= PACKET);
+        if pixels.is_empty() {
+            return;
+        }
         self.rays += pixels.len() as u64;
         self.visited.clear();
         let mut dirs = [Vec3::ZERO; PACKET];
@@ -184,10 +187,8 @@ impl<'a> Caster<'a> {
             best: [None; PACKET],
         };
         let all = u64::MAX >> (PACKET - pixels.len());
-        if !pixels.is_empty() {
-            let root = self.lzb.scene.root();
-            self.visit_packet(root, self.ctx.eye, &dirs, all, 0, &mut rays);
-        }
+        let root = self.lzb.scene.root();
+        self.visit_packet(root, self.ctx.eye, &dirs, all, 0, &mut rays);
         // The hits' items, read only now: loads of the rays' triangle ids that do not wait on
         // one another, rather than one in each ray's chain of dependent misses.
         for (&i, best) in pixels.iter().zip(rays.best) {

@@ -192,13 +192,14 @@ pub(crate) enum Accel {
 }
 
 /// Triangles `ids` of mesh `m` as a ray caster reads them (`normals`: area-scaled).
+/// On huge pages: rays read them at scattered places.
 fn leaf_triangles(m: &occult_core::Mesh, normals: &[Vec3], ids: &[u32]) -> Vec<RefTriangle> {
-    ids.iter()
-        .map(|&t| RefTriangle {
-            corners: m.triangle_positions(t as usize),
-            normal: normals[t as usize],
-        })
-        .collect()
+    let mut tris = occult_core::memory::huge_page_vec(ids.len());
+    tris.extend(ids.iter().map(|&t| RefTriangle {
+        corners: m.triangle_positions(t as usize),
+        normal: normals[t as usize],
+    }));
+    tris
 }
 
 /// A mesh's ray BVH (`caster=bvh`) with its triangles in leaf order.
