@@ -857,19 +857,23 @@ pub(crate) mod tests {
 
     /// Eight at a time gives the one-at-a-time bits: random triangles, rays aimed at corners
     /// (edge functions of zero: the f64 path), along axes, partial groups and masks.
+    /// [`soup`]'s triangles as leaf triangles (no normals).
+    fn leaf_soup(n: usize, seed: u64) -> Vec<LeafTriangle> {
+        let (p, t) = soup(n, seed);
+        t.iter()
+            .map(|tri| LeafTriangle {
+                corners: tri.map(|v| p[v as usize]),
+                normal: Vec3::ZERO,
+            })
+            .collect()
+    }
+
     #[test]
     fn eight_triangle_test_matches_the_single_one() {
         if !Isa::detected().has_avx2() {
             eprintln!("note: no AVX2 here; the dispatched path is the scalar one, compared with itself");
         }
-        let (p, t) = soup(400, 21);
-        let tris: Vec<LeafTriangle> = t
-            .iter()
-            .map(|tri| LeafTriangle {
-                corners: tri.map(|v| p[v as usize]),
-                normal: Vec3::ZERO,
-            })
-            .collect();
+        let tris = leaf_soup(400, 21);
         let mut rnd = xorshift(23);
         let (mut hits, mut corner_hits) = (0, 0);
         for k in 0..600 {
@@ -935,14 +939,7 @@ pub(crate) mod tests {
     /// zero direction components, and per-ray bounds.
     #[test]
     fn packet_leaf_test_is_each_rays_own() {
-        let (p, t) = soup(400, 29);
-        let tris: Vec<LeafTriangle> = t
-            .iter()
-            .map(|tri| LeafTriangle {
-                corners: tri.map(|v| p[v as usize]),
-                normal: Vec3::ZERO,
-            })
-            .collect();
+        let tris = leaf_soup(400, 29);
         let mut rnd = xorshift(31);
         let mut hits = 0;
         for k in 0..300 {
@@ -975,9 +972,9 @@ pub(crate) mod tests {
                 let (h1, t1) = rays[r].intersect8(leaf, 0xff, 0.0, t_max[r]);
                 let want = if mask & (1 << r) != 0 { h1 } else { 0 };
                 assert_eq!(got[r].0, want, "leaf {k}, ray {r}");
-                for i in 0..8 {
+                for (i, t) in t1.iter().enumerate() {
                     if want & (1 << i) != 0 {
-                        assert_eq!(got[r].1[i].to_bits(), t1[i].to_bits(), "leaf {k}, ray {r}, lane {i}");
+                        assert_eq!(got[r].1[i].to_bits(), t.to_bits(), "leaf {k}, ray {r}, lane {i}");
                     }
                 }
                 hits += want.count_ones();
