@@ -857,6 +857,20 @@ pub(crate) mod tests {
 
     /// Eight at a time gives the one-at-a-time bits: random triangles, rays aimed at corners
     /// (edge functions of zero: the f64 path), along axes, partial groups and masks.
+    /// The direction from `origin` to triangle `aim`'s centroid, a corner or an edge's midpoint
+    /// (by `k`), with one component zeroed when `k` is a multiple of `zero_every`.
+    fn aimed(origin: Vec3, aim: [Vec3; 3], k: usize, zero_every: usize) -> Vec3 {
+        let mut dir = match k % 3 {
+            0 => (aim[0] + aim[1] + aim[2]) / 3.0 - origin,
+            1 => aim[k % 3] - origin,
+            _ => (aim[0] + aim[1]) * 0.5 - origin,
+        };
+        if k % zero_every == 0 {
+            dir[k % 3] = 0.0;
+        }
+        dir
+    }
+
     /// [`soup`]'s triangles as leaf triangles (no normals).
     fn leaf_soup(n: usize, seed: u64) -> Vec<LeafTriangle> {
         let (p, t) = soup(n, seed);
@@ -880,16 +894,7 @@ pub(crate) mod tests {
             let origin = Vec3::new(rnd(), rnd(), rnd()) * 20.0 - 5.0;
             let start = (k * 7) % (tris.len() - 8);
             let group = &tris[start..start + 1 + k % 8];
-            let aim = group[k % group.len()].corners;
-            let mut dir = match k % 3 {
-                0 => (aim[0] + aim[1] + aim[2]) / 3.0 - origin,
-                1 => aim[k % 3] - origin,
-                _ => (aim[0] + aim[1]) * 0.5 - origin,
-            };
-            if k % 11 == 0 {
-                dir[k % 3] = 0.0;
-            }
-            let ray = ShearedRay::new(origin, dir);
+            let ray = ShearedRay::new(origin, aimed(origin, group[k % group.len()].corners, k, 11));
             let active = if k % 4 == 0 { 0xff } else { (k as u32 * 37) & 0xff };
             let (t_min, t_max) = if k % 5 == 0 { (0.3, 0.9) } else { (0.0, f32::INFINITY) };
             let (h8, t8) = ray.intersect8(group, active, t_min, t_max);
@@ -947,18 +952,7 @@ pub(crate) mod tests {
             let start = (k * 7) % (tris.len() - 8);
             let leaf = &tris[start..start + 1 + k % 8];
             let rays: Vec<ShearedRay> = (0..64)
-                .map(|r| {
-                    let aim = leaf[r % leaf.len()].corners;
-                    let mut dir = match r % 3 {
-                        0 => (aim[0] + aim[1] + aim[2]) / 3.0 - origin,
-                        1 => aim[r % 3] - origin,
-                        _ => (aim[0] + aim[1]) * 0.5 - origin,
-                    };
-                    if r % 13 == 0 {
-                        dir[r % 3] = 0.0;
-                    }
-                    ShearedRay::new(origin, dir)
-                })
+                .map(|r| ShearedRay::new(origin, aimed(origin, leaf[r % leaf.len()].corners, r, 13)))
                 .collect();
             let mask = match k % 3 {
                 0 => u64::MAX,
