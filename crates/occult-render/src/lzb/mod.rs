@@ -1025,8 +1025,8 @@ impl Lzb {
         // §III.C: object-oriented ray casting: only unfinished pixels inside the projection of
         // a far leaf, each once (the done-mask). Without far leaves no pixel is cast: the
         // masks and the tile walk below are skipped (a frame whose plane lies at the far
-        // plane, every leaf near).
-        let no_rays = self.opts.oor && far.is_empty();
+        // plane, every leaf near), nor in a frame abandoned in its near pass.
+        let no_rays = (self.opts.oor && far.is_empty()) || payoff.abandoned();
         let mut cast_mask: Vec<bool> = if no_rays {
             Vec::new()
         } else {

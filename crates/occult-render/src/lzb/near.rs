@@ -218,6 +218,10 @@ impl Lzb {
             let raster_time = stats.phases.get(Phase::Raster).saturating_sub(raster_before);
             payoff.rasterized(submitted as u64, raster_time, false);
             drop(draws);
+            // Abandoned (`crate::payoff`): drawn again directly, nothing more of it here.
+            if payoff.abandoned() {
+                break;
+            }
             // The pyramid over what the batch drew, for the next batch's tests.
             if next < units.len() {
                 let t = Instant::now();
