@@ -38,13 +38,10 @@ fn the_cost_model_weighs_triangles_against_rays() {
     assert_eq!(z, 5.5);
 }
 
-/// No leaf and no hit: nothing costs anything; the plane is the near plane.
-/// `near_cull=on`: with every leaf near, the units behind a wall are not drawn, and the
-/// frame is the one drawn without culling (and `zbuffer`'s).
-#[test]
-fn near_cull_skips_what_the_near_pass_hides() {
+/// A wall of 12,800 triangles at z = 0 hiding another one at z = -2, both 4 × 4, a view of
+/// them and its reference frame.
+fn two_walls() -> (Arc<Scene>, View, Frame) {
     use occult_core::{Affine3A, Instance, SceneBuilder, Vec3};
-    // A wall of 12,800 triangles at z = 0 hiding another one at z = -2, both 4 × 4.
     let mut b = SceneBuilder::new();
     let grid = b.add_mesh("grid", crate::test_grid(80)).expect("a grid");
     let at = |z: f32| Instance {
@@ -55,12 +52,20 @@ fn near_cull_skips_what_the_near_pass_hides() {
     let root = b.add_group("walls", vec![at(0.0), at(-2.0)]).expect("a group");
     let scene = Arc::new(b.build(root).expect("a scene"));
     let (view, _) = crate::test_view(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 96, 64);
-    let options = RenderOptions::default();
     let mut reference = Frame::new(96, 64).expect("a frame");
-    crate::zbuffer::ZBuffer::new(scene.clone(), &options)
+    crate::zbuffer::ZBuffer::new(scene.clone(), &RenderOptions::default())
         .expect("zbuffer")
         .render(&view, &mut reference)
         .expect("a frame");
+    (scene, view, reference)
+}
+
+/// `near_cull=on`: with every leaf near, the units behind a wall are not drawn, and the
+/// frame is the one drawn without culling (and `zbuffer`'s).
+#[test]
+fn near_cull_skips_what_the_near_pass_hides() {
+    let (scene, view, reference) = two_walls();
+    let options = RenderOptions::default();
     for near_cull in [true, false] {
         let opts = LzbOptions {
             plane: Plane::Static,
@@ -88,6 +93,30 @@ fn near_cull_skips_what_the_near_pass_hides() {
     }
 }
 
+/// A frame abandoned in its near pass (`crate::payoff`) draws no more near batches and casts
+/// no ray: it is redrawn directly, and is the reference frame.
+#[test]
+fn a_frame_abandoned_in_its_near_pass_stops_there() {
+    use crate::direct::tests::ForceDirect;
+    let (scene, view, reference) = two_walls();
+    let opts = LzbOptions {
+        plane: Plane::Static,
+        plane_fraction: 1.0,
+        ..LzbOptions::default()
+    };
+    let mut lzb = Lzb::new(scene, &RenderOptions::default(), &opts).expect("lzb builds");
+    lzb.force(0, true);
+    let mut frame = Frame::new(96, 64).expect("a frame");
+    let stats = lzb.render(&view, &mut frame).expect("a frame");
+    assert!(frame.same_visibility(&reference));
+    assert_eq!(stats.counters.get(crate::direct::COUNTER), 1, "redrawn directly");
+    assert_eq!(stats.counters.get("rays"), 0);
+    // The first batch alone: the near wall takes several.
+    let near = stats.counters.get("near_triangles");
+    assert!(near <= (NEAR_FIRST_BATCH + NEAR_UNIT as usize) as u64, "{near} near triangles drawn");
+}
+
+/// No leaf and no hit: nothing costs anything; the plane is the near plane.
 #[test]
 fn nothing_in_view_puts_the_plane_at_the_near_plane() {
     assert_eq!(
