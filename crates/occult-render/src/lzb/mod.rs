@@ -144,8 +144,10 @@ const NEAR_FIRST_BATCH: usize = 4096;
 /// Triangle references of a unit of the near pass's tests (`near_cull=on`): consecutive near
 /// leaves of a mesh instance, up to this many, are tested as one box.
 const NEAR_UNIT: u32 = 256;
-/// Largest batch of the near pass: batches double up to it, each followed by a pyramid update.
-const NEAR_MAX_BATCH: usize = 1 << 16;
+/// Largest batch of the near pass: batches double up to it, each followed by a pyramid update
+/// (of the batch's screen rectangle: on a street, most of the screen; a near set of millions
+/// of triangles in batches of 65,536 spent more in updates than in drawing).
+const NEAR_MAX_BATCH: usize = 1 << 18;
 
 /// Pixels one task casts (one [`Caster`], so one coherence chain).
 const CHUNK: usize = 256;
