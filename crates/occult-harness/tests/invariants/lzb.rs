@@ -25,6 +25,10 @@ identical_on_every_generator! {
         "lzb:payoff=off,select=dynamic,base_cos=0.9,plane_reuse=1,coarse_rays=16,group_leaf=1",
         1
     );
+    /// A plane halfway: the far leaves of instances hidden behind the near set are dropped
+    /// before the rays (`far_cull=on`, the default), with the paper's near pass.
+    far_cull_plane_halfway_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("lzb:payoff=off,plane=static,plane_fraction=0.5,near_cull=off,far_cull=on", 2);
     /// A tiny plane: almost nothing near, almost every pixel goes to the rays.
     hybrid_everything_behind_the_plane_is_identical_on_every_generator:
         assert_variant_identical_on_every_generator("lzb:payoff=off,plane=static,plane_fraction=0.0001,leaf=32", 2);
@@ -346,6 +350,8 @@ fn bad_parameters_are_errors() {
         ("lzb:mode=naive,caster=octree,packets=on", "caster=bvh"),
         ("lzb:mode=naive,packets=maybe", "packets"),
         ("lzb:payoff=maybe", "payoff"),
+        ("lzb:oor=off,far_cull=on", "oor=on"),
+        ("lzb:far_cull=maybe", "far_cull"),
     ] {
         match spec(bad).build(scene.clone(), &o) {
             Err(RenderError::BadParameter(m)) => assert!(m.contains(names), "{bad}: {m}"),

@@ -110,7 +110,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use occult_core::{Aabb, Affine3A, Camera, Containment, Frustum, ItemId, Mat4, NodeKind, Scene, Vec3, Vec4, View};
-use occult_raster::{Draw, DrawTriangles, Frame, PixelRect, PyramidCounts, PyramidTest, Rasterizer, ZPyramid};
+use occult_raster::{Draw, DrawTriangles, Frame, PixelRect, PyramidCounts, Rasterizer, ZPyramid};
 use occult_spatial::{RayBvh, RayBvhConfig, RayBvhError, RayOctree, RayOctreeConfig, RayOctreeError};
 use rayon::prelude::*;
 
@@ -1013,6 +1013,11 @@ impl Lzb {
         crate::check_cancel(&self.raster)?;
         if let Some(share) = share.as_deref_mut() {
             share.depth(frame)?;
+        }
+        // Step 3½ (`far_cull=on`): the far leaves hidden behind the near set dropped.
+        if self.opts.far_cull && !far.is_empty() && !payoff.abandoned() {
+            let culled = self.cull_far(view, frame, &instances, &mut far, &mut stats)?;
+            stats.counters.add("far_culled_leaves", culled);
         }
 
         // Step 4: the unfinished pixels: nothing drawn nearer than the plane.

@@ -113,11 +113,7 @@ impl Lzb {
             }
         }
         units.sort_unstable_by(|a, b| a.distance.total_cmp(&b.distance));
-        let fits = |p: &ZPyramid| p.width() == w && p.height() == h;
-        let mut pyramid = match self.pyramid.take() {
-            Some(p) if fits(&p) => p,
-            _ => ZPyramid::new(w, h)?,
-        };
+        let mut pyramid = self.take_pyramid(w, h)?;
         pyramid.clear();
         let eye = view.camera().eye;
         let mut eyes: Vec<Option<Vec3>> = vec![None; instances.len()];
@@ -151,16 +147,7 @@ impl Lzb {
                     tested += 1;
                     let e = *eyes[inst as usize]
                         .get_or_insert_with(|| rec.world_from_object.inverse().transform_point3(eye));
-                    let occlusion = Occlusion {
-                        frame,
-                        pyramid: &pyramid,
-                        how: PyramidTest {
-                            global: true,
-                            hierarchical: true,
-                        },
-                        far_depth: view.far_depth(),
-                    };
-                    if occlusion.box_hidden(clip, &b, e, &mut counts) {
+                    if Occlusion::hierarchical(frame, &pyramid, view).box_hidden(clip, &b, e, &mut counts) {
                         culled_units += 1;
                         culled_triangles += u64::from(count);
                         payoff.saved(u64::from(count));
@@ -241,5 +228,71 @@ impl Lzb {
         stats.counters.add("near_culled_triangles", culled_triangles);
         self.pyramid = Some(pyramid);
         Ok(())
+    }
+
+    /// Step 3½ (`far_cull=on`, not in the paper): the far leaves hidden behind what the near
+    /// pass drew are removed from `far` before step 4 projects their polygons. A leaf whose
+    /// box is hidden over every pixel it covers (`hzb`'s face test, through a pyramid of the
+    /// frame's depth) holds nothing a pixel shows: each of its pixels shows a near triangle
+    /// in front of it, so no ray needs to be cast there for it (another far leaf may still
+    /// cover the pixel). Tested per instance, the union of its far leaves' boxes: one test
+    /// drops them all (tests leaf by leaf in the instances not hidden cost more than the
+    /// projections they saved, docs/lzb.md). Returns the leaves removed.
+    ///
+    /// # Errors
+    /// [`RenderError::Raster`] when the pyramid cannot be allocated.
+    pub(super) fn cull_far(
+        &mut self,
+        view: &View,
+        frame: &Frame,
+        instances: &[(InstanceRec, ItemId, Mat4)],
+        far: &mut Vec<(u32, u32)>,
+        stats: &mut FrameStats,
+    ) -> Result<u64> {
+        let t = Instant::now();
+        let (w, h) = (view.width(), view.height());
+        let mut pyramid = self.take_pyramid(w, h)?;
+        pyramid.rebuild(frame);
+        stats.phases.add(Phase::DepthStructure, t.elapsed());
+        let t = Instant::now();
+        let occlusion = Occlusion::hierarchical(frame, &pyramid, view);
+        let eye = view.camera().eye;
+        let mut counts = PyramidCounts::default();
+        let mut tested = 0u64;
+        far.sort_unstable();
+        let before = far.len();
+        let mut kept = Vec::with_capacity(far.len());
+        for (inst, r) in group_ranges(far) {
+            let (rec, _, clip) = &instances[inst as usize];
+            let Accel::Mesh { octree, .. } = &self.accel[rec.node.index()] else {
+                kept.extend_from_slice(&far[r]);
+                continue;
+            };
+            let nodes = octree.nodes();
+            let e = rec.world_from_object.inverse().transform_point3(eye);
+            let union = far[r.clone()]
+                .iter()
+                .fold(Aabb::EMPTY, |b, &(_, leaf)| b.union(nodes[leaf as usize].bounds));
+            tested += 1;
+            if occlusion.box_hidden(clip, &union, e, &mut counts) {
+                continue;
+            }
+            kept.extend_from_slice(&far[r]);
+        }
+        *far = kept;
+        self.pyramid = Some(pyramid);
+        stats.boxes_tested += tested;
+        stats.boxes_culled += (before - far.len()) as u64;
+        stats.phases.add(Phase::Cull, t.elapsed());
+        Ok((before - far.len()) as u64)
+    }
+
+    /// The frame's pyramid (`w × h`), made when there is none of that size; handed back to
+    /// `self.pyramid` by the caller.
+    fn take_pyramid(&mut self, w: u32, h: u32) -> Result<ZPyramid> {
+        match self.pyramid.take() {
+            Some(p) if p.width() == w && p.height() == h => Ok(p),
+            _ => Ok(ZPyramid::new(w, h)?),
+        }
     }
 }

@@ -99,6 +99,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             help: "draw the near set front to back in growing batches, testing each near leaf (or mesh) against the depth drawn so far through a pyramid, as hzb does, and skipping the hidden ones (not in the paper; off: one draw, §II)",
         },
         ParamDoc {
+            key: "far_cull",
+            default: "on",
+            help: "after the near pass, drop the far leaves hidden behind what it drew (an instance's far leaves tested as one box, through a pyramid of the near depth), so that object-oriented ray casting neither projects them nor casts their pixels (not in the paper; needs oor=on, and is off with oor=off)",
+        },
+        ParamDoc {
             key: "payoff",
             default: "on",
             help: "abandon a frame whose rays would take longer than drawing it directly, and draw runs of frames as frustum does while lzb frames are slower than such direct frames (not in the paper; lazy mode only: off, and refused, with mode=naive, whose frames are approximate)",
@@ -124,6 +129,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "pvl_triangles",
         "near_culled_units",
         "near_culled_triangles",
+        "far_culled_leaves",
         crate::payoff::COUNTERS[0],
         crate::payoff::COUNTERS[1],
         crate::direct::COUNTER,
@@ -218,6 +224,9 @@ pub struct LzbOptions {
     pub payoff: bool,
     /// Occlusion-cull the near set front to back (not in the paper).
     pub near_cull: bool,
+    /// Drop the far leaves hidden behind the near set before object-oriented ray casting
+    /// (not in the paper; needs `oor`).
+    pub far_cull: bool,
 }
 
 impl Default for LzbOptions {
@@ -279,9 +288,11 @@ impl LzbOptions {
             pvl_triangles: p.choice("pvl", &["leaves", "triangles"], "leaves")? == "triangles",
             payoff: p.flag("payoff", mode == Mode::Lazy)?,
             near_cull: p.flag("near_cull", true)?,
+            far_cull: false,
         };
         let o = Self {
             packets: p.flag("packets", o.mode == Mode::Naive && o.caster == CasterKind::Bvh)?,
+            far_cull: p.flag("far_cull", o.oor)?,
             ..o
         };
         if p.raw("bvh_leaf").is_some() && o.caster == CasterKind::Octree {
@@ -330,6 +341,11 @@ impl LzbOptions {
         }
         if self.plane_reuse == 0 {
             return bad("plane_reuse=0: a plane is used for at least 1 frame".into());
+        }
+        if self.far_cull && !self.oor {
+            return bad(
+                "far_cull=on drops hidden far leaves from object-oriented ray casting, which oor=off turns off (every unfinished pixel is then cast): it needs oor=on".into(),
+            );
         }
         if self.packets && (self.mode != Mode::Naive || self.caster != CasterKind::Bvh) {
             return bad(

@@ -116,6 +116,36 @@ fn a_frame_abandoned_in_its_near_pass_stops_there() {
     assert!(near <= (NEAR_FIRST_BATCH + NEAR_UNIT as usize) as u64, "{near} near triangles drawn");
 }
 
+/// `far_cull=on`: the far wall, wholly behind the near one, is dropped before object-oriented
+/// ray casting (no polygon projected); the frame is the reference's either way.
+#[test]
+fn far_cull_drops_the_far_leaves_behind_the_near_set() {
+    let (scene, view, reference) = two_walls();
+    for far_cull in [true, false] {
+        let opts = LzbOptions {
+            plane: Plane::Static,
+            plane_fraction: 0.8,
+            payoff: false,
+            far_cull,
+            ..LzbOptions::default()
+        };
+        let mut lzb = Lzb::new(scene.clone(), &RenderOptions::default(), &opts).expect("lzb builds");
+        let mut frame = Frame::new(96, 64).expect("a frame");
+        let stats = lzb.render(&view, &mut frame).expect("a frame");
+        assert!(frame.same_visibility(&reference), "far_cull={far_cull}");
+        let far = stats.counters.get("far_leaves");
+        assert!(far > 0, "the far wall lies beyond the plane");
+        assert!(stats.counters.get("near_leaves") > 0, "the near wall before it");
+        if far_cull {
+            assert_eq!(stats.counters.get("far_culled_leaves"), far);
+            assert_eq!(stats.counters.get("oor_polygons"), 0);
+        } else {
+            assert_eq!(stats.counters.get("far_culled_leaves"), 0);
+            assert!(stats.counters.get("oor_polygons") > 0);
+        }
+    }
+}
+
 /// No leaf and no hit: nothing costs anything; the plane is the near plane.
 #[test]
 fn nothing_in_view_puts_the_plane_at_the_near_plane() {
