@@ -179,7 +179,8 @@ impl DirectFrames {
         if self.choice.model().is_none() {
             self.choice
                 .direct(s.total, s.phases.get(Phase::Raster), s.triangles_submitted);
-            self.choice.direct_left = self.choice.direct_left.max(FIRST_MEASURED - 1);
+            // The rest of the first measurement's frames (none while it is one frame).
+            self.choice.direct_left += FIRST_MEASURED.saturating_sub(1 + self.choice.direct_left);
         }
         stats.add_counts(&s);
         stats.phases.merge(&s.phases);

@@ -668,14 +668,14 @@ pub(crate) mod tests {
     pub(crate) fn awkward_ray(rnd: &mut impl FnMut() -> f32, k: usize, slab_y: f32) -> FatRay {
         let mut origin = Vec3::new(rnd(), rnd(), rnd()) * 16.0 - 3.0;
         let mut dir = Vec3::new(rnd(), rnd(), rnd()) * 2.0 - 1.0;
-        if k % 5 == 0 {
+        if k.is_multiple_of(5) {
             dir[k % 3] = 0.0;
         }
-        if k % 7 == 0 {
+        if k.is_multiple_of(7) {
             origin.y = slab_y;
             dir.y = 0.0;
         }
-        let (spread, margin) = if k % 2 == 0 { (0.0, 0.0) } else { (0.002, 0.01) };
+        let (spread, margin) = if k.is_multiple_of(2) { (0.0, 0.0) } else { (0.002, 0.01) };
         FatRay::new(origin, dir, spread, margin)
     }
 
@@ -865,7 +865,7 @@ pub(crate) mod tests {
             1 => aim[k % 3] - origin,
             _ => (aim[0] + aim[1]) * 0.5 - origin,
         };
-        if k % zero_every == 0 {
+        if k.is_multiple_of(zero_every) {
             dir[k % 3] = 0.0;
         }
         dir

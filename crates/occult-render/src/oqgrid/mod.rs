@@ -1348,7 +1348,6 @@ impl Renderer for OqGrid {
         } = walk;
         self.predrawn = predrawn;
         let recorded = record.is_some();
-        drop(record);
         // A cancelled frame's list is incomplete, and its costs are no measure: both dropped.
         if control.is_cancelled() {
             return Err(crate::RenderError::Cancelled);
