@@ -1015,9 +1015,13 @@ impl Lzb {
             share.depth(frame)?;
         }
         // Step 3½ (`far_cull=on`): the far leaves hidden behind the near set dropped.
-        if self.opts.far_cull && !far.is_empty() && !payoff.abandoned() {
+        // Without a near leaf nothing is drawn that could hide one: no test could pass.
+        let mut far_cull_time = Duration::ZERO;
+        if self.opts.far_cull && !far.is_empty() && !near.is_empty() && !payoff.abandoned() {
+            let t = Instant::now();
             let culled = self.cull_far(view, frame, &instances, &mut far, &mut stats)?;
             stats.counters.add("far_culled_leaves", culled);
+            far_cull_time = t.elapsed();
         }
 
         // Step 4: the unfinished pixels: nothing drawn nearer than the plane.
@@ -1250,7 +1254,8 @@ impl Lzb {
             if far_triangles > 0 && !naive {
                 // An empty PVL is a measurement too (a share of 0), unlike a zero time.
                 self.pvl_share = 0.5 * (self.pvl_share + pvl as f64 / far_triangles as f64);
-                let other = stats.phases.get(Phase::Other).as_nanos() as f64;
+                // With `far_cull`, its tests are part of what a far leaf costs.
+                let other = (stats.phases.get(Phase::Other) + far_cull_time).as_nanos() as f64;
                 self.ns_per_far_leaf = blend(self.ns_per_far_leaf, other / far_leaves as f64);
             }
             // The fine rays alone: the coarse ones are thin first-hit rays, several times

@@ -258,7 +258,7 @@ impl Lzb {
         let occlusion = Occlusion::hierarchical(frame, &pyramid, view);
         let eye = view.camera().eye;
         let mut counts = PyramidCounts::default();
-        let mut tested = 0u64;
+        let (mut tested, mut hidden) = (0u64, 0u64);
         far.sort_unstable();
         let before = far.len();
         let mut kept = Vec::with_capacity(far.len());
@@ -275,6 +275,7 @@ impl Lzb {
                 .fold(Aabb::EMPTY, |b, &(_, leaf)| b.union(nodes[leaf as usize].bounds));
             tested += 1;
             if occlusion.box_hidden(clip, &union, e, &mut counts) {
+                hidden += 1;
                 continue;
             }
             kept.extend_from_slice(&far[r]);
@@ -282,7 +283,7 @@ impl Lzb {
         *far = kept;
         self.pyramid = Some(pyramid);
         stats.boxes_tested += tested;
-        stats.boxes_culled += (before - far.len()) as u64;
+        stats.boxes_culled += hidden;
         stats.phases.add(Phase::Cull, t.elapsed());
         Ok((before - far.len()) as u64)
     }

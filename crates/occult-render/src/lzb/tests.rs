@@ -41,15 +41,24 @@ fn the_cost_model_weighs_triangles_against_rays() {
 /// A wall of 12,800 triangles at z = 0 hiding another one at z = -2, both 4 × 4, a view of
 /// them and its reference frame.
 fn two_walls() -> (Arc<Scene>, View, Frame) {
+    walls(4.0)
+}
+
+/// A wall of 12,800 triangles at z = 0, `near_size` wide, before another one at z = -2, 4 × 4
+/// (partly seen around the first when that is less than about 2.4 wide), a view of them and
+/// its reference frame.
+fn walls(near_size: f32) -> (Arc<Scene>, View, Frame) {
     use occult_core::{Affine3A, Instance, SceneBuilder, Vec3};
     let mut b = SceneBuilder::new();
     let grid = b.add_mesh("grid", crate::test_grid(80)).expect("a grid");
-    let at = |z: f32| Instance {
-        parent_from_child: Affine3A::from_translation(Vec3::new(-2.0, -2.0, z))
-            * Affine3A::from_scale(Vec3::splat(4.0)),
+    let at = |z: f32, size: f32| Instance {
+        parent_from_child: Affine3A::from_translation(Vec3::new(-size / 2.0, -size / 2.0, z))
+            * Affine3A::from_scale(Vec3::splat(size)),
         child: grid,
     };
-    let root = b.add_group("walls", vec![at(0.0), at(-2.0)]).expect("a group");
+    let root = b
+        .add_group("walls", vec![at(0.0, near_size), at(-2.0, 4.0)])
+        .expect("a group");
     let scene = Arc::new(b.build(root).expect("a scene"));
     let (view, _) = crate::test_view(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 96, 64);
     let mut reference = Frame::new(96, 64).expect("a frame");
@@ -93,16 +102,26 @@ fn near_cull_skips_what_the_near_pass_hides() {
     }
 }
 
-/// A frame abandoned in its near pass (`crate::payoff`) draws no more near batches and casts
-/// no ray: it is redrawn directly, and is the reference frame.
+/// A frame abandoned in its near pass (`crate::payoff`) draws no more near batches, projects
+/// no far leaf and casts no ray: it is redrawn directly, and is the reference frame, as is the
+/// next one.
 #[test]
 fn a_frame_abandoned_in_its_near_pass_stops_there() {
     use crate::direct::tests::ForceDirect;
     let (scene, view, reference) = two_walls();
+    // The near wall near, the far one beyond the plane.
     let opts = LzbOptions {
         plane: Plane::Static,
-        plane_fraction: 1.0,
+        plane_fraction: 0.8,
         ..LzbOptions::default()
+    };
+    let full = {
+        let mut lzb = Lzb::new(scene.clone(), &RenderOptions::default(), &LzbOptions { payoff: false, ..opts.clone() })
+            .expect("lzb builds");
+        let mut frame = Frame::new(96, 64).expect("a frame");
+        let stats = lzb.render(&view, &mut frame).expect("a frame");
+        assert!(stats.counters.get("far_leaves") > 0);
+        stats.counters.get("near_triangles")
     };
     let mut lzb = Lzb::new(scene, &RenderOptions::default(), &opts).expect("lzb builds");
     lzb.force(0, true);
@@ -110,10 +129,14 @@ fn a_frame_abandoned_in_its_near_pass_stops_there() {
     let stats = lzb.render(&view, &mut frame).expect("a frame");
     assert!(frame.same_visibility(&reference));
     assert_eq!(stats.counters.get(crate::direct::COUNTER), 1, "redrawn directly");
+    assert_eq!(stats.counters.get("oor_polygons"), 0, "no far leaf projected");
     assert_eq!(stats.counters.get("rays"), 0);
-    // The first batch alone: the near wall takes several.
     let near = stats.counters.get("near_triangles");
-    assert!(near <= (NEAR_FIRST_BATCH + NEAR_UNIT as usize) as u64, "{near} near triangles drawn");
+    assert!(near < full, "{near} near triangles drawn of {full}");
+    lzb.force(0, false);
+    let mut frame = Frame::new(96, 64).expect("a frame");
+    lzb.render(&view, &mut frame).expect("a frame");
+    assert!(frame.same_visibility(&reference), "the frame after");
 }
 
 /// `far_cull=on`: the far wall, wholly behind the near one, is dropped before object-oriented
@@ -144,6 +167,22 @@ fn far_cull_drops_the_far_leaves_behind_the_near_set() {
             assert!(stats.counters.get("oor_polygons") > 0);
         }
     }
+    // A near wall too small to hide the far one (seen around it, over empty pixels too):
+    // nothing dropped, rays cast, the reference frame.
+    let (scene, view, reference) = walls(1.5);
+    let opts = LzbOptions {
+        plane: Plane::Static,
+        plane_fraction: 0.8,
+        payoff: false,
+        ..LzbOptions::default()
+    };
+    let mut lzb = Lzb::new(scene, &RenderOptions::default(), &opts).expect("lzb builds");
+    let mut frame = Frame::new(96, 64).expect("a frame");
+    let stats = lzb.render(&view, &mut frame).expect("a frame");
+    assert!(frame.same_visibility(&reference));
+    assert!(stats.counters.get("far_leaves") > 0);
+    assert_eq!(stats.counters.get("far_culled_leaves"), 0);
+    assert!(stats.counters.get("rays") > 0);
 }
 
 /// No leaf and no hit: nothing costs anything; the plane is the near plane.
