@@ -116,8 +116,15 @@ fn a_frame_abandoned_in_its_near_pass_stops_there() {
         ..LzbOptions::default()
     };
     let full = {
-        let mut lzb = Lzb::new(scene.clone(), &RenderOptions::default(), &LzbOptions { payoff: false, ..opts.clone() })
-            .expect("lzb builds");
+        let mut lzb = Lzb::new(
+            scene.clone(),
+            &RenderOptions::default(),
+            &LzbOptions {
+                payoff: false,
+                ..opts.clone()
+            },
+        )
+        .expect("lzb builds");
         let mut frame = Frame::new(96, 64).expect("a frame");
         let stats = lzb.render(&view, &mut frame).expect("a frame");
         assert!(stats.counters.get("far_leaves") > 0);
