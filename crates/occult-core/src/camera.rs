@@ -112,6 +112,9 @@ pub struct View {
     view_from_world: Mat4,
     clip_from_view: Mat4,
     clip_from_world: Mat4,
+    /// The rows this view renders, `[first, end)`: all of them unless restricted
+    /// ([`View::with_rows`]).
+    rows: [u32; 2],
 }
 
 impl View {
@@ -140,7 +143,40 @@ impl View {
             view_from_world,
             clip_from_view,
             clip_from_world,
+            rows: [0, height],
         })
+    }
+
+    /// This view restricted to the pixel rows `rows` of its frame (a band of the screen, as
+    /// sort-first rendering gives each thread): the same camera, matrices and resolution, so
+    /// that every pixel of the band comes out as in the whole view; its [`View::frustum`]
+    /// holds only what can reach those rows, and the rasterizer writes no other row.
+    ///
+    /// # Errors
+    /// [`CoreError::BadResolution`] for an empty range or one beyond the last row.
+    pub fn with_rows(&self, rows: std::ops::Range<u32>) -> Result<Self> {
+        if rows.start >= rows.end || rows.end > self.height {
+            return Err(CoreError::BadResolution {
+                width: self.width,
+                height: self.height,
+                reason: format!("rows {}..{} are not a band of its rows", rows.start, rows.end),
+            });
+        }
+        Ok(Self {
+            rows: [rows.start, rows.end],
+            ..*self
+        })
+    }
+
+    /// The pixel rows this view renders (all of them, `0..height`, unless restricted by
+    /// [`View::with_rows`]).
+    pub fn rows(&self) -> std::ops::Range<u32> {
+        self.rows[0]..self.rows[1]
+    }
+
+    /// Whether this view renders only some rows ([`View::with_rows`]).
+    pub fn is_band(&self) -> bool {
+        self.rows != [0, self.height]
     }
 
     /// The same camera at another resolution.
@@ -190,9 +226,22 @@ impl View {
     /// The culling frustum in object space, widened by two pixels on each side and by 0.1 %
     /// in depth, so that nothing it rejects could reach a pixel centre through the
     /// rasterizer's snapping and rounding.
+    /// A band's ([`View::with_rows`]) bottom and top planes bound its rows instead, widened
+    /// the same (a side that is the frame's own keeps the frame's plane).
     pub fn frustum(&self, world_from_object: &Affine3A) -> Frustum {
         let margin = Vec2::new(4.0 / self.width as f32, 4.0 / self.height as f32);
-        Frustum::from_reversed_z(&self.clip_from_object(world_from_object), self.camera.far, margin, 1e-3)
+        let clip_from_object = self.clip_from_object(world_from_object);
+        let frustum = Frustum::from_reversed_z(&clip_from_object, self.camera.far, margin, 1e-3);
+        if !self.is_band() {
+            return frustum;
+        }
+        // Screen row `sy` is `y_ndc = 1 - 2 sy / height`; the band is rows `[first, end)`,
+        // two pixels wider on each side.
+        let h = self.height as f32;
+        let [first, end] = self.rows;
+        let bottom = (end < self.height).then(|| 1.0 - 2.0 * (end as f32 + 2.0) / h);
+        let top = (first > 0).then(|| 1.0 - 2.0 * (first as f32 - 2.0) / h);
+        frustum.with_y_range(&clip_from_object, bottom, top)
     }
 }
 

@@ -201,6 +201,21 @@ impl Frustum {
         }
     }
 
+    /// This frustum (of `clip_from_object`, as [`Frustum::from_reversed_z`] made it) with its
+    /// bottom plane moved to `y_ndc = bottom` and its top one to `y_ndc = top`, where given: a
+    /// band of the screen's rows.
+    pub fn with_y_range(mut self, clip_from_object: &Mat4, bottom: Option<f32>, top: Option<f32>) -> Self {
+        let m = clip_from_object.transpose();
+        let (r1, r3) = (m.y_axis, m.w_axis);
+        if let Some(b) = bottom {
+            self.planes[2] = Plane::from_vec4(r1 - r3 * b);
+        }
+        if let Some(t) = top {
+            self.planes[3] = Plane::from_vec4(r3 * t - r1);
+        }
+        self
+    }
+
     /// Classifies a box by the centre–extent test against each plane. Conservative: a box
     /// reported `Outside` lies outside one plane entirely.
     #[inline]

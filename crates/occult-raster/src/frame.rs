@@ -7,10 +7,15 @@ use occult_core::{ItemId, NO_ITEM};
 /// Depth of a cleared pixel: reversed-Z zero, infinitely far.
 pub const CLEAR_DEPTH: f32 = 0.0;
 
+/// Depth of a pixel outside the band of rows a frame is drawn for ([`Frame::band`]): nearer
+/// than anything, so that every depth test and occlusion test finds whatever lies there hidden
+/// and judges a box by its pixels in the band alone.
+pub const BLOCKED_DEPTH: f32 = f32::INFINITY;
+
 /// A `width × height` frame, row-major, row 0 at the top. Depth is reversed-Z `z_ndc`
 /// (greater is nearer, [`CLEAR_DEPTH`] when nothing was drawn); item ids name the triangle
 /// instance kept at each pixel ([`NO_ITEM`] when none); color is filled by [`crate::shade`].
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct Frame {
     width: u32,
     height: u32,
@@ -20,6 +25,25 @@ pub struct Frame {
     /// True while `color` was written by the renderer for the current depth and items (see
     /// [`Frame::resolved_color_mut`]); [`crate::shade`] then leaves it alone.
     pub(crate) color_resolved: bool,
+    /// The rows drawn into, `[start, end)`: all of them but for a frame prepared for a band of
+    /// rows ([`crate::Rasterizer::clear_rows`]), whose other rows hold [`BLOCKED_DEPTH`].
+    band: [u32; 2],
+    /// Written by a caller through [`Frame::buffers_mut`] or [`Frame::write_fragment`] since it
+    /// was last cleared: rows outside `band` may hold anything.
+    foreign: bool,
+}
+
+/// Frames are equal when their sizes, buffers and whether their colors were resolved are:
+/// the band of rows it was last prepared for is not part of the picture.
+impl PartialEq for Frame {
+    fn eq(&self, other: &Self) -> bool {
+        self.width == other.width
+            && self.height == other.height
+            && self.depth == other.depth
+            && self.items == other.items
+            && self.color == other.color
+            && self.color_resolved == other.color_resolved
+    }
 }
 
 impl Frame {
@@ -59,6 +83,8 @@ impl Frame {
             items,
             color,
             color_resolved: false,
+            band: [0, height],
+            foreign: false,
         })
     }
 
@@ -92,6 +118,29 @@ impl Frame {
         self.color_resolved = false;
         self.depth.fill(CLEAR_DEPTH);
         self.items.fill(NO_ITEM);
+        self.band = [0, self.height];
+        self.foreign = false;
+    }
+
+    /// The rows this frame was last prepared for ([`crate::Rasterizer::clear_rows`]): all of
+    /// them, or a band of rows whose others hold [`BLOCKED_DEPTH`].
+    pub fn band(&self) -> std::ops::Range<u32> {
+        self.band[0]..self.band[1]
+    }
+
+    /// Depth and items, for the rasterizer, which writes only the rows of the view it draws.
+    pub(crate) fn buffers_unmarked(&mut self) -> (&mut [f32], &mut [ItemId]) {
+        self.color_resolved = false;
+        (&mut self.depth, &mut self.items)
+    }
+
+    /// The rows `[start, end)` this frame holds as a band, whether a caller wrote pixels
+    /// since it was last cleared; records the band it is being prepared for, written by no one.
+    pub(crate) fn prepare(&mut self, band: std::ops::Range<u32>) -> ([u32; 2], bool) {
+        let before = (self.band, self.foreign);
+        self.band = [band.start, band.end];
+        self.foreign = false;
+        before
     }
     /// Pixels holding an item.
     pub fn covered_pixel_count(&self) -> u64 {
@@ -189,8 +238,8 @@ impl Frame {
     /// Mutable access to depth and items, for renderers that write pixels themselves (point
     /// samples, ray casting) under the same (depth, item) rule as the rasterizer.
     pub fn buffers_mut(&mut self) -> (&mut [f32], &mut [ItemId]) {
-        self.color_resolved = false;
-        (&mut self.depth, &mut self.items)
+        self.foreign = true;
+        self.buffers_unmarked()
     }
 
     /// Colors written by a renderer that resolves them itself (a filtered reconstruction whose
@@ -212,6 +261,7 @@ impl Frame {
     /// (greater depth), or equally near with a smaller item id. Returns whether it was kept.
     #[inline]
     pub fn write_fragment(&mut self, x: u32, y: u32, depth: f32, item: ItemId) -> bool {
+        self.foreign = true;
         let i = y as usize * self.width as usize + x as usize;
         keep_fragment(&mut self.depth[i], &mut self.items[i], depth, item)
     }

@@ -49,7 +49,7 @@ mod shade;
 pub mod zpyramid;
 
 pub use control::FrameControl;
-pub use frame::{keep_fragment, Frame, CLEAR_DEPTH};
+pub use frame::{keep_fragment, Frame, BLOCKED_DEPTH, CLEAR_DEPTH};
 pub use nbuffer::{Extremum, NBuffer};
 pub use query::{query_box, query_box_counted, query_rect, BoxQuery, PixelRect};
 pub use raster::stencil::{StencilBuffer, StencilCounts, StencilDraw, StencilFaces};

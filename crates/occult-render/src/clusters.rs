@@ -180,6 +180,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         crate::direct::SCREENED,
     ],
     conservative: true,
+    bands: true,
     build: |scene, options, params| {
         let mut co = ClusterOptions::default();
         crate::params::read_params!(params, co, {

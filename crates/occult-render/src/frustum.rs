@@ -87,6 +87,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
     ],
     counters: &[],
     conservative: true,
+    bands: true,
     build: |scene, options, params| {
         let mut fo = FrustumOptions::default();
         crate::params::read_params!(params, fo, {

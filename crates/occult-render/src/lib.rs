@@ -72,6 +72,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod bands;
 #[cfg(test)]
 mod cancel_tests;
 pub mod clusters;
@@ -228,6 +229,9 @@ pub struct AlgorithmInfo {
     /// Whether its frames are bit-identical to `zbuffer`'s (DESIGN invariant 2) or approximate
     /// (invariant 3).
     pub conservative: bool,
+    /// Whether it draws a frame as bands of rows with `bands=N` ([`bands`]): it writes pixels
+    /// only through the rasterizer, so that a band's view confines it to its rows.
+    pub bands: bool,
     /// Builds it (the settings' keys are checked first).
     pub build: BuildFn,
 }
@@ -308,10 +312,20 @@ impl Algorithm {
 
     /// Its parameter keys, comma-separated, for messages (`none` when it has none).
     pub fn keys(self) -> String {
-        if self.0.params.is_empty() {
+        let params = self.params();
+        if params.is_empty() {
             return "none".into();
         }
-        self.0.params.iter().map(|d| d.key).collect::<Vec<_>>().join(", ")
+        params.iter().map(|d| d.key).collect::<Vec<_>>().join(", ")
+    }
+
+    /// Its settings: its own, then `bands` ([`bands::BANDS_PARAM`]) where it takes it.
+    pub fn params(self) -> Vec<ParamDoc> {
+        let mut params = self.0.params.to_vec();
+        if self.0.bands {
+            params.push(bands::BANDS_PARAM);
+        }
+        params
     }
 
     /// The names of the counters ([`FrameStats::counters`]) it may report, whichever its
@@ -344,7 +358,10 @@ impl AlgoSpec {
         self.check_keys()?;
         match options.split_hook() {
             (inner, Some(hook)) => hook(scene, &inner, self),
-            (_, None) => (self.algorithm.0.build)(scene, options, &self.params),
+            (_, None) => match bands::bands(self)? {
+                1 => (self.algorithm.0.build)(scene, options, &self.params),
+                n => Ok(Box::new(bands::Bands::build(scene, options, self, n)?)),
+            },
         }
     }
 }
@@ -487,7 +504,7 @@ pub(crate) fn begin_frame(
     check_cancel(raster)?;
     let start = Instant::now();
     let mut stats = FrameStats::default();
-    raster.clear(frame);
+    raster.clear_rows(frame, view.rows());
     let cleared_at = Instant::now();
     stats.phases.add(Phase::Clear, cleared_at - start);
     Ok((start, cleared_at, stats))

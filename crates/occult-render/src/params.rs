@@ -244,7 +244,7 @@ impl AlgoSpec {
     /// # Errors
     /// [`RenderError::BadParameter`] naming the key and listing the valid ones.
     pub fn check_keys(&self) -> Result<()> {
-        let docs = self.algorithm.info().params;
+        let docs = self.algorithm.params();
         for (key, _) in self.params.entries() {
             if !docs.iter().any(|d| d.key == key) {
                 return Err(RenderError::BadParameter(format!(

@@ -22,6 +22,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
     params: &[],
     counters: &[],
     conservative: true,
+    bands: true,
     build: |scene, options, _| Ok(Box::new(ZBuffer::new(scene, options)?)),
 };
 

@@ -1,7 +1,7 @@
 //! `occult algos`: the renderers and their parameters, from the registry.
 
 use anyhow::Result;
-use occult_render::ALGORITHMS;
+use occult_render::{Algorithm, ALGORITHMS};
 use serde::Serialize;
 
 use crate::args::AlgosArgs;
@@ -23,8 +23,9 @@ pub fn run(a: AlgosArgs) -> Result<()> {
             name: i.name,
             description: i.summary,
             conservative: i.conservative,
-            parameters: i
-                .params
+            parameters: Algorithm::parse(i.name)
+                .map(Algorithm::params)
+                .unwrap_or_default()
                 .iter()
                 .map(|p| ParamOut::new(p.key, p.default, p.help))
                 .collect(),

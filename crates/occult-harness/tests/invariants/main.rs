@@ -4,6 +4,7 @@
 //! end-to-end checks that need several renderers or real scenes (counters, errors, `rzb`'s
 //! measured error), and the golden frames that pin `zbuffer` itself. One module per renderer; `support` holds the shared checks.
 
+mod bands;
 mod clusters;
 mod frustum;
 mod golden;

@@ -433,15 +433,49 @@ impl Rasterizer {
 
     /// Clears `frame`'s depth and items, in parallel on this rasterizer's threads.
     pub fn clear(&self, frame: &mut Frame) {
-        let (depth, items) = frame.buffers_mut();
+        self.clear_rows(frame, 0..frame.height());
+    }
+
+    /// Prepares `frame` for a view of the rows `rows` ([`occult_core::View::with_rows`]; all
+    /// of them for a whole view): clears those rows, and gives every other row
+    /// [`crate::BLOCKED_DEPTH`] and no item, so that tests of what is drawn judge a box by its
+    /// pixels in the band alone. A frame prepared for the same band frame after frame costs
+    /// the clear of its own rows only (and of those that left the band).
+    pub fn clear_rows(&self, frame: &mut Frame, rows: std::ops::Range<u32>) {
+        let h = frame.height();
+        let rows = rows.start.min(h)..rows.end.min(h);
+        let (before, foreign) = frame.prepare(rows.clone());
+        let w = frame.width() as usize;
+        let (depth, items) = frame.buffers_unmarked();
+        let mut fill = |span: std::ops::Range<u32>, value: f32| {
+            if span.start >= span.end {
+                return;
+            }
+            let px = span.start as usize * w..span.end as usize * w;
+            self.fill(&mut depth[px.clone()], &mut items[px], value);
+        };
+        fill(rows.clone(), crate::CLEAR_DEPTH);
+        if foreign {
+            // Anything may lie outside the band: block all of it.
+            fill(0..rows.start, crate::BLOCKED_DEPTH);
+            fill(rows.end..h, crate::BLOCKED_DEPTH);
+        } else {
+            // Rows of the last band that are not in this one; the rest are blocked already.
+            fill(before[0]..before[1].min(rows.start), crate::BLOCKED_DEPTH);
+            fill(before[0].max(rows.end)..before[1], crate::BLOCKED_DEPTH);
+        }
+    }
+
+    /// Sets `depth` to `value` and `items` to none, on this rasterizer's threads.
+    fn fill(&self, depth: &mut [f32], items: &mut [occult_core::ItemId], value: f32) {
         if self.config.threads == 1 {
-            depth.fill(crate::CLEAR_DEPTH);
+            depth.fill(value);
             items.fill(occult_core::NO_ITEM);
             return;
         }
         let jobs = depth.chunks_mut(1 << 16).zip(items.chunks_mut(1 << 16)).collect();
         self.workers(self.thread_count()).share(jobs, |(d, i)| {
-            d.fill(crate::CLEAR_DEPTH);
+            d.fill(value);
             i.fill(occult_core::NO_ITEM);
         });
     }
@@ -455,7 +489,8 @@ impl Rasterizer {
         }
     }
 
-    /// Rasterizes `draws` into `frame` (not cleared first).
+    /// Rasterizes `draws` into `frame` (not cleared first). A view restricted to some rows
+    /// ([`View::with_rows`]) writes only those, on the calling thread whatever the strategy.
     ///
     /// # Panics
     /// If the frame's size differs from the view's (a programmer error).
@@ -466,7 +501,12 @@ impl Rasterizer {
             "frame and view sizes differ"
         );
         let vp = Viewport::new(view, &self.config);
-        let shared = self.shared_as(draws, u64::from(view.width()) * u64::from(view.height()));
+        // A band of rows (`View::with_rows`) is one thread's share already.
+        let shared = if view.is_band() {
+            None
+        } else {
+            self.shared_as(draws, u64::from(view.width()) * u64::from(view.height()))
+        };
         self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES, shared)
     }
 

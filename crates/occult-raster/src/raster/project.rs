@@ -47,6 +47,8 @@ pub(super) struct Viewport {
     pub(super) tiles_x: u32,
     pub(super) tiles_y: u32,
     pub(super) cull_backfaces: bool,
+    /// The first and last row drawn (inclusive): the view's rows ([`View::rows`]).
+    pub(super) rows: [u32; 2],
 }
 
 impl Viewport {
@@ -66,6 +68,7 @@ impl Viewport {
             tiles_x: width.div_ceil(tile_size),
             tiles_y: height.div_ceil(tile_size),
             cull_backfaces: config.cull_backfaces,
+            rows: [view.rows().start, view.rows().end - 1],
         }
     }
 

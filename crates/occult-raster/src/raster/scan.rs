@@ -32,7 +32,8 @@ impl<'a> FrameTarget<'a> {
     /// The depth and item buffers of `frame`.
     pub(super) fn new(frame: &'a mut Frame) -> Self {
         let width = frame.width() as usize;
-        let (depth, items) = frame.buffers_mut();
+        // The rows written are marked by the draw (`Rasterizer::draw`).
+        let (depth, items) = frame.buffers_unmarked();
         Self::from_buffers(depth, items, width)
     }
 

@@ -573,6 +573,7 @@ mod tests {
             tiles_x: width.div_ceil(64),
             tiles_y: height.div_ceil(64),
             cull_backfaces: rng.random_bool(0.3),
+            rows: [0, height - 1],
         }
     }
 

@@ -38,7 +38,8 @@ pub(super) unsafe fn draw_direct<const AVX2: bool>(
     target: &FrameTarget<'_>,
     mode: RasterMode,
 ) -> (u64, u64, [u32; 4]) {
-    let rect = [0, 0, vp.width - 1, vp.height - 1];
+    // The view's rows: all of them but for a band (`View::with_rows`).
+    let rect = [0, vp.rows[0], vp.width - 1, vp.rows[1]];
     let mut sink = DirectSink::<AVX2> {
         target,
         rect,
@@ -173,6 +174,9 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
 
     #[inline(always)]
     fn push_lane(&mut self, vp: &Viewport, t: TriSetup) {
+        if u32::from(t.py1) < self.rect[1] || u32::from(t.py0) > self.rect[3] {
+            return; // wholly outside a band's rows
+        }
         // SAFETY: a DirectSink is only made by `draw_direct`, whose caller guarantees that
         // no other thread touches the frame during the draw.
         self.written += unsafe { scan_triangle::<AVX2>(vp, &t, self.rect, self.target, self.mode) };
@@ -202,10 +206,14 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
 
     #[inline(always)]
     fn push_small(&mut self, vp: &Viewport, t: TriSetup, cover: SmallCover) {
-        // Counted with its batch (`count_lanes`). The direct sink's rectangle is the whole
-        // frame, which holds the box: `scan_triangle` would scan the box itself, small, from
-        // these edge functions, or from the mask that the 8-lane setup formed from them.
+        // Counted with its batch (`count_lanes`). Unless the view is a band of rows that cuts
+        // the box, the direct sink's rectangle holds the box: `scan_triangle` would scan the
+        // box itself, small, from these edge functions, or from the mask that the 8-lane setup
+        // formed from them.
         let rect = [t.px0 as u32, t.py0 as u32, t.px1 as u32, t.py1 as u32];
+        if rect[1] < self.rect[1] || rect[3] > self.rect[3] {
+            return self.push_lane(vp, t);
+        }
         // SAFETY: as in `push`.
         self.written += unsafe { scan_small::<AVX2>(vp, &t, rect, cover, self.target, self.mode) };
     }

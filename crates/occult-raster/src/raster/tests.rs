@@ -197,6 +197,70 @@ fn banded_draws_are_direct_draws() {
     }
 }
 
+/// A view restricted to a band of rows ([`View::with_rows`]) writes those rows as the whole
+/// view does and no other; a frame prepared for it ([`Rasterizer::clear_rows`]) holds
+/// [`crate::BLOCKED_DEPTH`] and no item elsewhere, and when the band moves, the rows that left
+/// it are blocked again.
+#[test]
+fn bands_of_rows_draw_their_rows_alone() {
+    let view =
+        View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 301, 203).expect("a valid 301 × 203 view");
+    let meshes = [grid(60, 0.01), grid(30, 0.25), grid(6, 4.0)];
+    let draws: Vec<Draw<'_>> = meshes
+        .iter()
+        .enumerate()
+        .map(|(k, mesh)| Draw {
+            mesh,
+            triangles: DrawTriangles::All,
+            clip_from_object: view.clip_from_object(&Affine3A::from_translation(Vec3::new(
+                0.2 * k as f32,
+                0.0,
+                -(k as f32),
+            ))),
+            first_item: 100_000 * k as u64,
+        })
+        .collect();
+    let mut r = Rasterizer::new(RasterConfig {
+        threads: 1,
+        ..RasterConfig::default()
+    })
+    .expect("a valid configuration");
+    let mut whole = Frame::new(301, 203).expect("a frame");
+    r.draw(&view, &mut whole, &draws, RasterMode::Full);
+    let mut frame = Frame::new(301, 203).expect("a frame");
+    for rows in [40..90, 70..140, 0..20, 180..203, 0..203] {
+        let band = view.with_rows(rows.clone()).expect("rows of the view");
+        r.clear_rows(&mut frame, band.rows());
+        assert_eq!(frame.band(), rows);
+        r.draw(&band, &mut frame, &draws, RasterMode::Full);
+        for y in 0..203u32 {
+            let row = y as usize * 301..(y as usize + 1) * 301;
+            if rows.contains(&y) {
+                assert_eq!(
+                    frame.items()[row.clone()],
+                    whole.items()[row.clone()],
+                    "row {y} of {rows:?}"
+                );
+                assert!(frame.depth()[row.clone()]
+                    .iter()
+                    .zip(&whole.depth()[row])
+                    .all(|(a, b)| a.to_bits() == b.to_bits()));
+            } else {
+                assert!(
+                    frame.items()[row.clone()].iter().all(|&i| i == occult_core::NO_ITEM),
+                    "row {y} of {rows:?}"
+                );
+                assert!(
+                    frame.depth()[row].iter().all(|&d| d == crate::BLOCKED_DEPTH),
+                    "row {y} of {rows:?}"
+                );
+            }
+        }
+    }
+    assert!(frame.same_visibility(&whole));
+    assert!(view.with_rows(10..10).is_err() && view.with_rows(0..204).is_err());
+}
+
 /// A sort-last draw and a clear finish, with the frame and counts of one thread, while one
 /// of the rasterizer's two threads is blocked elsewhere: the other runs every job.
 #[test]

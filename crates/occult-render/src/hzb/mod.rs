@@ -488,6 +488,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
     ],
     counters: &DECLARED,
     conservative: true,
+    bands: true,
     build: |scene, options, params| Ok(Box::new(Hzb::new(scene, options, &HzbOptions::from_params(params)?)?)),
 };
 

@@ -136,6 +136,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         crate::direct::SCREENED,
     ],
     conservative: true,
+    bands: false,
     build: |scene, options, params| Ok(Box::new(Lzb::new(scene, options, &LzbOptions::from_params(params)?)?)),
 };
 

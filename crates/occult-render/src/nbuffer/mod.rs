@@ -183,6 +183,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "second_pass_saved",
     ],
     conservative: true,
+    bands: true,
     build: |scene, options, params| {
         let defaults = NBufferOptions::default();
         let no = NBufferOptions {

@@ -250,6 +250,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         crate::direct::SCREENED,
     ],
     conservative: true,
+    bands: true,
     build: |scene, options, params| {
         Ok(Box::new(OqGrid::with_options(scene, options, &OqGridOptions::from_params(params)?)?))
     },

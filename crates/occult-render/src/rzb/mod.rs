@@ -154,6 +154,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "boxes_split",
     ],
     conservative: false,
+    bands: false,
     build: |scene, options, params| Ok(Box::new(Rzb::with_options(scene, options, &RzbOptions::from_params(params)?)?)),
 };
 
