@@ -112,9 +112,9 @@ pub struct View {
     view_from_world: Mat4,
     clip_from_view: Mat4,
     clip_from_world: Mat4,
-    /// The rows this view renders, `[first, end)`: all of them unless restricted
-    /// ([`View::with_rows`]).
-    rows: [u32; 2],
+    /// The pixels this view renders, columns `[x0, x1)` × rows `[y0, y1)` as
+    /// `[x0, y0, x1, y1]`: the whole frame unless restricted ([`View::with_region`]).
+    region: [u32; 4],
 }
 
 impl View {
@@ -143,40 +143,51 @@ impl View {
             view_from_world,
             clip_from_view,
             clip_from_world,
-            rows: [0, height],
+            region: [0, 0, width, height],
         })
     }
 
-    /// This view restricted to the pixel rows `rows` of its frame (a band of the screen, as
-    /// sort-first rendering gives each thread): the same camera, matrices and resolution, so
-    /// that every pixel of the band comes out as in the whole view; its [`View::frustum`]
-    /// holds only what can reach those rows, and the rasterizer writes no other row.
+    /// This view restricted to the pixels of columns `columns` and rows `rows` of its frame (a
+    /// band of the screen, as sort-first rendering gives each thread): the same camera,
+    /// matrices and resolution, so that every pixel of the region comes out as in the whole
+    /// view; its [`View::frustum`] holds only what can reach the region, and the rasterizer
+    /// writes no other pixel.
     ///
     /// # Errors
-    /// [`CoreError::BadResolution`] for an empty range or one beyond the last row.
-    pub fn with_rows(&self, rows: std::ops::Range<u32>) -> Result<Self> {
-        if rows.start >= rows.end || rows.end > self.height {
+    /// [`CoreError::BadResolution`] for an empty range or one beyond the frame.
+    pub fn with_region(&self, columns: std::ops::Range<u32>, rows: std::ops::Range<u32>) -> Result<Self> {
+        if columns.start >= columns.end || columns.end > self.width || rows.start >= rows.end || rows.end > self.height
+        {
             return Err(CoreError::BadResolution {
                 width: self.width,
                 height: self.height,
-                reason: format!("rows {}..{} are not a band of its rows", rows.start, rows.end),
+                reason: format!(
+                    "columns {}..{} and rows {}..{} are not a region of it",
+                    columns.start, columns.end, rows.start, rows.end
+                ),
             });
         }
         Ok(Self {
-            rows: [rows.start, rows.end],
+            region: [columns.start, rows.start, columns.end, rows.end],
             ..*self
         })
     }
 
-    /// The pixel rows this view renders (all of them, `0..height`, unless restricted by
-    /// [`View::with_rows`]).
-    pub fn rows(&self) -> std::ops::Range<u32> {
-        self.rows[0]..self.rows[1]
+    /// The pixel columns this view renders (all of them unless restricted by
+    /// [`View::with_region`]).
+    pub fn columns(&self) -> std::ops::Range<u32> {
+        self.region[0]..self.region[2]
     }
 
-    /// Whether this view renders only some rows ([`View::with_rows`]).
+    /// The pixel rows this view renders (all of them unless restricted by
+    /// [`View::with_region`]).
+    pub fn rows(&self) -> std::ops::Range<u32> {
+        self.region[1]..self.region[3]
+    }
+
+    /// Whether this view renders only a region of its frame ([`View::with_region`]).
     pub fn is_band(&self) -> bool {
-        self.rows != [0, self.height]
+        self.region != [0, 0, self.width, self.height]
     }
 
     /// The same camera at another resolution.
@@ -226,8 +237,8 @@ impl View {
     /// The culling frustum in object space, widened by two pixels on each side and by 0.1 %
     /// in depth, so that nothing it rejects could reach a pixel centre through the
     /// rasterizer's snapping and rounding.
-    /// A band's ([`View::with_rows`]) bottom and top planes bound its rows instead, widened
-    /// the same (a side that is the frame's own keeps the frame's plane).
+    /// A region's ([`View::with_region`]) side planes bound its columns and rows instead,
+    /// widened the same (a side that is the frame's own keeps the frame's plane).
     pub fn frustum(&self, world_from_object: &Affine3A) -> Frustum {
         let margin = Vec2::new(4.0 / self.width as f32, 4.0 / self.height as f32);
         let clip_from_object = self.clip_from_object(world_from_object);
@@ -235,13 +246,15 @@ impl View {
         if !self.is_band() {
             return frustum;
         }
-        // Screen row `sy` is `y_ndc = 1 - 2 sy / height`; the band is rows `[first, end)`,
-        // two pixels wider on each side.
-        let h = self.height as f32;
-        let [first, end] = self.rows;
-        let bottom = (end < self.height).then(|| 1.0 - 2.0 * (end as f32 + 2.0) / h);
-        let top = (first > 0).then(|| 1.0 - 2.0 * (first as f32 - 2.0) / h);
-        frustum.with_y_range(&clip_from_object, bottom, top)
+        // Screen column `sx` is `x_ndc = 2 sx / width - 1`, row `sy` is `y_ndc = 1 - 2 sy /
+        // height`; the region two pixels wider on each side.
+        let (w, h) = (self.width as f32, self.height as f32);
+        let [x0, y0, x1, y1] = self.region;
+        let left = (x0 > 0).then(|| 2.0 * (x0 as f32 - 2.0) / w - 1.0);
+        let right = (x1 < self.width).then(|| 2.0 * (x1 as f32 + 2.0) / w - 1.0);
+        let bottom = (y1 < self.height).then(|| 1.0 - 2.0 * (y1 as f32 + 2.0) / h);
+        let top = (y0 > 0).then(|| 1.0 - 2.0 * (y0 as f32 - 2.0) / h);
+        frustum.with_ranges(&clip_from_object, [left, right, bottom, top])
     }
 }
 

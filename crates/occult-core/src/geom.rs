@@ -202,11 +202,17 @@ impl Frustum {
     }
 
     /// This frustum (of `clip_from_object`, as [`Frustum::from_reversed_z`] made it) with its
-    /// bottom plane moved to `y_ndc = bottom` and its top one to `y_ndc = top`, where given: a
-    /// band of the screen's rows.
-    pub fn with_y_range(mut self, clip_from_object: &Mat4, bottom: Option<f32>, top: Option<f32>) -> Self {
+    /// side planes moved to `x_ndc = left`, `x_ndc = right`, `y_ndc = bottom` and
+    /// `y_ndc = top`, where given: a region of the screen.
+    pub fn with_ranges(mut self, clip_from_object: &Mat4, [left, right, bottom, top]: [Option<f32>; 4]) -> Self {
         let m = clip_from_object.transpose();
-        let (r1, r3) = (m.y_axis, m.w_axis);
+        let (r0, r1, r3) = (m.x_axis, m.y_axis, m.w_axis);
+        if let Some(l) = left {
+            self.planes[0] = Plane::from_vec4(r0 - r3 * l);
+        }
+        if let Some(r) = right {
+            self.planes[1] = Plane::from_vec4(r3 * r - r0);
+        }
         if let Some(b) = bottom {
             self.planes[2] = Plane::from_vec4(r1 - r3 * b);
         }

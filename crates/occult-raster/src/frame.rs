@@ -7,9 +7,9 @@ use occult_core::{ItemId, NO_ITEM};
 /// Depth of a cleared pixel: reversed-Z zero, infinitely far.
 pub const CLEAR_DEPTH: f32 = 0.0;
 
-/// Depth of a pixel outside the band of rows a frame is drawn for ([`Frame::band`]): nearer
-/// than anything, so that every depth test and occlusion test finds whatever lies there hidden
-/// and judges a box by its pixels in the band alone.
+/// Depth of a pixel outside the region a frame is drawn for ([`Frame::region`]): nearer than
+/// anything, so that every depth test and occlusion test finds whatever lies there hidden and
+/// judges a box by its pixels in the region alone.
 pub const BLOCKED_DEPTH: f32 = f32::INFINITY;
 
 /// A `width × height` frame, row-major, row 0 at the top. Depth is reversed-Z `z_ndc`
@@ -25,16 +25,16 @@ pub struct Frame {
     /// True while `color` was written by the renderer for the current depth and items (see
     /// [`Frame::resolved_color_mut`]); [`crate::shade`] then leaves it alone.
     pub(crate) color_resolved: bool,
-    /// The rows drawn into, `[start, end)`: all of them but for a frame prepared for a band of
-    /// rows ([`crate::Rasterizer::clear_rows`]), whose other rows hold [`BLOCKED_DEPTH`].
-    band: [u32; 2],
+    /// The pixels drawn into, `[x0, y0, x1, y1)`: the whole frame but for a frame prepared for a
+    /// region ([`crate::Rasterizer::clear_region`]), whose other pixels hold [`BLOCKED_DEPTH`].
+    region: [u32; 4],
     /// Written by a caller through [`Frame::buffers_mut`] or [`Frame::write_fragment`] since it
     /// was last cleared: rows outside `band` may hold anything.
     foreign: bool,
 }
 
 /// Frames are equal when their sizes, buffers and whether their colors were resolved are:
-/// the band of rows it was last prepared for is not part of the picture.
+/// the region it was last prepared for is not part of the picture.
 impl PartialEq for Frame {
     fn eq(&self, other: &Self) -> bool {
         self.width == other.width
@@ -83,7 +83,7 @@ impl Frame {
             items,
             color,
             color_resolved: false,
-            band: [0, height],
+            region: [0, 0, width, height],
             foreign: false,
         })
     }
@@ -118,14 +118,15 @@ impl Frame {
         self.color_resolved = false;
         self.depth.fill(CLEAR_DEPTH);
         self.items.fill(NO_ITEM);
-        self.band = [0, self.height];
+        self.region = [0, 0, self.width, self.height];
         self.foreign = false;
     }
 
-    /// The rows this frame was last prepared for ([`crate::Rasterizer::clear_rows`]): all of
-    /// them, or a band of rows whose others hold [`BLOCKED_DEPTH`].
-    pub fn band(&self) -> std::ops::Range<u32> {
-        self.band[0]..self.band[1]
+    /// The pixels this frame was last prepared for ([`crate::Rasterizer::clear_region`]),
+    /// `[x0, y0, x1, y1)`: the whole frame, or a region whose other pixels hold
+    /// [`BLOCKED_DEPTH`].
+    pub fn region(&self) -> [u32; 4] {
+        self.region
     }
 
     /// Depth and items, for the rasterizer, which writes only the rows of the view it draws.
@@ -134,11 +135,11 @@ impl Frame {
         (&mut self.depth, &mut self.items)
     }
 
-    /// The rows `[start, end)` this frame holds as a band, whether a caller wrote pixels
-    /// since it was last cleared; records the band it is being prepared for, written by no one.
-    pub(crate) fn prepare(&mut self, band: std::ops::Range<u32>) -> ([u32; 2], bool) {
-        let before = (self.band, self.foreign);
-        self.band = [band.start, band.end];
+    /// The region this frame holds, and whether a caller wrote pixels since it was last
+    /// cleared; records the region it is being prepared for, written by no one.
+    pub(crate) fn prepare(&mut self, region: [u32; 4]) -> ([u32; 4], bool) {
+        let before = (self.region, self.foreign);
+        self.region = region;
         self.foreign = false;
         before
     }

@@ -1,37 +1,42 @@
-//! Sort-first rendering: a frame drawn as bands of rows, each by its own copy of a renderer on
-//! its own thread (the setting `bands=N` of every renderer whose registry entry allows it).
+//! Sort-first rendering: a frame drawn as bands of columns, each by its own copy of a renderer
+//! on its own thread (the setting `bands=N` of every renderer whose registry entry allows it).
 //!
 //! A culling renderer's frame is serial where it costs: its walk tests boxes one after the
 //! other against the depth drawn so far, and the batches between two tests are too small to
 //! share over the rasterizer's threads (handing a batch over costs more than it saves). On two
 //! cores a culled frame runs on one while a frame drawn directly shares its large draws over
 //! both, and culling must first win back that factor. With `bands=N`, each of N threads draws
-//! a band of the screen's rows:
+//! a band of the screen's columns:
 //!
-//! - a view restricted to those rows ([`View::with_rows`]): the same camera, projection and
-//!   resolution, a frustum holding only what can reach the band, and a rasterizer that writes
-//!   no other row, so every pixel of the band comes out as in the whole view;
+//! - a view restricted to those columns ([`View::with_region`]): the same camera, projection
+//!   and resolution, a frustum holding only what can reach the band, and a rasterizer that
+//!   writes no other pixel and rejects a triangle wholly beside the band before its setup, so
+//!   every pixel of the band comes out as in the whole view;
 //! - a renderer of its own, built from the same settings with a one-thread rasterizer: its own
 //!   hierarchies, depth structures, temporal state and frame-level choice between culling and
 //!   drawing directly ([`crate::direct`]), all for its band;
-//! - a frame of its own, whose other rows stay clear (only the band's rows are cleared per
-//!   frame, [`occult_raster::Rasterizer::clear_rows`]); its rows are copied into the frame
-//!   asked for.
+//! - a frame of its own, whose other pixels hold [`occult_raster::BLOCKED_DEPTH`] (nearer than
+//!   anything, [`occult_raster::Rasterizer::clear_region`]), so that every occlusion test,
+//!   pyramid and query of the renderer judges a box by its pixels in the band alone; only the
+//!   band is cleared per frame. Its columns are copied into the frame asked for.
 //!
 //! The frame is the whole view's, identical to `zbuffer`'s for a conservative renderer: each
-//! band's rows hold the nearest fragment of everything that reaches them, and a box culled
-//! against a band's depth (nearer than or as near as the whole frame's at every pixel it
-//! covers) hides nothing of the band.
+//! band's pixels hold the nearest fragment of everything that reaches them, and a box culled
+//! against a band's depth hides nothing of the band.
 //!
-//! Bands are balanced: after each frame, the rows are shared again so that each band's rows
-//! per millisecond would take the same time, moving half way there (one noisy frame moves
-//! them little); no band gets fewer than [`MIN_BAND_ROWS`] rows.
+//! Bands are columns, not rows: a view towards the horizon gathers most of its triangles in a
+//! few rows (the distant part of a city, a forest or a terrain), which a split of the rows
+//! leaves to one band (measured: one band idle for most of the frame); columns share them.
+//! After each frame the columns are shared again so that each band's columns per millisecond
+//! would take the same time, moving half way there (one noisy frame moves them little); no
+//! band gets fewer than [`MIN_BAND_COLUMNS`] columns.
 //!
-//! Costs: what crosses two bands is walked and tested in both, its triangles set up twice
-//! (each band scanning only its own rows); memory is the renderer's structures N times over,
-//! plus a frame per band. Statistics add the bands' counts and counters (a triangle drawn in
-//! two bands counts twice) and their phase times (thread time: together more than the frame's
-//! wall time); counter `bands` gives the bands of the frame.
+//! Costs: what crosses two bands is walked and tested in both, its vertices projected twice;
+//! memory is the renderer's structures N times over, plus a frame per band. Statistics add the
+//! bands' counts and counters (a triangle drawn in two bands counts twice) and their phase
+//! times (thread time: together more than the frame's wall time), with the copy into the frame
+//! as `other`; counter `bands` gives the bands of the frame, `bands_idle_us` the time they
+//! waited for the slowest, together.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -39,23 +44,26 @@ use std::time::{Duration, Instant};
 use occult_core::{Scene, View};
 use occult_raster::Frame;
 
-use crate::{AlgoSpec, FrameStats, ParamDoc, RenderError, RenderOptions, Renderer, Result};
+use crate::{AlgoSpec, FrameStats, ParamDoc, Phase, RenderError, RenderOptions, Renderer, Result};
 
 /// The setting, documented with every renderer that takes it.
 pub const BANDS_PARAM: ParamDoc = ParamDoc {
     key: "bands",
     default: "1",
-    help: "sort-first: draw each frame as this many bands of rows (1..=64), each on its own thread with its own copy of the renderer and a one-thread rasterizer; 1 draws the whole frame at once",
+    help: "sort-first: draw each frame as this many bands of columns (1..=64), each on its own thread with its own copy of the renderer and a one-thread rasterizer; 1 draws the whole frame at once",
 };
 
 /// Most bands a frame is split into.
 pub const MAX_BANDS: usize = 64;
 
-/// Fewest rows a band is given (unless the frame has fewer than this per band).
-pub const MIN_BAND_ROWS: u32 = 8;
+/// Fewest columns a band is given (unless the frame has fewer than this per band).
+pub const MIN_BAND_COLUMNS: u32 = 8;
 
 /// The counter of the bands a frame was drawn as.
 pub const COUNTER: &str = "bands";
+/// The counter of the time bands waited for the slowest one, together, µs: how far the
+/// balance is off.
+pub const IDLE: &str = "bands_idle_us";
 
 /// The bands `spec` asks for (its `bands`, 1 without one).
 ///
@@ -73,20 +81,20 @@ pub(crate) fn bands(spec: &AlgoSpec) -> Result<usize> {
     }
     if n > 1 && !info.bands {
         return Err(RenderError::BadParameter(format!(
-            "{}: bands={n}: {} cannot draw a frame as bands of rows (it writes pixels other than through the rasterizer)",
+            "{}: bands={n}: {} cannot draw a frame as bands (it writes pixels other than through the rasterizer)",
             info.name, info.name
         )));
     }
     Ok(n)
 }
 
-/// A renderer drawing each frame as bands of rows ([module doc](self)).
+/// A renderer drawing each frame as bands of columns ([module doc](self)).
 pub struct Bands {
     name: &'static str,
     parts: Vec<Part>,
-    /// Rows of each band in the last frame (empty before the first, or after a change of
-    /// height).
-    rows: Vec<u32>,
+    /// Columns of each band in the last frame (empty before the first, or after a change of
+    /// width).
+    columns: Vec<u32>,
 }
 
 /// One band's renderer and frame.
@@ -120,20 +128,20 @@ impl Bands {
         Ok(Self {
             name: spec.algorithm.name(),
             parts,
-            rows: Vec::new(),
+            columns: Vec::new(),
         })
     }
 
-    /// The rows of each band for a frame of `height` rows: last frame's, or shared evenly.
-    fn band_rows(&mut self, height: u32) -> Vec<std::ops::Range<u32>> {
-        let n = self.parts.len().min(height as usize).max(1);
-        if self.rows.len() != n || self.rows.iter().sum::<u32>() != height {
-            self.rows = (0..n as u32)
-                .map(|k| (k + 1) * height / n as u32 - k * height / n as u32)
+    /// The columns of each band for a frame `width` pixels wide: last frame's, or shared evenly.
+    fn band_columns(&mut self, width: u32) -> Vec<std::ops::Range<u32>> {
+        let n = self.parts.len().min(width as usize).max(1);
+        if self.columns.len() != n || self.columns.iter().sum::<u32>() != width {
+            self.columns = (0..n as u32)
+                .map(|k| (k + 1) * width / n as u32 - k * width / n as u32)
                 .collect();
         }
         let mut first = 0;
-        self.rows
+        self.columns
             .iter()
             .map(|&r| {
                 first += r;
@@ -142,36 +150,36 @@ impl Bands {
             .collect()
     }
 
-    /// Shares the rows again from the bands' times: each band's rows per nanosecond say what
-    /// rows would take them all the same time; every band moves half way there.
+    /// Shares the columns again from the bands' times: each band's columns per nanosecond say
+    /// what columns would take them all the same time; every band moves half way there.
     fn balance(&mut self, times: &[Duration]) {
-        let height: u32 = self.rows.iter().sum();
-        let n = self.rows.len() as u32;
-        let floor = MIN_BAND_ROWS.min(height / n.max(1)).max(1);
+        let width: u32 = self.columns.iter().sum();
+        let n = self.columns.len() as u32;
+        let floor = MIN_BAND_COLUMNS.min(width / n.max(1)).max(1);
         let speed: Vec<f64> = self
-            .rows
+            .columns
             .iter()
             .zip(times)
             .map(|(&r, t)| r as f64 / (t.as_nanos() as f64).max(1e3))
             .collect();
         let total: f64 = speed.iter().sum();
         let wanted: Vec<f64> = self
-            .rows
+            .columns
             .iter()
             .zip(&speed)
-            .map(|(&r, s)| (0.5 * r as f64 + 0.5 * height as f64 * s / total).max(floor as f64))
+            .map(|(&r, s)| (0.5 * r as f64 + 0.5 * width as f64 * s / total).max(floor as f64))
             .collect();
-        // Rounded, the rest given to the bands in order so the rows add up to the height.
-        let scale = (height - floor * n) as f64 / wanted.iter().map(|w| w - floor as f64).sum::<f64>().max(1e-9);
-        let mut rows: Vec<u32> = wanted
+        // Rounded, the rest given to the bands in order so the columns add up to the width.
+        let scale = (width - floor * n) as f64 / wanted.iter().map(|w| w - floor as f64).sum::<f64>().max(1e-9);
+        let mut columns: Vec<u32> = wanted
             .iter()
             .map(|w| floor + ((w - floor as f64) * scale).floor() as u32)
             .collect();
-        let left = height.saturating_sub(rows.iter().sum::<u32>());
+        let left = width.saturating_sub(columns.iter().sum::<u32>());
         for k in 0..left as usize {
-            rows[k % n as usize] += 1;
+            columns[k % n as usize] += 1;
         }
-        self.rows = rows;
+        self.columns = columns;
     }
 }
 
@@ -183,9 +191,14 @@ impl Renderer for Bands {
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
         crate::check_frame(view, frame)?;
         let start = Instant::now();
-        let bands = self.band_rows(view.height());
+        let bands = self.band_columns(view.width());
         let (width, height) = (view.width(), view.height());
-        for part in &mut self.parts[..bands.len()] {
+        let draw = |part: &mut Part, columns: std::ops::Range<u32>| {
+            let t = Instant::now();
+            let band = view
+                .with_region(columns, 0..height)
+                .expect("bands are non-empty columns of the view");
+            // A band's frame is made by its own thread (at the first frame, or a new size).
             if part
                 .frame
                 .as_ref()
@@ -193,34 +206,41 @@ impl Renderer for Bands {
             {
                 part.frame = Some(Frame::new(width, height)?);
             }
-        }
-        let w = width as usize;
-        let (depth, items) = frame.buffers_mut();
-        // Each band's rows of the frame asked for, for its thread to copy its own into.
-        let mut targets = Vec::with_capacity(bands.len());
-        let (mut depth, mut items) = (depth, items);
-        for rows in &bands {
-            let len = (rows.end - rows.start) as usize * w;
-            let (d, rest_d) = depth.split_at_mut(len);
-            let (i, rest_i) = items.split_at_mut(len);
-            targets.push((d, i));
-            (depth, items) = (rest_d, rest_i);
-        }
-        let draw = |part: &mut Part, rows: std::ops::Range<u32>, (d, i): (&mut [f32], &mut [occult_core::ItemId])| {
-            let t = Instant::now();
-            let band = view
-                .with_rows(rows.clone())
-                .expect("bands are non-empty rows of the view");
             let own = part.frame.as_mut().expect("made above");
             let stats = part.renderer.render(&band, own)?;
-            let span = rows.start as usize * w..rows.end as usize * w;
-            d.copy_from_slice(&own.depth()[span.clone()]);
-            i.copy_from_slice(&own.items()[span]);
             Ok((stats, t.elapsed()))
         };
-        let work = self.parts.iter_mut().zip(bands.iter().cloned()).zip(targets).collect();
-        let results: Vec<Result<(FrameStats, Duration)>> =
-            on_threads(work, |((part, rows), target)| draw(part, rows, target));
+        let work = self.parts.iter_mut().zip(bands.iter().cloned()).collect();
+        let results: Vec<Result<(FrameStats, Duration)>> = on_threads(work, |(part, columns)| draw(part, columns));
+        // Each band's columns into the frame asked for, the rows shared over the threads.
+        let t = Instant::now();
+        let w = width as usize;
+        let sources: Vec<(&Frame, std::ops::Range<usize>)> = self
+            .parts
+            .iter()
+            .zip(&bands)
+            .filter_map(|(p, c)| Some((p.frame.as_ref()?, c.start as usize..c.end as usize)))
+            .collect();
+        let (depth, items) = frame.buffers_mut();
+        let rows_each = (height as usize).div_ceil(bands.len()).max(1) * w;
+        let chunks = depth
+            .chunks_mut(rows_each)
+            .zip(items.chunks_mut(rows_each))
+            .enumerate()
+            .collect();
+        on_threads(
+            chunks,
+            |(k, (d, i)): (usize, (&mut [f32], &mut [occult_core::ItemId]))| {
+                for (row, (d, i)) in d.chunks_mut(w).zip(i.chunks_mut(w)).enumerate() {
+                    let at = (k * rows_each / w + row) * w;
+                    for (own, c) in &sources {
+                        d[c.clone()].copy_from_slice(&own.depth()[at + c.start..at + c.end]);
+                        i[c.clone()].copy_from_slice(&own.items()[at + c.start..at + c.end]);
+                    }
+                }
+            },
+        );
+        let assembled = t.elapsed();
         let mut stats = FrameStats::default();
         let mut times = Vec::with_capacity(results.len());
         for r in results {
@@ -235,6 +255,10 @@ impl Renderer for Bands {
             times.push(t);
         }
         stats.counters.add(COUNTER, bands.len() as u64);
+        let slowest = times.iter().max().copied().unwrap_or_default();
+        let idle: Duration = times.iter().map(|&t| slowest - t).sum();
+        stats.counters.add(IDLE, idle.as_micros() as u64);
+        stats.phases.add(Phase::Other, assembled);
         self.balance(&times);
         stats.total = start.elapsed();
         Ok(stats)

@@ -229,8 +229,8 @@ pub struct AlgorithmInfo {
     /// Whether its frames are bit-identical to `zbuffer`'s (DESIGN invariant 2) or approximate
     /// (invariant 3).
     pub conservative: bool,
-    /// Whether it draws a frame as bands of rows with `bands=N` ([`bands`]): it writes pixels
-    /// only through the rasterizer, so that a band's view confines it to its rows.
+    /// Whether it draws a frame as bands of columns with `bands=N` ([`bands`]): it writes
+    /// pixels only through the rasterizer, so that a band's view confines it to its columns.
     pub bands: bool,
     /// Builds it (the settings' keys are checked first).
     pub build: BuildFn,
@@ -504,7 +504,15 @@ pub(crate) fn begin_frame(
     check_cancel(raster)?;
     let start = Instant::now();
     let mut stats = FrameStats::default();
-    raster.clear_rows(frame, view.rows());
+    raster.clear_region(
+        frame,
+        [
+            view.columns().start,
+            view.rows().start,
+            view.columns().end,
+            view.rows().end,
+        ],
+    );
     let cleared_at = Instant::now();
     stats.phases.add(Phase::Clear, cleared_at - start);
     Ok((start, cleared_at, stats))

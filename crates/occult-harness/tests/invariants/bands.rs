@@ -1,4 +1,4 @@
-//! `bands=N` (sort-first bands of rows, each drawn by its own copy of a renderer on its own
+//! `bands=N` (sort-first bands of columns, each drawn by its own copy of a renderer on its own
 //! thread) against `zbuffer`: frames bit-identical for every renderer that takes bands, over every
 //! generator and over camera paths whose bands move from frame to frame (they are balanced on
 //! the bands' times); bad counts and renderers that cannot draw bands refused.

@@ -433,36 +433,51 @@ impl Rasterizer {
 
     /// Clears `frame`'s depth and items, in parallel on this rasterizer's threads.
     pub fn clear(&self, frame: &mut Frame) {
-        self.clear_rows(frame, 0..frame.height());
+        self.clear_region(frame, [0, 0, frame.width(), frame.height()]);
     }
 
-    /// Prepares `frame` for a view of the rows `rows` ([`occult_core::View::with_rows`]; all
-    /// of them for a whole view): clears those rows, and gives every other row
-    /// [`crate::BLOCKED_DEPTH`] and no item, so that tests of what is drawn judge a box by its
-    /// pixels in the band alone. A frame prepared for the same band frame after frame costs
-    /// the clear of its own rows only (and of those that left the band).
-    pub fn clear_rows(&self, frame: &mut Frame, rows: std::ops::Range<u32>) {
-        let h = frame.height();
-        let rows = rows.start.min(h)..rows.end.min(h);
-        let (before, foreign) = frame.prepare(rows.clone());
-        let w = frame.width() as usize;
+    /// Prepares `frame` for a view of the region `[x0, y0, x1, y1)`
+    /// ([`occult_core::View::with_region`]; the whole frame for a whole view): clears it, and
+    /// gives every other pixel [`crate::BLOCKED_DEPTH`] and no item, so that tests of what is
+    /// drawn judge a box by its pixels in the region alone. A frame prepared for the same region
+    /// frame after frame costs the clear of its own pixels only (and of those that left it).
+    pub fn clear_region(&self, frame: &mut Frame, region: [u32; 4]) {
+        let (w, h) = (frame.width(), frame.height());
+        let [x0, y0, x1, y1] = [region[0].min(w), region[1].min(h), region[2].min(w), region[3].min(h)];
+        let (before, foreign) = frame.prepare([x0, y0, x1, y1]);
+        let width = w as usize;
         let (depth, items) = frame.buffers_unmarked();
-        let mut fill = |span: std::ops::Range<u32>, value: f32| {
-            if span.start >= span.end {
+        let mut fill = |[a0, b0, a1, b1]: [u32; 4], value: f32| {
+            if a0 >= a1 || b0 >= b1 {
                 return;
             }
-            let px = span.start as usize * w..span.end as usize * w;
-            self.fill(&mut depth[px.clone()], &mut items[px], value);
+            if a0 == 0 && a1 == w {
+                let px = b0 as usize * width..b1 as usize * width;
+                return self.fill(&mut depth[px.clone()], &mut items[px], value);
+            }
+            for y in b0 as usize..b1 as usize {
+                let px = y * width + a0 as usize..y * width + a1 as usize;
+                depth[px.clone()].fill(value);
+                items[px].fill(occult_core::NO_ITEM);
+            }
         };
-        fill(rows.clone(), crate::CLEAR_DEPTH);
-        if foreign {
-            // Anything may lie outside the band: block all of it.
-            fill(0..rows.start, crate::BLOCKED_DEPTH);
-            fill(rows.end..h, crate::BLOCKED_DEPTH);
-        } else {
-            // Rows of the last band that are not in this one; the rest are blocked already.
-            fill(before[0]..before[1].min(rows.start), crate::BLOCKED_DEPTH);
-            fill(before[0].max(rows.end)..before[1], crate::BLOCKED_DEPTH);
+        fill([x0, y0, x1, y1], crate::CLEAR_DEPTH);
+        // What lies outside the region: above, below, left and right of it.
+        let outside = [[0, 0, w, y0], [0, y1, w, h], [0, y0, x0, y1], [x1, y0, w, y1]];
+        for [a0, b0, a1, b1] in outside {
+            // Anything may lie outside after a caller's writes; else only what the last region
+            // held (the rest is blocked already).
+            let piece = if foreign {
+                [a0, b0, a1, b1]
+            } else {
+                [
+                    a0.max(before[0]),
+                    b0.max(before[1]),
+                    a1.min(before[2]),
+                    b1.min(before[3]),
+                ]
+            };
+            fill(piece, crate::BLOCKED_DEPTH);
         }
     }
 
@@ -489,8 +504,9 @@ impl Rasterizer {
         }
     }
 
-    /// Rasterizes `draws` into `frame` (not cleared first). A view restricted to some rows
-    /// ([`View::with_rows`]) writes only those, on the calling thread whatever the strategy.
+    /// Rasterizes `draws` into `frame` (not cleared first). A view restricted to a region
+    /// ([`View::with_region`]) writes only its pixels, on the calling thread whatever the
+    /// strategy.
     ///
     /// # Panics
     /// If the frame's size differs from the view's (a programmer error).
@@ -501,7 +517,7 @@ impl Rasterizer {
             "frame and view sizes differ"
         );
         let vp = Viewport::new(view, &self.config);
-        // A band of rows (`View::with_rows`) is one thread's share already.
+        // A region (`View::with_region`) is one thread's share already.
         let shared = if view.is_band() {
             None
         } else {

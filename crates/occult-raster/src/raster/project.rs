@@ -47,8 +47,13 @@ pub(super) struct Viewport {
     pub(super) tiles_x: u32,
     pub(super) tiles_y: u32,
     pub(super) cull_backfaces: bool,
-    /// The first and last row drawn (inclusive): the view's rows ([`View::rows`]).
-    pub(super) rows: [u32; 2],
+    /// The inclusive pixel box drawn, `[x0, y0, x1, y1]`: the view's region
+    /// ([`View::with_region`]; the whole frame for most views).
+    pub(super) region: [u32; 4],
+    /// The region's left and right in `x_ndc` and its bottom and top in `y_ndc`, a pixel wider
+    /// (`±1` at the frame's own edges): a vertex beyond is out of the region's view
+    /// (`OUT_LEFT` ...), so that a triangle wholly beside a region is rejected before its setup.
+    pub(super) band_ndc: [f32; 4],
 }
 
 impl Viewport {
@@ -68,7 +73,13 @@ impl Viewport {
             tiles_x: width.div_ceil(tile_size),
             tiles_y: height.div_ceil(tile_size),
             cull_backfaces: config.cull_backfaces,
-            rows: [view.rows().start, view.rows().end - 1],
+            region: [
+                view.columns().start,
+                view.rows().start,
+                view.columns().end - 1,
+                view.rows().end - 1,
+            ],
+            band_ndc: band_ndc(view),
         }
     }
 
@@ -103,10 +114,10 @@ impl Viewport {
                 code: NOT_FINITE,
             };
         }
-        code |= if c.x < -c.w { OUT_LEFT } else { 0 };
-        code |= if c.x > c.w { OUT_RIGHT } else { 0 };
-        code |= if c.y < -c.w { OUT_BOTTOM } else { 0 };
-        code |= if c.y > c.w { OUT_TOP } else { 0 };
+        code |= if c.x < self.band_ndc[0] * c.w { OUT_LEFT } else { 0 };
+        code |= if c.x > self.band_ndc[1] * c.w { OUT_RIGHT } else { 0 };
+        code |= if c.y < self.band_ndc[2] * c.w { OUT_BOTTOM } else { 0 };
+        code |= if c.y > self.band_ndc[3] * c.w { OUT_TOP } else { 0 };
         code |= if c.z > c.w || c.w <= 0.0 {
             OUT_NEAR | NEEDS_CLIP
         } else {
@@ -144,6 +155,36 @@ impl Viewport {
             code,
         }
     }
+}
+
+/// [`Viewport::band_ndc`] of `view`: screen column `sx` is `x_ndc = 2 sx / width - 1`, row `sy`
+/// is `y_ndc = 1 - 2 sy / height`. Each bound is a plane through the eye (`x = t·w` in clip
+/// space), so a triangle whose corners all lie beyond one lies wholly beyond, whatever their
+/// `w`.
+fn band_ndc(view: &View) -> [f32; 4] {
+    let (w, h) = (view.width() as f32, view.height() as f32);
+    let (x, y) = (view.columns(), view.rows());
+    let left = if x.start == 0 {
+        -1.0
+    } else {
+        2.0 * (x.start as f32 - 1.0) / w - 1.0
+    };
+    let right = if x.end >= view.width() {
+        1.0
+    } else {
+        2.0 * (x.end as f32 + 1.0) / w - 1.0
+    };
+    let bottom = if y.end >= view.height() {
+        -1.0
+    } else {
+        1.0 - 2.0 * (y.end as f32 + 1.0) / h
+    };
+    let top = if y.start == 0 {
+        1.0
+    } else {
+        1.0 - 2.0 * (y.start as f32 - 1.0) / h
+    };
+    [left, right, bottom, top]
 }
 
 /// Object to clip space: the one expression every path uses, so that a vertex recomputed for

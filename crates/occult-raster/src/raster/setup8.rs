@@ -397,10 +397,10 @@ pub(super) unsafe fn project8_avx2(vp: &Viewport, m: &Mat4, positions: &[Vec3], 
     let inf = splat(f32::INFINITY);
     let finite = |v: F32x8| v.abs().lt(inf);
     let flag = |mask: M32x8, f: u32| I32x8::splat(avx2, f as i32).keep(mask);
-    let neg_w = -cw;
-    let mut code = flag(cx.lt(neg_w), OUT_LEFT)
-        .or(flag(cx.gt(cw), OUT_RIGHT))
-        .or(flag(cy.lt(neg_w), OUT_BOTTOM).or(flag(cy.gt(cw), OUT_TOP)));
+    let beyond = |k: usize| splat(vp.band_ndc[k]) * cw;
+    let mut code = flag(cx.lt(beyond(0)), OUT_LEFT)
+        .or(flag(cx.gt(beyond(1)), OUT_RIGHT))
+        .or(flag(cy.lt(beyond(2)), OUT_BOTTOM).or(flag(cy.gt(beyond(3)), OUT_TOP)));
     let near = cz.gt(cw).or(cw.le(F32x8::zero(avx2)));
     code = code.or(flag(near, OUT_NEAR | NEEDS_CLIP));
     let guard = cx
@@ -573,7 +573,8 @@ mod tests {
             tiles_x: width.div_ceil(64),
             tiles_y: height.div_ceil(64),
             cull_backfaces: rng.random_bool(0.3),
-            rows: [0, height - 1],
+            region: [0, 0, width - 1, height - 1],
+            band_ndc: [-1.0, 1.0, -1.0, 1.0],
         }
     }
 

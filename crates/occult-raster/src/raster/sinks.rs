@@ -38,8 +38,8 @@ pub(super) unsafe fn draw_direct<const AVX2: bool>(
     target: &FrameTarget<'_>,
     mode: RasterMode,
 ) -> (u64, u64, [u32; 4]) {
-    // The view's rows: all of them but for a band (`View::with_rows`).
-    let rect = [0, vp.rows[0], vp.width - 1, vp.rows[1]];
+    // The view's region: the whole frame but for a band (`View::with_region`).
+    let rect = vp.region;
     let mut sink = DirectSink::<AVX2> {
         target,
         rect,
@@ -174,8 +174,9 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
 
     #[inline(always)]
     fn push_lane(&mut self, vp: &Viewport, t: TriSetup) {
-        if u32::from(t.py1) < self.rect[1] || u32::from(t.py0) > self.rect[3] {
-            return; // wholly outside a band's rows
+        let r = self.rect;
+        if u32::from(t.px1) < r[0] || u32::from(t.px0) > r[2] || u32::from(t.py1) < r[1] || u32::from(t.py0) > r[3] {
+            return; // wholly outside a band's region
         }
         // SAFETY: a DirectSink is only made by `draw_direct`, whose caller guarantees that
         // no other thread touches the frame during the draw.
@@ -206,12 +207,13 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
 
     #[inline(always)]
     fn push_small(&mut self, vp: &Viewport, t: TriSetup, cover: SmallCover) {
-        // Counted with its batch (`count_lanes`). Unless the view is a band of rows that cuts
+        // Counted with its batch (`count_lanes`). Unless the view is a band whose region cuts
         // the box, the direct sink's rectangle holds the box: `scan_triangle` would scan the
         // box itself, small, from these edge functions, or from the mask that the 8-lane setup
         // formed from them.
         let rect = [t.px0 as u32, t.py0 as u32, t.px1 as u32, t.py1 as u32];
-        if rect[1] < self.rect[1] || rect[3] > self.rect[3] {
+        let r = self.rect;
+        if rect[0] < r[0] || rect[1] < r[1] || rect[2] > r[2] || rect[3] > r[3] {
             return self.push_lane(vp, t);
         }
         // SAFETY: as in `push`.

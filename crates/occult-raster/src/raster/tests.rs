@@ -197,12 +197,12 @@ fn banded_draws_are_direct_draws() {
     }
 }
 
-/// A view restricted to a band of rows ([`View::with_rows`]) writes those rows as the whole
-/// view does and no other; a frame prepared for it ([`Rasterizer::clear_rows`]) holds
-/// [`crate::BLOCKED_DEPTH`] and no item elsewhere, and when the band moves, the rows that left
-/// it are blocked again.
+/// A view restricted to a region ([`View::with_region`]) writes its pixels as the whole view
+/// does and no other; a frame prepared for it ([`Rasterizer::clear_region`]) holds
+/// [`crate::BLOCKED_DEPTH`] and no item elsewhere, and when the region moves, the pixels that
+/// left it are blocked again.
 #[test]
-fn bands_of_rows_draw_their_rows_alone() {
+fn regions_draw_their_pixels_alone() {
     let view =
         View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 301, 203).expect("a valid 301 × 203 view");
     let meshes = [grid(60, 0.01), grid(30, 0.25), grid(6, 4.0)];
@@ -228,37 +228,48 @@ fn bands_of_rows_draw_their_rows_alone() {
     let mut whole = Frame::new(301, 203).expect("a frame");
     r.draw(&view, &mut whole, &draws, RasterMode::Full);
     let mut frame = Frame::new(301, 203).expect("a frame");
-    for rows in [40..90, 70..140, 0..20, 180..203, 0..203] {
-        let band = view.with_rows(rows.clone()).expect("rows of the view");
-        r.clear_rows(&mut frame, band.rows());
-        assert_eq!(frame.band(), rows);
+    let regions = [
+        (0..301, 40..90),
+        (0..301, 70..140),
+        (100..150, 0..203),
+        (120..301, 0..203),
+        (0..20, 180..203),
+        (0..301, 0..203),
+    ];
+    for (columns, rows) in regions {
+        let band = view
+            .with_region(columns.clone(), rows.clone())
+            .expect("a region of the view");
+        r.clear_region(&mut frame, [columns.start, rows.start, columns.end, rows.end]);
+        assert_eq!(frame.region(), [columns.start, rows.start, columns.end, rows.end]);
         r.draw(&band, &mut frame, &draws, RasterMode::Full);
         for y in 0..203u32 {
-            let row = y as usize * 301..(y as usize + 1) * 301;
-            if rows.contains(&y) {
-                assert_eq!(
-                    frame.items()[row.clone()],
-                    whole.items()[row.clone()],
-                    "row {y} of {rows:?}"
-                );
-                assert!(frame.depth()[row.clone()]
-                    .iter()
-                    .zip(&whole.depth()[row])
-                    .all(|(a, b)| a.to_bits() == b.to_bits()));
-            } else {
-                assert!(
-                    frame.items()[row.clone()].iter().all(|&i| i == occult_core::NO_ITEM),
-                    "row {y} of {rows:?}"
-                );
-                assert!(
-                    frame.depth()[row].iter().all(|&d| d == crate::BLOCKED_DEPTH),
-                    "row {y} of {rows:?}"
-                );
+            for x in 0..301u32 {
+                let i = (y * 301 + x) as usize;
+                if rows.contains(&y) && columns.contains(&x) {
+                    assert_eq!(
+                        frame.items()[i],
+                        whole.items()[i],
+                        "({x}, {y}) in {columns:?} × {rows:?}"
+                    );
+                    assert_eq!(frame.depth()[i].to_bits(), whole.depth()[i].to_bits());
+                } else {
+                    assert_eq!(
+                        frame.items()[i],
+                        occult_core::NO_ITEM,
+                        "({x}, {y}) beside {columns:?} × {rows:?}"
+                    );
+                    assert_eq!(
+                        frame.depth()[i],
+                        crate::BLOCKED_DEPTH,
+                        "({x}, {y}) beside {columns:?} × {rows:?}"
+                    );
+                }
             }
         }
     }
     assert!(frame.same_visibility(&whole));
-    assert!(view.with_rows(10..10).is_err() && view.with_rows(0..204).is_err());
+    assert!(view.with_region(10..10, 0..10).is_err() && view.with_region(0..10, 0..204).is_err());
 }
 
 /// A sort-last draw and a clear finish, with the frame and counts of one thread, while one
