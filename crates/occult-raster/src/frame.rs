@@ -135,6 +135,15 @@ impl Frame {
         (&mut self.depth, &mut self.items)
     }
 
+    /// Notes a draw over `region` (`[x0, y0, x1, y1)`): one beyond the region the frame was
+    /// prepared for writes pixels that its next preparation must block again.
+    pub(crate) fn note_drawn(&mut self, region: [u32; 4]) {
+        let r = self.region;
+        if region[0] < r[0] || region[1] < r[1] || region[2] > r[2] || region[3] > r[3] {
+            self.foreign = true;
+        }
+    }
+
     /// The region this frame holds, and whether a caller wrote pixels since it was last
     /// cleared; records the region it is being prepared for, written by no one.
     pub(crate) fn prepare(&mut self, region: [u32; 4]) -> ([u32; 4], bool) {

@@ -106,6 +106,40 @@ impl ZPyramid {
         }
     }
 
+    /// Sets every sample to what `frame` holds just after [`crate::Rasterizer::clear_region`]
+    /// prepared it: 0 (far) where a sample covers a pixel of the frame's region,
+    /// [`crate::BLOCKED_DEPTH`] where it covers none (as [`ZPyramid::clear`] for a whole
+    /// frame), so that tests of a box beside a band of the screen find it hidden there.
+    ///
+    /// # Panics
+    /// If `frame` is not of the pyramid's size (a programmer error).
+    pub fn clear_for(&mut self, frame: &Frame) {
+        assert!(
+            frame.width() == self.width && frame.height() == self.height,
+            "z-pyramid and frame sizes differ"
+        );
+        let [x0, y0, x1, y1] = frame.region();
+        if [x0, y0, x1, y1] == [0, 0, self.width, self.height] || x0 >= x1 || y0 >= y1 {
+            return self.clear();
+        }
+        for (k, (lw, _, samples)) in self.levels.iter_mut().enumerate() {
+            // Level k + 1: a sample covers 2^(k+1) pixels a side.
+            let shift = k as u32 + 1;
+            let (c0, c1) = ((x0 >> shift) as usize, ((x1 - 1) >> shift) as usize + 1);
+            let (r0, r1) = (y0 >> shift, (y1 - 1) >> shift);
+            for (j, row) in samples.chunks_mut(*lw as usize).enumerate() {
+                if (j as u32) < r0 || j as u32 > r1 {
+                    row.fill(crate::BLOCKED_DEPTH);
+                    continue;
+                }
+                let c1 = c1.min(row.len());
+                row[..c0].fill(crate::BLOCKED_DEPTH);
+                row[c0..c1].fill(0.0);
+                row[c1..].fill(crate::BLOCKED_DEPTH);
+            }
+        }
+    }
+
     /// The farthest depth of the whole frame at the last update (§5.3's global maximum z).
     pub fn farthest(&self, frame: &Frame) -> f32 {
         match self.levels.last() {
@@ -307,6 +341,38 @@ impl ZPyramid {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A pyramid cleared for a frame prepared for a region holds what one rebuilt from that
+    /// frame holds: far over the region, blocked wholly beside it.
+    #[test]
+    fn clearing_for_a_region_is_rebuilding_from_its_frame() {
+        let r = crate::Rasterizer::new(crate::RasterConfig {
+            threads: 1,
+            ..crate::RasterConfig::default()
+        })
+        .expect("a one-thread rasterizer");
+        for (w, h) in [(97, 61), (64, 48), (1, 9)] {
+            let mut frame = Frame::new(w, h).expect("a frame");
+            for region in [
+                [0, 0, w, h],
+                [w / 3, 0, w, h],
+                [0, 0, (w / 2).max(1), h],
+                [w / 4, h / 5, w / 2 + 1, h - 1],
+            ] {
+                r.clear_region(&mut frame, region);
+                let mut cleared = ZPyramid::new(w, h).expect("a pyramid");
+                cleared.clear_for(&frame);
+                let mut rebuilt = ZPyramid::new(w, h).expect("a pyramid");
+                rebuilt.rebuild(&frame);
+                for ((_, _, a), (_, _, b)) in cleared.levels.iter().zip(&rebuilt.levels) {
+                    assert!(
+                        a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()),
+                        "{w}x{h} {region:?}"
+                    );
+                }
+            }
+        }
+    }
 
     fn frame_with(w: u32, h: u32, f: impl Fn(u32, u32) -> f32) -> Frame {
         let mut frame = Frame::new(w, h).expect("a test frame of a valid size");

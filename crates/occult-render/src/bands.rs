@@ -35,8 +35,11 @@
 //! memory is the renderer's structures N times over, plus a frame per band. Statistics add the
 //! bands' counts and counters (a triangle drawn in two bands counts twice) and their phase
 //! times (thread time: together more than the frame's wall time), with the copy into the frame
-//! as `other`; counter `bands` gives the bands of the frame, `bands_idle_us` the time they
-//! waited for the slowest, together.
+//! as `other`; a triangle within a pixel of a band counts as rasterized by it. Counter `bands`
+//! gives the bands of the frame, `bands_idle_us` the time they waited for the slowest,
+//! together. The bands share the frame's [`occult_raster::FrameControl`]: a cancel stops each
+//! band at its next check (a band that fails leaves the others to finish, then its error is the
+//! frame's), and the progress read is the furthest band's.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -69,7 +72,7 @@ pub const IDLE: &str = "bands_idle_us";
 ///
 /// # Errors
 /// [`RenderError::BadParameter`] for a count outside `1..=`[`MAX_BANDS`], or more than one band
-/// of a renderer that cannot split (its frames are not drawn through the rasterizer alone).
+/// (a renderer that cannot draw bands has no such key: [`crate::AlgoSpec::check_keys`]).
 pub(crate) fn bands(spec: &AlgoSpec) -> Result<usize> {
     let info = spec.algorithm.info();
     let n: usize = spec.params.get(BANDS_PARAM.key, 1)?;
@@ -79,18 +82,14 @@ pub(crate) fn bands(spec: &AlgoSpec) -> Result<usize> {
             info.name
         )));
     }
-    if n > 1 && !info.bands {
-        return Err(RenderError::BadParameter(format!(
-            "{}: bands={n}: {} cannot draw a frame as bands (it writes pixels other than through the rasterizer)",
-            info.name, info.name
-        )));
-    }
     Ok(n)
 }
 
 /// A renderer drawing each frame as bands of columns ([module doc](self)).
 pub struct Bands {
     name: &'static str,
+    /// The frames' cancellation and progress, shared by the bands' rasterizers.
+    control: occult_raster::FrameControl,
     parts: Vec<Part>,
     /// Columns of each band in the last frame (empty before the first, or after a change of
     /// width).
@@ -127,6 +126,7 @@ impl Bands {
             .collect::<Result<Vec<_>>>()?;
         Ok(Self {
             name: spec.algorithm.name(),
+            control: options.raster.control.clone(),
             parts,
             columns: Vec::new(),
         })
@@ -212,6 +212,9 @@ impl Renderer for Bands {
         };
         let work = self.parts.iter_mut().zip(bands.iter().cloned()).collect();
         let results: Vec<Result<(FrameStats, Duration)>> = on_threads(work, |(part, columns)| draw(part, columns));
+        if self.control.is_cancelled() {
+            return Err(RenderError::Cancelled);
+        }
         // Each band's columns into the frame asked for, the rows shared over the threads.
         let t = Instant::now();
         let w = width as usize;
@@ -285,13 +288,22 @@ fn on_threads<T: Send, R: Send>(items: Vec<T>, job: impl Fn(T) -> R + Sync) -> V
         let Some(first) = items.next() else {
             return Vec::new();
         };
-        let others: Vec<_> = items.map(|item| s.spawn(move || job(item))).collect();
-        std::iter::once(job(first))
-            .chain(
-                others
-                    .into_iter()
-                    .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p))),
-            )
-            .collect()
+        // A thread that cannot start leaves its item to the calling thread, after its own.
+        let others: Vec<_> = items
+            .map(|item| {
+                let item = std::sync::Arc::new(std::sync::Mutex::new(Some(item)));
+                let mine = std::sync::Arc::clone(&item);
+                let take = move || mine.lock().unwrap_or_else(std::sync::PoisonError::into_inner).take();
+                let spawned = std::thread::Builder::new().spawn_scoped(s, move || take().map(job));
+                (item, spawned.ok())
+            })
+            .collect();
+        let mut results = vec![job(first)];
+        for (item, handle) in others {
+            let done = handle.and_then(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
+            let left = || item.lock().unwrap_or_else(std::sync::PoisonError::into_inner).take();
+            results.push(done.unwrap_or_else(|| job(left().expect("an item not taken by a thread that ran"))));
+        }
+        results
     })
 }

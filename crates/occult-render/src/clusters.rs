@@ -692,7 +692,7 @@ impl ClusterCulling {
         if first > 0 {
             pyramid.rebuild(frame);
         } else {
-            pyramid.clear();
+            pyramid.clear_for(frame);
         }
         stats.phases.add(Phase::DepthStructure, t.elapsed());
         crate::check_cancel(raster)?;

@@ -329,10 +329,14 @@ impl Algorithm {
     }
 
     /// The names of the counters ([`FrameStats::counters`]) it may report, whichever its
-    /// settings (a frame reports some only in some configurations); empty for renderers
-    /// without counters of their own.
+    /// settings (a frame reports some only in some configurations; [`bands`]' where it takes
+    /// `bands`); empty for renderers without counters of their own.
     pub fn counter_names(self) -> Vec<&'static str> {
-        self.0.counters.to_vec()
+        let mut names = self.0.counters.to_vec();
+        if self.0.bands {
+            names.extend([bands::COUNTER, bands::IDLE]);
+        }
+        names
     }
 
     /// Builds the renderer for `scene` with default settings, doing its preprocessing (time
@@ -680,6 +684,8 @@ mod tests {
             "rzb",
             "rzb:cache=on,orientation=2",
             "rzb:eps=auto,max_samples=10",
+            "hzb:bands=2",
+            "clusters:bands=3,payoff=off",
         ];
         let mut options = RenderOptions::default();
         options.raster.threads = 1;

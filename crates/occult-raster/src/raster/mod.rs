@@ -517,6 +517,8 @@ impl Rasterizer {
             "frame and view sizes differ"
         );
         let vp = Viewport::new(view, &self.config);
+        let [x0, y0, x1, y1] = vp.region;
+        frame.note_drawn([x0, y0, x1 + 1, y1 + 1]);
         // A region (`View::with_region`) is one thread's share already.
         let shared = if view.is_band() {
             None

@@ -876,6 +876,7 @@ impl Renderer for Hzb {
             let w = &mut self.workers[0];
             let (_, _, cleared) = crate::begin_frame(&mut w.raster, view, frame)?;
             let pyramid = ready_pyramid(&mut w.pyramid, frame.width(), frame.height())?;
+            pyramid.clear_for(frame);
             let mut stats = walk_frame(
                 scene,
                 octrees,

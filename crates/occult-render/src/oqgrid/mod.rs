@@ -1295,9 +1295,8 @@ impl Renderer for OqGrid {
             CellTest::Pyramid => {
                 if (self.pyramid.width(), self.pyramid.height()) != (frame.width(), frame.height()) {
                     self.pyramid = ZPyramid::new(frame.width(), frame.height())?;
-                } else {
-                    self.pyramid.clear();
                 }
+                self.pyramid.clear_for(frame);
                 Some(&mut self.pyramid)
             }
         };
