@@ -129,7 +129,8 @@ impl Frame {
         self.region
     }
 
-    /// Depth and items, for the rasterizer, which writes only the rows of the view it draws.
+    /// Depth and items, for the rasterizer, which writes only the region of the view it draws
+    /// ([`Frame::note_drawn`]).
     pub(crate) fn buffers_unmarked(&mut self) -> (&mut [f32], &mut [ItemId]) {
         self.color_resolved = false;
         (&mut self.depth, &mut self.items)

@@ -150,6 +150,25 @@ fn long_small_draws_are_shared() {
     assert_eq!(r.last_pass, Some((true, Strategy::Direct)), "short: on the caller");
 }
 
+/// Whole-mesh draws of `meshes` seen by `view`, mesh `k` moved `k × dx` to the right and `k`
+/// back, its items from `100,000 k`.
+fn staggered<'a>(view: &View, meshes: &'a [Mesh], dx: f32) -> Vec<Draw<'a>> {
+    meshes
+        .iter()
+        .enumerate()
+        .map(|(k, mesh)| Draw {
+            mesh,
+            triangles: DrawTriangles::All,
+            clip_from_object: view.clip_from_object(&Affine3A::from_translation(Vec3::new(
+                dx * k as f32,
+                0.0,
+                -(k as f32),
+            ))),
+            first_item: 100_000 * k as u64,
+        })
+        .collect()
+}
+
 /// A banded draw gives the direct draw's frame and counts, on any number of threads, bands
 /// split across every triangle size (tiny, spanning bands, larger than the frame).
 #[test]
@@ -157,20 +176,7 @@ fn banded_draws_are_direct_draws() {
     let view =
         View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 301, 203).expect("a valid 301 × 203 view");
     let meshes = [grid(60, 0.01), grid(40, 0.08), grid(30, 0.25), grid(6, 4.0)];
-    let draws: Vec<Draw<'_>> = meshes
-        .iter()
-        .enumerate()
-        .map(|(k, mesh)| Draw {
-            mesh,
-            triangles: DrawTriangles::All,
-            clip_from_object: view.clip_from_object(&Affine3A::from_translation(Vec3::new(
-                0.3 * k as f32,
-                0.0,
-                -(k as f32),
-            ))),
-            first_item: 100_000 * k as u64,
-        })
-        .collect();
+    let draws = staggered(&view, &meshes, 0.3);
     let run = |threads, strategy| {
         let mut r = Rasterizer::new(RasterConfig {
             threads,
@@ -206,20 +212,7 @@ fn regions_draw_their_pixels_alone() {
     let view =
         View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 301, 203).expect("a valid 301 × 203 view");
     let meshes = [grid(60, 0.01), grid(30, 0.25), grid(6, 4.0)];
-    let draws: Vec<Draw<'_>> = meshes
-        .iter()
-        .enumerate()
-        .map(|(k, mesh)| Draw {
-            mesh,
-            triangles: DrawTriangles::All,
-            clip_from_object: view.clip_from_object(&Affine3A::from_translation(Vec3::new(
-                0.2 * k as f32,
-                0.0,
-                -(k as f32),
-            ))),
-            first_item: 100_000 * k as u64,
-        })
-        .collect();
+    let draws = staggered(&view, &meshes, 0.2);
     let mut r = Rasterizer::new(RasterConfig {
         threads: 1,
         ..RasterConfig::default()
