@@ -42,8 +42,9 @@
 //!   frame that did not plainly pay is screened the same way on its own depth, at its own
 //!   cost of a triangle, and the direct frames are measured next when it cannot pay.
 //!
-//! Renderers also hand the expected direct frame to their in-frame payoff, which then
-//! abandons a frame plainly slower than drawing it again directly
+//! Renderers also hand the expected direct frame to their in-frame payoff, which then gives
+//! up a frame plainly slower than drawing it directly (`hzb` and `oqgrid` draw its rest
+//! directly, `lzb` draws it again)
 //! ([`FramePayoff::abandoned`](crate::payoff::FramePayoff::abandoned)).
 //! Frames do not change (`frustum` is exact), only the time. Counters: `payoff_direct` (1 for
 //! a frame drawn directly), `payoff_screened` (1 for a frame whose screening skipped a probe
@@ -253,7 +254,7 @@ impl DirectFrames {
     }
 
     /// Makes the next `n` frames direct (tests of the renderers that embed one); `abandon`:
-    /// with a direct rate known, so that frames that stop are abandoned.
+    /// with a direct rate known, so that frames that stop are given up.
     #[cfg(test)]
     pub(crate) fn force(&mut self, n: u32, abandon: bool) {
         self.choice.direct_left = n;
@@ -262,7 +263,7 @@ impl DirectFrames {
         }
     }
 
-    /// Sets the measured direct rate (tests: frames that stop are then abandoned).
+    /// Sets the measured direct rate (tests: frames that stop are then given up).
     #[cfg(test)]
     pub(crate) fn force_rate(&mut self, ns: f64) {
         self.choice.measured = vec![Model {
@@ -474,11 +475,11 @@ pub(crate) mod tests {
         (scene, view, reference)
     }
 
-    /// Frames drawn directly, and frames whose culling stops and is abandoned (redrawn
-    /// directly), are the reference frames, counted as such; the renderers that embed
+    /// Frames drawn directly, and frames whose culling is given up (finished untested, or
+    /// redrawn directly), are the reference frames, counted as such; the renderers that embed
     /// [`DirectFrames`] each.
     #[test]
-    fn direct_and_abandoned_frames_are_identical() {
+    fn direct_and_given_up_frames_are_identical() {
         let (scene, view, reference) = scene_view_reference();
         let options = RenderOptions::default();
         let hzb =
@@ -508,11 +509,12 @@ pub(crate) mod tests {
             r.force(0, true);
             let mut f = Frame::new(96, 64).expect("a 96x64 frame");
             let s = r.render(&view, &mut f).expect("the renderer renders the view");
-            assert!(f.same_visibility(&reference), "{name} abandoned");
+            assert!(f.same_visibility(&reference), "{name} given up");
+            // lzb redraws a frame it gives up; hzb and oqgrid finish it untested.
             assert_eq!(
                 s.counters.get(COUNTER),
-                1,
-                "{name}: an abandoned frame is drawn directly"
+                u64::from(*name == "lzb"),
+                "{name}: a frame given up is drawn directly"
             );
             assert_eq!(s.counters.get("payoff_stopped"), 1, "{name}");
         }
@@ -521,7 +523,7 @@ pub(crate) mod tests {
     /// What the tests above set in a renderer that embeds [`DirectFrames`].
     pub(crate) trait ForceDirect: Renderer {
         /// Makes the next `n` frames direct; `abandon`: frames stop at their first balance
-        /// check, with a direct rate known (so they are abandoned).
+        /// check, with a direct rate known (so they are given up).
         fn force(&mut self, n: u32, abandon: bool);
     }
 

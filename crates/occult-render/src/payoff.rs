@@ -32,10 +32,13 @@
 //! once one was measured, what it is expected to cost ([`Payoff::set_direct`]; before that,
 //! an estimate from the rasterization rates seen). The balance is then checked after each
 //! batch too, and a frame that has spent a direct frame's time, whose rest at its pace so far
-//! would take longer than another, is **abandoned** ([`FramePayoff::abandoned`]): the renderer
-//! draws nothing more of it and the whole frame is drawn directly instead (about two direct
-//! frames in all). Once a direct frame was measured,
-//! any other frame is finished as begun, tests and all; the frame-level choice weighs it.
+//! would take longer than another, is **given up** ([`Abandon`]): a renderer whose walk can
+//! go on untested (`hzb`, `oqgrid`) stops testing and draws the rest directly, keeping what it
+//! drew (at most a direct frame's time beyond what was spent); one that cannot (`lzb`, whose
+//! far scene is found by rays) draws nothing more and the whole frame is drawn directly
+//! instead ([`FramePayoff::abandoned`]: about two direct frames in all). Once a direct frame
+//! was measured, any other frame is finished as begun, tests and all, unless given up; the
+//! frame-level choice weighs it.
 //!
 //! Counters, registered by each renderer that uses it: `payoff_stopped` (1 when the frame
 //! stopped testing), `payoff_untested` (the tests then skipped).
@@ -62,11 +65,24 @@ pub const ABANDON_MARGIN: f64 = 1.25;
 /// Tests between two checks of the balance (a check reads the clock).
 const CHECK_EVERY: u32 = 32;
 
+/// What a renderer does with a frame that is given up ([module doc](self)).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Abandon {
+    /// Stop testing and draw the rest of the frame directly, keeping what was drawn: for
+    /// renderers whose walk can go on untested. The frame counts as stopped
+    /// ([`FramePayoff::stopped`]), never as abandoned.
+    Finish,
+    /// Draw nothing more of the frame: the renderer hands it whole to
+    /// [`crate::direct::DirectFrames::redraw`] ([`FramePayoff::abandoned`]).
+    Redraw,
+}
+
 /// What a renderer keeps across frames: the allowance, the measured cost of a triangle and
 /// the triangles last seen in view.
 #[derive(Clone, Debug)]
 pub struct Payoff {
     enabled: bool,
+    abandon: Abandon,
     allowance: f64,
     ns_per_triangle: f64,
     /// Cost of a triangle in a batch shared over the rasterizer's threads, ns: what drawing
@@ -84,8 +100,6 @@ pub struct Payoff {
     direct_threads: usize,
     /// Whether the last frame's tests saved more than they cost ([`FramePayoff::paid`]).
     last_paid: bool,
-    /// Whether the last frame was abandoned ([`FramePayoff::abandoned`]).
-    last_abandoned: bool,
     /// Tests: every frame stops at its first check.
     #[cfg(test)]
     pub(crate) force_stop: bool,
@@ -93,10 +107,12 @@ pub struct Payoff {
 
 impl Payoff {
     /// A fresh state. `enabled` false: frames never stop testing. `scene_triangles` is the
-    /// first frame's estimate of the triangles in view (the whole scene).
+    /// first frame's estimate of the triangles in view (the whole scene). A frame given up is
+    /// finished directly ([`Abandon::Finish`]; see [`Payoff::redrawing`]).
     pub fn new(enabled: bool, scene_triangles: u64) -> Self {
         Self {
             enabled,
+            abandon: Abandon::Finish,
             allowance: MAX_ALLOWANCE,
             ns_per_triangle: PRIOR_NS_PER_TRIANGLE,
             direct_ns: None,
@@ -105,9 +121,17 @@ impl Payoff {
             direct_work: 0,
             direct_threads: 1,
             last_paid: false,
-            last_abandoned: false,
             #[cfg(test)]
             force_stop: false,
+        }
+    }
+
+    /// The same state, for a renderer that cannot go on untested: a frame given up draws
+    /// nothing more and is redrawn directly ([`Abandon::Redraw`]).
+    pub fn redrawing(self) -> Self {
+        Self {
+            abandon: Abandon::Redraw,
+            ..self
         }
     }
 
@@ -127,12 +151,6 @@ impl Payoff {
         self.last_paid
     }
 
-    /// Whether the last frame was abandoned, to be redrawn directly
-    /// ([`FramePayoff::abandoned`]).
-    pub fn last_abandoned(&self) -> bool {
-        self.last_abandoned
-    }
-
     /// Starts weighing a frame that began at `start`.
     pub fn begin(&self, start: Instant) -> FramePayoff {
         FramePayoff {
@@ -147,7 +165,9 @@ impl Payoff {
             direct_frame_ns: self.direct_frame_ns,
             direct_work: self.direct_work,
             direct_threads: self.direct_threads,
+            abandon: self.abandon,
             abandoned: false,
+            given_up: false,
             #[cfg(test)]
             force_stop: self.force_stop,
             allowance_triangles: self.allowance * self.in_view as f64,
@@ -160,7 +180,6 @@ impl Payoff {
     /// Learns from a finished frame: the allowance, the cost of a triangle, the work in view.
     pub fn end(&mut self, f: &FramePayoff) {
         self.last_paid = f.paid(Instant::now());
-        self.last_abandoned = f.abandoned();
         self.ns_per_triangle = f.ns_per_triangle();
         if f.shared.0 > 0 {
             let measured = f.shared.1.as_nanos() as f64 / f.shared.0 as f64;
@@ -193,8 +212,12 @@ pub struct FramePayoff {
     /// The work a direct frame meets (0: unknown), and the threads it is shared over.
     direct_work: u64,
     direct_threads: usize,
-    /// The frame was abandoned ([`FramePayoff::abandoned`]).
+    /// What a frame given up does, and whether this one was abandoned
+    /// ([`FramePayoff::abandoned`]).
+    abandon: Abandon,
     abandoned: bool,
+    /// The frame was given up (abandoned, or with [`Abandon::Finish`] stopped for it).
+    given_up: bool,
     #[cfg(test)]
     force_stop: bool,
     allowance_triangles: f64,
@@ -263,13 +286,14 @@ impl FramePayoff {
         // longer than a direct frame by a margin.
         let progress =
             ((self.raster_triangles + self.saved_triangles) as f64 / self.direct_work.max(1) as f64).min(1.0);
-        self.abandoned = self.abandons(elapsed, progress);
-        self.stopped = self.abandoned
+        let given_up = self.abandons(elapsed, progress) || self.forced_to_give_up();
+        self.given_up = given_up;
+        self.abandoned = given_up && self.abandon == Abandon::Redraw;
+        self.stopped = given_up
             || (self.direct_frame_ns.is_none() && (direct_too_slow || self.cost_ns(now) > self.gain_ns() + allowance));
         #[cfg(test)]
         {
             self.stopped |= self.force_stop;
-            self.abandoned |= self.force_stop && self.direct_frame_ns.is_some();
         }
         self.stopped
     }
@@ -283,6 +307,15 @@ impl FramePayoff {
             && elapsed * (1.0 - progress) > ABANDON_MARGIN * expected * progress
     }
 
+    /// Tests (`force_stop`): a frame with a direct frame measured is given up at its
+    /// first check.
+    fn forced_to_give_up(&self) -> bool {
+        #[cfg(test)]
+        return self.force_stop && self.direct_frame_ns.is_some();
+        #[cfg(not(test))]
+        false
+    }
+
     /// For a renderer whose tests are not per triangle (rays): `progress` (0..=1) of the
     /// frame's tests is done; weighs abandonment by the same rule as the triangle count does
     /// ([`FramePayoff::abandoned`]) and returns it. Never abandons when payoff is off or the
@@ -290,12 +323,10 @@ impl FramePayoff {
     pub fn progressed(&mut self, progress: f64) -> bool {
         if self.enabled && !self.abandoned {
             let elapsed = self.start.elapsed().as_nanos() as f64;
-            self.abandoned = self.abandons(elapsed, progress.clamp(0.0, 1.0));
-            #[cfg(test)]
-            {
-                self.abandoned |= self.force_stop && self.direct_frame_ns.is_some();
-            }
-            self.stopped |= self.abandoned;
+            let given_up = self.abandons(elapsed, progress.clamp(0.0, 1.0)) || self.forced_to_give_up();
+            self.given_up = given_up;
+            self.abandoned = given_up && self.abandon == Abandon::Redraw;
+            self.stopped |= given_up;
         }
         self.abandoned
     }
@@ -336,14 +367,22 @@ impl FramePayoff {
 
     /// True once the frame has spent a direct frame's time and the rest of it, at its pace so
     /// far (the share of its work drawn or removed), would take more than [`ABANDON_MARGIN`]
-    /// direct frames: the renderer then draws nothing more of the frame and hands it to
-    /// [`crate::direct::DirectFrames::redraw`], which draws it whole as `frustum` does. The
-    /// direct frame's time is the measured one ([`Payoff::set_direct`]); before one was
-    /// measured, an estimate from the rasterization rates seen (so that a first frame that
-    /// culling cannot help, with no list of what was visible yet, is not finished in small
-    /// tested batches).
+    /// direct frames, for a renderer that redraws such a frame ([`Abandon::Redraw`]): it then
+    /// draws nothing more of the frame and hands it to
+    /// [`crate::direct::DirectFrames::redraw`], which draws it whole as `frustum` does. With
+    /// [`Abandon::Finish`] such a frame only stops testing ([`FramePayoff::stopped`]) and this
+    /// stays false. The direct frame's time is the measured one ([`Payoff::set_direct`]);
+    /// before one was measured, an estimate from the rasterization rates seen (so that a first
+    /// frame that culling cannot help, with no list of what was visible yet, is not finished in
+    /// small tested batches).
     pub fn abandoned(&self) -> bool {
         self.abandoned
+    }
+
+    /// True once the frame was given up by the rule of [`FramePayoff::abandoned`], whatever
+    /// the renderer does with it ([`Abandon`]).
+    pub fn given_up(&self) -> bool {
+        self.given_up
     }
 
     /// The counters `payoff_stopped` and `payoff_untested`.
@@ -428,12 +467,12 @@ mod tests {
         assert_eq!(p.in_view, 1_001_000);
     }
 
-    /// A frame that spent a direct frame's time, with a tenth of its work done, is abandoned:
+    /// A frame that spent a direct frame's time, with a tenth of its work done, is given up:
     /// the direct frame measured, or before a measurement estimated from the frame's own rate
     /// shared over the threads; one nearly done stops testing only (before a measurement) or
-    /// goes on.
+    /// goes on. A renderer that redraws has it abandoned; one that finishes, stopped only.
     #[test]
-    fn abandons_a_frame_plainly_slower_than_drawing_it_again() {
+    fn gives_up_a_frame_plainly_slower_than_drawing_it_directly() {
         let ago = |ms| Instant::now() - Duration::from_millis(ms);
         // 1,000 triangles drawn at 10 µs each: a direct frame of 10,000 on 2 threads, 50 ms.
         let frame = |p: &Payoff, started: Instant, saved: u64| {
@@ -442,10 +481,19 @@ mod tests {
             f.rasterized(1_000, Duration::from_millis(10), false);
             f
         };
-        let mut p = Payoff::new(true, 10_000);
+        let mut finishing = Payoff::new(true, 10_000);
+        finishing.set_direct(None, 10_000, 2);
+        let f = frame(&finishing, ago(60), 0);
+        assert!(f.given_up() && f.stopped() && !f.abandoned(), "finished untested");
+        let f = frame(&finishing, ago(25), 0);
+        assert!(!f.given_up() && !f.stopped());
+        let mut p = Payoff::new(true, 10_000).redrawing();
         p.set_direct(None, 10_000, 2);
         let f = frame(&p, ago(60), 0);
-        assert!(f.abandoned() && f.stopped(), "60 ms, a tenth of the work: estimated");
+        assert!(
+            f.abandoned() && f.given_up() && f.stopped(),
+            "60 ms, a tenth of the work: estimated"
+        );
         let f = frame(&p, ago(25), 0);
         assert!(!f.abandoned() && !f.stopped(), "within the estimate and the allowance");
         let f = frame(&p, ago(500), 8_000);

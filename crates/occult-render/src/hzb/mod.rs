@@ -62,8 +62,9 @@
 //!   the pyramid then, and it rebuilds it). Across frames ([`crate::direct`], without a
 //!   distribution): after a frame that was slower than a measured direct frame (`frustum`'s
 //!   way, per triangle in view), runs of frames are drawn directly (counter `payoff_direct`),
-//!   culling probed between them; a frame that stops once a direct frame was measured is
-//!   abandoned and drawn directly instead.
+//!   culling probed between them; a frame headed for more than a direct frame's time (at its
+//!   pace so far) is given up: it stops testing and draws the rest directly, keeping what it
+//!   drew ([`crate::payoff::Abandon::Finish`]).
 //!
 //! Every part has a switch so its effect can be measured (`occult algos` lists them).
 //!
@@ -900,9 +901,6 @@ impl Renderer for Hzb {
         };
         crate::check_cancel(&self.workers[0].raster)?;
         if let Some(direct) = &mut self.direct {
-            if self.workers.iter().any(|w| w.payoff.last_abandoned()) {
-                direct.redraw(&mut self.workers[0].raster, view, frame, &mut stats)?;
-            }
             let (t, paid) = (Instant::now(), self.workers.iter().all(|w| w.payoff.last_paid()));
             direct.culled(view, frame, start.elapsed(), &mut stats, paid)?;
             stats.phases.add(Phase::Other, t.elapsed());

@@ -842,8 +842,8 @@ impl<'a> Walk<'a> {
 
     /// §3.2: test the node's box, draw its own primitives, then its children front to back.
     fn octree_node(&mut self, inst: &Instance<'a>, n: u32, inside: bool) {
-        if self.payoff.abandoned() || self.raster.config().control.is_cancelled() {
-            return; // the frame is redrawn directly (`crate::direct`), or not at all
+        if self.raster.config().control.is_cancelled() {
+            return; // the frame is not drawn at all
         }
         let node = &inst.octree.nodes()[n as usize];
         let stats = &mut self.walk.stats;
@@ -1105,14 +1105,6 @@ impl<'a> Walk<'a> {
     /// Rasterizes the batch, then brings the pyramid up to date over the batch's region.
     fn flush(&mut self) {
         if self.pending.is_empty() {
-            return;
-        }
-        if self.payoff.abandoned() {
-            // The frame is redrawn directly (`crate::direct`).
-            self.pending.clear();
-            self.scratch.clear();
-            self.pending_triangles = 0;
-            self.dirty = None;
             return;
         }
         let draws: Vec<Draw<'_>> = self

@@ -548,7 +548,7 @@ impl Lzb {
         };
         Ok(Self {
             cull_backfaces: options.raster.cull_backfaces,
-            payoff: Payoff::new(opts.payoff, scene.item_count()),
+            payoff: Payoff::new(opts.payoff, scene.item_count()).redrawing(),
             scene,
             raster,
             opts: opts.clone(),

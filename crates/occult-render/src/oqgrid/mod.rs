@@ -767,9 +767,6 @@ impl<'a> Visitor<'a> for Walk<'a> {
 
     /// Traverses the occurrence's grid from its top level.
     fn visit(&mut self, at: &NodeAt<'a>) {
-        if self.payoff.abandoned() {
-            return; // the frame is redrawn directly (`crate::direct`)
-        }
         self.counts.node_occurrences += 1;
         self.next_epoch();
         let view = self.walk.view();
@@ -883,8 +880,8 @@ impl<'a> Walk<'a> {
     /// Queries the cells of one batch against the same depth state, then draws the visible
     /// ones (§3.4) and recurses into the visible ones' subgrids (§3.2) and instances.
     fn batch(&mut self, occ: &Occurrence<'a>, level_index: u32, batch: &[(i64, u32)]) {
-        if self.payoff.abandoned() || self.raster.config().control.is_cancelled() {
-            return; // the frame is redrawn directly (`crate::direct`), or not at all
+        if self.raster.config().control.is_cancelled() {
+            return; // the frame is not drawn at all
         }
         let cells: &'a [GridCell] = &occ.grid.levels()[level_index as usize].cells;
         let options = self.options;
@@ -1212,14 +1209,6 @@ impl<'a> Walk<'a> {
         if self.pending.is_empty() {
             return;
         }
-        if self.payoff.abandoned() {
-            // The frame is redrawn directly (`crate::direct`).
-            self.pending.clear();
-            self.gathered.clear();
-            self.dirty.clear();
-            self.pending_triangles = 0;
-            return;
-        }
         let view = self.walk.view();
         let draws: Vec<Draw<'_>> = self
             .pending
@@ -1354,8 +1343,9 @@ impl Renderer for OqGrid {
         }
         self.payoff.end(&payoff);
         let mut stats = walk.finish("oqgrid")?;
-        if recorded && !payoff.abandoned() {
-            // This frame's list replaces the last (an abandoned frame's is incomplete).
+        if recorded && !payoff.given_up() {
+            // This frame's list replaces the last (a frame given up lists what it drew
+            // untested: everything in view).
             std::mem::swap(&mut self.visible, &mut self.next_visible);
         }
         stats.phases.add(Phase::Query, query_time);
@@ -1376,9 +1366,6 @@ impl Renderer for OqGrid {
         }
         stats.counters.add_all(payoff.counters());
         if let Some(direct) = &mut self.direct {
-            if payoff.abandoned() {
-                direct.redraw(&mut self.raster, view, frame, &mut stats)?;
-            }
             let t = Instant::now();
             direct.culled(view, frame, start.elapsed(), &mut stats, self.payoff.last_paid())?;
             stats.phases.add(Phase::Other, t.elapsed());
