@@ -204,6 +204,41 @@ fn reference_is_added_when_not_requested() {
     assert_eq!(report.renderers[1].frames_identical, Some(2));
 }
 
+/// The frames checked against come from a second, untimed instance of the reference: every
+/// build is announced, that one last, and the timed reference is checked like any renderer.
+#[test]
+fn reference_frames_come_from_an_untimed_instance() {
+    let config = CompareConfig::new(vec![Algorithm::ZBUFFER, Algorithm::FRUSTUM], 96, 64);
+    let mut builds = Vec::new();
+    let report = compare(cubes(), &circle(3), &config, &mut |p| {
+        if let CompareProgress::Building { label, index, count } = p {
+            builds.push((label.to_string(), index, count));
+        }
+    })
+    .expect("zbuffer and frustum compare on the cubes");
+    assert_eq!(
+        builds,
+        [
+            ("zbuffer".to_string(), 0, 3),
+            ("frustum".to_string(), 1, 3),
+            ("zbuffer (reference frames)".to_string(), 2, 3)
+        ]
+    );
+    let z = report.renderer("zbuffer").expect("zbuffer is in the report");
+    assert!(z.is_reference);
+    assert_eq!((z.frames, z.frames_identical), (3, Some(3)));
+    let none = CompareConfig {
+        reference: Reference::None,
+        ..config
+    };
+    let mut builds = 0;
+    compare(cubes(), &circle(1), &none, &mut |p| {
+        builds += usize::from(matches!(p, CompareProgress::Building { .. }));
+    })
+    .expect("no reference");
+    assert_eq!(builds, 2, "nothing to check, no second instance");
+}
+
 #[test]
 fn scenes_too_large_for_brute_force_use_frustum_as_reference() {
     // 10^10 triangle instances along +x, ten times farther apart at each level; the camera
