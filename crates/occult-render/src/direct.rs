@@ -27,7 +27,8 @@
 //!   cost at the frame's own rasterization rate), unless that frame is small beside the culled
 //!   frames before it (less than half their mean time); a culled frame that wins by a thin
 //!   margin (more than [`REMEASURE_SHARE`] of the predicted direct time) measures it again
-//!   once the measurement is [`REMEASURE_AFTER`] frames old;
+//!   once the measurement is [`REMEASURE_AFTER`] frames old, or [`REMEASURE_FIRST`] while
+//!   there is only one (it may be cold), then also after a thin loss;
 //! - a culled frame shorter than [`MIN_ALLOWANCE_TIME`] never starts a run (small scenes keep
 //!   their tests whatever the clock says);
 //! - probes are **screened**: the last direct frame of a run has its final depth, and what a
@@ -67,8 +68,13 @@ pub const MAX_RUN: u32 = 64;
 pub const MIN_RUN: u32 = 8;
 /// A culled frame paying less than this share of the direct rate measures it again ...
 pub const REMEASURE_SHARE: f64 = 0.8;
-/// ... once the last measurement is this many frames old.
+/// ... once the last measurement is this many frames old ...
 pub const REMEASURE_AFTER: u32 = 16;
+/// ... or this many, while the model holds a single measurement: a renderer's first direct
+/// frame may still be cold (its rasterizer's first large draws: 34–38 ms against 22 for the
+/// next ones on `city` `circle:32`), and one cold measurement made culled frames slower than
+/// a warm direct frame look like wins for 16 frames.
+pub const REMEASURE_FIRST: u32 = 4;
 /// Direct frames whose measurements are kept (the model takes the least of each part).
 pub const DIRECT_KEPT: usize = 4;
 /// Direct frames drawn in a row for the first measurement: a renderer's first direct frame
@@ -399,13 +405,21 @@ impl Choice {
         }
         if self.judge(total, work, tests_paid) {
             self.start_run();
-        } else if !self.lost_last {
+            return;
+        }
+        if !self.lost_last {
             self.run = 0;
-            // A thin win against a direct frame measured long ago is measured again.
-            let thin = self.ratio(total, work) > Some(REMEASURE_SHARE);
-            if thin && self.since_direct >= REMEASURE_AFTER {
-                self.direct_left = 1;
-            }
+        }
+        // A thin win against a direct frame measured long ago is measured again; against a
+        // single measurement, soon, and a thin loss too (the measurement may be cold).
+        let thin = self.ratio(total, work) > Some(REMEASURE_SHARE);
+        let after = match (self.measured.len(), self.lost_last) {
+            (..=1, _) => REMEASURE_FIRST,
+            (_, false) => REMEASURE_AFTER,
+            (_, true) => u32::MAX,
+        };
+        if thin && self.since_direct >= after {
+            self.direct_left = 1;
         }
     }
 
@@ -635,6 +649,47 @@ pub(crate) mod tests {
             }
         }
         assert_eq!(remeasured, 3);
+    }
+
+    /// A single measurement that was cold (twice a warm direct frame) is taken again after
+    /// [`REMEASURE_FIRST`] culled frames that win or lose thinly against it; the warm one then
+    /// shows them as losses.
+    #[test]
+    fn a_single_cold_measurement_is_taken_again_soon() {
+        let mut c = Choice::default();
+        c.culled(40 * MS, 1000, false, false, false);
+        assert!(c.take_direct());
+        c.direct(40 * MS, 39 * MS, 1000); // cold: warm ones take 20 ms
+        assert!(!c.take_direct(), "the culled frame before is weighed: a thin win");
+        let mut culled = 0;
+        while !c.take_direct() {
+            c.culled(36 * MS, 1000, true, false, false);
+            culled += 1;
+            assert!(
+                culled <= REMEASURE_FIRST,
+                "remeasured after {REMEASURE_FIRST} culled frames"
+            );
+        }
+        assert_eq!(culled, REMEASURE_FIRST);
+        c.direct(20 * MS, 19 * MS, 1000);
+        c.culled(36 * MS, 1000, true, false, false);
+        c.culled(36 * MS, 1000, true, false, false);
+        assert!(c.take_direct(), "two losses against the warm measurement start a run");
+        // With two measurements, thin wins wait REMEASURE_AFTER frames as before.
+        let mut c = Choice {
+            measured: vec![
+                Model {
+                    fixed_ns: 0.0,
+                    rate_ns: 40_000.0,
+                };
+                2
+            ],
+            ..Choice::default()
+        };
+        for _ in 0..REMEASURE_AFTER - 1 {
+            c.culled(36 * MS, 1000, true, false, false);
+            assert!(!c.take_direct());
+        }
     }
 
     /// A loss starts a run when its tests did not pay, or after another loss; a single loss
