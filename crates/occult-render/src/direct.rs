@@ -28,7 +28,7 @@
 //!   frames before it (less than half their mean time); a culled frame that wins by a thin
 //!   margin (more than [`REMEASURE_SHARE`] of the predicted direct time) measures it again
 //!   once the measurement is [`REMEASURE_AFTER`] frames old, or [`REMEASURE_FIRST`] while
-//!   there is only one (it may be cold), then also after a thin loss;
+//!   there is only one (it may be cold), then also after a loss that started no run;
 //! - a culled frame shorter than [`MIN_ALLOWANCE_TIME`] never starts a run (small scenes keep
 //!   their tests whatever the clock says);
 //! - probes are **screened**: the last direct frame of a run has its final depth, and what a
@@ -46,7 +46,7 @@
 //! Renderers also hand the expected direct frame to their in-frame payoff, which then gives
 //! up a frame plainly slower than drawing it directly (`hzb` and `oqgrid` draw its rest
 //! directly, `lzb` draws it again)
-//! ([`FramePayoff::abandoned`](crate::payoff::FramePayoff::abandoned)).
+//! ([`FramePayoff::given_up`](crate::payoff::FramePayoff::given_up)).
 //! Frames do not change (`frustum` is exact), only the time. Counters: `payoff_direct` (1 for
 //! a frame drawn directly), `payoff_screened` (1 for a frame whose screening skipped a probe
 //! or, before the first measurement, a culled frame).
@@ -411,7 +411,8 @@ impl Choice {
             self.run = 0;
         }
         // A thin win against a direct frame measured long ago is measured again; against a
-        // single measurement, soon, and a thin loss too (the measurement may be cold).
+        // single measurement, soon, and after a loss that started no run too (every loss is
+        // "thin": the measurement may be cold).
         let thin = self.ratio(total, work) > Some(REMEASURE_SHARE);
         let after = match (self.measured.len(), self.lost_last) {
             (..=1, _) => REMEASURE_FIRST,
@@ -531,6 +532,10 @@ pub(crate) mod tests {
                 "{name}: a frame given up is drawn directly"
             );
             assert_eq!(s.counters.get("payoff_stopped"), 1, "{name}");
+            // The frame after, from what the given-up frame left (its list, its state).
+            let mut f = Frame::new(96, 64).expect("a 96x64 frame");
+            r.render(&view, &mut f).expect("the renderer renders the view");
+            assert!(f.same_visibility(&reference), "{name}: the frame after one given up");
         }
     }
 
@@ -652,8 +657,9 @@ pub(crate) mod tests {
     }
 
     /// A single measurement that was cold (twice a warm direct frame) is taken again after
-    /// [`REMEASURE_FIRST`] culled frames that win or lose thinly against it; the warm one then
-    /// shows them as losses.
+    /// [`REMEASURE_FIRST`] culled frames that win thinly against it, or lose without starting a
+    /// run; the warm one then shows them as losses. With two measurements, thin wins wait
+    /// [`REMEASURE_AFTER`] frames as before.
     #[test]
     fn a_single_cold_measurement_is_taken_again_soon() {
         let mut c = Choice::default();
@@ -690,6 +696,22 @@ pub(crate) mod tests {
             c.culled(36 * MS, 1000, true, false, false);
             assert!(!c.take_direct());
         }
+        c.culled(36 * MS, 1000, true, false, false);
+        assert!(c.take_direct(), "the {REMEASURE_AFTER}th thin win remeasures");
+        // One measurement, culled frames that lose by turns (tests paid: no run starts).
+        let mut c = Choice {
+            measured: vec![Model {
+                fixed_ns: 0.0,
+                rate_ns: 30_000.0,
+            }],
+            ..Choice::default()
+        };
+        for k in 0..REMEASURE_FIRST {
+            assert!(!c.take_direct());
+            let t = if k % 2 == 1 { 34 * MS } else { 20 * MS };
+            c.culled(t, 1000, true, false, false);
+        }
+        assert!(c.take_direct(), "a loss that started no run remeasures too");
     }
 
     /// A loss starts a run when its tests did not pay, or after another loss; a single loss

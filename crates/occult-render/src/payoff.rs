@@ -57,10 +57,11 @@ const PRIOR_NS_PER_TRIANGLE: f64 = 20.0;
 /// Triangles a renderer gathers per batch once its frame stopped testing: large enough that the
 /// rasterizer shares each batch over its threads, as brute force's draws are.
 pub const DIRECT_BATCH: usize = 1 << 19;
-/// A frame is abandoned when the rest of it, at its pace so far, would take this many times a
+/// A frame is given up when the rest of it, at its pace so far, would take this many times a
 /// direct frame (see [`FramePayoff::abandoned`]): at least a direct frame's time is spent by
 /// then, and culling that pays often pays late in a frame (what is hidden is reached after its
-/// occluders), hence the margin over 1.
+/// occluders), hence the margin over 1 (set when a frame given up was always drawn again
+/// whole; finishing it directly costs only its rest, [`Abandon::Finish`]).
 pub const ABANDON_MARGIN: f64 = 1.25;
 /// Tests between two checks of the balance (a check reads the clock).
 const CHECK_EVERY: u32 = 32;
@@ -91,8 +92,8 @@ pub struct Payoff {
     /// Triangles last frame drew or removed by tests: the work a direct frame would face.
     in_view: u64,
     /// What a measured direct frame of the coming view is expected to cost, ns
-    /// ([`crate::direct`]): a frame that stops is then abandoned. `None` before one was
-    /// measured.
+    /// ([`crate::direct`]): a frame then stops only when it is given up ([`Abandon`]). `None`
+    /// before one was measured.
     direct_frame_ns: Option<f64>,
     /// The coming view's work: the triangles a direct frame would submit (0: unknown).
     direct_work: u64,
@@ -206,8 +207,8 @@ pub struct FramePayoff {
     saved_triangles: u64,
     last_ns_per_triangle: f64,
     direct_ns: Option<f64>,
-    /// What a measured direct frame is expected to cost, ns: a stop then abandons the frame
-    /// (redrawn directly, [`crate::direct`]).
+    /// What a measured direct frame is expected to cost, ns: a frame then stops only when it
+    /// is given up ([`Abandon`]).
     direct_frame_ns: Option<f64>,
     /// The work a direct frame meets (0: unknown), and the threads it is shared over.
     direct_work: u64,
@@ -281,9 +282,9 @@ impl FramePayoff {
             let work = (self.raster_triangles + self.saved_triangles) as f64 * d;
             elapsed > work + allowance
         });
-        // Abandoning costs what was spent plus a whole direct frame: only once a direct
-        // frame's time is spent, and the rest of the frame at its pace so far would take
-        // longer than a direct frame by a margin.
+        // Giving up costs what was spent plus the rest drawn directly (a whole direct frame
+        // for a renderer that redraws): only once a direct frame's time is spent, and the rest
+        // of the frame at its pace so far would take longer than a direct frame by a margin.
         let progress =
             ((self.raster_triangles + self.saved_triangles) as f64 / self.direct_work.max(1) as f64).min(1.0);
         let given_up = self.abandons(elapsed, progress) || self.forced_to_give_up();
@@ -321,7 +322,7 @@ impl FramePayoff {
     /// ([`FramePayoff::abandoned`]) and returns it. Never abandons when payoff is off or the
     /// frame's work is unknown.
     pub fn progressed(&mut self, progress: f64) -> bool {
-        if self.enabled && !self.abandoned {
+        if self.enabled && !self.given_up {
             let elapsed = self.start.elapsed().as_nanos() as f64;
             let given_up = self.abandons(elapsed, progress.clamp(0.0, 1.0)) || self.forced_to_give_up();
             self.given_up = given_up;

@@ -16,7 +16,8 @@
 //!   are drawn by a second instance of the reference, untimed; the timed instance is a
 //!   contestant like any other, its frames checked too. Timed in the role itself, a reference
 //!   ran 3–10 % faster than an identical copy of it (`zbuffer` against `zbuffer:bands=1`),
-//!   which flattered every ratio to it.
+//!   which flattered every ratio to it. The second instance and its frame stay in memory
+//!   while every renderer is measured (the process's peak resident memory holds them).
 //! - **identical**: depth (bit for bit) and item ids equal to the reference's
 //!   ([`Frame::same_visibility`]); DESIGN invariant 2 demands it of conservative renderers.
 //! - **error** of a frame that is not identical: share of covered pixels (covered in either
@@ -440,6 +441,7 @@ struct Contestant {
 /// `zbuffer:bands=1` on `sponza` `circle:96`, reference either one; not cache warmth:
 /// overwriting 64 MiB before every timed frame left it), which flattered every ratio to it.
 struct Checker {
+    /// `<reference> (reference frames)`: its name in progress and errors.
     label: String,
     renderer: Box<dyn Renderer>,
     frame: Frame,
@@ -476,7 +478,7 @@ impl Checker {
             prepare_ms: ms(t.elapsed()),
         });
         Ok(Self {
-            label: reference.label.clone(),
+            label,
             renderer,
             frame: Frame::new(config.width, config.height)?,
         })

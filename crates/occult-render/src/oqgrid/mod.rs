@@ -67,7 +67,8 @@
 //!   threads, without pyramid updates. Counters `payoff_stopped`, `payoff_untested`. Across
 //!   frames ([`crate::direct`]): after a frame that was slower than a measured direct frame
 //!   (`frustum`'s way, per triangle in view), runs of frames are drawn directly (counter
-//!   `payoff_direct`), querying probed between them.
+//!   `payoff_direct`), querying probed between them; a frame headed for more than a direct
+//!   frame's time is given up: it stops querying the same way, keeping what it drew.
 //!
 //! # Instanced scenes
 //! The scene DAG is not flattened. A grid is built per *unique* node, in the node's own space:
@@ -1343,9 +1344,9 @@ impl Renderer for OqGrid {
         }
         self.payoff.end(&payoff);
         let mut stats = walk.finish("oqgrid")?;
-        if recorded && !payoff.given_up() {
-            // This frame's list replaces the last (a frame given up lists what it drew
-            // untested: everything in view).
+        if recorded {
+            // This frame's list replaces the last (one that stopped querying, given up or not,
+            // lists what it drew untested).
             std::mem::swap(&mut self.visible, &mut self.next_visible);
         }
         stats.phases.add(Phase::Query, query_time);
