@@ -476,6 +476,15 @@ pub(crate) mod tests {
 
     const MS: Duration = Duration::from_millis(1);
 
+    /// A choice whose model holds `n` measurements of a direct frame: `fixed_ns` and `rate_ns`
+    /// a triangle.
+    fn measured(fixed_ns: f64, rate_ns: f64, n: usize) -> Choice {
+        Choice {
+            measured: vec![Model { fixed_ns, rate_ns }; n],
+            ..Choice::default()
+        }
+    }
+
     /// A row of cubes before more cubes on the ground, a view along the row, and the
     /// reference frame.
     pub(crate) fn scene_view_reference() -> (Arc<Scene>, View, Frame) {
@@ -576,13 +585,7 @@ pub(crate) mod tests {
     /// first culled frame that cannot pay has the direct frames measured next.
     #[test]
     fn screening_weighs_hidden_triangles_against_the_cost_of_culling() {
-        let mut c = Choice {
-            measured: vec![Model {
-                fixed_ns: 0.0,
-                rate_ns: 10_000.0,
-            }],
-            ..Choice::default()
-        };
+        let mut c = measured(0.0, 10_000.0, 1);
         assert!(!c.screens(), "no culled frame measured");
         // 14 ms for 1000 submitted triangles, 10 ms of drawing them directly: culling cost 4 ms.
         c.last_culled = Some((14 * MS, 1000));
@@ -682,16 +685,7 @@ pub(crate) mod tests {
         c.culled(36 * MS, 1000, true, false, false);
         assert!(c.take_direct(), "two losses against the warm measurement start a run");
         // With two measurements, thin wins wait REMEASURE_AFTER frames as before.
-        let mut c = Choice {
-            measured: vec![
-                Model {
-                    fixed_ns: 0.0,
-                    rate_ns: 40_000.0,
-                };
-                2
-            ],
-            ..Choice::default()
-        };
+        let mut c = measured(0.0, 40_000.0, 2);
         for _ in 0..REMEASURE_AFTER - 1 {
             c.culled(36 * MS, 1000, true, false, false);
             assert!(!c.take_direct());
@@ -699,13 +693,7 @@ pub(crate) mod tests {
         c.culled(36 * MS, 1000, true, false, false);
         assert!(c.take_direct(), "the {REMEASURE_AFTER}th thin win remeasures");
         // One measurement, culled frames that lose by turns (tests paid: no run starts).
-        let mut c = Choice {
-            measured: vec![Model {
-                fixed_ns: 0.0,
-                rate_ns: 30_000.0,
-            }],
-            ..Choice::default()
-        };
+        let mut c = measured(0.0, 30_000.0, 1);
         for k in 0..REMEASURE_FIRST {
             assert!(!c.take_direct());
             let t = if k % 2 == 1 { 34 * MS } else { 20 * MS };
@@ -718,17 +706,7 @@ pub(crate) mod tests {
     /// of a frame whose tests paid does not.
     #[test]
     fn single_losses_of_paying_tests_are_not_trusted() {
-        let model = vec![
-            Model {
-                fixed_ns: 0.0,
-                rate_ns: 10_000.0,
-            };
-            2
-        ];
-        let mut c = Choice {
-            measured: model.clone(),
-            ..Choice::default()
-        };
+        let mut c = measured(0.0, 10_000.0, 2);
         c.culled(30 * MS, 1000, true, false, false);
         assert!(!c.take_direct(), "one loss, tests paid");
         c.culled(9 * MS, 1000, true, false, false);
@@ -736,10 +714,7 @@ pub(crate) mod tests {
         assert!(!c.take_direct(), "a win between");
         c.culled(11 * MS, 1000, true, false, false);
         assert!(c.take_direct(), "two losses in a row");
-        let mut c = Choice {
-            measured: model,
-            ..Choice::default()
-        };
+        let mut c = measured(0.0, 10_000.0, 2);
         c.culled(11 * MS, 1000, false, false, false);
         assert!(c.take_direct(), "a loss whose tests did not pay");
     }
@@ -771,16 +746,7 @@ pub(crate) mod tests {
     /// outweigh a frame of little work that loses a little.
     #[test]
     fn the_model_and_the_balance() {
-        let mut c = Choice {
-            measured: vec![
-                Model {
-                    fixed_ns: 8e6,
-                    rate_ns: 2000.0,
-                };
-                2
-            ],
-            ..Choice::default()
-        };
+        let mut c = measured(8e6, 2000.0, 2);
         assert_eq!(c.model().map(|m| m.predict(1000)), Some(10e6));
         c.culled(3 * MS, 1, false, false, false);
         assert!(
