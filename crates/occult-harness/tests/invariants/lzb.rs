@@ -29,6 +29,9 @@ identical_on_every_generator! {
     /// before the rays (`far_cull=on`, the default), with the paper's near pass.
     far_cull_plane_halfway_is_identical_on_every_generator:
         assert_variant_identical_on_every_generator("lzb:payoff=off,plane=static,plane_fraction=0.5,near_cull=off,far_cull=on", 2);
+    /// The near pass without last frame's visible leaves first.
+    near_cull_without_temporal_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("lzb:payoff=off,near_temporal=off", 1);
     /// A tiny plane: almost nothing near, almost every pixel goes to the rays.
     hybrid_everything_behind_the_plane_is_identical_on_every_generator:
         assert_variant_identical_on_every_generator("lzb:payoff=off,plane=static,plane_fraction=0.0001,leaf=32", 2);
@@ -64,6 +67,8 @@ fn identical_on_paths() {
         "lzb:payoff=off,plane=static,plane_fraction=0.3,select=static",
         "lzb:payoff=off,caster=bvh,plane=static,plane_fraction=0.3",
         "lzb:payoff=off,caster=bvh,select=all,oor=off",
+        // Everything near: the near pass alone, last frame's visible leaves first.
+        "lzb:payoff=off,plane=static,plane_fraction=1",
     ] {
         assert_identical_on_path(&spec(algo), "city:blocks=3,detail=1", "circle:12", 128, 96);
         assert_identical_on_path(&spec(algo), "forest:trees=2,patches=2", "flyover:8", 96, 64);
@@ -352,6 +357,8 @@ fn bad_parameters_are_errors() {
         ("lzb:payoff=maybe", "payoff"),
         ("lzb:oor=off,far_cull=on", "oor=on"),
         ("lzb:far_cull=maybe", "far_cull"),
+        ("lzb:near_cull=off,near_temporal=on", "near_cull=on"),
+        ("lzb:near_temporal=maybe", "near_temporal"),
     ] {
         match spec(bad).build(scene.clone(), &o) {
             Err(RenderError::BadParameter(m)) => assert!(m.contains(names), "{bad}: {m}"),

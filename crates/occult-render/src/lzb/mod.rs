@@ -149,6 +149,12 @@ const NEAR_UNIT: u32 = 256;
 /// of triangles in batches of 65,536 spent more in updates than in drawing).
 const NEAR_MAX_BATCH: usize = 1 << 18;
 
+/// `near_temporal` reads one pixel in this many, in x and in y, of a finished frame's items
+/// for the leaves that showed a pixel: on `city` `street:32` at 1280×720 a stride of 2 took
+/// 0.77 ms a frame, 8 took 0.15 ms, and `plant` `circle:32` drew its first batches as well
+/// (the leaves found are those showing a pixel of the sampled grid; the others are tested).
+const VISIBLE_STRIDE: usize = 8;
+
 /// Pixels one task casts (one [`Caster`], so one coherence chain).
 const CHUNK: usize = 256;
 
@@ -178,6 +184,9 @@ pub(crate) enum Accel {
         leaf_base: Vec<f32>,
         /// Its non-empty leaves (all of them near: the mesh is drawn whole).
         leaves: u32,
+        /// Per triangle: a leaf that holds it (`u32::MAX`: none), so that a pixel's item
+        /// names a leaf (`near_temporal`).
+        leaf_of: Vec<u32>,
         /// What the rays walk with `caster=bvh`.
         bvh: Option<MeshBvh>,
     },
@@ -233,12 +242,13 @@ impl Accel {
                 octree,
                 refs,
                 leaf_base,
+                leaf_of,
                 bvh,
                 ..
             } => {
                 octree.memory_bytes()
                     + refs.capacity() * std::mem::size_of::<RefTriangle>()
-                    + leaf_base.capacity() * 4
+                    + (leaf_base.capacity() + leaf_of.capacity()) * 4
                     + bvh.as_ref().map_or(0, MeshBvh::memory_bytes)
             }
             Accel::Group {
@@ -296,6 +306,9 @@ pub struct Lzb {
     /// The near pass's depth pyramid (`near_cull=on`), made at the frame's size when first
     /// needed.
     pyramid: Option<ZPyramid>,
+    /// The leaves that showed a pixel in the last frame, as (instance's first item, leaf),
+    /// sorted (`near_temporal`): the near pass draws them first.
+    near_visible: Vec<(ItemId, u32)>,
     /// Wall time of a rasterized triangle and of a ray, last measured (`plane=cost`).
     ns_per_triangle: f64,
     ns_per_ray: f64,
@@ -476,6 +489,14 @@ impl Lzb {
                                     .intersection(Aabb::new(b.min - grow, b.max + grow))
                             });
                             let refs = leaf_triangles(m, &normals, octree.primitives());
+                            let mut leaf_of = vec![u32::MAX; m.triangle_count()];
+                            for (n, node) in octree.nodes().iter().enumerate() {
+                                if node.is_leaf() {
+                                    for &t in &octree.primitives()[node.range()] {
+                                        leaf_of[t as usize] = n as u32;
+                                    }
+                                }
+                            }
                             let bvh = match opts.caster {
                                 CasterKind::Bvh => Some(MeshBvh::build(m, &normals, opts.bvh_leaf).map_err(|e| {
                                     RenderError::BadParameter(format!("lzb: BVH of node '{}': {e}", node.name()))
@@ -488,6 +509,7 @@ impl Lzb {
                                     octree,
                                     refs,
                                     leaf_base,
+                                    leaf_of,
                                     bvh,
                                 },
                                 shallower,
@@ -564,6 +586,7 @@ impl Lzb {
             near_share: 1.0,
             ns_per_far_leaf: PRIOR_NS_PER_FAR_LEAF,
             pyramid: None,
+            near_visible: Vec::new(),
             build_time: start.elapsed(),
         })
     }
@@ -1216,6 +1239,11 @@ impl Lzb {
         }
         // A cancelled frame measures nothing: the rates below stay as they were.
         crate::check_cancel(&self.raster)?;
+        if self.opts.near_cull && self.opts.near_temporal && !payoff.abandoned() {
+            let t = Instant::now();
+            self.remember_visible(frame, &instances);
+            stats.phases.add(Phase::Other, t.elapsed());
+        }
         // The rays paid when the time outside rasterization is no more than what the
         // triangles they removed from a direct frame's work would have cost at this frame's
         // rate (with the payoff's least allowance). The in-frame balance is not fed with the
@@ -1290,6 +1318,7 @@ impl Lzb {
             + self.stamps.iter().map(|s| s.capacity() * 4).sum::<usize>()
             + self.raster.memory_bytes()
             + self.pyramid.as_ref().map_or(0, ZPyramid::memory_bytes)
+            + self.near_visible.capacity() * std::mem::size_of::<(ItemId, u32)>()
     }
 }
 

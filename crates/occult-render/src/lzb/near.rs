@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use occult_core::{ItemId, Mat4, View};
+use occult_core::{ItemId, Mat4, View, NO_ITEM};
 use occult_raster::{Draw, DrawTriangles, Frame};
 
 use super::*;
@@ -59,7 +59,11 @@ impl Lzb {
     /// against the depth drawn so far, as `hzb` tests its boxes (Greene's face
     /// test through a pyramid updated after each batch); hidden units are not drawn. The near
     /// z-buffer ends the same (a hidden unit draws no pixel), so are the unfinished pixels
-    /// and the frame. Counters `near_culled_units`, `near_culled_triangles`.
+    /// and the frame. With `near_temporal`, the near leaves that showed a pixel in the last
+    /// frame ([`Lzb::remember_visible`]) make the first batch, untested: the rest is then
+    /// tested against nearly the frame's final depth, as `hzb`'s visible list does. Counters
+    /// `near_culled_units`, `near_culled_triangles`, `near_visible_triangles` (the first
+    /// batch's).
     ///
     /// # Errors
     /// [`RenderError::Raster`] when the pyramid cannot be allocated.
@@ -74,11 +78,33 @@ impl Lzb {
     ) -> Result<()> {
         let t = Instant::now();
         let (w, h) = (view.width(), view.height());
-        // The units, by their least view distance: a mesh instance of one leaf (drawn whole),
-        // or runs of consecutive near leaves of an instance (neighbours in the octree's
-        // depth-first order, so close in space) of up to NEAR_UNIT triangle references.
-        let mut units: Vec<NearUnit> = Vec::new();
+        // With `near_temporal`, each instance's leaves visible last frame come first in its
+        // run of pairs (and its units first in the order).
+        let visible = std::mem::take(&mut self.near_visible);
+        let mut ordered: Vec<(u32, u32)> = Vec::with_capacity(near.len());
+        let mut parts: Vec<(u32, std::ops::Range<usize>, bool)> = Vec::new();
         for (inst, r) in group_ranges(near) {
+            // This instance's visible leaves (`visible` is sorted by first item).
+            let base = instances[inst as usize].1;
+            let lo = visible.partition_point(|v| v.0 < base);
+            let seen = &visible[lo..lo + visible[lo..].partition_point(|v| v.0 == base)];
+            let was = |p: &(u32, u32)| seen.binary_search_by_key(&p.1, |v| v.1).is_ok();
+            let at = ordered.len();
+            ordered.extend(near[r.clone()].iter().filter(|p| was(p)));
+            let rest = ordered.len();
+            ordered.extend(near[r].iter().filter(|p| !was(p)));
+            parts.push((inst, at..rest, true));
+            parts.push((inst, rest..ordered.len(), false));
+        }
+        drop(visible);
+        let near = &ordered[..];
+        // The units, by their least view distance (last frame's visible ones first): a mesh
+        // instance of one leaf (drawn whole), or runs of consecutive near leaves of an
+        // instance (neighbours in the octree's depth-first order, so close in space) of up to
+        // NEAR_UNIT triangle references.
+        let mut units: Vec<NearUnit> = Vec::new();
+        let mut visible_triangles = 0usize;
+        for (inst, r, seen) in parts.into_iter().filter(|p| !p.1.is_empty()) {
             let (rec, _, clip) = &instances[inst as usize];
             let Accel::Mesh { octree, leaves, .. } = &self.accel[rec.node.index()] else {
                 continue;
@@ -101,8 +127,15 @@ impl Lzb {
                         .mesh()
                         .map_or(0, |m| m.triangle_count() as u32);
                 }
+                if seen {
+                    visible_triangles += count as usize;
+                }
                 units.push(NearUnit {
-                    distance: near_distance(w_row, &bounds),
+                    distance: if seen {
+                        f32::NEG_INFINITY
+                    } else {
+                        near_distance(w_row, &bounds)
+                    },
                     inst,
                     leaves: at as u32..end as u32,
                     whole,
@@ -121,7 +154,12 @@ impl Lzb {
         let (mut tested, mut culled_units, mut culled_triangles, mut near_triangles) = (0u64, 0u64, 0u64, 0u64);
         let mut pyramid_time = Duration::ZERO;
         let mut counts = PyramidCounts::default();
-        let mut batch_triangles = NEAR_FIRST_BATCH;
+        // The first batch, drawn untested: last frame's visible leaves, or the nearest units.
+        let mut batch_triangles = if visible_triangles > 0 {
+            visible_triangles
+        } else {
+            NEAR_FIRST_BATCH
+        };
         let mut next = 0;
         let mut first = true;
         stats.phases.add(Phase::Other, t.elapsed());
@@ -217,8 +255,12 @@ impl Lzb {
                 }
                 pyramid_time += t.elapsed();
             }
+            batch_triangles = if first && visible_triangles > 0 {
+                NEAR_FIRST_BATCH
+            } else {
+                (batch_triangles * 2).min(NEAR_MAX_BATCH)
+            };
             first = false;
-            batch_triangles = (batch_triangles * 2).min(NEAR_MAX_BATCH);
         }
         stats.phases.add(Phase::DepthStructure, pyramid_time);
         stats.boxes_tested += tested;
@@ -226,8 +268,59 @@ impl Lzb {
         stats.counters.add("near_triangles", near_triangles);
         stats.counters.add("near_culled_units", culled_units);
         stats.counters.add("near_culled_triangles", culled_triangles);
+        stats.counters.add("near_visible_triangles", visible_triangles as u64);
         self.pyramid = Some(pyramid);
         Ok(())
+    }
+
+    /// Remembers which leaves showed a pixel of the finished `frame` (`near_temporal`; one
+    /// pixel in [`VISIBLE_STRIDE`]² is read): a pixel's item names an instance of
+    /// `instances` (by its first item) and a triangle of its mesh, held by a leaf
+    /// ([`Accel::Mesh`]'s `leaf_of`). The next frame's near pass draws those of its near
+    /// leaves first.
+    pub(super) fn remember_visible(&mut self, frame: &Frame, instances: &[(InstanceRec, ItemId, Mat4)]) {
+        // Each mesh instance's item range, by first item.
+        let mut spans: Vec<(ItemId, ItemId, u32)> = instances
+            .iter()
+            .filter_map(|(rec, base, _)| {
+                let m = self.scene.node(rec.node).mesh()?;
+                Some((*base, base + m.triangle_count() as u64, rec.node.index() as u32))
+            })
+            .collect();
+        spans.sort_unstable_by_key(|s| s.0);
+        let mut visible = std::mem::take(&mut self.near_visible);
+        visible.clear();
+        let (mut last_item, mut span) = (NO_ITEM, None::<(ItemId, ItemId, u32)>);
+        // An ordering, not a proof: a leaf missed is tested like any other.
+        let w = frame.width() as usize;
+        let sampled = frame
+            .items()
+            .chunks(w)
+            .step_by(VISIBLE_STRIDE)
+            .flat_map(|row| row.iter().step_by(VISIBLE_STRIDE));
+        for &item in sampled {
+            if item == last_item || item == NO_ITEM {
+                continue;
+            }
+            last_item = item;
+            // Neighbouring pixels mostly show one instance: its span is tried first.
+            if !span.is_some_and(|(b, e, _)| (b..e).contains(&item)) {
+                let k = spans.partition_point(|s| s.0 <= item);
+                span = k.checked_sub(1).map(|k| spans[k]).filter(|&(_, e, _)| item < e);
+            }
+            let Some((base, _, node)) = span else {
+                continue;
+            };
+            if let Accel::Mesh { leaf_of, .. } = &self.accel[node as usize] {
+                let leaf = leaf_of[(item - base) as usize];
+                if leaf != u32::MAX && visible.last() != Some(&(base, leaf)) {
+                    visible.push((base, leaf));
+                }
+            }
+        }
+        visible.sort_unstable();
+        visible.dedup();
+        self.near_visible = visible;
     }
 
     /// Step 3½ (`far_cull=on`, not in the paper): the far leaves hidden behind what the near

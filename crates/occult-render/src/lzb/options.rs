@@ -99,6 +99,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             help: "draw the near set front to back in growing batches, testing each near leaf (or mesh) against the depth drawn so far through a pyramid, as hzb does, and skipping the hidden ones (not in the paper; off: one draw, §II)",
         },
         ParamDoc {
+            key: "near_temporal",
+            default: "on",
+            help: "near_cull=on: draw the near leaves that showed a pixel in the last frame first, untested, so that the rest is tested against nearly the frame's final depth (hzb's visible list, by leaves; not in the paper; needs near_cull=on, and is off with near_cull=off)",
+        },
+        ParamDoc {
             key: "far_cull",
             default: "on",
             help: "after the near pass, drop the far leaves hidden behind what it drew (an instance's far leaves tested as one box, through a pyramid of the near depth), so that object-oriented ray casting neither projects them nor casts their pixels (not in the paper; needs oor=on, and is off with oor=off)",
@@ -129,6 +134,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "pvl_triangles",
         "near_culled_units",
         "near_culled_triangles",
+        "near_visible_triangles",
         "far_culled_leaves",
         crate::payoff::COUNTERS[0],
         crate::payoff::COUNTERS[1],
@@ -225,6 +231,9 @@ pub struct LzbOptions {
     pub payoff: bool,
     /// Occlusion-cull the near set front to back (not in the paper).
     pub near_cull: bool,
+    /// Draw last frame's visible near leaves first, untested (not in the paper; needs
+    /// `near_cull`).
+    pub near_temporal: bool,
     /// Drop the far leaves hidden behind the near set before object-oriented ray casting
     /// (not in the paper; needs `oor`).
     pub far_cull: bool,
@@ -289,9 +298,11 @@ impl LzbOptions {
             pvl_triangles: p.choice("pvl", &["leaves", "triangles"], "leaves")? == "triangles",
             payoff: p.flag("payoff", mode == Mode::Lazy)?,
             near_cull: p.flag("near_cull", true)?,
+            near_temporal: false,
             far_cull: false,
         };
         let o = Self {
+            near_temporal: p.flag("near_temporal", o.near_cull)?,
             packets: p.flag("packets", o.mode == Mode::Naive && o.caster == CasterKind::Bvh)?,
             far_cull: p.flag("far_cull", o.oor)?,
             ..o
@@ -346,6 +357,11 @@ impl LzbOptions {
         if self.far_cull && !self.oor {
             return bad(
                 "far_cull=on drops hidden far leaves from object-oriented ray casting, which oor=off turns off (every unfinished pixel is then cast): it needs oor=on".into(),
+            );
+        }
+        if self.near_temporal && !self.near_cull {
+            return bad(
+                "near_temporal=on orders the near pass's occlusion tests, which near_cull=off turns off (the near set is then one draw): it needs near_cull=on".into(),
             );
         }
         if self.packets && (self.mode != Mode::Naive || self.caster != CasterKind::Bvh) {

@@ -81,6 +81,7 @@ fn near_cull_skips_what_the_near_pass_hides() {
             plane_fraction: 1.0,
             payoff: false,
             near_cull,
+            near_temporal: near_cull,
             ..LzbOptions::default()
         };
         let mut lzb = Lzb::new(scene.clone(), &options, &opts).expect("lzb builds");
@@ -98,6 +99,40 @@ fn near_cull_skips_what_the_near_pass_hides() {
             );
         } else {
             assert_eq!(culled, 0);
+        }
+    }
+}
+
+/// `near_temporal=on`: the second frame of a view draws the leaves that showed a pixel in the
+/// first before any test, and culls the far wall as well; frames stay `zbuffer`'s. Off, no
+/// leaf is drawn first.
+#[test]
+fn near_temporal_draws_last_frames_visible_leaves_first() {
+    let (scene, view, reference) = two_walls();
+    for near_temporal in [true, false] {
+        let opts = LzbOptions {
+            plane: Plane::Static,
+            plane_fraction: 1.0,
+            payoff: false,
+            near_temporal,
+            ..LzbOptions::default()
+        };
+        let mut lzb = Lzb::new(scene.clone(), &RenderOptions::default(), &opts).expect("lzb builds");
+        let mut frame = Frame::new(96, 64).expect("a frame");
+        let first = lzb.render(&view, &mut frame).expect("a frame");
+        assert_eq!(first.counters.get("near_visible_triangles"), 0, "nothing seen yet");
+        let second = lzb.render(&view, &mut frame).expect("a frame");
+        assert!(frame.same_visibility(&reference), "near_temporal={near_temporal}");
+        let drawn_first = second.counters.get("near_visible_triangles");
+        if near_temporal {
+            assert!(drawn_first > 0, "the near wall's leaves come first");
+            assert!(drawn_first <= second.counters.get("near_triangles"));
+            assert!(
+                second.counters.get("near_culled_triangles") > 0,
+                "the far wall is hidden"
+            );
+        } else {
+            assert_eq!(drawn_first, 0);
         }
     }
 }
