@@ -98,13 +98,15 @@ impl Lzb {
         }
         drop(visible);
         let near = &ordered[..];
-        // The units, by their least view distance (last frame's visible ones first): a mesh
-        // instance of one leaf (drawn whole), or runs of consecutive near leaves of an
-        // instance (neighbours in the octree's depth-first order, so close in space) of up to
-        // NEAR_UNIT triangle references.
+        // The units: a mesh instance of one leaf (drawn whole), or runs of consecutive near
+        // leaves of an instance (neighbours in the octree's depth-first order, so close in
+        // space) of up to NEAR_UNIT triangle references; and their groups, runs of up to
+        // NEAR_GROUP consecutive units of an instance, tested as one box first.
         let mut units: Vec<NearUnit> = Vec::new();
+        let mut groups: Vec<NearGroup> = Vec::new();
         let mut visible_triangles = 0usize;
         for (inst, r, seen) in parts.into_iter().filter(|p| !p.1.is_empty()) {
+            let first_unit = units.len();
             let (rec, _, clip) = &instances[inst as usize];
             let Accel::Mesh { octree, leaves, .. } = &self.accel[rec.node.index()] else {
                 continue;
@@ -144,8 +146,28 @@ impl Lzb {
                 });
                 at = end;
             }
+            for start in (first_unit..units.len()).step_by(NEAR_GROUP) {
+                let of = &units[start..(start + NEAR_GROUP).min(units.len())];
+                groups.push(NearGroup {
+                    distance: of.iter().map(|u| u.distance).fold(f32::INFINITY, f32::min),
+                    inst,
+                    units: start as u32..(start + of.len()) as u32,
+                    count: of.iter().map(|u| u64::from(u.count)).sum(),
+                    bounds: of.iter().fold(Aabb::EMPTY, |a, u| a.union(u.bounds)),
+                });
+            }
         }
-        units.sort_unstable_by(|a, b| a.distance.total_cmp(&b.distance));
+        // Groups by their least view distance (last frame's visible ones first), and the units
+        // of each by theirs.
+        groups.sort_unstable_by(|a, b| a.distance.total_cmp(&b.distance));
+        let mut sorted: Vec<NearUnit> = Vec::with_capacity(units.len());
+        for g in &mut groups {
+            let at = sorted.len();
+            sorted.extend_from_slice(&units[g.units.start as usize..g.units.end as usize]);
+            sorted[at..].sort_unstable_by(|a, b| a.distance.total_cmp(&b.distance));
+            g.units = at as u32..sorted.len() as u32;
+        }
+        let units = sorted;
         let mut pyramid = self.take_pyramid(w, h)?;
         pyramid.clear();
         let eye = view.camera().eye;
@@ -160,7 +182,7 @@ impl Lzb {
         } else {
             NEAR_FIRST_BATCH
         };
-        let mut next = 0;
+        let (mut next, mut group) = (0, 0);
         let mut first = true;
         stats.phases.add(Phase::Other, t.elapsed());
         while next < units.len() {
@@ -169,6 +191,24 @@ impl Lzb {
             let (mut pairs, mut whole, mut rect) = (Vec::new(), Vec::new(), None::<PixelRect>);
             let mut gathered = 0usize;
             while next < units.len() && gathered < batch_triangles {
+                // A group of several units starts: one test for all of them.
+                if groups.get(group).is_some_and(|g| g.units.start as usize == next) {
+                    let g = &groups[group];
+                    group += 1;
+                    if !first && g.units.len() > 1 {
+                        tested += 1;
+                        let (rec, _, clip) = &instances[g.inst as usize];
+                        let e = *eyes[g.inst as usize]
+                            .get_or_insert_with(|| rec.world_from_object.inverse().transform_point3(eye));
+                        if Occlusion::hierarchical(frame, &pyramid, view).box_hidden(clip, &g.bounds, e, &mut counts) {
+                            culled_units += g.units.len() as u64;
+                            culled_triangles += g.count;
+                            payoff.saved(g.count);
+                            next = g.units.end as usize;
+                            continue;
+                        }
+                    }
+                }
                 let NearUnit {
                     inst,
                     ref leaves,
