@@ -143,8 +143,7 @@ const RAY_WAVE: usize = 4096;
 const NEAR_FIRST_BATCH: usize = 4096;
 /// Triangle references of a unit of the near pass's tests (`near_cull=on`): consecutive near
 /// leaves of a mesh instance, up to this many, are tested as one box (within groups,
-/// [`NEAR_GROUP`]: on `plant` `circle:32` units of 256, 64 and 32 references submitted 329 k,
-/// 83 k and 48 k triangles in 21–24, 18–20 and 18–20 ms a frame).
+/// [`NEAR_GROUP`]; smaller units submit fewer triangles for more tests, docs/lzb.md).
 const NEAR_UNIT: u32 = 64;
 /// Units of a group of the near pass's tests (`near_cull=on`): consecutive units of an
 /// instance, up to this many, are first tested as one box, and each only where that box is
@@ -156,9 +155,8 @@ const NEAR_GROUP: usize = 16;
 const NEAR_MAX_BATCH: usize = 1 << 18;
 
 /// `near_temporal` reads one pixel in this many, in x and in y, of a finished frame's items
-/// for the leaves that showed a pixel: on `city` `street:32` at 1280×720 a stride of 2 took
-/// 0.77 ms a frame, 8 took 0.15 ms, and `plant` `circle:32` drew its first batches as well
-/// (the leaves found are those showing a pixel of the sampled grid; the others are tested).
+/// for the leaves that showed a pixel: a leaf missed is only tested, and a quarter of the
+/// reads of a stride of 2 found the same first batches (docs/lzb.md).
 const VISIBLE_STRIDE: usize = 8;
 
 /// Pixels one task casts (one [`Caster`], so one coherence chain).
@@ -495,9 +493,11 @@ impl Lzb {
                                     .intersection(Aabb::new(b.min - grow, b.max + grow))
                             });
                             let refs = leaf_triangles(m, &normals, octree.primitives());
-                            let mut leaf_of = vec![u32::MAX; m.triangle_count()];
+                            // Only `near_temporal` reads it.
+                            let temporal = opts.near_cull && opts.near_temporal;
+                            let mut leaf_of = vec![u32::MAX; if temporal { m.triangle_count() } else { 0 }];
                             for (n, node) in octree.nodes().iter().enumerate() {
-                                if node.is_leaf() {
+                                if temporal && node.is_leaf() {
                                     for &t in &octree.primitives()[node.range()] {
                                         leaf_of[t as usize] = n as u32;
                                     }
@@ -760,7 +760,8 @@ struct NearGroup {
     distance: f32,
     /// Its instance.
     inst: u32,
-    /// Its units: a range of the sorted units.
+    /// Its units: a range of the units (of those in the order they were built, then of those
+    /// sorted group by group).
     units: std::ops::Range<u32>,
     /// Its units' triangle references.
     count: u64,

@@ -55,15 +55,17 @@ impl Lzb {
     }
 
     /// Step 3 with `near_cull=on` (not in the paper): the near set drawn front to back in
-    /// growing batches, each unit (a near leaf, or a mesh instance of a single leaf) tested
-    /// against the depth drawn so far, as `hzb` tests its boxes (Greene's face
-    /// test through a pyramid updated after each batch); hidden units are not drawn. The near
-    /// z-buffer ends the same (a hidden unit draws no pixel), so are the unfinished pixels
-    /// and the frame. With `near_temporal`, the near leaves that showed a pixel in the last
-    /// frame ([`Lzb::remember_visible`]) make the first batch, untested: the rest is then
+    /// growing batches, each unit (a run of near leaves of an instance, or a mesh instance of
+    /// a single leaf) tested against the depth drawn so far, as `hzb` tests its boxes
+    /// (Greene's face test through a pyramid updated after each batch), after its group
+    /// (consecutive units of the instance, [`NEAR_GROUP`]) was tested as one box; hidden
+    /// units are not drawn. The near z-buffer ends the same (a hidden unit draws no pixel), so
+    /// are the unfinished pixels and the frame. With `near_temporal`, the near leaves that
+    /// showed a pixel in the last frame ([`Lzb::remember_visible`]) make the first batch,
+    /// untested (up to [`NEAR_MAX_BATCH`] triangles: the set may be stale): the rest is then
     /// tested against nearly the frame's final depth, as `hzb`'s visible list does. Counters
-    /// `near_culled_units`, `near_culled_triangles`, `near_visible_triangles` (the first
-    /// batch's).
+    /// `near_culled_units`, `near_culled_groups`, `near_culled_triangles`,
+    /// `near_visible_triangles` (those of last frame's visible leaves).
     ///
     /// # Errors
     /// [`RenderError::Raster`] when the pyramid cannot be allocated.
@@ -81,9 +83,13 @@ impl Lzb {
         // With `near_temporal`, each instance's leaves visible last frame come first in its
         // run of pairs (and its units first in the order).
         let visible = std::mem::take(&mut self.near_visible);
-        let mut ordered: Vec<(u32, u32)> = Vec::with_capacity(near.len());
+        let mut ordered: Vec<(u32, u32)> = Vec::new();
         let mut parts: Vec<(u32, std::ops::Range<usize>, bool)> = Vec::new();
         for (inst, r) in group_ranges(near) {
+            if visible.is_empty() {
+                parts.push((inst, r, false));
+                continue;
+            }
             // This instance's visible leaves (`visible` is sorted by first item).
             let base = instances[inst as usize].1;
             let lo = visible.partition_point(|v| v.0 < base);
@@ -96,8 +102,8 @@ impl Lzb {
             parts.push((inst, at..rest, true));
             parts.push((inst, rest..ordered.len(), false));
         }
+        let near = if visible.is_empty() { near } else { &ordered[..] };
         drop(visible);
-        let near = &ordered[..];
         // The units: a mesh instance of one leaf (drawn whole), or runs of consecutive near
         // leaves of an instance (neighbours in the octree's depth-first order, so close in
         // space) of up to NEAR_UNIT triangle references; and their groups, runs of up to
@@ -174,11 +180,13 @@ impl Lzb {
         let mut eyes: Vec<Option<Vec3>> = vec![None; instances.len()];
         let first_stamp = self.reserve_stamps(instances.len() as u32);
         let (mut tested, mut culled_units, mut culled_triangles, mut near_triangles) = (0u64, 0u64, 0u64, 0u64);
+        // Groups and units found hidden by their own test (a hidden group's units are not tested).
+        let (mut culled_groups, mut culled_boxes) = (0u64, 0u64);
         let mut pyramid_time = Duration::ZERO;
         let mut counts = PyramidCounts::default();
         // The first batch, drawn untested: last frame's visible leaves, or the nearest units.
         let mut batch_triangles = if visible_triangles > 0 {
-            visible_triangles
+            visible_triangles.min(NEAR_MAX_BATCH)
         } else {
             NEAR_FIRST_BATCH
         };
@@ -201,6 +209,8 @@ impl Lzb {
                         let e = *eyes[g.inst as usize]
                             .get_or_insert_with(|| rec.world_from_object.inverse().transform_point3(eye));
                         if Occlusion::hierarchical(frame, &pyramid, view).box_hidden(clip, &g.bounds, e, &mut counts) {
+                            culled_groups += 1;
+                            culled_boxes += 1;
                             culled_units += g.units.len() as u64;
                             culled_triangles += g.count;
                             payoff.saved(g.count);
@@ -227,6 +237,7 @@ impl Lzb {
                         .get_or_insert_with(|| rec.world_from_object.inverse().transform_point3(eye));
                     if Occlusion::hierarchical(frame, &pyramid, view).box_hidden(clip, &b, e, &mut counts) {
                         culled_units += 1;
+                        culled_boxes += 1;
                         culled_triangles += u64::from(count);
                         payoff.saved(u64::from(count));
                         continue;
@@ -304,9 +315,10 @@ impl Lzb {
         }
         stats.phases.add(Phase::DepthStructure, pyramid_time);
         stats.boxes_tested += tested;
-        stats.boxes_culled += culled_units;
+        stats.boxes_culled += culled_boxes;
         stats.counters.add("near_triangles", near_triangles);
         stats.counters.add("near_culled_units", culled_units);
+        stats.counters.add("near_culled_groups", culled_groups);
         stats.counters.add("near_culled_triangles", culled_triangles);
         stats.counters.add("near_visible_triangles", visible_triangles as u64);
         self.pyramid = Some(pyramid);
@@ -327,7 +339,9 @@ impl Lzb {
                 Some((*base, base + m.triangle_count() as u64, rec.node.index() as u32))
             })
             .collect();
-        spans.sort_unstable_by_key(|s| s.0);
+        // By first item, then end: of an empty mesh's span and the next sharing its first
+        // item, the search below finds the next.
+        spans.sort_unstable();
         let mut visible = std::mem::take(&mut self.near_visible);
         visible.clear();
         let (mut last_item, mut span) = (NO_ITEM, None::<(ItemId, ItemId, u32)>);
@@ -352,7 +366,7 @@ impl Lzb {
                 continue;
             };
             if let Accel::Mesh { leaf_of, .. } = &self.accel[node as usize] {
-                let leaf = leaf_of[(item - base) as usize];
+                let leaf = leaf_of.get((item - base) as usize).copied().unwrap_or(u32::MAX);
                 if leaf != u32::MAX && visible.last() != Some(&(base, leaf)) {
                     visible.push((base, leaf));
                 }

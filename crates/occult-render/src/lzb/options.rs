@@ -133,6 +133,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "pvl_entries_triangles",
         "pvl_triangles",
         "near_culled_units",
+        "near_culled_groups",
         "near_culled_triangles",
         "near_visible_triangles",
         "far_culled_leaves",
