@@ -896,7 +896,13 @@ impl<'a> Visitor<'a> for Walk<'a> {
             Accel::Group { octree, bounds, .. } => {
                 let mut chosen: Vec<(u32, bool)> = Vec::new();
                 cull_octree(&mut self.walk, octree, &at.frustum, at.inside, |_, n, inside| {
-                    chosen.extend(octree.leaf_primitives(n).iter().map(|&i| (i, inside)));
+                    // An instance overlaps its leaves without lying within them: the leaf's
+                    // containment holds for it only when its box is within the leaf's.
+                    let leaf = octree.nodes()[n as usize].bounds;
+                    chosen.extend(octree.leaf_primitives(n).iter().map(|&i| {
+                        let b = bounds[i as usize];
+                        (i, inside && b.min.cmpge(leaf.min).all() && b.max.cmple(leaf.max).all())
+                    }));
                 });
                 // Instances span leaves: each once, "inside" if any of its leaves was.
                 chosen.sort_unstable_by_key(|&(i, inside)| (i, !inside));
