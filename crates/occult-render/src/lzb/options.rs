@@ -25,8 +25,8 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         },
         ParamDoc {
             key: "bvh_leaf",
-            default: "4",
-            help: "max triangles per BVH leaf, 1..=8; needs caster=bvh (refused with caster=octree)",
+            default: "8",
+            help: "max triangles per BVH leaf, 1..=8 (the lanes of one triangle test: the build counts a leaf's cost in tests of 8, so leaves fill up to this size); needs caster=bvh (refused with caster=octree)",
         },
         ParamDoc {
             key: "packets",
@@ -270,7 +270,7 @@ impl LzbOptions {
                 "octree" => CasterKind::Octree,
                 _ => CasterKind::Bvh,
             },
-            bvh_leaf: p.get("bvh_leaf", 4usize)?,
+            bvh_leaf: p.get("bvh_leaf", 8usize)?,
             packets: false,
             mode,
             selection: match p.choice("select", &["all", "static", "dynamic", "hybrid"], "hybrid")? {
