@@ -97,12 +97,12 @@ fn project(
     })
 }
 
-/// Samples of a whole structure that descend in lockstep ([`Sampler::whole_samples`]).
+/// Samples of a whole structure that descend in lockstep ([`Sampler::descents`]).
 const LANES: usize = 8;
 /// Levels of instancing a descent carries its point up through; deeper chains are entered.
 const CHAIN: usize = 16;
 
-/// One sample's descent down the instance chain ([`Sampler::whole_samples`]).
+/// One sample's descent down the instance chain ([`Sampler::descents`]).
 #[derive(Clone, Copy)]
 struct Descent {
     /// The structure it is in.
@@ -254,12 +254,9 @@ impl Sampler<'_> {
     /// chosen with probability proportional to its area, passed to `f` in the space of the
     /// mesh they lie on (with that space's [`Place`]).
     ///
-    /// The `n` choices are made at once as a multinomial split: `n` sorted uniform numbers
-    /// (descending order statistics, `X₍ₖ₎ = X₍ₖ₊₁₎ · U^(1/k)`) inverted by binary searches that
-    /// move monotonically through the list. This is the same distribution as `n` independent
-    /// inversions (§5.2), but the list is read in order, and an instance chosen `k` times is
-    /// entered once with `k` samples (its transform composed once), instead of once per
-    /// sample through the whole instance chain.
+    /// Each sample is chosen on its own ([`Sampler::descents`]): its position in the section
+    /// `range` by inverting the distribution list (a binary search of the prefix sums), or in a
+    /// whole structure by its alias table, then down the instance chain by alias picks.
     ///
     /// §5.4: a structure with a distribution tree samples from it instead: `part` (the job's
     /// node, or the whole tree for an entered instance) is descended once per sample.
@@ -300,79 +297,31 @@ impl Sampler<'_> {
             }
             return;
         }
-        let entries = st.octree.entries();
-        let whole = range.start == 0 && range.end as usize == entries.len() && !st.alias.is_empty();
-        // Samples of a whole structure (an entered instance): each sample descends on its
-        // own, an alias pick per level in O(1) and its point carried up the chain
-        // ([`Sampler::one_of_whole`]). The sorted split below would cost a `powf` and a binary
-        // search per sample and level, which grouping the repeated picks of an instance did
-        // not repay: below the selected boxes, most instances are entered with few samples.
-        if whole {
-            self.whole_samples(sid, n, place, rng, f);
-            return;
-        }
-        let mut hi = range.end; // one past the last position a smaller target can land on
-        let lo_area = st.octree.prefix(range.start);
-        let area = st.octree.prefix(range.end) - lo_area;
-        let mut x = 1.0f64;
-        let mut k = n;
-        let mut run: Option<(u32, u64)> = None;
-        loop {
-            let pick = if k > 0 {
-                // U^(1/k); the common small k without `powf` (a fifth of the time on deep
-                // instancing, where most instances are entered with one or two samples).
-                let u = rng.random::<f64>();
-                x *= match k {
-                    1 => u,
-                    2 => u.sqrt(),
-                    _ => u.powf(1.0 / k as f64),
-                };
-                k -= 1;
-                let pos = st.octree.locate(range.start..hi, lo_area + x * area);
-                // Picks descend: the next one lies at or before this position.
-                hi = (pos + 1).min(range.end);
-                Some(pos)
-            } else {
-                None
-            };
-            match (run, pick) {
-                (Some((pos, c)), Some(p)) if p == pos => run = Some((pos, c + 1)),
-                (prev, next) => {
-                    if let Some((pos, count)) = prev {
-                        let e = entries[pos as usize] as usize;
-                        match node.kind() {
-                            NodeKind::Mesh(m) => self.points(m, e, count, place, rng, f),
-                            NodeKind::Group(g) => {
-                                let inst = &g[e];
-                                let child = place.enter(inst, node.item_offset(e), self.backface);
-                                let cid = inst.child.0;
-                                let len = self.structures[cid as usize].octree.entries().len() as u32;
-                                self.generate(cid, 0..len, Part::Whole, count, &child, rng, f);
-                            }
-                        }
-                    }
-                    match next {
-                        Some(p) => run = Some((p, 1)),
-                        None => return,
-                    }
-                }
-            }
-        }
+        let whole = range.start == 0 && range.end as usize == st.octree.entries().len() && !st.alias.is_empty();
+        self.descents(sid, (!whole).then_some(range), n, place, rng, f);
     }
 
-    /// `n` samples of the whole structure `sid` (an entered instance, `place` its space), each
-    /// descending on its own: an alias pick per level of instancing, in O(1), down to a
+    /// `n` samples of structure `sid` (`place` its space), each descending on its own: its
+    /// position in the section `first` of the list by inverting the distribution list (a
+    /// binary search of the prefix sums), or, with `first` `None`, in the whole structure by
+    /// its alias table; below, an alias pick per level of instancing, in O(1), down to a
     /// triangle, whose random point (and, for back faces, edges) is then carried up the chain
     /// of instance transforms into `place`'s space, a point transform per level. Entering
     /// each instance instead (composing its matrices, [`Place::enter`]) cost a 4×4 matrix
     /// product per level and sample.
     ///
+    /// The section's positions were once chosen together, as a multinomial split of sorted
+    /// order statistics (`X₍ₖ₎ = X₍ₖ₊₁₎ · U^(1/k)`, one `powf` a sample) so that an instance
+    /// chosen `k` times was entered once; a binary search a sample and no entering cost less
+    /// (a sixth of a frame of `chessboard:n=10000000` went to the split).
+    ///
     /// A descent is a chain of dependent loads (pick, entry, instance, child); [`LANES`]
     /// samples descend in lockstep, so that the loads of different samples overlap (15 % less
     /// CPU time than one after the other on `chessboard:n=10000000`).
-    fn whole_samples<F: FnMut(&Place, Vec3, Vec3, ItemId)>(
+    fn descents<F: FnMut(&Place, Vec3, Vec3, ItemId)>(
         &self,
         sid: u32,
+        first: Option<std::ops::Range<u32>>,
         n: u64,
         place: &Place,
         rng: &mut Pcg64Mcg,
@@ -395,7 +344,7 @@ impl Sampler<'_> {
             let mut live = (1u32 << m) - 1;
             while live != 0 {
                 for (l, d) in lanes.iter_mut().enumerate().take(m) {
-                    if live & (1 << l) != 0 && self.descend(d, place, rng, f) {
+                    if live & (1 << l) != 0 && self.descend(d, &first, place, rng, f) {
                         live &= !(1 << l);
                     }
                 }
@@ -403,18 +352,20 @@ impl Sampler<'_> {
         }
     }
 
-    /// One level of `d`'s descent ([`Sampler::whole_samples`]); true once its sample was
-    /// passed to `f`.
+    /// One level of `d`'s descent ([`Sampler::descents`], `first` its section of the top
+    /// level's list); true once its sample was passed to `f`.
     #[inline]
     fn descend<F: FnMut(&Place, Vec3, Vec3, ItemId)>(
         &self,
         d: &mut Descent,
+        first: &Option<std::ops::Range<u32>>,
         place: &Place,
         rng: &mut Pcg64Mcg,
         f: &mut F,
     ) -> bool {
         let st = &self.structures[d.sid as usize];
-        if st.tree.is_some() || st.alias.is_empty() || d.depth == CHAIN {
+        let top = if d.depth == 0 { first.as_ref() } else { None };
+        if top.is_none() && (st.tree.is_some() || st.alias.is_empty() || d.depth == CHAIN) {
             // Sampled otherwise (a distribution tree, an empty list) or a chain deeper than
             // the descent holds: the chain entered as before, and the structure sampled whole.
             let mut entered = place.clone();
@@ -428,7 +379,14 @@ impl Sampler<'_> {
             self.generate(d.sid, 0..len, Part::Whole, 1, &entered, rng, f);
             return true;
         }
-        let pos = st.alias.pick(rng.random::<u64>()) as usize;
+        let pos = match top {
+            Some(range) => {
+                let lo = st.octree.prefix(range.start);
+                let area = st.octree.prefix(range.end) - lo;
+                st.octree.locate(range.clone(), lo + rng.random::<f64>() * area)
+            }
+            None => st.alias.pick(rng.random::<u64>()),
+        } as usize;
         if let Some(link) = st.links.get(pos) {
             d.chain[d.depth] = (d.sid, link.instance);
             d.item += link.item_offset;
