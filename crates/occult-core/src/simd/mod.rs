@@ -270,6 +270,20 @@ impl Avx2 {
     }
 }
 
+/// Hints the processor to fetch the cache line holding `x` into every level of its caches;
+/// never faults (whatever the address), never changes a result.
+#[inline(always)]
+pub fn prefetch<T>(x: *const T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is a hint: it reads nothing and never faults.
+    unsafe {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        _mm_prefetch::<_MM_HINT_T0>(x.cast::<i8>());
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = x;
+}
+
 /// `+ - * /` and unary `-` (a sign flip) for a float lane type `$t` wrapping one register:
 /// each operator is the one instruction named.
 #[cfg(target_arch = "x86_64")]
