@@ -8,7 +8,7 @@ use rand_pcg::Pcg64Mcg;
 
 use super::cache::{BoxKey, CachedSample};
 use super::select::Job;
-use super::structure::Structure;
+use super::structure::{Link, Structure};
 
 /// Where samples are written: depth and item buffers of a `width × height` frame.
 pub struct Target<'f> {
@@ -104,18 +104,26 @@ const CHAIN: usize = 16;
 
 /// One sample's descent down the instance chain ([`Sampler::descents`]).
 #[derive(Clone, Copy)]
-struct Descent {
+struct Descent<'s> {
     /// The structure it is in.
     sid: u32,
     /// Item id of that structure's first triangle.
     item: ItemId,
-    /// Instances entered so far (the first `depth`): group node and instance index.
+    /// Instances entered so far (the first `depth`), as their groups' lists hold them.
     depth: usize,
     /// The list position of the triangle picked in a mesh too large for the caches, whose
     /// lines were asked for in the round before ([`FAR_SOUP`]); [`NO_LEAF`] otherwise.
     leaf: u32,
-    chain: [(u32, u32); CHAIN],
+    chain: [&'s Link; CHAIN],
 }
+
+/// What an unused level of a [`Descent`]'s chain holds.
+static NO_LINK: Link = Link {
+    parent_from_child: occult_core::Affine3A::IDENTITY,
+    child: 0,
+    instance: 0,
+    item_offset: 0,
+};
 
 /// [`Descent::leaf`] when no triangle waits.
 const NO_LEAF: u32 = u32::MAX;
@@ -183,7 +191,13 @@ impl Place {
     /// The space of instance `inst` (whose items start `item_offset` after this space's).
     #[inline]
     pub fn enter(&self, inst: &Instance, item_offset: u64, backface: bool) -> Self {
-        let t = &inst.parent_from_child;
+        self.enter_by(&inst.parent_from_child, item_offset, backface)
+    }
+
+    /// The space below transform `t` (`parent_from_child`), whose items start `item_offset`
+    /// after this space's.
+    #[inline]
+    fn enter_by(&self, t: &occult_core::Affine3A, item_offset: u64, backface: bool) -> Self {
         Self {
             clip_from_space: self.clip_from_space * Mat4::from(*t),
             job_from_space: self.job_from_space * *t,
@@ -345,7 +359,7 @@ impl Sampler<'_> {
             item: place.base,
             depth: 0,
             leaf: NO_LEAF,
-            chain: [(0, 0); CHAIN],
+            chain: [&NO_LINK; CHAIN],
         };
         let mut lanes = [fresh; LANES];
         let mut left = n;
@@ -369,9 +383,9 @@ impl Sampler<'_> {
     /// One level of `d`'s descent ([`Sampler::descents`], `first` its section of the top
     /// level's list); true once its sample was passed to `f`.
     #[inline]
-    fn descend<F: FnMut(&Place, Vec3, Vec3, ItemId)>(
-        &self,
-        d: &mut Descent,
+    fn descend<'s, F: FnMut(&Place, Vec3, Vec3, ItemId)>(
+        &'s self,
+        d: &mut Descent<'s>,
         first: &Option<std::ops::Range<u32>>,
         place: &Place,
         rng: &mut Pcg64Mcg,
@@ -387,11 +401,8 @@ impl Sampler<'_> {
             // Sampled otherwise (a distribution tree, an empty list) or a chain deeper than
             // the descent holds: the chain entered as before, and the structure sampled whole.
             let mut entered = place.clone();
-            for &(group, k) in &d.chain[..d.depth] {
-                let node = self.scene.node(occult_core::NodeId(group));
-                if let NodeKind::Group(g) = node.kind() {
-                    entered = entered.enter(&g[k as usize], node.item_offset(k as usize), self.backface);
-                }
+            for link in &d.chain[..d.depth] {
+                entered = entered.enter_by(&link.parent_from_child, link.item_offset, self.backface);
             }
             let len = st.octree.entries().len() as u32;
             self.generate(d.sid, 0..len, Part::Whole, 1, &entered, rng, f);
@@ -406,7 +417,7 @@ impl Sampler<'_> {
             None => st.alias.pick(rng.random::<u64>()),
         } as usize;
         if let Some(link) = st.links.get(pos) {
-            d.chain[d.depth] = (d.sid, link.instance);
+            d.chain[d.depth] = link;
             d.item += link.item_offset;
             d.depth += 1;
             d.sid = link.child;
@@ -442,14 +453,12 @@ impl Sampler<'_> {
         let (r1, r2) = uniform_on_triangle(rng);
         let (mut e1, mut e2) = (b - a, c - a);
         let mut p = a + e1 * r1 + e2 * r2;
-        for &(group, k) in d.chain[..d.depth].iter().rev() {
-            if let NodeKind::Group(g) = self.scene.node(occult_core::NodeId(group)).kind() {
-                let t = &g[k as usize].parent_from_child;
-                p = t.transform_point3(p);
-                if self.backface {
-                    e1 = t.transform_vector3(e1);
-                    e2 = t.transform_vector3(e2);
-                }
+        for link in d.chain[..d.depth].iter().rev() {
+            let t = &link.parent_from_child;
+            p = t.transform_point3(p);
+            if self.backface {
+                e1 = t.transform_vector3(e1);
+                e2 = t.transform_vector3(e2);
             }
         }
         // Carried up (with back faces only), the edges' cross product is the normal times the

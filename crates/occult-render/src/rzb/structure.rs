@@ -45,6 +45,9 @@ pub struct Structure {
 /// A group's list position as a descent reads it ([`Structure::links`]).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Link {
+    /// The instance's transform: a descent carries its point up through the links it took,
+    /// whose lines it has just read, instead of going back to the scene's instances.
+    pub parent_from_child: occult_core::Affine3A,
     /// The instance's child node.
     pub child: u32,
     /// The instance's index in the group.
@@ -267,6 +270,7 @@ pub fn build_all(
                         .entries()
                         .iter()
                         .map(|&e| Link {
+                            parent_from_child: g[e as usize].parent_from_child,
                             child: g[e as usize].child.0,
                             instance: e,
                             item_offset: node.item_offset(e as usize),
