@@ -1237,26 +1237,38 @@ impl Renderer for Rzb {
                     height,
                 });
             }
-            let (units, sources, built, bounds) = (&units, &sources, &built, &bounds);
-            let batch_counts: Vec<SampleCounts> = self.raster.install(|| {
-                targets
-                    .par_iter_mut()
-                    .enumerate()
-                    .map(|(c, target)| {
-                        let mut counts = SampleCounts::default();
-                        for u in &units[bounds[c]..bounds[c + 1]] {
-                            if control.is_cancelled() {
-                                break;
-                            }
-                            let job = &jobs[u.job];
-                            match sources[u.job] {
-                                Some(Source::Direct) => {
-                                    let mut rng = piece_rng(sampler.seed, job, u.piece);
-                                    sampler.draw_job(job, u.len as u64, &mut rng, target, &mut counts);
+            let batch_counts: Vec<SampleCounts> = {
+                let (units, sources, built, bounds) = (&units, &sources, &built, &bounds);
+                self.raster.install(|| {
+                    targets
+                        .par_iter_mut()
+                        .enumerate()
+                        .map(|(c, target)| {
+                            let mut counts = SampleCounts::default();
+                            for u in &units[bounds[c]..bounds[c + 1]] {
+                                if control.is_cancelled() {
+                                    break;
                                 }
-                                Some(Source::Hit) => {
-                                    if let Some(c) = cache {
-                                        let set = &c.samples(&job.key())[u.first..u.first + u.len];
+                                let job = &jobs[u.job];
+                                match sources[u.job] {
+                                    Some(Source::Direct) => {
+                                        let mut rng = piece_rng(sampler.seed, job, u.piece);
+                                        sampler.draw_job(job, u.len as u64, &mut rng, target, &mut counts);
+                                    }
+                                    Some(Source::Hit) => {
+                                        if let Some(c) = cache {
+                                            let set = &c.samples(&job.key())[u.first..u.first + u.len];
+                                            sampler.draw_cached(
+                                                &job.clip_from_structure,
+                                                job.base,
+                                                set,
+                                                target,
+                                                &mut counts,
+                                            );
+                                        }
+                                    }
+                                    Some(Source::Built(b)) => {
+                                        let set = &built[b].0[u.first..u.first + u.len];
                                         sampler.draw_cached(
                                             &job.clip_from_structure,
                                             job.base,
@@ -1265,19 +1277,15 @@ impl Renderer for Rzb {
                                             &mut counts,
                                         );
                                     }
+                                    None => {}
                                 }
-                                Some(Source::Built(b)) => {
-                                    let set = &built[b].0[u.first..u.first + u.len];
-                                    sampler.draw_cached(&job.clip_from_structure, job.base, set, target, &mut counts);
-                                }
-                                None => {}
+                                unit_done(u.len);
                             }
-                            unit_done(u.len);
-                        }
-                        counts
-                    })
-                    .collect()
-            });
+                            counts
+                        })
+                        .collect()
+                })
+            };
             counts.extend(batch_counts);
             // Merge the scratch buffers into the frame.
             let (frame_depth, frame_items) = frame.buffers_mut();
@@ -1287,6 +1295,15 @@ impl Renderer for Rzb {
                         keep_fragment(&mut frame_depth[p], &mut frame_items[p], d[p], i[p]);
                     }
                 }
+            }
+            // The batch's parts are drawn: the next batch's take their places (only the
+            // Gaussian pass goes over every unit again). A frame of the 1.4·10^14 forest splits
+            // its boxes into 8.8 M parts of 208 bytes; kept to the frame's end, they made
+            // 2.3 GB of fresh pages, a quarter of the frame in page faults.
+            if !gauss {
+                jobs.truncate(selected);
+                sources.truncate(selected);
+                units.clear();
             }
         }
         if pyramid.is_some() {
