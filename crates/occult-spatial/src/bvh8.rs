@@ -130,7 +130,10 @@ impl Builder<'_> {
             b: n as u32,
             leaf: true,
         });
-        if n <= 1 {
+        // A leaf's cost, one eight-lane test ([`blocks`]), never exceeds a split's (a node visit
+        // plus its sides' tests): every node of at most `max_leaf` triangles is a leaf. The
+        // heuristic chooses among splits above that size.
+        if n <= self.max_leaf {
             return index;
         }
         let cb = order
@@ -143,11 +146,7 @@ impl Builder<'_> {
         };
         let c = self.centroids;
         let mid = match split {
-            Some((axis, bin, cost)) => {
-                // Leaf cost against split cost (areas relative; see [`blocks`]).
-                if n <= self.max_leaf && blocks(n as u32) <= 1.0 + cost {
-                    return index;
-                }
+            Some((axis, bin)) => {
                 let (lo, scale) = bin_map(&cb, axis);
                 let mut i = 0;
                 for j in 0..n {
@@ -159,9 +158,6 @@ impl Builder<'_> {
                 i
             }
             None => {
-                if n <= self.max_leaf {
-                    return index;
-                }
                 // No separating bin (coincident centroids) or too deep: the middle of the
                 // order along the longest centroid axis.
                 let axis = cb.size().max_position();
@@ -197,9 +193,9 @@ impl Builder<'_> {
         index
     }
 
-    /// The best binned split `(axis, last bin of the left side, cost relative to the node's
-    /// area)`, or `None` when no bin separates the centroids.
-    fn sah_split(&self, order: &[u32], cb: &Aabb, bounds: &Aabb) -> Option<(usize, usize, f32)> {
+    /// The best binned split `(axis, last bin of the left side)` by its cost relative to the
+    /// node's area, or `None` when no bin separates the centroids.
+    fn sah_split(&self, order: &[u32], cb: &Aabb, bounds: &Aabb) -> Option<(usize, usize)> {
         let area = bounds.surface_area().max(f32::MIN_POSITIVE);
         let mut best: Option<(usize, usize, f32)> = None;
         for axis in 0..3 {
@@ -238,7 +234,7 @@ impl Builder<'_> {
                 }
             }
         }
-        best
+        best.map(|(axis, bin, _)| (axis, bin))
     }
 }
 

@@ -47,9 +47,10 @@
 //!   draws need, requires the instance chain. One transform more per sample per level.
 //! - Samples are drawn on the CPU in parallel into per-thread buffers merged under the frame's
 //!   rule (the paper used OpenGL points).
-//! - A single sample from a whole structure (an instance entered once), and every sample of a
-//!   whole mesh, is picked with a Walker alias table ([`structure::AliasTable`], O(1)) instead
-//!   of the list's binary search, a mesh's triangles read from a copy in list order: same
+//! - Each sample picks its position in a selected box's section by the list's binary search,
+//!   then descends the instance chain without entering an instance: a Walker alias table per
+//!   level ([`structure::AliasTable`], O(1)) instead of the list's binary search, a mesh's
+//!   triangles read from a copy in list order, the point carried up the links taken: same
 //!   distribution, fewer dependent loads on deep instancing.
 //! - §5.3.2 selects boxes by their depth ratio; the paper's boxes are octree cubes, whose width
 //!   across the view that ratio bounds as well. Ours are tight bounds (slabs, for rows of
@@ -72,8 +73,8 @@
 //!   build. Sums are recomputed along the path in a fixed order instead of adjusted by the
 //!   difference, so frames depend only on which entries are present. A change of a node's area
 //!   is set on every instance of it, up the DAG (O(height) per referencing instance).
-//!   `dynamic=on` samples by one tree descent per sample instead of the multinomial split over
-//!   lists.
+//!   `dynamic=on` samples by one tree descent per sample instead of the lists' binary searches
+//!   and alias tables.
 //! - Addition, `occlude=on` (the default; `off` is the paper's behaviour): the paper samples
 //!   every surface in view, hidden or not. Here the selected boxes are sampled nearest first,
 //!   in batches of growing size (the first about half a sample per pixel, then ×1.5); before
@@ -1210,6 +1211,12 @@ impl Renderer for Rzb {
             }
             let chunk_count = bounds.len() - 1;
             if batch_units.is_empty() && batch_index + 1 < batch_count {
+                // Nothing to draw (every part hidden, say): the parts go as after a draw.
+                if !gauss {
+                    jobs.truncate(selected);
+                    sources.truncate(selected);
+                    units.clear();
+                }
                 continue;
             }
             self.scratch.truncate(chunk_count.saturating_sub(1));

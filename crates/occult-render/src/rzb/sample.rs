@@ -97,7 +97,7 @@ fn project(
     })
 }
 
-/// Samples of a whole structure that descend in lockstep ([`Sampler::descents`]).
+/// Samples that descend in lockstep ([`Sampler::descents`]).
 const LANES: usize = 8;
 /// Levels of instancing a descent carries its point up through; deeper chains are entered.
 const CHAIN: usize = 16;
@@ -121,7 +121,6 @@ struct Descent<'s> {
 static NO_LINK: Link = Link {
     parent_from_child: occult_core::Affine3A::IDENTITY,
     child: 0,
-    instance: 0,
     item_offset: 0,
 };
 

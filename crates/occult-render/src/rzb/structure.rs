@@ -50,8 +50,6 @@ pub struct Link {
     pub parent_from_child: occult_core::Affine3A,
     /// The instance's child node.
     pub child: u32,
-    /// The instance's index in the group.
-    pub instance: u32,
     /// Items before the instance's first (the group's item offset of it).
     pub item_offset: u64,
 }
@@ -272,7 +270,6 @@ pub fn build_all(
                         .map(|&e| Link {
                             parent_from_child: g[e as usize].parent_from_child,
                             child: g[e as usize].child.0,
-                            instance: e,
                             item_offset: node.item_offset(e as usize),
                         })
                         .collect();

@@ -237,8 +237,7 @@ impl SampleOctree {
     }
 
     /// The list position in `range` whose area interval (measured from the list's start)
-    /// holds `target`; targets beyond the range's end give its last entry with area. Lets a
-    /// caller invert sorted targets over shrinking ranges.
+    /// holds `target`; targets beyond the range's end give its last entry with area.
     #[inline]
     pub fn locate(&self, range: std::ops::Range<u32>, target: f64) -> u32 {
         let hi = self.prefix[range.end as usize];
