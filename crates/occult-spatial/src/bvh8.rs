@@ -667,17 +667,10 @@ fn traverse_bvh_avx2(
 /// Asks for every cache line of `node` (a hint: changes no result).
 #[inline(always)]
 fn prefetch_node(node: &RayBvhNode) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        let p = (node as *const RayBvhNode).cast::<i8>();
-        for offset in (0..std::mem::size_of::<RayBvhNode>()).step_by(64) {
-            // SAFETY: the address lies inside `node`; prefetching never faults anyway.
-            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(offset)) };
-        }
+    let p = (node as *const RayBvhNode).cast::<u8>();
+    for offset in (0..std::mem::size_of::<RayBvhNode>()).step_by(64) {
+        occult_core::simd::prefetch(p.wrapping_add(offset));
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = node;
 }
 
 /// Asks for child `i` of `node`: its triangles if a leaf, else its node (a hint).

@@ -163,18 +163,10 @@ const _: () = assert!(std::mem::size_of::<LeafTriangle>() == 48 && std::mem::siz
 /// would otherwise take one miss after another). A hint: it changes no result.
 #[inline]
 pub fn prefetch_triangles(tris: &[LeafTriangle]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        let start = tris.as_ptr().cast::<i8>();
-        let bytes = std::mem::size_of_val(tris);
-        for offset in (0..bytes).step_by(64) {
-            // SAFETY: the address lies inside `tris`; prefetching never faults anyway.
-            unsafe { _mm_prefetch::<_MM_HINT_T0>(start.wrapping_add(offset)) };
-        }
+    let start = tris.as_ptr().cast::<u8>();
+    for offset in (0..std::mem::size_of_val(tris)).step_by(64) {
+        occult_core::simd::prefetch(start.wrapping_add(offset));
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = tris;
 }
 
 impl ShearedRay {

@@ -106,14 +106,9 @@ fn combine1(out: &mut [Key], a: &[Key], step: usize, f: impl Fn(Key, Key) -> Key
 /// results, nothing when the index is out of range or the target has no prefetch).
 #[inline(always)]
 pub(super) fn prefetch(keys: &[Key], index: usize) {
-    #[cfg(target_arch = "x86_64")]
     if let Some(k) = keys.get(index) {
-        // SAFETY: `_mm_prefetch` only hints the cache; the pointer is to a live element, and
-        // SSE is part of the x86-64 baseline.
-        unsafe { std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>((k as *const Key).cast()) };
+        occult_core::simd::prefetch(k as *const Key);
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = (keys, index);
 }
 
 /// Rectangles whose covers [`cover_block`] computes at once (one AVX-512 register of `u32`).

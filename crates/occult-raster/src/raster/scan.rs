@@ -98,15 +98,8 @@ pub(super) const SHORT_SPAN: usize = 16;
 /// results.
 #[inline(always)]
 pub(super) fn prefetch(target: &FrameTarget<'_>, i: usize) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch is a hint: it never faults, whatever the address.
-    unsafe {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        _mm_prefetch::<_MM_HINT_T0>(target.depth.wrapping_add(i) as *const i8);
-        _mm_prefetch::<_MM_HINT_T0>(target.items.wrapping_add(i) as *const i8);
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = (target, i);
+    occult_core::simd::prefetch(target.depth.wrapping_add(i));
+    occult_core::simd::prefetch(target.items.wrapping_add(i));
 }
 
 /// Side of the block scanned without branches for small triangles.

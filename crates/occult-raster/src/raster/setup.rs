@@ -421,12 +421,5 @@ pub(super) fn max_f32(a: f32, b: f32) -> f32 {
 /// Hints the processor to fetch `x`'s cache line; never faults, never changes results.
 #[inline(always)]
 fn prefetch_read<T>(x: &T) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch is a hint, and the address is a live reference's.
-    unsafe {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        _mm_prefetch::<_MM_HINT_T0>((x as *const T).cast::<i8>());
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = x;
+    occult_core::simd::prefetch(x as *const T);
 }
