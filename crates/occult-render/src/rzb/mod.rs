@@ -1257,34 +1257,20 @@ impl Renderer for Rzb {
                                     break;
                                 }
                                 let job = &jobs[u.job];
-                                match sources[u.job] {
+                                let set = match sources[u.job] {
                                     Some(Source::Direct) => {
                                         let mut rng = piece_rng(sampler.seed, job, u.piece);
                                         sampler.draw_job(job, u.len as u64, &mut rng, target, &mut counts);
+                                        None
                                     }
                                     Some(Source::Hit) => {
-                                        if let Some(c) = cache {
-                                            let set = &c.samples(&job.key())[u.first..u.first + u.len];
-                                            sampler.draw_cached(
-                                                &job.clip_from_structure,
-                                                job.base,
-                                                set,
-                                                target,
-                                                &mut counts,
-                                            );
-                                        }
+                                        cache.map(|c| &c.samples(&job.key())[u.first..u.first + u.len])
                                     }
-                                    Some(Source::Built(b)) => {
-                                        let set = &built[b].0[u.first..u.first + u.len];
-                                        sampler.draw_cached(
-                                            &job.clip_from_structure,
-                                            job.base,
-                                            set,
-                                            target,
-                                            &mut counts,
-                                        );
-                                    }
-                                    None => {}
+                                    Some(Source::Built(b)) => Some(&built[b].0[u.first..u.first + u.len]),
+                                    None => None,
+                                };
+                                if let Some(set) = set {
+                                    sampler.draw_cached(&job.clip_from_structure, job.base, set, target, &mut counts);
                                 }
                                 unit_done(u.len);
                             }
