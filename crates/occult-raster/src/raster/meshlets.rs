@@ -52,25 +52,7 @@ impl Meshlets {
     /// out of the mesh, or a cluster of more than [`MAX_CLUSTER_VERTICES`] distinct vertices.
     pub fn new(mesh: &Mesh, triangles: &[u32], starts: &[u32]) -> Result<Self, RasterError> {
         let bad = |m: String| Err(RasterError::BadConfig(format!("meshlets: {m}")));
-        if starts.first() != Some(&0)
-            || starts.last().map(|&s| s as usize) != Some(triangles.len())
-            || starts.windows(2).any(|w| w[0] > w[1])
-        {
-            return bad(format!(
-                "cluster starts must begin at 0, never decrease and end at the {} triangles",
-                triangles.len()
-            ));
-        }
-        if let Some((i, t)) = triangles
-            .iter()
-            .enumerate()
-            .find(|(_, &t)| t as usize >= mesh.triangle_count())
-        {
-            return bad(format!(
-                "entry {i} names triangle {t} of a mesh of {}",
-                mesh.triangle_count()
-            ));
-        }
+        check(mesh, triangles, starts, "cluster starts")?;
         let tris = mesh.triangles();
         // Per mesh vertex, its local index in the cluster being built, stamped by the cluster.
         let mut local = vec![(u32::MAX, 0u8); mesh.positions().len()];
@@ -112,6 +94,54 @@ impl Meshlets {
             m.position_starts.push(m.positions.len() as u32);
         }
         Ok(m)
+    }
+
+    /// Clusters of `mesh` cut from runs of triangles: run `r` is
+    /// `triangles[runs[r]..runs[r + 1]]` (mesh triangle indices; `runs` begins at 0, never
+    /// decreases and ends at `triangles.len()`), cut in order into clusters of at most
+    /// [`MAX_CLUSTER_VERTICES`] distinct vertices. Returns the clusters and, per run, the index
+    /// of its first cluster, then the end: run `r`'s clusters are `first[r]..first[r + 1]`
+    /// (none for an empty run).
+    ///
+    /// # Errors
+    /// As [`Meshlets::new`], for bad `runs` or a triangle index out of the mesh.
+    pub fn from_runs(mesh: &Mesh, triangles: &[u32], runs: &[u32]) -> Result<(Self, Vec<u32>), RasterError> {
+        check(mesh, triangles, runs, "runs")?;
+        let tris = mesh.triangles();
+        // Per mesh vertex, the last cluster that counted it.
+        let mut seen = vec![u32::MAX; mesh.positions().len()];
+        let (mut starts, mut first) = (vec![0u32], Vec::with_capacity(runs.len()));
+        for w in runs.windows(2) {
+            first.push(starts.len() as u32 - 1);
+            let mut distinct = 0;
+            for i in w[0]..w[1] {
+                let corners = tris[triangles[i as usize] as usize];
+                let cluster = starts.len() as u32 - 1;
+                let new = |seen: &[u32]| {
+                    corners
+                        .iter()
+                        .enumerate()
+                        .filter(|&(k, &v)| seen[v as usize] != cluster && !corners[..k].contains(&v))
+                        .count()
+                };
+                let mut cluster = cluster;
+                if i > w[0] && distinct + new(&seen) > MAX_CLUSTER_VERTICES {
+                    starts.push(i);
+                    (cluster, distinct) = (cluster + 1, 0);
+                }
+                for &v in &corners {
+                    if seen[v as usize] != cluster {
+                        seen[v as usize] = cluster;
+                        distinct += 1;
+                    }
+                }
+            }
+            if w[1] > w[0] {
+                starts.push(w[1]);
+            }
+        }
+        first.push(starts.len() as u32 - 1);
+        Ok((Self::new(mesh, triangles, &starts)?, first))
     }
 
     /// Number of clusters.
@@ -183,7 +213,7 @@ impl Meshlets {
     }
 
     /// The triangles of the clusters `list`, in order.
-    pub(super) fn list_len(&self, list: &[u32]) -> usize {
+    pub fn list_len(&self, list: &[u32]) -> usize {
         list.iter().map(|&c| self.triangle_count(c as usize)).sum()
     }
 
@@ -198,6 +228,32 @@ impl Meshlets {
             j -= n;
         }
         panic!("triangle beyond the clusters' triangles");
+    }
+}
+
+/// Checks that `bounds` (`what`) begin at 0, never decrease and end at `triangles.len()`, and
+/// that every entry of `triangles` names a triangle of `mesh`.
+fn check(mesh: &Mesh, triangles: &[u32], bounds: &[u32], what: &str) -> Result<(), RasterError> {
+    let bad = |m: String| Err(RasterError::BadConfig(format!("meshlets: {m}")));
+    if bounds.first() != Some(&0)
+        || bounds.last().map(|&s| s as usize) != Some(triangles.len())
+        || bounds.windows(2).any(|w| w[0] > w[1])
+    {
+        return bad(format!(
+            "{what} must begin at 0, never decrease and end at the {} triangles",
+            triangles.len()
+        ));
+    }
+    match triangles
+        .iter()
+        .enumerate()
+        .find(|(_, &t)| t as usize >= mesh.triangle_count())
+    {
+        Some((i, t)) => bad(format!(
+            "entry {i} names triangle {t} of a mesh of {}",
+            mesh.triangle_count()
+        )),
+        None => Ok(()),
     }
 }
 
@@ -238,6 +294,34 @@ mod tests {
         assert_eq!(m.list_len(&[2, 0]), 6);
         assert_eq!(m.list_triangle(&[2, 0], 3), 0);
         assert_eq!(m.list_triangle(&[2, 0], 2), 4);
+    }
+
+    #[test]
+    fn runs_are_cut_into_clusters_of_few_vertices() {
+        // A strip of 600 triangles uses 602 vertices: one run of all of them needs three
+        // clusters; an empty run gets none.
+        let mesh = strip(600);
+        let all: Vec<u32> = (0..600).collect();
+        let (m, first) = Meshlets::from_runs(&mesh, &all, &[0, 10, 10, 600]).expect("valid runs");
+        assert_eq!(first, vec![0, 1, 1, 4]);
+        assert_eq!(m.triangles(0), &all[..10]);
+        let run: Vec<u32> = (1..4).flat_map(|c| m.triangles(c).to_vec()).collect();
+        assert_eq!(run, all[10..]);
+        for c in 0..m.len() {
+            assert!(m.cluster(c).0.len() <= MAX_CLUSTER_VERTICES);
+        }
+        // Full clusters: the first of the long run holds 254 triangles (256 vertices).
+        assert_eq!(m.triangle_count(1), 254);
+        assert!(
+            Meshlets::from_runs(&mesh, &all, &[0, 700]).is_err(),
+            "runs past the end"
+        );
+        assert!(
+            Meshlets::from_runs(&mesh, &[0, 600], &[0, 2]).is_err(),
+            "a triangle out of the mesh"
+        );
+        let (m, first) = Meshlets::from_runs(&mesh, &[], &[0, 0]).expect("one empty run");
+        assert_eq!((m.len(), first), (0, vec![0, 0]));
     }
 
     #[test]

@@ -136,6 +136,9 @@ pub(super) fn setup_range<const AVX2: bool>(
         let corners = || indices.map(|i| draw.mesh.positions()[i as usize]);
         setup_triangle(vp, v.map(|p| *p), &draw.clip_from_object, corners, item, out);
     };
+    // A cluster's projected vertices (made once a range: a draw of one small cluster would
+    // otherwise clear it for a few triangles).
+    let mut local = [ProjVertex::default(); MAX_CLUSTER_VERTICES];
     while t < range.end {
         while draw_starts[d + 1] <= t {
             d += 1;
@@ -180,7 +183,6 @@ pub(super) fn setup_range<const AVX2: bool>(
                 let m = &draw.clip_from_object;
                 let (mut j, last) = (t - draw_starts[d], end - draw_starts[d]);
                 let (mut k, mut base) = meshlets.seek(list, j);
-                let mut local = [ProjVertex::default(); MAX_CLUSTER_VERTICES];
                 while j < last {
                     let c = list[k] as usize;
                     let n = meshlets.triangle_count(c);
@@ -207,7 +209,6 @@ pub(super) fn setup_range<const AVX2: bool>(
                 let m = &draw.clip_from_object;
                 let (mut j, last) = (t - draw_starts[d], end - draw_starts[d]);
                 let (mut k, mut base) = meshlets.seek(list, j);
-                let mut local = [ProjVertex::default(); MAX_CLUSTER_VERTICES];
                 while j < last {
                     let c = list[k] as usize;
                     let n = meshlets.triangle_count(c);

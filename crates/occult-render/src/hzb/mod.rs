@@ -31,6 +31,10 @@
 //!   (at least `refresh` triangles) meets the box on screen draws the batch and tests again:
 //!   in a front-to-back walk the batch often holds the box's occluder (the near side of the
 //!   same building), which a full-size batch would leave out of the pyramid.
+//! - **Node draws as clusters** (not in the paper): a mesh octree node's unshared own triangles
+//!   are kept as clusters of at most 256 distinct vertices ([`occult_raster::Meshlets`], built
+//!   once with the octrees), so drawing the node projects each vertex once instead of three
+//!   corners a triangle; its shared ones, drawn once a frame by their stamps, stay an index list.
 //! - **Front-to-back traversal**: children of an octree node in the order of the octants seen
 //!   from the eye; a node's box is tested (frustum, then occlusion) before its own primitives
 //!   are drawn and its children visited.
@@ -133,6 +137,7 @@
 //! plants); on open terrain almost everything is visible and the tests are pure overhead.
 
 pub(crate) mod boxtest;
+mod meshlets;
 mod walk;
 
 use std::sync::Arc;
@@ -527,15 +532,23 @@ impl Worker {
     }
 }
 
+/// Per DAG node, what the walk reads beside its octree.
+struct PerNode {
+    /// Per DAG node with an octree: triangle instances below each of its nodes (what a test
+    /// that culls the node saves, [`crate::payoff`]).
+    subtree_items: Vec<Vec<u64>>,
+    /// Per mesh with an octree: its nodes' unshared triangles as clusters.
+    meshlets: Vec<Option<meshlets::NodeMeshlets>>,
+}
+
 /// The hzb renderer.
 pub struct Hzb {
     scene: Arc<Scene>,
     options: HzbOptions,
     /// Per DAG node: its octree (groups, and meshes over the leaf size).
     octrees: Vec<Option<HybridOctree>>,
-    /// Per DAG node with an octree: triangle instances below each of its nodes (what a test
-    /// that culls the node saves, [`crate::payoff`]).
-    subtree_items: Vec<Vec<u64>>,
+    /// What the walk reads beside the octrees.
+    per_node: PerNode,
     /// One walker, or one per worker of the distribution.
     workers: Vec<Worker>,
     frames_since_recheck: u32,
@@ -607,6 +620,15 @@ impl Hzb {
                 _ => Ok(None),
             });
         let octrees = octrees.map_err(|e| RenderError::BadParameter(format!("hzb: {e}")))?;
+        let meshlets = scene
+            .nodes()
+            .iter()
+            .zip(&octrees)
+            .map(|(node, o)| match (node.kind(), o) {
+                (NodeKind::Mesh(m), Some(o)) => meshlets::NodeMeshlets::build(m, o).map(Some),
+                _ => Ok(None),
+            })
+            .collect::<Result<Vec<_>>>()?;
         let workers = if hzb.distribution == Distribution::Off {
             vec![Worker {
                 payoff: Payoff::new(hzb.payoff, scene.item_count()),
@@ -656,7 +678,10 @@ impl Hzb {
             direct,
             scene,
             options: hzb,
-            subtree_items,
+            per_node: PerNode {
+                subtree_items,
+                meshlets,
+            },
             octrees,
             workers,
             frames_since_recheck: 0,
@@ -708,22 +733,12 @@ fn walk_frame(
     share: walk::Share,
     recheck: bool,
     stamps: &mut walk::Stamps,
-    subtree_items: &[Vec<u64>],
+    per_node: &PerNode,
     payoff: &mut Payoff,
 ) -> FrameStats {
     let old_visible = std::mem::take(visible);
     let mut w = walk::Walk::new(
-        scene,
-        octrees,
-        options,
-        view,
-        raster,
-        frame,
-        pyramid,
-        share,
-        stamps,
-        subtree_items,
-        payoff,
+        scene, octrees, options, view, raster, frame, pyramid, share, stamps, per_node, payoff,
     );
     let skip = *list_precision < options.trust as f64;
     if options.temporal {
@@ -755,7 +770,7 @@ impl Hzb {
     /// slowest before the merge (the load balance the paper discusses).
     fn render_distributed(&mut self, view: &View, frame: &mut Frame, recheck: bool) -> Result<FrameStats> {
         let (scene, octrees, options) = (&*self.scene, &self.octrees[..], &self.options);
-        let subtree_items = &self.subtree_items[..];
+        let per_node = &self.per_node;
         let (width, height) = (frame.width(), frame.height());
         for w in &mut self.workers {
             if !matches!(&w.frame, Some(f) if f.width() == width && f.height() == height) {
@@ -794,7 +809,7 @@ impl Hzb {
                             share,
                             recheck,
                             &mut w.stamps,
-                            subtree_items,
+                            per_node,
                             &mut w.payoff,
                         );
                         (stats, t.elapsed())
@@ -891,7 +906,7 @@ impl Renderer for Hzb {
                 walk::Share::ALL,
                 recheck,
                 &mut w.stamps,
-                &self.subtree_items,
+                &self.per_node,
                 &mut w.payoff,
             );
             stats.phases.merge(&cleared.phases);
@@ -918,6 +933,13 @@ impl Renderer for Hzb {
             .flatten()
             .map(HybridOctree::memory_bytes)
             .sum::<usize>()
+            + self
+                .per_node
+                .meshlets
+                .iter()
+                .flatten()
+                .map(meshlets::NodeMeshlets::memory_bytes)
+                .sum::<usize>()
             + self.workers.iter().map(Worker::memory_bytes).sum::<usize>()
             + self.direct.as_ref().map_or(0, DirectFrames::memory_bytes)
     }

@@ -5,11 +5,14 @@ use std::hash::Hasher;
 use std::time::Instant;
 
 use occult_core::{Affine3A, Containment, Frustum, Mat4, Mesh, NodeId, NodeKind, Scene, Vec3, View};
-use occult_raster::{Draw, DrawTriangles, Frame, PixelRect, PyramidCounts, PyramidTest, Rasterizer, ZPyramid};
+use occult_raster::{
+    Draw, DrawTriangles, Frame, Meshlets, PixelRect, PyramidCounts, PyramidTest, Rasterizer, ZPyramid,
+};
 use occult_spatial::{octree::hybrid::NO_CHILD, HybridOctree};
 
 use super::boxtest::{screen_rect, Occlusion};
-use super::{ChildOrder, Distribution, HzbOptions, VisEntry};
+use super::meshlets::NodeMeshlets;
+use super::{ChildOrder, Distribution, HzbOptions, PerNode, VisEntry};
 use crate::hash::{FxBuild, FxHasher};
 use crate::payoff::{FramePayoff, Payoff, DIRECT_BATCH};
 use crate::walk::{NodeAt, NodeTest, Placed, SceneWalk, Visitor};
@@ -37,22 +40,22 @@ pub(super) struct Stamps {
     bit_of: Vec<Vec<u32>>,
     /// Per DAG node: words of one instance's bit set.
     words: Vec<u32>,
-    /// Per DAG node whose octree shares primitives: its nodes' own lists regrouped (read for
+    /// Per DAG node whose octree shares primitives: its nodes' shared own primitives (read for
     /// meshes).
     split: Vec<Option<Split>>,
     /// This frame's bit sets.
     sets: StampSets,
 }
 
-/// The own primitives of every node of a mesh octree, regrouped as the unshared ones then the
-/// shared ones with their stamp bits: drawing a node copies the first run as it is and checks
-/// a stamp only for the second, reading both in order (the per-primitive lookup of a bit in a
-/// table over the whole mesh missed the cache).
+/// The shared own primitives of every node of a mesh octree, node by node, with their stamp
+/// bits, read in order when a node is drawn (the per-primitive lookup of a bit in a table over
+/// the whole mesh missed the cache). The unshared ones are drawn as clusters
+/// ([`NodeMeshlets`]).
 struct Split {
-    /// Per octree node: where its unshared run starts, where its shared run starts, the end.
-    ranges: Vec<[u32; 3]>,
+    /// Per octree node: where its shared run starts and ends.
+    ranges: Vec<[u32; 2]>,
     order: Vec<u32>,
-    /// The stamp bit of each entry of `order` ([`NOT_SHARED`] in unshared runs).
+    /// The stamp bit of each entry of `order`.
     bits: Vec<u32>,
 }
 
@@ -146,12 +149,8 @@ impl Stamps {
                     let start = split.order.len() as u32;
                     split
                         .order
-                        .extend(own.iter().filter(|&&p| bit_of[p as usize] == NOT_SHARED));
-                    let mid = split.order.len() as u32;
-                    split
-                        .order
                         .extend(own.iter().filter(|&&p| bit_of[p as usize] != NOT_SHARED));
-                    split.ranges.push([start, mid, split.order.len() as u32]);
+                    split.ranges.push([start, split.order.len() as u32]);
                 }
                 split.bits = split.order.iter().map(|&p| bit_of[p as usize]).collect();
                 Some(split)
@@ -179,28 +178,26 @@ impl Stamps {
                 .split
                 .iter()
                 .flatten()
-                .map(|s| s.ranges.capacity() * 12 + s.order.capacity() * 4 + s.bits.capacity() * 4)
+                .map(|s| s.ranges.capacity() * 8 + s.order.capacity() * 4 + s.bits.capacity() * 4)
                 .sum::<usize>()
             + self.words.capacity() * 4
             + self.sets.bits.capacity() * 8
             + self.sets.slots.capacity() * 24
     }
 
-    /// Appends to `out` the own primitives of octree node `n` of the instance of mesh `id` at
-    /// `first_item` that it has not drawn yet this frame, stamping the shared ones; false (and
-    /// nothing appended) when the octree shares nothing: its node lists are drawn as they are.
+    /// Appends to `out` the shared own primitives of octree node `n` of the instance of mesh
+    /// `id` at `first_item` that it has not drawn yet this frame, stamping them.
     #[inline]
-    fn gather(&mut self, id: NodeId, n: u32, first_item: u64, out: &mut Vec<u32>) -> bool {
+    fn gather_shared(&mut self, id: NodeId, n: u32, first_item: u64, out: &mut Vec<u32>) {
         let Some(split) = &self.split[id.index()] else {
-            return false;
+            return;
         };
-        let [start, mid, end] = split.ranges[n as usize];
-        out.extend_from_slice(&split.order[start as usize..mid as usize]);
-        if mid == end {
-            return true;
+        let [start, end] = split.ranges[n as usize];
+        if start == end {
+            return;
         }
         let set = self.sets.set(id, self.words[id.index()], first_item);
-        for k in mid as usize..end as usize {
+        for k in start as usize..end as usize {
             let bit = split.bits[k];
             let (word, mask) = (&mut set[bit as usize / 64], 1u64 << (bit % 64));
             if *word & mask == 0 {
@@ -208,7 +205,6 @@ impl Stamps {
                 out.push(split.order[k]);
             }
         }
-        true
     }
 
     /// Stamps primitive `p` of the instance of DAG node `id` at `first_item`; false when it is
@@ -288,8 +284,8 @@ enum Triangles<'a> {
     All,
     /// A range of `scratch` (a list filtered by stamps or shares).
     Scratch(u32, u32),
-    /// An octree node's own index list, as it is.
-    Node(&'a [u32]),
+    /// Some clusters of the mesh's node clusters (an octree node's unshared triangles).
+    Clusters(&'a Meshlets, &'a [u32]),
 }
 
 impl Triangles<'_> {
@@ -297,7 +293,7 @@ impl Triangles<'_> {
         match self {
             Triangles::All => mesh.triangle_count(),
             Triangles::Scratch(s, e) => (e - s) as usize,
-            Triangles::Node(l) => l.len(),
+            Triangles::Clusters(m, list) => m.list_len(list),
         }
     }
 }
@@ -324,6 +320,8 @@ pub(super) struct Walk<'a> {
     octrees: &'a [Option<HybridOctree>],
     /// Per DAG node with an octree: triangle instances below each octree node.
     subtree_items: &'a [Vec<u64>],
+    /// Per mesh with an octree: its nodes' unshared triangles as clusters.
+    meshlets: &'a [Option<NodeMeshlets>],
     /// Whether the tests still pay this frame, and what the renderer learns from it.
     payoff: FramePayoff,
     payoff_state: &'a mut Payoff,
@@ -388,14 +386,15 @@ impl<'a> Walk<'a> {
         pyramid: &'a mut ZPyramid,
         share: Share,
         stamps: &'a mut Stamps,
-        subtree_items: &'a [Vec<u64>],
+        per_node: &'a PerNode,
         payoff_state: &'a mut Payoff,
     ) -> Self {
         stamps.begin_frame();
         Self {
             walk: SceneWalk::new(scene, view),
             octrees,
-            subtree_items,
+            subtree_items: &per_node.subtree_items,
+            meshlets: &per_node.meshlets,
             payoff: payoff_state.begin(Instant::now()),
             payoff_state,
             options,
@@ -1016,14 +1015,18 @@ impl<'a> Walk<'a> {
                 let own = octree.node_primitives(n);
                 let start = self.scratch.len() as u32;
                 if self.share == Share::ALL {
-                    if self.stamps.gather(id, n, first_item, &mut self.scratch) {
-                        let end = self.scratch.len() as u32;
-                        if end > start {
-                            self.push(mesh, Triangles::Scratch(start, end), clip, first_item, own_box);
+                    // The unshared triangles as clusters, the shared ones not drawn yet as a list.
+                    let meshlets: &'a [Option<NodeMeshlets>] = self.meshlets;
+                    if let Some(m) = &meshlets[id.index()] {
+                        let (meshlets, list) = m.node(n);
+                        if !list.is_empty() {
+                            self.push(mesh, Triangles::Clusters(meshlets, list), clip, first_item, own_box);
                         }
-                    } else if !own.is_empty() {
-                        // Nothing shared: the octree's list is drawn as it is.
-                        self.push(mesh, Triangles::Node(own), clip, first_item, own_box);
+                    }
+                    self.stamps.gather_shared(id, n, first_item, &mut self.scratch);
+                    let end = self.scratch.len() as u32;
+                    if end > start {
+                        self.push(mesh, Triangles::Scratch(start, end), clip, first_item, own_box);
                     }
                     return self.pending.len() > queued;
                 }
@@ -1115,7 +1118,7 @@ impl<'a> Walk<'a> {
                 triangles: match p.triangles {
                     Triangles::All => DrawTriangles::All,
                     Triangles::Scratch(s, e) => DrawTriangles::List(&self.scratch[s as usize..e as usize]),
-                    Triangles::Node(l) => DrawTriangles::List(l),
+                    Triangles::Clusters(meshlets, list) => DrawTriangles::Clusters { meshlets, list },
                 },
                 clip_from_object: p.clip_from_object,
                 first_item: p.first_item,
