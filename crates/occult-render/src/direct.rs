@@ -25,10 +25,13 @@
 //!   or after two in a row that did not plainly pay ([`DirectFrames::plainly`]: tests that
 //!   paid, and at most a third of the work submitted or less than half of what the work would
 //!   cost at the frame's own rasterization rate), unless that frame is small beside the culled
-//!   frames before it (less than half their mean time); a culled frame that wins by a thin
-//!   margin (more than [`REMEASURE_SHARE`] of the predicted direct time) measures it again
-//!   once the measurement is [`REMEASURE_AFTER`] frames old, or [`REMEASURE_FIRST`] while
-//!   there is only one (it may be cold), then also after a loss that started no run;
+//!   frames before it (less than half their mean time), or after the renderer's first culled
+//!   frame when it took longer than its work at its own cost of a triangle shared over the
+//!   threads (a view that culling cannot help then costs one culled frame, not two); a
+//!   culled frame that wins by a thin margin (more than [`REMEASURE_SHARE`] of the predicted
+//!   direct time) measures it again once the measurement is [`REMEASURE_AFTER`] frames old,
+//!   or [`REMEASURE_FIRST`] while there is only one (it may be cold), then also after a loss
+//!   that started no run;
 //! - a culled frame shorter than [`MIN_ALLOWANCE_TIME`] never starts a run (small scenes keep
 //!   their tests whatever the clock says);
 //! - probes are **screened**: the last direct frame of a run has its final depth, and what a
@@ -97,6 +100,8 @@ pub struct DirectFrames {
     /// The depth pyramid of the last direct frame of a run (screening), made at the frame's
     /// size when first needed.
     pyramid: Option<ZPyramid>,
+    /// The threads a direct frame's draws are shared over (the renderer's rasterizer's).
+    threads: usize,
 }
 
 impl DirectFrames {
@@ -110,6 +115,7 @@ impl DirectFrames {
             frustum: Hierarchies::build(scene, raster, &FrustumOptions::default())?,
             choice: Choice::default(),
             pyramid: None,
+            threads: raster.thread_count().max(1),
         })
     }
 
@@ -220,14 +226,17 @@ impl DirectFrames {
         let work = self.choice.last_work;
         let submitted = stats.triangles_submitted;
         let raster_ns = stats.phases.get(Phase::Raster).as_nanos() as f64 / submitted.max(1) as f64;
-        let plainly = Self::plainly(tests_paid, total, submitted, raster_ns, work);
+        let first = self.choice.model().is_none();
+        let slower = self.choice.first_lost(total, raster_ns, self.threads);
+        let plainly = !slower && Self::plainly(tests_paid, total, submitted, raster_ns, work);
         // Culling pays only if drawing the hidden triangles costs more than what culling cost
         // this frame beyond drawing what it submitted (both at this frame's rate: a direct
         // frame's is lower, which only widens the loss).
-        let cannot_pay = self.choice.model().is_none()
+        let cannot_pay = first
             && !plainly
             && total >= MIN_ALLOWANCE_TIME
-            && raster_ns * (self.hidden_triangles(view, frame)? + submitted) as f64 <= total.as_nanos() as f64;
+            && (slower
+                || raster_ns * (self.hidden_triangles(view, frame)? + submitted) as f64 <= total.as_nanos() as f64);
         if cannot_pay {
             stats.counters.add(SCREENED, 1);
         }
@@ -339,6 +348,19 @@ impl Choice {
     fn ratio(&self, total: Duration, work: u64) -> Option<f64> {
         let m = self.model()?;
         Some(total.as_nanos() as f64 / m.predict(work).max(1.0))
+    }
+
+    /// Whether the renderer's first culled frame, which took `total` at `raster_ns` a
+    /// triangle it drew, lost to a direct frame of its work: it took longer than that work at
+    /// its own cost of a triangle shared over the `threads` (a direct frame's triangles, of
+    /// whole meshes in large batches, cost less each). A direct frame is then measured next,
+    /// without a screening. Only the first culled frame is judged so: later ones of little
+    /// work (a street's) have a direct frame's fixed part (clearing, walking) to beat, which
+    /// this estimate leaves out.
+    fn first_lost(&self, total: Duration, raster_ns: f64, threads: usize) -> bool {
+        self.model().is_none()
+            && self.unweighed.is_empty()
+            && total.as_nanos() as f64 > raster_ns / threads.max(1) as f64 * self.last_work as f64
     }
 
     /// Whether a run's last direct frame screens the coming probe: a direct frame and a
@@ -604,6 +626,26 @@ pub(crate) mod tests {
         c.culled(20 * MS, 1000, true, true, false);
         c.culled(5 * MS, 1000, true, false, true);
         assert!(!c.take_direct(), "unless small beside the frames before");
+    }
+
+    /// The first culled frame loses when it took longer than its work at its own cost of a
+    /// triangle shared over the threads; no later one is judged so, nor one after a direct
+    /// frame was measured.
+    #[test]
+    fn a_first_culled_frame_slower_than_its_work_drawn_directly_lost() {
+        let mut c = Choice {
+            last_work: 1_000_000,
+            ..Choice::default()
+        };
+        // A million triangles at 20 ns over 2 threads: 10 ms.
+        assert!(c.first_lost(11 * MS, 20.0, 2));
+        assert!(!c.first_lost(9 * MS, 20.0, 2));
+        assert!(!c.first_lost(11 * MS, 20.0, 1), "one thread: 20 ms");
+        c.culled(9 * MS, 1_000_000, true, true, false);
+        assert!(!c.first_lost(100 * MS, 20.0, 2), "not the first culled frame");
+        let mut c = measured(0.0, 1.0, 1);
+        c.last_work = 1_000_000;
+        assert!(!c.first_lost(100 * MS, 20.0, 2), "a direct frame was measured");
     }
 
     /// The hidden triangles of a view: some behind the front row, never one that a pixel of

@@ -40,6 +40,10 @@
 //! was measured, any other frame is finished as begun, tests and all, unless given up; the
 //! frame-level choice weighs it.
 //!
+//! What a frame draws untested before its tests begin (`hzb`'s visible list,
+//! [`FramePayoff::untested_first`], [`FramePayoff::tests_begin`]) is neither a cost nor a gain
+//! of its tests: only the abandonment rule weighs it.
+//!
 //! Counters, registered by each renderer that uses it: `payoff_stopped` (1 when the frame
 //! stopped testing), `payoff_untested` (the tests then skipped).
 
@@ -175,6 +179,8 @@ impl Payoff {
             stopped: false,
             since_check: 0,
             untested: 0,
+            base: (Duration::ZERO, Duration::ZERO, 0),
+            untested_first: false,
         }
     }
 
@@ -225,9 +231,36 @@ pub struct FramePayoff {
     stopped: bool,
     since_check: u32,
     untested: u64,
+    /// What the frame had spent, drawn and removed when its tested part began
+    /// ([`FramePayoff::tests_begin`]): time, rasterization time, triangles drawn or removed.
+    base: (Duration, Duration, u64),
+    /// The frame draws untested first ([`FramePayoff::untested_first`]): until its tests
+    /// begin, only the abandonment rule may stop it.
+    untested_first: bool,
 }
 
 impl FramePayoff {
+    /// The frame draws something untested before its tests begin ([`FramePayoff::tests_begin`]):
+    /// meanwhile it is not stopped for tests that do not pay (it makes none), only given up
+    /// by the abandonment rule.
+    pub fn untested_first(&mut self) {
+        self.untested_first = true;
+    }
+
+    /// The frame's tests begin now: what it drew before without tests (`hzb`'s visible list,
+    /// drawn in large batches) is neither a cost nor a gain of testing. The balance and the
+    /// comparison with a direct frame's rate weigh only what comes after (what was drawn
+    /// stays drawn whatever the frame does next); the abandonment rule still weighs the whole
+    /// frame.
+    pub fn tests_begin(&mut self, now: Instant) {
+        self.base = (
+            now.saturating_duration_since(self.start),
+            self.raster_time,
+            self.raster_triangles + self.saved_triangles,
+        );
+        self.untested_first = false;
+    }
+
     /// Rasterizing `triangles` (submitted) took `time`: not a cost of the tests. `shared`:
     /// the batch was large enough for the rasterizer to share over its threads, as a direct
     /// draw is (its rate is then what drawing directly costs).
@@ -279,8 +312,8 @@ impl FramePayoff {
         // than shared ones, a cost of testing too.
         let elapsed = now.saturating_duration_since(self.start).as_nanos() as f64;
         let direct_too_slow = self.direct_ns.is_some_and(|d| {
-            let work = (self.raster_triangles + self.saved_triangles) as f64 * d;
-            elapsed > work + allowance
+            let work = (self.raster_triangles + self.saved_triangles - self.base.2) as f64 * d;
+            elapsed - self.base.0.as_nanos() as f64 > work + allowance
         });
         // Giving up costs what was spent plus the rest drawn directly (a whole direct frame
         // for a renderer that redraws): only once a direct frame's time is spent, and the rest
@@ -291,7 +324,9 @@ impl FramePayoff {
         self.given_up = given_up;
         self.abandoned = given_up && self.abandon == Abandon::Redraw;
         self.stopped = given_up
-            || (self.direct_frame_ns.is_none() && (direct_too_slow || self.cost_ns(now) > self.gain_ns() + allowance));
+            || (self.direct_frame_ns.is_none()
+                && !self.untested_first
+                && (direct_too_slow || self.cost_ns(now) > self.gain_ns() + allowance));
         #[cfg(test)]
         {
             self.stopped |= self.force_stop;
@@ -403,9 +438,12 @@ impl FramePayoff {
         self.raster_time.as_nanos() as f64 / self.raster_triangles as f64
     }
 
+    /// Time spent outside rasterization since the tests began.
     fn cost_ns(&self, now: Instant) -> f64 {
+        let (spent, raster, _) = self.base;
         now.saturating_duration_since(self.start)
-            .saturating_sub(self.raster_time)
+            .saturating_sub(spent)
+            .saturating_sub(self.raster_time.saturating_sub(raster))
             .as_nanos() as f64
     }
 
@@ -466,6 +504,28 @@ mod tests {
         assert_eq!(p.ns_per_triangle, 30.0);
         assert_eq!(p.direct_ns, Some(30.0));
         assert_eq!(p.in_view, 1_001_000);
+    }
+
+    /// What a frame draws untested first (a visible list) neither stops it while drawn nor
+    /// counts against its tests after.
+    #[test]
+    fn what_is_drawn_untested_first_is_not_a_cost_of_the_tests() {
+        let p = Payoff::new(true, 1_000);
+        // 50 ms ago, 1,000 triangles drawn in 1 ms: 49 ms outside rasterization.
+        let mut f = p.begin(Instant::now() - Duration::from_millis(50));
+        f.untested_first();
+        f.rasterized(1_000, Duration::from_millis(1), false);
+        assert!(!f.check(Instant::now()), "not stopped while drawing untested");
+        f.tests_begin(Instant::now());
+        assert!(
+            (0..10 * CHECK_EVERY).all(|_| f.test()),
+            "the tests begin with a clean balance"
+        );
+        assert!(f.paid(Instant::now()));
+        // Without it, the same frame stops at its first check.
+        let mut f = p.begin(Instant::now() - Duration::from_millis(50));
+        f.rasterized(1_000, Duration::from_millis(1), false);
+        assert!(f.check(Instant::now()));
     }
 
     /// A frame that spent a direct frame's time, with a tenth of its work done, is given up:

@@ -443,6 +443,7 @@ impl<'a> Walk<'a> {
     /// not drawn, only noted for the recheck to measure the list's precision again: the
     /// tested traversal draws what is visible.
     pub fn draw_visible_list(&mut self, mut list: Vec<VisEntry>, skip: bool) {
+        self.payoff.untested_first();
         let (w, h) = (self.frame.width(), self.frame.height());
         if self.options.area_sort && !skip {
             let mut keyed: Vec<(u64, VisEntry)> = list
@@ -563,6 +564,7 @@ impl<'a> Walk<'a> {
 
     /// The tested front-to-back traversal of the whole scene (§3.2).
     pub fn traverse(&mut self) {
+        self.payoff.tests_begin(Instant::now());
         self.run();
         self.flush();
     }
