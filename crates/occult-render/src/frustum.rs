@@ -6,8 +6,10 @@
 //! the crate's scene walk ([`crate::walk`]): at each node instance it forms the frustum in that
 //! node's space (planes of `clip_from_object`), descends the node's hierarchy
 //! ([`crate::walk::cull_bvh`]), skips subtrees outside, stops testing inside subtrees wholly
-//! inside, and hands the surviving triangles to the rasterizer as
-//! index lists (whole meshes when entirely inside, so their vertices are shared).
+//! inside, and hands the surviving triangles to the rasterizer: whole meshes when entirely
+//! inside or mostly kept, else the kept leaves and subtrees as their clusters (each leaf's
+//! triangles cut into clusters of at most 256 vertices at build, [`crate::runs`], so that
+//! their vertices are projected once, as a whole mesh's are; `clusters=off`: index lists).
 //!
 //! Cost: O(visited nodes + triangles in the frustum). It removes nothing that is in the frustum
 //! but hidden; that is the occlusion culling renderers' job.
@@ -21,6 +23,7 @@ use occult_spatial::Bvh;
 
 use crate::hzb::boxtest::Occlusion;
 use crate::nodes::{instance_boxes, per_node, triangle_boxes};
+use crate::runs::RunClusters;
 use crate::walk::{cull_bvh, Counts, NodeAt, SceneWalk, Visitor};
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Phase, RenderError, RenderOptions, Renderer, Result};
 
@@ -34,6 +37,10 @@ pub struct FrustumOptions {
     /// Draws handed to the rasterizer at a time (≥ 1): bounds a frame's memory where many
     /// instances lie in the view (each batch past the first walks the hierarchy again).
     pub batch_draws: usize,
+    /// A mesh's leaves kept as clusters of few vertices ([`occult_raster::Meshlets`], about 24
+    /// bytes a triangle), drawn as cluster draws, each vertex projected once; off: index
+    /// lists, three corners projected a triangle.
+    pub clusters: bool,
 }
 
 impl Default for FrustumOptions {
@@ -42,6 +49,7 @@ impl Default for FrustumOptions {
             mesh_leaf_size: 256,
             group_leaf_size: 4,
             batch_draws: 1 << 20,
+            clusters: true,
         }
     }
 }
@@ -84,6 +92,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             default: "1048576",
             help: "draws handed to the rasterizer at a time (>= 1; about 100 bytes each): a frame with more walks the hierarchy again per batch",
         },
+        ParamDoc {
+            key: "clusters",
+            default: "on",
+            help: "a mesh's BVH leaves drawn as clusters of few vertices, each vertex projected once (about 24 bytes a triangle); off: index lists",
+        },
     ],
     counters: &[],
     conservative: true,
@@ -94,6 +107,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             mesh_leaf_size: "leaf",
             group_leaf_size: "group_leaf",
             batch_draws: "batch",
+            clusters: flag "clusters",
         });
         Ok(Box::new(FrustumCulling::with_options(scene, options, &fo)?))
     },
@@ -112,6 +126,8 @@ pub struct Hierarchies {
     scene: Arc<Scene>,
     /// Per node: its hierarchy (None when small enough to test as one box).
     hierarchies: Vec<Option<Bvh>>,
+    /// Per mesh with a hierarchy: its leaves' triangles as clusters, a run per leaf.
+    clusters: Vec<Option<RunClusters>>,
     /// [`FrustumOptions::batch_draws`].
     batch_draws: usize,
 }
@@ -137,7 +153,7 @@ impl Hierarchies {
     /// [`RenderError::BadParameter`] for a zero leaf size or batch.
     pub fn build(scene: Arc<Scene>, raster: &Rasterizer, fo: &FrustumOptions) -> Result<Self> {
         fo.validate()?;
-        let hierarchies = per_node(raster, &scene, |node| match node.kind() {
+        let hierarchies: Vec<Option<Bvh>> = per_node(raster, &scene, |node| match node.kind() {
             NodeKind::Mesh(m) if m.triangle_count() > fo.mesh_leaf_size => {
                 Some(Bvh::build(&triangle_boxes(m), fo.mesh_leaf_size))
             }
@@ -146,9 +162,19 @@ impl Hierarchies {
             }
             _ => None,
         });
+        let clusters = scene
+            .nodes()
+            .iter()
+            .zip(&hierarchies)
+            .map(|(node, h)| match (node.kind(), h.as_ref()) {
+                (NodeKind::Mesh(m), Some(bvh)) if fo.clusters => leaf_clusters(m, bvh).map(Some),
+                _ => Ok(None),
+            })
+            .collect::<Result<Vec<_>>>()?;
         Ok(Self {
             scene,
             hierarchies,
+            clusters,
             batch_draws: fo.batch_draws,
         })
     }
@@ -156,7 +182,7 @@ impl Hierarchies {
     /// The triangles a frame of `view` submits, found by one walk of the hierarchies that
     /// draws nothing: the work [`crate::direct`] measures frames by.
     pub fn triangles_in_view(&self, view: &View) -> u64 {
-        let mut w = Walk::new(&self.scene, &self.hierarchies, view, 0, 0);
+        let mut w = Walk::new(self, view, 0, 0);
         w.run();
         w.walk.triangles_met()
     }
@@ -170,7 +196,7 @@ impl Hierarchies {
     pub fn render(&self, raster: &mut Rasterizer, view: &View, frame: &mut Frame) -> Result<FrameStats> {
         let (start, t, cleared) = crate::begin_frame(raster, view, frame)?;
         // The first walk meets every draw (keeping the first batch) and gives the statistics.
-        let mut first = Walk::new(&self.scene, &self.hierarchies, view, 0, self.batch_draws);
+        let mut first = Walk::new(self, view, 0, self.batch_draws);
         first.walk.stats = cleared;
         first.run();
         let Walk {
@@ -194,7 +220,7 @@ impl Hierarchies {
                 break;
             }
             let t = Instant::now();
-            let mut next = Walk::new(&self.scene, &self.hierarchies, view, done, self.batch_draws);
+            let mut next = Walk::new(self, view, done, self.batch_draws);
             next.run();
             stats.phases.add(Phase::Cull, t.elapsed());
             (draws, more) = (next.draws, next.more);
@@ -206,9 +232,15 @@ impl Hierarchies {
         Ok(stats)
     }
 
-    /// Bytes held by the hierarchies.
+    /// Bytes held by the hierarchies and their clusters.
     pub fn memory_bytes(&self) -> usize {
-        self.hierarchies.iter().flatten().map(Bvh::memory_bytes).sum()
+        self.hierarchies.iter().flatten().map(Bvh::memory_bytes).sum::<usize>()
+            + self
+                .clusters
+                .iter()
+                .flatten()
+                .map(RunClusters::memory_bytes)
+                .sum::<usize>()
     }
 
     /// The triangles in the view of `frame` (drawn whole, its depth final) whose boxes are
@@ -229,6 +261,15 @@ impl Hierarchies {
         w.run();
         w.hidden
     }
+}
+
+/// The triangles of the leaves of `bvh`, a hierarchy of `mesh`, as clusters, a run per leaf
+/// (leaves in the order of their entries, so that a subtree's entries are consecutive runs).
+fn leaf_clusters(mesh: &occult_core::Mesh, bvh: &Bvh) -> Result<RunClusters> {
+    let mut starts: Vec<u32> = bvh.nodes().iter().filter(|n| n.is_leaf()).map(|n| n.first).collect();
+    starts.sort_unstable();
+    starts.push(bvh.primitive_indices().len() as u32);
+    RunClusters::build(mesh, bvh.primitive_indices(), starts)
 }
 
 /// The walk of [`Hierarchies::hidden_triangles`]: the frustum walk, each box also tested
@@ -304,6 +345,7 @@ impl<'a> Visitor<'a> for Hidden<'a> {
 struct Walk<'a> {
     walk: SceneWalk<'a>,
     hierarchies: &'a [Option<Bvh>],
+    clusters: &'a [Option<RunClusters>],
     /// Draws of this walk's batch: those after the first `skip` in traversal order, at most
     /// `cap` of them.
     draws: Vec<Draw<'a>>,
@@ -313,16 +355,18 @@ struct Walk<'a> {
     met: usize,
     /// Draws met beyond the batch.
     more: bool,
-    /// Index lists of the leaves kept in the mesh being walked.
-    leaves: Vec<&'a [u32]>,
+    /// Entries (of the hierarchy's primitive indices) of the leaves and subtrees kept in the
+    /// mesh being walked.
+    leaves: Vec<std::ops::Range<usize>>,
 }
 
 impl<'a> Walk<'a> {
     /// A walk that keeps the draws after the first `skip`, at most `cap` of them.
-    fn new(scene: &'a Scene, hierarchies: &'a [Option<Bvh>], view: &'a View, skip: usize, cap: usize) -> Self {
+    fn new(h: &'a Hierarchies, view: &'a View, skip: usize, cap: usize) -> Self {
         Self {
-            walk: SceneWalk::new(scene, view),
-            hierarchies,
+            walk: SceneWalk::new(&h.scene, view),
+            hierarchies: &h.hierarchies,
+            clusters: &h.clusters,
             draws: Vec::new(),
             skip,
             cap,
@@ -383,27 +427,33 @@ impl<'a> Visitor<'a> for Walk<'a> {
                 let mut kept = 0usize;
                 cull_bvh(self, bvh, &at.frustum, |_, _, bn, inside| {
                     if inside || bn.is_leaf() {
-                        let list = &bvh.primitive_indices()[bn.range()];
-                        kept += list.len();
-                        leaves.push(list);
+                        kept += bn.range().len();
+                        leaves.push(bn.range());
                         return false;
                     }
                     true
                 });
-                // Index lists transform each corner once per triangle; a whole mesh shares its
-                // vertices. When most of the mesh survived, drawing it whole is cheaper (the
-                // rasterizer's outcode test drops the rest at a few ns each).
+                // The kept leaves and subtrees draw as their clusters, whose vertices are
+                // projected once each, about as a whole mesh's are. When most of the mesh
+                // survived, drawing it whole is cheaper still (the rasterizer's outcode test
+                // drops the rest at a few ns each).
+                let clusters: &'a [Option<RunClusters>] = self.clusters;
+                let clusters = clusters[at.place.id.index()].as_ref();
                 if kept * 2 > mesh.triangle_count() {
                     self.draw(whole, mesh.triangle_count());
                 } else {
-                    for &list in &leaves {
-                        let triangles = DrawTriangles::List(list);
+                    for range in leaves.drain(..) {
+                        let n = range.len();
+                        let triangles = match clusters.and_then(|c| c.entries(range.clone())) {
+                            Some((meshlets, list)) => DrawTriangles::Clusters { meshlets, list },
+                            None => DrawTriangles::List(&bvh.primitive_indices()[range]),
+                        };
                         self.draw(
                             Draw {
                                 triangles,
                                 ..whole.clone()
                             },
-                            list.len(),
+                            n,
                         );
                     }
                 }

@@ -86,6 +86,7 @@ mod nodes;
 pub mod oqgrid;
 pub mod params;
 pub mod payoff;
+mod runs;
 pub mod rzb;
 mod stats;
 pub mod walk;

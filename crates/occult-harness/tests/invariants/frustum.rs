@@ -29,6 +29,18 @@ fn frustum_with_other_leaf_sizes_is_identical() {
     assert_identical_on_path(&spec, "city:blocks=3,detail=2", "street:10", 160, 90);
 }
 
+/// Leaves drawn as index lists (`clusters=off`) and as clusters (the default) draw the same
+/// frames; the clusters' memory is counted.
+#[test]
+fn frustum_with_index_lists_is_identical() {
+    let spec = AlgoSpec::parse("frustum:clusters=off").unwrap();
+    assert_variant_identical_on_every_generator(&spec, 0);
+    let scene = Arc::new(build_scene("terrain:g=64").scene);
+    let lists = spec.build(scene.clone(), &RenderOptions::default()).unwrap();
+    let clusters = renderer("frustum", &scene);
+    assert!(clusters.memory_bytes() > lists.memory_bytes());
+}
+
 #[test]
 fn default_views_and_paths_are_identical() {
     for spec in ["city:blocks=3,detail=2", "terrain:g=64"] {

@@ -143,7 +143,6 @@
 //! plants); on open terrain almost everything is visible and the tests are pure overhead.
 
 pub(crate) mod boxtest;
-mod meshlets;
 mod walk;
 
 use std::sync::Arc;
@@ -156,6 +155,7 @@ use occult_spatial::{HybridOctree, HybridOctreeConfig};
 use crate::direct::DirectFrames;
 use crate::nodes::{instance_boxes, per_node, triangle_boxes};
 use crate::payoff::Payoff;
+use crate::runs::RunClusters;
 use crate::{
     check_frame, AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result,
 };
@@ -544,8 +544,8 @@ struct PerNode {
     /// Per DAG node with an octree: triangle instances below each of its nodes (what a test
     /// that culls the node saves, [`crate::payoff`]).
     subtree_items: Vec<Vec<u64>>,
-    /// Per mesh with an octree: its nodes' unshared triangles as clusters.
-    meshlets: Vec<Option<meshlets::NodeMeshlets>>,
+    /// Per mesh with an octree: its nodes' unshared triangles as clusters, a run per node.
+    meshlets: Vec<Option<RunClusters>>,
 }
 
 /// The hzb renderer.
@@ -632,7 +632,7 @@ impl Hzb {
             .iter()
             .zip(&octrees)
             .map(|(node, o)| match (node.kind(), o) {
-                (NodeKind::Mesh(m), Some(o)) => meshlets::NodeMeshlets::build(m, o).map(Some),
+                (NodeKind::Mesh(m), Some(o)) => node_clusters(m, o).map(Some),
                 _ => Ok(None),
             })
             .collect::<Result<Vec<_>>>()?;
@@ -694,6 +694,19 @@ impl Hzb {
             frames_since_recheck: 0,
         })
     }
+}
+
+/// The unshared own triangles of every node of the octree of `mesh` as clusters, a run per
+/// node (the shared ones are drawn once a frame by their stamps, as an index list).
+fn node_clusters(mesh: &occult_core::Mesh, octree: &HybridOctree) -> Result<RunClusters> {
+    let mut triangles = Vec::with_capacity(octree.primitive_count());
+    let mut starts = Vec::with_capacity(octree.nodes().len() + 1);
+    starts.push(0);
+    for n in 0..octree.nodes().len() as u32 {
+        triangles.extend(octree.node_primitives(n).iter().filter(|&&p| !octree.is_shared(p)));
+        starts.push(triangles.len() as u32);
+    }
+    RunClusters::build(mesh, &triangles, starts)
 }
 
 /// Triangle instances below each node of `octree`, the octree of DAG node `id`: its own
@@ -945,7 +958,7 @@ impl Renderer for Hzb {
                 .meshlets
                 .iter()
                 .flatten()
-                .map(meshlets::NodeMeshlets::memory_bytes)
+                .map(RunClusters::memory_bytes)
                 .sum::<usize>()
             + self.workers.iter().map(Worker::memory_bytes).sum::<usize>()
             + self.direct.as_ref().map_or(0, DirectFrames::memory_bytes)

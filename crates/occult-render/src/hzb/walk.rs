@@ -11,10 +11,10 @@ use occult_raster::{
 use occult_spatial::{octree::hybrid::NO_CHILD, HybridOctree};
 
 use super::boxtest::{screen_rect, Occlusion};
-use super::meshlets::NodeMeshlets;
 use super::{ChildOrder, Distribution, HzbOptions, PerNode, VisEntry};
 use crate::hash::{FxBuild, FxHasher};
 use crate::payoff::{FramePayoff, Payoff, DIRECT_BATCH};
+use crate::runs::RunClusters;
 use crate::walk::{NodeAt, NodeTest, Placed, SceneWalk, Visitor};
 use crate::{FrameStats, Phase};
 
@@ -50,7 +50,7 @@ pub(super) struct Stamps {
 /// The shared own primitives of every node of a mesh octree, node by node, with their stamp
 /// bits, read in order when a node is drawn (the per-primitive lookup of a bit in a table over
 /// the whole mesh missed the cache). The unshared ones are drawn as clusters
-/// ([`NodeMeshlets`]).
+/// ([`RunClusters`]).
 struct Split {
     /// Per octree node: where its shared run starts and ends.
     ranges: Vec<[u32; 2]>,
@@ -321,7 +321,7 @@ pub(super) struct Walk<'a> {
     /// Per DAG node with an octree: triangle instances below each octree node.
     subtree_items: &'a [Vec<u64>],
     /// Per mesh with an octree: its nodes' unshared triangles as clusters.
-    meshlets: &'a [Option<NodeMeshlets>],
+    meshlets: &'a [Option<RunClusters>],
     /// Whether the tests still pay this frame, and what the renderer learns from it.
     payoff: FramePayoff,
     payoff_state: &'a mut Payoff,
@@ -1018,9 +1018,9 @@ impl<'a> Walk<'a> {
                 let start = self.scratch.len() as u32;
                 if self.share == Share::ALL {
                     // The unshared triangles as clusters, the shared ones not drawn yet as a list.
-                    let meshlets: &'a [Option<NodeMeshlets>] = self.meshlets;
+                    let meshlets: &'a [Option<RunClusters>] = self.meshlets;
                     if let Some(m) = &meshlets[id.index()] {
-                        let (meshlets, list) = m.node(n);
+                        let (meshlets, list) = m.runs(n as usize..n as usize + 1);
                         if !list.is_empty() {
                             self.push(mesh, Triangles::Clusters(meshlets, list), clip, first_item, own_box);
                         }
