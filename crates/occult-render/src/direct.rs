@@ -227,7 +227,7 @@ impl DirectFrames {
         let submitted = stats.triangles_submitted;
         let raster_ns = stats.phases.get(Phase::Raster).as_nanos() as f64 / submitted.max(1) as f64;
         let first = self.choice.model().is_none();
-        let slower = self.choice.first_lost(total, raster_ns, self.threads);
+        let slower = submitted > 0 && self.choice.first_lost(total, raster_ns, self.threads);
         let plainly = !slower && Self::plainly(tests_paid, total, submitted, raster_ns, work);
         // Culling pays only if drawing the hidden triangles costs more than what culling cost
         // this frame beyond drawing what it submitted (both at this frame's rate: a direct

@@ -8,7 +8,7 @@
 //! ([`crate::walk::cull_bvh`]), skips subtrees outside, stops testing inside subtrees wholly
 //! inside, and hands the surviving triangles to the rasterizer: whole meshes when entirely
 //! inside or mostly kept, else the kept leaves and subtrees as their clusters (each leaf's
-//! triangles cut into clusters of at most 256 vertices at build, [`crate::runs`], so that
+//! triangles cut into clusters of at most 256 vertices at build, `crate::runs`, so that
 //! their vertices are projected once, as a whole mesh's are; `clusters=off`: index lists).
 //!
 //! Cost: O(visited nodes + triangles in the frustum). It removes nothing that is in the frustum
@@ -263,6 +263,11 @@ impl Hierarchies {
     }
 }
 
+/// Most clusters in one draw of a kept subtree: the rasterizer finds where a range of a draw's
+/// triangles begins by a walk of its clusters, once per range of a shared draw (2,048 triangles),
+/// so one draw of a large subtree's clusters would cost the square of its size.
+const DRAW_CLUSTERS: usize = 64;
+
 /// The triangles of the leaves of `bvh`, a hierarchy of `mesh`, as clusters, a run per leaf
 /// (leaves in the order of their entries, so that a subtree's entries are consecutive runs).
 fn leaf_clusters(mesh: &occult_core::Mesh, bvh: &Bvh) -> Result<RunClusters> {
@@ -376,6 +381,13 @@ impl<'a> Walk<'a> {
         }
     }
 
+    /// Meets `triangles` triangles in a walk that keeps no draws (`cap` 0: counting only).
+    fn draw_none(&mut self, triangles: usize) {
+        self.walk.meet_triangles(triangles as u64);
+        self.met += 1;
+        self.more |= self.met > self.skip;
+    }
+
     /// Meets a draw of `triangles` triangles, in traversal order.
     fn draw(&mut self, draw: Draw<'a>, triangles: usize) {
         self.walk.meet_triangles(triangles as u64);
@@ -443,18 +455,35 @@ impl<'a> Visitor<'a> for Walk<'a> {
                     self.draw(whole, mesh.triangle_count());
                 } else {
                     for range in leaves.drain(..) {
-                        let n = range.len();
-                        let triangles = match clusters.and_then(|c| c.entries(range.clone())) {
-                            Some((meshlets, list)) => DrawTriangles::Clusters { meshlets, list },
-                            None => DrawTriangles::List(&bvh.primitive_indices()[range]),
-                        };
-                        self.draw(
-                            Draw {
-                                triangles,
-                                ..whole.clone()
-                            },
-                            n,
-                        );
+                        if self.cap == 0 {
+                            self.draw_none(range.len()); // counting only
+                            continue;
+                        }
+                        match clusters.and_then(|c| c.entries(range.clone())) {
+                            // A subtree's clusters in draws of at most `DRAW_CLUSTERS` (the
+                            // rasterizer finds a range's first triangle by a walk of its draw's
+                            // clusters).
+                            Some((meshlets, list)) => {
+                                for list in list.chunks(DRAW_CLUSTERS) {
+                                    let draw = Draw {
+                                        triangles: DrawTriangles::Clusters { meshlets, list },
+                                        ..whole.clone()
+                                    };
+                                    self.draw(draw, meshlets.list_len(list));
+                                }
+                            }
+                            None => {
+                                let n = range.len();
+                                let triangles = DrawTriangles::List(&bvh.primitive_indices()[range]);
+                                self.draw(
+                                    Draw {
+                                        triangles,
+                                        ..whole.clone()
+                                    },
+                                    n,
+                                );
+                            }
+                        }
                     }
                 }
                 self.leaves = leaves;

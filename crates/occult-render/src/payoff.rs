@@ -179,7 +179,7 @@ impl Payoff {
             stopped: false,
             since_check: 0,
             untested: 0,
-            base: (Duration::ZERO, Duration::ZERO, 0),
+            base: (Duration::ZERO, Duration::ZERO, 0, 0),
             untested_first: false,
         }
     }
@@ -232,8 +232,9 @@ pub struct FramePayoff {
     since_check: u32,
     untested: u64,
     /// What the frame had spent, drawn and removed when its tested part began
-    /// ([`FramePayoff::tests_begin`]): time, rasterization time, triangles drawn or removed.
-    base: (Duration, Duration, u64),
+    /// ([`FramePayoff::tests_begin`]): time, rasterization time, triangles drawn or removed,
+    /// triangles removed.
+    base: (Duration, Duration, u64, u64),
     /// The frame draws untested first ([`FramePayoff::untested_first`]): until its tests
     /// begin, only the abandonment rule may stop it.
     untested_first: bool,
@@ -257,6 +258,7 @@ impl FramePayoff {
             now.saturating_duration_since(self.start),
             self.raster_time,
             self.raster_triangles + self.saved_triangles,
+            self.saved_triangles,
         );
         self.untested_first = false;
     }
@@ -440,15 +442,16 @@ impl FramePayoff {
 
     /// Time spent outside rasterization since the tests began.
     fn cost_ns(&self, now: Instant) -> f64 {
-        let (spent, raster, _) = self.base;
+        let (spent, raster, ..) = self.base;
         now.saturating_duration_since(self.start)
             .saturating_sub(spent)
             .saturating_sub(self.raster_time.saturating_sub(raster))
             .as_nanos() as f64
     }
 
+    /// What the tests removed since they began, at this frame's cost of a triangle.
     fn gain_ns(&self) -> f64 {
-        self.saved_triangles as f64 * self.ns_per_triangle()
+        (self.saved_triangles - self.base.3) as f64 * self.ns_per_triangle()
     }
 }
 
@@ -515,8 +518,12 @@ mod tests {
         let mut f = p.begin(Instant::now() - Duration::from_millis(50));
         f.untested_first();
         f.rasterized(1_000, Duration::from_millis(1), false);
+        f.saved(500); // a retest among the untested draws
         assert!(!f.check(Instant::now()), "not stopped while drawing untested");
         f.tests_begin(Instant::now());
+        assert_eq!(f.gain_ns(), 0.0, "what was removed before is no gain of the tests");
+        f.saved(10);
+        assert_eq!(f.gain_ns(), 10.0 * f.ns_per_triangle());
         assert!(
             (0..10 * CHECK_EVERY).all(|_| f.test()),
             "the tests begin with a clean balance"

@@ -1019,11 +1019,16 @@ impl<'a> Walk<'a> {
                 if self.share == Share::ALL {
                     // The unshared triangles as clusters, the shared ones not drawn yet as a list.
                     let meshlets: &'a [Option<RunClusters>] = self.meshlets;
-                    if let Some(m) = &meshlets[id.index()] {
-                        let (meshlets, list) = m.runs(n as usize..n as usize + 1);
-                        if !list.is_empty() {
-                            self.push(mesh, Triangles::Clusters(meshlets, list), clip, first_item, own_box);
+                    match &meshlets[id.index()] {
+                        Some(m) => {
+                            let (meshlets, list) = m.runs(n as usize..n as usize + 1);
+                            if !list.is_empty() {
+                                self.push(mesh, Triangles::Clusters(meshlets, list), clip, first_item, own_box);
+                            }
                         }
+                        // Every mesh octree has its clusters (built with it); were one missing,
+                        // its unshared triangles would go as a list.
+                        None => self.scratch.extend(own.iter().filter(|&&p| !octree.is_shared(p))),
                     }
                     self.stamps.gather_shared(id, n, first_item, &mut self.scratch);
                     let end = self.scratch.len() as u32;
