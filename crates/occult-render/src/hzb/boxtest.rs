@@ -11,6 +11,9 @@ use occult_raster::{Frame, PixelRect, PyramidCounts, PyramidTest, ZPyramid};
 const SNAP_MARGIN: f64 = 1.0 / 64.0;
 /// Relative depth margin for the rasterizer's rounding.
 const DEPTH_MARGIN: f32 = 1e-5;
+/// Boxes at most this wide and tall on screen, pixels, are tested whole (Greene), not face by
+/// face (Georges §3.2).
+const WHOLE_BOX_PIXELS: f64 = 16.0;
 
 /// The 8 clip-space corners of `b` (corner `i` takes `max` on axis `a` when bit `a` is set), or
 /// None when one is not finite or reaches the near plane: such a box may cover anything.
@@ -145,7 +148,9 @@ impl<'a> Occlusion<'a> {
 
     /// §3.2: true when the box `b` (object space, placed by `clip_from_object`, the eye at `eye`
     /// in object space) is hidden behind what is drawn: every front face of the box is hidden
-    /// over its screen box, compared at the face's nearest corner. An empty box is hidden; a box
+    /// over its screen box, compared at the face's nearest corner; a box at most
+    /// `WHOLE_BOX_PIXELS` wide and tall on screen is tested whole instead, as
+    /// [`Occlusion::box_hidden_whole`] does. An empty box is hidden; a box
     /// holding the eye or reaching the near plane is not.
     pub fn box_hidden(&self, clip_from_object: &Mat4, b: &Aabb, eye: Vec3, counts: &mut PyramidCounts) -> bool {
         let c = match Self::testable(clip_from_object, b, eye) {
@@ -156,6 +161,24 @@ impl<'a> Occlusion<'a> {
         // Each corner projected once (screen position and depth), shared by the faces it is on.
         let xy = c.map(|v| screen_xy(v, w, h));
         let depth = c.map(|v| v.z / v.w);
+        // A box small on screen: Greene's whole-box test (one rectangle at the nearest depth of
+        // all corners) culls about as much as one test per face, for one pyramid test.
+        let (mut minx, mut maxx, mut miny, mut maxy) =
+            (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+        for &(x, y) in &xy {
+            minx = minx.min(x);
+            maxx = maxx.max(x);
+            miny = miny.min(y);
+            maxy = maxy.max(y);
+        }
+        if maxx - minx <= WHOLE_BOX_PIXELS && maxy - miny <= WHOLE_BOX_PIXELS {
+            let nearest = depth.iter().copied().fold(0.0f32, f32::max) * (1.0 + DEPTH_MARGIN);
+            if nearest < self.far_depth * (1.0 - DEPTH_MARGIN) {
+                return true; // beyond the far plane: draws nothing
+            }
+            let r = rect_of_span(minx, maxx, miny, maxy, w, h);
+            return self.pyramid.occludes(self.frame, r, nearest, self.how, counts);
+        }
         // Front faces: the eye is strictly outside the face's plane. Their projections cover the
         // box's silhouette, and every point of the box lies behind a point of one of them.
         for axis in 0..3 {
