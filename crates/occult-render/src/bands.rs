@@ -91,9 +91,95 @@ pub struct Bands {
     /// The frames' cancellation and progress, shared by the bands' rasterizers.
     control: occult_raster::FrameControl,
     parts: Vec<Part>,
+    columns: ColumnShare,
+}
+
+/// How the columns of a frame are shared between bands, frame after frame: evenly at first,
+/// then after each frame so that each band's columns per millisecond would take them all the
+/// same time, moving half way there (one noisy frame moves them little); no band gets fewer
+/// than [`MIN_BAND_COLUMNS`] columns.
+#[derive(Debug, Default)]
+pub(crate) struct ColumnShare {
     /// Columns of each band in the last frame (empty before the first, or after a change of
-    /// width).
+    /// width or of the bands' count).
     columns: Vec<u32>,
+}
+
+impl ColumnShare {
+    /// The columns of each of `n` bands (at most one a column) for a frame `width` pixels
+    /// wide: last frame's, or shared evenly.
+    pub(crate) fn ranges(&mut self, width: u32, n: usize) -> Vec<std::ops::Range<u32>> {
+        let n = n.min(width as usize).max(1);
+        if self.columns.len() != n || self.columns.iter().sum::<u32>() != width {
+            self.columns = (0..n as u32)
+                .map(|k| (k + 1) * width / n as u32 - k * width / n as u32)
+                .collect();
+        }
+        let mut first = 0;
+        self.columns
+            .iter()
+            .map(|&r| {
+                first += r;
+                first - r..first
+            })
+            .collect()
+    }
+
+    /// Shares the columns again from the time each band took last frame (in the bands' order).
+    pub(crate) fn balance(&mut self, times: &[Duration]) {
+        let width: u32 = self.columns.iter().sum();
+        let n = self.columns.len() as u32;
+        let floor = MIN_BAND_COLUMNS.min(width / n.max(1)).max(1);
+        let speed: Vec<f64> = self
+            .columns
+            .iter()
+            .zip(times)
+            .map(|(&r, t)| r as f64 / (t.as_nanos() as f64).max(1e3))
+            .collect();
+        let total: f64 = speed.iter().sum();
+        let wanted: Vec<f64> = self
+            .columns
+            .iter()
+            .zip(&speed)
+            .map(|(&r, s)| (0.5 * r as f64 + 0.5 * width as f64 * s / total).max(floor as f64))
+            .collect();
+        // Rounded, the rest given to the bands in order so the columns add up to the width.
+        let scale = (width - floor * n) as f64 / wanted.iter().map(|w| w - floor as f64).sum::<f64>().max(1e-9);
+        let mut columns: Vec<u32> = wanted
+            .iter()
+            .map(|w| floor + ((w - floor as f64) * scale).floor() as u32)
+            .collect();
+        let left = width.saturating_sub(columns.iter().sum::<u32>());
+        for k in 0..left as usize {
+            columns[k % n as usize] += 1;
+        }
+        self.columns = columns;
+    }
+}
+
+/// Copies the columns `c` of each `(source, c)` into `frame` (all of one size), the rows shared
+/// over as many threads as there are sources.
+pub(crate) fn assemble(frame: &mut Frame, sources: &[(&Frame, std::ops::Range<usize>)]) {
+    let (w, height) = (frame.width() as usize, frame.height() as usize);
+    let (depth, items) = frame.buffers_mut();
+    let rows_each = height.div_ceil(sources.len().max(1)).max(1) * w;
+    let chunks = depth
+        .chunks_mut(rows_each)
+        .zip(items.chunks_mut(rows_each))
+        .enumerate()
+        .collect();
+    on_threads(
+        chunks,
+        |(k, (d, i)): (usize, (&mut [f32], &mut [occult_core::ItemId]))| {
+            for (row, (d, i)) in d.chunks_mut(w).zip(i.chunks_mut(w)).enumerate() {
+                let at = (k * rows_each / w + row) * w;
+                for (own, c) in sources {
+                    d[c.clone()].copy_from_slice(&own.depth()[at + c.start..at + c.end]);
+                    i[c.clone()].copy_from_slice(&own.items()[at + c.start..at + c.end]);
+                }
+            }
+        },
+    );
 }
 
 /// One band's renderer and frame.
@@ -128,58 +214,8 @@ impl Bands {
             name: spec.algorithm.name(),
             control: options.raster.control.clone(),
             parts,
-            columns: Vec::new(),
+            columns: ColumnShare::default(),
         })
-    }
-
-    /// The columns of each band for a frame `width` pixels wide: last frame's, or shared evenly.
-    fn band_columns(&mut self, width: u32) -> Vec<std::ops::Range<u32>> {
-        let n = self.parts.len().min(width as usize).max(1);
-        if self.columns.len() != n || self.columns.iter().sum::<u32>() != width {
-            self.columns = (0..n as u32)
-                .map(|k| (k + 1) * width / n as u32 - k * width / n as u32)
-                .collect();
-        }
-        let mut first = 0;
-        self.columns
-            .iter()
-            .map(|&r| {
-                first += r;
-                first - r..first
-            })
-            .collect()
-    }
-
-    /// Shares the columns again from the bands' times: each band's columns per nanosecond say
-    /// what columns would take them all the same time; every band moves half way there.
-    fn balance(&mut self, times: &[Duration]) {
-        let width: u32 = self.columns.iter().sum();
-        let n = self.columns.len() as u32;
-        let floor = MIN_BAND_COLUMNS.min(width / n.max(1)).max(1);
-        let speed: Vec<f64> = self
-            .columns
-            .iter()
-            .zip(times)
-            .map(|(&r, t)| r as f64 / (t.as_nanos() as f64).max(1e3))
-            .collect();
-        let total: f64 = speed.iter().sum();
-        let wanted: Vec<f64> = self
-            .columns
-            .iter()
-            .zip(&speed)
-            .map(|(&r, s)| (0.5 * r as f64 + 0.5 * width as f64 * s / total).max(floor as f64))
-            .collect();
-        // Rounded, the rest given to the bands in order so the columns add up to the width.
-        let scale = (width - floor * n) as f64 / wanted.iter().map(|w| w - floor as f64).sum::<f64>().max(1e-9);
-        let mut columns: Vec<u32> = wanted
-            .iter()
-            .map(|w| floor + ((w - floor as f64) * scale).floor() as u32)
-            .collect();
-        let left = width.saturating_sub(columns.iter().sum::<u32>());
-        for k in 0..left as usize {
-            columns[k % n as usize] += 1;
-        }
-        self.columns = columns;
     }
 }
 
@@ -191,7 +227,7 @@ impl Renderer for Bands {
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
         crate::check_frame(view, frame)?;
         let start = Instant::now();
-        let bands = self.band_columns(view.width());
+        let bands = self.columns.ranges(view.width(), self.parts.len());
         let (width, height) = (view.width(), view.height());
         let draw = |part: &mut Part, columns: std::ops::Range<u32>| {
             let t = Instant::now();
@@ -215,34 +251,15 @@ impl Renderer for Bands {
         if self.control.is_cancelled() {
             return Err(RenderError::Cancelled);
         }
-        // Each band's columns into the frame asked for, the rows shared over the threads.
+        // Each band's columns into the frame asked for.
         let t = Instant::now();
-        let w = width as usize;
         let sources: Vec<(&Frame, std::ops::Range<usize>)> = self
             .parts
             .iter()
             .zip(&bands)
             .filter_map(|(p, c)| Some((p.frame.as_ref()?, c.start as usize..c.end as usize)))
             .collect();
-        let (depth, items) = frame.buffers_mut();
-        let rows_each = (height as usize).div_ceil(bands.len()).max(1) * w;
-        let chunks = depth
-            .chunks_mut(rows_each)
-            .zip(items.chunks_mut(rows_each))
-            .enumerate()
-            .collect();
-        on_threads(
-            chunks,
-            |(k, (d, i)): (usize, (&mut [f32], &mut [occult_core::ItemId]))| {
-                for (row, (d, i)) in d.chunks_mut(w).zip(i.chunks_mut(w)).enumerate() {
-                    let at = (k * rows_each / w + row) * w;
-                    for (own, c) in &sources {
-                        d[c.clone()].copy_from_slice(&own.depth()[at + c.start..at + c.end]);
-                        i[c.clone()].copy_from_slice(&own.items()[at + c.start..at + c.end]);
-                    }
-                }
-            },
-        );
+        assemble(frame, &sources);
         let assembled = t.elapsed();
         let mut stats = FrameStats::default();
         let mut times = Vec::with_capacity(results.len());
@@ -262,7 +279,7 @@ impl Renderer for Bands {
         let idle: Duration = times.iter().map(|&t| slowest - t).sum();
         stats.counters.add(IDLE, idle.as_micros() as u64);
         stats.phases.add(Phase::Other, assembled);
-        self.balance(&times);
+        self.columns.balance(&times);
         stats.total = start.elapsed();
         Ok(stats)
     }
@@ -281,7 +298,7 @@ impl Renderer for Bands {
 
 /// `job` of every item, the first on the calling thread and each other on a thread of its
 /// own, in order; a panic of one is raised again here.
-fn on_threads<T: Send, R: Send>(items: Vec<T>, job: impl Fn(T) -> R + Sync) -> Vec<R> {
+pub(crate) fn on_threads<T: Send, R: Send>(items: Vec<T>, job: impl Fn(T) -> R + Sync) -> Vec<R> {
     let job = &job;
     std::thread::scope(|s| {
         let mut items = items.into_iter();

@@ -263,6 +263,18 @@ impl DirectFrames {
         payoff.set_direct(self.choice.model().map(|m| m.predict(work)), work, threads);
     }
 
+    /// What a direct frame of the coming culled frame's view is expected to take, ns, once one
+    /// was measured (the prediction [`DirectFrames::arm`] hands over).
+    pub fn expected_ns(&self) -> Option<f64> {
+        self.choice.model().map(|m| m.predict(self.choice.last_work))
+    }
+
+    /// The triangles a direct frame of `view` meets (a view of some columns: those a direct
+    /// frame draws there), counted by one walk.
+    pub fn work_in(&self, view: &View) -> u64 {
+        self.frustum.triangles_in_view(view)
+    }
+
     /// Bytes held (`frustum`'s hierarchies, the screening's pyramid).
     pub fn memory_bytes(&self) -> usize {
         self.frustum.memory_bytes() + self.pyramid.as_ref().map_or(0, ZPyramid::memory_bytes)

@@ -31,6 +31,8 @@ const CONFIGS: &[&str] = &[
     "hzb:parallel=structure,workers=3,small=0.25",
     "hzb:parallel=primitive,small=0.25",
     "hzb:parallel=hybrid,workers=4,small=0.25",
+    "hzb:parallel=columns",
+    "hzb:parallel=columns,workers=3,small=0.25,payoff=off,recheck=2",
     "hzb:small=0.25,temporal=off,refresh=0",
     "hzb:whole=0.01,recheck=2",
     "hzb:retest=off,leaf=64",
@@ -209,7 +211,7 @@ fn hzb_bad_parameters_are_errors() {
 fn hzb_distributions_report_worker_idle_time() {
     let built = build_scene("city:blocks=3,detail=2");
     let scene = Arc::new(built.scene);
-    for d in ["structure", "primitive", "hybrid"] {
+    for d in ["structure", "primitive", "hybrid", "columns"] {
         let s = spec(&format!("hzb:parallel={d},workers=3"));
         let mut h = s.build(scene.clone(), &RenderOptions::default()).unwrap();
         let view = View::new(built.default_camera, 96, 64).unwrap();
@@ -228,6 +230,7 @@ fn hzb_frame_size_changes_and_mismatches() {
     let scene = Arc::new(build_scene("occluder:objects=3").scene);
     let mut h = renderer("hzb", &scene);
     let mut z = renderer("zbuffer", &scene);
+    let mut c = renderer("hzb:parallel=columns,workers=3", &scene);
     let cam = Camera::look_at(Vec3::new(0.0, 3.0, 30.0), Vec3::ZERO);
     for (w, hh) in [(64, 48), (7, 3), (1, 1), (96, 64)] {
         let view = View::new(cam, w, hh).unwrap();
@@ -235,6 +238,9 @@ fn hzb_frame_size_changes_and_mismatches() {
         h.render(&view, &mut a).unwrap();
         z.render(&view, &mut b).unwrap();
         assert!(a.same_visibility(&b), "{w}x{hh}");
+        let mut d = Frame::new(w, hh).unwrap();
+        c.render(&view, &mut d).unwrap();
+        assert!(d.same_visibility(&b), "columns, {w}x{hh}");
     }
     let view = View::new(cam, 64, 48).unwrap();
     assert!(h.render(&view, &mut Frame::new(32, 32).unwrap()).is_err());

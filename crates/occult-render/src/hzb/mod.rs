@@ -62,6 +62,16 @@
 //!   time and its idle time (waiting for the slowest before the merge) are reported as the
 //!   counters `worker<k>_busy_us` / `worker<k>_idle_us`; the phases are the slowest worker's,
 //!   the merge is `other`.
+//! - **Sort-first by columns** (not in the paper), `parallel=columns`: each worker culls and
+//!   draws its own columns of the screen (the view restricted to them, its own depth of them,
+//!   pyramid, visible list and one rasterizer thread; the first worker draws into the frame
+//!   itself, the others into frames of their own whose columns are then copied in, no merge).
+//!   Unlike `bands=N`, which copies the whole renderer per band, the octrees are shared and the
+//!   frame-level choice of [`crate::direct`] is the renderer's: a direct frame is drawn whole,
+//!   on all threads; each worker's in-frame payoff weighs its columns against that frame. The
+//!   columns are shared again after each frame by the workers' times
+//!   ([`crate::bands::ColumnShare`]). The phases add the workers' thread times, the copy is
+//!   `other`; `visible_list_precision_pct` is their mean.
 //!
 //! - **Payoff** ([`crate::payoff`], `payoff`): a frame whose tests cost more than they save
 //!   stops testing and draws the rest directly: mesh instances wholly in view whole, in batches
@@ -185,6 +195,11 @@ pub enum Distribution {
     Primitive,
     /// The hybrid: structures kept whole, but fine (octree nodes), spread over the workers.
     Hybrid,
+    /// Sort-first by columns (not in the paper): each worker walks the whole scene for a view
+    /// restricted to its columns of the screen ([`View::with_region`]), culling against its
+    /// own depth of them; the columns are copied into the frame, no merge. The columns are
+    /// shared again after each frame by the workers' times ([`crate::bands::ColumnShare`]).
+    Columns,
 }
 
 /// Deepest octree `hzb` accepts, in levels with the root as level 1 (its documented `depth`
@@ -322,10 +337,15 @@ impl HzbOptions {
             return bad(format!("workers={workers}: workers must be in 1..={MAX_WORKERS}"));
         }
         Ok(Self {
-            distribution: match p.choice("parallel", &["off", "structure", "primitive", "hybrid"], "off")? {
+            distribution: match p.choice(
+                "parallel",
+                &["off", "structure", "primitive", "hybrid", "columns"],
+                "off",
+            )? {
                 "structure" => Distribution::Structure,
                 "primitive" => Distribution::Primitive,
                 "hybrid" => Distribution::Hybrid,
+                "columns" => Distribution::Columns,
                 _ => Distribution::Off,
             },
             workers,
@@ -374,7 +394,7 @@ pub const COUNTERS: [&str; 21] = [
     "whole_drawn",
     "visible_list_retested",
     "visible_list_skipped",
-    "visible_list_precision_pct",
+    PRECISION,
     "refreshes",
     "refreshes_paid",
     crate::payoff::COUNTERS[0],
@@ -489,7 +509,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc {
             key: "parallel",
             default: "off",
-            help: "distribution over workers with own depth buffers, merged by depth compositing: off, structure, primitive, hybrid (§4.1)",
+            help: "distribution over workers with own depth buffers: off, structure, primitive, hybrid (§4.1, merged by depth compositing), columns (each worker culls and draws its columns of the screen; not in the paper)",
         },
         ParamDoc {
             key: "workers",
@@ -564,7 +584,15 @@ pub struct Hzb {
     frames_since_recheck: u32,
     /// Frames drawn directly where culling does not pay (`payoff=on`).
     direct: Option<DirectFrames>,
+    /// The rasterizer of direct frames under the columns distribution (on all threads; the
+    /// workers' rasterize on one each).
+    direct_raster: Option<Rasterizer>,
+    /// The workers' columns under the columns distribution.
+    columns: crate::bands::ColumnShare,
 }
+
+/// The counter of the visible list's precision at the last recheck, percent.
+pub(crate) const PRECISION: &str = "visible_list_precision_pct";
 
 /// Counter names per worker (counters are named by static strings).
 pub(crate) const BUSY: [&str; MAX_WORKERS] = [
@@ -680,12 +708,18 @@ impl Hzb {
         hzb.temporal &= hzb.occlusion; // without tests a visible list changes nothing
                                        // Direct frames go through the walker's rasterizer: not under a distribution, whose
                                        // workers rasterize on one thread each.
-        let direct = match hzb.payoff && hzb.distribution == Distribution::Off {
-            true => Some(DirectFrames::new(scene.clone(), &workers[0].raster)?),
-            false => None,
+        let (direct, direct_raster) = match (hzb.payoff, hzb.distribution) {
+            (true, Distribution::Off) => (Some(DirectFrames::new(scene.clone(), &workers[0].raster)?), None),
+            (true, Distribution::Columns) => {
+                let raster = crate::scene_rasterizer(&scene, options)?;
+                (Some(DirectFrames::new(scene.clone(), &raster)?), Some(raster))
+            }
+            _ => (None, None),
         };
         Ok(Self {
             direct,
+            direct_raster,
+            columns: crate::bands::ColumnShare::default(),
             scene,
             options: hzb,
             per_node: PerNode {
@@ -864,6 +898,111 @@ impl Hzb {
     }
 }
 
+impl Hzb {
+    /// Sort-first by columns ([`Distribution::Columns`]): every worker walks the whole scene
+    /// for its view `bands[k]` (the frame's view restricted to its columns), the first into
+    /// `frame` itself, the others each into a frame of its own (made on its thread, at the first
+    /// frame or a new size), cleared over its columns and blocked beside them, with its own
+    /// pyramid, visible list and one rasterizer thread; then the other workers' columns are
+    /// copied into `frame`. The statistics add the workers' counts, counters and phases
+    /// (thread time: together more than the frame's wall time; a triangle drawn in two columns
+    /// counts twice); the copy is `other`.
+    ///
+    /// Also returns how long making the workers' frames and pyramids took (at the first frame
+    /// or a new size; the slowest worker's): a one-time cost that the frame-level choice
+    /// between culling and drawing directly does not weigh.
+    fn render_columns(
+        &mut self,
+        frame: &mut Frame,
+        recheck: bool,
+        bands: &[View],
+    ) -> Result<(FrameStats, std::time::Duration)> {
+        let (scene, octrees, options) = (&*self.scene, &self.octrees[..], &self.options);
+        let per_node = &self.per_node;
+        let (width, height) = (frame.width(), frame.height());
+        let mut work: Vec<(&mut Worker, &View, Option<&mut Frame>)> = Vec::with_capacity(bands.len());
+        let mut out = Some(&mut *frame);
+        for (w, band) in self.workers.iter_mut().zip(bands) {
+            let target = out.take();
+            work.push((w, band, target));
+        }
+        let job = |(w, band, out): (&mut Worker, &View, Option<&mut Frame>)| {
+            let t = Instant::now();
+            let made = !matches!(&w.pyramid, Some(p) if p.width() == width && p.height() == height)
+                || (out.is_none() && !matches!(&w.frame, Some(f) if f.width() == width && f.height() == height));
+            let f = match out {
+                Some(f) => f,
+                None => {
+                    if !matches!(&w.frame, Some(f) if f.width() == width && f.height() == height) {
+                        w.frame = None;
+                        w.frame = Some(Frame::new(width, height)?);
+                    }
+                    w.frame.as_mut().expect("made above")
+                }
+            };
+            let p = ready_pyramid(&mut w.pyramid, width, height)?;
+            // Made at the first frame or a new size: the frame and pyramid, and their first
+            // clearing, which faults their pages in.
+            let setup = if made { Some(t) } else { None };
+            let (_, _, cleared) = crate::begin_frame(&mut w.raster, band, f)?;
+            p.clear_for(f);
+            let setup = setup.map_or(std::time::Duration::ZERO, |t| t.elapsed());
+            let mut stats = walk_frame(
+                scene,
+                octrees,
+                options,
+                band,
+                &mut w.raster,
+                f,
+                p,
+                &mut w.visible,
+                &mut w.list_precision,
+                walk::Share::ALL,
+                recheck,
+                &mut w.stamps,
+                per_node,
+                &mut w.payoff,
+            );
+            stats.phases.merge(&cleared.phases);
+            Ok((stats, t.elapsed(), setup))
+        };
+        let results: Vec<Result<(FrameStats, std::time::Duration, std::time::Duration)>> =
+            crate::bands::on_threads(work, job);
+        crate::check_cancel(&self.workers[0].raster)?;
+        let results = results.into_iter().collect::<Result<Vec<_>>>()?;
+        let t = Instant::now();
+        let sources: Vec<(&Frame, std::ops::Range<usize>)> = self.workers[1..]
+            .iter()
+            .zip(&bands[1..])
+            .filter_map(|(w, b)| Some((w.frame.as_ref()?, b.columns().start as usize..b.columns().end as usize)))
+            .collect();
+        crate::bands::assemble(frame, &sources);
+        let assembled = t.elapsed();
+        let slowest = results.iter().map(|r| r.1).max().unwrap_or_default();
+        let mut stats = FrameStats::default();
+        let mut precision = (0, 0);
+        for (k, (s, busy, _)) in results.iter().enumerate() {
+            stats.add_counts(s);
+            stats.counters.merge(&s.counters);
+            stats.phases.merge(&s.phases);
+            stats.counters.add(BUSY[k], busy.as_micros() as u64);
+            stats.counters.add(IDLE[k], (slowest - *busy).as_micros() as u64);
+            if s.counters.0.iter().any(|(k, _)| *k == PRECISION) {
+                precision = (precision.0 + s.counters.get(PRECISION), precision.1 + 1);
+            }
+        }
+        // The workers' precisions, averaged (not added as the other counters are).
+        if let Some((_, v)) = stats.counters.0.iter_mut().find(|(k, _)| *k == PRECISION) {
+            *v = precision.0 / precision.1.max(1);
+        }
+        stats.phases.add(Phase::Other, assembled);
+        let times: Vec<std::time::Duration> = results.iter().map(|r| r.1 - r.2).collect();
+        self.columns.balance(&times);
+        let setup = results.iter().map(|r| r.2).max().unwrap_or_default();
+        Ok((stats, setup))
+    }
+}
+
 /// Depth compositing: every pixel of `out` takes the nearest fragment (ties to the smaller
 /// item) of the `parts`, in row bands over the available threads.
 fn composite<'f>(out: &mut Frame, parts: impl Iterator<Item = &'f Frame>) {
@@ -897,12 +1036,34 @@ impl Renderer for Hzb {
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
         check_frame(view, frame)?;
         let start = Instant::now();
+        let columns = match self.options.distribution {
+            Distribution::Columns => self.columns.ranges(view.columns().len() as u32, self.workers.len()),
+            _ => Vec::new(),
+        };
+        let bands = columns
+            .iter()
+            .map(|c| {
+                let first = view.columns().start;
+                view.with_region(first + c.start..first + c.end, view.rows())
+            })
+            .collect::<std::result::Result<Vec<View>, _>>()
+            .map_err(|e| RenderError::BadParameter(format!("hzb: parallel=columns: {e}")))?;
         if let Some(direct) = &mut self.direct {
-            if let Some(stats) = direct.render_if_due(&mut self.workers[0].raster, view, frame)? {
-                return crate::end_frame(&self.workers[0].raster, stats);
+            let raster = self.direct_raster.as_mut().unwrap_or(&mut self.workers[0].raster);
+            if let Some(stats) = direct.render_if_due(raster, view, frame)? {
+                return crate::end_frame(raster, stats);
             }
-            for w in &mut self.workers {
-                direct.arm(&mut w.payoff, w.raster.thread_count());
+            if bands.is_empty() {
+                for w in &mut self.workers {
+                    direct.arm(&mut w.payoff, w.raster.thread_count());
+                }
+            } else {
+                // Each worker's columns against the whole direct frame: its work there, on its
+                // one thread, and the whole frame's expected time.
+                let expected = direct.expected_ns();
+                for (w, band) in self.workers.iter_mut().zip(&bands) {
+                    w.payoff.set_direct(expected, direct.work_in(band), 1);
+                }
             }
         }
         self.frames_since_recheck += 1;
@@ -911,6 +1072,7 @@ impl Renderer for Hzb {
             self.frames_since_recheck = 0;
         }
         let (scene, octrees, options) = (&*self.scene, &self.octrees[..], &self.options);
+        let mut setup = std::time::Duration::ZERO;
         let mut stats = if options.distribution == Distribution::Off {
             let w = &mut self.workers[0];
             let (_, _, cleared) = crate::begin_frame(&mut w.raster, view, frame)?;
@@ -934,13 +1096,17 @@ impl Renderer for Hzb {
             );
             stats.phases.merge(&cleared.phases);
             stats
+        } else if options.distribution == Distribution::Columns {
+            let (stats, made) = self.render_columns(frame, recheck, &bands)?;
+            setup = made;
+            stats
         } else {
             self.render_distributed(view, frame, recheck)?
         };
         crate::check_cancel(&self.workers[0].raster)?;
         if let Some(direct) = &mut self.direct {
             let (t, paid) = (Instant::now(), self.workers.iter().all(|w| w.payoff.last_paid()));
-            direct.culled(view, frame, start.elapsed(), &mut stats, paid)?;
+            direct.culled(view, frame, start.elapsed().saturating_sub(setup), &mut stats, paid)?;
             stats.phases.add(Phase::Other, t.elapsed());
         }
         stats.total = start.elapsed();
@@ -965,6 +1131,7 @@ impl Renderer for Hzb {
                 .sum::<usize>()
             + self.workers.iter().map(Worker::memory_bytes).sum::<usize>()
             + self.direct.as_ref().map_or(0, DirectFrames::memory_bytes)
+            + self.direct_raster.as_ref().map_or(0, Rasterizer::memory_bytes)
     }
 }
 #[cfg(test)]

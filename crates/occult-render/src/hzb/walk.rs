@@ -665,7 +665,7 @@ impl<'a> Walk<'a> {
             ("refreshes_paid", self.refreshes_paid),
         ]);
         if let Some(p) = self.list_precision_pct {
-            c.add("visible_list_precision_pct", p);
+            c.add(super::PRECISION, p);
         }
         c.add_all(self.payoff.counters());
         self.payoff_state.end(&self.payoff);
@@ -1082,7 +1082,18 @@ impl<'a> Walk<'a> {
     /// Queues triangles whose object-space bounds are `b` (for the pyramid's dirty region).
     fn push(&mut self, mesh: &'a Mesh, triangles: Triangles<'a>, clip: Mat4, first_item: u64, b: &occult_core::Aabb) {
         self.pending_triangles += triangles.count(mesh);
-        if let Some(r) = screen_rect(&clip, b, self.frame.width(), self.frame.height()) {
+        // Only the view's region is drawn (a band of columns: `parallel=columns`, `bands`).
+        let (columns, rows) = (self.walk.view().columns(), self.walk.view().rows());
+        let in_region = screen_rect(&clip, b, self.frame.width(), self.frame.height()).and_then(|r| {
+            let r = PixelRect {
+                x0: r.x0.max(columns.start),
+                y0: r.y0.max(rows.start),
+                x1: r.x1.min(columns.end),
+                y1: r.y1.min(rows.end),
+            };
+            (r.x0 < r.x1 && r.y0 < r.y1).then_some(r)
+        });
+        if let Some(r) = in_region {
             self.dirty = Some(match self.dirty {
                 None => r,
                 Some(d) => PixelRect {
