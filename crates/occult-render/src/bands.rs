@@ -125,34 +125,53 @@ impl ColumnShare {
             .collect()
     }
 
-    /// Shares the columns again from the time each band took last frame (in the bands' order).
+    /// Shares the columns again from the time each band took last frame (in the bands' order):
+    /// each band's time spread evenly over its columns gives a cost per column; the cuts that
+    /// would split that cost evenly are found, and each cut moves half way there.
     pub(crate) fn balance(&mut self, times: &[Duration]) {
         let width: u32 = self.columns.iter().sum();
-        let n = self.columns.len() as u32;
-        let floor = MIN_BAND_COLUMNS.min(width / n.max(1)).max(1);
-        let speed: Vec<f64> = self
+        let n = self.columns.len();
+        if n < 2 || times.len() != n {
+            return;
+        }
+        let floor = MIN_BAND_COLUMNS.min(width / n as u32).max(1);
+        // Every column costs at least a hundredth of the mean, so that an empty band (the sky)
+        // is not handed the whole screen next frame.
+        let total: f64 = times.iter().map(|t| t.as_nanos() as f64).sum::<f64>().max(1.0);
+        let least = 0.01 * total / width as f64;
+        let density: Vec<f64> = self
             .columns
             .iter()
             .zip(times)
-            .map(|(&r, t)| r as f64 / (t.as_nanos() as f64).max(1e3))
+            .map(|(&c, t)| (t.as_nanos() as f64 / c.max(1) as f64).max(least))
             .collect();
-        let total: f64 = speed.iter().sum();
-        let wanted: Vec<f64> = self
-            .columns
-            .iter()
-            .zip(&speed)
-            .map(|(&r, s)| (0.5 * r as f64 + 0.5 * width as f64 * s / total).max(floor as f64))
-            .collect();
-        // Rounded, the rest given to the bands in order so the columns add up to the width.
-        let scale = (width - floor * n) as f64 / wanted.iter().map(|w| w - floor as f64).sum::<f64>().max(1e-9);
-        let mut columns: Vec<u32> = wanted
-            .iter()
-            .map(|w| floor + ((w - floor as f64) * scale).floor() as u32)
-            .collect();
-        let left = width.saturating_sub(columns.iter().sum::<u32>());
-        for k in 0..left as usize {
-            columns[k % n as usize] += 1;
+        let cost: f64 = self.columns.iter().zip(&density).map(|(&c, d)| c as f64 * d).sum();
+        // The old cuts and the even ones, as column positions.
+        let mut cuts = Vec::with_capacity(n - 1);
+        let (mut at, mut band, mut before) = (0.0f64, 0usize, 0.0f64);
+        let mut old = 0u32;
+        for j in 1..n {
+            old += self.columns[j - 1];
+            let wanted = cost * j as f64 / n as f64;
+            while band < n - 1 && before + self.columns[band] as f64 * density[band] < wanted {
+                before += self.columns[band] as f64 * density[band];
+                at += self.columns[band] as f64;
+                band += 1;
+            }
+            let even = at + (wanted - before) / density[band];
+            cuts.push(0.5 * old as f64 + 0.5 * even);
         }
+        // Rounded, each band keeping at least `floor` columns.
+        let mut columns = Vec::with_capacity(n);
+        let mut left = 0u32;
+        for (j, &c) in cuts.iter().enumerate() {
+            let lo = left + floor;
+            let hi = width - floor * (n - 1 - j) as u32;
+            let cut = (c.round() as u32).clamp(lo, hi.max(lo));
+            columns.push(cut - left);
+            left = cut;
+        }
+        columns.push(width - left);
         self.columns = columns;
     }
 }
@@ -323,4 +342,56 @@ pub(crate) fn on_threads<T: Send, R: Send>(items: Vec<T>, job: impl Fn(T) -> R +
         }
         results
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ms(v: &[u64]) -> Vec<Duration> {
+        v.iter().map(|&m| Duration::from_millis(m)).collect()
+    }
+
+    /// The cuts move towards splitting the cost evenly, half way a frame; an empty band is not
+    /// handed the whole screen; the columns always add up to the width, none below the floor.
+    #[test]
+    fn columns_move_towards_even_cost() {
+        let mut c = ColumnShare::default();
+        assert_eq!(c.ranges(1280, 4), vec![0..320, 320..640, 640..960, 960..1280]);
+        // The cost lies in the middle two bands (a city in the middle of the screen).
+        c.balance(&ms(&[0, 100, 100, 0]));
+        let r = c.ranges(1280, 4);
+        assert_eq!(r.last().map(|r| r.end), Some(1280));
+        let widths: Vec<u32> = r.iter().map(|r| r.end - r.start).collect();
+        assert!(widths[0] > 320 && widths[3] > 320, "{widths:?}");
+        assert!(widths[1] < 320 && widths[2] < 320, "{widths:?}");
+        assert!(widths[0] < 640, "half way, not all the way: {widths:?}");
+        // Again and again: it settles with the middle bands narrow, never an empty band.
+        for _ in 0..20 {
+            let r = c.ranges(1280, 4);
+            // Time as the columns of the middle 640 each band holds.
+            let times: Vec<u64> = r
+                .iter()
+                .map(|r| (r.end.min(960).saturating_sub(r.start.max(320))) as u64 + 1)
+                .collect();
+            c.balance(&ms(&times));
+            let w: Vec<u32> = c.ranges(1280, 4).iter().map(|r| r.end - r.start).collect();
+            assert_eq!(w.iter().sum::<u32>(), 1280);
+            assert!(w.iter().all(|&w| w >= MIN_BAND_COLUMNS), "{w:?}");
+        }
+        let r = c.ranges(1280, 4);
+        assert!(
+            r[0].end > 320 && r[3].start < 960 && r[1].end < 700 && r[2].start > 580,
+            "{r:?}"
+        );
+        // Two bands of equal cost stay as they are; one band alone is never moved.
+        let mut two = ColumnShare::default();
+        let before = two.ranges(100, 2);
+        two.balance(&ms(&[5, 5]));
+        assert_eq!(two.ranges(100, 2), before);
+        let mut one = ColumnShare::default();
+        one.ranges(10, 1);
+        one.balance(&ms(&[7]));
+        assert_eq!(one.ranges(10, 1), vec![0..10]);
+    }
 }

@@ -269,10 +269,10 @@ impl DirectFrames {
         self.choice.model().map(|m| m.predict(self.choice.last_work))
     }
 
-    /// The triangles a direct frame of `view` meets (a view of some columns: those a direct
-    /// frame draws there), counted by one walk.
-    pub fn work_in(&self, view: &View) -> u64 {
-        self.frustum.triangles_in_view(view)
+    /// The triangles a direct frame of the coming culled frame's view meets (counted by
+    /// [`DirectFrames::render_if_due`]).
+    pub fn work(&self) -> u64 {
+        self.choice.last_work
     }
 
     /// Bytes held (`frustum`'s hierarchies, the screening's pyramid).

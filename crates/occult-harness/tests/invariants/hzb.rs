@@ -32,6 +32,7 @@ const CONFIGS: &[&str] = &[
     "hzb:parallel=primitive,small=0.25",
     "hzb:parallel=hybrid,workers=4,small=0.25",
     "hzb:parallel=columns",
+    "hzb:parallel=columns,strips=3,refresh=0",
     "hzb:parallel=columns,workers=3,small=0.25,payoff=off,recheck=2",
     "hzb:small=0.25,temporal=off,refresh=0",
     "hzb:whole=0.01,recheck=2",
@@ -196,6 +197,9 @@ fn hzb_bad_parameters_are_errors() {
         "hzb:whole=2",
         "hzb:trust=1.5",
         "hzb:refresh=-1",
+        "hzb:parallel=columns,strips=0",
+        "hzb:strips=17",
+        "hzb:parallel=rows",
     ] {
         let s = spec(bad);
         match s.build(scene.clone(), &RenderOptions::default()) {

@@ -62,16 +62,18 @@
 //!   time and its idle time (waiting for the slowest before the merge) are reported as the
 //!   counters `worker<k>_busy_us` / `worker<k>_idle_us`; the phases are the slowest worker's,
 //!   the merge is `other`.
-//! - **Sort-first by columns** (not in the paper), `parallel=columns`: each worker culls and
-//!   draws its own columns of the screen (the view restricted to them, its own depth of them,
-//!   pyramid, visible list and one rasterizer thread; the first worker draws into the frame
-//!   itself, the others into frames of their own whose columns are then copied in, no merge).
-//!   Unlike `bands=N`, which copies the whole renderer per band, the octrees are shared and the
-//!   frame-level choice of [`crate::direct`] is the renderer's: a direct frame is drawn whole,
-//!   on all threads; each worker's in-frame payoff weighs its columns against that frame. The
-//!   columns are shared again after each frame by the workers' times
-//!   ([`crate::bands::ColumnShare`]). The phases add the workers' thread times, the copy is
-//!   `other`; `visible_list_precision_pct` is their mean.
+//! - **Sort-first by columns** (not in the paper), `parallel=columns`, `strips=N`: the screen
+//!   is cut into `workers × N` strips of columns, handed out one at a time (last frame's
+//!   slowest first) to whichever worker is free; a worker culls and draws a strip as a view
+//!   restricted to its columns, in its own frame (blocked beside them), pyramid and one
+//!   rasterizer thread, with the strip's own visible list and payoff, then copies the strip's
+//!   columns into the frame (no merge). Unlike `bands=N`, which copies the whole renderer per
+//!   band, the octrees are shared and the frame-level choice of [`crate::direct`] is the
+//!   renderer's: a direct frame is drawn whole, on all threads; each strip's in-frame payoff
+//!   weighs its share of the work against its share of that frame. The cuts move after each
+//!   frame towards an even split of the strips' times ([`crate::bands::ColumnShare`]). The
+//!   phases add the strips' thread times, the copies are `other`; `visible_list_precision_pct`
+//!   is their mean, `strips` counts them.
 //!
 //! - **Payoff** ([`crate::payoff`], `payoff`): a frame whose tests cost more than they save
 //!   stops testing and draws the rest directly: mesh instances wholly in view whole, in batches
@@ -209,6 +211,9 @@ const MAX_DEPTH: u32 = 32;
 /// Most workers of a distribution.
 pub const MAX_WORKERS: usize = 8;
 
+/// Most strips of columns a worker under [`Distribution::Columns`].
+pub const MAX_STRIPS: usize = 16;
+
 /// Tunables of [`Hzb`]; every part can be switched off to measure it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct HzbOptions {
@@ -249,6 +254,9 @@ pub struct HzbOptions {
     pub distribution: Distribution,
     /// Workers of the distribution (1 ..= [`MAX_WORKERS`]); each rasterizes on one thread.
     pub workers: usize,
+    /// Under [`Distribution::Columns`], strips of columns a worker (1 ..= [`MAX_STRIPS`]),
+    /// handed out one at a time to whichever worker is free.
+    pub strips: usize,
     /// Stop testing for the rest of a frame once the tests cost more than they save, and draw
     /// the rest directly ([`crate::payoff`]); draw whole frames directly while culled frames
     /// are slower than direct ones ([`crate::direct`]). Not in the paper.
@@ -279,6 +287,7 @@ impl Default for HzbOptions {
             order: ChildOrder::FrontToBack,
             distribution: Distribution::Off,
             workers: 2,
+            strips: 1,
             payoff: true,
         }
     }
@@ -336,6 +345,10 @@ impl HzbOptions {
         if workers == 0 || workers > MAX_WORKERS {
             return bad(format!("workers={workers}: workers must be in 1..={MAX_WORKERS}"));
         }
+        let strips: usize = p.get("strips", d.strips)?;
+        if strips == 0 || strips > MAX_STRIPS {
+            return bad(format!("strips={strips}: strips a worker must be in 1..={MAX_STRIPS}"));
+        }
         Ok(Self {
             distribution: match p.choice(
                 "parallel",
@@ -349,6 +362,7 @@ impl HzbOptions {
                 _ => Distribution::Off,
             },
             workers,
+            strips,
             payoff: p.flag("payoff", d.payoff)?,
             octree: HybridOctreeConfig {
                 leaf_size,
@@ -379,7 +393,7 @@ impl HzbOptions {
 /// Every counter ([`FrameStats::counters`](crate::FrameStats::counters)) a frame may report,
 /// whichever the settings, except the per-worker ones of `parallel=on` (`worker<k>_busy_us`,
 /// `worker<k>_idle_us`); [`INFO`]'s counters list those too.
-pub const COUNTERS: [&str; 21] = [
+pub const COUNTERS: [&str; 22] = [
     "occlusion_tests",
     "occlusion_culled",
     "frustum_culled",
@@ -401,7 +415,11 @@ pub const COUNTERS: [&str; 21] = [
     crate::payoff::COUNTERS[1],
     crate::direct::COUNTER,
     crate::direct::SCREENED,
+    STRIPS,
 ];
+
+/// The counter of the strips of columns a frame was drawn as (`parallel=columns`).
+pub(crate) const STRIPS: &str = "strips";
 
 /// Every counter a frame may report: [`COUNTERS`], then the workers' busy and idle times.
 const DECLARED: [&str; COUNTERS.len() + 2 * MAX_WORKERS] = {
@@ -517,6 +535,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             help: "workers of the distribution, 1..=8 (each rasterizes on one thread)",
         },
         ParamDoc {
+            key: "strips",
+            default: "1",
+            help: "parallel=columns: strips of columns a worker, 1..=16, handed out one at a time to whichever worker is free",
+        },
+        ParamDoc {
             key: "payoff",
             default: "on",
             help: "stop testing for the rest of a frame once tests cost more than they save, and draw the rest directly; draw runs of frames as frustum does while culled frames are slower than such direct frames (not in the paper)",
@@ -587,8 +610,20 @@ pub struct Hzb {
     /// The rasterizer of direct frames under the columns distribution (on all threads; the
     /// workers' rasterize on one each).
     direct_raster: Option<Rasterizer>,
-    /// The workers' columns under the columns distribution.
+    /// The strips' columns under the columns distribution.
     columns: crate::bands::ColumnShare,
+    /// Under the columns distribution, what each strip of columns keeps from frame to frame.
+    strips: Vec<std::sync::Mutex<Strip>>,
+}
+
+/// One strip of columns of [`Distribution::Columns`]: what its walk keeps from frame to frame,
+/// whichever worker draws it.
+struct Strip {
+    visible: Vec<VisEntry>,
+    list_precision: f64,
+    payoff: Payoff,
+    /// How long it took last frame (after the one-time setup of the worker that drew it).
+    time: std::time::Duration,
 }
 
 /// The counter of the visible list's precision at the last recheck, percent.
@@ -716,9 +751,23 @@ impl Hzb {
             }
             _ => (None, None),
         };
+        let strips = match hzb.distribution {
+            Distribution::Columns => (0..hzb.workers * hzb.strips)
+                .map(|_| {
+                    std::sync::Mutex::new(Strip {
+                        visible: Vec::new(),
+                        list_precision: 1.0,
+                        payoff: Payoff::new(hzb.payoff, scene.item_count()),
+                        time: std::time::Duration::ZERO,
+                    })
+                })
+                .collect(),
+            _ => Vec::new(),
+        };
         Ok(Self {
             direct,
             direct_raster,
+            strips,
             columns: crate::bands::ColumnShare::default(),
             scene,
             options: hzb,
@@ -899,14 +948,15 @@ impl Hzb {
 }
 
 impl Hzb {
-    /// Sort-first by columns ([`Distribution::Columns`]): every worker walks the whole scene
-    /// for its view `bands[k]` (the frame's view restricted to its columns), the first into
-    /// `frame` itself, the others each into a frame of its own (made on its thread, at the first
-    /// frame or a new size), cleared over its columns and blocked beside them, with its own
-    /// pyramid, visible list and one rasterizer thread; then the other workers' columns are
-    /// copied into `frame`. The statistics add the workers' counts, counters and phases
-    /// (thread time: together more than the frame's wall time; a triangle drawn in two columns
-    /// counts twice); the copy is `other`.
+    /// Sort-first by columns ([`Distribution::Columns`]): the view is cut into strips of
+    /// columns (`bands[k]`, the frame's view restricted to strip `k`'s columns), handed out
+    /// one at a time, the slowest of last frame first, to whichever worker is free. A worker
+    /// walks the whole scene for the strip's view into its own frame (made on its thread at the
+    /// first frame or a new size), cleared over the strip and blocked beside it, with its own
+    /// pyramid and one rasterizer thread, and the strip's own visible list and payoff; then it
+    /// copies the strip's columns into `frame` (one worker at a time). The statistics add the
+    /// strips' counts, counters and phases (thread time: together more than the frame's wall
+    /// time; a triangle drawn in two strips counts twice); the copies are `other`.
     ///
     /// Also returns how long making the workers' frames and pyramids took (at the first frame
     /// or a new size; the slowest worker's): a one-time cost that the frame-level choice
@@ -917,89 +967,121 @@ impl Hzb {
         recheck: bool,
         bands: &[View],
     ) -> Result<(FrameStats, std::time::Duration)> {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        use std::sync::{Mutex, PoisonError};
+        use std::time::Duration;
         let (scene, octrees, options) = (&*self.scene, &self.octrees[..], &self.options);
-        let per_node = &self.per_node;
+        let (per_node, strips) = (&self.per_node, &self.strips[..]);
         let (width, height) = (frame.width(), frame.height());
-        let mut work: Vec<(&mut Worker, &View, Option<&mut Frame>)> = Vec::with_capacity(bands.len());
-        let mut out = Some(&mut *frame);
-        for (w, band) in self.workers.iter_mut().zip(bands) {
-            let target = out.take();
-            work.push((w, band, target));
-        }
-        let job = |(w, band, out): (&mut Worker, &View, Option<&mut Frame>)| {
+        // The slowest strips of last frame first (the longest jobs first balance best).
+        let mut order: Vec<usize> = (0..bands.len()).collect();
+        order.sort_by_key(|&k| std::cmp::Reverse(strips[k].lock().unwrap_or_else(PoisonError::into_inner).time));
+        let next = AtomicUsize::new(0);
+        let out = Mutex::new(&mut *frame);
+        let copied = Mutex::new(Duration::ZERO);
+        /// What a worker did: per strip drawn its statistics and time, its busy time, its setup.
+        type Done = (Vec<(FrameStats, Duration)>, Duration, Duration);
+        let job = |w: &mut Worker| -> Result<Done> {
             let t = Instant::now();
-            let made = !matches!(&w.pyramid, Some(p) if p.width() == width && p.height() == height)
-                || (out.is_none() && !matches!(&w.frame, Some(f) if f.width() == width && f.height() == height));
-            let f = match out {
-                Some(f) => f,
-                None => {
-                    if !matches!(&w.frame, Some(f) if f.width() == width && f.height() == height) {
-                        w.frame = None;
-                        w.frame = Some(Frame::new(width, height)?);
-                    }
-                    w.frame.as_mut().expect("made above")
-                }
+            if !matches!(&w.frame, Some(f) if f.width() == width && f.height() == height) {
+                w.frame = None;
+                w.frame = Some(Frame::new(width, height)?);
+                w.pyramid = None;
+            }
+            let made = !matches!(&w.pyramid, Some(p) if p.width() == width && p.height() == height);
+            if made {
+                w.pyramid = Some(ZPyramid::new(width, height)?);
+            }
+            let (Some(f), Some(p)) = (w.frame.as_mut(), w.pyramid.as_mut()) else {
+                unreachable!("made above");
             };
-            let p = ready_pyramid(&mut w.pyramid, width, height)?;
-            // Made at the first frame or a new size: the frame and pyramid, and their first
-            // clearing, which faults their pages in.
-            let setup = if made { Some(t) } else { None };
-            let (_, _, cleared) = crate::begin_frame(&mut w.raster, band, f)?;
-            p.clear_for(f);
-            let setup = setup.map_or(std::time::Duration::ZERO, |t| t.elapsed());
-            let mut stats = walk_frame(
-                scene,
-                octrees,
-                options,
-                band,
-                &mut w.raster,
-                f,
-                p,
-                &mut w.visible,
-                &mut w.list_precision,
-                walk::Share::ALL,
-                recheck,
-                &mut w.stamps,
-                per_node,
-                &mut w.payoff,
-            );
-            stats.phases.merge(&cleared.phases);
-            Ok((stats, t.elapsed(), setup))
+            let setup = if made { t.elapsed() } else { Duration::ZERO };
+            let mut done = Vec::new();
+            loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(&k) = order.get(i) else { break };
+                let band = &bands[k];
+                let mut strip = strips[k].lock().unwrap_or_else(PoisonError::into_inner);
+                let t = Instant::now();
+                let (_, _, cleared) = crate::begin_frame(&mut w.raster, band, f)?;
+                p.clear_for(f);
+                let strip = &mut *strip;
+                let mut stats = walk_frame(
+                    scene,
+                    octrees,
+                    options,
+                    band,
+                    &mut w.raster,
+                    f,
+                    p,
+                    &mut strip.visible,
+                    &mut strip.list_precision,
+                    walk::Share::ALL,
+                    recheck,
+                    &mut w.stamps,
+                    per_node,
+                    &mut strip.payoff,
+                );
+                stats.phases.merge(&cleared.phases);
+                strip.time = t.elapsed();
+                let c = Instant::now();
+                {
+                    let mut out = out.lock().unwrap_or_else(PoisonError::into_inner);
+                    copy_columns(&mut out, f, band.columns());
+                }
+                *copied.lock().unwrap_or_else(PoisonError::into_inner) += c.elapsed();
+                done.push((stats, strip.time));
+                crate::check_cancel(&w.raster)?;
+            }
+            Ok((done, t.elapsed(), setup))
         };
-        let results: Vec<Result<(FrameStats, std::time::Duration, std::time::Duration)>> =
-            crate::bands::on_threads(work, job);
-        crate::check_cancel(&self.workers[0].raster)?;
+        let results = crate::bands::on_threads(self.workers.iter_mut().collect(), job);
         let results = results.into_iter().collect::<Result<Vec<_>>>()?;
-        let t = Instant::now();
-        let sources: Vec<(&Frame, std::ops::Range<usize>)> = self.workers[1..]
-            .iter()
-            .zip(&bands[1..])
-            .filter_map(|(w, b)| Some((w.frame.as_ref()?, b.columns().start as usize..b.columns().end as usize)))
-            .collect();
-        crate::bands::assemble(frame, &sources);
-        let assembled = t.elapsed();
         let slowest = results.iter().map(|r| r.1).max().unwrap_or_default();
         let mut stats = FrameStats::default();
         let mut precision = (0, 0);
-        for (k, (s, busy, _)) in results.iter().enumerate() {
-            stats.add_counts(s);
-            stats.counters.merge(&s.counters);
-            stats.phases.merge(&s.phases);
+        for (k, (done, busy, _)) in results.iter().enumerate() {
+            for (s, _) in done {
+                stats.add_counts(s);
+                stats.counters.merge(&s.counters);
+                stats.phases.merge(&s.phases);
+                if s.counters.0.iter().any(|(k, _)| *k == PRECISION) {
+                    precision = (precision.0 + s.counters.get(PRECISION), precision.1 + 1);
+                }
+            }
             stats.counters.add(BUSY[k], busy.as_micros() as u64);
             stats.counters.add(IDLE[k], (slowest - *busy).as_micros() as u64);
-            if s.counters.0.iter().any(|(k, _)| *k == PRECISION) {
-                precision = (precision.0 + s.counters.get(PRECISION), precision.1 + 1);
-            }
         }
-        // The workers' precisions, averaged (not added as the other counters are).
+        // The strips' precisions, averaged (not added as the other counters are).
         if let Some((_, v)) = stats.counters.0.iter_mut().find(|(k, _)| *k == PRECISION) {
             *v = precision.0 / precision.1.max(1);
         }
-        stats.phases.add(Phase::Other, assembled);
-        let times: Vec<std::time::Duration> = results.iter().map(|r| r.1 - r.2).collect();
+        stats.counters.add(STRIPS, bands.len() as u64);
+        stats.phases.add(
+            Phase::Other,
+            copied.into_inner().unwrap_or_else(PoisonError::into_inner),
+        );
+        // Strips in column order, each with its time.
+        let times: Vec<Duration> = self
+            .strips
+            .iter_mut()
+            .map(|s| s.get_mut().unwrap_or_else(PoisonError::into_inner).time)
+            .collect();
         self.columns.balance(&times);
         let setup = results.iter().map(|r| r.2).max().unwrap_or_default();
         Ok((stats, setup))
+    }
+}
+
+/// Copies the pixels of `columns` of `from` into `out` (frames of one size).
+fn copy_columns(out: &mut Frame, from: &Frame, columns: std::ops::Range<u32>) {
+    let w = out.width() as usize;
+    let c = columns.start as usize..columns.end as usize;
+    let (depth, items) = out.buffers_mut();
+    for (row, (d, i)) in depth.chunks_mut(w).zip(items.chunks_mut(w)).enumerate() {
+        let at = row * w;
+        d[c.clone()].copy_from_slice(&from.depth()[at + c.start..at + c.end]);
+        i[c.clone()].copy_from_slice(&from.items()[at + c.start..at + c.end]);
     }
 }
 
@@ -1037,7 +1119,7 @@ impl Renderer for Hzb {
         check_frame(view, frame)?;
         let start = Instant::now();
         let columns = match self.options.distribution {
-            Distribution::Columns => self.columns.ranges(view.columns().len() as u32, self.workers.len()),
+            Distribution::Columns => self.columns.ranges(view.columns().len() as u32, self.strips.len()),
             _ => Vec::new(),
         };
         let bands = columns
@@ -1058,11 +1140,18 @@ impl Renderer for Hzb {
                     direct.arm(&mut w.payoff, w.raster.thread_count());
                 }
             } else {
-                // Each worker's columns against the whole direct frame: its work there, on its
-                // one thread, and the whole frame's expected time.
-                let expected = direct.expected_ns();
-                for (w, band) in self.workers.iter_mut().zip(&bands) {
-                    w.payoff.set_direct(expected, direct.work_in(band), 1);
+                // Each strip against its share of a whole direct frame: the work in view by its
+                // share of the columns, on one thread, in the time a worker has for it (the
+                // frame's, over the strips each worker draws).
+                let (expected, work) = (direct.expected_ns(), direct.work());
+                let width = view.columns().len().max(1) as f64;
+                let per_worker = bands.len() as f64 / self.workers.len() as f64;
+                for (strip, band) in self.strips.iter_mut().zip(&bands) {
+                    let share = band.columns().len() as f64 / width;
+                    let strip = strip.get_mut().unwrap_or_else(std::sync::PoisonError::into_inner);
+                    strip
+                        .payoff
+                        .set_direct(expected.map(|e| e / per_worker), (work as f64 * share) as u64, 1);
                 }
             }
         }
@@ -1105,7 +1194,16 @@ impl Renderer for Hzb {
         };
         crate::check_cancel(&self.workers[0].raster)?;
         if let Some(direct) = &mut self.direct {
-            let (t, paid) = (Instant::now(), self.workers.iter().all(|w| w.payoff.last_paid()));
+            let paid = match self.options.distribution {
+                Distribution::Columns => self.strips.iter_mut().all(|s| {
+                    s.get_mut()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner)
+                        .payoff
+                        .last_paid()
+                }),
+                _ => self.workers.iter().all(|w| w.payoff.last_paid()),
+            };
+            let t = Instant::now();
             direct.culled(view, frame, start.elapsed().saturating_sub(setup), &mut stats, paid)?;
             stats.phases.add(Phase::Other, t.elapsed());
         }
