@@ -35,6 +35,17 @@ impl PixelRect {
     pub fn area(&self) -> u64 {
         self.x1.saturating_sub(self.x0) as u64 * self.y1.saturating_sub(self.y0) as u64
     }
+
+    /// The pixels in both rectangles; `None` when there are none.
+    pub fn intersect(&self, other: &PixelRect) -> Option<PixelRect> {
+        let r = PixelRect {
+            x0: self.x0.max(other.x0),
+            y0: self.y0.max(other.y0),
+            x1: self.x1.min(other.x1),
+            y1: self.y1.min(other.y1),
+        };
+        (r.x0 < r.x1 && r.y0 < r.y1).then_some(r)
+    }
 }
 
 /// Counts the pixels of `rect` (clipped to the frame) where a fragment at depth `nearest`

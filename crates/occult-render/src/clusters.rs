@@ -779,7 +779,13 @@ impl ClusterCulling {
                 draw_pending(raster, view, frame, &mut pending, &mut scratch, &mut stats);
                 counts.batches += 1;
                 let u = Instant::now();
-                if let (Some(d), true) = (dirty, next < order.len()) {
+                // Only where the batch wrote: the clusters' region cut to the box of the
+                // triangles that wrote a fragment.
+                let written = crate::written_region(raster, view);
+                if let (Some(d), true) = (
+                    dirty.zip(written).and_then(|(d, w)| d.intersect(&w)),
+                    next < order.len(),
+                ) {
                     pyramid.update(frame, d);
                 }
                 stats.phases.add(Phase::DepthStructure, u.elapsed());

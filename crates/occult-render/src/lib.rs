@@ -437,6 +437,21 @@ pub(crate) fn rasterize_counted(
     }
 }
 
+/// Where the draws of `raster` since the last call wrote a fragment
+/// ([`occult_raster::Rasterizer::take_written`]), within `view`'s region: the only pixels a
+/// depth structure over the frame (a pyramid) must be brought up to date over. `None` when
+/// nothing was written there.
+pub(crate) fn written_region(raster: &mut occult_raster::Rasterizer, view: &View) -> Option<occult_raster::PixelRect> {
+    let (columns, rows) = (view.columns(), view.rows());
+    let region = occult_raster::PixelRect {
+        x0: columns.start,
+        y0: rows.start,
+        x1: columns.end,
+        y1: rows.end,
+    };
+    raster.take_written()?.intersect(&region)
+}
+
 /// Draws `draws` in one call, adding the time to [`Phase::Raster`] and the counts to `stats`.
 fn draw_timed(
     raster: &mut occult_raster::Rasterizer,

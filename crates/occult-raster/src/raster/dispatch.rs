@@ -53,7 +53,8 @@ hot_loop! {
 
 hot_loop! {
     /// Sets up and scans `range` of the triangle stream at once over the whole frame;
-    /// returns (triangles rasterized, fragments written, inclusive pixel box touched).
+    /// returns (triangles rasterized, fragments written, the inclusive pixel box of the
+    /// triangles that wrote any: every pixel written lies in it).
     ///
     /// # Safety
     /// No other thread may access `target` during the call.
@@ -68,7 +69,8 @@ hot_loop! {
 
 hot_loop! {
     /// Sets up every triangle of `range` of the stream and scans it over the rows of bands
-    /// `band, band + bands, …` only; returns (triangles rasterized, fragments written).
+    /// `band, band + bands, …` only; returns (triangles rasterized, fragments written, the
+    /// inclusive pixel box of the triangles that wrote any).
     ///
     /// # Safety
     /// No other thread may access the rows of those bands in `target` during the call.
@@ -80,7 +82,7 @@ hot_loop! {
         mode: RasterMode,
         band: u32,
         bands: u32,
-    ) -> (u64, u64) = super::sinks::draw_banded::<false>, super::sinks::draw_banded::<true>;
+    ) -> (u64, u64, [u32; 4]) = super::sinks::draw_banded::<false>, super::sinks::draw_banded::<true>;
 }
 
 hot_loop! {

@@ -5,6 +5,7 @@ use super::dispatch;
 use super::project::Viewport;
 use super::scan::FrameTarget;
 use super::setup::TriStream;
+use super::sinks::{union_rect, EMPTY_RECT};
 use super::threads::Workers;
 use super::{Draw, RasterMode, Rasterizer};
 use crate::frame::Frame;
@@ -26,7 +27,7 @@ impl Rasterizer {
         draw_starts: &[usize],
         vertex_offsets: &[usize],
         mode: RasterMode,
-    ) -> Option<(u64, u64, f64)> {
+    ) -> Option<(u64, u64, f64, [u32; 4])> {
         let parts = workers.threads;
         let (w, h) = (vp.width as usize, vp.height as usize);
         // Private frames are kept cleared between draws; one a panic left drawn is dropped.
@@ -99,11 +100,15 @@ impl Rasterizer {
             });
         }
         self.scratch_clean = true;
-        Some(
-            results
-                .iter()
-                .fold((0, 0, 0.0), |(r, f, t), &(rr, ff, _, tt)| (r + rr, f + ff, t + tt)),
-        )
+        // Every pixel written, by any worker, lies in one of the boxes.
+        let written_box = results
+            .iter()
+            .flat_map(|r| r.2.iter())
+            .fold(EMPTY_RECT, |a, &b| union_rect(a, b));
+        let (rasterized, written, thread_ns) = results
+            .iter()
+            .fold((0, 0, 0.0), |(r, f, t), &(rr, ff, _, tt)| (r + rr, f + ff, t + tt));
+        Some((rasterized, written, thread_ns, written_box))
     }
 }
 

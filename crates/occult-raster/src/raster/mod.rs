@@ -293,6 +293,9 @@ pub struct Rasterizer {
     helpers: Option<Helpers>,
     /// The helper threads could not be started (banded draws then run on the caller alone).
     helpers_failed: bool,
+    /// The inclusive pixel box holding every fragment written since it was last taken (empty
+    /// while `written_box[0] > written_box[2]`), see [`Rasterizer::take_written`].
+    written_box: [u32; 4],
     /// Whether the last pass drawn ran on the calling thread alone, and its strategy, for
     /// tests of the choice.
     #[cfg(test)]
@@ -371,6 +374,7 @@ impl Rasterizer {
             measured: (0.0, 0.0),
             helpers: None,
             helpers_failed: false,
+            written_box: sinks::EMPTY_RECT,
             #[cfg(test)]
             last_pass: None,
             isa,
@@ -526,6 +530,20 @@ impl Rasterizer {
             self.shared_as(draws, u64::from(view.width()) * u64::from(view.height()))
         };
         self.draw_in_passes(&vp, frame, draws, mode, MAX_PROJECTED_VERTICES, shared)
+    }
+
+    /// The pixels that the draws since the last call ([`Rasterizer::draw`], into any frame)
+    /// wrote a fragment to lie in this rectangle (the box of the triangles that wrote any);
+    /// `None` when they wrote none. Where a caller keeps a structure over the depth (a
+    /// pyramid), only this rectangle changed. Starts empty again.
+    pub fn take_written(&mut self) -> Option<crate::PixelRect> {
+        let [x0, y0, x1, y1] = std::mem::replace(&mut self.written_box, sinks::EMPTY_RECT);
+        (x0 <= x1 && y0 <= y1).then_some(crate::PixelRect {
+            x0,
+            y0,
+            x1: x1 + 1,
+            y1: y1 + 1,
+        })
     }
 
     /// How `draws` are shared over the threads; `None` when they run directly on the calling
@@ -710,10 +728,11 @@ impl Rasterizer {
             let target = FrameTarget::new(frame);
             let t = Instant::now();
             // SAFETY: only this thread touches the frame while it is drawn.
-            let (rasterized, written, _) = unsafe {
+            let (rasterized, written, dirty) = unsafe {
                 let stream = TriStream::new(draws, &draw_starts, &vertex_offsets, &self.vertices);
                 dispatch::draw_direct(self.isa, vp, &stream, 0..total, &target, mode)
             };
+            self.written_box = sinks::union_rect(self.written_box, dirty);
             self.measure(total, t.elapsed().as_nanos() as f64);
             counts.triangles_rasterized = rasterized;
             counts.fragments_written = written;
@@ -730,24 +749,30 @@ impl Rasterizer {
             let stream = TriStream::new(draws, &draw_starts, &vertex_offsets, &self.vertices);
             let bands = threads as u32;
             let (target, stream) = (&target, &stream);
-            let results: Vec<std::sync::Mutex<(u64, u64, f64)>> =
-                (0..bands).map(|_| std::sync::Mutex::new((0, 0, 0.0))).collect();
+            /// A band's triangles rasterized, fragments written, thread time and written box.
+            type BandResult = (u64, u64, f64, [u32; 4]);
+            let results: Vec<std::sync::Mutex<BandResult>> = (0..bands)
+                .map(|_| std::sync::Mutex::new((0, 0, 0.0, sinks::EMPTY_RECT)))
+                .collect();
             let job = |band: usize| {
                 let t = Instant::now();
                 // SAFETY: each band is drawn once, and band `band` writes only its own rows.
-                let (rasterized, written) =
+                let (rasterized, written, dirty) =
                     unsafe { dispatch::draw_banded(isa, vp, stream, 0..total, target, mode, band as u32, bands) };
                 *results[band].lock().unwrap_or_else(std::sync::PoisonError::into_inner) =
-                    (rasterized, written, t.elapsed().as_nanos() as f64);
+                    (rasterized, written, t.elapsed().as_nanos() as f64, dirty);
             };
             match &mut self.helpers {
                 Some(h) => h.run(bands as usize, &job),
                 None => (0..bands as usize).for_each(job),
             }
-            let results: Vec<(u64, u64, f64)> = results
+            let results: Vec<BandResult> = results
                 .into_iter()
                 .map(|r| r.into_inner().unwrap_or_else(std::sync::PoisonError::into_inner))
                 .collect();
+            for r in &results {
+                self.written_box = sinks::union_rect(self.written_box, r.3);
+            }
             // Every band set up every triangle: each counted them all.
             counts.triangles_rasterized = results[0].0;
             counts.fragments_written = results.iter().map(|r| r.1).sum();
@@ -757,9 +782,10 @@ impl Rasterizer {
             return counts;
         }
         if strategy == Strategy::SortLast {
-            if let Some((rasterized, written, thread_ns)) =
+            if let Some((rasterized, written, thread_ns, dirty)) =
                 self.draw_sort_last(&workers, vp, frame, draws, &draw_starts, &vertex_offsets, mode)
             {
+                self.written_box = sinks::union_rect(self.written_box, dirty);
                 self.measure(total, thread_ns);
                 counts.triangles_rasterized = rasterized;
                 counts.fragments_written = written;
@@ -796,14 +822,16 @@ impl Rasterizer {
             // Phase 2: rasterize tile by tile.
             let chunks = &self.chunks[..used];
             let target = &target;
-            let fragments: u64 = workers
-                .share((0..tile_count).collect(), |tile| {
-                    // SAFETY: tiles are disjoint and each is scanned by exactly one task.
-                    unsafe { dispatch::scan_tile(isa, vp, chunks, tile, target, mode) }
-                })
-                .into_iter()
-                .sum();
-            counts.fragments_written += fragments;
+            let fragments: Vec<u64> = workers.share((0..tile_count).collect(), |tile| {
+                // SAFETY: tiles are disjoint and each is scanned by exactly one task.
+                unsafe { dispatch::scan_tile(isa, vp, chunks, tile, target, mode) }
+            });
+            for (tile, &n) in fragments.iter().enumerate() {
+                if n > 0 {
+                    self.written_box = sinks::union_rect(self.written_box, vp.tile_rect(tile));
+                }
+            }
+            counts.fragments_written += fragments.iter().sum::<u64>();
             start = round_end;
         }
         counts

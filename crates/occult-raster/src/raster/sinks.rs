@@ -147,16 +147,20 @@ pub(super) struct DirectSink<'a, const AVX2: bool> {
     pub(super) mode: RasterMode,
     pub(super) rasterized: u64,
     pub(super) written: u64,
-    /// Inclusive pixel box of everything scanned (empty while `dirty[0] > dirty[2]`).
+    /// Inclusive pixel box of the triangles that wrote a fragment (empty while
+    /// `dirty[0] > dirty[2]`): every pixel written is in it.
     pub(super) dirty: [u32; 4],
 }
 
 impl<const AVX2: bool> DirectSink<'_, AVX2> {
-    /// Counts a triangle about to be scanned and grows the box of what was drawn by its box.
+    /// Counts `written` fragments of triangle `t`, growing the box of what was written by its
+    /// box when there are any.
     #[inline(always)]
-    pub(super) fn count(&mut self, t: &TriSetup) {
-        self.rasterized += 1;
-        self.dirty = union_rect(self.dirty, [t.px0, t.py0, t.px1, t.py1].map(u32::from));
+    fn wrote(&mut self, t: &TriSetup, written: u64) {
+        if written > 0 {
+            self.written += written;
+            self.dirty = union_rect(self.dirty, [t.px0, t.py0, t.px1, t.py1].map(u32::from));
+        }
     }
 }
 
@@ -168,7 +172,7 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
 
     #[inline(always)]
     fn push(&mut self, vp: &Viewport, t: TriSetup) {
-        self.count(&t);
+        self.rasterized += 1;
         self.push_lane(vp, t);
     }
 
@@ -180,7 +184,8 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
         }
         // SAFETY: a DirectSink is only made by `draw_direct`, whose caller guarantees that
         // no other thread touches the frame during the draw.
-        self.written += unsafe { scan_triangle::<AVX2>(vp, &t, self.rect, self.target, self.mode) };
+        let written = unsafe { scan_triangle::<AVX2>(vp, &t, self.rect, self.target, self.mode) };
+        self.wrote(&t, written);
     }
 
     const TAKES_EDGES: bool = true;
@@ -190,14 +195,13 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
     const COUNTS_LANES: bool = true;
 
     #[inline(always)]
-    fn count_lanes(&mut self, n: u32, bounds: [u32; 4]) {
+    fn count_lanes(&mut self, n: u32, _bounds: [u32; 4]) {
         self.rasterized += n as u64;
-        self.dirty = union_rect(self.dirty, bounds);
     }
 
     #[inline(always)]
     fn count_uncovered(&mut self, n: u32) {
-        // Counted like any other; nothing drawn, so the box of what was drawn stays.
+        // Counted like any other; nothing drawn, so the box of what was written stays.
         self.rasterized += n as u64;
     }
 
@@ -217,7 +221,8 @@ impl<const AVX2: bool> SetupSink for DirectSink<'_, AVX2> {
             return self.push_lane(vp, t);
         }
         // SAFETY: as in `push`.
-        self.written += unsafe { scan_small::<AVX2>(vp, &t, rect, cover, self.target, self.mode) };
+        let written = unsafe { scan_small::<AVX2>(vp, &t, rect, cover, self.target, self.mode) };
+        self.wrote(&t, written);
     }
 }
 
@@ -227,7 +232,8 @@ pub(super) const BAND_SHIFT: u32 = 5;
 
 /// The body of [`super::dispatch::draw_banded`], compiled once per instruction set: sets up
 /// every triangle of `range` and scans the rows of bands `band, band + bands, …` (of
-/// `1 << BAND_SHIFT` rows) only; returns (triangles rasterized, fragments written).
+/// `1 << BAND_SHIFT` rows) only; returns (triangles rasterized, fragments written, the
+/// inclusive box of the triangles that wrote any).
 ///
 /// # Safety
 /// No other thread may access the rows of those bands in `target` during the call.
@@ -240,7 +246,7 @@ pub(super) unsafe fn draw_banded<const AVX2: bool>(
     mode: RasterMode,
     band: u32,
     bands: u32,
-) -> (u64, u64) {
+) -> (u64, u64, [u32; 4]) {
     let mut sink = BandSink::<AVX2> {
         target,
         mode,
@@ -249,9 +255,10 @@ pub(super) unsafe fn draw_banded<const AVX2: bool>(
         last: [vp.width - 1, vp.height - 1],
         rasterized: 0,
         written: 0,
+        dirty: EMPTY_RECT,
     };
     setup_range::<AVX2>(vp, stream, range, &mut sink);
-    (sink.rasterized, sink.written)
+    (sink.rasterized, sink.written, sink.dirty)
 }
 
 /// Scans each triangle as soon as it is set up, over one worker's bands of rows: every worker
@@ -267,12 +274,23 @@ pub(super) struct BandSink<'a, const AVX2: bool> {
     last: [u32; 2],
     rasterized: u64,
     written: u64,
+    /// As [`DirectSink`]'s: the box of the triangles that wrote a fragment in these bands.
+    dirty: [u32; 4],
 }
 
 impl<const AVX2: bool> BandSink<'_, AVX2> {
     #[inline(always)]
     fn mine(&self, band: u32) -> bool {
         band % self.stride == self.own
+    }
+
+    /// As [`DirectSink`]'s.
+    #[inline(always)]
+    fn wrote(&mut self, t: &TriSetup, written: u64) {
+        if written > 0 {
+            self.written += written;
+            self.dirty = union_rect(self.dirty, [t.px0, t.py0, t.px1, t.py1].map(u32::from));
+        }
     }
 
     /// Scans `t` over this worker's bands that its box meets.
@@ -284,7 +302,8 @@ impl<const AVX2: bool> BandSink<'_, AVX2> {
             let top = band << BAND_SHIFT;
             let rect = [0, top, self.last[0], (top + (1 << BAND_SHIFT) - 1).min(self.last[1])];
             // SAFETY: the rows of this worker's bands are its own (`draw_banded`'s caller).
-            self.written += unsafe { scan_triangle::<AVX2>(vp, t, rect, self.target, self.mode) };
+            let written = unsafe { scan_triangle::<AVX2>(vp, t, rect, self.target, self.mode) };
+            self.wrote(t, written);
             band += self.stride;
         }
     }
@@ -334,7 +353,8 @@ impl<const AVX2: bool> SetupSink for BandSink<'_, AVX2> {
                 // As the direct sink: the box, in one of this worker's bands, is the rectangle.
                 let rect = [t.px0 as u32, t.py0 as u32, t.px1 as u32, t.py1 as u32];
                 // SAFETY: the box's rows are this worker's.
-                self.written += unsafe { scan_small::<AVX2>(vp, &t, rect, cover, self.target, self.mode) };
+                let written = unsafe { scan_small::<AVX2>(vp, &t, rect, cover, self.target, self.mode) };
+                self.wrote(&t, written);
             }
         } else {
             // Across bands: scanned again from its setup in each of this worker's.

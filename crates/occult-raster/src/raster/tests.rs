@@ -521,3 +521,59 @@ fn cluster_draws_are_list_draws() {
         }
     }
 }
+
+/// [`Rasterizer::take_written`] holds every pixel a draw wrote, whichever the strategy; a
+/// draw wholly behind what is drawn writes none; taking it empties it.
+#[test]
+fn the_written_box_holds_every_pixel_written() {
+    let view =
+        View::new(Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO), 320, 240).expect("a valid 320 × 240 view");
+    let (near, far) = (&grid(8, 0.2), &grid(40, 0.5));
+    fn at<'a>(view: &View, z: f32, mesh: &'a Mesh, first_item: u64) -> Draw<'a> {
+        Draw {
+            mesh,
+            triangles: DrawTriangles::All,
+            clip_from_object: view.clip_from_object(&Affine3A::from_translation(Vec3::new(0.5, -0.3, z))),
+            first_item,
+        }
+    }
+    for strategy in [Strategy::Direct, Strategy::Binned, Strategy::SortLast, Strategy::Banded] {
+        let mut r = Rasterizer::new(RasterConfig {
+            threads: 2,
+            strategy,
+            ..RasterConfig::default()
+        })
+        .expect("a valid configuration");
+        let mut frame = Frame::new(320, 240).expect("a 320 × 240 frame");
+        assert_eq!(r.take_written(), None, "{strategy:?}: nothing drawn yet");
+        r.draw(&view, &mut frame, &[at(&view, 1.0, near, 0)], RasterMode::Full);
+        let b = r.take_written().expect("the near grid is in view");
+        let mut written = 0;
+        for y in 0..240u32 {
+            for x in 0..320u32 {
+                if frame.items()[(y * 320 + x) as usize] != occult_core::NO_ITEM {
+                    written += 1;
+                    assert!(
+                        x >= b.x0 && x < b.x1 && y >= b.y0 && y < b.y1,
+                        "{strategy:?}: ({x}, {y}) beside {b:?}"
+                    );
+                }
+            }
+        }
+        assert!(
+            written > 100 && b.area() < 320 * 240 / 2,
+            "{strategy:?}: {written} in {b:?}"
+        );
+        assert_eq!(r.take_written(), None, "{strategy:?}: taken");
+        // Behind the near grid and within its box: nothing passes the depth test.
+        let small_far = Draw {
+            triangles: DrawTriangles::Range(0..2),
+            ..at(&view, -5.0, near, 1000)
+        };
+        r.draw(&view, &mut frame, &[small_far], RasterMode::Full);
+        assert_eq!(r.take_written(), None, "{strategy:?}: hidden");
+        // A far grid around it writes around it.
+        r.draw(&view, &mut frame, &[at(&view, -5.0, far, 5000)], RasterMode::Full);
+        assert!(r.take_written().is_some_and(|w| w.area() > b.area()), "{strategy:?}");
+    }
+}

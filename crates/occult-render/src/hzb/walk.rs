@@ -334,6 +334,7 @@ pub(super) struct Walk<'a> {
     pending: Vec<Pending<'a>>,
     scratch: Vec<u32>,
     pending_triangles: usize,
+    /// The pending batch's screen region, within the view's (what `refresh` weighs).
     dirty: Option<PixelRect>,
     /// Nodes whose own primitives the visible list drew this frame.
     drawn_nodes: IdSet<NodeKey>,
@@ -1079,20 +1080,20 @@ impl<'a> Walk<'a> {
         self.pending.len() > queued
     }
 
-    /// Queues triangles whose object-space bounds are `b` (for the pyramid's dirty region).
+    /// Queues triangles whose object-space bounds are `b` (their screen region grows the
+    /// pending batch's, for `refresh`).
     fn push(&mut self, mesh: &'a Mesh, triangles: Triangles<'a>, clip: Mat4, first_item: u64, b: &occult_core::Aabb) {
         self.pending_triangles += triangles.count(mesh);
-        // Only the view's region is drawn (a band of columns: `parallel=columns`, `bands`).
+        // Only the view's region is drawn (a strip of columns: `parallel=columns`, `bands`).
         let (columns, rows) = (self.walk.view().columns(), self.walk.view().rows());
-        let in_region = screen_rect(&clip, b, self.frame.width(), self.frame.height()).and_then(|r| {
-            let r = PixelRect {
-                x0: r.x0.max(columns.start),
-                y0: r.y0.max(rows.start),
-                x1: r.x1.min(columns.end),
-                y1: r.y1.min(rows.end),
-            };
-            (r.x0 < r.x1 && r.y0 < r.y1).then_some(r)
-        });
+        let region = PixelRect {
+            x0: columns.start,
+            y0: rows.start,
+            x1: columns.end,
+            y1: rows.end,
+        };
+        let in_region =
+            screen_rect(&clip, b, self.frame.width(), self.frame.height()).and_then(|r| r.intersect(&region));
         if let Some(r) = in_region {
             self.dirty = Some(match self.dirty {
                 None => r,
@@ -1123,7 +1124,7 @@ impl<'a> Walk<'a> {
         }
     }
 
-    /// Rasterizes the batch, then brings the pyramid up to date over the batch's region.
+    /// Rasterizes the batch, then brings the pyramid up to date where the batch wrote.
     fn flush(&mut self) {
         if self.pending.is_empty() {
             return;
@@ -1149,7 +1150,11 @@ impl<'a> Walk<'a> {
             .rasterized(self.pending_triangles as u64, t.elapsed(), shared);
         drop(draws);
         self.batches += 1;
-        if let Some(d) = self.dirty.take() {
+        // Only what the batch wrote changed: the box of its triangles that wrote a fragment
+        // (none when the batch was wholly hidden), within the view's region.
+        self.dirty = None;
+        let dirty = crate::written_region(self.raster, self.walk.view());
+        if let Some(d) = dirty {
             // Once tests stopped, only the recheck reads the pyramid, and it rebuilds it.
             if self.options.occlusion && !self.payoff.stopped() {
                 let t = Instant::now();

@@ -299,9 +299,12 @@ impl Lzb {
                 break;
             }
             // The pyramid over what the batch drew, for the next batch's tests.
+            // Only where the batch wrote: its units' region cut to the box of the triangles
+            // that wrote a fragment.
+            let written = crate::written_region(&mut self.raster, view);
             if next < units.len() {
                 let t = Instant::now();
-                if let Some(r) = rect {
+                if let Some(r) = rect.zip(written).and_then(|(r, w)| r.intersect(&w)) {
                     pyramid.update(frame, r);
                 }
                 pyramid_time += t.elapsed();

@@ -1232,6 +1232,20 @@ impl<'a> Walk<'a> {
         self.raster_time += spent;
         let shared = self.pending_triangles >= DIRECT_BATCH;
         self.payoff.rasterized(self.pending_triangles as u64, spent, shared);
+        // Only where the batch wrote: its rectangles cut to the box of the triangles that wrote
+        // a fragment (none left when it was wholly hidden).
+        match crate::written_region(self.raster, view) {
+            Some(w) => {
+                self.dirty.retain_mut(|r| match r.intersect(&w) {
+                    Some(cut) => {
+                        *r = cut;
+                        true
+                    }
+                    None => false,
+                });
+            }
+            None => self.dirty.clear(),
+        }
         // Once the frame stopped querying, nothing reads the pyramid.
         let stopped = self.payoff.stopped();
         if let Some(pyramid) = self
