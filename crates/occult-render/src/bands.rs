@@ -27,9 +27,9 @@
 //! Bands are columns, not rows: a view towards the horizon gathers most of its triangles in a
 //! few rows (the distant part of a city, a forest or a terrain), which a split of the rows
 //! leaves to one band (measured: one band idle for most of the frame); columns share them.
-//! After each frame the columns are shared again so that each band's columns per millisecond
-//! would take the same time, moving half way there (one noisy frame moves them little); no
-//! band gets fewer than [`MIN_BAND_COLUMNS`] columns.
+//! After each frame the cuts between bands move half way (one noisy frame moves them little)
+//! towards an even split of the frame's cost, each band's time spread evenly over its columns;
+//! no band gets fewer than [`MIN_BAND_COLUMNS`] columns ([`ColumnShare`]).
 //!
 //! Costs: what crosses two bands is walked and tested in both, its vertices projected twice;
 //! memory is the renderer's structures N times over, plus a frame per band. Statistics add the
@@ -94,10 +94,9 @@ pub struct Bands {
     columns: ColumnShare,
 }
 
-/// How the columns of a frame are shared between bands, frame after frame: evenly at first,
-/// then after each frame so that each band's columns per millisecond would take them all the
-/// same time, moving half way there (one noisy frame moves them little); no band gets fewer
-/// than [`MIN_BAND_COLUMNS`] columns.
+/// How the columns of a frame are shared between bands, frame after frame: evenly at first
+/// (and again at a new width or count), then moved after each frame by
+/// [`ColumnShare::balance`]; no band gets fewer than [`MIN_BAND_COLUMNS`] columns.
 #[derive(Debug, Default)]
 pub(crate) struct ColumnShare {
     /// Columns of each band in the last frame (empty before the first, or after a change of

@@ -33,6 +33,7 @@ const CONFIGS: &[&str] = &[
     "hzb:parallel=hybrid,workers=4,small=0.25",
     "hzb:parallel=columns",
     "hzb:parallel=columns,strips=3,refresh=0",
+    "hzb:parallel=columns,bands=2",
     "hzb:parallel=columns,workers=3,small=0.25,payoff=off,recheck=2",
     "hzb:small=0.25,temporal=off,refresh=0",
     "hzb:whole=0.01,recheck=2",

@@ -25,7 +25,9 @@
 //!   stored depth (see the pyramid's doc).
 //! - **Pyramid updates: per batch.** Visible geometry is gathered into batches of about `batch`
 //!   triangles; a full batch is rasterized (multi-threaded) and the pyramid is then recomputed
-//!   over the union of the batch's screen boxes. Per triangle would cost more than the triangle;
+//!   over the box of the batch's triangles that wrote a fragment
+//!   ([`occult_raster::Rasterizer::take_written`]; nothing when the batch was wholly hidden).
+//!   Per triangle would cost more than the triangle;
 //!   per batch amortizes the update and keeps the rasterizer's batches large. Correctness does
 //!   not depend on the schedule: depth only grows during a frame, so a stale pyramid can only
 //!   fail to reject (the test's last level reads the frame itself). The visible list, which
@@ -741,8 +743,9 @@ impl Hzb {
             .collect();
         let mut hzb = hzb.clone();
         hzb.temporal &= hzb.occlusion; // without tests a visible list changes nothing
-                                       // Direct frames go through the walker's rasterizer: not under a distribution, whose
-                                       // workers rasterize on one thread each.
+                                       // Direct frames go through the walker's rasterizer, or under the columns
+                                       // distribution one of their own on all threads; not under the other
+                                       // distributions, whose workers rasterize on one thread each.
         let (direct, direct_raster) = match (hzb.payoff, hzb.distribution) {
             (true, Distribution::Off) => (Some(DirectFrames::new(scene.clone(), &workers[0].raster)?), None),
             (true, Distribution::Columns) => {
@@ -843,6 +846,8 @@ fn walk_frame(
     payoff: &mut Payoff,
 ) -> FrameStats {
     let old_visible = std::mem::take(visible);
+    // What the rasterizer wrote before this walk (a direct frame, another strip) is no batch's.
+    let _ = raster.take_written();
     let mut w = walk::Walk::new(
         scene, octrees, options, view, raster, frame, pyramid, share, stamps, per_node, payoff,
     );
@@ -1024,6 +1029,10 @@ impl Hzb {
                 );
                 stats.phases.merge(&cleared.phases);
                 strip.time = t.elapsed();
+                // What the walk did not time is its culling.
+                let p = &stats.phases;
+                let accounted = p.get(Phase::Clear) + p.get(Phase::Raster) + p.get(Phase::DepthStructure);
+                stats.phases.add(Phase::Cull, strip.time.saturating_sub(accounted));
                 let c = Instant::now();
                 {
                     let mut out = out.lock().unwrap_or_else(PoisonError::into_inner);
@@ -1186,6 +1195,13 @@ impl Renderer for Hzb {
             stats.phases.merge(&cleared.phases);
             stats
         } else if options.distribution == Distribution::Columns {
+            if view.is_band() {
+                // Nested in a band of its own (the `bands` wrapper): the strips copy in the
+                // band's columns; beside it the frame is blocked as every band's frame is.
+                let raster = self.direct_raster.as_mut().unwrap_or(&mut self.workers[0].raster);
+                let (c, r) = (view.columns(), view.rows());
+                raster.clear_region(frame, [c.start, r.start, c.end, r.end]);
+            }
             let (stats, made) = self.render_columns(frame, recheck, &bands)?;
             setup = made;
             stats
@@ -1195,7 +1211,7 @@ impl Renderer for Hzb {
         crate::check_cancel(&self.workers[0].raster)?;
         if let Some(direct) = &mut self.direct {
             let paid = match self.options.distribution {
-                Distribution::Columns => self.strips.iter_mut().all(|s| {
+                Distribution::Columns => self.strips.iter_mut().take(bands.len()).all(|s| {
                     s.get_mut()
                         .unwrap_or_else(std::sync::PoisonError::into_inner)
                         .payoff
@@ -1208,9 +1224,14 @@ impl Renderer for Hzb {
             stats.phases.add(Phase::Other, t.elapsed());
         }
         stats.total = start.elapsed();
-        let p = &stats.phases;
-        let accounted = p.get(Phase::Clear) + p.get(Phase::Raster) + p.get(Phase::DepthStructure) + p.get(Phase::Other);
-        stats.phases.add(Phase::Cull, stats.total.saturating_sub(accounted));
+        // Under the columns distribution the phases are the strips' thread times, their culling
+        // included (`render_columns`); else what the walk did not time is its culling.
+        if bands.is_empty() {
+            let p = &stats.phases;
+            let accounted =
+                p.get(Phase::Clear) + p.get(Phase::Raster) + p.get(Phase::DepthStructure) + p.get(Phase::Other);
+            stats.phases.add(Phase::Cull, stats.total.saturating_sub(accounted));
+        }
         crate::end_frame(&self.workers[0].raster, stats)
     }
 
@@ -1230,6 +1251,17 @@ impl Renderer for Hzb {
             + self.workers.iter().map(Worker::memory_bytes).sum::<usize>()
             + self.direct.as_ref().map_or(0, DirectFrames::memory_bytes)
             + self.direct_raster.as_ref().map_or(0, Rasterizer::memory_bytes)
+            + self
+                .strips
+                .iter()
+                .map(|s| {
+                    s.lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner)
+                        .visible
+                        .capacity()
+                        * std::mem::size_of::<VisEntry>()
+                })
+                .sum::<usize>()
     }
 }
 #[cfg(test)]
@@ -1239,6 +1271,12 @@ impl crate::direct::tests::ForceDirect for Hzb {
         direct.force(n, abandon);
         for w in &mut self.workers {
             w.payoff.force_stop = abandon;
+        }
+        for s in &mut self.strips {
+            s.get_mut()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .payoff
+                .force_stop = abandon;
         }
     }
 }
