@@ -157,10 +157,17 @@ impl<const AVX2: bool> DirectSink<'_, AVX2> {
     /// box when there are any.
     #[inline(always)]
     fn wrote(&mut self, t: &TriSetup, written: u64) {
-        if written > 0 {
-            self.written += written;
-            self.dirty = union_rect(self.dirty, [t.px0, t.py0, t.px1, t.py1].map(u32::from));
-        }
+        count_written(&mut self.written, &mut self.dirty, t, written);
+    }
+}
+
+/// Adds `written` fragments of triangle `t` to `count`, and `t`'s box to `dirty` (the box of
+/// what was written) when there are any.
+#[inline(always)]
+fn count_written(count: &mut u64, dirty: &mut [u32; 4], t: &TriSetup, written: u64) {
+    if written > 0 {
+        *count += written;
+        *dirty = union_rect(*dirty, [t.px0, t.py0, t.px1, t.py1].map(u32::from));
     }
 }
 
@@ -287,10 +294,7 @@ impl<const AVX2: bool> BandSink<'_, AVX2> {
     /// As [`DirectSink`]'s.
     #[inline(always)]
     fn wrote(&mut self, t: &TriSetup, written: u64) {
-        if written > 0 {
-            self.written += written;
-            self.dirty = union_rect(self.dirty, [t.px0, t.py0, t.px1, t.py1].map(u32::from));
-        }
+        count_written(&mut self.written, &mut self.dirty, t, written);
     }
 
     /// Scans `t` over this worker's bands that its box meets.
