@@ -43,6 +43,6 @@ pub use octree::{
 };
 pub use packet::{traverse_bvh_packet, traverse_bvh_packet_scalar, RayPacket, PACKET};
 pub use raycast::{
-    intersect8_packet, intersect8_packet_scalar, prefetch_triangles, traverse, traverse_scalar, FatRay, LeafTriangle,
-    ShearedRay, TraversalCounters,
+    intersect8_packet, intersect8_packet_scalar, prefetch_triangles, traverse, traverse_scalar, Candidates8, FatRay,
+    LeafTriangle, ShearedRay, TraversalCounters,
 };

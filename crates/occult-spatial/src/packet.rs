@@ -42,6 +42,9 @@ pub struct RayPacket {
     inv: [[f32; PACKET]; 3],
     len: usize,
     kind: Kind,
+    /// Cones around the rays ([`RayPacket::fat`]): `(spread, margin, the rays' largest
+    /// inverse direction length)`; `None`: thin rays.
+    cone: Option<(f32, f32, f32)>,
 }
 
 /// What the slab test of a packet may skip.
@@ -93,7 +96,24 @@ impl RayPacket {
             inv,
             len: directions.len(),
             kind,
+            cone: None,
         }
+    }
+
+    /// The rays `origin + t · directions[r]`, each widened to the cone of radius
+    /// `spread · t + margin` (a [`FatRay`]): a child box is entered when the box grown by the
+    /// cone's radius at its far side is, as [`FatRay::enter`] grows it, measured with the
+    /// rays' shortest direction (the largest radius any of them has there), so every box a
+    /// ray's cone enters is entered by that ray of the packet.
+    ///
+    /// # Panics
+    /// With more than [`PACKET`] directions.
+    #[inline]
+    pub fn fat(origin: Vec3, directions: &[Vec3], spread: f32, margin: f32) -> Self {
+        let mut packet = Self::new(origin, directions);
+        let inv_length = directions.iter().map(|d| 1.0 / d.length()).fold(0.0f32, f32::max);
+        packet.cone = Some((spread, margin, inv_length));
+        packet
     }
 
     /// The common origin.
@@ -308,6 +328,27 @@ fn children_of_rays_avx2<const KIND: u8>(
     (masks, near.to_array())
 }
 
+/// `node` with every child's box grown by the cone's radius at the box's far side (the
+/// arithmetic of [`crate::bvh8`]'s fat child test, operation for operation), for a packet's
+/// cones `(spread, margin, inv_length)` from `o`.
+#[inline(always)]
+fn grow(node: &RayBvhNode, o: Vec3, (spread, margin, inv_length): (f32, f32, f32)) -> RayBvhNode {
+    let mut grown = *node;
+    for i in 0..8 {
+        let lo = [node.lo[0][i], node.lo[1][i], node.lo[2][i]];
+        let hi = [node.hi[0][i], node.hi[1][i], node.hi[2][i]];
+        let c = |a: usize| ((lo[a] + hi[a]) * 0.5 - o[a]).abs();
+        let h = |a: usize| (hi[a] - lo[a]) * 0.5;
+        let far_t = ((c(0) + c(1)) + c(2) + ((h(0) + h(1)) + h(2))) * inv_length;
+        let g = spread * far_t + margin;
+        for a in 0..3 {
+            grown.lo[a][i] = lo[a] - g;
+            grown.hi[a][i] = hi[a] + g;
+        }
+    }
+    grown
+}
+
 /// The body of [`traverse_bvh_packet`], on AVX2 lanes when `avx2` is given.
 #[inline(always)]
 fn packet_body<const KIND: u8>(
@@ -343,10 +384,18 @@ fn packet_body<const KIND: u8>(
         if let Some((index, m)) = current.take() {
             counters.nodes_visited += 1;
             let node = &nodes[index as usize];
+            let grown;
+            let tested = match packet.cone {
+                Some(cone) => {
+                    grown = grow(node, packet.origin, cone);
+                    &grown
+                }
+                None => node,
+            };
             let (masks, near) = match avx2 {
                 #[cfg(target_arch = "x86_64")]
-                Some(a) => children_of_rays_avx2::<KIND>(a, packet, node, m, t_limit),
-                _ => children_of_rays_scalar(packet, node, m, t_limit),
+                Some(a) => children_of_rays_avx2::<KIND>(a, packet, tested, m, t_limit),
+                _ => children_of_rays_scalar(packet, tested, m, t_limit),
             };
             // Farthest first onto the stack, so the nearest pops first (insertion by entry;
             // equal entries keep lane order, the same on both paths).
@@ -385,7 +434,7 @@ mod tests {
     use super::*;
     use crate::raycast::intersect8_packet;
     use crate::raycast::tests::{soup, xorshift};
-    use crate::{RayBvhConfig, ShearedRay};
+    use crate::{traverse_bvh, RayBvhConfig, ShearedRay};
     use occult_core::Aabb;
 
     fn build(p: &[Vec3], t: &[[u32; 3]], leaf: usize) -> RayBvh {
@@ -523,6 +572,50 @@ mod tests {
             rounded * 200 < hit_rays,
             "{rounded} of {hit_rays} rays differ in rounding"
         );
+    }
+
+    /// A packet of cones hands each ray every leaf whose box that ray's own cone enters
+    /// before its bound (the bounds held fixed), on both paths alike.
+    #[test]
+    fn fat_packet_enters_every_box_its_cones_enter() {
+        let (p, t) = soup(600, 5);
+        let bvh = build(&p, &t, 4);
+        let mut rnd = xorshift(23);
+        let mut checked = 0;
+        for k in 0..60 {
+            let origin = Vec3::new(rnd(), rnd(), rnd()) * 30.0 - 10.0;
+            let centre = Vec3::new(rnd(), rnd(), rnd()) * 10.0 - origin * 0.2;
+            let dirs = tile(centre, [0.002, 0.05, 0.5][k % 3], k % 4 == 1);
+            let (spread, margin) = ([0.0, 1e-3, 2e-2][k % 3], [0.0, 1e-4, 0.05][(k / 3) % 3]);
+            let packet = RayPacket::fat(origin, &dirs, spread, margin);
+            let run = |scalar: bool| {
+                let mut limit = [25.0f32; PACKET];
+                let mut seen = vec![];
+                let mut c = TraversalCounters::default();
+                let f = |code: u32, rays: u64, _: &mut [f32; PACKET]| seen.push((code, rays));
+                if scalar {
+                    traverse_bvh_packet_scalar(&bvh, &packet, u64::MAX, &mut limit, &mut c, f);
+                } else {
+                    traverse_bvh_packet(&bvh, &packet, u64::MAX, &mut limit, &mut c, f);
+                }
+                seen
+            };
+            let seen = run(true);
+            assert_eq!(seen, run(false), "packet {k}: scalar and dispatched paths");
+            for (r, &d) in dirs.iter().enumerate() {
+                let ray = FatRay::new(origin, d, spread, margin);
+                let mut bound = 25.0f32;
+                let mut c = TraversalCounters::default();
+                traverse_bvh(&bvh, &ray, &mut bound, &mut c, |code, _, _, _, _| {
+                    checked += 1;
+                    assert!(
+                        seen.iter().any(|&(s, rays)| s == code && rays & (1 << r) != 0),
+                        "packet {k}, ray {r}: leaf {code} missed"
+                    );
+                });
+            }
+        }
+        assert!(checked > 1_000, "{checked}");
     }
 
     #[test]

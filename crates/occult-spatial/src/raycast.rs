@@ -278,6 +278,235 @@ impl ShearedRay {
     }
 }
 
+/// What [`ShearedRay::candidates8`] finds among up to 8 triangles (bit `i`: triangle `i`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Candidates8 {
+    /// The thin ray's hits with `t` in `[t_min, t_max]`, as [`ShearedRay::intersect8`] gives
+    /// them (the same bits).
+    pub hits: u32,
+    /// The hits' parameters (lane `i` where bit `i` of `hits` is set).
+    pub t: [f32; 8],
+    /// The triangles that may come within the cone around the ray (a superset of those that
+    /// do; see [`ShearedRay::candidates8`]).
+    pub close: u32,
+    /// Per close triangle, a parameter no greater than that of any of its points within the
+    /// cone: the triangle reaches the ray's path before a bound `b` only if this is `<= b`.
+    pub t_reach: [f32; 8],
+}
+
+impl ShearedRay {
+    /// The thin hits of [`ShearedRay::intersect8`] and, in the same pass over the corners, the
+    /// triangles that the cone of radius `spread · t + margin` around the ray may touch at a
+    /// parameter `t <= t_max`.
+    ///
+    /// Why it is conservative:
+    /// - A point at distance `r` across the ray, at parameter `t`, has the parameter `t ± r/|d_kz|`
+    ///   along the ray's major axis (`kz`), and every point of a triangle has at most its corners'
+    ///   greatest. So a point of the triangle within the cone lies at `t <= t_far`, where
+    ///   `t_far = (t_corner_max + margin/|d_kz|) / (1 − spread/|d_kz|)` (at most `t_max`, and
+    ///   `t_max` where `spread/|d_kz|` reaches a half); the
+    ///   radius there, `R = spread · t_far + margin`, bounds the cone wherever the triangle is in it.
+    /// - The shear projects along the ray onto the plane across its major axis, which moves a point
+    ///   at distance `R` from the ray to at most `R · |d| / |d_kz|` from it (`sec`). A triangle
+    ///   with a point that close to the ray has each sheared edge function, signed by the
+    ///   triangle's winding, at least `−R · sec · |edge|` at the ray (the function grows by `|edge|`
+    ///   per unit of distance), and `|edge|` is at most the sum of the edge's two component
+    ///   lengths. Each edge function is allowed besides four units of rounding of its two
+    ///   products. A degenerate projection (winding zero or NaN) is always close.
+    /// - Such a point's parameter is at least the corners' least along `kz`, less `R/|d_kz|`:
+    ///   `t_reach`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn candidates8(
+        &self,
+        tris: &[LeafTriangle],
+        active: u32,
+        spread: f32,
+        margin: f32,
+        t_min: f32,
+        t_max: f32,
+    ) -> Candidates8 {
+        let active = active & (((1u64 << tris.len().min(8)) - 1) as u32);
+        if active == 0 {
+            return Candidates8 {
+                hits: 0,
+                t: [0.0; 8],
+                close: 0,
+                t_reach: [0.0; 8],
+            };
+        }
+        #[cfg(target_arch = "x86_64")]
+        if let Some(avx2) = Isa::detected().avx2() {
+            // SAFETY: the token proves AVX2, the kernel's one feature.
+            return unsafe { self.candidates8_avx2(avx2, tris, active, spread, margin, t_min, t_max) };
+        }
+        self.candidates8_scalar(tris, active, spread, margin, t_min, t_max)
+    }
+
+    /// The constants of [`ShearedRay::candidates8`]'s cone: `(|1/d_kz|, 1 − spread/|d_kz|`
+    /// (`None` from a half down: a cone too wide to bound by the corners, taken at `t_max`),
+    /// `sec · (1 + 2⁻¹⁰))`.
+    #[inline(always)]
+    fn cone_constants(&self, spread: f32) -> (f32, Option<f32>, f32) {
+        let [sx, sy, sz] = self.s;
+        let inv_kz = sz.abs();
+        let lean = 1.0 - spread * inv_kz;
+        (
+            inv_kz,
+            (lean > 0.5).then_some(lean),
+            (1.0 + sx * sx + sy * sy).sqrt() * (1.0 + 1.0 / 1024.0),
+        )
+    }
+
+    /// [`ShearedRay::candidates8`] one triangle at a time (the same operations as the AVX2
+    /// lanes, so the same bits).
+    #[allow(clippy::too_many_arguments)]
+    pub fn candidates8_scalar(
+        &self,
+        tris: &[LeafTriangle],
+        active: u32,
+        spread: f32,
+        margin: f32,
+        t_min: f32,
+        t_max: f32,
+    ) -> Candidates8 {
+        let (hits, t) = self.intersect8_scalar(tris, active, t_min, t_max);
+        let [kx, ky, kz] = self.k;
+        let [sx, sy, sz] = self.s;
+        let [ox, oy, oz] = self.origin;
+        let (inv_kz, lean, sec) = self.cone_constants(spread);
+        // The rules of the AVX2 minimum and maximum, so that the two paths give the same bits.
+        let min = |x: f32, y: f32| if x < y { x } else { y };
+        let max = |x: f32, y: f32| if x > y { x } else { y };
+        let mut close = 0;
+        let mut t_reach = [0f32; 8];
+        for (i, tri) in tris.iter().enumerate().take(8) {
+            if active & (1 << i) == 0 {
+                continue;
+            }
+            let rel = |v: &Vec3| {
+                let v: &[f32; 3] = v.as_ref();
+                (v[kx] - ox, v[ky] - oy, v[kz] - oz)
+            };
+            let p = &tri.corners;
+            let (a, b, c) = (rel(&p[0]), rel(&p[1]), rel(&p[2]));
+            let (ta, tb, tc) = (sz * a.2, sz * b.2, sz * c.2);
+            let t_far = match lean {
+                Some(lean) => (max(max(ta, tb), tc) + margin * inv_kz) / lean,
+                None => t_max,
+            };
+            let radius = spread * max(min(t_far, t_max), 0.0) + margin;
+            let r = radius * sec;
+            let (ax, ay) = (a.0 - sx * a.2, a.1 - sy * a.2);
+            let (bx, by) = (b.0 - sx * b.2, b.1 - sy * b.2);
+            let (cx, cy) = (c.0 - sx * c.2, c.1 - sy * c.2);
+            let edge = |px: f32, py: f32, qx: f32, qy: f32| {
+                let (m, n) = (qx * py, qy * px);
+                (
+                    m - n,
+                    r * ((px - qx).abs() + (py - qy).abs()) + ROUNDING * (m.abs() + n.abs()),
+                )
+            };
+            let (u, lu) = edge(bx, by, cx, cy);
+            let (v, lv) = edge(cx, cy, ax, ay);
+            let (w, lw) = edge(ax, ay, bx, by);
+            let det = u + v + w;
+            let signed = |e: f32| {
+                if det > 0.0 {
+                    e
+                } else if det < 0.0 {
+                    0.0 - e
+                } else {
+                    0.0
+                }
+            };
+            let far = signed(u) < 0.0 - lu || signed(v) < 0.0 - lv || signed(w) < 0.0 - lw;
+            if !far {
+                close |= 1 << i;
+                t_reach[i] = min(min(ta, tb), tc) - radius * inv_kz;
+            }
+        }
+        Candidates8 {
+            hits,
+            t,
+            close,
+            t_reach,
+        }
+    }
+
+    /// [`ShearedRay::candidates8`] in AVX2 lanes, for an `active` already limited to lanes
+    /// below `tris.len()`.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[allow(clippy::too_many_arguments)]
+    fn candidates8_avx2(
+        &self,
+        avx2: Avx2,
+        tris: &[LeafTriangle],
+        active: u32,
+        spread: f32,
+        margin: f32,
+        t_min: f32,
+        t_max: f32,
+    ) -> Candidates8 {
+        let [kx, ky, kz] = self.k;
+        let o = self.origin.map(|v| F32x8::splat(avx2, v));
+        // SAFETY: only `active` lanes are read, all below `tris.len()` (the caller's promise).
+        let rel = |corner: usize, axis: usize, o: F32x8| unsafe { gather_corner(avx2, tris, active, corner, axis) } - o;
+        let corners = [
+            [rel(0, kx, o[0]), rel(0, ky, o[1]), rel(0, kz, o[2])],
+            [rel(1, kx, o[0]), rel(1, ky, o[1]), rel(1, kz, o[2])],
+            [rel(2, kx, o[0]), rel(2, ky, o[1]), rel(2, kz, o[2])],
+        ];
+        let (hits, t) = self.finish8(avx2, corners, tris, active, t_min, t_max);
+        let (inv_kz, lean, sec) = self.cone_constants(spread);
+        let splat = |v: f32| F32x8::splat(avx2, v);
+        let [sx, sy, sz] = self.s.map(splat);
+        let [[a0, a1, a2], [b0, b1, b2], [c0, c1, c2]] = corners;
+        let (ta, tb, tc) = (sz * a2, sz * b2, sz * c2);
+        let t_far = match lean {
+            Some(lean) => (ta.max(tb).max(tc) + splat(margin) * splat(inv_kz)) / splat(lean),
+            None => splat(t_max),
+        };
+        let zero = F32x8::zero(avx2);
+        let radius = splat(spread) * t_far.min(splat(t_max)).max(zero) + splat(margin);
+        let r = radius * splat(sec);
+        let shear = |p: F32x8, q: F32x8, s: F32x8| p - s * q;
+        let (ax, ay) = (shear(a0, a2, sx), shear(a1, a2, sy));
+        let (bx, by) = (shear(b0, b2, sx), shear(b1, b2, sy));
+        let (cx, cy) = (shear(c0, c2, sx), shear(c1, c2, sy));
+        let rounding = splat(ROUNDING);
+        let edge = |px: F32x8, py: F32x8, qx: F32x8, qy: F32x8| {
+            let (m, n) = (qx * py, qy * px);
+            (
+                m - n,
+                r * ((px - qx).abs() + (py - qy).abs()) + rounding * (m.abs() + n.abs()),
+            )
+        };
+        let (u, lu) = edge(bx, by, cx, cy);
+        let (v, lv) = edge(cx, cy, ax, ay);
+        let (w, lw) = edge(ax, ay, bx, by);
+        let det = u + v + w;
+        let (pos, neg) = (det.gt(zero), det.lt(zero));
+        let signed = |e: F32x8| F32x8::select(pos, e, F32x8::select(neg, zero - e, zero));
+        let far = signed(u)
+            .lt(zero - lu)
+            .or(signed(v).lt(zero - lv))
+            .or(signed(w).lt(zero - lw));
+        let close = !far.bits() & active;
+        let t_reach = ta.min(tb).min(tc) - radius * splat(inv_kz);
+        Candidates8 {
+            hits,
+            t,
+            close,
+            t_reach: t_reach.keep(M32x8::from_bits(avx2, close)).to_array(),
+        }
+    }
+}
+
+/// Units of rounding allowed on each product of a sheared edge function in
+/// [`ShearedRay::candidates8`] (four units of the last place of `f32`).
+const ROUNDING: f32 = 4.0 * f32::EPSILON;
+
 /// Axis `axis` of corner `corner` of the `active` triangles of `tris`, in lanes.
 ///
 /// # Safety
@@ -1033,5 +1262,92 @@ pub(crate) mod tests {
         assert!(FatRay::new(Vec3::new(1.05, 0.5, 5.0), -Vec3::Z, 0.0, 0.1)
             .enter(&b)
             .is_some());
+    }
+
+    /// `candidates8`: the thin hits of `intersect8`, the scalar and AVX2 paths the same bits,
+    /// and every triangle with a point within the radius of the ray marked close, with a
+    /// corner parameter no more than the slack past that point's parameter. Triangles of every
+    /// size, some edge-on, around rays of every direction.
+    #[test]
+    fn candidates_hold_every_triangle_within_the_radius() {
+        let mut rnd = xorshift(31);
+        let (mut near, mut far) = (0, 0);
+        for k in 0..3000 {
+            let origin = Vec3::new(rnd(), rnd(), rnd()) * 20.0 - 10.0;
+            let mut dir = Vec3::new(rnd(), rnd(), rnd()) * 2.0 - 1.0;
+            if k % 7 == 0 {
+                dir.y = 0.0;
+            }
+            let dir = dir * [1.0, 0.01, 30.0][k % 3];
+            let sheared = ShearedRay::new(origin, dir);
+            let (spread, margin) = [(1e-4, 1e-5), (3e-3, 0.0), (0.0, 0.2)][(k / 3) % 3];
+            let radius = spread * 40.0 + margin;
+            let scale = [0.02, 1.0, 20.0][(k / 9) % 3];
+            let tris: Vec<LeafTriangle> = (0..8)
+                .map(|j| {
+                    // Around a point of the ray, often within a few radii of it.
+                    let at = origin + dir * (rnd() * 40.0 / dir.length());
+                    let off = (Vec3::new(rnd(), rnd(), rnd()) - 0.5) * radius * 6.0;
+                    let mut c = [0; 3].map(|_| at + off + (Vec3::new(rnd(), rnd(), rnd()) - 0.5) * scale);
+                    if j == 3 {
+                        // Edge-on: the ray's direction lies in its plane.
+                        c[2] = c[0] + dir * (rnd() * scale / dir.length());
+                    }
+                    LeafTriangle {
+                        corners: c,
+                        normal: (c[1] - c[0]).cross(c[2] - c[0]),
+                    }
+                })
+                .collect();
+            let active = 0xff >> (k % 3);
+            // The parameters of lanes without a hit are unspecified.
+            let hit_t = |hits: u32, t: [f32; 8]| {
+                (
+                    hits,
+                    std::array::from_fn::<_, 8, _>(|i| (hits >> i & 1 != 0).then_some(t[i])),
+                )
+            };
+            let got = sheared.candidates8(&tris, active, spread, margin, 0.0, 1e9);
+            let scalar = sheared.candidates8_scalar(&tris, active, spread, margin, 0.0, 1e9);
+            assert_eq!((got.close, got.t_reach), (scalar.close, scalar.t_reach), "ray {k}");
+            assert_eq!(hit_t(got.hits, got.t), hit_t(scalar.hits, scalar.t), "ray {k}");
+            let (hits, t) = sheared.intersect8(&tris, active, 0.0, 1e9);
+            assert_eq!(hit_t(got.hits, got.t), hit_t(hits, t), "ray {k}");
+            let d = dir.as_dvec3().normalize();
+            let o = origin.as_dvec3();
+            for (i, tri) in tris.iter().enumerate().filter(|&(i, _)| active & (1 << i) != 0) {
+                let c = tri.corners.map(|v| v.as_dvec3());
+                // The point of a grid over the triangle deepest inside the cone: its distance
+                // across the ray less the cone's radius there, and its parameter.
+                let mut best = (f64::INFINITY, 0.0);
+                for a in 0..=40 {
+                    for b in 0..=(40 - a) {
+                        let (wa, wb) = (a as f64 / 40.0, b as f64 / 40.0);
+                        let p = c[0] + (c[1] - c[0]) * wa + (c[2] - c[0]) * wb;
+                        let along = (p - o).dot(d);
+                        let t = along / dir.as_dvec3().length();
+                        let across = ((p - o) - d * along).length() - (spread as f64 * t.max(0.0) + margin as f64);
+                        if across < best.0 {
+                            best = (across, t);
+                        }
+                    }
+                }
+                if best.0 <= 0.0 && best.1 >= 0.0 {
+                    near += 1;
+                    assert!(got.close & (1 << i) != 0, "ray {k}, triangle {i}: {best:?} not close");
+                    assert!(
+                        got.t_reach[i] as f64 <= best.1 + 1e-5 * best.1.abs(),
+                        "ray {k}, triangle {i}: reached at {} past {best:?}",
+                        got.t_reach[i]
+                    );
+                } else if best.0 > 3.0 * radius as f64 + 0.05 * scale as f64 {
+                    far += (got.close & (1 << i) == 0) as u32;
+                }
+            }
+        }
+        // Some triangles near the ray, and most of those clearly away from it left out (the
+        // test is not "everything is close").
+        assert!(near > 2000, "{near}");
+        assert!(far > 3000, "{far}");
     }
 }

@@ -57,12 +57,26 @@ identical_on_every_generator! {
         "lzb:payoff=off,caster=bvh,bvh_leaf=8,plane=static,plane_fraction=0.0001,pvl=triangles",
         1
     );
+    /// The triangles the rays' cones may touch, cast in packets: with the cost plane, then with
+    /// everything to the rays, every unfinished pixel cast, and with leaves of one triangle and
+    /// group octrees of one instance a leaf (the packets' enclosing cone at its tightest).
+    hit_pvl_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("lzb:payoff=off,pvl=hits", 1);
+    hit_pvl_everything_behind_the_plane_is_identical_on_every_generator: assert_variant_identical_on_every_generator(
+        "lzb:payoff=off,pvl=hits,plane=static,plane_fraction=0.0001,oor=off",
+        2
+    );
+    hit_pvl_small_leaves_is_identical_on_every_generator: assert_variant_identical_on_every_generator(
+        "lzb:payoff=off,pvl=hits,bvh_leaf=1,group_leaf=1,plane=static,plane_fraction=0.0001",
+        0
+    );
 }
 
 #[test]
 fn identical_on_paths() {
     for algo in [
         "lzb",
+        "lzb:pvl=hits",
         "lzb:payoff=off,select=all,oor=off",
         "lzb:payoff=off,plane=static,plane_fraction=0.3,select=static",
         "lzb:payoff=off,caster=bvh,plane=static,plane_fraction=0.3",
@@ -157,6 +171,8 @@ const RAY_HEAVY: &[&str] = &[
     "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=static,k=1,caster=bvh",
     "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=all,caster=bvh,bvh_leaf=1",
     "lzb:payoff=off,plane=static,plane_fraction=0.0001,caster=bvh,bvh_leaf=8,coherence=off",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,pvl=hits",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,pvl=hits,bvh_leaf=1,oor=off",
 ];
 
 #[test]
@@ -352,6 +368,9 @@ fn bad_parameters_are_errors() {
         ("lzb:leaf=many", "leaf"),
         ("lzb:mode=naive,payoff=on", "payoff"),
         ("lzb:packets=on", "mode=naive"),
+        ("lzb:pvl=hits,packets=off", "packets=on"),
+        ("lzb:pvl=hits,caster=octree", "caster=bvh"),
+        ("lzb:mode=naive,pvl=hits", "mode=lazy"),
         ("lzb:mode=naive,caster=octree,packets=on", "caster=bvh"),
         ("lzb:mode=naive,packets=maybe", "packets"),
         ("lzb:payoff=maybe", "payoff"),

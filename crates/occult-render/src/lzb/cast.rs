@@ -23,6 +23,10 @@ pub(super) struct InstanceRec {
 /// Relative depth margin past a robust hit (§III.A's "current leaf", made conservative): the
 /// rasterizer's winner at the pixel may lie slightly behind the ray's hit by rounding.
 pub(super) const DEPTH_EPS: f32 = 2e-3;
+/// The cone of a `pvl=hits` ray, as a share of the lazy rays' (1/8 pixel): 1/64 pixel, four
+/// times the most that vertex snapping (1/256 pixel) moves an edge. Its triangles are recorded
+/// one by one, so a narrower cone records fewer; the lazy rays' leaves are recorded whole.
+const HITS_SPREAD: f32 = 1.0 / 8.0;
 /// A robust hit covers the pixel centre by at least this many pixels on every edge.
 const EDGE_MARGIN_PX: f64 = 1.0 / 32.0;
 /// With `caster=bvh`, the next ray's coherence start (§III.D) is the BVH subtree this many
@@ -59,6 +63,9 @@ pub(super) struct Caster<'a> {
     ctx: &'a FrameCtx,
     /// PVL entries `(instance first item, leaf)`, without duplicates.
     pub pvl: HashSet<(ItemId, u32), FxBuild>,
+    /// `pvl=hits`: PVL entries `(instance first item, triangle)`, without duplicates within a
+    /// packet (the frame's list is sorted and made unique once).
+    pub pvl_hits: Vec<(ItemId, u32)>,
     /// The instances the PVL names.
     pub instances: HashMap<ItemId, InstanceRec, FxBuild>,
     /// First hits of naive rays `(pixel index, depth, item)`.
@@ -83,6 +90,29 @@ pub(super) struct Caster<'a> {
     pixel: (f32, f32),
     best: Option<(f32, ItemId)>,
     naive: bool,
+    /// `pvl=hits`: the mesh instances the current packet met.
+    hit_met: Vec<HitMet>,
+    /// `pvl=hits`: the current packet's close triangles (`Cand`).
+    cands: Vec<Cand>,
+}
+
+/// A mesh instance a packet of `pvl=hits` rays met.
+struct HitMet {
+    base: ItemId,
+    node: NodeId,
+    world_from_object: Affine3A,
+    recorded: bool,
+}
+
+/// A triangle that a ray's cone may touch (`pvl=hits`): the ray, the instance (index into
+/// `hit_met`), the triangle's index in its mesh, and the parameter the ray's final bound must
+/// reach for the triangle to be on its path (its corners' least parameter less the slack).
+#[derive(Clone, Copy)]
+struct Cand {
+    ray: u8,
+    met: u32,
+    triangle: u32,
+    t_reach: f32,
 }
 
 impl<'a> Caster<'a> {
@@ -91,6 +121,7 @@ impl<'a> Caster<'a> {
             lzb,
             ctx,
             pvl: HashSet::default(),
+            pvl_hits: Vec::new(),
             instances: HashMap::default(),
             hits: Vec::new(),
             counters: TraversalCounters::default(),
@@ -107,6 +138,8 @@ impl<'a> Caster<'a> {
             pixel: (0.0, 0.0),
             best: None,
             naive,
+            hit_met: Vec::new(),
+            cands: Vec::new(),
         }
     }
 
@@ -202,6 +235,255 @@ impl<'a> Caster<'a> {
         }
     }
 
+    /// Casts the lazy rays of up to [`PACKET`] neighbouring pixels together with `pvl=hits`
+    /// (not in the paper): each ray a cone of radius 1/8 pixel around the pixel centre's ray,
+    /// bounded by its first robust hit (§III.A's rule), records the triangles its cone may
+    /// touch no farther than that bound ([`ShearedRay::candidates8`]) instead of the leaves
+    /// it enters. The rays walk each mesh's BVH as one packet of cones
+    /// ([`RayPacket::fat`]) and a group's octree as one cone that holds them all.
+    ///
+    /// Why the PVL is still exact: the triangle the rasterizer shows at a pixel centre covers
+    /// it (vertex snapping moves an edge by at most 1/256 pixel), so it lies within the cone
+    /// there, in a leaf whose box the cone enters; it is no farther than the robust hit, which
+    /// the rasterizer surely draws there, plus the depth margin; so it is close, within reach
+    /// of the final bound, and recorded.
+    pub fn cast_packet_hits(&mut self, pixels: &[u32], width: u32) {
+        debug_assert!(!self.naive && pixels.len() <= PACKET);
+        if pixels.is_empty() {
+            return;
+        }
+        self.rays += pixels.len() as u64;
+        self.visited.clear();
+        self.hit_met.clear();
+        self.cands.clear();
+        let mut dirs = [Vec3::ZERO; PACKET];
+        let mut centres = [(0f32, 0f32); PACKET];
+        for ((d, c), &i) in dirs.iter_mut().zip(&mut centres).zip(pixels) {
+            *c = ((i % width) as f32 + 0.5, (i / width) as f32 + 0.5);
+            *d = self.ctx.pixel_direction(c.0, c.1);
+        }
+        let mut rays = HitRays {
+            t_limit: [self.ctx.far * (1.0 + DEPTH_EPS); PACKET],
+            resolved: 0,
+            centres,
+        };
+        let all = u64::MAX >> (PACKET - pixels.len());
+        let root = self.lzb.scene.root();
+        self.visit_packet_hits(
+            root,
+            self.ctx.eye,
+            &dirs,
+            all,
+            self.ctx.spread * HITS_SPREAD,
+            &Affine3A::IDENTITY,
+            0,
+            &mut rays,
+        );
+        self.resolved += u64::from(rays.resolved.count_ones());
+        let first = self.pvl_hits.len();
+        for c in &self.cands {
+            if c.t_reach <= rays.t_limit[c.ray as usize] {
+                let met = &mut self.hit_met[c.met as usize];
+                self.pvl_hits.push((met.base, c.triangle));
+                met.recorded = true;
+            }
+        }
+        // Neighbouring rays record mostly the same triangles.
+        self.pvl_hits[first..].sort_unstable();
+        let mut kept = first;
+        for k in first..self.pvl_hits.len() {
+            if kept == first || self.pvl_hits[k] != self.pvl_hits[kept - 1] {
+                self.pvl_hits[kept] = self.pvl_hits[k];
+                kept += 1;
+            }
+        }
+        self.pvl_hits.truncate(kept);
+        for met in self.hit_met.iter().filter(|m| m.recorded) {
+            self.instances.entry(met.base).or_insert(InstanceRec {
+                node: met.node,
+                world_from_object: met.world_from_object,
+            });
+        }
+    }
+
+    /// Casts the `pvl=hits` cones `o + t·dirs[r]` (node space, radius `spread · t` plus a
+    /// rounding margin) named by `mask` through node `id`, placed by `world_from_node`, whose
+    /// first item is `base`.
+    #[allow(clippy::too_many_arguments)]
+    fn visit_packet_hits(
+        &mut self,
+        id: NodeId,
+        o: Vec3,
+        dirs: &[Vec3; PACKET],
+        mask: u64,
+        spread: f32,
+        world_from_node: &Affine3A,
+        base: ItemId,
+        rays: &mut HitRays,
+    ) {
+        let lzb = self.lzb;
+        let margin = |b: &Aabb| ABS_EPS * (b.min.abs().max(b.max.abs()).max_element() + o.abs().max_element());
+        let mut counters = TraversalCounters::default();
+        match &lzb.accel[id.index()] {
+            Accel::Empty => {}
+            Accel::Mesh {
+                octree, bvh: Some(b), ..
+            } => {
+                let count = 64 - mask.leading_zeros() as usize;
+                let margin = margin(&octree.bounds());
+                let packet = RayPacket::fat(o, &dirs[..count], spread, margin);
+                let clip = self.ctx.view.clip_from_object(world_from_node);
+                let w_row = row_w(&clip);
+                // Nothing of a mesh that reaches no nearer than the near limit is the near pass's.
+                let any_near = self.ctx.is_near(w_row, &octree.bounds());
+                let mut sheared = [ShearedRay::new(o, Vec3::X); PACKET];
+                let mut made = 0u64;
+                let mut met: Option<u32> = None;
+                traverse_bvh_packet(
+                    &b.bvh,
+                    &packet,
+                    mask,
+                    &mut rays.t_limit,
+                    &mut counters,
+                    |leaf, m, t_limit| {
+                        shear_new_rays(&mut sheared, &mut made, m, o, dirs);
+                        let range = RayBvh::leaf_range(leaf);
+                        let tris = b.bvh.leaf_triangles(leaf);
+                        let ids = &b.bvh.triangles()[range];
+                        self.tri_tests += u64::from(m.count_ones()) * tris.len() as u64;
+                        let mut rest = m;
+                        while rest != 0 {
+                            let r = rest.trailing_zeros() as usize;
+                            rest &= rest - 1;
+                            let c = sheared[r].candidates8(tris, 0xff, spread, margin, 0.0, t_limit[r]);
+                            let mut close = c.close;
+                            while close != 0 {
+                                let i = close.trailing_zeros() as usize;
+                                close &= close - 1;
+                                // A triangle wholly nearer than the near limit is the near pass's.
+                                if any_near && self.ctx.is_wholly_near(w_row, &Aabb::from_points(tris[i].corners)) {
+                                    continue;
+                                }
+                                let m = *met.get_or_insert_with(|| {
+                                    self.hit_met.push(HitMet {
+                                        base,
+                                        node: id,
+                                        world_from_object: *world_from_node,
+                                        recorded: false,
+                                    });
+                                    (self.hit_met.len() - 1) as u32
+                                });
+                                self.cands.push(Cand {
+                                    ray: r as u8,
+                                    met: m,
+                                    triangle: ids[i],
+                                    t_reach: c.t_reach[i],
+                                });
+                            }
+                            // The hits nearest first: the first robust one lowers the bound
+                            // past every farther one.
+                            let mut hits = c.hits;
+                            while hits != 0 {
+                                let mut i = hits.trailing_zeros() as usize;
+                                let mut rest = hits & (hits - 1);
+                                while rest != 0 {
+                                    let j = rest.trailing_zeros() as usize;
+                                    rest &= rest - 1;
+                                    if c.t[j] < c.t[i] {
+                                        i = j;
+                                    }
+                                }
+                                hits &= !(1 << i);
+                                let t = c.t[i];
+                                if t * (1.0 + DEPTH_EPS) >= t_limit[r] {
+                                    break;
+                                }
+                                if self.robust(&clip, tris[i].corners, t, rays.centres[r]) {
+                                    t_limit[r] = t * (1.0 + DEPTH_EPS);
+                                    rays.resolved |= 1 << r;
+                                    break;
+                                }
+                            }
+                        }
+                    },
+                );
+            }
+            Accel::Mesh { bvh: None, .. } => unreachable!("pvl=hits needs caster=bvh (options)"),
+            Accel::Group {
+                octree,
+                bounds,
+                child_from_parent,
+                stretch,
+            } => {
+                let node = lzb.scene.node(id);
+                let instances = node.instances();
+                self.serial += 1;
+                let serial = self.serial;
+                let margin = margin(&octree.bounds());
+                let cone = enclosing_cone(o, dirs, mask, spread, margin);
+                let mut cone_limit = max_limit(&rays.t_limit, mask);
+                let mut cones = [FatRay::new(o, Vec3::X, 0.0, 0.0); PACKET];
+                let mut rest = mask;
+                while rest != 0 {
+                    let r = rest.trailing_zeros() as usize;
+                    rest &= rest - 1;
+                    cones[r] = FatRay::new(o, dirs[r], spread, margin);
+                }
+                traverse(
+                    octree,
+                    &cone,
+                    &mut cone_limit,
+                    &mut counters,
+                    |leaf, _, _, cone_limit| {
+                        for &i in octree.leaf_primitives(leaf) {
+                            // Mailbox: an instance spanning several leaves is cast once per packet.
+                            if !self.visited.insert((serial, i)) {
+                                continue;
+                            }
+                            let i = i as usize;
+                            // The cones that enter the instance's box before their bounds: none
+                            // where the cone holding them all does not.
+                            if !cone.enter(&bounds[i]).is_some_and(|(e, _)| e <= *cone_limit) {
+                                continue;
+                            }
+                            let mut sub = 0u64;
+                            let mut rest = mask;
+                            while rest != 0 {
+                                let r = rest.trailing_zeros() as usize;
+                                rest &= rest - 1;
+                                let enters = cones[r].enter(&bounds[i]).is_some_and(|(e, _)| e <= rays.t_limit[r]);
+                                sub |= u64::from(enters) << r;
+                            }
+                            if sub == 0 {
+                                continue;
+                            }
+                            let cfp = &child_from_parent[i];
+                            let mut child_dirs = [Vec3::ZERO; PACKET];
+                            let count = 64 - sub.leading_zeros() as usize;
+                            for (c, d) in child_dirs.iter_mut().zip(&dirs[..count]) {
+                                *c = cfp.transform_vector3(*d);
+                            }
+                            let world_from_child = compose(world_from_node, &instances[i].parent_from_child);
+                            self.visit_packet_hits(
+                                instances[i].child,
+                                cfp.transform_point3(o),
+                                &child_dirs,
+                                sub,
+                                spread * stretch[i],
+                                &world_from_child,
+                                base + node.item_offset(i),
+                                rays,
+                            );
+                            *cone_limit = max_limit(&rays.t_limit, mask);
+                        }
+                    },
+                );
+            }
+        }
+        self.counters.nodes_visited += counters.nodes_visited;
+        self.counters.leaves_visited += counters.leaves_visited;
+    }
+
     /// Casts the rays `o + t·dirs[r]` (node space) named by `mask` through node `id`, whose
     /// first item is `base`.
     fn visit_packet(&mut self, id: NodeId, o: Vec3, dirs: &[Vec3; PACKET], mask: u64, base: ItemId, rays: &mut Rays) {
@@ -222,13 +504,7 @@ impl<'a> Caster<'a> {
                     &mut rays.t_limit,
                     &mut counters,
                     |leaf, m, t_limit| {
-                        let mut new = m & !made;
-                        made |= m;
-                        while new != 0 {
-                            let r = new.trailing_zeros() as usize;
-                            new &= new - 1;
-                            sheared[r] = ShearedRay::new(o, dirs[r]);
-                        }
+                        shear_new_rays(&mut sheared, &mut made, m, o, dirs);
                         let range = RayBvh::leaf_range(leaf);
                         let tris = b.bvh.leaf_triangles(leaf);
                         self.tri_tests += u64::from(m.count_ones()) * tris.len() as u64;
@@ -271,7 +547,7 @@ impl<'a> Caster<'a> {
                 let instances = node.instances();
                 self.serial += 1;
                 let serial = self.serial;
-                let cone = enclosing_cone(o, dirs, mask);
+                let cone = enclosing_cone(o, dirs, mask, 0.0, 0.0);
                 let mut cone_limit = max_limit(&rays.t_limit, mask);
                 traverse(
                     octree,
@@ -444,7 +720,7 @@ impl<'a> Caster<'a> {
                         self.best = Some((hit_t, base + ids[8 * c + i] as u64));
                     }
                     best = Some(hit_t);
-                } else if self.robust(clip_from_object, chunk[i].corners, hit_t) {
+                } else if self.robust(clip_from_object, chunk[i].corners, hit_t, self.pixel) {
                     best = Some(hit_t);
                 }
             }
@@ -452,11 +728,11 @@ impl<'a> Caster<'a> {
         best
     }
 
-    /// True when the rasterizer surely draws this triangle at the current pixel centre: every
+    /// True when the rasterizer surely draws this triangle at pixel centre `pixel`: every
     /// corner well in front of the near plane, the centre inside every projected edge by
     /// [`EDGE_MARGIN_PX`] (vertex snapping moves edges by at most 1/256 pixel), facing right when
     /// back faces are culled, and the hit nearer than the far plane.
-    fn robust(&self, clip_from_object: &Mat4, tri: [Vec3; 3], t: f32) -> bool {
+    fn robust(&self, clip_from_object: &Mat4, tri: [Vec3; 3], t: f32, pixel: (f32, f32)) -> bool {
         let ctx = self.ctx;
         if t.is_nan() || t * (1.0 + DEPTH_EPS) >= ctx.far {
             return false;
@@ -474,7 +750,7 @@ impl<'a> Caster<'a> {
             }
             s[k] = (x, y);
         }
-        let (px, py) = (self.pixel.0 as f64, self.pixel.1 as f64);
+        let (px, py) = (pixel.0 as f64, pixel.1 as f64);
         let area = (s[1].0 - s[0].0) * (s[2].1 - s[0].1) - (s[2].0 - s[0].0) * (s[1].1 - s[0].1);
         if area == 0.0 || !area.is_finite() {
             return false;
@@ -506,7 +782,7 @@ impl<'a> Caster<'a> {
             let Accel::Mesh { octree, refs, bvh, .. } = &lzb.accel[met.node.index()] else {
                 continue;
             };
-            if !lzb.opts.pvl_triangles {
+            if lzb.opts.pvl == super::Pvl::Leaves {
                 // The leaf (with `caster=bvh` a BVH leaf of a few triangles, listed when the
                 // PVL is assembled).
                 self.pvl.insert((met.base, leaf));
@@ -710,6 +986,14 @@ pub(super) fn row_w(m: &Mat4) -> Vec4 {
     Vec4::new(m.x_axis.w, m.y_axis.w, m.z_axis.w, m.w_axis.w)
 }
 
+/// The bounds of the cones of a `pvl=hits` packet (`Caster::cast_packet_hits`), the set of
+/// those that met a robust hit, and their pixel centres.
+struct HitRays {
+    t_limit: [f32; PACKET],
+    resolved: u64,
+    centres: [(f32, f32); PACKET],
+}
+
 /// The bounds and first hits of the rays of a packet (`Caster::cast_packet`).
 struct Rays {
     t_limit: [f32; PACKET],
@@ -737,6 +1021,18 @@ impl PacketHit {
     }
 }
 
+/// Makes the shear of each ray of `m` not in `made` yet (when it first reaches a leaf).
+#[inline]
+fn shear_new_rays(sheared: &mut [ShearedRay; PACKET], made: &mut u64, m: u64, o: Vec3, dirs: &[Vec3; PACKET]) {
+    let mut new = m & !*made;
+    *made |= m;
+    while new != 0 {
+        let r = new.trailing_zeros() as usize;
+        new &= new - 1;
+        sheared[r] = ShearedRay::new(o, dirs[r]);
+    }
+}
+
 /// The largest bound among the rays of `mask`.
 fn max_limit(t_limit: &[f32; PACKET], mask: u64) -> f32 {
     let mut m = f32::NEG_INFINITY;
@@ -754,8 +1050,10 @@ fn max_limit(t_limit: &[f32; PACKET], mask: u64) -> f32 {
 /// `max |d_r − c|`, scaled by `|c| / min |d_r|` because [`FatRay::enter`] measures a box's far
 /// side along `c` while a ray reaches a point at `t` along its own, longer or shorter,
 /// direction; then widened by a thousandth against rounding. Every box a ray enters at `t_e`
-/// is entered by the cone no later than `t_e`.
-fn enclosing_cone(o: Vec3, dirs: &[Vec3; PACKET], mask: u64) -> FatRay {
+/// is entered by the cone no later than `t_e`. With cones around the rays (radius
+/// `ray_spread · t + ray_margin`): their directions reach `ray_spread` farther from `c` and
+/// may be that much shorter, and the margin adds to the cone's.
+fn enclosing_cone(o: Vec3, dirs: &[Vec3; PACKET], mask: u64, ray_spread: f32, ray_margin: f32) -> FatRay {
     let (mut sum, mut n) = (Vec3::ZERO, 0.0f32);
     let mut rest = mask;
     while rest != 0 {
@@ -773,8 +1071,8 @@ fn enclosing_cone(o: Vec3, dirs: &[Vec3; PACKET], mask: u64) -> FatRay {
         spread = spread.max((dirs[r] - c).length());
         shortest = shortest.min(dirs[r].length());
     }
-    let spread = spread * (c.length() / shortest).max(1.0) * 1.001 + c.length() * 1e-6;
-    FatRay::new(o, c, spread, ABS_EPS * (o.abs().max_element() + 1.0))
+    let spread = (spread + ray_spread) * (c.length() / (shortest - ray_spread)).max(1.0) * 1.001 + c.length() * 1e-6;
+    FatRay::new(o, c, spread, ABS_EPS * (o.abs().max_element() + 1.0) + ray_margin)
 }
 
 #[cfg(test)]
@@ -814,7 +1112,7 @@ mod tests {
                 dirs = dirs.map(|d| m * d);
             }
             let mask = u64::MAX >> rng.random_range(0..40);
-            let cone = enclosing_cone(o, &dirs, mask);
+            let cone = enclosing_cone(o, &dirs, mask, 0.0, 0.0);
             for _ in 0..50 {
                 // Near a ray of the packet, often at its edge: some rays enter, some miss.
                 let r = rng.random_range(0..PACKET - mask.leading_zeros() as usize);

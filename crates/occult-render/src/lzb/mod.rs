@@ -103,7 +103,7 @@ mod options;
 mod plane;
 pub mod shared;
 
-pub use options::{CasterKind, LzbOptions, Mode, Plane, Selection, INFO};
+pub use options::{CasterKind, LzbOptions, Mode, Plane, Pvl, Selection, INFO};
 pub use plane::cost_plane;
 
 use std::sync::Arc;
@@ -1179,7 +1179,11 @@ impl Lzb {
                             // The pixels come in 8×8 tiles (step 4), so a run of 64 is one
                             // tile or a few rows of neighbours.
                             for packet in chunk.chunks(occult_spatial::PACKET) {
-                                caster.cast_packet(packet, w);
+                                if naive {
+                                    caster.cast_packet(packet, w);
+                                } else {
+                                    caster.cast_packet_hits(packet, w);
+                                }
                             }
                         } else {
                             for &i in chunk {
@@ -1207,6 +1211,7 @@ impl Lzb {
             ray_nodes += c.counters.nodes_visited;
             leaves += c.counters.leaves_visited;
             pairs.extend(c.pvl.iter().copied());
+            pairs.extend(&c.pvl_hits);
             recs.extend(c.instances.iter().map(|(k, v)| (*k, *v)));
             hits.extend(c.hits);
         }
@@ -1247,10 +1252,10 @@ impl Lzb {
                 .map(|(key, r)| (recs[&key], key, r))
                 .collect();
             let pvl_leaves: Vec<u32> = pairs.iter().map(|&(_, l)| l).collect();
-            let entries = match (self.opts.pvl_triangles, self.opts.caster) {
-                (true, _) => Entries::Triangles,
-                (false, CasterKind::Bvh) => Entries::BvhLeaves,
-                (false, CasterKind::Octree) => Entries::OctreeLeaves,
+            let entries = match (self.opts.pvl, self.opts.caster) {
+                (Pvl::Triangles | Pvl::Hits, _) => Entries::Triangles,
+                (Pvl::Leaves, CasterKind::Bvh) => Entries::BvhLeaves,
+                (Pvl::Leaves, CasterKind::Octree) => Entries::OctreeLeaves,
             };
             let counter = if entries == Entries::Triangles {
                 "pvl_entries_triangles"

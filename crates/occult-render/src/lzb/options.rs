@@ -31,7 +31,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc {
             key: "packets",
             default: "off",
-            help: "naive rays of up to 64 neighbouring pixels (8x8 tiles) cast together: one packet through each mesh's BVH, each ray tested as alone, one cone through a group's octree (not in the paper); on by default in naive mode, where on needs caster=bvh (refused otherwise, and in lazy mode, whose cone rays go one at a time); off: one ray at a time",
+            help: "rays of up to 64 neighbouring pixels (8x8 tiles) cast together: one packet through each mesh's BVH, each ray tested as alone, one cone through a group's octree (not in the paper); on by default in naive mode and with pvl=hits, and needs one of them and caster=bvh (refused otherwise: lazy rays that record leaves go one at a time); off: one ray at a time",
         },
         ParamDoc {
             key: "group_leaf",
@@ -86,7 +86,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc {
             key: "pvl",
             default: "leaves",
-            help: "what a ray records: leaves (§III.A, every leaf on its path) or triangles (those of the path's leaves whose box the ray's cone enters before its bound)",
+            help: "what a ray records: leaves (§III.A, every leaf on its path), triangles (those of the path's leaves whose box the ray's cone enters before its bound) or hits (the triangles the ray's cone of 1/8 pixel may touch before its bound: triangle-exact; the rays go in packets, so it needs caster=bvh, the default with it, and packets=on, its default; select= is not used: every triangle may end a ray; not in the paper)",
         },
         ParamDoc {
             key: "coherence",
@@ -203,7 +203,7 @@ pub struct LzbOptions {
     pub caster: CasterKind,
     /// Max triangles per BVH leaf (`caster=bvh`).
     pub bvh_leaf: usize,
-    /// Naive rays cast in packets of neighbouring pixels (`caster=bvh`, `mode=naive`).
+    /// Rays cast in packets of neighbouring pixels (`caster=bvh`; `mode=naive` or `pvl=hits`).
     pub packets: bool,
     /// Ray mode.
     pub mode: Mode,
@@ -225,8 +225,8 @@ pub struct LzbOptions {
     pub oor: bool,
     /// Coherence start.
     pub coherence: bool,
-    /// Rays record triangles instead of whole leaves.
-    pub pvl_triangles: bool,
+    /// What a lazy ray records.
+    pub pvl: Pvl,
     /// Abandon frames whose rays do not pay, and draw frames directly while they do not
     /// (lazy mode only).
     pub payoff: bool,
@@ -238,6 +238,17 @@ pub struct LzbOptions {
     /// Drop the far leaves hidden behind the near set before object-oriented ray casting
     /// (not in the paper; needs `oor`).
     pub far_cull: bool,
+}
+
+/// What a lazy ray records into the PVL.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Pvl {
+    /// Every leaf on its path (§III.A).
+    Leaves,
+    /// The triangles of those leaves whose box its cone enters before its bound.
+    Triangles,
+    /// The triangles its cone may touch before its bound (triangle-exact).
+    Hits,
 }
 
 impl Default for LzbOptions {
@@ -256,6 +267,11 @@ impl LzbOptions {
             "naive" => Mode::Naive,
             _ => Mode::Lazy,
         };
+        let pvl = match p.choice("pvl", &["leaves", "triangles", "hits"], "leaves")? {
+            "triangles" => Pvl::Triangles,
+            "hits" => Pvl::Hits,
+            _ => Pvl::Leaves,
+        };
         let o = Self {
             leaf: p.get("leaf", 150usize)?,
             depth: p.get("depth", 10u32)?,
@@ -265,7 +281,11 @@ impl LzbOptions {
             caster: match p.choice(
                 "caster",
                 &["bvh", "octree"],
-                if mode == Mode::Lazy { "octree" } else { "bvh" },
+                if mode == Mode::Lazy && pvl != Pvl::Hits {
+                    "octree"
+                } else {
+                    "bvh"
+                },
             )? {
                 "octree" => CasterKind::Octree,
                 _ => CasterKind::Bvh,
@@ -296,7 +316,7 @@ impl LzbOptions {
             plane_reuse: p.get("plane_reuse", 8u32)?,
             oor: p.flag("oor", true)?,
             coherence: p.flag("coherence", true)?,
-            pvl_triangles: p.choice("pvl", &["leaves", "triangles"], "leaves")? == "triangles",
+            pvl,
             payoff: p.flag("payoff", mode == Mode::Lazy)?,
             near_cull: p.flag("near_cull", true)?,
             near_temporal: false,
@@ -304,7 +324,10 @@ impl LzbOptions {
         };
         let o = Self {
             near_temporal: p.flag("near_temporal", o.near_cull)?,
-            packets: p.flag("packets", o.mode == Mode::Naive && o.caster == CasterKind::Bvh)?,
+            packets: p.flag(
+                "packets",
+                (o.mode == Mode::Naive || o.pvl == Pvl::Hits) && o.caster == CasterKind::Bvh,
+            )?,
             far_cull: p.flag("far_cull", o.oor)?,
             ..o
         };
@@ -365,9 +388,15 @@ impl LzbOptions {
                 "near_temporal=on orders the near pass's occlusion tests, which near_cull=off turns off (the near set is then one draw): it needs near_cull=on".into(),
             );
         }
-        if self.packets && (self.mode != Mode::Naive || self.caster != CasterKind::Bvh) {
+        if self.packets && (self.mode != Mode::Naive && self.pvl != Pvl::Hits || self.caster != CasterKind::Bvh) {
             return bad(
-                "packets=on casts naive first-hit rays through the BVH: it needs mode=naive and caster=bvh (the default in naive mode)"
+                "packets=on casts naive first-hit rays or pvl=hits cones through the BVH: it needs mode=naive or pvl=hits, and caster=bvh (their default)"
+                    .into(),
+            );
+        }
+        if self.pvl == Pvl::Hits && (self.mode != Mode::Lazy || self.caster != CasterKind::Bvh || !self.packets) {
+            return bad(
+                "pvl=hits records what lazy rays cast in packets through the BVH may touch: it needs mode=lazy, caster=bvh and packets=on (its defaults)"
                     .into(),
             );
         }
