@@ -1222,9 +1222,14 @@ impl Lzb {
                 return crate::end_frame(&self.raster, stats);
             }
         }
-        // The chunks' sets overlap: one entry per (instance, leaf).
-        pairs.sort_unstable();
-        pairs.dedup();
+        // The chunks' sets overlap: one entry per (instance, leaf). A `pvl=hits` list (hundreds
+        // of thousands of triangles) is left in the runs its packets made, each of one
+        // instance, sorted and without duplicates: the stamps below drop most of what two
+        // runs of an instance share (a triangle drawn twice draws the same frame).
+        if self.opts.pvl != Pvl::Hits {
+            pairs.sort_unstable();
+            pairs.dedup();
+        }
         stats.rays_cast += rays;
         stats.counters.add_all([
             ("rays", rays),
@@ -1264,7 +1269,20 @@ impl Lzb {
             };
             stats.counters.add(counter, pvl_leaves.len() as u64);
             let mut pool = Vec::new();
-            let lists = self.emit(&groups, &pvl_leaves, &mut pool, entries, None);
+            // One stamp per instance however many runs it has (`pvl=hits`).
+            let stamps = (self.opts.pvl == Pvl::Hits).then(|| {
+                let mut of_base = std::collections::HashMap::<ItemId, u32, crate::hash::FxBuild>::default();
+                for (_, key, _) in &groups {
+                    let next = of_base.len() as u32;
+                    of_base.entry(*key).or_insert(next);
+                }
+                let first = self.reserve_stamps(of_base.len() as u32);
+                groups
+                    .iter()
+                    .map(|(_, key, _)| first + of_base[key])
+                    .collect::<Vec<u32>>()
+            });
+            let lists = self.emit(&groups, &pvl_leaves, &mut pool, entries, stamps.as_deref());
             stats.counters.add("pvl_triangles", pool.len() as u64);
             stats.phases.add(Phase::Other, t.elapsed());
             let draws = make_draws(&self.scene, view, &lists, &pool);
