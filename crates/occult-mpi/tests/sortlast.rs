@@ -171,7 +171,10 @@ fn parallel_lzb_is_identical_on_every_generator() {
         ..SortLastConfig::default()
     };
     check_with("lzb:payoff=off", config.clone());
-    check_with("lzb:payoff=off,oor=off,coherence=off,plane=dynamic", config);
+    check_with(
+        "lzb:payoff=off,oor=off,coherence=off,plane=dynamic,caster=octree",
+        config,
+    );
 }
 
 #[test]

@@ -692,7 +692,7 @@ mod tests {
             "lzb",
             "lzb:pvl=triangles,select=dynamic",
             "lzb:mode=naive,plane=static",
-            "lzb:oor=off,coherence=off",
+            "lzb:oor=off,coherence=off,caster=octree",
             "oqgrid",
             "oqgrid:grid=uniform,queries=off",
             "nbuffer",

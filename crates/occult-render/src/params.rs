@@ -411,7 +411,7 @@ mod tests {
                     .unwrap_or_else(|e| panic!("{}: {e}", d.key));
             }
         }
-        check("lzb:bvh_leaf=4").expect_err("bvh_leaf without caster=bvh sizes nothing");
+        check("lzb:caster=octree,bvh_leaf=4").expect_err("bvh_leaf without caster=bvh sizes nothing");
         check("frustum:leaf=8,group_leaf=2").expect("valid frustum settings pass");
         check("rzb:eps=auto").expect("eps=auto is valid");
     }

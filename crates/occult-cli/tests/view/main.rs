@@ -162,7 +162,7 @@ fn screenshots_equal_render_across_conservative_renderers() {
     // The list is zbuffer, frustum, hzb, oqgrid, nbuffer, lzb, rzb: keys 2 and 3, then Tab.
     let script = format!(
         "view circle:8:3\nscreenshot {}\nkey 2\nwait-frame\nscreenshot {}\nkey 3\nscreenshot {}\nkey tab\nscreenshot {}\n\
-         algo nbuffer\nscreenshot {}\nalgo lzb\nscreenshot {}\nalgo lzb:select=dynamic\nmode depth\nwait-frame\n\
+         algo nbuffer\nscreenshot {}\nalgo lzb\nscreenshot {}\nalgo lzb:caster=octree,select=dynamic\nmode depth\nwait-frame\n\
          mode color\nscreenshot {}\nexit\n",
         shot("zbuffer.png"),
         shot("frustum.png"),

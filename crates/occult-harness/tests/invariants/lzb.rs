@@ -13,16 +13,19 @@ use occult_render::{Algorithm, RenderError, RenderOptions, Renderer};
 
 identical_on_every_generator! {
     default_is_identical_on_every_generator: assert_identical_on_every_generator("lzb", 1);
-    /// The paper's algorithm alone: with payoff, frames it loses are drawn directly instead,
-    /// so every other configuration here turns it off too.
+    /// The algorithm alone (its default PVL, `pvl=hits`): with payoff, frames it loses are
+    /// drawn directly instead, so every other configuration here turns it off too.
     without_payoff_is_identical_on_every_generator:
         assert_variant_identical_on_every_generator("lzb:payoff=off", 1);
+    /// The paper's octree, whose leaves on the rays' paths make the PVL.
+    paper_octree_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("lzb:payoff=off,caster=octree", 1);
     lazy_all_triangles_static_plane_is_identical_on_every_generator:
-        assert_variant_identical_on_every_generator("lzb:payoff=off,select=all,plane=static,plane_fraction=0.15,oor=off", 2);
+        assert_variant_identical_on_every_generator("lzb:payoff=off,select=all,plane=static,plane_fraction=0.15,oor=off,caster=octree", 2);
     static_occluders_small_leaves_is_identical_on_every_generator:
-        assert_variant_identical_on_every_generator("lzb:payoff=off,select=static,k=1,leaf=8,depth=6,coherence=off", 0);
+        assert_variant_identical_on_every_generator("lzb:payoff=off,select=static,k=1,leaf=8,depth=6,coherence=off,caster=octree", 0);
     dynamic_selection_every_frame_plane_is_identical_on_every_generator: assert_variant_identical_on_every_generator(
-        "lzb:payoff=off,select=dynamic,base_cos=0.9,plane_reuse=1,coarse_rays=16,group_leaf=1",
+        "lzb:payoff=off,select=dynamic,base_cos=0.9,plane_reuse=1,coarse_rays=16,group_leaf=1,caster=octree",
         1
     );
     /// A plane halfway: the far leaves of instances hidden behind the near set are dropped
@@ -41,16 +44,16 @@ identical_on_every_generator! {
     /// The BVH as the rays' structure (the default in lazy mode is the paper's octree), with
     /// its leaves as the PVL; then almost every pixel goes to the rays.
     bvh_caster_is_identical_on_every_generator:
-        assert_variant_identical_on_every_generator("lzb:payoff=off,caster=bvh", 1);
+        assert_variant_identical_on_every_generator("lzb:payoff=off,caster=bvh,pvl=leaves", 1);
     bvh_caster_everything_behind_the_plane_is_identical_on_every_generator:
-        assert_variant_identical_on_every_generator("lzb:payoff=off,caster=bvh,plane=static,plane_fraction=0.0001", 2);
+        assert_variant_identical_on_every_generator("lzb:payoff=off,caster=bvh,plane=static,plane_fraction=0.0001,pvl=leaves", 2);
     bvh_caster_dynamic_selection_is_identical_on_every_generator: assert_variant_identical_on_every_generator(
-        "lzb:payoff=off,caster=bvh,select=dynamic,base_cos=0.9,plane_reuse=1,coarse_rays=16,group_leaf=1",
+        "lzb:payoff=off,caster=bvh,select=dynamic,base_cos=0.9,plane_reuse=1,coarse_rays=16,group_leaf=1,pvl=leaves",
         1
     );
     /// BVH leaves of one and of eight triangles, everything to the rays.
     bvh_leaf_sizes_are_identical_on_every_generator: assert_variant_identical_on_every_generator(
-        "lzb:payoff=off,caster=bvh,bvh_leaf=1,plane=static,plane_fraction=0.0001,select=all",
+        "lzb:payoff=off,caster=bvh,bvh_leaf=1,plane=static,plane_fraction=0.0001,select=all,pvl=leaves",
         0
     );
     bvh_large_leaves_are_identical_on_every_generator: assert_variant_identical_on_every_generator(
@@ -77,10 +80,10 @@ fn identical_on_paths() {
     for algo in [
         "lzb",
         "lzb:pvl=hits",
-        "lzb:payoff=off,select=all,oor=off",
-        "lzb:payoff=off,plane=static,plane_fraction=0.3,select=static",
-        "lzb:payoff=off,caster=bvh,plane=static,plane_fraction=0.3",
-        "lzb:payoff=off,caster=bvh,select=all,oor=off",
+        "lzb:payoff=off,select=all,oor=off,caster=octree",
+        "lzb:payoff=off,plane=static,plane_fraction=0.3,select=static,caster=octree",
+        "lzb:payoff=off,caster=bvh,plane=static,plane_fraction=0.3,pvl=leaves",
+        "lzb:payoff=off,caster=bvh,select=all,oor=off,pvl=leaves",
         // Everything near: the near pass alone, last frame's visible leaves first.
         "lzb:payoff=off,plane=static,plane_fraction=1",
     ] {
@@ -163,14 +166,14 @@ fn check_scene(scene: Scene, views: &[View], algos: &[&str]) {
 /// Configurations that send (nearly) everything to the rays.
 const RAY_HEAVY: &[&str] = &[
     "lzb:payoff=off,plane=static,plane_fraction=0.0001",
-    "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=all,oor=off,leaf=1,depth=8",
-    "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=static,k=1,leaf=4",
-    "lzb:payoff=off,plane=dynamic,select=dynamic,base_cos=1,leaf=2",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=all,oor=off,leaf=1,depth=8,caster=octree",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=static,k=1,leaf=4,caster=octree",
+    "lzb:payoff=off,plane=dynamic,select=dynamic,base_cos=1,leaf=2,caster=octree",
     "lzb:payoff=off,plane=static,plane_fraction=0.0001,pvl=triangles,select=all",
-    "lzb:payoff=off,plane=static,plane_fraction=0.0001,caster=bvh",
-    "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=static,k=1,caster=bvh",
-    "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=all,caster=bvh,bvh_leaf=1",
-    "lzb:payoff=off,plane=static,plane_fraction=0.0001,caster=bvh,bvh_leaf=8,coherence=off",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,caster=bvh,pvl=leaves",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=static,k=1,caster=bvh,pvl=leaves",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,select=all,caster=bvh,bvh_leaf=1,pvl=leaves",
+    "lzb:payoff=off,plane=static,plane_fraction=0.0001,caster=bvh,bvh_leaf=8,coherence=off,pvl=leaves",
     "lzb:payoff=off,plane=static,plane_fraction=0.0001,pvl=hits",
     "lzb:payoff=off,plane=static,plane_fraction=0.0001,pvl=hits,bvh_leaf=1,oor=off",
 ];
@@ -348,26 +351,28 @@ fn bad_parameters_are_errors() {
     let o = RenderOptions::default();
     for (bad, names) in [
         ("lzb:leaf=0", "leaf"),
-        ("lzb:k=0", "k"),
+        ("lzb:k=0,caster=octree", "k"),
         ("lzb:plane_fraction=0", "plane_fraction"),
         ("lzb:plane_fraction=1.5", "plane_fraction"),
         ("lzb:plane_fraction=-0.2", "plane_fraction"),
         ("lzb:coarse_rays=0", "coarse_rays"),
         ("lzb:depth=25", "depth"),
         ("lzb:group_leaf=0", "group_leaf"),
-        ("lzb:base_cos=2", "base_cos"),
+        ("lzb:base_cos=2,caster=octree", "base_cos"),
         ("lzb:plane_reuse=0", "plane_reuse"),
-        ("lzb:select=some", "select"),
+        ("lzb:select=some,caster=octree", "select"),
         ("lzb:mode=fast", "mode"),
         ("lzb:pvl=some", "pvl"),
         ("lzb:caster=kd", "caster"),
-        ("lzb:caster=bvh,bvh_leaf=0", "bvh_leaf"),
-        ("lzb:caster=bvh,bvh_leaf=9", "bvh_leaf"),
-        ("lzb:bvh_leaf=4", "caster=bvh"),
+        ("lzb:caster=bvh,bvh_leaf=0,pvl=leaves", "bvh_leaf"),
+        ("lzb:caster=bvh,bvh_leaf=9,pvl=leaves", "bvh_leaf"),
         ("lzb:caster=octree,bvh_leaf=2", "caster=bvh"),
         ("lzb:leaf=many", "leaf"),
         ("lzb:mode=naive,payoff=on", "payoff"),
-        ("lzb:packets=on", "mode=naive"),
+        ("lzb:pvl=leaves,packets=on", "mode=naive"),
+        ("lzb:select=all", "pvl=leaves"),
+        ("lzb:coherence=off", "pvl=leaves"),
+        ("lzb:k=3", "pvl=leaves"),
         ("lzb:pvl=hits,packets=off", "packets=on"),
         ("lzb:pvl=hits,caster=octree", "caster=bvh"),
         ("lzb:mode=naive,pvl=hits", "mode=lazy"),
@@ -438,7 +443,7 @@ fn counters_and_multithreaded_pvl_match_single_threaded() {
                 ..RenderOptions::default()
             };
             // The algorithm itself: with payoff a frame may be drawn directly, without rays.
-            let mut r = spec(&format!("lzb:coherence=off,payoff=off,caster={caster}"))
+            let mut r = spec(&format!("lzb:coherence=off,payoff=off,caster={caster},pvl=leaves"))
                 .build(scene.clone(), &o)
                 .unwrap();
             let mut f = Frame::new(160, 120).unwrap();

@@ -20,8 +20,8 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         },
         ParamDoc {
             key: "caster",
-            default: "octree",
-            help: "what the rays walk in a mesh: bvh (an 8-wide SAH BVH per unique mesh, one reference per triangle, leaves of up to bvh_leaf triangles; the PVL is made of the BVH leaves on the path; not in the paper; the default in naive mode, where its first-hit rays are 2.5x faster) or octree (the paper's octree of §II.A, whose leaves make the PVL; the default in lazy mode, where its cone rays are faster)",
+            default: "bvh",
+            help: "what the rays walk in a mesh: bvh (an 8-wide SAH BVH per unique mesh, one reference per triangle, leaves of up to bvh_leaf triangles; not in the paper; the default: naive first-hit rays are 2.5x faster through it, and pvl=hits needs it) or octree (the paper's octree of §II.A, whose leaves make the PVL; pvl= then defaults to leaves, the paper's)",
         },
         ParamDoc {
             key: "bvh_leaf",
@@ -30,7 +30,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         },
         ParamDoc {
             key: "packets",
-            default: "off",
+            default: "on",
             help: "rays of up to 64 neighbouring pixels (8x8 tiles) cast together: one packet through each mesh's BVH, each ray tested as alone, one cone through a group's octree (not in the paper); on by default in naive mode and with pvl=hits, and needs one of them and caster=bvh (refused otherwise: lazy rays that record leaves go one at a time); off: one ray at a time",
         },
         ParamDoc {
@@ -46,17 +46,17 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc {
             key: "select",
             default: "hybrid",
-            help: "local occluders tested per leaf: all (§III.A), static (k largest, §III.B.1), dynamic (visibility, §III.B.2), hybrid",
+            help: "local occluders tested per leaf: all (§III.A), static (k largest, §III.B.1), dynamic (visibility, §III.B.2), hybrid; for rays that record leaves or their triangles: needs pvl=leaves or pvl=triangles (refused with pvl=hits, whose rays test every triangle of a leaf they reach)",
         },
         ParamDoc {
             key: "k",
             default: "5",
-            help: "local occluders per leaf for select=static|hybrid (>= 1)",
+            help: "local occluders per leaf for select=static|hybrid (>= 1; needs pvl=leaves or pvl=triangles)",
         },
         ParamDoc {
             key: "base_cos",
             default: "0.5",
-            help: "preset |v.n| of the base visibility (x mean leaf area) for select=dynamic|hybrid, in [0, 1]",
+            help: "preset |v.n| of the base visibility (x mean leaf area) for select=dynamic|hybrid, in [0, 1] (needs pvl=leaves or pvl=triangles)",
         },
         ParamDoc {
             key: "plane",
@@ -85,13 +85,13 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         },
         ParamDoc {
             key: "pvl",
-            default: "leaves",
-            help: "what a ray records: leaves (§III.A, every leaf on its path), triangles (those of the path's leaves whose box the ray's cone enters before its bound) or hits (the triangles the ray's cone of 1/8 pixel may touch before its bound: triangle-exact; the rays go in packets, so it needs caster=bvh, the default with it, and packets=on, its default; select= is not used: every triangle may end a ray; not in the paper)",
+            default: "hits",
+            help: "what a lazy ray records: hits (the triangles the ray's cone of 1/64 pixel may touch before its bound: triangle-exact; the rays go in packets: needs caster=bvh and packets=on, the defaults; every triangle a ray reaches may end it, so select=, k=, base_cos= and coherence= are refused; not in the paper; the default unless caster=octree), leaves (§III.A, every leaf on its path; the default with caster=octree) or triangles (those of the path's leaves whose box the ray's cone enters before its bound)",
         },
         ParamDoc {
             key: "coherence",
             default: "on",
-            help: "start each ray from its neighbour's hit (§III.D)",
+            help: "start each ray from its neighbour's hit (§III.D); for rays cast one at a time: needs pvl=leaves or pvl=triangles (pvl=hits casts packets)",
         },
         ParamDoc {
             key: "near_cull",
@@ -267,7 +267,15 @@ impl LzbOptions {
             "naive" => Mode::Naive,
             _ => Mode::Lazy,
         };
-        let pvl = match p.choice("pvl", &["leaves", "triangles", "hits"], "leaves")? {
+        // The triangle-exact PVL unless the paper's octree is asked for, whose leaves are the
+        // paper's PVL (and whose cone rays go one at a time).
+        let octree = p.raw("caster") == Some("octree");
+        let pvl_default = if mode == Mode::Lazy && !octree {
+            "hits"
+        } else {
+            "leaves"
+        };
+        let pvl = match p.choice("pvl", &["leaves", "triangles", "hits"], pvl_default)? {
             "triangles" => Pvl::Triangles,
             "hits" => Pvl::Hits,
             _ => Pvl::Leaves,
@@ -276,8 +284,9 @@ impl LzbOptions {
             leaf: p.get("leaf", 150usize)?,
             depth: p.get("depth", 10u32)?,
             group_leaf: p.get("group_leaf", 8usize)?,
-            // Measured (docs/lzb.md): the BVH's thin first-hit rays are faster, the octree's
-            // cone rays (with `select=`'s few tests per large leaf) are.
+            // Measured (docs/lzb.md): the BVH's thin first-hit rays are faster; of rays that
+            // record leaves, the octree's cone rays (with `select=`'s few tests per large leaf)
+            // are; `pvl=hits` casts through the BVH.
             caster: match p.choice(
                 "caster",
                 &["bvh", "octree"],
@@ -331,10 +340,22 @@ impl LzbOptions {
             far_cull: p.flag("far_cull", o.oor)?,
             ..o
         };
+        if o.mode == Mode::Lazy && o.pvl == Pvl::Hits {
+            if let Some(key) = ["select", "k", "base_cos", "coherence"]
+                .into_iter()
+                .find(|k| p.raw(k).is_some())
+            {
+                return Err(RenderError::BadParameter(format!(
+                    "lzb: {key}= sets up rays that record leaves one ray at a time; pvl=hits (the default \
+                     unless caster=octree) casts packets that test every triangle they reach: add \
+                     pvl=leaves (or caster=octree, the paper's)"
+                )));
+            }
+        }
         if p.raw("bvh_leaf").is_some() && o.caster == CasterKind::Octree {
             return Err(RenderError::BadParameter(
                 "lzb: bvh_leaf sizes the leaves of the BVH of caster=bvh, which these rays do not walk \
-                 (caster=octree, the default in lazy mode): add caster=bvh"
+                 (caster=octree): drop caster=octree (caster=bvh is the default)"
                     .into(),
             ));
         }
