@@ -41,8 +41,8 @@ identical_on_every_generator! {
     /// Rays record triangles, not leaves; almost every pixel goes to the rays.
     triangle_pvl_everything_behind_the_plane_is_identical_on_every_generator:
         assert_variant_identical_on_every_generator("lzb:payoff=off,pvl=triangles,plane=static,plane_fraction=0.0001", 1);
-    /// The BVH as the rays' structure (the default in lazy mode is the paper's octree), with
-    /// its leaves as the PVL; then almost every pixel goes to the rays.
+    /// The BVH as the rays' structure with its leaves as the PVL (the paper's octree's, with
+    /// `caster=octree`); then almost every pixel goes to the rays.
     bvh_caster_is_identical_on_every_generator:
         assert_variant_identical_on_every_generator("lzb:payoff=off,caster=bvh,pvl=leaves", 1);
     bvh_caster_everything_behind_the_plane_is_identical_on_every_generator:
@@ -60,11 +60,12 @@ identical_on_every_generator! {
         "lzb:payoff=off,caster=bvh,bvh_leaf=8,plane=static,plane_fraction=0.0001,pvl=triangles",
         1
     );
-    /// The triangles the rays' cones may touch, cast in packets: with the cost plane, then with
+    /// The triangles the rays' cones may touch, cast in packets (`pvl=hits`, the default; with
+    /// the cost plane above): with the paper's mean-hit plane and near pass, then with
     /// everything to the rays, every unfinished pixel cast, and with leaves of one triangle and
     /// group octrees of one instance a leaf (the packets' enclosing cone at its tightest).
-    hit_pvl_is_identical_on_every_generator:
-        assert_variant_identical_on_every_generator("lzb:payoff=off,pvl=hits", 1);
+    hit_pvl_dynamic_plane_is_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("lzb:payoff=off,pvl=hits,plane=dynamic,near_cull=off", 1);
     hit_pvl_everything_behind_the_plane_is_identical_on_every_generator: assert_variant_identical_on_every_generator(
         "lzb:payoff=off,pvl=hits,plane=static,plane_fraction=0.0001,oor=off",
         2
@@ -79,7 +80,7 @@ identical_on_every_generator! {
 fn identical_on_paths() {
     for algo in [
         "lzb",
-        "lzb:pvl=hits",
+        "lzb:caster=octree",
         "lzb:payoff=off,select=all,oor=off,caster=octree",
         "lzb:payoff=off,plane=static,plane_fraction=0.3,select=static,caster=octree",
         "lzb:payoff=off,caster=bvh,plane=static,plane_fraction=0.3,pvl=leaves",

@@ -63,8 +63,8 @@ pub(super) struct Caster<'a> {
     ctx: &'a FrameCtx,
     /// PVL entries `(instance first item, leaf)`, without duplicates.
     pub pvl: HashSet<(ItemId, u32), FxBuild>,
-    /// `pvl=hits`: PVL entries `(instance first item, triangle)`, without duplicates within a
-    /// packet (the frame's list is sorted and made unique once).
+    /// `pvl=hits`: PVL entries `(instance first item, triangle)`, in runs of one instance, one
+    /// run per instance a packet recorded, sorted and without duplicates within it.
     pub pvl_hits: Vec<(ItemId, u32)>,
     /// The instances the PVL names.
     pub instances: HashMap<ItemId, InstanceRec, FxBuild>,
@@ -236,7 +236,7 @@ impl<'a> Caster<'a> {
     }
 
     /// Casts the lazy rays of up to [`PACKET`] neighbouring pixels together with `pvl=hits`
-    /// (not in the paper): each ray a cone of radius 1/8 pixel around the pixel centre's ray,
+    /// (not in the paper): each ray a cone of radius 1/64 pixel around the pixel centre's ray,
     /// bounded by its first robust hit (§III.A's rule), records the triangles its cone may
     /// touch no farther than that bound ([`ShearedRay::candidates8`]) instead of the leaves
     /// it enters. The rays walk each mesh's BVH as one packet of cones
@@ -1071,7 +1071,13 @@ fn enclosing_cone(o: Vec3, dirs: &[Vec3; PACKET], mask: u64, ray_spread: f32, ra
         spread = spread.max((dirs[r] - c).length());
         shortest = shortest.min(dirs[r].length());
     }
-    let spread = (spread + ray_spread) * (c.length() / (shortest - ray_spread)).max(1.0) * 1.001 + c.length() * 1e-6;
+    // Cones so wide that a direction could shrink to nothing (an instance stretched some 10⁴
+    // to 1): a cone that holds everything.
+    let spread = if shortest > ray_spread {
+        (spread + ray_spread) * (c.length() / (shortest - ray_spread)).max(1.0) * 1.001 + c.length() * 1e-6
+    } else {
+        f32::INFINITY
+    };
     FatRay::new(o, c, spread, ABS_EPS * (o.abs().max_element() + 1.0) + ray_margin)
 }
 
@@ -1112,7 +1118,14 @@ mod tests {
                 dirs = dirs.map(|d| m * d);
             }
             let mask = u64::MAX >> rng.random_range(0..40);
-            let cone = enclosing_cone(o, &dirs, mask, 0.0, 0.0);
+            // A third of the packets are of cones (`pvl=hits`): their spread and margin widen
+            // the enclosing cone.
+            let (ray_spread, ray_margin) = if k % 3 == 2 {
+                (pixel * rng.random_range(0.01..0.5), rng.random_range(0.0..0.05))
+            } else {
+                (0.0, 0.0)
+            };
+            let cone = enclosing_cone(o, &dirs, mask, ray_spread, ray_margin);
             for _ in 0..50 {
                 // Near a ray of the packet, often at its edge: some rays enter, some miss.
                 let r = rng.random_range(0..PACKET - mask.leading_zeros() as usize);
@@ -1130,7 +1143,11 @@ mod tests {
                 let b = Aabb::new(c - e, c + e);
                 let first = (0..PACKET)
                     .filter(|r| mask & (1 << r) != 0)
-                    .filter_map(|r| FatRay::new(o, dirs[r], 0.0, 0.0).enter(&b).map(|(t, _)| t))
+                    .filter_map(|r| {
+                        FatRay::new(o, dirs[r], ray_spread, ray_margin)
+                            .enter(&b)
+                            .map(|(t, _)| t)
+                    })
                     .fold(f32::INFINITY, f32::min);
                 if first.is_finite() {
                     checked += 1;

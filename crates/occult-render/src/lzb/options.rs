@@ -21,7 +21,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc {
             key: "caster",
             default: "bvh",
-            help: "what the rays walk in a mesh: bvh (an 8-wide SAH BVH per unique mesh, one reference per triangle, leaves of up to bvh_leaf triangles; not in the paper; the default: naive first-hit rays are 2.5x faster through it, and pvl=hits needs it) or octree (the paper's octree of §II.A, whose leaves make the PVL; pvl= then defaults to leaves, the paper's)",
+            help: "what the rays walk in a mesh: bvh (an 8-wide SAH BVH per unique mesh, one reference per triangle, leaves of up to bvh_leaf triangles; not in the paper; the default: naive first-hit rays are 2.5x faster through it, and pvl=hits needs it) or octree (the paper's octree of §II.A, whose leaves make the PVL; pvl= then defaults to leaves, the paper's; also the default with pvl=leaves or pvl=triangles in lazy mode, whose one-at-a-time cone rays are faster through it)",
         },
         ParamDoc {
             key: "bvh_leaf",
@@ -269,7 +269,7 @@ impl LzbOptions {
         };
         // The triangle-exact PVL unless the paper's octree is asked for, whose leaves are the
         // paper's PVL (and whose cone rays go one at a time).
-        let octree = p.raw("caster") == Some("octree");
+        let octree = p.raw("caster").is_some_and(|c| c.trim().eq_ignore_ascii_case("octree"));
         let pvl_default = if mode == Mode::Lazy && !octree {
             "hits"
         } else {
@@ -355,7 +355,8 @@ impl LzbOptions {
         if p.raw("bvh_leaf").is_some() && o.caster == CasterKind::Octree {
             return Err(RenderError::BadParameter(
                 "lzb: bvh_leaf sizes the leaves of the BVH of caster=bvh, which these rays do not walk \
-                 (caster=octree): drop caster=octree (caster=bvh is the default)"
+                 (caster=octree, asked for or the default with pvl=leaves|triangles in lazy mode): \
+                 add caster=bvh"
                     .into(),
             ));
         }

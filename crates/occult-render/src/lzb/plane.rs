@@ -29,31 +29,55 @@ pub fn cost_plane(
     near: f32,
     far: f32,
 ) -> f32 {
-    let mut by_distance: Vec<(f32, u32)> = leaves.to_vec();
-    by_distance.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
-    let mut prefix = Vec::with_capacity(by_distance.len() + 1);
-    prefix.push(0u64);
-    for &(_, t) in &by_distance {
-        prefix.push(prefix.last().copied().unwrap_or(0) + u64::from(t));
-    }
     let mut hit_distances: Vec<f32> = hits.iter().flatten().copied().filter(|d| d.is_finite()).collect();
     hit_distances.sort_unstable_by(f32::total_cmp);
     let per_ray = pixels / hits.len().max(1) as f64;
-    let cost = |z: f32| {
-        let limit = z * (1.0 + NEAR_MARGIN);
-        let near_leaves = by_distance.partition_point(|&(d, _)| d < limit);
-        let near_triangles = prefix[near_leaves] as f64;
-        let far_triangles = prefix[by_distance.len()] as f64 - near_triangles;
-        let far_leaves = (by_distance.len() - near_leaves) as f64;
-        let rays = (hit_distances.len() - hit_distances.partition_point(|&d| d < z)) as f64 * per_ray;
-        (near_triangles * near_share + far_triangles * pvl_share) * ns_per_triangle
-            + rays * ns_per_ray
-            + far_leaves * ns_per_far_leaf
-    };
-    std::iter::once(near)
+    // The candidates in the order they are weighed (of equal costs the first wins), and their
+    // near limits: a leaf is near for a candidate whose limit lies beyond its distance.
+    let candidates: Vec<f32> = std::iter::once(near)
         .chain(hit_distances.iter().copied())
         .chain(std::iter::once(far))
         .map(|z| z.clamp(near, far))
+        .collect();
+    let mut limits: Vec<f32> = candidates.iter().map(|&z| z * (1.0 + NEAR_MARGIN)).collect();
+    limits.sort_unstable_by(f32::total_cmp);
+    // Each leaf counted once, at the first (sorted) limit it lies below: a few hundred limits
+    // searched per leaf rather than the leaves sorted (hundreds of thousands on a city).
+    let mut triangles_at = vec![0u64; limits.len() + 1];
+    let mut leaves_at = vec![0u64; limits.len() + 1];
+    for &(d, t) in leaves {
+        let k = if d.is_nan() {
+            limits.len()
+        } else {
+            limits.partition_point(|&l| l <= d)
+        };
+        triangles_at[k] += u64::from(t);
+        leaves_at[k] += 1;
+    }
+    let all_triangles: u64 = triangles_at.iter().sum();
+    let (mut triangles, mut count) = (0u64, 0u64);
+    // Per sorted limit, the triangles and leaves nearer than it.
+    let near_of: Vec<(u64, u64)> = (0..limits.len())
+        .map(|k| {
+            triangles += triangles_at[k];
+            count += leaves_at[k];
+            (triangles, count)
+        })
+        .collect();
+    let cost = |z: f32| {
+        let limit = z * (1.0 + NEAR_MARGIN);
+        // The last sorted limit equal to this one: every leaf below it is near.
+        let k = limits.partition_point(|&l| l <= limit) - 1;
+        let (near_triangles, near_leaves) = near_of[k];
+        let far_triangles = (all_triangles - near_triangles) as f64;
+        let far_leaves = (leaves.len() as u64 - near_leaves) as f64;
+        let rays = (hit_distances.len() - hit_distances.partition_point(|&d| d < z)) as f64 * per_ray;
+        (near_triangles as f64 * near_share + far_triangles * pvl_share) * ns_per_triangle
+            + rays * ns_per_ray
+            + far_leaves * ns_per_far_leaf
+    };
+    candidates
+        .into_iter()
         .map(|z| (cost(z), z))
         .min_by(|a, b| a.0.total_cmp(&b.0))
         .map_or(near, |(_, z)| z)

@@ -38,6 +38,77 @@ fn the_cost_model_weighs_triangles_against_rays() {
     assert_eq!(z, 5.5);
 }
 
+/// The cost model's choice is the one of weighing every candidate over the leaves sorted by
+/// distance (the model as first written), on random leaves and hits with ties, repeats and
+/// leaves beyond every candidate.
+#[test]
+fn the_cost_plane_buckets_as_a_sort_would() {
+    fn by_sort(leaves: &[(f32, u32)], hits: &[Option<f32>], rates: [f64; 6], near: f32, far: f32) -> f32 {
+        let [pixels, ns_tri, ns_ray, near_share, pvl_share, ns_leaf] = rates;
+        let mut by_distance = leaves.to_vec();
+        by_distance.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        let mut prefix = vec![0u64];
+        for &(_, t) in &by_distance {
+            prefix.push(prefix.last().copied().unwrap_or(0) + u64::from(t));
+        }
+        let mut hit_distances: Vec<f32> = hits.iter().flatten().copied().filter(|d| d.is_finite()).collect();
+        hit_distances.sort_unstable_by(f32::total_cmp);
+        let per_ray = pixels / hits.len().max(1) as f64;
+        let cost = |z: f32| {
+            let limit = z * (1.0 + NEAR_MARGIN);
+            let n = by_distance.partition_point(|&(d, _)| d < limit);
+            let near_t = prefix[n] as f64;
+            let far_t = prefix[by_distance.len()] as f64 - near_t;
+            let rays = (hit_distances.len() - hit_distances.partition_point(|&d| d < z)) as f64 * per_ray;
+            (near_t * near_share + far_t * pvl_share) * ns_tri
+                + rays * ns_ray
+                + (by_distance.len() - n) as f64 * ns_leaf
+        };
+        std::iter::once(near)
+            .chain(hit_distances.iter().copied())
+            .chain(std::iter::once(far))
+            .map(|z| z.clamp(near, far))
+            .map(|z| (cost(z), z))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map_or(near, |(_, z)| z)
+    }
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(5);
+    for case in 0..500 {
+        let leaves: Vec<(f32, u32)> = (0..rng.random_range(0..300))
+            .map(|_| {
+                let d = if rng.random_bool(0.2) {
+                    rng.random_range(1..20) as f32
+                } else {
+                    rng.random_range(0.05..40.0f32)
+                };
+                (d, rng.random_range(1..5000))
+            })
+            .collect();
+        let hits: Vec<Option<f32>> = (0..rng.random_range(1..40))
+            .map(|_| {
+                rng.random_bool(0.8)
+                    .then(|| rng.random_range(1..20) as f32 * rng.random_range(0.9..1.1f32))
+            })
+            .collect();
+        let rates = [
+            rng.random_range(100.0..1e6),
+            rng.random_range(1.0..100.0),
+            rng.random_range(10.0..5000.0),
+            rng.random_range(0.05..1.0),
+            rng.random_range(0.0..1.0),
+            rng.random_range(0.0..500.0),
+        ];
+        let [pixels, ns_tri, ns_ray, near_share, pvl_share, ns_leaf] = rates;
+        let far = rng.random_range(10.0..50.0f32);
+        assert_eq!(
+            cost_plane(&leaves, &hits, pixels, ns_tri, ns_ray, near_share, pvl_share, ns_leaf, 0.1, far),
+            by_sort(&leaves, &hits, rates, 0.1, far),
+            "case {case}"
+        );
+    }
+}
+
 /// A wall of 12,800 triangles at z = 0 hiding another one at z = -2, both 4 × 4, a view of
 /// them and its reference frame.
 fn two_walls() -> (Arc<Scene>, View, Frame) {
