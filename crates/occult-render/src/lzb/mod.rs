@@ -73,9 +73,9 @@
 //!   ones, probed between runs. DESIGN's invariant 5 (never slower than brute force) asks it of
 //!   every conservative renderer. Counters `payoff_direct`, `payoff_stopped`; `payoff=off`
 //!   measures the paper's algorithm alone.
-//! - The rays' structure in a mesh (`caster=bvh`, the default in naive mode; `caster=octree`,
-//!   the paper's, is the default in lazy mode, where its cone rays measured faster): an
-//!   8-wide BVH per unique mesh
+//! - The rays' structure in a mesh (`caster=bvh`, the default; `caster=octree`, the paper's,
+//!   whose one-at-a-time cone rays measured faster when they record leaves): an 8-wide BVH per
+//!   unique mesh
 //!   ([`occult_spatial::RayBvh`]: binned SAH, one reference per triangle, leaves of up to
 //!   `bvh_leaf` triangles stored contiguously), not the paper's octree, which stays for the
 //!   frustum walk, the near/far split, the object-oriented polygons and the near pass. Its
@@ -86,15 +86,22 @@
 //!   octree leaf holding a part of its triangles is near: the near pass draws them or finds
 //!   them hidden). §III.D's start is the BVH subtree two levels above the neighbour's hit
 //!   leaf. `caster=octree` casts through the octree as the paper does.
-//! - Naive rays in packets (`packets=on`, the default in naive mode, with `caster=bvh`): the
+//! - Naive rays in packets (`packets=on`, the default with `caster=bvh`): the
 //!   rays of an 8×8 tile walk each mesh's BVH together ([`occult_spatial::traverse_bvh_packet`]:
 //!   each ray tested as alone at every node it reaches, a leaf's triangles read once for its
 //!   rays) and a group's octree as one cone that holds them (`Caster::cast_packet`). The same
 //!   hits as one at a time, but for ties within rounding.
-//! - `pvl=triangles` (an option; leaves by default, as the paper): the ray's record keeps,
-//!   of each leaf on the path, only the triangles whose box the ray's cone enters before the
-//!   bound. Conservative for the same reason as the leaves: the pixel's winner lies within the
-//!   cone, nearer than the bound.
+//! - `pvl=hits` (the default in lazy mode unless `caster=octree`; not in the paper): lazy rays
+//!   in packets of an 8×8 tile, each a cone of 1/64 pixel bounded by its first robust hit,
+//!   record the triangles their cone may touch before the bound
+//!   ([`occult_spatial::ShearedRay::candidates8`], `Caster::cast_packet_hits`) instead of the
+//!   leaves they enter: triangle-exact. Conservative because the pixel's winner has a point
+//!   within the cone, nearer than the bound. `select=`, `k=`, `base_cos=` and `coherence=`
+//!   (rays that record leaves, one at a time) are refused with it.
+//! - `pvl=triangles` (an option): the ray's record keeps, of each leaf on the path, only the
+//!   triangles whose box the ray's cone enters before the bound. Conservative for the same
+//!   reason as the leaves: the pixel's winner lies within the cone, nearer than the bound.
+//!   `pvl=leaves` (the default with `caster=octree`): the paper's leaves.
 
 mod cast;
 mod near;
