@@ -422,13 +422,7 @@ impl<'a> Caster<'a> {
                 let margin = margin(&octree.bounds());
                 let cone = enclosing_cone(o, dirs, mask, spread, margin);
                 let mut cone_limit = max_limit(&rays.t_limit, mask);
-                let mut cones = [FatRay::new(o, Vec3::X, 0.0, 0.0); PACKET];
-                let mut rest = mask;
-                while rest != 0 {
-                    let r = rest.trailing_zeros() as usize;
-                    rest &= rest - 1;
-                    cones[r] = FatRay::new(o, dirs[r], spread, margin);
-                }
+                let cones = packet_cones(o, dirs, mask, spread, margin);
                 traverse(
                     octree,
                     &cone,
@@ -446,23 +440,12 @@ impl<'a> Caster<'a> {
                             if !cone.enter(&bounds[i]).is_some_and(|(e, _)| e <= *cone_limit) {
                                 continue;
                             }
-                            let mut sub = 0u64;
-                            let mut rest = mask;
-                            while rest != 0 {
-                                let r = rest.trailing_zeros() as usize;
-                                rest &= rest - 1;
-                                let enters = cones[r].enter(&bounds[i]).is_some_and(|(e, _)| e <= rays.t_limit[r]);
-                                sub |= u64::from(enters) << r;
-                            }
+                            let sub = rays_entering(&cones, mask, &bounds[i], &rays.t_limit);
                             if sub == 0 {
                                 continue;
                             }
                             let cfp = &child_from_parent[i];
-                            let mut child_dirs = [Vec3::ZERO; PACKET];
-                            let count = 64 - sub.leading_zeros() as usize;
-                            for (c, d) in child_dirs.iter_mut().zip(&dirs[..count]) {
-                                *c = cfp.transform_vector3(*d);
-                            }
+                            let child_dirs = child_directions(cfp, dirs, sub);
                             let world_from_child = compose(world_from_node, &instances[i].parent_from_child);
                             self.visit_packet_hits(
                                 instances[i].child,
@@ -549,6 +532,7 @@ impl<'a> Caster<'a> {
                 let serial = self.serial;
                 let cone = enclosing_cone(o, dirs, mask, 0.0, 0.0);
                 let mut cone_limit = max_limit(&rays.t_limit, mask);
+                let thin = packet_cones(o, dirs, mask, 0.0, 0.0);
                 traverse(
                     octree,
                     &cone,
@@ -563,24 +547,12 @@ impl<'a> Caster<'a> {
                             let i = i as usize;
                             // The rays that enter the instance's box before their bounds, each as a
                             // single ray would test it.
-                            let mut sub = 0u64;
-                            let mut rest = mask;
-                            while rest != 0 {
-                                let r = rest.trailing_zeros() as usize;
-                                rest &= rest - 1;
-                                let ray = FatRay::new(o, dirs[r], 0.0, 0.0);
-                                let enters = ray.enter(&bounds[i]).is_some_and(|(e, _)| e <= rays.t_limit[r]);
-                                sub |= u64::from(enters) << r;
-                            }
+                            let sub = rays_entering(&thin, mask, &bounds[i], &rays.t_limit);
                             if sub == 0 {
                                 continue;
                             }
                             let cfp = &child_from_parent[i];
-                            let mut child_dirs = [Vec3::ZERO; PACKET];
-                            let count = 64 - sub.leading_zeros() as usize;
-                            for (c, d) in child_dirs.iter_mut().zip(&dirs[..count]) {
-                                *c = cfp.transform_vector3(*d);
-                            }
+                            let child_dirs = child_directions(cfp, dirs, sub);
                             self.visit_packet(
                                 instances[i].child,
                                 cfp.transform_point3(o),
@@ -1019,6 +991,42 @@ impl PacketHit {
     fn before(&self, o: &Self) -> bool {
         (self.t, self.base, self.slot) < (o.t, o.base, o.slot)
     }
+}
+
+/// The rays `o + t·dirs[r]` of `mask` as cones of radius `spread · t + margin` (thin with
+/// zeros), made once for all the instances of a group a packet meets.
+fn packet_cones(o: Vec3, dirs: &[Vec3; PACKET], mask: u64, spread: f32, margin: f32) -> [FatRay; PACKET] {
+    let mut cones = [FatRay::new(o, Vec3::X, 0.0, 0.0); PACKET];
+    let mut rest = mask;
+    while rest != 0 {
+        let r = rest.trailing_zeros() as usize;
+        rest &= rest - 1;
+        cones[r] = FatRay::new(o, dirs[r], spread, margin);
+    }
+    cones
+}
+
+/// The rays of `mask` whose cone enters box `b` no later than their bound.
+fn rays_entering(cones: &[FatRay; PACKET], mask: u64, b: &Aabb, t_limit: &[f32; PACKET]) -> u64 {
+    let mut sub = 0u64;
+    let mut rest = mask;
+    while rest != 0 {
+        let r = rest.trailing_zeros() as usize;
+        rest &= rest - 1;
+        let enters = cones[r].enter(b).is_some_and(|(e, _)| e <= t_limit[r]);
+        sub |= u64::from(enters) << r;
+    }
+    sub
+}
+
+/// The directions of the rays up to the last of `sub` in a child's space.
+fn child_directions(child_from_parent: &Affine3A, dirs: &[Vec3; PACKET], sub: u64) -> [Vec3; PACKET] {
+    let mut child_dirs = [Vec3::ZERO; PACKET];
+    let count = 64 - sub.leading_zeros() as usize;
+    for (c, d) in child_dirs.iter_mut().zip(&dirs[..count]) {
+        *c = child_from_parent.transform_vector3(*d);
+    }
+    child_dirs
 }
 
 /// Makes the shear of each ray of `m` not in `made` yet (when it first reaches a leaf).
