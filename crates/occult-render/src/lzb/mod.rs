@@ -195,6 +195,8 @@ pub(crate) enum Accel {
         leaf_base: Vec<f32>,
         /// Its non-empty leaves (all of them near: the mesh is drawn whole).
         leaves: u32,
+        /// The near pass's units of an instance all of whose leaves are near ([`near_chunks`]).
+        chunks: Vec<NearChunk>,
         /// Per triangle: a leaf that holds it (`u32::MAX`: none), so that a pixel's item
         /// names a leaf (`near_temporal`).
         leaf_of: Vec<u32>,
@@ -255,9 +257,11 @@ impl Accel {
                 leaf_base,
                 leaf_of,
                 bvh,
+                chunks,
                 ..
             } => {
                 octree.memory_bytes()
+                    + chunks.capacity() * std::mem::size_of::<NearChunk>()
                     + refs.capacity() * std::mem::size_of::<RefTriangle>()
                     + (leaf_base.capacity() + leaf_of.capacity()) * 4
                     + bvh.as_ref().map_or(0, MeshBvh::memory_bytes)
@@ -320,6 +324,10 @@ pub struct Lzb {
     /// The leaves that showed a pixel in the last frame, as (instance's first item, leaf),
     /// sorted (`near_temporal`): the near pass draws them first.
     near_visible: Vec<(ItemId, u32)>,
+    /// The near pass's lists, kept across frames.
+    near_scratch: near::NearScratch,
+    /// A frame's lists of instances and leaves, kept across frames.
+    lists: FrameLists,
     /// Wall time of a rasterized triangle and of a ray, last measured (`plane=cost`).
     ns_per_triangle: f64,
     ns_per_ray: f64,
@@ -519,6 +527,11 @@ impl Lzb {
                             (
                                 Accel::Mesh {
                                     leaves: octree.nodes().iter().filter(|n| n.is_leaf() && n.count > 0).count() as u32,
+                                    chunks: if opts.near_cull {
+                                        near_chunks(&octree)
+                                    } else {
+                                        Vec::new()
+                                    },
                                     octree,
                                     refs,
                                     leaf_base,
@@ -600,6 +613,8 @@ impl Lzb {
             ns_per_far_leaf: PRIOR_NS_PER_FAR_LEAF,
             pyramid: None,
             near_visible: Vec::new(),
+            near_scratch: near::NearScratch::default(),
+            lists: FrameLists::default(),
             build_time: start.elapsed(),
         })
     }
@@ -776,6 +791,63 @@ struct NearGroup {
     bounds: Aabb,
 }
 
+/// A unit of the near pass of an instance all of whose leaves are near ([`near_chunks`]).
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct NearChunk {
+    /// Its leaves: positions in the order [`cull_octree`] meets the non-empty leaves.
+    leaves: std::ops::Range<u32>,
+    /// Its triangle references.
+    count: u32,
+    /// The union of its leaves' boxes.
+    bounds: Aabb,
+}
+
+/// The near pass's units of a mesh instance all of whose leaves are near (an instance wholly
+/// in the frustum before the plane: most of them when the plane lies far), made once: runs of
+/// consecutive non-empty leaves, in the order [`cull_octree`] meets them, of up to
+/// [`NEAR_UNIT`] triangle references, exactly as the near pass forms them from a frame's
+/// leaves, which reads every near leaf's node.
+fn near_chunks(octree: &RayOctree) -> Vec<NearChunk> {
+    let mut order = Vec::new();
+    let mut stack = vec![0u32];
+    while let Some(n) = stack.pop() {
+        let on = &octree.nodes()[n as usize];
+        if on.is_leaf() {
+            if on.count > 0 {
+                order.push(n);
+            }
+        } else {
+            stack.extend(on.children().rev());
+        }
+    }
+    let mut chunks = Vec::new();
+    let mut at = 0;
+    while at < order.len() {
+        let (end, count, bounds) = near_unit(octree, |i| order[i], at..order.len());
+        chunks.push(NearChunk {
+            leaves: at as u32..end as u32,
+            count,
+            bounds,
+        });
+        at = end;
+    }
+    chunks
+}
+
+/// The near pass's unit that starts at the first of the leaves `run` (`leaf(i)` the node of
+/// the `i`th): it and the leaves after it while they hold fewer than [`NEAR_UNIT`] triangle
+/// references. Returns where it ends, its references and the union of its leaves' boxes.
+fn near_unit(octree: &RayOctree, leaf: impl Fn(usize) -> u32, run: std::ops::Range<usize>) -> (usize, u32, Aabb) {
+    let (mut end, mut count, mut bounds) = (run.start, 0u32, Aabb::EMPTY);
+    while end < run.end && (end == run.start || count < NEAR_UNIT) {
+        let on = &octree.nodes()[leaf(end) as usize];
+        count += on.count;
+        bounds = bounds.union(on.bounds);
+        end += 1;
+    }
+    (end, count, bounds)
+}
+
 /// What the near pass tests as one box (`near_cull=on`).
 #[derive(Clone)]
 struct NearUnit {
@@ -815,6 +887,36 @@ fn make_draws<'s>(
 
 /// Step 1: hierarchical view-frustum culling over the octrees (the crate's scene walk,
 /// [`crate::walk`]), collecting leaves near and far of the plane.
+/// A frame's lists of the instances met and of their leaves, kept from frame to frame and
+/// cleared before each: on a view of many leaves they hold megabytes, which fresh vectors
+/// faulted in page by page every frame (as [`near::NearScratch`]).
+#[derive(Default)]
+struct FrameLists {
+    instances: Vec<(InstanceRec, ItemId, Mat4)>,
+    near: Vec<(u32, u32)>,
+    far: Vec<(u32, u32)>,
+    deferred: Vec<(u32, u32, f32, u32)>,
+    /// `plane=cost`: the deferred leaves' distances and triangles.
+    plane_leaves: Vec<(f32, u32)>,
+}
+
+impl FrameLists {
+    fn clear(&mut self) {
+        self.instances.clear();
+        self.near.clear();
+        self.far.clear();
+        self.deferred.clear();
+        self.plane_leaves.clear();
+    }
+
+    fn memory_bytes(&self) -> usize {
+        self.instances.capacity() * std::mem::size_of::<(InstanceRec, ItemId, Mat4)>()
+            + (self.near.capacity() + self.far.capacity()) * 8
+            + self.deferred.capacity() * std::mem::size_of::<(u32, u32, f32, u32)>()
+            + self.plane_leaves.capacity() * 8
+    }
+}
+
 struct Walk<'a> {
     walk: SceneWalk<'a>,
     lzb: &'a Lzb,
@@ -990,15 +1092,18 @@ impl Lzb {
 
         // Step 1: frustum culling collecting leaves, split by the plane.
         let t = Instant::now();
+        let mut lists = std::mem::take(&mut self.lists);
+        lists.clear();
         let mut walk = Walk {
             walk: SceneWalk::new(&self.scene, &ctx.view),
             lzb: self,
             ctx: &ctx,
-            instances: Vec::new(),
-            near: Vec::new(),
-            far: Vec::new(),
+            instances: std::mem::take(&mut lists.instances),
+            near: std::mem::take(&mut lists.near),
+            far: std::mem::take(&mut lists.far),
             // §IV: every rank splits by rank 0's plane, known after the walk.
-            deferred: (matches!(choice, PlaneChoice::Cost(_)) || share.is_some()).then(Vec::new),
+            deferred: (matches!(choice, PlaneChoice::Cost(_)) || share.is_some())
+                .then(|| std::mem::take(&mut lists.deferred)),
         };
         walk.walk.stats = stats;
         walk.run();
@@ -1013,10 +1118,11 @@ impl Lzb {
         stats = walk.finish("lzb")?;
         if let Some(deferred) = deferred {
             if let PlaneChoice::Cost(hits) = &choice {
-                let leaves: Vec<(f32, u32)> = deferred.iter().map(|&(_, _, d, n)| (d, n)).collect();
+                let leaves = &mut lists.plane_leaves;
+                leaves.extend(deferred.iter().map(|&(_, _, d, n)| (d, n)));
                 let pixels = f64::from(view.width()) * f64::from(view.height());
                 z_clip = cost_plane(
-                    &leaves,
+                    leaves,
                     hits,
                     pixels,
                     self.ns_per_triangle,
@@ -1033,13 +1139,14 @@ impl Lzb {
                 z_clip = share.plane(z_clip)?;
             }
             ctx.near_limit = z_clip * (1.0 + NEAR_MARGIN);
-            for (inst, leaf, d, _) in deferred {
+            for &(inst, leaf, d, _) in &deferred {
                 if d < ctx.near_limit {
                     near.push((inst, leaf));
                 } else {
                     far.push((inst, leaf));
                 }
             }
+            lists.deferred = deferred;
         }
         stats
             .counters
@@ -1368,6 +1475,12 @@ impl Lzb {
             stats.phases.add(Phase::Other, t.elapsed());
         }
         stats.total = start.elapsed();
+        self.lists = FrameLists {
+            instances,
+            near,
+            far,
+            ..lists
+        };
         crate::end_frame(&self.raster, stats)
     }
 
@@ -1377,6 +1490,8 @@ impl Lzb {
             + self.raster.memory_bytes()
             + self.pyramid.as_ref().map_or(0, ZPyramid::memory_bytes)
             + self.near_visible.capacity() * std::mem::size_of::<(ItemId, u32)>()
+            + self.near_scratch.memory_bytes()
+            + self.lists.memory_bytes()
     }
 }
 

@@ -83,8 +83,17 @@ impl Lzb {
         // With `near_temporal`, each instance's leaves visible last frame come first in its
         // run of pairs (and its units first in the order).
         let visible = std::mem::take(&mut self.near_visible);
-        let mut ordered: Vec<(u32, u32)> = Vec::new();
-        let mut parts: Vec<(u32, std::ops::Range<usize>, bool)> = Vec::new();
+        let mut scratch = std::mem::take(&mut self.near_scratch);
+        let NearScratch {
+            ordered,
+            parts,
+            units,
+            sorted,
+            groups,
+            eyes,
+        } = &mut scratch;
+        ordered.clear();
+        parts.clear();
         for (inst, r) in group_ranges(near) {
             if visible.is_empty() {
                 parts.push((inst, r, false));
@@ -94,8 +103,14 @@ impl Lzb {
             let base = instances[inst as usize].1;
             let lo = visible.partition_point(|v| v.0 < base);
             let seen = &visible[lo..lo + visible[lo..].partition_point(|v| v.0 == base)];
-            let was = |p: &(u32, u32)| seen.binary_search_by_key(&p.1, |v| v.1).is_ok();
             let at = ordered.len();
+            if seen.is_empty() {
+                // Nothing of it seen: its leaves in their order.
+                ordered.extend_from_slice(&near[r]);
+                parts.push((inst, at..ordered.len(), false));
+                continue;
+            }
+            let was = |p: &(u32, u32)| seen.binary_search_by_key(&p.1, |v| v.1).is_ok();
             ordered.extend(near[r.clone()].iter().filter(|p| was(p)));
             let rest = ordered.len();
             ordered.extend(near[r].iter().filter(|p| !was(p)));
@@ -108,26 +123,46 @@ impl Lzb {
         // leaves of an instance (neighbours in the octree's depth-first order, so close in
         // space) of up to NEAR_UNIT triangle references; and their groups, runs of up to
         // NEAR_GROUP consecutive units of an instance, tested as one box first.
-        let mut units: Vec<NearUnit> = Vec::new();
-        let mut groups: Vec<NearGroup> = Vec::new();
+        units.clear();
+        groups.clear();
         let mut visible_triangles = 0usize;
-        for (inst, r, seen) in parts.into_iter().filter(|p| !p.1.is_empty()) {
+        for (inst, r, seen) in parts.drain(..).filter(|p| !p.1.is_empty()) {
             let first_unit = units.len();
             let (rec, _, clip) = &instances[inst as usize];
-            let Accel::Mesh { octree, leaves, .. } = &self.accel[rec.node.index()] else {
+            let Accel::Mesh {
+                octree, leaves, chunks, ..
+            } = &self.accel[rec.node.index()]
+            else {
                 continue;
             };
             let w_row = row_w(clip);
             let whole = r.len() == *leaves as usize && *leaves == 1;
-            let mut at = r.start;
-            while at < r.end {
-                let (mut end, mut count, mut bounds) = (at, 0u32, Aabb::EMPTY);
-                while end < r.end && (end == at || count < NEAR_UNIT) {
-                    let on = &octree.nodes()[near[end].1 as usize];
-                    count += on.count;
-                    bounds = bounds.union(on.bounds);
-                    end += 1;
+            // Every leaf near, in the walk's order (a part of several leaves holding them all
+            // holds them in that order): the units made once.
+            let full = r.len() == *leaves as usize && !whole && !chunks.is_empty();
+            if full {
+                for c in chunks {
+                    if seen {
+                        visible_triangles += c.count as usize;
+                    }
+                    units.push(NearUnit {
+                        distance: if seen {
+                            f32::NEG_INFINITY
+                        } else {
+                            near_distance(w_row, &c.bounds)
+                        },
+                        inst,
+                        leaves: r.start as u32 + c.leaves.start..r.start as u32 + c.leaves.end,
+                        whole: false,
+                        count: c.count,
+                        bounds: c.bounds,
+                    });
                 }
+            }
+            // Otherwise formed here from the frame's leaves, the same way.
+            let mut at = if full { r.end } else { r.start };
+            while at < r.end {
+                let (end, mut count, bounds) = near_unit(octree, |i| near[i].1, at..r.end);
                 if whole {
                     count = self
                         .scene
@@ -166,18 +201,19 @@ impl Lzb {
         // Groups by their least view distance (last frame's visible ones first), and the units
         // of each by theirs.
         groups.sort_unstable_by(|a, b| a.distance.total_cmp(&b.distance));
-        let mut sorted: Vec<NearUnit> = Vec::with_capacity(units.len());
-        for g in &mut groups {
+        sorted.clear();
+        for g in groups.iter_mut() {
             let at = sorted.len();
             sorted.extend_from_slice(&units[g.units.start as usize..g.units.end as usize]);
             sorted[at..].sort_unstable_by(|a, b| a.distance.total_cmp(&b.distance));
             g.units = at as u32..sorted.len() as u32;
         }
-        let units = sorted;
+        let units = &*sorted;
         let mut pyramid = self.take_pyramid(w, h)?;
         pyramid.clear();
         let eye = view.camera().eye;
-        let mut eyes: Vec<Option<Vec3>> = vec![None; instances.len()];
+        eyes.clear();
+        eyes.resize(instances.len(), None);
         let first_stamp = self.reserve_stamps(instances.len() as u32);
         let (mut tested, mut culled_units, mut culled_triangles, mut near_triangles) = (0u64, 0u64, 0u64, 0u64);
         // Groups and units found hidden by their own test (a hidden group's units are not tested).
@@ -325,6 +361,7 @@ impl Lzb {
         stats.counters.add("near_culled_triangles", culled_triangles);
         stats.counters.add("near_visible_triangles", visible_triangles as u64);
         self.pyramid = Some(pyramid);
+        self.near_scratch = scratch;
         Ok(())
     }
 
@@ -445,5 +482,34 @@ impl Lzb {
             Some(p) if p.width() == w && p.height() == h => Ok(p),
             _ => Ok(ZPyramid::new(w, h)?),
         }
+    }
+}
+
+/// The near pass's lists (`near_cull=on`), kept from frame to frame and cleared before each: on
+/// a view of a hundred thousand near leaves they hold megabytes, which fresh vectors faulted in
+/// page by page every frame (docs/perf-log.md).
+#[derive(Default)]
+pub(super) struct NearScratch {
+    /// The near pairs reordered (`near_temporal`: each instance's leaves seen last frame first).
+    ordered: Vec<(u32, u32)>,
+    /// Runs of `ordered` of an instance, seen last frame or not.
+    parts: Vec<(u32, std::ops::Range<usize>, bool)>,
+    /// The units as formed, then sorted group by group.
+    units: Vec<NearUnit>,
+    sorted: Vec<NearUnit>,
+    /// The groups of units.
+    groups: Vec<NearGroup>,
+    /// Per instance: the eye in its space, once needed.
+    eyes: Vec<Option<Vec3>>,
+}
+
+impl NearScratch {
+    /// Bytes held.
+    pub(super) fn memory_bytes(&self) -> usize {
+        self.ordered.capacity() * std::mem::size_of::<(u32, u32)>()
+            + self.parts.capacity() * std::mem::size_of::<(u32, std::ops::Range<usize>, bool)>()
+            + (self.units.capacity() + self.sorted.capacity()) * std::mem::size_of::<NearUnit>()
+            + self.groups.capacity() * std::mem::size_of::<NearGroup>()
+            + self.eyes.capacity() * std::mem::size_of::<Option<Vec3>>()
     }
 }

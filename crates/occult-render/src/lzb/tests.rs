@@ -312,3 +312,56 @@ fn nothing_in_view_puts_the_plane_at_the_near_plane() {
         0.1
     );
 }
+
+/// The near pass's units of an instance all of whose leaves are near, made once when the
+/// renderer is built ([`near_chunks`]), are the units it forms from a frame's leaves: the same
+/// tests, the same triangles culled and drawn, frame after frame (the second with last frame's
+/// leaves first), and the same frame.
+#[test]
+fn near_units_made_once_are_those_formed_per_frame() {
+    let (scene, view, reference) = two_walls();
+    let opts = LzbOptions {
+        plane: Plane::Static,
+        plane_fraction: 1.0,
+        payoff: false,
+        near_cull: true,
+        near_temporal: true,
+        ..LzbOptions::default()
+    };
+    let options = RenderOptions::default();
+    let mut made_once = Lzb::new(scene.clone(), &options, &opts).expect("lzb builds");
+    let mut per_frame = Lzb::new(scene.clone(), &options, &opts).expect("lzb builds");
+    let mut chunks = 0;
+    for accel in &mut per_frame.accel {
+        if let Accel::Mesh { chunks: c, .. } = accel {
+            chunks += c.len();
+            c.clear();
+        }
+    }
+    assert!(chunks > 2, "the walls' mesh has units made once");
+    for frame_no in 0..2 {
+        let (mut a, mut b) = (
+            Frame::new(96, 64).expect("a frame"),
+            Frame::new(96, 64).expect("a frame"),
+        );
+        let sa = made_once.render(&view, &mut a).expect("a frame");
+        let sb = per_frame.render(&view, &mut b).expect("a frame");
+        assert!(
+            a.same_visibility(&reference) && b.same_visibility(&reference),
+            "frame {frame_no}"
+        );
+        assert_eq!(sa.boxes_tested, sb.boxes_tested, "frame {frame_no}");
+        assert_eq!(sa.triangles_submitted, sb.triangles_submitted, "frame {frame_no}");
+        for counter in ["near_culled_units", "near_culled_groups", "near_visible_triangles"] {
+            assert_eq!(
+                sa.counters.get(counter),
+                sb.counters.get(counter),
+                "{counter}, frame {frame_no}"
+            );
+        }
+        assert!(
+            sa.counters.get("near_culled_units") > 0,
+            "frame {frame_no}: the far wall is culled"
+        );
+    }
+}
