@@ -446,28 +446,37 @@ impl Lzb {
         let eye = view.camera().eye;
         let mut counts = PyramidCounts::default();
         let (mut tested, mut hidden) = (0u64, 0u64);
-        far.sort_unstable();
+        // The walk lists an instance's leaves together, instances in order: grouped already
+        // (sorting 143 k leaves a frame cost a twentieth of a city street's frame). The order
+        // of the leaves does not matter to what follows (the pixels they project to).
+        if !far.is_sorted_by_key(|p| p.0) {
+            far.sort_unstable_by_key(|p| p.0);
+        }
         let before = far.len();
-        let mut kept = Vec::with_capacity(far.len());
+        // The instances not hidden keep their leaves, moved down over the hidden ones'.
+        let mut kept = 0;
         for (inst, r) in group_ranges(far) {
             let (rec, _, clip) = &instances[inst as usize];
-            let Accel::Mesh { octree, .. } = &self.accel[rec.node.index()] else {
-                kept.extend_from_slice(&far[r]);
-                continue;
+            let hidden_instance = match &self.accel[rec.node.index()] {
+                Accel::Mesh { octree, .. } => {
+                    let nodes = octree.nodes();
+                    let e = rec.world_from_object.inverse().transform_point3(eye);
+                    let union = far[r.clone()]
+                        .iter()
+                        .fold(Aabb::EMPTY, |b, &(_, leaf)| b.union(nodes[leaf as usize].bounds));
+                    tested += 1;
+                    occlusion.box_hidden(clip, &union, e, &mut counts)
+                }
+                _ => false,
             };
-            let nodes = octree.nodes();
-            let e = rec.world_from_object.inverse().transform_point3(eye);
-            let union = far[r.clone()]
-                .iter()
-                .fold(Aabb::EMPTY, |b, &(_, leaf)| b.union(nodes[leaf as usize].bounds));
-            tested += 1;
-            if occlusion.box_hidden(clip, &union, e, &mut counts) {
+            if hidden_instance {
                 hidden += 1;
                 continue;
             }
-            kept.extend_from_slice(&far[r]);
+            far.copy_within(r.clone(), kept);
+            kept += r.len();
         }
-        *far = kept;
+        far.truncate(kept);
         self.pyramid = Some(pyramid);
         stats.boxes_tested += tested;
         stats.boxes_culled += hidden;
