@@ -60,16 +60,17 @@ fn counter(r: &mut dyn Renderer, view: &View, name: &str) -> u64 {
 }
 
 /// DESIGN invariant 3 and the bound: with the paper's sample count and per-pixel
-/// reconstruction (d = 1, large-triangle fallback at the paper's threshold), at most 3 % of the
-/// covered pixels show another item than zbuffer's. Sizes where part of the frame is sampled
-/// (city) and where triangles are about pixel-sized (chessboard).
+/// reconstruction (d = 1, large-triangle fallback at the paper's threshold, per leaf only as
+/// the paper: `whole=off`), at most 3 % of the covered pixels show another item than
+/// zbuffer's. Sizes where part of the frame is sampled (city) and where triangles are about
+/// pixel-sized (chessboard).
 #[test]
 fn per_pixel_reconstruction_differs_from_zbuffer_in_at_most_3_percent() {
     for (spec, sampled) in [("city:blocks=4", true), ("chessboard:n=200", false)] {
         let (scene, camera) = scene(spec);
         let view = View::new(camera, 320, 240).unwrap();
         let reference = zbuffer_frame(&scene, &view);
-        let mut r = rzb(&scene, "rzb:d=1", 2);
+        let mut r = rzb(&scene, "rzb:d=1,whole=off", 2);
         let frame = render(r.as_mut(), &view);
         let share = differing_share(&frame, &reference);
         assert!(share <= 0.03, "{spec}: {:.3}% of covered pixels differ", share * 100.0);
@@ -79,6 +80,39 @@ fn per_pixel_reconstruction_differs_from_zbuffer_in_at_most_3_percent() {
                 "{spec}: nothing sampled"
             );
         }
+    }
+}
+
+/// `whole=on` (the default): a mesh instance most of whose triangles the fallback draws is
+/// drawn whole, its samples dropped. On a city whose buildings are drawn mostly by the
+/// fallback, instances are drawn whole, with fewer samples and no more pixels wrong than
+/// per leaf (the instances drawn whole are exact); where every instance is, the frame is
+/// `zbuffer`'s.
+#[test]
+fn instances_drawn_mostly_by_the_fallback_are_drawn_whole() {
+    let (scene, camera) = scene("city:blocks=4");
+    let view = View::new(camera, 320, 240).unwrap();
+    let reference = zbuffer_frame(&scene, &view);
+    let mut per_leaf = rzb(&scene, "rzb:d=1,whole=off", 2);
+    let mut whole = rzb(&scene, "rzb:d=1", 2);
+    let (a, b) = (render(per_leaf.as_mut(), &view), render(whole.as_mut(), &view));
+    let (share_leaf, share_whole) = (differing_share(&a, &reference), differing_share(&b, &reference));
+    assert!(
+        share_whole <= share_leaf,
+        "whole {:.3}% against per leaf {:.3}%",
+        share_whole * 100.0,
+        share_leaf * 100.0
+    );
+    assert!(counter(whole.as_mut(), &view, "instances_zbuffer") > 0);
+    assert_eq!(counter(per_leaf.as_mut(), &view, "instances_zbuffer"), 0);
+    assert!(
+        counter(whole.as_mut(), &view, "samples_generated") < counter(per_leaf.as_mut(), &view, "samples_generated")
+    );
+    if counter(whole.as_mut(), &view, "samples_generated") == 0 {
+        assert!(
+            b.same_visibility(&reference),
+            "every instance drawn whole: zbuffer's frame"
+        );
     }
 }
 

@@ -42,6 +42,9 @@
 //! including hidden surfaces; O(n) memory over unique geometry.
 //!
 //! # Deviations
+//! - Addition (`whole=on`, the default): a mesh instance more than half of whose triangles the
+//!   §7.1 fallback draws is drawn whole, one draw, its sampled boxes dropped ([`select`]);
+//!   `whole=off` is the paper's per-box fallback.
 //! - Every group node gets its own structure (the paper merges singly referenced nodes into
 //!   the parent's octree): composing transforms from the root, which bit-identical fallback
 //!   draws need, requires the instance chain. One transform more per sample per level.
@@ -122,6 +125,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc { key: "gauss_tolerance", default: "0.02", help: "recon=gauss: a sample is visible at a pixel when its view distance is within (1 + this) of the pixel's nearest, (0, 1]" },
         ParamDoc { key: "oversample", default: "1", help: "factor on the paper's sample count a*ln(v) (4.1.1), (0, 1000]" },
         ParamDoc { key: "large", default: "on", help: "draw boxes of large triangles with the z-buffer (7.1)" },
+        ParamDoc { key: "whole", default: "on", help: "large=on: a mesh instance more than half of whose triangles the z-buffer draws (7.1) is drawn whole instead, its sampled boxes with it (not in the paper); off: per leaf only" },
         ParamDoc { key: "threshold", default: "1", help: "samples per triangle above which a box is z-buffered (7.1, 8.3: projected area d^2/ln v)" },
         ParamDoc { key: "area_ratio", default: "4", help: "largest area ratio within an area class (7.1), > 1" },
         ParamDoc { key: "orientation", default: "0", help: "orientation classes (5.3.4): bands of the polar grid of normal classes (2*bands^2 classes), 0..=8, 0 for none; bounds the orientation factor per box and skips boxes facing away when back faces are rejected" },
@@ -139,6 +143,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
     counters: &[
         "boxes_selected",
         "boxes_zbuffer",
+        "instances_zbuffer",
         "boxes_backfacing",
         "instances_visited",
         "samples_generated",
@@ -213,6 +218,9 @@ pub struct RzbOptions {
     pub large: bool,
     /// Samples per triangle above which a box is drawn by the rasterizer (> 0).
     pub large_threshold: f64,
+    /// With `large`: a mesh instance more than half of whose triangles §7.1 draws is drawn
+    /// whole by the rasterizer, its sampled boxes with it (not in the paper; [`select`]).
+    pub whole: bool,
     /// Largest area ratio within an area class (> 1; §8.3: 2..64 behave alike).
     pub area_ratio: f64,
     /// §5.3.4: bands of the polar grid of orientation classes (0 = none, ≤ 8).
@@ -256,6 +264,7 @@ impl Default for RzbOptions {
             oversample: 1.0,
             large: true,
             large_threshold: 1.0,
+            whole: true,
             area_ratio: 4.0,
             orientation: 0,
             leaf_size: 32,
@@ -294,6 +303,7 @@ impl RzbOptions {
             gauss_tolerance: "gauss_tolerance",
             oversample: "oversample",
             large: flag "large",
+            whole: flag "whole",
             large_threshold: "threshold",
             area_ratio: "area_ratio",
             orientation: "orientation",
@@ -1378,6 +1388,7 @@ impl Renderer for Rzb {
         let c = &mut stats.counters;
         c.add("boxes_selected", selected as u64);
         c.add("boxes_zbuffer", sel.boxes_zbuffer);
+        c.add("instances_zbuffer", sel.instances_zbuffer);
         if self.opts.orientation > 0 {
             c.add("boxes_backfacing", sel.boxes_backfacing);
         }

@@ -4,7 +4,7 @@
 //! the node's box ([`NodeTest::None`]): its octree roots, one per area class, are what is
 //! tested, and only they count as tested boxes.
 
-use occult_core::{Aabb, Affine3A, Containment, Frustum, ItemId, Mat4, NodeKind, Scene, Vec3, Vec4, View};
+use occult_core::{Aabb, Affine3A, Containment, Frustum, ItemId, Mat4, Mesh, NodeKind, Scene, Vec3, Vec4, View};
 use occult_raster::{Draw, DrawTriangles};
 
 use crate::walk::{NodeAt, NodeTest, Placed, SceneWalk, Visitor};
@@ -107,6 +107,10 @@ pub struct Selection<'a> {
     pub instances_visited: u64,
     /// Boxes handed to the z-buffer.
     pub boxes_zbuffer: u64,
+    /// Mesh instances drawn whole by the z-buffer ([`RzbOptions::whole`]).
+    pub instances_zbuffer: u64,
+    /// [`RzbOptions::whole`].
+    whole: bool,
     /// §5.3.4: boxes skipped wholesale because their orientation class faces away.
     pub boxes_backfacing: u64,
 }
@@ -168,6 +172,8 @@ impl<'a> Selection<'a> {
             boxes_culled: 0,
             instances_visited: 0,
             boxes_zbuffer: 0,
+            instances_zbuffer: 0,
+            whole: opts.whole,
             boxes_backfacing: 0,
         };
         Visitor::run(&mut s);
@@ -205,15 +211,20 @@ impl<'a> Visitor<'a> for Selection<'a> {
                 .then(|| world_from_structure.inverse().transform_point3(self.consts.eye)),
             mirrored: world_from_structure.matrix3.determinant() < 0.0,
         };
+        if self.dense_at_centre(&place, st) {
+            return;
+        }
+        let (draws_at, jobs_at, zbuffer_at) = (self.draws.len(), self.jobs.len(), self.boxes_zbuffer);
         for (class, root) in st.octree.roots().iter().enumerate() {
             if let Some(root) = root {
                 self.node(&place, *root, st.cones.get(class));
             }
         }
+        self.whole_if_mostly_drawn(&place, st, draws_at, jobs_at, zbuffer_at);
     }
 }
 
-impl Selection<'_> {
+impl<'a> Selection<'a> {
     /// §5.1/§5.3: (nearest view distance clamped to the near plane, farthest, largest lateral
     /// extent across the view direction, samples) of the list positions `range` bounded by `b`;
     /// with an orientation class (§5.3.4) the samples carry its bound of the orientation factor,
@@ -250,6 +261,80 @@ impl Selection<'_> {
             }
         }
         Some((z_min, z_max, 2.0 * dx.max(dy) as f64, samples))
+    }
+
+    /// [`RzbOptions::whole`], before any descent: a mesh instance whose triangles would get on
+    /// average more than twice the threshold of samples each at its box's centre is drawn
+    /// whole at once (its octrees' descent is most of a frame's selection, and §7.1 would draw
+    /// most of it). True when drawn (or outside the view).
+    fn dense_at_centre(&mut self, p: &Place, st: &Structure) -> bool {
+        let Some(threshold) = self.large.filter(|_| self.whole && st.tree.is_none()) else {
+            return false;
+        };
+        let NodeKind::Mesh(mesh) = self.walk.scene().node(p.at.id).kind() else {
+            return false;
+        };
+        let bounds = st
+            .octree
+            .roots()
+            .iter()
+            .flatten()
+            .fold(Aabb::EMPTY, |b, &r| b.union(st.octree.nodes()[r as usize].bounds));
+        if bounds.is_empty() || mesh.triangle_count() == 0 {
+            return false;
+        }
+        let r = p.rows[2];
+        let z = (-(r.truncate().dot(bounds.center()) + r.w) as f64).max(self.consts.near as f64);
+        let prj = self.consts.focal_px * self.consts.focal_px / (z * z);
+        let d2 = (self.consts.splat * self.consts.splat) as f64;
+        let samples = st.area * p.area_scale * prj * self.consts.ln_v / d2 * self.oversample;
+        if samples / (mesh.triangle_count() as f64) <= 2.0 * threshold {
+            return false;
+        }
+        if self.test(p, &bounds) {
+            self.draw_whole(p, mesh);
+        }
+        true
+    }
+
+    /// One draw of the whole mesh of instance `p`, counted in `instances_zbuffer`.
+    fn draw_whole(&mut self, p: &Place, mesh: &'a Mesh) {
+        self.instances_zbuffer += 1;
+        self.draws.push(Draw {
+            mesh,
+            triangles: DrawTriangles::All,
+            clip_from_object: p.clip_from_structure,
+            first_item: p.at.first_item,
+        });
+    }
+
+    /// [`RzbOptions::whole`] (not in the paper): once a mesh instance's octrees were
+    /// descended, when §7.1 drew more than half of its triangles (the draws and jobs after
+    /// `draws_at` and `jobs_at` are this instance's), they and its sampled boxes give way to
+    /// one draw of the whole mesh: each vertex projected once instead of a list per leaf, and
+    /// the rest drawn exactly instead of sampled. Only static structures (a removed entry would
+    /// be drawn).
+    fn whole_if_mostly_drawn(&mut self, p: &Place, st: &Structure, draws_at: usize, jobs_at: usize, zbuffer_at: u64) {
+        if !self.whole || st.tree.is_some() || self.draws.len() == draws_at {
+            return;
+        }
+        let NodeKind::Mesh(mesh) = self.walk.scene().node(p.at.id).kind() else {
+            return;
+        };
+        let drawn: usize = self.draws[draws_at..]
+            .iter()
+            .map(|d| match d.triangles {
+                DrawTriangles::List(l) => l.len(),
+                _ => mesh.triangle_count(),
+            })
+            .sum();
+        if drawn * 2 <= mesh.triangle_count() {
+            return;
+        }
+        self.draws.truncate(draws_at);
+        self.jobs.truncate(jobs_at);
+        self.boxes_zbuffer = zbuffer_at;
+        self.draw_whole(p, mesh);
     }
 
     /// The counted frustum test: false when `b` is outside.
