@@ -885,8 +885,6 @@ fn make_draws<'s>(
         .collect()
 }
 
-/// Step 1: hierarchical view-frustum culling over the octrees (the crate's scene walk,
-/// [`crate::walk`]), collecting leaves near and far of the plane.
 /// A frame's lists of the instances met and of their leaves, kept from frame to frame and
 /// cleared before each: on a view of many leaves they hold megabytes, which fresh vectors
 /// faulted in page by page every frame (as [`near::NearScratch`]).
@@ -917,6 +915,8 @@ impl FrameLists {
     }
 }
 
+/// Step 1: hierarchical view-frustum culling over the octrees (the crate's scene walk,
+/// [`crate::walk`]), collecting leaves near and far of the plane.
 struct Walk<'a> {
     walk: SceneWalk<'a>,
     lzb: &'a Lzb,
@@ -1333,6 +1333,12 @@ impl Lzb {
         if let Some(share) = share {
             if !shared::unite_pvl(share, &mut pairs, &mut recs)? {
                 stats.total = start.elapsed();
+                self.lists = FrameLists {
+                    instances,
+                    near,
+                    far,
+                    ..lists
+                };
                 return crate::end_frame(&self.raster, stats);
             }
         }

@@ -43,8 +43,10 @@
 //!
 //! # Deviations
 //! - Addition (`whole=on`, the default): a mesh instance more than half of whose triangles the
-//!   §7.1 fallback draws is drawn whole, one draw, its sampled boxes dropped ([`select`]);
-//!   `whole=off` is the paper's per-box fallback.
+//!   §7.1 fallback draws is drawn whole, one draw, its sampled boxes dropped; so is one wholly
+//!   beyond the near plane whose triangles would average more than twice the threshold of
+//!   samples at its centre's distance, before any descent ([`select`]); `whole=off` is the
+//!   paper's per-box fallback.
 //! - Every group node gets its own structure (the paper merges singly referenced nodes into
 //!   the parent's octree): composing transforms from the root, which bit-identical fallback
 //!   draws need, requires the instance chain. One transform more per sample per level.
@@ -125,7 +127,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc { key: "gauss_tolerance", default: "0.02", help: "recon=gauss: a sample is visible at a pixel when its view distance is within (1 + this) of the pixel's nearest, (0, 1]" },
         ParamDoc { key: "oversample", default: "1", help: "factor on the paper's sample count a*ln(v) (4.1.1), (0, 1000]" },
         ParamDoc { key: "large", default: "on", help: "draw boxes of large triangles with the z-buffer (7.1)" },
-        ParamDoc { key: "whole", default: "on", help: "large=on: a mesh instance more than half of whose triangles the z-buffer draws (7.1) is drawn whole instead, its sampled boxes with it (not in the paper); off: per leaf only" },
+        ParamDoc { key: "whole", default: "on", help: "large=on: a mesh instance more than half of whose triangles the z-buffer draws (7.1), or whose triangles average more than twice threshold samples at its centre's distance, is drawn whole instead, its sampled boxes with it (not in the paper); off: per box only" },
         ParamDoc { key: "threshold", default: "1", help: "samples per triangle above which a box is z-buffered (7.1, 8.3: projected area d^2/ln v)" },
         ParamDoc { key: "area_ratio", default: "4", help: "largest area ratio within an area class (7.1), > 1" },
         ParamDoc { key: "orientation", default: "0", help: "orientation classes (5.3.4): bands of the polar grid of normal classes (2*bands^2 classes), 0..=8, 0 for none; bounds the orientation factor per box and skips boxes facing away when back faces are rejected" },
@@ -218,8 +220,9 @@ pub struct RzbOptions {
     pub large: bool,
     /// Samples per triangle above which a box is drawn by the rasterizer (> 0).
     pub large_threshold: f64,
-    /// With `large`: a mesh instance more than half of whose triangles §7.1 draws is drawn
-    /// whole by the rasterizer, its sampled boxes with it (not in the paper; [`select`]).
+    /// With `large`: a mesh instance more than half of whose triangles §7.1 draws (or dense
+    /// enough at its centre's distance) is drawn whole by the rasterizer, its sampled boxes with
+    /// it (not in the paper; [`select`]).
     pub whole: bool,
     /// Largest area ratio within an area class (> 1; §8.3: 2..64 behave alike).
     pub area_ratio: f64,

@@ -214,13 +214,18 @@ impl<'a> Visitor<'a> for Selection<'a> {
         if self.dense_at_centre(&place, st) {
             return;
         }
-        let (draws_at, jobs_at, zbuffer_at) = (self.draws.len(), self.jobs.len(), self.boxes_zbuffer);
+        let at = (
+            self.draws.len(),
+            self.jobs.len(),
+            self.boxes_zbuffer,
+            self.boxes_backfacing,
+        );
         for (class, root) in st.octree.roots().iter().enumerate() {
             if let Some(root) = root {
                 self.node(&place, *root, st.cones.get(class));
             }
         }
-        self.whole_if_mostly_drawn(&place, st, draws_at, jobs_at, zbuffer_at);
+        self.whole_if_mostly_drawn(&place, st, at);
     }
 }
 
@@ -263,10 +268,11 @@ impl<'a> Selection<'a> {
         Some((z_min, z_max, 2.0 * dx.max(dy) as f64, samples))
     }
 
-    /// [`RzbOptions::whole`], before any descent: a mesh instance whose triangles would get on
-    /// average more than twice the threshold of samples each at its box's centre is drawn
-    /// whole at once (its octrees' descent is most of a frame's selection, and §7.1 would draw
-    /// most of it). True when drawn (or outside the view).
+    /// [`RzbOptions::whole`], before any descent: a mesh instance wholly beyond the near plane
+    /// whose triangles would get on average more than twice the threshold of samples each at
+    /// the view distance of its box's centre is drawn whole at once (its octrees' descent is
+    /// most of a frame's selection, and §7.1 would draw most of it). True when drawn (or
+    /// outside the view).
     fn dense_at_centre(&mut self, p: &Place, st: &Structure) -> bool {
         let Some(threshold) = self.large.filter(|_| self.whole && st.tree.is_none()) else {
             return false;
@@ -283,15 +289,25 @@ impl<'a> Selection<'a> {
         if bounds.is_empty() || mesh.triangle_count() == 0 {
             return false;
         }
+        // Only a box wholly beyond the near plane: one that holds the eye (a terrain, a
+        // building walked through) is descended, whatever its centre's distance.
         let r = p.rows[2];
-        let z = (-(r.truncate().dot(bounds.center()) + r.w) as f64).max(self.consts.near as f64);
+        let (zc, dz) = (
+            -(r.truncate().dot(bounds.center()) + r.w),
+            r.truncate().abs().dot(bounds.half_extent()),
+        );
+        if zc - dz <= self.consts.near {
+            return false;
+        }
+        let z = zc as f64;
         let prj = self.consts.focal_px * self.consts.focal_px / (z * z);
         let d2 = (self.consts.splat * self.consts.splat) as f64;
         let samples = st.area * p.area_scale * prj * self.consts.ln_v / d2 * self.oversample;
         if samples / (mesh.triangle_count() as f64) <= 2.0 * threshold {
             return false;
         }
-        if self.test(p, &bounds) {
+        // Not a counted box test (the octree roots are this renderer's boxes).
+        if p.frustum.classify_aabb(&bounds) != Containment::Outside {
             self.draw_whole(p, mesh);
         }
         true
@@ -310,11 +326,13 @@ impl<'a> Selection<'a> {
 
     /// [`RzbOptions::whole`] (not in the paper): once a mesh instance's octrees were
     /// descended, when §7.1 drew more than half of its triangles (the draws and jobs after
-    /// `draws_at` and `jobs_at` are this instance's), they and its sampled boxes give way to
-    /// one draw of the whole mesh: each vertex projected once instead of a list per leaf, and
-    /// the rest drawn exactly instead of sampled. Only static structures (a removed entry would
-    /// be drawn).
-    fn whole_if_mostly_drawn(&mut self, p: &Place, st: &Structure, draws_at: usize, jobs_at: usize, zbuffer_at: u64) {
+    /// those counted in `at` are this instance's: a mesh's descent enters no instance), they
+    /// and its sampled boxes give way to one draw of the whole mesh: each vertex projected
+    /// once instead of a list per leaf, and the rest drawn exactly instead of sampled; the
+    /// counts of its boxes drawn and skipped as back-facing go back to `at`'s. Only static
+    /// structures (a removed entry would be drawn).
+    fn whole_if_mostly_drawn(&mut self, p: &Place, st: &Structure, at: (usize, usize, u64, u64)) {
+        let (draws_at, jobs_at, zbuffer_at, backfacing_at) = at;
         if !self.whole || st.tree.is_some() || self.draws.len() == draws_at {
             return;
         }
@@ -334,6 +352,7 @@ impl<'a> Selection<'a> {
         self.draws.truncate(draws_at);
         self.jobs.truncate(jobs_at);
         self.boxes_zbuffer = zbuffer_at;
+        self.boxes_backfacing = backfacing_at;
         self.draw_whole(p, mesh);
     }
 
