@@ -195,8 +195,8 @@ pub(crate) enum Accel {
         leaf_base: Vec<f32>,
         /// Its non-empty leaves (all of them near: the mesh is drawn whole).
         leaves: u32,
-        /// The near pass's units of an instance all of whose leaves are near ([`near_chunks`]).
-        chunks: Vec<NearChunk>,
+        /// The near pass's units of an instance all of whose leaves are near ([`near::near_chunks`]).
+        chunks: Vec<near::NearChunk>,
         /// Per triangle: a leaf that holds it (`u32::MAX`: none), so that a pixel's item
         /// names a leaf (`near_temporal`).
         leaf_of: Vec<u32>,
@@ -261,7 +261,7 @@ impl Accel {
                 ..
             } => {
                 octree.memory_bytes()
-                    + chunks.capacity() * std::mem::size_of::<NearChunk>()
+                    + chunks.capacity() * std::mem::size_of::<near::NearChunk>()
                     + refs.capacity() * std::mem::size_of::<RefTriangle>()
                     + (leaf_base.capacity() + leaf_of.capacity()) * 4
                     + bvh.as_ref().map_or(0, MeshBvh::memory_bytes)
@@ -528,7 +528,7 @@ impl Lzb {
                                 Accel::Mesh {
                                     leaves: octree.nodes().iter().filter(|n| n.is_leaf() && n.count > 0).count() as u32,
                                     chunks: if opts.near_cull {
-                                        near_chunks(&octree)
+                                        near::near_chunks(&octree)
                                     } else {
                                         Vec::new()
                                     },
@@ -789,63 +789,6 @@ struct NearGroup {
     count: u64,
     /// The union of its units' boxes.
     bounds: Aabb,
-}
-
-/// A unit of the near pass of an instance all of whose leaves are near ([`near_chunks`]).
-#[derive(Clone, Debug, PartialEq)]
-pub(crate) struct NearChunk {
-    /// Its leaves: positions in the order [`cull_octree`] meets the non-empty leaves.
-    leaves: std::ops::Range<u32>,
-    /// Its triangle references.
-    count: u32,
-    /// The union of its leaves' boxes.
-    bounds: Aabb,
-}
-
-/// The near pass's units of a mesh instance all of whose leaves are near (an instance wholly
-/// in the frustum before the plane: most of them when the plane lies far), made once: runs of
-/// consecutive non-empty leaves, in the order [`cull_octree`] meets them, of up to
-/// [`NEAR_UNIT`] triangle references, exactly as the near pass forms them from a frame's
-/// leaves, which reads every near leaf's node.
-fn near_chunks(octree: &RayOctree) -> Vec<NearChunk> {
-    let mut order = Vec::new();
-    let mut stack = vec![0u32];
-    while let Some(n) = stack.pop() {
-        let on = &octree.nodes()[n as usize];
-        if on.is_leaf() {
-            if on.count > 0 {
-                order.push(n);
-            }
-        } else {
-            stack.extend(on.children().rev());
-        }
-    }
-    let mut chunks = Vec::new();
-    let mut at = 0;
-    while at < order.len() {
-        let (end, count, bounds) = near_unit(octree, |i| order[i], at..order.len());
-        chunks.push(NearChunk {
-            leaves: at as u32..end as u32,
-            count,
-            bounds,
-        });
-        at = end;
-    }
-    chunks
-}
-
-/// The near pass's unit that starts at the first of the leaves `run` (`leaf(i)` the node of
-/// the `i`th): it and the leaves after it while they hold fewer than [`NEAR_UNIT`] triangle
-/// references. Returns where it ends, its references and the union of its leaves' boxes.
-fn near_unit(octree: &RayOctree, leaf: impl Fn(usize) -> u32, run: std::ops::Range<usize>) -> (usize, u32, Aabb) {
-    let (mut end, mut count, mut bounds) = (run.start, 0u32, Aabb::EMPTY);
-    while end < run.end && (end == run.start || count < NEAR_UNIT) {
-        let on = &octree.nodes()[leaf(end) as usize];
-        count += on.count;
-        bounds = bounds.union(on.bounds);
-        end += 1;
-    }
-    (end, count, bounds)
 }
 
 /// What the near pass tests as one box (`near_cull=on`).

@@ -494,6 +494,67 @@ impl Lzb {
     }
 }
 
+/// A unit of the near pass of an instance all of whose leaves are near ([`near_chunks`]).
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct NearChunk {
+    /// Its leaves: positions in the order [`super::cull_octree`] meets the non-empty leaves.
+    leaves: std::ops::Range<u32>,
+    /// Its triangle references.
+    count: u32,
+    /// The union of its leaves' boxes.
+    bounds: Aabb,
+}
+
+/// The near pass's units of a mesh instance all of whose leaves are near (an instance wholly
+/// in the frustum before the plane: most of them when the plane lies far), made once: runs of
+/// consecutive non-empty leaves, in the order [`super::cull_octree`] meets them, of up to
+/// [`super::NEAR_UNIT`] triangle references, exactly as the near pass forms them from a frame's
+/// leaves, which reads every near leaf's node.
+pub(super) fn near_chunks(octree: &RayOctree) -> Vec<NearChunk> {
+    let mut order = Vec::new();
+    let mut stack = vec![0u32];
+    while let Some(n) = stack.pop() {
+        let on = &octree.nodes()[n as usize];
+        if on.is_leaf() {
+            if on.count > 0 {
+                order.push(n);
+            }
+        } else {
+            stack.extend(on.children().rev());
+        }
+    }
+    let mut chunks = Vec::new();
+    let mut at = 0;
+    while at < order.len() {
+        let (end, count, bounds) = near_unit(octree, |i| order[i], at..order.len());
+        chunks.push(NearChunk {
+            leaves: at as u32..end as u32,
+            count,
+            bounds,
+        });
+        at = end;
+    }
+    chunks
+}
+
+/// The near pass's unit that starts at the first of the leaves `run` (`leaf(i)` the node of
+/// the `i`th): it and the leaves after it while they hold fewer than [`super::NEAR_UNIT`] triangle
+/// references. Returns where it ends, its references and the union of its leaves' boxes.
+pub(super) fn near_unit(
+    octree: &RayOctree,
+    leaf: impl Fn(usize) -> u32,
+    run: std::ops::Range<usize>,
+) -> (usize, u32, Aabb) {
+    let (mut end, mut count, mut bounds) = (run.start, 0u32, Aabb::EMPTY);
+    while end < run.end && (end == run.start || count < NEAR_UNIT) {
+        let on = &octree.nodes()[leaf(end) as usize];
+        count += on.count;
+        bounds = bounds.union(on.bounds);
+        end += 1;
+    }
+    (end, count, bounds)
+}
+
 /// The near pass's lists (`near_cull=on`), kept from frame to frame and cleared before each: on
 /// a view of a hundred thousand near leaves they hold megabytes, which fresh vectors faulted in
 /// page by page every frame (docs/perf-log.md).
