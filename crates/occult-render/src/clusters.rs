@@ -24,7 +24,8 @@
 //! 1. **draws last frame's visible clusters** of the instances in view, untested, in one
 //!    call over the rasterizer's threads (`temporal`; only while at least `trust` of last
 //!    frame's set in view stayed visible: after a jump of the view it is hidden geometry, not
-//!    occluders), and builds the pyramid over them;
+//!    occluders; and only while it made frames faster, `weigh`, [`crate::list_choice`]), and
+//!    builds the pyramid over them;
 //! 2. takes the instances in view **front to back** (nearest box point first) in windows of
 //!    at least `batch` triangles (or a quarter of what the first pass drew, if more), each
 //!    next window twice as large, up to [`MAX_BATCH`]. The instances of a window are tested in
@@ -67,6 +68,7 @@ use occult_raster::{
 
 use crate::direct::DirectFrames;
 use crate::hzb::boxtest::{screen_rect, Occlusion};
+use crate::list_choice::ListChoice;
 use rayon::prelude::*;
 
 use crate::nodes::per_node;
@@ -95,6 +97,9 @@ pub struct ClusterOptions {
     /// the first pass to be drawn: below, the view moved too far for last frame's set to be
     /// this frame's occluders, and the second pass draws the frame alone.
     pub trust: f64,
+    /// Draw the first pass only while frames that drew it were faster than frames that did
+    /// not ([`crate::list_choice`]).
+    pub weigh: bool,
     /// Draw runs of frames directly, as `frustum` does, while culled frames are slower than
     /// such direct frames ([`crate::direct`]).
     pub payoff: bool,
@@ -107,6 +112,7 @@ impl Default for ClusterOptions {
             batch: 1 << 14,
             temporal: true,
             trust: TRUST,
+            weigh: true,
             payoff: true,
         }
     }
@@ -163,6 +169,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             help: "draw the first pass only while at least this share (0..=1) of last frame's visible clusters in view stayed visible; 0 = always",
         },
         ParamDoc {
+            key: "weigh",
+            default: "on",
+            help: "draw the first pass only while frames that drew it were faster than frames that did not (the last of each; the other way measured again after 8, 16 .. 64 frames); off = by trust alone",
+        },
+        ParamDoc {
             key: "payoff",
             default: "on",
             help: "draw runs of frames as frustum does while culled frames are slower than such direct frames",
@@ -188,6 +199,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             batch: "batch",
             temporal: flag "temporal",
             trust: "trust",
+            weigh: flag "weigh",
             payoff: flag "payoff",
         });
         Ok(Box::new(ClusterCulling::new(scene, options, &co)?))
@@ -348,6 +360,8 @@ pub struct ClusterCulling {
     precision: f64,
     /// Whether the last culled frame drew the first pass.
     last_first: bool,
+    /// Frame times with the first pass and without it (`weigh`).
+    choice: ListChoice,
 }
 
 impl ClusterCulling {
@@ -395,6 +409,7 @@ impl ClusterCulling {
             direct,
             precision: 1.0,
             last_first: true,
+            choice: ListChoice::default(),
             options: co.clone(),
             clusters,
             placed,
@@ -643,10 +658,11 @@ impl ClusterCulling {
             direct: _,
             precision,
             last_first,
+            choice,
         } = self;
         // The first pass only while last frame's set was mostly still visible: where the view
         // jumps (a cut, a street corner), it would draw what is hidden now.
-        let use_first = options.temporal && *precision >= options.trust;
+        let use_first = options.temporal && *precision >= options.trust && !(options.weigh && choice.skip());
         let scene: &Scene = scene;
         let pyramid = pyramid.as_mut().expect("made above");
         let eye = view.camera().eye;
@@ -801,6 +817,9 @@ impl ClusterCulling {
             *precision = counts.still_visible as f64 / counts.was_visible as f64;
         }
         *last_first = use_first;
+        if options.temporal && options.weigh {
+            choice.record(first > 0, start.elapsed());
+        }
         stats.boxes_tested += counts.tested;
         stats.boxes_culled += counts.culled + counts.instances_culled;
         stats.counters.add_all([
@@ -820,7 +839,6 @@ impl ClusterCulling {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use occult_core::{Instance, SceneBuilder};
 
     /// Every triangle in exactly one cluster, each cluster at most `size` triangles in
     /// ascending order and inside its box.
@@ -880,23 +898,7 @@ mod tests {
     #[test]
     fn too_many_mesh_instances_is_an_error_before_flattening() {
         // 2^12 x 2^11 instances of one small mesh: 2^23 mesh instances, counted, not walked.
-        let row_of = |n: u32, step: Vec3, child| -> Vec<Instance> {
-            (0..n)
-                .map(|i| Instance {
-                    parent_from_child: Affine3A::from_translation(step * i as f32),
-                    child,
-                })
-                .collect()
-        };
-        let mut b = SceneBuilder::new();
-        let mesh = b.add_mesh("quad", crate::test_grid(1)).expect("a mesh node");
-        let row = b
-            .add_group("row", row_of(1 << 12, Vec3::X, mesh))
-            .expect("a group of the mesh");
-        let all = b
-            .add_group("all", row_of(1 << 11, Vec3::Y, row))
-            .expect("a group of rows");
-        let scene = Arc::new(b.build(all).expect("a scene of groups"));
+        let scene = Arc::new(crate::test_quad_rows(1 << 11, 1 << 12));
         assert_eq!(mesh_instance_count(&scene), 1 << 23);
         let e = ClusterCulling::new(scene, &RenderOptions::default(), &ClusterOptions::default())
             .err()

@@ -80,6 +80,7 @@ pub mod direct;
 pub mod frustum;
 mod hash;
 pub mod hzb;
+pub mod list_choice;
 pub mod lzb;
 pub mod nbuffer;
 mod nodes;
@@ -582,6 +583,28 @@ pub(crate) fn test_grid(g: u32) -> occult_core::Mesh {
         .collect();
     // A valid mesh by construction: every index is below (g + 1)^2.
     occult_core::Mesh::new(positions, triangles).expect("a grid is a valid mesh")
+}
+
+/// For unit tests: `rows` rows of `per_row` instances of a one-quad [`test_grid`], a unit
+/// apart (two levels of groups: `rows * per_row` mesh instances, not walked to build).
+#[cfg(test)]
+pub(crate) fn test_quad_rows(rows: u32, per_row: u32) -> occult_core::Scene {
+    use occult_core::{Affine3A, Instance, SceneBuilder, Vec3};
+    let row_of = |n: u32, step: Vec3, child| -> Vec<Instance> {
+        (0..n)
+            .map(|i| Instance {
+                parent_from_child: Affine3A::from_translation(step * i as f32),
+                child,
+            })
+            .collect()
+    };
+    let mut b = SceneBuilder::new();
+    let mesh = b.add_mesh("quad", test_grid(1)).expect("a mesh node");
+    let row = b
+        .add_group("row", row_of(per_row, Vec3::X, mesh))
+        .expect("a group of the mesh");
+    let all = b.add_group("all", row_of(rows, Vec3::Y, row)).expect("a group of rows");
+    b.build(all).expect("a scene of groups")
 }
 
 /// For unit tests: a `width` x `height` view from `eye` towards `target`, with its

@@ -27,6 +27,7 @@ fn every_configuration_is_identical() {
     for spec in [
         "clusters:payoff=off",
         "clusters:payoff=off,temporal=off",
+        "clusters:payoff=off,weigh=off,trust=0",
         "clusters:payoff=off,size=8,batch=1",
         "clusters:payoff=off,size=512,batch=1000000",
     ] {

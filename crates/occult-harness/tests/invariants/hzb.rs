@@ -42,6 +42,8 @@ const CONFIGS: &[&str] = &[
     "hzb:refresh=1,batch=64,leaf=16",
     "hzb:trust=1,recheck=2",
     "hzb:trust=0",
+    "hzb:weigh=off,trust=0.9",
+    "hzb:parallel=off,recheck=2",
 ];
 
 identical_on_every_generator! {
@@ -116,7 +118,8 @@ fn hzb_culls_on_a_city_street_and_keeps_a_visible_list() {
 fn hzb_skips_an_imprecise_visible_list_and_keeps_a_precise_one() {
     // An orbit in 6 steps (60 degrees a frame): most of last frame's list is hidden now, so the
     // list is measured imprecise and skipped, and the frames submit less than drawing it would;
-    // a street walk keeps its list. Frames stay exact either way.
+    // a street walk keeps its list. Frames stay exact either way. (`weigh` off: the precision
+    // alone decides.)
     let built = build_scene("city:blocks=3,detail=2");
     let scene = Arc::new(built.scene);
     let run = |algo: &str, path: &str| {
@@ -141,18 +144,18 @@ fn hzb_skips_an_imprecise_visible_list_and_keeps_a_precise_one() {
         }
         (skipped, submitted, precision)
     };
-    let (skipped, submitted, precision) = run("hzb:payoff=off,trust=0.9", "circle:6");
-    let (never, blind, _) = run("hzb:payoff=off,trust=0", "circle:6");
+    let (skipped, submitted, precision) = run("hzb:payoff=off,trust=0.9,weigh=off", "circle:6");
+    let (never, blind, _) = run("hzb:payoff=off,trust=0,weigh=off", "circle:6");
     assert!(
         skipped > 0,
         "the orbit's list was never skipped (precision {precision:?})"
     );
-    assert_eq!(never, 0, "trust=0 never skips");
+    assert_eq!(never, 0, "trust=0 without weigh never skips");
     assert!(
         submitted < blind,
         "skipping submitted {submitted} triangles, drawing the list {blind}"
     );
-    let (skipped, _, precision) = run("hzb:payoff=off,trust=0.5", "street:12");
+    let (skipped, _, precision) = run("hzb:payoff=off,trust=0.5,weigh=off", "street:12");
     assert_eq!(skipped, 0, "a street walk's list is precise (precision {precision:?})");
 }
 

@@ -75,7 +75,11 @@
 //!   weighs its share of the work against its share of that frame. The cuts move after each
 //!   frame towards an even split of the strips' times ([`crate::bands::ColumnShare`]). The
 //!   phases add the strips' thread times, the copies are `other`; `visible_list_precision_pct`
-//!   is their mean, `strips` counts them.
+//!   is their mean, `strips` counts them. `parallel=auto`, the default, takes the columns
+//!   on scenes of at least [`AUTO_COLUMNS`] triangle instances drawn on two threads or more,
+//!   and one walk otherwise: a culled frame of one walk rasterizes its small batches on one
+//!   thread, which a frame of millions of triangles cannot afford on two cores, while on the
+//!   suite's scenes of 1-5 M triangles the strips' fixed part costs more than it gains.
 //!
 //! - **Payoff** ([`crate::payoff`], `payoff`): a frame whose tests cost more than they save
 //!   stops testing and draws the rest directly: mesh instances wholly in view whole, in batches
@@ -131,6 +135,12 @@
 //!   still pays, drawing the occluders first: on `plant`'s 32-step orbit 51-93 % of the list
 //!   stays visible, and skipping it below 75 % rasterized twice the triangles; hence the
 //!   default 0.4.
+//! - Addition, `weigh`: the precision cannot tell every case (the 8-step orbit of
+//!   `city:blocks=32` keeps 56-71 % of its list, `plant`'s 32-step orbit 51-93 %, and the list
+//!   costs the first and pays on the second), so the frame times decide as well: the list is
+//!   drawn only while the last frame that drew it was faster than the last that did not (the
+//!   first frame, which has none, is one), the way not taken measured again after 8, 16 .. 64
+//!   frames ([`crate::list_choice`]). Each strip of `parallel=columns` chooses for itself.
 //! - Addition, `payoff` (above): the paper tests everything; on views where little is hidden
 //!   that is slower than brute force.
 //! - Addition, `whole`: a mesh instance whose visible-list nodes hold at least this fraction of
@@ -170,6 +180,7 @@ use occult_raster::{Frame, Rasterizer, ZPyramid};
 use occult_spatial::{HybridOctree, HybridOctreeConfig};
 
 use crate::direct::DirectFrames;
+use crate::list_choice::ListChoice;
 use crate::nodes::{instance_boxes, per_node, triangle_boxes};
 use crate::payoff::Payoff;
 use crate::runs::RunClusters;
@@ -204,6 +215,27 @@ pub enum Distribution {
     /// own depth of them; the columns are copied into the frame, no merge. The columns are
     /// shared again after each frame by the workers' times ([`crate::bands::ColumnShare`]).
     Columns,
+    /// [`Distribution::Columns`] on a scene of at least [`AUTO_COLUMNS`] triangle instances
+    /// drawn on two threads or more, else [`Distribution::Off`]; chosen when the renderer is
+    /// built (see the module doc).
+    Auto,
+}
+
+/// Triangle instances from which `parallel=auto` chooses the columns distribution. The
+/// strips' fixed part (a second frame cleared, the columns copied, the upper octree levels
+/// walked per strip) is about a millisecond a frame at 1280x720; it pays on the suite's scenes
+/// of 9-45 M triangles (frames of 60-190 ms with `zbuffer`) and not on those of 1-5 M.
+pub const AUTO_COLUMNS: u64 = 8_000_000;
+
+impl Distribution {
+    /// [`Distribution::Auto`] resolved for `scene` drawn on `threads` threads; others as they are.
+    pub fn resolve(self, scene: &Scene, threads: usize) -> Self {
+        match self {
+            Self::Auto if scene.item_count() >= AUTO_COLUMNS && threads >= 2 => Self::Columns,
+            Self::Auto => Self::Off,
+            d => d,
+        }
+    }
 }
 
 /// Deepest octree `hzb` accepts, in levels with the root as level 1 (its documented `depth`
@@ -250,6 +282,9 @@ pub struct HzbOptions {
     /// view stayed visible (its precision at the last recheck); below it, the frame is drawn
     /// by the tested traversal alone (0: always drawn, as the paper). Not in the paper.
     pub trust: f32,
+    /// Draw the visible list first only while frames that drew it were faster than frames
+    /// that did not ([`crate::list_choice`]). Not in the paper.
+    pub weigh: bool,
     /// Sibling order.
     pub order: ChildOrder,
     /// Parallel distribution (§4.1).
@@ -286,8 +321,9 @@ impl Default for HzbOptions {
             retest: true,
             whole: 0.5,
             trust: 0.4,
+            weigh: true,
             order: ChildOrder::FrontToBack,
-            distribution: Distribution::Off,
+            distribution: Distribution::Auto,
             workers: 2,
             strips: 1,
             payoff: true,
@@ -354,14 +390,15 @@ impl HzbOptions {
         Ok(Self {
             distribution: match p.choice(
                 "parallel",
-                &["off", "structure", "primitive", "hybrid", "columns"],
-                "off",
+                &["auto", "off", "structure", "primitive", "hybrid", "columns"],
+                "auto",
             )? {
                 "structure" => Distribution::Structure,
                 "primitive" => Distribution::Primitive,
                 "hybrid" => Distribution::Hybrid,
                 "columns" => Distribution::Columns,
-                _ => Distribution::Off,
+                "off" => Distribution::Off,
+                _ => Distribution::Auto,
             },
             workers,
             strips,
@@ -384,6 +421,7 @@ impl HzbOptions {
             retest: p.flag("retest", d.retest)?,
             whole,
             trust,
+            weigh: p.flag("weigh", d.weigh)?,
             order: match p.choice("order", &["front", "count"], "front")? {
                 "count" => ChildOrder::Count,
                 _ => ChildOrder::FrontToBack,
@@ -522,14 +560,19 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             help: "draw the visible list first only while at least this share of the last list (in triangles) stayed visible, else let the tested traversal draw the frame alone; 0 = always (§3.3); needs temporal (not in the paper)",
         },
         ParamDoc {
+            key: "weigh",
+            default: "on",
+            help: "draw the visible list first only while frames that drew it were faster than frames that did not (the last of each; the other way measured again after 8, 16 .. 64 frames); off = by trust alone; needs temporal (not in the paper)",
+        },
+        ParamDoc {
             key: "order",
             default: "front",
             help: "sibling order: front (front to back) or count (ascending primitive count, §4.2/§5.1)",
         },
         ParamDoc {
             key: "parallel",
-            default: "off",
-            help: "distribution over workers with own depth buffers: off, structure, primitive, hybrid (§4.1, merged by depth compositing), columns (each worker culls and draws its columns of the screen; not in the paper)",
+            default: "auto",
+            help: "distribution over workers with own depth buffers: off, structure, primitive, hybrid (§4.1, merged by depth compositing), columns (each worker culls and draws its columns of the screen; not in the paper), auto (columns on scenes of at least 8,000,000 triangle instances drawn on 2 threads or more, else off)",
         },
         ParamDoc {
             key: "workers",
@@ -573,8 +616,8 @@ struct Worker {
     frame: Option<Frame>,
     pyramid: Option<ZPyramid>,
     visible: Vec<VisEntry>,
-    /// The visible list's precision at the last recheck (`trust`).
-    list_precision: f64,
+    /// Whether the next frame draws the visible list first (`trust`, `weigh`).
+    list_way: ListWay,
 }
 
 impl Worker {
@@ -622,10 +665,27 @@ pub struct Hzb {
 /// whichever worker draws it.
 struct Strip {
     visible: Vec<VisEntry>,
-    list_precision: f64,
+    list_way: ListWay,
     payoff: Payoff,
     /// How long it took last frame (after the one-time setup of the worker that drew it).
     time: std::time::Duration,
+}
+
+/// What decides whether a frame draws the visible list first: its precision at the last
+/// recheck (`trust`) and the time of frames with it and without it (`weigh`).
+#[derive(Clone, Copy, Debug)]
+struct ListWay {
+    precision: f64,
+    choice: ListChoice,
+}
+
+impl Default for ListWay {
+    fn default() -> Self {
+        Self {
+            precision: 1.0,
+            choice: ListChoice::default(),
+        }
+    }
 }
 
 /// The counter of the visible list's precision at the last recheck, percent.
@@ -686,6 +746,8 @@ impl Hzb {
             ));
         }
         let raster = crate::scene_rasterizer(&scene, options)?;
+        let mut hzb = hzb.clone();
+        hzb.distribution = hzb.distribution.resolve(&scene, raster.thread_count());
         let octrees: std::result::Result<Vec<Option<HybridOctree>>, _> =
             per_node(&raster, &scene, |node| match node.kind() {
                 NodeKind::Mesh(m) if m.triangle_count() > o.leaf_size => {
@@ -711,7 +773,7 @@ impl Hzb {
                 frame: None,
                 pyramid: None,
                 visible: Vec::new(),
-                list_precision: 1.0,
+                list_way: ListWay::default(),
                 stamps: walk::Stamps::new(&octrees),
             }]
         } else {
@@ -727,7 +789,7 @@ impl Hzb {
                         frame: None,
                         pyramid: None,
                         visible: Vec::new(),
-                        list_precision: 1.0,
+                        list_way: ListWay::default(),
                         stamps: walk::Stamps::new(&octrees),
                     })
                 })
@@ -741,7 +803,6 @@ impl Hzb {
                     .map_or_else(Vec::new, |o| subtree_items(&scene, NodeId(i as u32), o))
             })
             .collect();
-        let mut hzb = hzb.clone();
         hzb.temporal &= hzb.occlusion; // without tests a visible list changes nothing
                                        // Direct frames go through the walker's rasterizer, or under the columns
                                        // distribution one of their own on all threads; not under the other
@@ -759,7 +820,7 @@ impl Hzb {
                 .map(|_| {
                     std::sync::Mutex::new(Strip {
                         visible: Vec::new(),
-                        list_precision: 1.0,
+                        list_way: ListWay::default(),
                         payoff: Payoff::new(hzb.payoff, scene.item_count()),
                         time: std::time::Duration::ZERO,
                     })
@@ -838,20 +899,21 @@ fn walk_frame(
     frame: &mut Frame,
     pyramid: &mut ZPyramid,
     visible: &mut Vec<VisEntry>,
-    list_precision: &mut f64,
+    way: &mut ListWay,
     share: walk::Share,
     recheck: bool,
     stamps: &mut walk::Stamps,
     per_node: &PerNode,
     payoff: &mut Payoff,
 ) -> FrameStats {
+    let start = Instant::now();
     let old_visible = std::mem::take(visible);
     // What the rasterizer wrote before this walk (a direct frame, another strip) is no batch's.
     let _ = raster.take_written();
     let mut w = walk::Walk::new(
         scene, octrees, options, view, raster, frame, pyramid, share, stamps, per_node, payoff,
     );
-    let skip = *list_precision < options.trust as f64;
+    let skip = way.precision < options.trust as f64 || (options.weigh && way.choice.skip());
     if options.temporal {
         w.draw_visible_list(old_visible, skip);
     }
@@ -860,15 +922,20 @@ fn walk_frame(
         // A skipped list that the traversal mostly did not draw is skipped next frame too:
         // no recheck is needed to tell (`trust`).
         match w.skipped_drawn_share() {
-            Some(p) if p < options.trust as f64 => *list_precision = p,
+            Some(p) if p < options.trust as f64 => way.precision = p,
             _ => {
                 if let Some(p) = w.recheck() {
-                    *list_precision = p;
+                    way.precision = p;
                 }
             }
         }
     }
     let (list, stats) = w.finish();
+    if options.weigh && options.temporal && stats.counters.get("payoff_stopped") == 0 {
+        let c = &stats.counters;
+        let drew = c.get("visible_list_drawn") + c.get("whole_drawn") > 0;
+        way.choice.record(drew, start.elapsed());
+    }
     *visible = list;
     stats
 }
@@ -916,7 +983,7 @@ impl Hzb {
                             f,
                             p,
                             &mut w.visible,
-                            &mut w.list_precision,
+                            &mut w.list_way,
                             share,
                             recheck,
                             &mut w.stamps,
@@ -1020,7 +1087,7 @@ impl Hzb {
                     f,
                     p,
                     &mut strip.visible,
-                    &mut strip.list_precision,
+                    &mut strip.list_way,
                     walk::Share::ALL,
                     recheck,
                     &mut w.stamps,
@@ -1185,7 +1252,7 @@ impl Renderer for Hzb {
                 frame,
                 pyramid,
                 &mut w.visible,
-                &mut w.list_precision,
+                &mut w.list_way,
                 walk::Share::ALL,
                 recheck,
                 &mut w.stamps,
@@ -1287,6 +1354,19 @@ mod tests {
 
     fn build(p: Params) -> Result<HzbOptions> {
         HzbOptions::from_params(&p)
+    }
+
+    #[test]
+    fn auto_distribution_takes_columns_on_large_scenes_drawn_on_several_threads() {
+        let (small, large) = (crate::test_quad_rows(2, 4096), crate::test_quad_rows(1024, 4096));
+        assert!(small.item_count() < AUTO_COLUMNS && large.item_count() >= AUTO_COLUMNS);
+        assert_eq!(build(Params::new("hzb")).unwrap().distribution, Distribution::Auto);
+        assert_eq!(Distribution::Auto.resolve(&large, 2), Distribution::Columns);
+        assert_eq!(Distribution::Auto.resolve(&large, 1), Distribution::Off);
+        assert_eq!(Distribution::Auto.resolve(&small, 2), Distribution::Off);
+        for d in [Distribution::Off, Distribution::Columns, Distribution::Hybrid] {
+            assert_eq!(d.resolve(&large, 2), d, "an explicit distribution stays");
+        }
     }
 
     #[test]
