@@ -180,6 +180,11 @@ use crate::walk::{NodeAt, SceneWalk, Visitor};
 use crate::{FrameStats, Phase, RenderError, RenderOptions, Renderer, Result};
 use cast::{row_w, Caster, InstanceRec};
 
+/// Largest screen rectangle, in pixels per far leaf of the instance, of an instance's box that
+/// the object-oriented ray casting's mask scans before projecting the instance's far leaves
+/// one by one (§III.C): a scan costs about a nanosecond a pixel, a leaf's projection some tens.
+const OOR_SCAN_PER_LEAF: u64 = 64;
+
 /// The acceleration structure of one DAG node.
 pub(crate) enum Accel {
     /// No triangle below.
@@ -1154,26 +1159,74 @@ impl Lzb {
         if self.opts.oor && !no_rays {
             let mut done = vec![false; cast_mask.len()];
             let mut polygons = 0u64;
-            for &(inst, leaf) in &far {
-                let (rec, _, clip) = &instances[inst as usize];
+            // Whether a pixel rectangle holds a pixel left to mark: a box whose rectangle holds
+            // none marks nothing (seen from outside a city, most far leaves lie behind marked
+            // ones), and needs no hull.
+            let open = |done: &[bool], rect: [u32; 4]| {
+                (rect[2]..=rect[3]).any(|y| {
+                    let row = (y * w) as usize;
+                    let span = row + rect[0] as usize..=row + rect[1] as usize;
+                    cast_mask[span.clone()].iter().zip(&done[span]).any(|(&c, &d)| c && !d)
+                })
+            };
+            // The far list holds an instance's leaves in one run. The runs go nearest instance
+            // first, so that the leaves in front mark the pixels that those behind then find
+            // marked; an instance whose whole box is off screen, or (when small enough for the
+            // scan to cost less than its leaves' projections) on pixels all marked, is skipped
+            // whole. The mask is the same in any order.
+            let eye = view.camera().eye;
+            let mut instances_skipped = 0u64;
+            let mut runs: Vec<(f32, usize, usize)> = Vec::new();
+            let mut first = 0;
+            while first < far.len() {
+                let inst = far[first].0;
+                let end = first + far[first..].iter().take_while(|&&(i, _)| i == inst).count();
+                let rec = &instances[inst as usize].0;
+                if let Accel::Mesh { octree, .. } = &self.accel[rec.node.index()] {
+                    let b = octree.bounds().transformed(&rec.world_from_object);
+                    runs.push((eye.clamp(b.min, b.max).distance_squared(eye), first, end));
+                }
+                first = end;
+            }
+            runs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+            'runs: for &(_, first, end) in &runs {
+                let (rec, _, clip) = &instances[far[first].0 as usize];
                 let Accel::Mesh { octree, .. } = &self.accel[rec.node.index()] else {
                     continue;
                 };
-                let b = octree.nodes()[leaf as usize].bounds;
-                match oor::project_box(clip, &b, w, h, ctx.near) {
-                    oor::Projection::Nothing => {}
-                    oor::Projection::Screen => {
-                        polygons += 1;
-                        done.copy_from_slice(&cast_mask);
-                        break;
+                let skip = match oor::project_box(clip, &octree.bounds(), w, h, ctx.near) {
+                    oor::Projection::Nothing => true,
+                    oor::Projection::Screen => false,
+                    oor::Projection::Polygon { rect, .. } => {
+                        let area = u64::from(rect[1] - rect[0] + 1) * u64::from(rect[3] - rect[2] + 1);
+                        area <= OOR_SCAN_PER_LEAF * (end - first) as u64 && !open(&done, rect)
                     }
-                    oor::Projection::Polygon { hull, rect } => {
-                        polygons += 1;
-                        for y in rect[2]..=rect[3] {
-                            for x in rect[0]..=rect[1] {
-                                let i = (y * w + x) as usize;
-                                if cast_mask[i] && !done[i] && oor::inside(&hull, x as f32 + 0.5, y as f32 + 0.5) {
-                                    done[i] = true;
+                };
+                if skip {
+                    instances_skipped += 1;
+                    continue;
+                }
+                for &(_, leaf) in &far[first..end] {
+                    let b = octree.nodes()[leaf as usize].bounds;
+                    match oor::project_box(clip, &b, w, h, ctx.near) {
+                        oor::Projection::Nothing => {}
+                        oor::Projection::Screen => {
+                            polygons += 1;
+                            done.copy_from_slice(&cast_mask);
+                            break 'runs;
+                        }
+                        oor::Projection::Polygon { corners, rect } => {
+                            polygons += 1;
+                            if !open(&done, rect) {
+                                continue;
+                            }
+                            let hull = oor::Hull::of(corners);
+                            for y in rect[2]..=rect[3] {
+                                for x in rect[0]..=rect[1] {
+                                    let i = (y * w + x) as usize;
+                                    if cast_mask[i] && !done[i] && hull.inside(x as f32 + 0.5, y as f32 + 0.5) {
+                                        done[i] = true;
+                                    }
                                 }
                             }
                         }
@@ -1181,9 +1234,11 @@ impl Lzb {
                 }
             }
             stats.counters.add("oor_polygons", polygons);
+            stats.counters.add("oor_instances_skipped", instances_skipped);
             cast_mask = done;
         } else if no_rays {
             stats.counters.add("oor_polygons", 0);
+            stats.counters.add("oor_instances_skipped", 0);
         }
         // In tiles of 8×8 pixels, row-major within a tile: neighbouring rays meet the same
         // nodes and triangles, which a chunk then finds in cache (and §III.D's neighbour is

@@ -8,11 +8,13 @@ use occult_core::{Aabb, Mat4, Vec2, Vec4};
 const GROW_PX: f64 = 0.5;
 
 /// The screen projection of a box: a convex polygon of 4, 5 or 6 sides (the hull of the
-/// projected corners), or the whole screen when a corner lies near or behind the eye.
+/// projected corners, [`Hull::of`]), or the whole screen when a corner lies near or behind the
+/// eye.
 pub(super) enum Projection {
-    /// Counter-clockwise (in y-down screen space, clockwise visually) hull and its bounding
-    /// pixel rectangle `[x0, x1] × [y0, y1]` (inclusive, clamped to the screen).
-    Polygon { hull: Vec<Vec2>, rect: [u32; 4] },
+    /// The projected corners and their bounding pixel rectangle `[x0, x1] × [y0, y1]`
+    /// (inclusive, clamped to the screen). The hull is left to the caller: most boxes of a far
+    /// set fall on pixels already marked, which the rectangle tells without it.
+    Polygon { corners: [Vec2; 8], rect: [u32; 4] },
     /// Covers everything.
     Screen,
     /// Off screen.
@@ -60,54 +62,81 @@ pub(super) fn project_box(clip_from_object: &Mat4, b: &Aabb, width: u32, height:
         return Projection::Nothing;
     }
     Projection::Polygon {
-        hull: convex_hull(&mut pts),
+        corners: pts,
         rect: [x0 as u32, x1 as u32, y0 as u32, y1 as u32],
     }
 }
 
-/// Andrew's monotone chain; collinear points dropped.
-fn convex_hull(pts: &mut [Vec2]) -> Vec<Vec2> {
-    pts.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
-    let cross =
-        |o: Vec2, a: Vec2, b: Vec2| (a.x - o.x) as f64 * (b.y - o.y) as f64 - (a.y - o.y) as f64 * (b.x - o.x) as f64;
-    let mut hull: Vec<Vec2> = Vec::with_capacity(16);
-    for pass in 0..2 {
-        let start = hull.len();
-        let iter: Box<dyn Iterator<Item = &Vec2>> = if pass == 0 {
-            Box::new(pts.iter())
-        } else {
-            Box::new(pts.iter().rev())
-        };
-        for &p in iter {
-            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0 {
-                hull.pop();
-            }
-            hull.push(p);
-        }
-        hull.pop();
-    }
-    hull
+/// The convex hull of a box's projected corners, counter-clockwise (in y-down screen space,
+/// clockwise visually), held in place (no allocation: a far set has hundreds of thousands of
+/// boxes), with each edge's length for the distance test.
+pub(super) struct Hull {
+    pts: [Vec2; 8],
+    /// Per edge `i` (from point `i` to the next): one over its length.
+    inv_len: [f64; 8],
+    len: usize,
 }
 
-/// True when the point is inside the hull grown by [`GROW_PX`]. A degenerate hull (fewer than
-/// 3 points: a box seen edge-on) holds the points within the margin of its segment.
-pub(super) fn inside(hull: &[Vec2], x: f32, y: f32) -> bool {
-    let n = hull.len();
-    if n < 3 {
-        return match n {
-            0 => false,
-            1 => (hull[0] - Vec2::new(x, y)).length() as f64 <= GROW_PX,
-            _ => segment_distance(hull[0], hull[1], Vec2::new(x, y)) <= GROW_PX,
+impl Hull {
+    /// Andrew's monotone chain over the corners; collinear points dropped.
+    pub(super) fn of(mut corners: [Vec2; 8]) -> Self {
+        corners.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+        let cross = |o: Vec2, a: Vec2, b: Vec2| {
+            (a.x - o.x) as f64 * (b.y - o.y) as f64 - (a.y - o.y) as f64 * (b.x - o.x) as f64
         };
+        // A chain holds at most 8 + 1 points before its last is dropped; the hull at most 8.
+        let mut hull = [Vec2::ZERO; 17];
+        let mut n = 0;
+        for pass in 0..2 {
+            let start = n;
+            for k in 0..8 {
+                let p = if pass == 0 { corners[k] } else { corners[7 - k] };
+                while n >= start + 2 && cross(hull[n - 2], hull[n - 1], p) <= 0.0 {
+                    n -= 1;
+                }
+                hull[n] = p;
+                n += 1;
+            }
+            n -= 1;
+        }
+        let mut out = Self {
+            pts: [Vec2::ZERO; 8],
+            inv_len: [0.0; 8],
+            len: n.min(8),
+        };
+        out.pts[..out.len].copy_from_slice(&hull[..out.len]);
+        for i in 0..out.len {
+            let (a, b) = (out.pts[i], out.pts[(i + 1) % out.len]);
+            out.inv_len[i] = 1.0 / ((b - a).length() as f64).max(1e-30);
+        }
+        out
     }
-    (0..n).all(|i| {
-        let a = hull[i];
-        let b = hull[(i + 1) % n];
-        let e = (b.x - a.x) as f64 * (y - a.y) as f64 - (b.y - a.y) as f64 * (x - a.x) as f64;
-        let len = ((b - a).length() as f64).max(1e-30);
-        // The hull runs counter-clockwise in (x, y) coordinates: inside is e >= 0.
-        e / len >= -GROW_PX
-    })
+
+    /// The hull's points.
+    #[cfg(test)]
+    pub(super) fn points(&self) -> &[Vec2] {
+        &self.pts[..self.len]
+    }
+
+    /// True when the point is inside the hull grown by [`GROW_PX`]. A degenerate hull (fewer
+    /// than 3 points: a box seen edge-on) holds the points within the margin of its segment.
+    pub(super) fn inside(&self, x: f32, y: f32) -> bool {
+        let (hull, n) = (&self.pts, self.len);
+        if n < 3 {
+            return match n {
+                0 => false,
+                1 => (hull[0] - Vec2::new(x, y)).length() as f64 <= GROW_PX,
+                _ => segment_distance(hull[0], hull[1], Vec2::new(x, y)) <= GROW_PX,
+            };
+        }
+        (0..n).all(|i| {
+            let a = hull[i];
+            let b = hull[(i + 1) % n];
+            let e = (b.x - a.x) as f64 * (y - a.y) as f64 - (b.y - a.y) as f64 * (x - a.x) as f64;
+            // The hull runs counter-clockwise in (x, y) coordinates: inside is e >= 0.
+            e * self.inv_len[i] >= -GROW_PX
+        })
+    }
 }
 
 fn segment_distance(a: Vec2, b: Vec2, p: Vec2) -> f64 {
@@ -125,10 +154,11 @@ mod tests {
     fn projected_box_holds_its_projected_points() {
         let (view, m) = crate::test_view(Vec3::new(3.0, 2.0, 5.0), Vec3::ZERO, 64, 48);
         let b = Aabb::new(Vec3::splat(-0.5), Vec3::new(0.5, 1.0, 0.25));
-        let Projection::Polygon { hull, rect } = project_box(&m, &b, 64, 48, view.camera().near) else {
+        let Projection::Polygon { corners, rect } = project_box(&m, &b, 64, 48, view.camera().near) else {
             panic!("box in view")
         };
-        assert!((4..=6).contains(&hull.len()), "{} sides", hull.len());
+        let hull = Hull::of(corners);
+        assert!((4..=6).contains(&hull.points().len()), "{} sides", hull.points().len());
         for i in 0..=10 {
             for j in 0..=10 {
                 for k in 0..=10 {
@@ -136,12 +166,12 @@ mod tests {
                     let c = m * p.extend(1.0);
                     let x = (c.x / c.w * 0.5 + 0.5) * 64.0;
                     let y = (0.5 - c.y / c.w * 0.5) * 48.0;
-                    assert!(inside(&hull, x, y));
+                    assert!(hull.inside(x, y));
                     assert!(x >= rect[0] as f32 - 0.5 && x <= rect[1] as f32 + 1.5);
                 }
             }
         }
-        assert!(!inside(&hull, -100.0, -100.0));
+        assert!(!hull.inside(-100.0, -100.0));
     }
 
     #[test]

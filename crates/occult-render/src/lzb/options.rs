@@ -121,6 +121,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "far_leaves",
         "near_triangles",
         "oor_polygons",
+        "oor_instances_skipped",
         "rays",
         "ray_tri_tests",
         "ray_leaves_visited",

@@ -282,8 +282,10 @@ fn far_cull_drops_the_far_leaves_behind_the_near_set() {
             assert_eq!(stats.counters.get("far_culled_leaves"), far);
             assert_eq!(stats.counters.get("oor_polygons"), 0);
         } else {
+            // The far wall reaches object-oriented ray casting, whose mask skips its instance:
+            // its box lies on pixels all finished by the near wall.
             assert_eq!(stats.counters.get("far_culled_leaves"), 0);
-            assert!(stats.counters.get("oor_polygons") > 0);
+            assert!(stats.counters.get("oor_polygons") + stats.counters.get("oor_instances_skipped") > 0);
         }
     }
     // A near wall too small to hide the far one (seen around it, over empty pixels too):
