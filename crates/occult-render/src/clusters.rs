@@ -171,7 +171,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc {
             key: "weigh",
             default: "on",
-            help: "draw the first pass only while frames that drew it were faster than frames that did not (the last of each; the other way measured again after 8, 16 .. 64 frames); off = by trust alone",
+            help: "draw the first pass only while frames that drew it were faster than frames that did not (the last of each; the other way measured again after 16, 32, 64 frames); off = by trust alone",
         },
         ParamDoc {
             key: "payoff",
@@ -816,8 +816,12 @@ impl ClusterCulling {
         if counts.was_visible > 0 && (*last_first || !use_first) {
             *precision = counts.still_visible as f64 / counts.was_visible as f64;
         }
+        // A first pass drawn from a frame without one holds clusters that frame could not hide
+        // (above): not what the first pass costs, so not recorded (a probe of it then lasts
+        // two frames).
+        let measured = *last_first || first == 0;
         *last_first = use_first;
-        if options.temporal && options.weigh {
+        if options.temporal && options.weigh && measured {
             choice.record(first > 0, start.elapsed());
         }
         stats.boxes_tested += counts.tested;

@@ -17,7 +17,7 @@
 //! Frames do not change either way (the traversal is conservative), only their time.
 
 /// Frames after which the way not taken is measured again, the first time ...
-pub const FIRST_PROBE: u32 = 8;
+pub const FIRST_PROBE: u32 = 16;
 /// ... and at most, after probes that confirmed the choice.
 pub const MAX_PROBE: u32 = 64;
 
@@ -126,8 +126,9 @@ mod tests {
         let ways = run(200, ms(10), ms(20));
         assert!(!ways[0] && ways[1..=FIRST_PROBE as usize + 1].iter().all(|&d| d));
         let probes: Vec<usize> = (1..ways.len()).filter(|&i| !ways[i]).collect();
-        // Probes after 8, 16, 32, 64, 64 frames of the list.
-        assert_eq!(probes, [10, 27, 60, 125, 190]);
+        // Probes after 16, 32, 64, 64 frames of the list (the first counted from the frame after
+        // the first with it, when both ways are known).
+        assert_eq!(probes, [18, 51, 116, 181]);
     }
 
     #[test]

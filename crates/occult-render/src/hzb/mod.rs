@@ -97,10 +97,11 @@
 //! - §4's processors are threads of one machine sharing memory: the distributions are
 //!   per-frame filters over the shared octrees rather than copies of the data, and every
 //!   worker of `structure`/`hybrid` still walks (and tests) the shared upper octree levels.
-//!   With `parallel=off` (the default) parallelism is the rasterizer's own: sort-last within
-//!   a batch of at least 200,000 triangles; a shorter batch that its measured cost of a
-//!   triangle makes long is shared by bands of rows (its fill split over the threads, the
-//!   setup repeated), the rest drawn on the calling thread.
+//!   With `parallel=off` (what `auto`, the default, takes below 8 M triangle instances)
+//!   parallelism is the rasterizer's own: sort-last within a batch of at least 200,000
+//!   triangles; a shorter batch that its measured cost of a triangle makes long is shared by
+//!   bands of rows (its fill split over the threads, the setup repeated), the rest drawn on
+//!   the calling thread.
 //! - §3.1's hybrid redistribution is off by default (`small=0`; the paper's value is
 //!   `small=0.25`): a straddler stays at its cell, tested with the cell's own primitives
 //!   (below). Shared straddlers cost a stamp check each and are drawn as an index list, the
@@ -139,7 +140,7 @@
 //!   `city:blocks=32` keeps 56-71 % of its list, `plant`'s 32-step orbit 51-93 %, and the list
 //!   costs the first and pays on the second), so the frame times decide as well: the list is
 //!   drawn only while the last frame that drew it was faster than the last that did not (the
-//!   first frame, which has none, is one), the way not taken measured again after 8, 16 .. 64
+//!   first frame, which has none, is one), the way not taken measured again after 16, 32, 64
 //!   frames ([`crate::list_choice`]). Each strip of `parallel=columns` chooses for itself.
 //! - Addition, `payoff` (above): the paper tests everything; on views where little is hidden
 //!   that is slower than brute force.
@@ -289,7 +290,8 @@ pub struct HzbOptions {
     pub order: ChildOrder,
     /// Parallel distribution (§4.1).
     pub distribution: Distribution,
-    /// Workers of the distribution (1 ..= [`MAX_WORKERS`]); each rasterizes on one thread.
+    /// Workers of the distribution (1 ..= [`MAX_WORKERS`]; 0: the rasterizer's threads, at
+    /// most [`MAX_WORKERS`]); each rasterizes on one thread.
     pub workers: usize,
     /// Under [`Distribution::Columns`], strips of columns a worker (1 ..= [`MAX_STRIPS`]),
     /// handed out one at a time to whichever worker is free.
@@ -324,7 +326,7 @@ impl Default for HzbOptions {
             weigh: true,
             order: ChildOrder::FrontToBack,
             distribution: Distribution::Auto,
-            workers: 2,
+            workers: 0,
             strips: 1,
             payoff: true,
         }
@@ -379,10 +381,17 @@ impl HzbOptions {
             ));
         }
         let occlusion = p.flag("occlusion", d.occlusion)?;
-        let workers: usize = p.get("workers", d.workers)?;
-        if workers == 0 || workers > MAX_WORKERS {
-            return bad(format!("workers={workers}: workers must be in 1..={MAX_WORKERS}"));
-        }
+        // `threads` (the default): the rasterizer's threads, 0 until the renderer is built.
+        let workers: usize = match p.raw("workers") {
+            None | Some("threads") => d.workers,
+            Some(_) => {
+                let n: usize = p.get("workers", 1)?;
+                if n == 0 || n > MAX_WORKERS {
+                    return bad(format!("workers={n}: workers must be in 1..={MAX_WORKERS} or threads"));
+                }
+                n
+            }
+        };
         let strips: usize = p.get("strips", d.strips)?;
         if strips == 0 || strips > MAX_STRIPS {
             return bad(format!("strips={strips}: strips a worker must be in 1..={MAX_STRIPS}"));
@@ -562,7 +571,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc {
             key: "weigh",
             default: "on",
-            help: "draw the visible list first only while frames that drew it were faster than frames that did not (the last of each; the other way measured again after 8, 16 .. 64 frames); off = by trust alone; needs temporal (not in the paper)",
+            help: "draw the visible list first only while frames that drew it were faster than frames that did not (the last of each; the other way measured again after 16, 32, 64 frames); off = by trust alone; needs temporal (not in the paper)",
         },
         ParamDoc {
             key: "order",
@@ -576,8 +585,8 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         },
         ParamDoc {
             key: "workers",
-            default: "2",
-            help: "workers of the distribution, 1..=8 (each rasterizes on one thread)",
+            default: "threads",
+            help: "workers of the distribution, 1..=8 (each rasterizes on one thread), or threads: the rasterizer's threads, at most 8",
         },
         ParamDoc {
             key: "strips",
@@ -677,6 +686,8 @@ struct Strip {
 struct ListWay {
     precision: f64,
     choice: ListChoice,
+    /// The list was rechecked (or is empty) at the end of the frame that made it.
+    pruned: bool,
 }
 
 impl Default for ListWay {
@@ -684,6 +695,7 @@ impl Default for ListWay {
         Self {
             precision: 1.0,
             choice: ListChoice::default(),
+            pruned: true,
         }
     }
 }
@@ -748,6 +760,9 @@ impl Hzb {
         let raster = crate::scene_rasterizer(&scene, options)?;
         let mut hzb = hzb.clone();
         hzb.distribution = hzb.distribution.resolve(&scene, raster.thread_count());
+        if hzb.workers == 0 {
+            hzb.workers = raster.thread_count().clamp(1, MAX_WORKERS);
+        }
         let octrees: std::result::Result<Vec<Option<HybridOctree>>, _> =
             per_node(&raster, &scene, |node| match node.kind() {
                 NodeKind::Mesh(m) if m.triangle_count() > o.leaf_size => {
@@ -918,12 +933,14 @@ fn walk_frame(
         w.draw_visible_list(old_visible, skip);
     }
     w.traverse();
+    let mut pruned = false;
     if recheck {
         // A skipped list that the traversal mostly did not draw is skipped next frame too:
         // no recheck is needed to tell (`trust`).
         match w.skipped_drawn_share() {
             Some(p) if p < options.trust as f64 => way.precision = p,
             _ => {
+                pruned = true;
                 if let Some(p) = w.recheck() {
                     way.precision = p;
                 }
@@ -931,11 +948,18 @@ fn walk_frame(
         }
     }
     let (list, stats) = w.finish();
-    if options.weigh && options.temporal && stats.counters.get("payoff_stopped") == 0 {
+    if options.weigh && options.temporal {
         let c = &stats.counters;
         let drew = c.get("visible_list_drawn") + c.get("whole_drawn") > 0;
-        way.choice.record(drew, start.elapsed());
+        // A list its frame did not prune (`recheck` above 1, or skipped unrechecked) holds
+        // nodes hidden at that frame's end: drawing it is not what the list costs, and the
+        // frame is not recorded (a probe of the list then lasts until one is). A frame that
+        // stopped testing is: its time is what its way cost.
+        if !drew || way.pruned {
+            way.choice.record(drew, start.elapsed());
+        }
     }
+    way.pruned = pruned || list.is_empty();
     *visible = list;
     stats
 }

@@ -1171,9 +1171,9 @@ impl Lzb {
             };
             // The far list holds an instance's leaves in one run. The runs go nearest instance
             // first, so that the leaves in front mark the pixels that those behind then find
-            // marked; an instance whose whole box is off screen, or (when small enough for the
-            // scan to cost less than its leaves' projections) on pixels all marked, is skipped
-            // whole. The mask is the same in any order.
+            // marked; an instance whose box lies (when small enough for the scan to cost less
+            // than its leaves' projections) on pixels all finished or marked is skipped whole.
+            // The mask is the same in any order.
             let eye = view.camera().eye;
             let mut instances_skipped = 0u64;
             let mut runs: Vec<(f32, usize, usize)> = Vec::new();
@@ -1194,10 +1194,19 @@ impl Lzb {
                 let Accel::Mesh { octree, .. } = &self.accel[rec.node.index()] else {
                     continue;
                 };
-                let skip = match oor::project_box(clip, &octree.bounds(), w, h, ctx.near) {
-                    oor::Projection::Nothing => true,
-                    oor::Projection::Screen => false,
+                // Judged with twice the near margin: an instance skipped has no corner near
+                // enough for a leaf of it to cover the screen, however its corners round.
+                let skip = match oor::project_box(clip, &octree.bounds(), w, h, 2.0 * ctx.near) {
+                    oor::Projection::Nothing | oor::Projection::Screen => false,
                     oor::Projection::Polygon { rect, .. } => {
+                        // Grown by a pixel: a leaf's corners, summed otherwise, may round past
+                        // the instance's rectangle where their faces meet.
+                        let rect = [
+                            rect[0].saturating_sub(1),
+                            (rect[1] + 1).min(w - 1),
+                            rect[2].saturating_sub(1),
+                            (rect[3] + 1).min(h - 1),
+                        ];
                         let area = u64::from(rect[1] - rect[0] + 1) * u64::from(rect[3] - rect[2] + 1);
                         area <= OOR_SCAN_PER_LEAF * (end - first) as u64 && !open(&done, rect)
                     }

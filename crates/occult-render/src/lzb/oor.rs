@@ -69,13 +69,19 @@ pub(super) fn project_box(clip_from_object: &Mat4, b: &Aabb, width: u32, height:
 
 /// The convex hull of a box's projected corners, counter-clockwise (in y-down screen space,
 /// clockwise visually), held in place (no allocation: a far set has hundreds of thousands of
-/// boxes), with each edge's length for the distance test.
+/// boxes), with each edge's length for the distance test (the same arithmetic as a hull of
+/// any length: the mask does not depend on how it is held).
 pub(super) struct Hull {
-    pts: [Vec2; 8],
-    /// Per edge `i` (from point `i` to the next): one over its length.
-    inv_len: [f64; 8],
+    /// Room for every point the chains may keep: 8 in exact arithmetic, more where rounded
+    /// orientation tests disagree on nearly collinear corners (none is dropped).
+    pts: [Vec2; HULL_ROOM],
+    /// Per edge `i` (from point `i` to the next): its length.
+    len_of: [f64; HULL_ROOM],
     len: usize,
 }
+
+/// Points a [`Hull`] holds at most: both chains of 8 corners, less their shared ends.
+const HULL_ROOM: usize = 16;
 
 impl Hull {
     /// Andrew's monotone chain over the corners; collinear points dropped.
@@ -84,8 +90,9 @@ impl Hull {
         let cross = |o: Vec2, a: Vec2, b: Vec2| {
             (a.x - o.x) as f64 * (b.y - o.y) as f64 - (a.y - o.y) as f64 * (b.x - o.x) as f64
         };
-        // A chain holds at most 8 + 1 points before its last is dropped; the hull at most 8.
-        let mut hull = [Vec2::ZERO; 17];
+        // The lower chain keeps at most 8 points, the upper at most 8 more before each drops
+        // its last: at most 16.
+        let mut hull = [Vec2::ZERO; HULL_ROOM + 1];
         let mut n = 0;
         for pass in 0..2 {
             let start = n;
@@ -100,14 +107,14 @@ impl Hull {
             n -= 1;
         }
         let mut out = Self {
-            pts: [Vec2::ZERO; 8],
-            inv_len: [0.0; 8],
-            len: n.min(8),
+            pts: [Vec2::ZERO; HULL_ROOM],
+            len_of: [0.0; HULL_ROOM],
+            len: n,
         };
-        out.pts[..out.len].copy_from_slice(&hull[..out.len]);
-        for i in 0..out.len {
-            let (a, b) = (out.pts[i], out.pts[(i + 1) % out.len]);
-            out.inv_len[i] = 1.0 / ((b - a).length() as f64).max(1e-30);
+        out.pts[..n].copy_from_slice(&hull[..n]);
+        for i in 0..n {
+            let (a, b) = (out.pts[i], out.pts[(i + 1) % n]);
+            out.len_of[i] = ((b - a).length() as f64).max(1e-30);
         }
         out
     }
@@ -134,7 +141,7 @@ impl Hull {
             let b = hull[(i + 1) % n];
             let e = (b.x - a.x) as f64 * (y - a.y) as f64 - (b.y - a.y) as f64 * (x - a.x) as f64;
             // The hull runs counter-clockwise in (x, y) coordinates: inside is e >= 0.
-            e * self.inv_len[i] >= -GROW_PX
+            e / self.len_of[i] >= -GROW_PX
         })
     }
 }
