@@ -327,7 +327,7 @@ impl Default for HzbOptions {
             order: ChildOrder::FrontToBack,
             distribution: Distribution::Auto,
             workers: 0,
-            strips: 1,
+            strips: 2,
             payoff: true,
         }
     }
@@ -590,7 +590,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         },
         ParamDoc {
             key: "strips",
-            default: "1",
+            default: "2",
             help: "parallel=columns: strips of columns a worker, 1..=16, handed out one at a time to whichever worker is free",
         },
         ParamDoc {
