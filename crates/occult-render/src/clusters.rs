@@ -820,7 +820,8 @@ impl ClusterCulling {
         // (above): not what the first pass costs, so not recorded (a probe of it then lasts
         // two frames).
         let measured = *last_first || first == 0;
-        *last_first = use_first;
+        // Drew: a first pass with nothing of last frame's set in view drew none.
+        *last_first = use_first && first > 0;
         if options.temporal && options.weigh && measured {
             choice.record(first > 0, start.elapsed());
         }

@@ -12,7 +12,9 @@
 //! measured: the time of the last frame that drew the list and of the last that did not (the
 //! first frame, which has no list, is one), and the faster way is taken; the other is measured
 //! again after [`FIRST_PROBE`] frames, and after each probe that confirms the choice twice as
-//! many, up to [`MAX_PROBE`]. Time, not triangles: with the list first, `clusters` submits
+//! many, up to [`MAX_PROBE`] (frames recorded: a renderer does not record a frame whose list
+//! does not show what the list costs, as one drawn from a frame that neither drew nor pruned
+//! one). Time, not triangles: with the list first, `clusters` submits
 //! more triangles on `plant`'s orbits but in fewer, larger batches, and is twice as fast.
 //! Frames do not change either way (the traversal is conservative), only their time.
 

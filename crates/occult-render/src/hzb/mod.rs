@@ -383,14 +383,12 @@ impl HzbOptions {
         let occlusion = p.flag("occlusion", d.occlusion)?;
         // `threads` (the default): the rasterizer's threads, 0 until the renderer is built.
         let workers: usize = match p.raw("workers") {
-            None | Some("threads") => d.workers,
-            Some(_) => {
-                let n: usize = p.get("workers", 1)?;
-                if n == 0 || n > MAX_WORKERS {
-                    return bad(format!("workers={n}: workers must be in 1..={MAX_WORKERS} or threads"));
-                }
-                n
-            }
+            None => d.workers,
+            Some(v) if v.eq_ignore_ascii_case("threads") => d.workers,
+            Some(v) => match v.parse::<usize>() {
+                Ok(n) if (1..=MAX_WORKERS).contains(&n) => n,
+                _ => return bad(format!("workers={v}: workers must be in 1..={MAX_WORKERS}, or threads")),
+            },
         };
         let strips: usize = p.get("strips", d.strips)?;
         if strips == 0 || strips > MAX_STRIPS {
@@ -688,6 +686,8 @@ struct ListWay {
     choice: ListChoice,
     /// The list was rechecked (or is empty) at the end of the frame that made it.
     pruned: bool,
+    /// The frame that made it drew the list before it.
+    drew: bool,
 }
 
 impl Default for ListWay {
@@ -696,6 +696,7 @@ impl Default for ListWay {
             precision: 1.0,
             choice: ListChoice::default(),
             pruned: true,
+            drew: false,
         }
     }
 }
@@ -762,6 +763,12 @@ impl Hzb {
         hzb.distribution = hzb.distribution.resolve(&scene, raster.thread_count());
         if hzb.workers == 0 {
             hzb.workers = raster.thread_count().clamp(1, MAX_WORKERS);
+        }
+        if hzb.workers > MAX_WORKERS || !(1..=MAX_STRIPS).contains(&hzb.strips) {
+            return Err(RenderError::BadParameter(format!(
+                "hzb: {} workers and {} strips a worker: expected 1..={MAX_WORKERS} and 1..={MAX_STRIPS}",
+                hzb.workers, hzb.strips
+            )));
         }
         let octrees: std::result::Result<Vec<Option<HybridOctree>>, _> =
             per_node(&raster, &scene, |node| match node.kind() {
@@ -951,13 +958,15 @@ fn walk_frame(
     if options.weigh && options.temporal {
         let c = &stats.counters;
         let drew = c.get("visible_list_drawn") + c.get("whole_drawn") > 0;
-        // A list its frame did not prune (`recheck` above 1, or skipped unrechecked) holds
+        // A list made by a frame that neither drew nor pruned one (skipped unrechecked) holds
         // nodes hidden at that frame's end: drawing it is not what the list costs, and the
-        // frame is not recorded (a probe of the list then lasts until one is). A frame that
-        // stopped testing is: its time is what its way cost.
-        if !drew || way.pruned {
+        // frame is not recorded (a probe of the list then lasts two frames). A list carried
+        // over unpruned between rechecks (`recheck` above 1) is the list's steady state, and
+        // is. A frame that stopped testing is recorded too: its time is what its way cost.
+        if !drew || way.pruned || way.drew {
             way.choice.record(drew, start.elapsed());
         }
+        way.drew = drew;
     }
     way.pruned = pruned || list.is_empty();
     *visible = list;
@@ -1378,6 +1387,39 @@ mod tests {
 
     fn build(p: Params) -> Result<HzbOptions> {
         HzbOptions::from_params(&p)
+    }
+
+    #[test]
+    fn workers_default_to_the_rasterizers_threads() {
+        for spec in [Params::new("hzb"), Params::new("hzb").with("workers", "Threads")] {
+            assert_eq!(build(spec).unwrap().workers, 0, "resolved when the renderer is built");
+        }
+        assert_eq!(build(Params::new("hzb").with("workers", "3")).unwrap().workers, 3);
+        for v in ["0", "9", "all"] {
+            let e = build(Params::new("hzb").with("workers", v)).unwrap_err().to_string();
+            assert!(e.contains("threads") && e.contains(v), "{e}");
+        }
+        let scene = Arc::new(crate::test_quad_rows(2, 2));
+        for threads in [1, 3] {
+            let options = RenderOptions {
+                raster: occult_raster::RasterConfig {
+                    threads,
+                    ..Default::default()
+                },
+                ..Default::default()
+            };
+            let hzb = HzbOptions {
+                distribution: Distribution::Columns,
+                ..HzbOptions::default()
+            };
+            let h = Hzb::new(scene.clone(), &options, &hzb).unwrap();
+            assert_eq!(h.workers.len(), threads);
+        }
+        let too_many = HzbOptions {
+            workers: MAX_WORKERS + 1,
+            ..HzbOptions::default()
+        };
+        assert!(Hzb::new(scene, &RenderOptions::default(), &too_many).is_err());
     }
 
     #[test]
