@@ -1392,9 +1392,18 @@ mod tests {
     #[test]
     fn workers_default_to_the_rasterizers_threads() {
         for spec in [Params::new("hzb"), Params::new("hzb").with("workers", "Threads")] {
-            assert_eq!(build(spec).unwrap().workers, 0, "resolved when the renderer is built");
+            assert_eq!(
+                build(spec).expect("workers=threads is valid").workers,
+                0,
+                "resolved when the renderer is built"
+            );
         }
-        assert_eq!(build(Params::new("hzb").with("workers", "3")).unwrap().workers, 3);
+        assert_eq!(
+            build(Params::new("hzb").with("workers", "3"))
+                .expect("3 workers are valid")
+                .workers,
+            3
+        );
         for v in ["0", "9", "all"] {
             let e = build(Params::new("hzb").with("workers", v)).unwrap_err().to_string();
             assert!(e.contains("threads") && e.contains(v), "{e}");
@@ -1412,7 +1421,7 @@ mod tests {
                 distribution: Distribution::Columns,
                 ..HzbOptions::default()
             };
-            let h = Hzb::new(scene.clone(), &options, &hzb).unwrap();
+            let h = Hzb::new(scene.clone(), &options, &hzb).expect("hzb builds on a small scene");
             assert_eq!(h.workers.len(), threads);
         }
         let too_many = HzbOptions {
@@ -1426,7 +1435,10 @@ mod tests {
     fn auto_distribution_takes_columns_on_large_scenes_drawn_on_several_threads() {
         let (small, large) = (crate::test_quad_rows(2, 4096), crate::test_quad_rows(1024, 4096));
         assert!(small.item_count() < AUTO_COLUMNS && large.item_count() >= AUTO_COLUMNS);
-        assert_eq!(build(Params::new("hzb")).unwrap().distribution, Distribution::Auto);
+        assert_eq!(
+            build(Params::new("hzb")).expect("the defaults are valid").distribution,
+            Distribution::Auto
+        );
         assert_eq!(Distribution::Auto.resolve(&large, 2), Distribution::Columns);
         assert_eq!(Distribution::Auto.resolve(&large, 1), Distribution::Off);
         assert_eq!(Distribution::Auto.resolve(&small, 2), Distribution::Off);
