@@ -24,7 +24,10 @@
 //!   rasterizer's first large draws) are drawn after a culled frame whose tests did not pay,
 //!   or after two in a row that did not plainly pay ([`DirectFrames::plainly`]: tests that
 //!   paid, and at most a third of the work submitted or less than half of what the work would
-//!   cost at the frame's own rasterization rate), unless that frame is small beside the culled
+//!   cost at the frame's own rasterization rate), or, for `lzb` and `oqgrid`, after the
+//!   renderer's first culled frame when it did not plainly pay by time alone
+//!   ([`DirectFrames::plainly_first`], [`DirectFrames::judging_first_by_time`]: its own rate
+//!   shared over the threads, whatever share it submitted), unless that frame is small beside the culled
 //!   frames before it (less than half their mean time), or after the renderer's first culled
 //!   frame when it took longer than its work at its own cost of a triangle shared over the
 //!   threads (a view that culling cannot help then costs one culled frame, not two); a
@@ -117,6 +120,18 @@ impl DirectFrames {
             pyramid: None,
             threads: raster.thread_count().max(1),
         })
+    }
+
+    /// The same, judging the renderer's first culled frame by time alone
+    /// ([`DirectFrames::plainly_first`]): for renderers whose tests cost what the share of
+    /// the work they submit does not show, `lzb`'s rays and `oqgrid`'s queries (a ray's
+    /// traversal, a query's scan of its box's pixels, are not bounded per test as a pyramid
+    /// lookup is). The renderers that draw a visible list first (`hzb`, `clusters`) keep the
+    /// share: their first frame, without a list, is no measure of the next ones, and a direct
+    /// frame measured on it would be screened against its cost.
+    pub fn judging_first_by_time(mut self) -> Self {
+        self.choice.first_by_time = true;
+        self
     }
 
     /// Draws this frame directly when the choice says so (counting it in `payoff_direct` and
@@ -227,16 +242,27 @@ impl DirectFrames {
         let submitted = stats.triangles_submitted;
         let raster_ns = stats.phases.get(Phase::Raster).as_nanos() as f64 / submitted.max(1) as f64;
         let first = self.choice.model().is_none();
+        // The renderer's first culled frame: a direct frame is measured next unless it paid
+        // plainly by time alone.
+        let first_frame = self.choice.first_by_time && first && self.choice.unweighed.is_empty();
         let slower = submitted > 0 && self.choice.first_lost(total, raster_ns, self.threads);
-        let plainly = !slower && Self::plainly(tests_paid, total, submitted, raster_ns, work);
+        let plainly = !slower
+            && if first_frame {
+                Self::plainly_first(tests_paid, total, raster_ns / self.threads as f64, work)
+            } else {
+                Self::plainly(tests_paid, total, submitted, raster_ns, work)
+            };
         // Culling pays only if drawing the hidden triangles costs more than what culling cost
         // this frame beyond drawing what it submitted (both at this frame's rate: a direct
-        // frame's is lower, which only widens the loss).
+        // frame's is lower, which only widens the loss). Not walked for the first culled
+        // frame, measured next anyway when it did not plainly pay.
         let cannot_pay = first
             && !plainly
             && total >= MIN_ALLOWANCE_TIME
             && (slower
-                || raster_ns * (self.hidden_triangles(view, frame)? + submitted) as f64 <= total.as_nanos() as f64);
+                || (!first_frame
+                    && raster_ns * (self.hidden_triangles(view, frame)? + submitted) as f64
+                        <= total.as_nanos() as f64));
         if cannot_pay {
             stats.counters.add(SCREENED, 1);
         }
@@ -253,6 +279,19 @@ impl DirectFrames {
     /// margin).
     pub fn plainly(tests_paid: bool, total: Duration, submitted: u64, raster_ns: f64, work: u64) -> bool {
         tests_paid && (submitted.saturating_mul(3) <= work || (total.as_nanos() as f64) < 0.5 * raster_ns * work as f64)
+    }
+
+    /// Whether the renderer's first culled frame, which took `total`, paid plainly: its tests
+    /// paid, and it took less than half of what the `work` would cost at its own cost of a
+    /// triangle shared over the threads (`shared_ns`). Stricter than [`DirectFrames::plainly`]:
+    /// time alone, not the share of the work submitted, since a renderer whose tests cost more
+    /// than its drawing can submit a ninth of the work and still lose (`lzb` on
+    /// `city:blocks=32` from outside: 3.4 M of 29.5 M triangles in 273 ms, against 150 ms
+    /// drawn directly). Judging one frame so costs at most one direct frame, measured once; a
+    /// street's later frames keep the share (their direct model, of triangles and not pixels,
+    /// would misjudge them).
+    pub fn plainly_first(tests_paid: bool, total: Duration, shared_ns: f64, work: u64) -> bool {
+        tests_paid && (total.as_nanos() as f64) < 0.5 * shared_ns * work as f64
     }
 
     /// Hands the coming culled frame's expectations to its in-frame `payoff`: the frame's
@@ -318,6 +357,9 @@ impl Model {
 /// The decision alone, on numbers: times and work.
 #[derive(Clone, Debug, Default, PartialEq)]
 struct Choice {
+    /// The renderer's first culled frame is judged by time alone
+    /// ([`DirectFrames::judging_first_by_time`]).
+    first_by_time: bool,
     /// The last direct frames' models, newest last, at most [`DIRECT_KEPT`].
     measured: Vec<Model>,
     /// Culled frames (time, work, whether their tests paid) not yet weighed: those before the
@@ -421,14 +463,15 @@ impl Choice {
             return;
         }
         if self.model().is_none() {
-            // Measure the alternative, next frame, when this frame's tests did not pay, or two
-            // frames in a row did not plainly pay; not for a frame small beside the culled
-            // frames before it (a view of a wall: whatever it loses is little, and weighed
-            // once a direct frame was measured).
+            // Measure the alternative, next frame, when this frame's tests did not pay, the
+            // renderer's first culled frame or two frames in a row did not plainly pay; not for
+            // a frame small beside the culled frames before it (a view of a wall: whatever it
+            // loses is little, and weighed once a direct frame was measured).
             self.unplain = if paid_plainly { 0 } else { self.unplain + 1 };
             let n = self.unweighed.len() as f64;
             let mean = self.unweighed.iter().map(|u| u.0.as_secs_f64()).sum::<f64>() / n.max(1.0);
-            if (cannot_pay || !tests_paid || self.unplain >= 2) && total.as_secs_f64() >= 0.5 * mean {
+            let unplain = self.unplain >= 2 || (self.unplain == 1 && self.unweighed.is_empty() && self.first_by_time);
+            if (cannot_pay || !tests_paid || unplain) && total.as_secs_f64() >= 0.5 * mean {
                 self.direct_left = FIRST_MEASURED;
             }
             if self.unweighed.len() == DIRECT_KEPT {
@@ -774,7 +817,8 @@ pub(crate) mod tests {
     }
 
     /// The first measurement: after tests that did not pay, or two frames in a row that did
-    /// not plainly pay; never after a plain win or a small frame.
+    /// not plainly pay (the first culled frame alone, judged by time); never after a plain win
+    /// or a small frame.
     #[test]
     fn when_direct_is_first_measured() {
         let mut c = Choice::default();
@@ -790,6 +834,27 @@ pub(crate) mod tests {
         assert!(!c.take_direct(), "small beside the frames before");
         c.culled(20 * MS, 1000, false, false, false);
         assert!(c.take_direct(), "tests that did not pay");
+        // Judging the first culled frame by time: its not paying plainly is enough, and only
+        // its own (a later frame keeps the two-in-a-row rule).
+        let by_time = || Choice {
+            first_by_time: true,
+            ..Choice::default()
+        };
+        let mut c = by_time();
+        c.culled(20 * MS, 1000, true, false, false);
+        assert!(c.take_direct(), "the first culled frame, not plainly");
+        let mut c = by_time();
+        c.culled(20 * MS, 1000, true, true, false);
+        c.culled(20 * MS, 1000, true, false, false);
+        assert!(!c.take_direct(), "a later frame once not plainly");
+        let mut c = Choice::default();
+        c.culled(20 * MS, 1000, true, false, false);
+        assert!(!c.take_direct(), "not judged by time: once is not enough");
+        // By time alone: half the work at the rate shared over the threads, whatever the share
+        // submitted; tests that paid.
+        assert!(DirectFrames::plainly_first(true, 100 * MS, 1e6, 300));
+        assert!(!DirectFrames::plainly_first(true, 150 * MS, 1e6, 300));
+        assert!(!DirectFrames::plainly_first(false, 100 * MS, 1e6, 300));
         let mut c = Choice::default();
         c.culled(MIN_ALLOWANCE_TIME / 2, 1000, false, false, false);
         assert!(!c.take_direct(), "short frames keep their tests");

@@ -591,7 +591,7 @@ impl Lzb {
             .map(|n| vec![0u32; n.mesh().map_or(0, |m| m.triangle_count())])
             .collect();
         let direct = match opts.payoff {
-            true => Some(DirectFrames::new(scene.clone(), &raster)?),
+            true => Some(DirectFrames::new(scene.clone(), &raster)?.judging_first_by_time()),
             false => None,
         };
         Ok(Self {

@@ -579,7 +579,7 @@ impl OqGrid {
         Ok(Self {
             payoff: Payoff::new(oq.payoff, scene.item_count()),
             direct: match oq.payoff {
-                true => Some(DirectFrames::new(scene.clone(), &raster)?),
+                true => Some(DirectFrames::new(scene.clone(), &raster)?.judging_first_by_time()),
                 false => None,
             },
             scene,
