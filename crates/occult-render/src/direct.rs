@@ -24,11 +24,12 @@
 //!   rasterizer's first large draws) are drawn after a culled frame whose tests did not pay,
 //!   or after two in a row that did not plainly pay ([`DirectFrames::plainly`]: tests that
 //!   paid, and at most a third of the work submitted or less than half of what the work would
-//!   cost at the frame's own rasterization rate), or, for `lzb` and `oqgrid`, after the
-//!   renderer's first culled frame when it did not plainly pay by time alone
-//!   ([`DirectFrames::plainly_first`], [`DirectFrames::judging_first_by_time`]: its own rate
-//!   shared over the threads, whatever share it submitted), unless that frame is small beside the culled
-//!   frames before it (less than half their mean time), or after the renderer's first culled
+//!   cost at the frame's own rasterization rate), unless that frame is small beside the
+//!   culled frames before it (less than half their mean time); for `lzb` and `oqgrid`, after
+//!   the renderer's first culled frame (of at least [`MIN_ALLOWANCE_TIME`]) when it did not
+//!   plainly pay by time alone ([`DirectFrames::plainly_first`],
+//!   [`DirectFrames::judging_first_by_time`]: its own rate shared over the threads, whatever
+//!   share it submitted); or after the renderer's first culled
 //!   frame when it took longer than its work at its own cost of a triangle shared over the
 //!   threads (a view that culling cannot help then costs one culled frame, not two); a
 //!   culled frame that wins by a thin margin (more than [`REMEASURE_SHARE`] of the predicted
@@ -47,7 +48,8 @@
 //!   hierarchies, a few percent of a frame; a losing probe costs up to two frames). Only with
 //!   a culled frame at most [`SCREEN_AGE`] frames old; before the first direct frame, a culled
 //!   frame that did not plainly pay is screened the same way on its own depth, at its own
-//!   cost of a triangle, and the direct frames are measured next when it cannot pay.
+//!   cost of a triangle, and the direct frames are measured next when it cannot pay (not the
+//!   first culled frame of a renderer judging it by time: it is measured next anyway).
 //!
 //! Renderers also hand the expected direct frame to their in-frame payoff, which then gives
 //! up a frame plainly slower than drawing it directly (`hzb` and `oqgrid` draw its rest
@@ -122,16 +124,26 @@ impl DirectFrames {
         })
     }
 
-    /// The same, judging the renderer's first culled frame by time alone
-    /// ([`DirectFrames::plainly_first`]): for renderers whose tests cost what the share of
-    /// the work they submit does not show, `lzb`'s rays and `oqgrid`'s queries (a ray's
-    /// traversal, a query's scan of its box's pixels, are not bounded per test as a pyramid
-    /// lookup is). The renderers that draw a visible list first (`hzb`, `clusters`) keep the
-    /// share: their first frame, without a list, is no measure of the next ones, and a direct
-    /// frame measured on it would be screened against its cost.
+    /// The same, judging the renderer's first culled frame (of at least
+    /// [`MIN_ALLOWANCE_TIME`]) by time alone ([`DirectFrames::plainly_first`]): for renderers
+    /// whose tests cost what the share of the work they submit does not show, `lzb`'s rays
+    /// and `oqgrid`'s queries (a ray's traversal, a query's scan of its box's pixels, are not
+    /// bounded per test as a pyramid lookup is). `hzb` and `clusters` keep the share: their
+    /// tests are such lookups, and their first frame, without the visible list or first pass
+    /// the next ones draw, is no measure of them; measured (perf log, sixteenth session), a
+    /// direct frame after it put `clusters` on `plant circle:32` into runs of direct frames
+    /// that its screenings, weighing that first frame's cost, never ended (2.6 → 1.0×).
+    /// `oqgrid`'s next frames draw last frame's cells first too; on the suite's cases its
+    /// first frames were either plain by time or lost to a direct frame (city32-orbit).
     pub fn judging_first_by_time(mut self) -> Self {
         self.choice.first_by_time = true;
         self
+    }
+
+    /// Whether the renderer's first culled frame is judged by time alone (tests).
+    #[cfg(test)]
+    pub(crate) fn judges_first_by_time(&self) -> bool {
+        self.choice.first_by_time
     }
 
     /// Draws this frame directly when the choice says so (counting it in `payoff_direct` and
@@ -226,7 +238,9 @@ impl DirectFrames {
     /// Before a direct frame was measured, a culled frame that did not plainly pay is
     /// screened: when even removing every triangle hidden behind its final depth
     /// ([`Hierarchies::hidden_triangles`]) would save less than its culling cost, at its own
-    /// rasterization cost of a triangle, the direct frames are measured next.
+    /// rasterization cost of a triangle, the direct frames are measured next. Not the first
+    /// culled frame of a renderer [judging it by time](DirectFrames::judging_first_by_time),
+    /// whose not paying plainly is enough: a direct frame is measured next without the walk.
     ///
     /// # Errors
     /// [`crate::RenderError::Raster`] when the screening's pyramid cannot be allocated.
@@ -244,7 +258,8 @@ impl DirectFrames {
         let first = self.choice.model().is_none();
         // The renderer's first culled frame: a direct frame is measured next unless it paid
         // plainly by time alone.
-        let first_frame = self.choice.first_by_time && first && self.choice.unweighed.is_empty();
+        // (One that submitted nothing has no rate: the share judges it.)
+        let first_frame = self.choice.first_by_time && first && self.choice.unweighed.is_empty() && submitted > 0;
         let slower = submitted > 0 && self.choice.first_lost(total, raster_ns, self.threads);
         let plainly = !slower
             && if first_frame {
@@ -630,6 +645,58 @@ pub(crate) mod tests {
         /// Makes the next `n` frames direct; `abandon`: frames stop at their first balance
         /// check, with a direct rate known (so they are given up).
         fn force(&mut self, n: u32, abandon: bool);
+        /// Its [`DirectFrames`].
+        fn direct(&self) -> &DirectFrames;
+    }
+
+    /// `lzb` and `oqgrid` judge their first culled frame by time, `hzb` and `clusters` by the
+    /// share; such a first frame that submitted a sliver of the work but took longer than
+    /// half of it at its own rate measures a direct frame next, without the screening walk,
+    /// where the share finds it plain.
+    #[test]
+    fn the_first_culled_frame_judged_by_time() {
+        let (scene, view, _) = scene_view_reference();
+        let options = RenderOptions::default();
+        let lzb =
+            crate::lzb::Lzb::new(scene.clone(), &options, &crate::lzb::LzbOptions::default()).expect("lzb builds");
+        let oqgrid =
+            crate::oqgrid::OqGrid::with_options(scene.clone(), &options, &crate::oqgrid::OqGridOptions::default())
+                .expect("oqgrid builds");
+        let hzb =
+            crate::hzb::Hzb::new(scene.clone(), &options, &crate::hzb::HzbOptions::default()).expect("hzb builds");
+        assert!(lzb.direct().judges_first_by_time());
+        assert!(oqgrid.direct().judges_first_by_time());
+        assert!(!hzb.direct().judges_first_by_time());
+        let raster = occult_raster::Rasterizer::new(options.raster.clone()).expect("a rasterizer");
+        for by_time in [false, true] {
+            let mut d = DirectFrames::new(scene.clone(), &raster).expect("frustum hierarchies build");
+            if by_time {
+                d = d.judging_first_by_time();
+            }
+            let mut raster = occult_raster::Rasterizer::new(options.raster.clone()).expect("a rasterizer");
+            let mut frame = Frame::new(96, 64).expect("a 96x64 frame");
+            assert!(d
+                .render_if_due(&mut raster, &view, &mut frame)
+                .expect("counts the work")
+                .is_none());
+            let work = d.work();
+            assert!(work > 100, "the view holds the cubes and the ground");
+            // Ten triangles submitted, drawn in 10 ms: a frame of three quarters of the work
+            // at that rate shared over the threads is not slower than it (`first_lost`), nor
+            // plain by time (under half of it), but plain by the share.
+            let mut stats = FrameStats {
+                triangles_submitted: 10,
+                ..FrameStats::default()
+            };
+            stats.phases.add(Phase::Raster, 10 * MS);
+            let shared_ns = 1e6 / d.threads as f64;
+            let total = Duration::from_nanos((0.75 * shared_ns * work as f64) as u64);
+            let next_direct = d
+                .culled(&view, &frame, total, &mut stats, true)
+                .expect("no screening pyramid to fail");
+            assert_eq!(next_direct, by_time, "judged by time: {by_time}");
+            assert_eq!(stats.counters.get(SCREENED), 0, "no screening either way");
+        }
     }
 
     /// Frames of a view where culling costs twice what drawing directly does and its tests do

@@ -1379,6 +1379,10 @@ impl crate::direct::tests::ForceDirect for Hzb {
                 .force_stop = abandon;
         }
     }
+
+    fn direct(&self) -> &DirectFrames {
+        self.direct.as_ref().expect("payoff is on by default")
+    }
 }
 
 #[cfg(test)]

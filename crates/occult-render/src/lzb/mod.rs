@@ -1436,6 +1436,10 @@ impl crate::direct::tests::ForceDirect for Lzb {
         direct.force(n, abandon);
         self.payoff.force_stop = abandon;
     }
+
+    fn direct(&self) -> &DirectFrames {
+        self.direct.as_ref().expect("payoff is on by default")
+    }
 }
 
 #[cfg(test)]

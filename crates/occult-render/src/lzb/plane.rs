@@ -88,12 +88,14 @@ pub fn cost_plane(
 /// Buckets of equal width over the range of sorted limits, each with the count of the limits
 /// in the buckets before it: the limits at most a distance are those of the earlier buckets
 /// and those of its own bucket at most it (the bucket of a value never decreases with it), a
-/// lookup and a few comparisons instead of a binary search over all of them.
+/// lookup and a binary search within one bucket (a few limits, usually) instead of one over
+/// all of them.
 struct LimitBuckets {
     low: f32,
-    /// Buckets per unit of distance; 0 when the limits span no range (then a binary search).
+    /// Buckets per unit of distance; 0 when the limits span no finite range (none, one, all
+    /// equal, or a range beyond `f32`: then a binary search over all of them).
     scale: f32,
-    /// Per bucket, the limits in the buckets before it.
+    /// Per bucket, the limits in the buckets before it; then the count of all.
     before: Vec<usize>,
 }
 
@@ -117,7 +119,7 @@ impl LimitBuckets {
         let mut b = Self {
             low,
             scale: n as f32 / (high - low),
-            before: vec![0; n],
+            before: vec![0; n + 1],
         };
         let mut counts = vec![0usize; n];
         for &l in limits {
@@ -128,6 +130,7 @@ impl LimitBuckets {
             *before = sum;
             sum += count;
         }
+        b.before[n] = sum;
         b
     }
 
@@ -135,7 +138,7 @@ impl LimitBuckets {
     /// what lies beyond it.
     fn bucket(&self, x: f32) -> usize {
         // Saturating: below the range (negative) is 0, beyond it is clamped.
-        (((x - self.low) * self.scale) as usize).min(self.before.len() - 1)
+        (((x - self.low) * self.scale) as usize).min(self.before.len() - 2)
     }
 
     /// How many of `limits` (those the buckets were made of) are at most `d` (not NaN).
@@ -143,10 +146,59 @@ impl LimitBuckets {
         if self.scale == 0.0 {
             return limits.partition_point(|&l| l <= d);
         }
-        let mut k = self.before[self.bucket(d)];
-        while k < limits.len() && limits[k] <= d {
-            k += 1;
+        let b = self.bucket(d);
+        let (first, end) = (self.before[b], self.before[b + 1]);
+        first + limits[first..end].partition_point(|&l| l <= d)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The buckets count what a binary search over all the limits counts, for distances below,
+    /// within, on and beyond the limits (negative, zero, infinite), with repeated limits, one
+    /// limit, equal limits and a range wider than `f32` holds.
+    #[test]
+    fn buckets_count_the_limits_a_binary_search_counts() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(7);
+        let mut sets: Vec<Vec<f32>> = vec![
+            vec![],
+            vec![3.0],
+            vec![2.0; 9],
+            vec![-f32::MAX, f32::MAX],
+            vec![0.1, 0.1, 0.1, 5.0, 5.0, 1e6],
+            vec![1.0, 1.0 + f32::EPSILON, 1.0 + 2.0 * f32::EPSILON],
+        ];
+        for _ in 0..200 {
+            let mut l: Vec<f32> = (0..rng.random_range(1..300))
+                .map(|_| {
+                    if rng.random_bool(0.3) {
+                        rng.random_range(1..8) as f32
+                    } else {
+                        rng.random_range(0.01..1000.0f32)
+                    }
+                })
+                .collect();
+            l.sort_unstable_by(f32::total_cmp);
+            sets.push(l);
         }
-        k
+        for limits in &sets {
+            let b = LimitBuckets::new(limits);
+            let mut ds: Vec<f32> = vec![f32::NEG_INFINITY, -1.0, -0.0, 0.0, f32::INFINITY, f32::MAX, -f32::MAX];
+            for &l in limits {
+                ds.extend([l, l.next_up(), l.next_down()]);
+            }
+            ds.extend((0..100).map(|_| rng.random_range(-10.0..1100.0f32)));
+            for d in ds {
+                assert_eq!(
+                    b.at_most(limits, d),
+                    limits.partition_point(|&l| l <= d),
+                    "{d} among {} limits",
+                    limits.len()
+                );
+            }
+        }
     }
 }

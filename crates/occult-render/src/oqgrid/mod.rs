@@ -1410,4 +1410,8 @@ impl crate::direct::tests::ForceDirect for OqGrid {
         direct.force(n, abandon);
         self.payoff.force_stop = abandon;
     }
+
+    fn direct(&self) -> &DirectFrames {
+        self.direct.as_ref().expect("payoff is on by default")
+    }
 }
