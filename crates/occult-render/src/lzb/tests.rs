@@ -367,3 +367,27 @@ fn near_units_made_once_are_those_formed_per_frame() {
         );
     }
 }
+
+/// The near units' sort keys order as `f32::total_cmp` orders their distances, ties by index,
+/// over signed, zero, infinite and neighbouring distances.
+#[test]
+fn distance_keys_order_as_total_cmp() {
+    let ds = [
+        f32::NEG_INFINITY,
+        -3.5,
+        -0.0,
+        0.0,
+        1e-30,
+        0.25,
+        0.25f32.next_up(),
+        7.0,
+        1e30,
+        f32::INFINITY,
+    ];
+    for (i, &a) in ds.iter().enumerate() {
+        for (j, &b) in ds.iter().enumerate() {
+            let by_keys = super::near::distance_key(a, i as u32).cmp(&super::near::distance_key(b, j as u32));
+            assert_eq!(by_keys, a.total_cmp(&b).then(i.cmp(&j)), "{a} ({i}) against {b} ({j})");
+        }
+    }
+}
