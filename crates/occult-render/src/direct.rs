@@ -591,6 +591,22 @@ pub(crate) mod tests {
         (scene, view, reference)
     }
 
+    /// `hzb` of `scene` with its default options.
+    fn default_hzb(scene: &Arc<Scene>) -> crate::hzb::Hzb {
+        crate::hzb::Hzb::new(
+            scene.clone(),
+            &RenderOptions::default(),
+            &crate::hzb::HzbOptions::default(),
+        )
+        .expect("hzb builds")
+    }
+
+    /// `oqgrid` of `scene` with its default options.
+    fn default_oqgrid(scene: &Arc<Scene>) -> crate::oqgrid::OqGrid {
+        let oq = crate::oqgrid::OqGridOptions::default();
+        crate::oqgrid::OqGrid::with_options(scene.clone(), &RenderOptions::default(), &oq).expect("oqgrid builds")
+    }
+
     /// Frames drawn directly, and frames whose culling is given up (finished untested, or
     /// redrawn directly), are the reference frames, counted as such; the renderers that embed
     /// [`DirectFrames`] each.
@@ -598,11 +614,8 @@ pub(crate) mod tests {
     fn direct_and_given_up_frames_are_identical() {
         let (scene, view, reference) = scene_view_reference();
         let options = RenderOptions::default();
-        let hzb =
-            crate::hzb::Hzb::new(scene.clone(), &options, &crate::hzb::HzbOptions::default()).expect("hzb builds");
-        let oqgrid =
-            crate::oqgrid::OqGrid::with_options(scene.clone(), &options, &crate::oqgrid::OqGridOptions::default())
-                .expect("oqgrid builds");
+        let hzb = default_hzb(&scene);
+        let oqgrid = default_oqgrid(&scene);
         // The paper's plane, so that rays are cast (abandonment comes between waves of them).
         let lzb_options = crate::lzb::LzbOptions {
             plane: crate::lzb::Plane::Dynamic,
@@ -659,11 +672,8 @@ pub(crate) mod tests {
         let options = RenderOptions::default();
         let lzb =
             crate::lzb::Lzb::new(scene.clone(), &options, &crate::lzb::LzbOptions::default()).expect("lzb builds");
-        let oqgrid =
-            crate::oqgrid::OqGrid::with_options(scene.clone(), &options, &crate::oqgrid::OqGridOptions::default())
-                .expect("oqgrid builds");
-        let hzb =
-            crate::hzb::Hzb::new(scene.clone(), &options, &crate::hzb::HzbOptions::default()).expect("hzb builds");
+        let oqgrid = default_oqgrid(&scene);
+        let hzb = default_hzb(&scene);
         assert!(lzb.direct().judges_first_by_time());
         assert!(oqgrid.direct().judges_first_by_time());
         assert!(!hzb.direct().judges_first_by_time());
