@@ -379,6 +379,11 @@ pub struct SuiteArgs {
     /// Frames of every case, instead of the suite's own counts.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=i64::from(occult_scenes::path::MAX_VIEWS)))]
     pub frames: Option<u32>,
+    /// Runs of every case, 1-100: each builds every renderer afresh and renders every frame.
+    /// The speedups pool the runs; a slowdown is beyond noise only when every run's speedup
+    /// and the frames' 90% interval lie below 1.
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub repeat: u32,
     /// The folder of the real models; default: $OCCULT_MODELS, else ../shared/models when it
     /// exists. Model cases whose file is missing are skipped.
     #[arg(long, value_name = "DIR")]

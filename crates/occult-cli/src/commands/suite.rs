@@ -49,11 +49,17 @@ pub fn run(a: SuiteArgs) -> Result<()> {
         width,
         height,
         models: models_folder(a.models.clone()),
+        repeats: a.repeat as usize,
     };
     say!(
-        "suite v{SUITE_VERSION}{}: {} cases at {width}x{height}, renderers {}; models {}",
+        "suite v{SUITE_VERSION}{}: {} cases at {width}x{height}{}, renderers {}; models {}",
         if a.quick { " (quick)" } else { "" },
         cases.len(),
+        if a.repeat > 1 {
+            format!(", {} runs of each", a.repeat)
+        } else {
+            String::new()
+        },
         config
             .algorithms
             .iter()
@@ -79,17 +85,22 @@ pub fn run(a: SuiteArgs) -> Result<()> {
     let report = run_suite(&cases, &config, &mut |event| match event {
         SuiteProgress::Case { case, index, count } => {
             bar = Some(Progress::bar(
-                u64::from(case.frames),
+                u64::from(case.frames) * u64::from(a.repeat),
                 format!("[{}/{count}] {}: building the scene", index + 1, case.name),
             ));
         }
-        SuiteProgress::Compare { case, event } => {
+        SuiteProgress::Compare { case, run, event } => {
             if let Some(bar) = &bar {
+                let run = if a.repeat > 1 {
+                    format!(" (run {}/{})", run + 1, a.repeat)
+                } else {
+                    String::new()
+                };
                 match event {
                     CompareProgress::Building { label, .. } => {
-                        bar.set_message(format!("{}: preparing {label}", case.name))
+                        bar.set_message(format!("{}{run}: preparing {label}", case.name))
                     }
-                    CompareProgress::Built { .. } => bar.set_message(format!("{}: rendering", case.name)),
+                    CompareProgress::Built { .. } => bar.set_message(format!("{}{run}: rendering", case.name)),
                     CompareProgress::Frame { .. } => bar.inc(),
                     CompareProgress::Differs { .. } => {} // not requested by the suite
                 }
@@ -193,13 +204,18 @@ fn ratio(r: Option<f64>) -> String {
 fn case_text(c: &CaseReport) -> String {
     let visible = c.renderers.first().map_or(0.0, |r| r.triangles_visible);
     let mut out = format!(
-        "\n{}: {} ({} triangles), {} at {}x{}, {} visible triangles a frame; reference {}, oracle {} ms; {:.1} s\n",
+        "\n{}: {} ({} triangles), {} at {}x{}{}, {} visible triangles a frame; reference {}, oracle {} ms; {:.1} s\n",
         c.name,
         c.scene_name,
         output::count(c.triangles as f64),
         c.path,
         c.compare.width,
         c.compare.height,
+        if c.runs > 1 {
+            format!(", {} runs", c.runs)
+        } else {
+            String::new()
+        },
         output::count(visible),
         c.reference.as_deref().unwrap_or("none"),
         c.oracle_ms.map_or_else(|| "-".into(), output::millis),
@@ -225,6 +241,12 @@ fn case_text(c: &CaseReport) -> String {
                 },
                 output::millis(r.mean_ms),
                 ratio(r.speedup_vs_zbuffer),
+                if r.speedup_runs.len() > 1 {
+                    let runs: Vec<String> = r.speedup_runs.iter().map(|&s| format!("{s:.2}")).collect();
+                    runs.join(" ")
+                } else {
+                    "-".into()
+                },
                 r.speedup_interval
                     .map_or_else(|| "-".into(), |[lo, hi]| format!("{lo:.2}-{hi:.2}")),
                 ratio(r.vs_oracle),
@@ -241,6 +263,7 @@ fn case_text(c: &CaseReport) -> String {
             "renderer",
             "ms",
             "x zbuffer",
+            "runs",
             "90% interval",
             "x oracle",
             "identical",
@@ -314,7 +337,7 @@ fn summary_text(r: &SuiteReport) -> String {
     let _ = writeln!(
         out,
         "\nviolations (a conservative renderer slower than zbuffer, or with a frame not identical, on a case): {}, \
-         {} beyond noise (frames that differ, or slower with the speedup's 90% interval wholly below 1)",
+         {} beyond noise (frames that differ, or slower with the speedup's 90% interval, widened to every run's, wholly below 1)",
         r.violation_count, r.significant_violation_count
     );
     for s in r.summary.iter().filter(|s| s.violations > 0) {

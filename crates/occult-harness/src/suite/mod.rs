@@ -95,6 +95,9 @@ pub enum SuiteError {
     /// No case to run.
     #[error("no case to run")]
     NoCases,
+    /// Zero runs of each case asked for.
+    #[error("repeats must be at least 1")]
+    NoRuns,
     /// The models folder was given but cannot be read.
     #[error("models folder '{}'", path.display())]
     Models {
@@ -147,6 +150,10 @@ pub struct SuiteConfig {
     pub height: u32,
     /// The folder model files are relative to; `None`: model cases are skipped.
     pub models: Option<PathBuf>,
+    /// Runs of every case, at least 1: each builds every renderer afresh and renders every
+    /// frame (its first included), so that the speedups pool the runs and their intervals
+    /// hold the drift from one run to the next, not only the noise between frames.
+    pub repeats: usize,
 }
 
 impl SuiteConfig {
@@ -158,6 +165,7 @@ impl SuiteConfig {
             width,
             height,
             models: None,
+            repeats: 1,
         }
     }
 }
@@ -178,6 +186,8 @@ pub enum SuiteProgress<'a> {
     Compare {
         /// The case.
         case: &'a Case,
+        /// Which run of the case, from 0 ([`SuiteConfig::repeats`]).
+        run: usize,
         /// What happened.
         event: CompareProgress<'a>,
     },
@@ -200,6 +210,9 @@ pub fn run_suite(
 ) -> Result<SuiteReport, SuiteError> {
     if cases.is_empty() {
         return Err(SuiteError::NoCases);
+    }
+    if config.repeats == 0 {
+        return Err(SuiteError::NoRuns);
     }
     if let Some(models) = &config.models {
         std::fs::read_dir(models).map_err(|source| SuiteError::Models {
@@ -271,19 +284,28 @@ fn run_case(
             source,
         })?;
     let scene = Arc::new(built.scene);
-    let report = compare(Arc::clone(&scene), &cameras, compare_config, &mut |event| {
-        progress(SuiteProgress::Compare { case, event })
-    })
-    .map_err(|source| SuiteError::Compare {
-        case: case.name.to_string(),
-        source,
-    })?;
+    let mut runs = Vec::with_capacity(config.repeats);
+    for run in 0..config.repeats {
+        let report = compare(Arc::clone(&scene), &cameras, compare_config, &mut |event| {
+            progress(SuiteProgress::Compare { case, run, event })
+        })
+        .map_err(|source| SuiteError::Compare {
+            case: case.name.to_string(),
+            source,
+        })?;
+        runs.push(report);
+    }
+    let mut runs = runs.into_iter();
+    // `repeats` is at least 1 (checked by `run_suite`).
+    let first = runs.next().ok_or(SuiteError::NoRuns)?;
+    let more = runs.collect();
     Ok(Ok(CaseReport::new(
         case,
         built.name,
         scene_build_ms,
         start.elapsed().as_secs_f64(),
-        report,
+        first,
+        more,
     )))
 }
 

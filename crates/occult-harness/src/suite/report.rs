@@ -19,20 +19,25 @@ pub struct CaseRenderer {
     pub is_reference: bool,
     /// Mean frame time, ms.
     pub mean_ms: f64,
-    /// `zbuffer`'s mean time over this renderer's (> 1: faster); `None` without `zbuffer`.
+    /// `zbuffer`'s mean time over this renderer's (> 1: faster), over every run of the case;
+    /// `None` without `zbuffer`.
     pub speedup_vs_zbuffer: Option<f64>,
-    /// The [`INTERVAL`] bootstrap interval of the speedup over the case's frames (see
-    /// [`speedup_interval`]): how far the machine's noise moves it; `None` without `zbuffer`.
+    /// The speedup of each run of the case, in order (one run unless the suite repeats its
+    /// cases: [`SuiteConfig::repeats`]); empty without `zbuffer`.
+    pub speedup_runs: Vec<f64>,
+    /// The [`INTERVAL`] bootstrap interval of the speedup over the frames of every run (see
+    /// [`speedup_interval`]), widened to hold each run's own speedup: how far the machine's
+    /// noise moves it, within a run and from one run to the next; `None` without `zbuffer`.
     pub speedup_interval: Option<[f64; 2]>,
     /// This renderer's mean time over the oracle's (1: perfect culling at no cost); `None`
     /// without an oracle.
     pub vs_oracle: Option<f64>,
-    /// Frames identical to the reference's; `None` when nothing was checked.
+    /// Frames identical to the reference's, over every run; `None` when nothing was checked.
     pub frames_identical: Option<usize>,
-    /// Frames rendered.
+    /// Frames rendered, over every run.
     pub frames: usize,
     /// Frames it drew directly, as `frustum` does, because its culling did not pay there
-    /// (counter `payoff_direct`; DESIGN invariant 5).
+    /// (counter `payoff_direct`; DESIGN invariant 5), over every run.
     pub direct_frames: usize,
     /// Mean triangles rasterized per frame.
     pub triangles_rasterized: f64,
@@ -41,26 +46,62 @@ pub struct CaseRenderer {
 }
 
 impl CaseRenderer {
-    /// `r`'s figures; `zbuffer`: `zbuffer`'s report on the case, if it ran.
-    fn of(r: &RendererReport, zbuffer: Option<&RendererReport>) -> Self {
-        let times = |r: &RendererReport| r.per_frame.iter().map(|f| f.time_ms).collect::<Vec<_>>();
+    /// The figures of one renderer over the runs of a case: `runs` its report of each run, in
+    /// order (at least one), `zbuffer` `zbuffer`'s of the same runs when it ran, `oracle_ms`
+    /// the oracle's mean time of each run when there was one. One run gives that run's
+    /// figures unchanged; several pool their frames (every run's first frame included).
+    fn of(runs: &[&RendererReport], zbuffer: Option<&[&RendererReport]>, oracle_ms: Option<&[f64]>) -> Self {
+        let first = runs[0];
+        let count = runs.len() as f64;
+        let summed_ms: f64 = runs.iter().map(|r| r.mean_ms).sum();
+        let mean_ms = summed_ms / count;
+        let times = |rs: &[&RendererReport]| {
+            rs.iter()
+                .flat_map(|r| r.per_frame.iter().map(|f| f.time_ms))
+                .collect::<Vec<_>>()
+        };
+        let speedup_runs: Vec<f64> = zbuffer.map_or_else(Vec::new, |z| {
+            z.iter()
+                .zip(runs)
+                .filter_map(|(z, r)| r.speedup_vs_zbuffer.or_else(|| ratio(z.mean_ms, r.mean_ms)))
+                .collect()
+        });
+        let (speedup_vs_zbuffer, vs_oracle) = if runs.len() == 1 {
+            (first.speedup_vs_zbuffer, first.vs_oracle)
+        } else {
+            // Every run renders the same frames: a ratio of summed means is one of summed times
+            // (summed alike, so that `zbuffer`'s own is exactly 1).
+            (
+                zbuffer.and_then(|z| ratio(z.iter().map(|r| r.mean_ms).sum(), summed_ms)),
+                oracle_ms.and_then(|o| ratio(summed_ms, o.iter().sum())),
+            )
+        };
+        let speedup_interval = zbuffer
+            .and_then(|z| speedup_interval(&times(z), &times(runs)))
+            .map(|[lo, hi]| {
+                speedup_runs
+                    .iter()
+                    .fold([lo, hi], |[lo, hi], &s| [lo.min(s), hi.max(s)])
+            });
+        let checked: Vec<usize> = runs.iter().filter_map(|r| r.frames_identical).collect();
         Self {
-            name: r.name.clone(),
-            conservative: r.conservative,
-            is_reference: r.is_reference,
-            mean_ms: r.mean_ms,
-            speedup_vs_zbuffer: r.speedup_vs_zbuffer,
-            speedup_interval: zbuffer.and_then(|z| speedup_interval(&times(z), &times(r))),
-            vs_oracle: r.vs_oracle,
-            frames_identical: r.frames_identical,
-            frames: r.frames,
-            direct_frames: r
-                .per_frame
+            name: first.name.clone(),
+            conservative: first.conservative,
+            is_reference: first.is_reference,
+            mean_ms,
+            speedup_vs_zbuffer,
+            speedup_runs,
+            speedup_interval,
+            vs_oracle,
+            frames_identical: (checked.len() == runs.len()).then(|| checked.iter().sum()),
+            frames: runs.iter().map(|r| r.frames).sum(),
+            direct_frames: runs
                 .iter()
+                .flat_map(|r| &r.per_frame)
                 .filter(|f| f.counters.get(occult_render::direct::COUNTER) > 0)
                 .count(),
-            triangles_rasterized: r.triangles_rasterized,
-            triangles_visible: r.triangles_visible,
+            triangles_rasterized: runs.iter().map(|r| r.triangles_rasterized).sum::<f64>() / count,
+            triangles_visible: runs.iter().map(|r| r.triangles_visible).sum::<f64>() / count,
         }
     }
 
@@ -114,8 +155,14 @@ pub struct CaseReport {
     pub renderers: Vec<CaseRenderer>,
     /// The violations on this case.
     pub violations: Vec<Violation>,
-    /// The full comparison (per-frame records, counters, phases).
+    /// Runs of the case ([`SuiteConfig::repeats`]): each builds every renderer afresh and
+    /// renders every frame.
+    pub runs: usize,
+    /// The first run's full comparison (per-frame records, counters, phases).
     pub compare: CompareReport,
+    /// The other runs' comparisons, in order (none unless the suite repeats its cases).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub more_runs: Vec<CompareReport>,
 }
 
 impl CaseReport {
@@ -126,9 +173,19 @@ impl CaseReport {
         scene_build_ms: f64,
         seconds: f64,
         compare: CompareReport,
+        more_runs: Vec<CompareReport>,
     ) -> Self {
-        let zbuffer = compare.renderers.iter().find(|r| r.name == "zbuffer");
-        let renderers: Vec<CaseRenderer> = compare.renderers.iter().map(|r| CaseRenderer::of(r, zbuffer)).collect();
+        let all: Vec<&CompareReport> = std::iter::once(&compare).chain(&more_runs).collect();
+        // A renderer's report in every run, by name (every run compares the same renderers).
+        let of_runs = |name: &str| -> Option<Vec<&RendererReport>> { all.iter().map(|c| c.renderer(name)).collect() };
+        let zbuffer = of_runs("zbuffer");
+        let oracle: Option<Vec<f64>> = all.iter().map(|c| c.oracle.as_ref().map(|o| o.mean_ms)).collect();
+        let renderers: Vec<CaseRenderer> = compare
+            .renderers
+            .iter()
+            .filter_map(|r| of_runs(&r.name))
+            .map(|runs| CaseRenderer::of(&runs, zbuffer.as_deref(), oracle.as_deref()))
+            .collect();
         let violations = renderers
             .iter()
             .flat_map(|r| {
@@ -157,7 +214,9 @@ impl CaseReport {
             oracle_ms: compare.oracle.as_ref().map(|o| o.mean_ms),
             renderers,
             violations,
+            runs: all.len(),
             compare,
+            more_runs,
         }
     }
 
@@ -255,6 +314,11 @@ pub fn speedup_interval(zbuffer_ms: &[f64], renderer_ms: &[f64]) -> Option<[f64;
     let tail = (1.0 - INTERVAL) / 2.0;
     let at = |q: f64| speedups[((q * RESAMPLES as f64) as usize).min(RESAMPLES - 1)];
     Some([at(tail), at(1.0 - tail)])
+}
+
+/// `num / den`, when `den` is positive and `num` finite (as the comparison's ratios).
+fn ratio(num: f64, den: f64) -> Option<f64> {
+    (den > 0.0 && num.is_finite()).then(|| num / den)
 }
 
 /// The case where a ratio was worst, and its value.
@@ -492,6 +556,7 @@ mod tests {
             is_reference: false,
             mean_ms: 2.0,
             speedup_vs_zbuffer: Some(0.99),
+            speedup_runs: vec![0.99],
             speedup_interval: Some([0.9, 1.05]),
             vs_oracle: Some(3.0),
             frames_identical: Some(3),

@@ -150,6 +150,69 @@ fn every_renderer_is_summarised_over_every_case() {
         assert!(json.get(field).is_some(), "{field}");
     }
     assert_eq!(json["cases"][0]["scene"]["kind"], "generated");
+    assert_eq!(json["cases"][0]["runs"], 1);
+    assert!(json["cases"][0].get("more_runs").is_none(), "one run: no other runs");
+}
+
+/// Repeated cases: every run builds and renders afresh; the figures pool the runs, the
+/// interval holds each run's speedup, and the report keeps every run's comparison.
+#[test]
+fn repeated_cases_pool_their_runs() {
+    let mut c = config([Algorithm::FRUSTUM]);
+    c.repeats = 3;
+    let mut runs_seen = Vec::new();
+    let report = run_suite(&TINY[1..], &c, &mut |e| {
+        if let SuiteProgress::Compare {
+            run,
+            event: crate::compare::CompareProgress::Built { .. },
+            ..
+        } = e
+        {
+            runs_seen.push(run);
+        }
+    })
+    .expect("the tiny terrain case runs three times");
+    assert!(runs_seen.contains(&0) && runs_seen.contains(&2) && !runs_seen.contains(&3));
+    let case = &report.cases[0];
+    assert_eq!((case.runs, case.more_runs.len(), case.frames), (3, 2, 3));
+    let all: Vec<&crate::compare::CompareReport> = std::iter::once(&case.compare).chain(&case.more_runs).collect();
+    let mean = |c: &crate::compare::CompareReport, name: &str| c.renderer(name).expect("compared").mean_ms;
+    let frustum = case.renderer("frustum").expect("frustum is in the case's report");
+    assert_eq!(frustum.frames, 9);
+    assert_eq!(frustum.frames_identical, Some(9), "DESIGN invariant 2, every run");
+    let own: Vec<f64> = all
+        .iter()
+        .map(|c| {
+            c.renderer("frustum")
+                .and_then(|r| r.speedup_vs_zbuffer)
+                .expect("each run measures frustum against zbuffer")
+        })
+        .collect();
+    assert_eq!(frustum.speedup_runs, own);
+    let pooled =
+        all.iter().map(|c| mean(c, "zbuffer")).sum::<f64>() / all.iter().map(|c| mean(c, "frustum")).sum::<f64>();
+    let speedup = frustum.speedup_vs_zbuffer.expect("pooled over the runs");
+    assert!((speedup - pooled).abs() <= 1e-12 * pooled, "{speedup} {pooled}");
+    let [lo, hi] = frustum.speedup_interval.expect("nine frames");
+    assert!(own.iter().all(|s| (lo..=hi).contains(s)), "{lo} {hi} {own:?}");
+    let oracle: f64 = all
+        .iter()
+        .map(|c| c.oracle.as_ref().expect("each run has the oracle").mean_ms)
+        .sum();
+    let vs_oracle = frustum.vs_oracle.expect("pooled over the runs");
+    assert!((vs_oracle - 3.0 * frustum.mean_ms / oracle).abs() <= 1e-9 * vs_oracle);
+    assert_eq!(report.renderer("frustum").expect("in the summary").frames, 9);
+    let zbuffer = case.renderer("zbuffer").expect("zbuffer is in the case's report");
+    assert_eq!(zbuffer.speedup_vs_zbuffer, Some(1.0), "exactly, whatever the rounding");
+    assert!(zbuffer.violations().is_empty());
+    let json = serde_json::to_value(&report).expect("a report serialises to JSON");
+    assert_eq!(json["cases"][0]["more_runs"].as_array().map(Vec::len), Some(2));
+
+    c.repeats = 0;
+    assert!(matches!(
+        run_suite(&TINY[1..], &c, &mut |_| {}),
+        Err(SuiteError::NoRuns)
+    ));
 }
 
 #[test]
