@@ -149,7 +149,7 @@ pub struct CaseReport {
     pub seconds: f64,
     /// The reference renderer; `None` when nothing was checked.
     pub reference: Option<String>,
-    /// The oracle's mean time, ms; `None` without a reference.
+    /// The oracle's mean time, ms, over every run; `None` without a reference.
     pub oracle_ms: Option<f64>,
     /// Every renderer, in the comparison's order (the reference first when not requested).
     pub renderers: Vec<CaseRenderer>,
@@ -211,7 +211,7 @@ impl CaseReport {
             scene_build_ms,
             seconds,
             reference: compare.reference.clone(),
-            oracle_ms: compare.oracle.as_ref().map(|o| o.mean_ms),
+            oracle_ms: oracle.as_ref().map(|o| o.iter().sum::<f64>() / o.len() as f64),
             renderers,
             violations,
             runs: all.len(),

@@ -199,6 +199,7 @@ fn repeated_cases_pool_their_runs() {
         .iter()
         .map(|c| c.oracle.as_ref().expect("each run has the oracle").mean_ms)
         .sum();
+    assert_eq!(case.oracle_ms, Some(oracle / 3.0));
     let vs_oracle = frustum.vs_oracle.expect("pooled over the runs");
     assert!((vs_oracle - 3.0 * frustum.mean_ms / oracle).abs() <= 1e-9 * vs_oracle);
     assert_eq!(report.renderer("frustum").expect("in the summary").frames, 9);
