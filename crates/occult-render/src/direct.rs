@@ -504,8 +504,8 @@ impl Choice {
         }
         // A thin win against a direct frame measured long ago is measured again; against a
         // single measurement, soon, and after a loss that started no run too (every loss is
-        // "thin": the measurement may be cold).
-        let thin = self.ratio(total, work) > Some(REMEASURE_SHARE);
+        // "thin": the measurement may be cold). So is a win the model cannot explain.
+        let thin = self.ratio(total, work) > Some(REMEASURE_SHARE) || self.implausible();
         let after = match (self.measured.len(), self.lost_last) {
             (..=1, _) => REMEASURE_FIRST,
             (_, false) => REMEASURE_AFTER,
@@ -513,6 +513,19 @@ impl Choice {
         };
         if thin && self.since_direct >= after {
             self.direct_left = 1;
+        }
+    }
+
+    /// Whether the last culled frame took less than the model's direct frame of only the
+    /// triangles it submitted: drawing those directly, in large batches and without tests,
+    /// costs no more than the culled frame did, so the model is too slow (a cold measurement,
+    /// or one the machine interrupted: noise only adds time), and the frame's win over it is
+    /// not to be trusted (`city` `circle:32`: a first direct frame of 67 ms, warm ones of
+    /// 25, kept culled frames of 40 ms for 30 frames).
+    fn implausible(&self) -> bool {
+        match (self.model(), self.last_culled) {
+            (Some(m), Some((total, submitted))) => (total.as_nanos() as f64) < m.predict(submitted),
+            _ => false,
         }
     }
 
@@ -874,6 +887,30 @@ pub(crate) mod tests {
             c.culled(t, 1000, true, false, false);
         }
         assert!(c.take_direct(), "a loss that started no run remeasures too");
+    }
+
+    /// A win the model cannot explain (a culled frame faster than its direct frame of the
+    /// triangles the culled one drew alone) is measured again like a thin one: after
+    /// [`REMEASURE_FIRST`] culled frames against a single (cold) measurement; a plain win of
+    /// few triangles is not.
+    #[test]
+    fn a_win_the_model_cannot_explain_is_measured_again() {
+        let run = |submitted: u64| {
+            let mut c = measured(0.0, 64_000.0, 1); // 64 ms for 1,000 triangles: cold
+            let mut culled = 0;
+            while !c.take_direct() && culled < 40 {
+                c.last_culled = Some((40 * MS, submitted));
+                c.culled(40 * MS, 1000, true, true, false);
+                culled += 1;
+            }
+            culled
+        };
+        assert_eq!(
+            run(900),
+            REMEASURE_FIRST,
+            "900 triangles in 40 ms, predicted 57.6 ms directly"
+        );
+        assert_eq!(run(500), 40, "500 in 40 ms, predicted 32 ms: a plain win");
     }
 
     /// A loss starts a run when its tests did not pay, or after another loss; a single loss
