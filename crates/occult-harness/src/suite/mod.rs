@@ -284,7 +284,7 @@ fn run_case(
             source,
         })?;
     let scene = Arc::new(built.scene);
-    let mut runs = Vec::with_capacity(config.repeats);
+    let mut runs = Vec::new();
     for run in 0..config.repeats {
         let report = compare(Arc::clone(&scene), &cameras, compare_config, &mut |event| {
             progress(SuiteProgress::Compare { case, run, event })
