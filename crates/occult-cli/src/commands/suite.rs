@@ -264,7 +264,11 @@ fn case_text(c: &CaseReport) -> String {
             "ms",
             "x zbuffer",
             "runs",
-            "90% interval",
+            if c.runs > 1 {
+                "90% interval, runs widened"
+            } else {
+                "90% interval"
+            },
             "x oracle",
             "identical",
             "direct",

@@ -141,4 +141,48 @@ fn suite_refuses_unknown_cases_and_unreadable_models_in_one_line() {
     assert!(stderr.contains("/no/such/models/folder"), "{stderr}");
     let (code, _, _) = fails(&["suite", "--frames", "0", "--list"]);
     assert_eq!(code, Some(2));
+    let (code, _, _) = fails(&["suite", "--repeat", "0", "--list"]);
+    assert_eq!(code, Some(2));
+}
+
+/// `--repeat 2`: each case twice, each run's speedup shown, and every run in the JSON.
+#[test]
+fn suite_repeats_its_cases() {
+    let dir = scratch("suite-repeat");
+    let json = dir.join("r.json");
+    let stdout = ok(&[
+        "--threads",
+        "2",
+        "suite",
+        "--cases",
+        CASE,
+        "--algos",
+        "frustum",
+        "--size",
+        "48x32",
+        "--frames",
+        "2",
+        "--repeat",
+        "2",
+        "--json",
+        path_arg(&json),
+    ]);
+    assert!(
+        stdout.contains("2 runs of each") && stdout.contains(", 2 runs,"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("interval, runs widened"), "{stdout}");
+    let report = read_json(&json);
+    let case = &report["cases"][0];
+    assert_eq!((case["runs"].as_u64(), case["frames"].as_u64()), (Some(2), Some(2)));
+    assert_eq!(case["more_runs"].as_array().map(Vec::len), Some(1));
+    let frustum = case["renderers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["name"] == "frustum")
+        .unwrap();
+    assert_eq!(frustum["frames"], 4);
+    assert_eq!(frustum["speedup_runs"].as_array().map(Vec::len), Some(2));
+    std::fs::remove_dir_all(&dir).unwrap();
 }
