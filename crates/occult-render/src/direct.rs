@@ -33,11 +33,9 @@
 //!   frame when it took longer than its work at its own cost of a triangle shared over the
 //!   threads (a view that culling cannot help then costs one culled frame, not two); a
 //!   culled frame that wins by a thin margin (more than [`REMEASURE_SHARE`] of the predicted
-//!   direct time) measures it again once the measurement is [`REMEASURE_AFTER`] frames old,
-//!   or [`REMEASURE_FIRST`] while there is only one (it may be cold), then also after a loss
-//!   that started no run; a single measurement is taken again after [`REMEASURE_FIRST`]
-//!   culled frames whatever they win (a cold or interrupted first direct frame made wide
-//!   wins of culled frames slower than a warm one);
+//!   direct time) measures it again once the measurement is [`REMEASURE_AFTER`] frames old;
+//!   a single measurement (it may be cold or interrupted) is taken again after
+//!   [`REMEASURE_FIRST`] culled frames, whatever they win;
 //! - a culled frame shorter than [`MIN_ALLOWANCE_TIME`] never starts a run (small scenes keep
 //!   their tests whatever the clock says);
 //! - probes are **screened**: the last direct frame of a run has its final depth, and what a
