@@ -38,8 +38,10 @@
 //! far scene is found by rays) draws nothing more and the whole frame is drawn directly
 //! instead ([`FramePayoff::abandoned`]: about two direct frames in all). A renderer's first
 //! frame, which has no last frame's visible set to draw first, is given up earlier when it
-//! finishes directly: once it met a quarter of its work with its tests having removed less
-//! than an eighth of it, on pace for more than 1.25 estimated direct frames (drawn in small
+//! finishes directly (`hzb`, `oqgrid`): once its tests met a quarter of its work and removed
+//! less than an eighth of what they met, when at its pace the whole frame would take
+//! more than 1.25 estimated direct frames (the estimate is the frame's own rate shared over
+//! the threads, so on two threads or more a frame drawn on one always is; drawn in small
 //! tested batches on one thread, a first view culling cannot help took about two). Once a
 //! direct frame was measured, any other frame is finished as begun, tests and all, unless
 //! given up; the frame-level choice weighs it.
@@ -69,12 +71,15 @@ pub const DIRECT_BATCH: usize = 1 << 19;
 /// direct frame (see [`FramePayoff::abandoned`]): at least a direct frame's time is spent by
 /// then, and culling that pays often pays late in a frame (what is hidden is reached after its
 /// occluders), hence the margin over 1 (set when a frame given up was always drawn again
-/// whole; finishing it directly costs only its rest, [`Abandon::Finish`]).
+/// whole; finishing it directly costs only its rest, [`Abandon::Finish`]). The early rule for
+/// a renderer's first frame ([`FramePayoff::given_up`]) weighs the whole frame at its pace
+/// against this many estimated direct frames, before one was spent.
 pub const ABANDON_MARGIN: f64 = 1.25;
-/// Share of its work a first frame meets before the early rule may give it up
-/// ([`FramePayoff::abandoned`]): what its tests removed by then says what they can remove.
+/// Share of its work a first frame's tests meet before the early rule may give it up
+/// ([`FramePayoff::given_up`]): what its tests removed by then says what they can remove.
 pub const EARLY_PROGRESS: f64 = 0.25;
-/// Share of what a frame's tests met that they must remove for the early rule to let it go on.
+/// Share of what a first frame's tests met that they must remove for the early rule to let it
+/// go on.
 pub const EARLY_REMOVED: f64 = 0.125;
 /// Tests between two checks of the balance (a check reads the clock).
 const CHECK_EVERY: u32 = 32;
@@ -359,21 +364,23 @@ impl FramePayoff {
         let least = MIN_ALLOWANCE_TIME.as_nanos() as f64;
         self.direct_work > 0
             && ((elapsed > expected.max(least) && elapsed * (1.0 - progress) > ABANDON_MARGIN * expected * progress)
-                || self.hopeless(elapsed, progress, expected.max(least)))
+                || self.gives_up_early(elapsed, progress, expected.max(least)))
     }
 
-    /// The early rule, for the renderer's first frame (no visible list, cells or occluders of
-    /// a last frame to draw first) when it finishes a frame given up ([`Abandon::Finish`]:
+    /// The early rule, for the renderer's first frame (no visible list or cells of a last
+    /// frame to draw first) when it finishes a frame given up ([`Abandon::Finish`]:
     /// giving up then costs the rest of the frame at the direct rate, not a whole direct
-    /// frame): [`EARLY_PROGRESS`] of its work met, its tests having removed less than
-    /// [`EARLY_REMOVED`] of it, and the whole frame at its pace so far longer than
-    /// [`ABANDON_MARGIN`] estimated direct frames (`expected` ns). A first view
+    /// frame): its tests met [`EARLY_PROGRESS`] of its work and removed less than
+    /// [`EARLY_REMOVED`] of what they met, and the whole frame at its pace so far longer than
+    /// [`ABANDON_MARGIN`] estimated direct frames (`expected` ns; estimated from the frame's
+    /// own rate shared over the threads, so on two threads or more this always holds of a
+    /// frame drawn on one, and on one thread it says the tests cost too much). A first view
     /// that culling cannot help (nothing hidden, drawn in small batches on one thread) then
     /// costs about 1.25 direct frames, not two; one whose tests remove much goes on, however
     /// slow its start. Later frames draw what was visible first, which their tests do not
     /// remove: the share would give up frames that pay (measured: `oqgrid` on `city`
-    /// streets, 1.77× → 1.28×).
-    fn hopeless(&self, elapsed: f64, progress: f64, expected: f64) -> bool {
+    /// streets, 1.77× → 1.28× `zbuffer`).
+    fn gives_up_early(&self, elapsed: f64, progress: f64, expected: f64) -> bool {
         let met = (self.raster_triangles + self.saved_triangles - self.base.2) as f64;
         let removed = (self.saved_triangles - self.base.3) as f64;
         self.first
@@ -381,7 +388,7 @@ impl FramePayoff {
             && self.abandon == Abandon::Finish
             && !self.untested_first
             && elapsed > MIN_ALLOWANCE_TIME.as_nanos() as f64
-            && progress >= EARLY_PROGRESS
+            && met >= EARLY_PROGRESS * self.direct_work as f64
             && removed < EARLY_REMOVED * met
             && elapsed > ABANDON_MARGIN * expected * progress
     }
@@ -458,8 +465,9 @@ impl FramePayoff {
         self.abandoned
     }
 
-    /// True once the frame was given up by the rule of [`FramePayoff::abandoned`], whatever
-    /// the renderer does with it ([`Abandon`]).
+    /// True once the frame was given up by the rule of [`FramePayoff::abandoned`] or, for a
+    /// renderer's first frame, by the early rule ([module doc](self)), whatever the renderer
+    /// does with it ([`Abandon`]).
     pub fn given_up(&self) -> bool {
         self.given_up
     }
@@ -594,7 +602,7 @@ mod tests {
         finishing.set_direct(None, 10_000, 2);
         let f = frame(&finishing, ago(60), 0);
         assert!(f.given_up() && f.stopped() && !f.abandoned(), "finished untested");
-        let f = frame(&finishing, ago(20), 0);
+        let f = frame(&finishing, ago(25), 0);
         assert!(!f.given_up() && !f.stopped());
         let mut p = Payoff::new(true, 10_000).redrawing();
         p.set_direct(None, 10_000, 2);
@@ -618,10 +626,12 @@ mod tests {
         let f = frame(&p, ago(60), 0);
         assert!(!f.abandoned(), "no work known, nothing to abandon for");
     }
-    /// A renderer's first frame, when it finishes what it gives up, is given up once it met a
-    /// quarter of its work, its tests removed less than an eighth of it and its pace says the
-    /// whole would take longer than the margin; not one whose tests remove, nor one that
-    /// redraws, nor a later frame, nor once a direct frame was measured.
+
+    /// A renderer's first frame, when it finishes what it gives up, is given up once its tests
+    /// met a quarter of its work and removed less than an eighth of what they met, and its
+    /// pace says the whole would take longer than the margin; not one whose tests remove, nor
+    /// one on pace (one thread), nor one still drawing untested, nor one that redraws, nor a
+    /// later frame, nor once a direct frame was measured.
     #[test]
     fn gives_up_early_a_first_frame_whose_tests_remove_nothing() {
         let ago = |ms| Instant::now() - Duration::from_millis(ms);
@@ -637,21 +647,35 @@ mod tests {
         p.set_direct(None, 10_000, 2);
         let f = frame(&p, ago(40), 3_000, 0);
         assert!(f.given_up() && f.stopped() && !f.abandoned(), "40 ms, nothing removed");
-        assert!(!frame(&p, ago(40), 2_000, 0).given_up(), "less than a quarter met");
-        assert!(!frame(&p, ago(40), 3_000, 500).given_up(), "a seventh removed");
+        assert!(!frame(&p, ago(30), 2_000, 0).given_up(), "less than a quarter met");
+        assert!(!frame(&p, ago(30), 3_000, 500).given_up(), "a seventh removed");
         assert!(frame(&p, ago(40), 3_000, 400).given_up(), "less than an eighth removed");
-        assert!(!frame(&p, ago(40), 3_000, 6_000).given_up(), "on pace");
+        assert!(!frame(&p, ago(30), 3_000, 6_000).given_up(), "two thirds removed");
+        // One thread: an estimated direct frame of 100 ms; 4,400 triangles met, the whole at
+        // its pace is within 1.25 estimates until 55 ms, and the late rule waits for 100.
+        let mut one = Payoff::new(true, 10_000);
+        one.set_direct(None, 10_000, 1);
+        assert!(!frame(&one, ago(41), 4_400, 0).given_up(), "on pace");
+        assert!(frame(&one, ago(70), 4_400, 0).given_up(), "behind its pace");
+        // Untested first: not given up early until its tests begin.
+        let mut f = p.begin(ago(40));
+        f.untested_first();
+        f.rasterized(3_000, Duration::from_millis(30), false);
+        assert!(!f.given_up(), "still drawing untested");
+        f.tests_begin(Instant::now());
+        f.rasterized(3_000, Duration::from_millis(30), false);
+        assert!(f.given_up(), "its tests met a quarter and removed nothing");
         let mut r = Payoff::new(true, 10_000).redrawing();
         r.set_direct(None, 10_000, 2);
         assert!(
-            !frame(&r, ago(40), 3_000, 0).given_up(),
+            !frame(&r, ago(30), 3_000, 0).given_up(),
             "a redraw costs a whole direct frame"
         );
         let mut later = Payoff::new(true, 10_000);
         later.set_direct(None, 10_000, 2);
         later.end(&later.begin(Instant::now()));
-        assert!(!frame(&later, ago(40), 3_000, 0).given_up(), "not the first frame");
+        assert!(!frame(&later, ago(30), 3_000, 0).given_up(), "not the first frame");
         p.set_direct(Some(50e6), 10_000, 2);
-        assert!(!frame(&p, ago(40), 3_000, 0).given_up(), "measured: the late rule only");
+        assert!(!frame(&p, ago(30), 3_000, 0).given_up(), "measured: the late rule only");
     }
 }
