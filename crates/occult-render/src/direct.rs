@@ -180,7 +180,7 @@ impl DirectFrames {
     }
 
     /// [`Hierarchies::hidden_triangles`] of the frame just drawn.
-    fn hidden_triangles(&mut self, view: &View, frame: &Frame) -> Result<u64> {
+    pub(crate) fn hidden_triangles(&mut self, view: &View, frame: &Frame) -> Result<u64> {
         let fits = |p: &ZPyramid| p.width() == frame.width() && p.height() == frame.height();
         if !self.pyramid.as_ref().is_some_and(fits) {
             self.pyramid = Some(ZPyramid::new(frame.width(), frame.height())?);

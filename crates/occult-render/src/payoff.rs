@@ -167,6 +167,11 @@ impl Payoff {
         self.direct_threads = threads.max(1);
     }
 
+    /// Whether no frame ended yet ([`Payoff::end`]): the coming one is the renderer's first.
+    pub fn first_frame(&self) -> bool {
+        !self.ended
+    }
+
     /// Whether the last frame's tests saved more than they cost ([`FramePayoff::paid`] at its
     /// end).
     pub fn last_paid(&self) -> bool {

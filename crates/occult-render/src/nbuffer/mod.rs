@@ -54,7 +54,13 @@
 //!   `frustum` (counter `payoff_direct`): what `frustum` draws, the way it draws it (whole
 //!   instances and its own mesh BVHs). A frame that finds no occluder at all (an empty depth
 //!   buffer hides nothing) is drawn the same way, without counting as a probe (counter
-//!   `no_occluders`).
+//!   `no_occluders`). The renderer's first frame is screened once its occluders are drawn:
+//!   when the triangles under `frustum`'s boxes hidden behind their depth
+//!   ([`Hierarchies::hidden_triangles`](crate::frustum::Hierarchies::hidden_triangles), at
+//!   most what the tests against that depth remove)
+//!   are less than [`FIRST_SCREEN_SHARE`] of the work, the frame is drawn again directly,
+//!   untested, and measured (counters `payoff_screened`, `payoff_direct`): a forest or a city
+//!   seen from outside no longer pays its tests and its small draws first.
 //!
 //! # First frame
 //! With `occluders=visible` and no previous frame (and after a resolution change) the
@@ -263,6 +269,10 @@ impl Occluders {
 
 /// Frames without a second pass after one that did not pay (`passes=2`).
 pub const SECOND_PASS_SKIP: u32 = 3;
+
+/// Share of the work that must lie hidden behind the first frame's occluders for its tests to
+/// be run (with payoff on): below it, the frame is drawn directly.
+pub const FIRST_SCREEN_SHARE: f64 = 0.125;
 
 impl Default for NBufferOptions {
     fn default() -> Self {
@@ -970,6 +980,23 @@ impl Renderer for NBufferCulling {
         drop(draws);
         crate::check_cancel(&self.raster)?;
         stats.counters.add("occluders_drawn", occluders.len() as u64);
+        if let (Some(direct), true) = (&mut self.direct, self.payoff.first_frame()) {
+            // The renderer's first frame, with no last frame's visible objects: when even every
+            // triangle hidden behind the occluders' depth (`frustum`'s boxes tested against
+            // it, at most what the tests against it remove) is less than an eighth of the work,
+            // the tests cannot pay and the frame is drawn again directly, measured.
+            let t = Instant::now();
+            let hidden = direct.hidden_triangles(view, frame)?;
+            stats.phases.add(Phase::Cull, t.elapsed());
+            if (hidden as f64) < FIRST_SCREEN_SHARE * direct.work() as f64 {
+                stats.counters.add(crate::direct::SCREENED, 1);
+                self.payoff.end(&payoff);
+                direct.redraw(&mut self.raster, view, frame, &mut stats)?;
+                direct.culled(view, frame, begun.elapsed(), &mut stats, false)?;
+                stats.total = start.elapsed();
+                return crate::end_frame(&self.raster, stats);
+            }
+        }
 
         // §2: the N-buffer of the occluders' depth (min variant: farthest depth); none for
         // occlusion queries, which read the depth buffer itself.
@@ -1310,6 +1337,38 @@ mod tests {
             assert_eq!(s.counters.get("payoff_direct"), u64::from(direct), "frame {i}");
             assert_eq!(s.rects_tested == 0, direct, "frame {i}");
         }
+    }
+
+    /// Seen from behind, the wall (the near occluder, the largest screen box) lies behind
+    /// everything else and hides nothing: the first frame is screened and drawn directly,
+    /// untested, and is the same frame. Seen from the front (the test above) it is culled.
+    #[test]
+    fn a_first_frame_whose_occluders_hide_nothing_is_drawn_directly() {
+        let (scene, front) = wall_scene();
+        let camera = Camera::look_at(Vec3::new(2.0, 1.5, -12.0), Vec3::new(2.0, 1.5, 0.0));
+        let view = View::new(camera, front.width(), front.height()).expect("a view of the wall from behind");
+        let reference = zbuffer_frame(&scene, &view);
+        let mut r = crate::AlgoSpec::parse("nbuffer:near_max=1")
+            .expect("the spec parses")
+            .build(scene.clone(), &RenderOptions::default())
+            .expect("nbuffer builds");
+        let mut f = Frame::new(view.width(), view.height()).expect("a frame of the view's size");
+        let s = r.render(&view, &mut f).expect("nbuffer renders the wall from behind");
+        assert!(f.same_visibility(&reference));
+        assert_eq!(s.counters.get("occluders_drawn"), 1);
+        assert_eq!(s.counters.get("payoff_screened"), 1);
+        assert_eq!(s.counters.get("payoff_direct"), 1);
+        assert_eq!(s.rects_tested, 0, "no test run");
+        // Without payoff the same frame is tested.
+        let mut r = crate::AlgoSpec::parse("nbuffer:near_max=1,payoff=off")
+            .expect("the spec parses")
+            .build(scene.clone(), &RenderOptions::default())
+            .expect("nbuffer builds");
+        let mut f = Frame::new(view.width(), view.height()).expect("a frame of the view's size");
+        let s = r.render(&view, &mut f).expect("nbuffer renders the wall from behind");
+        assert!(f.same_visibility(&reference));
+        assert!(s.rects_tested > 0);
+        assert_eq!(s.counters.get("payoff_screened"), 0);
     }
 
     #[test]
