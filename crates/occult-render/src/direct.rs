@@ -91,8 +91,10 @@ pub const DIRECT_KEPT: usize = 4;
 pub const FIRST_MEASURED: u32 = 1;
 /// The counter of frames drawn directly.
 pub const COUNTER: &str = "payoff_direct";
-/// The counter of probes skipped because the frame before showed that culling could not pay
-/// ([`DirectFrames::render_if_due`]).
+/// The counter of frames screened as unable to pay: probes skipped because the frame before
+/// showed that culling could not pay ([`DirectFrames::render_if_due`]), culled frames before
+/// the first measurement ([`DirectFrames::culled`]), `nbuffer`'s first culled frame drawn
+/// again directly.
 pub const SCREENED: &str = "payoff_screened";
 /// A screening needs the test cost of a culled frame at most this many frames old (views
 /// change: an old cost may not be this view's).
@@ -179,7 +181,8 @@ impl DirectFrames {
         Ok(Some(stats))
     }
 
-    /// [`Hierarchies::hidden_triangles`] of the frame just drawn.
+    /// [`Hierarchies::hidden_triangles`] of what `frame` holds (a frame drawn, or the part of
+    /// one drawn so far).
     pub(crate) fn hidden_triangles(&mut self, view: &View, frame: &Frame) -> Result<u64> {
         let fits = |p: &ZPyramid| p.width() == frame.width() && p.height() == frame.height();
         if !self.pyramid.as_ref().is_some_and(fits) {
@@ -198,8 +201,8 @@ impl DirectFrames {
         self.frustum.render(raster, view, frame)
     }
 
-    /// Redraws a frame whose culling was abandoned ([`FramePayoff::abandoned`]) as `frustum`
-    /// does (the frame is cleared first), adding its counts and phases to the culled part's
+    /// Redraws a frame whose culling was abandoned ([`FramePayoff::abandoned`]), or that a
+    /// renderer judged unable to pay, as `frustum` does (the frame is cleared first), adding its counts and phases to the culled part's
     /// `stats` and counting it in `payoff_direct`. Before a direct frame was measured, this
     /// one is, and the next frame is drawn directly too (as the first measurement always is,
     /// [`FIRST_MEASURED`]).

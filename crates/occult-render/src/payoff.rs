@@ -167,7 +167,8 @@ impl Payoff {
         self.direct_threads = threads.max(1);
     }
 
-    /// Whether no frame ended yet ([`Payoff::end`]): the coming one is the renderer's first.
+    /// Whether no frame ended yet ([`Payoff::end`]): the coming one is the renderer's first
+    /// culled frame (a renderer ends only the frames it culls).
     pub fn first_frame(&self) -> bool {
         !self.ended
     }

@@ -54,13 +54,19 @@
 //!   `frustum` (counter `payoff_direct`): what `frustum` draws, the way it draws it (whole
 //!   instances and its own mesh BVHs). A frame that finds no occluder at all (an empty depth
 //!   buffer hides nothing) is drawn the same way, without counting as a probe (counter
-//!   `no_occluders`). The renderer's first frame is screened once its occluders are drawn:
-//!   when the triangles under `frustum`'s boxes hidden behind their depth
-//!   ([`Hierarchies::hidden_triangles`](crate::frustum::Hierarchies::hidden_triangles), at
-//!   most what the tests against that depth remove)
-//!   are less than [`FIRST_SCREEN_SHARE`] of the work, the frame is drawn again directly,
-//!   untested, and measured (counters `payoff_screened`, `payoff_direct`): a forest or a city
-//!   seen from outside no longer pays its tests and its small draws first.
+//!   `no_occluders`; with `occluders=visible` or `both` its visible objects are read back
+//!   for the next frame). The renderer's first culled frame (frames drawn directly, or that
+//!   found no occluder, do not count) is screened once its occluders are drawn: when the
+//!   triangles under `frustum`'s boxes hidden behind their depth
+//!   ([`Hierarchies::hidden_triangles`](crate::frustum::Hierarchies::hidden_triangles): what
+//!   the first pass's tests could remove at most, at `frustum`'s granularity; the second pass
+//!   may remove more) are less than [`FIRST_SCREEN_SHARE`] of the work, the tests are not
+//!   expected to pay and the frame is drawn again directly, untested, and measured as the
+//!   first direct frame (counters `payoff_screened`, `payoff_direct`); weighed as a culled
+//!   frame that lost, it starts a run of direct frames (when it took at least
+//!   [`MIN_ALLOWANCE_TIME`](crate::payoff::MIN_ALLOWANCE_TIME)), as `lzb`'s redrawn frames
+//!   do. A forest or a city seen from outside no longer pays its tests and its small draws
+//!   first. The screening counts triangles, not time: it holds on small scenes too.
 //!
 //! # First frame
 //! With `occluders=visible` and no previous frame (and after a resolution change) the
@@ -961,6 +967,13 @@ impl Renderer for NBufferCulling {
             let mut stats = direct.render(&mut self.raster, view, frame)?;
             stats.counters.add("no_occluders", 1);
             stats.phases.add(Phase::Cull, t.elapsed());
+            if self.options.occluders.visible() {
+                // Its visible objects are the next frame's occluders (else every frame after
+                // would find none either).
+                let t = Instant::now();
+                self.read_back_visible(frame);
+                stats.phases.add(Phase::Other, t.elapsed());
+            }
             return crate::end_frame(&self.raster, stats);
         }
         let selection = t.elapsed();
@@ -981,18 +994,21 @@ impl Renderer for NBufferCulling {
         crate::check_cancel(&self.raster)?;
         stats.counters.add("occluders_drawn", occluders.len() as u64);
         if let (Some(direct), true) = (&mut self.direct, self.payoff.first_frame()) {
-            // The renderer's first frame, with no last frame's visible objects: when even every
-            // triangle hidden behind the occluders' depth (`frustum`'s boxes tested against
-            // it, at most what the tests against it remove) is less than an eighth of the work,
-            // the tests cannot pay and the frame is drawn again directly, measured.
+            // The first culled frame, with no last frame's visible objects: when the triangles
+            // under `frustum`'s boxes hidden behind the occluders' depth (what the first pass's
+            // tests could remove at most, at `frustum`'s granularity) are less than
+            // FIRST_SCREEN_SHARE of the work, the tests are not expected to pay and the frame
+            // is drawn again directly, measured.
             let t = Instant::now();
             let hidden = direct.hidden_triangles(view, frame)?;
             stats.phases.add(Phase::Cull, t.elapsed());
             if (hidden as f64) < FIRST_SCREEN_SHARE * direct.work() as f64 {
                 stats.counters.add(crate::direct::SCREENED, 1);
-                self.payoff.end(&payoff);
                 direct.redraw(&mut self.raster, view, frame, &mut stats)?;
+                self.payoff.end(&payoff);
+                let t = Instant::now();
                 direct.culled(view, frame, begun.elapsed(), &mut stats, false)?;
+                stats.phases.add(Phase::Other, t.elapsed());
                 stats.total = start.elapsed();
                 return crate::end_frame(&self.raster, stats);
             }
@@ -1341,34 +1357,62 @@ mod tests {
 
     /// Seen from behind, the wall (the near occluder, the largest screen box) lies behind
     /// everything else and hides nothing: the first frame is screened and drawn directly,
-    /// untested, and is the same frame. Seen from the front (the test above) it is culled.
+    /// untested, the same frame; the next is not screened again.
+    /// Without payoff the frame is tested. Seen from the front (the test above) it is culled.
     #[test]
     fn a_first_frame_whose_occluders_hide_nothing_is_drawn_directly() {
-        let (scene, front) = wall_scene();
+        let (scene, _) = wall_scene();
         let camera = Camera::look_at(Vec3::new(2.0, 1.5, -12.0), Vec3::new(2.0, 1.5, 0.0));
-        let view = View::new(camera, front.width(), front.height()).expect("a view of the wall from behind");
+        let view = View::new(camera, 96, 64).expect("a view of the wall from behind");
         let reference = zbuffer_frame(&scene, &view);
-        let mut r = crate::AlgoSpec::parse("nbuffer:near_max=1")
+        let frames = |spec: &str, n: usize| -> Vec<FrameStats> {
+            let mut r = crate::AlgoSpec::parse(spec)
+                .expect("the spec parses")
+                .build(scene.clone(), &RenderOptions::default())
+                .expect("nbuffer builds");
+            (0..n)
+                .map(|i| {
+                    let mut f = Frame::new(view.width(), view.height()).expect("a frame of the view's size");
+                    let s = r.render(&view, &mut f).expect("nbuffer renders the wall from behind");
+                    assert!(f.same_visibility(&reference), "{spec}, frame {i}");
+                    s
+                })
+                .collect()
+        };
+        let s = frames("nbuffer:near_max=1", 2);
+        assert_eq!(s[0].counters.get("occluders_drawn"), 1);
+        assert_eq!(s[0].counters.get("payoff_screened"), 1);
+        assert_eq!(s[0].counters.get("payoff_direct"), 1);
+        assert_eq!(s[0].rects_tested, 0, "no test run");
+        // A frame this short starts no run of direct frames (MIN_ALLOWANCE_TIME): the next is
+        // culled, and not screened again.
+        assert_eq!(s[1].counters.get("payoff_screened"), 0);
+        assert!(s[1].rects_tested > 0, "the second frame tests");
+        let s = frames("nbuffer:near_max=1,payoff=off", 1);
+        assert!(s[0].rects_tested > 0);
+        assert_eq!(s[0].counters.get("payoff_screened"), 0);
+    }
+
+    /// With `occluders=visible` and payoff on, the first frame finds no occluder and is drawn
+    /// directly; its visible objects are read back, so the next frame has occluders and culls.
+    #[test]
+    fn visible_occluders_come_from_a_frame_without_occluders() {
+        let (scene, view) = wall_scene();
+        let reference = zbuffer_frame(&scene, &view);
+        let mut r = crate::AlgoSpec::parse("nbuffer:occluders=visible")
             .expect("the spec parses")
             .build(scene.clone(), &RenderOptions::default())
             .expect("nbuffer builds");
-        let mut f = Frame::new(view.width(), view.height()).expect("a frame of the view's size");
-        let s = r.render(&view, &mut f).expect("nbuffer renders the wall from behind");
-        assert!(f.same_visibility(&reference));
-        assert_eq!(s.counters.get("occluders_drawn"), 1);
-        assert_eq!(s.counters.get("payoff_screened"), 1);
-        assert_eq!(s.counters.get("payoff_direct"), 1);
-        assert_eq!(s.rects_tested, 0, "no test run");
-        // Without payoff the same frame is tested.
-        let mut r = crate::AlgoSpec::parse("nbuffer:near_max=1,payoff=off")
-            .expect("the spec parses")
-            .build(scene.clone(), &RenderOptions::default())
-            .expect("nbuffer builds");
-        let mut f = Frame::new(view.width(), view.height()).expect("a frame of the view's size");
-        let s = r.render(&view, &mut f).expect("nbuffer renders the wall from behind");
-        assert!(f.same_visibility(&reference));
-        assert!(s.rects_tested > 0);
-        assert_eq!(s.counters.get("payoff_screened"), 0);
+        let mut stats = Vec::new();
+        for i in 0..2 {
+            let mut f = Frame::new(view.width(), view.height()).expect("a frame of the view's size");
+            stats.push(r.render(&view, &mut f).expect("nbuffer renders the wall"));
+            assert!(f.same_visibility(&reference), "frame {i}");
+        }
+        assert_eq!(stats[0].counters.get("no_occluders"), 1);
+        assert_eq!(stats[1].counters.get("no_occluders"), 0);
+        assert!(stats[1].counters.get("occluders_drawn") > 0);
+        assert!(stats[1].rects_culled > 0, "the wall, read back, hides the grids");
     }
 
     #[test]
