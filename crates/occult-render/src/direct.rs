@@ -52,8 +52,7 @@
 //!   first culled frame of a renderer judging it by time: it is measured next anyway).
 //!
 //! Renderers also hand the expected direct frame to their in-frame payoff, which then gives
-//! up a frame plainly slower than drawing it directly (`hzb` and `oqgrid` draw its rest
-//! directly, `lzb` draws it again)
+//! up a frame plainly slower than drawing it directly (its rest is drawn directly)
 //! ([`FramePayoff::given_up`](crate::payoff::FramePayoff::given_up)).
 //! Frames do not change (`frustum` is exact), only the time. Counters: `payoff_direct` (1 for
 //! a frame drawn directly), `payoff_screened` (1 for a frame whose screening skipped a probe
@@ -201,13 +200,11 @@ impl DirectFrames {
         self.frustum.render(raster, view, frame)
     }
 
-    /// Redraws a frame whose culling was abandoned ([`FramePayoff::abandoned`]), or that a
-    /// renderer judged unable to pay, as `frustum` does (the frame is cleared first), adding its counts and phases to the culled part's
+    /// Redraws a frame that a renderer judged unable to pay (`nbuffer`'s first, screened), as
+    /// `frustum` does (the frame is cleared first), adding its counts and phases to the culled part's
     /// `stats` and counting it in `payoff_direct`. Before a direct frame was measured, this
     /// one is, and the next frame is drawn directly too (as the first measurement always is,
     /// [`FIRST_MEASURED`]).
-    ///
-    /// [`FramePayoff::abandoned`]: crate::payoff::FramePayoff::abandoned
     ///
     /// # Errors
     /// As [`DirectFrames::render_if_due`].
@@ -613,8 +610,8 @@ pub(crate) mod tests {
         crate::oqgrid::OqGrid::with_options(scene.clone(), &RenderOptions::default(), &oq).expect("oqgrid builds")
     }
 
-    /// Frames drawn directly, and frames whose culling is given up (finished untested, or
-    /// redrawn directly), are the reference frames, counted as such; the renderers that embed
+    /// Frames drawn directly, and frames whose culling is given up (finished untested), are
+    /// the reference frames, counted as such; the renderers that embed
     /// [`DirectFrames`] each.
     #[test]
     fn direct_and_given_up_frames_are_identical() {
@@ -622,7 +619,7 @@ pub(crate) mod tests {
         let options = RenderOptions::default();
         let hzb = default_hzb(&scene);
         let oqgrid = default_oqgrid(&scene);
-        // The paper's plane, so that rays are cast (abandonment comes between waves of them).
+        // The paper's plane, so that rays are cast (giving up comes between waves of them).
         let lzb_options = crate::lzb::LzbOptions {
             plane: crate::lzb::Plane::Dynamic,
             ..Default::default()
@@ -645,12 +642,8 @@ pub(crate) mod tests {
             let mut f = Frame::new(96, 64).expect("a 96x64 frame");
             let s = r.render(&view, &mut f).expect("the renderer renders the view");
             assert!(f.same_visibility(&reference), "{name} given up");
-            // lzb redraws a frame it gives up; hzb and oqgrid finish it untested.
-            assert_eq!(
-                s.counters.get(COUNTER),
-                u64::from(*name == "lzb"),
-                "{name}: a frame given up is drawn directly"
-            );
+            // Finished untested, not drawn again.
+            assert_eq!(s.counters.get(COUNTER), 0, "{name}: a frame given up is finished");
             assert_eq!(s.counters.get("payoff_stopped"), 1, "{name}");
             // The frame after, from what the given-up frame left (its list, its state).
             let mut f = Frame::new(96, 64).expect("a 96x64 frame");

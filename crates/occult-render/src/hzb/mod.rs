@@ -89,7 +89,7 @@
 //!   way, per triangle in view), runs of frames are drawn directly (counter `payoff_direct`),
 //!   culling probed between them; a frame headed for more than a direct frame's time (at its
 //!   pace so far) is given up: it stops testing and draws the rest directly, keeping what it
-//!   drew ([`crate::payoff::Abandon::Finish`]).
+//!   drew ([`crate::payoff::FramePayoff::given_up`]).
 //!
 //! Every part has a switch so its effect can be measured (`occult algos` lists them).
 //!

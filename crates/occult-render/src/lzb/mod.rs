@@ -68,8 +68,8 @@
 //!   (its vertices shared), not by leaf lists. The paper's mean-hit plane is `plane=dynamic`.
 //! - Addition, payoff (`payoff=on`, lazy mode only; [`crate::payoff`], [`crate::direct`]): the
 //!   rays are cast in waves, and a frame that has spent a direct frame's time and whose rays
-//!   left, at their pace so far, would take longer than another is abandoned and drawn directly
-//!   (as `frustum` does); runs of frames are drawn directly while lzb frames lose to direct
+//!   left, at their pace so far, would take longer than another is given up: the rest of its
+//!   near set and its far leaves are drawn directly, untested, keeping what it drew; runs of frames are drawn directly while lzb frames lose to direct
 //!   ones, probed between runs. DESIGN's invariant 5 (never slower than brute force) asks it of
 //!   every conservative renderer. Counters `payoff_direct`, `payoff_stopped`; `payoff=off`
 //!   measures the paper's algorithm alone.
@@ -142,7 +142,7 @@ const PRIOR_PVL_SHARE: f64 = 0.5;
 const PRIOR_NS_PER_FAR_LEAF: f64 = 500.0;
 
 /// Pixels cast between two checks of the payoff balance (`payoff=on`): a few milliseconds of
-/// rays at the slowest rates measured, so an abandoned frame overshoots little.
+/// rays at the slowest rates measured, so a frame given up overshoots little.
 const RAY_WAVE: usize = 4096;
 
 /// Triangles of the near pass's first batch (`near_cull=on`), drawn untested: the nearest
@@ -596,7 +596,7 @@ impl Lzb {
         };
         Ok(Self {
             cull_backfaces: options.raster.cull_backfaces,
-            payoff: Payoff::new(opts.payoff, scene.item_count()).redrawing(),
+            payoff: Payoff::new(opts.payoff, scene.item_count()),
             scene,
             raster,
             opts: opts.clone(),
@@ -1115,7 +1115,7 @@ impl Lzb {
             if self.opts.near_cull {
                 self.draw_near_culled(view, frame, &instances, &near, &mut stats, &mut payoff)?;
             } else {
-                self.draw_near(view, frame, &instances, &near, &mut stats);
+                self.draw_leaves(view, frame, &instances, &near, &mut stats, "near_triangles");
             }
         }
         crate::check_cancel(&self.raster)?;
@@ -1125,7 +1125,7 @@ impl Lzb {
         // Step 3½ (`far_cull=on`): the far leaves hidden behind the near set dropped.
         // Without a near leaf nothing is drawn that could hide one: no test could pass.
         let mut far_cull_time = Duration::ZERO;
-        if self.opts.far_cull && !far.is_empty() && !near.is_empty() && !payoff.abandoned() {
+        if self.opts.far_cull && !far.is_empty() && !near.is_empty() && !payoff.given_up() {
             let t = Instant::now();
             let culled = self.cull_far(view, frame, &instances, &mut far, &mut stats)?;
             stats.counters.add("far_culled_leaves", culled);
@@ -1144,8 +1144,8 @@ impl Lzb {
         // §III.C: object-oriented ray casting: only unfinished pixels inside the projection of
         // a far leaf, each once (the done-mask). Without far leaves no pixel is cast: the
         // masks and the tile walk below are skipped (a frame whose plane lies at the far
-        // plane, every leaf near), nor in a frame abandoned in its near pass.
-        let no_rays = (self.opts.oor && far.is_empty()) || payoff.abandoned();
+        // plane, every leaf near), nor in a frame given up in its near pass.
+        let no_rays = (self.opts.oor && far.is_empty()) || payoff.given_up();
         let mut cast_mask: Vec<bool> = if no_rays {
             Vec::new()
         } else {
@@ -1196,7 +1196,7 @@ impl Lzb {
         let t = Instant::now();
         let naive = self.opts.mode == Mode::Naive;
         let this: &Lzb = self;
-        // With payoff, in waves: before each, the frame is abandoned once its rays do not pay.
+        // With payoff, in waves: before each, the frame is given up once its rays do not pay.
         // With a live frame control, in waves too: the cancellation is checked and the
         // progress (rays cast of the rays to cast) reported between two.
         let control = &this.raster.config().control;
@@ -1290,8 +1290,10 @@ impl Lzb {
         let fine_rays_time = t.elapsed();
         stats.phases.add(Phase::Rays, fine_rays_time);
 
-        if payoff.abandoned() {
-            // Redrawn directly below (`crate::direct`).
+        if payoff.given_up() {
+            // Given up (`crate::payoff`): its far leaves drawn directly, whatever rays were
+            // cast (the near set is drawn whole, `far_cull`'s hidden leaves dropped).
+            self.draw_leaves(view, frame, &instances, &far, &mut stats, "far_direct_triangles");
         } else if naive {
             // §II: the first hits are shaded directly (depth near / view distance).
             for (i, t, item) in hits {
@@ -1338,7 +1340,7 @@ impl Lzb {
         }
         // A cancelled frame measures nothing: the rates below stay as they were.
         crate::check_cancel(&self.raster)?;
-        if self.opts.near_cull && self.opts.near_temporal && !payoff.abandoned() {
+        if self.opts.near_cull && self.opts.near_temporal && !payoff.given_up() {
             let t = Instant::now();
             self.remember_visible(frame, &instances);
             stats.phases.add(Phase::Other, t.elapsed());
@@ -1347,13 +1349,13 @@ impl Lzb {
         // triangles they removed from a direct frame's work would have cost at this frame's
         // rate (with the payoff's least allowance). The in-frame balance is not fed with the
         // near pass's rate: a few large near triangles make a triangle look costly, which
-        // would put off abandoning the first frame.
+        // would put off giving up the first frame.
         let total = start.elapsed();
         let raster = stats.phases.get(Phase::Raster);
         let removed = payoff.work().saturating_sub(stats.triangles_submitted);
         let gain = raster.as_secs_f64() * removed as f64 / stats.triangles_submitted.max(1) as f64;
         let rays_paid = (total.saturating_sub(raster)).as_secs_f64() <= gain + MIN_ALLOWANCE_TIME.as_secs_f64();
-        if !payoff.abandoned() {
+        if !payoff.given_up() {
             // The rates `plane=cost` weighs (halfway to each new measurement).
             let blend = |old: f64, new: f64| {
                 if new.is_finite() && new > 0.0 {
@@ -1395,16 +1397,13 @@ impl Lzb {
         self.payoff.end(&payoff);
         if let Some(direct) = &mut self.direct {
             stats.counters.add_all(payoff.counters());
-            if payoff.abandoned() {
-                direct.redraw(&mut self.raster, view, frame, &mut stats)?;
-            }
             let t = Instant::now();
             direct.culled(
                 view,
                 frame,
                 start.elapsed(),
                 &mut stats,
-                rays_paid && !payoff.abandoned(),
+                rays_paid && !payoff.given_up(),
             )?;
             stats.phases.add(Phase::Other, t.elapsed());
         }

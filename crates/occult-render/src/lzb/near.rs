@@ -10,14 +10,16 @@ use super::*;
 
 impl Lzb {
     /// Step 3 (§II): the near leaves `near` (`(instance, leaf)` pairs of `instances`) drawn
-    /// with the z-buffer, in one draw.
-    pub(super) fn draw_near(
+    /// with the z-buffer, in one draw, their triangles counted in `counter` (the far leaves
+    /// of a frame given up are drawn so too).
+    pub(super) fn draw_leaves(
         &mut self,
         view: &View,
         frame: &mut Frame,
         instances: &[(InstanceRec, ItemId, Mat4)],
         near: &[(u32, u32)],
         stats: &mut FrameStats,
+        counter: &'static str,
     ) {
         let t = Instant::now();
         // A mesh instance all of whose leaves are near is drawn whole (its vertices shared, no
@@ -37,9 +39,7 @@ impl Lzb {
             .iter()
             .filter_map(|(rec, _)| self.scene.node(rec.node).mesh().map(|m| m.triangle_count()))
             .sum();
-        stats
-            .counters
-            .add("near_triangles", (pool.len() + whole_triangles) as u64);
+        stats.counters.add(counter, (pool.len() + whole_triangles) as u64);
         stats.phases.add(Phase::Other, t.elapsed());
         let mut draws = make_draws(&self.scene, view, &near_lists, &pool);
         draws.extend(whole.iter().filter_map(|(rec, base)| {
@@ -92,10 +92,16 @@ impl Lzb {
             keys,
             groups,
             eyes,
+            state,
         } = &mut scratch;
         ordered.clear();
         parts.clear();
+        state.clear();
+        state.resize(instances.len(), NearInstance::default());
         for (inst, r) in group_ranges(near) {
+            if let Accel::Mesh { leaves, .. } = &self.accel[instances[inst as usize].0.node.index()] {
+                state[inst as usize].all_near = r.len() == *leaves as usize;
+            }
             if visible.is_empty() {
                 parts.push((inst, r, false));
                 continue;
@@ -232,6 +238,8 @@ impl Lzb {
         };
         let (mut next, mut group) = (0, 0);
         let mut first = true;
+        // Given up (`crate::payoff`): the rest gathered into one batch, untested.
+        let mut finishing = false;
         stats.phases.add(Phase::Other, t.elapsed());
         while next < order.len() {
             let t = Instant::now();
@@ -243,7 +251,7 @@ impl Lzb {
                 if groups.get(group).is_some_and(|g| g.units.start as usize == next) {
                     let g = &groups[group];
                     group += 1;
-                    if !first && g.units.len() > 1 {
+                    if !first && !finishing && g.units.len() > 1 {
                         tested += 1;
                         let (rec, _, clip) = &instances[g.inst as usize];
                         let e = *eyes[g.inst as usize]
@@ -269,9 +277,28 @@ impl Lzb {
                 } = units[order[next] as usize];
                 next += 1;
                 let (rec, base, clip) = &instances[inst as usize];
+                // The rest of a frame given up: an instance wholly near of which at most half
+                // was drawn is drawn whole (its vertices shared, no list to build), once.
+                let at = &mut state[inst as usize];
+                if finishing && !is_whole && at.whole {
+                    continue;
+                }
+                if finishing && !is_whole && at.all_near {
+                    let all = self
+                        .scene
+                        .node(rec.node)
+                        .mesh()
+                        .map_or(0, occult_core::Mesh::triangle_count);
+                    if 2 * at.drawn as usize <= all {
+                        at.whole = true;
+                        whole.push((*rec, *base));
+                        gathered += all;
+                        continue;
+                    }
+                }
                 // Not weighed by the in-frame payoff's stop rule: it weighs the rays, and a
                 // frame's coarse rays and first batch come before any gain of these tests.
-                if !first {
+                if !first && !finishing {
                     tested += 1;
                     let e = *eyes[inst as usize]
                         .get_or_insert_with(|| rec.world_from_object.inverse().transform_point3(eye));
@@ -296,6 +323,7 @@ impl Lzb {
                 } else {
                     pairs.extend(near[leaves.start as usize..leaves.end as usize].iter().copied());
                 }
+                state[inst as usize].drawn += count;
                 gathered += count as usize;
             }
             // Draw it: index lists per instance (each triangle once), whole meshes whole.
@@ -334,9 +362,15 @@ impl Lzb {
             let raster_time = stats.phases.get(Phase::Raster).saturating_sub(raster_before);
             payoff.rasterized(submitted as u64, raster_time, false);
             drop(draws);
-            // Abandoned (`crate::payoff`): drawn again directly, nothing more of it here.
-            if payoff.abandoned() {
-                break;
+            // Given up (`crate::payoff`): the rest drawn untested, in one batch the rasterizer
+            // shares over its threads, and no more pyramid updates.
+            if payoff.given_up() {
+                if finishing {
+                    break;
+                }
+                finishing = true;
+                batch_triangles = usize::MAX;
+                continue;
             }
             // The pyramid over what the batch drew, for the next batch's tests.
             // Only where the batch wrote: its units' region cut to the box of the triangles
@@ -578,6 +612,19 @@ pub(super) struct NearScratch {
     groups: Vec<NearGroup>,
     /// Per instance: the eye in its space, once needed.
     eyes: Vec<Option<Vec3>>,
+    /// Per instance: what the rest of a frame given up draws whole.
+    state: Vec<NearInstance>,
+}
+
+/// An instance in the near pass ([`NearScratch::state`]).
+#[derive(Clone, Copy, Default)]
+struct NearInstance {
+    /// Every leaf of it is near.
+    all_near: bool,
+    /// Drawn whole, in the rest of a frame given up.
+    whole: bool,
+    /// Triangle references of its units drawn.
+    drawn: u32,
 }
 
 impl NearScratch {
@@ -590,6 +637,7 @@ impl NearScratch {
             + self.keys.capacity() * std::mem::size_of::<u64>()
             + self.groups.capacity() * std::mem::size_of::<NearGroup>()
             + self.eyes.capacity() * std::mem::size_of::<Option<Vec3>>()
+            + self.state.capacity() * std::mem::size_of::<NearInstance>()
     }
 }
 

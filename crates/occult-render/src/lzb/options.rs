@@ -111,7 +111,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc {
             key: "payoff",
             default: "on",
-            help: "abandon a frame whose rays would take longer than drawing it directly, and draw runs of frames as frustum does while lzb frames are slower than such direct frames (not in the paper; lazy mode only: off, and refused, with mode=naive, whose frames are approximate)",
+            help: "give up a frame whose rays would take longer than drawing it directly (its rest then drawn directly), and draw runs of frames as frustum does while lzb frames are slower than such direct frames (not in the paper; lazy mode only: off, and refused, with mode=naive, whose frames are approximate)",
         },
     ],
     counters: &[
@@ -138,6 +138,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "near_culled_triangles",
         "near_visible_triangles",
         "far_culled_leaves",
+        "far_direct_triangles",
         crate::payoff::COUNTERS[0],
         crate::payoff::COUNTERS[1],
         crate::direct::COUNTER,
@@ -228,7 +229,7 @@ pub struct LzbOptions {
     pub coherence: bool,
     /// What a lazy ray records.
     pub pvl: Pvl,
-    /// Abandon frames whose rays do not pay, and draw frames directly while they do not
+    /// Give up frames whose rays do not pay, and draw frames directly while they do not
     /// (lazy mode only).
     pub payoff: bool,
     /// Occlusion-cull the near set front to back (not in the paper).

@@ -21,7 +21,7 @@
 //!
 //! # Deviations
 //! - `payoff=off` and `mode=lazy` only: payoff decides per rank from its own clock whether to
-//!   abandon a frame, which would split the ranks; naive mode shades hits, which are not a
+//!   give a frame up, which would split the ranks; naive mode shades hits, which are not a
 //!   PVL to unite.
 //! - The ranks' other frames hold rank 0's near depth only; their statistics count their own
 //!   rays (rank 0's its own, plus the PVL it draws).
