@@ -43,7 +43,8 @@
 //!   of `frustum`'s hierarchies hidden by that depth
 //!   ([`Hierarchies::hidden_triangles`], Greene's box test through a pyramid of it). When
 //!   drawing those directly costs less than culling cost the last culled frame (its time
-//!   beyond a direct frame of the triangles it submitted), the probe cannot pay and the next
+//!   beyond a direct frame of the triangles it submitted; scaled down by the views' work when
+//!   this view holds less), the probe cannot pay and the next
 //!   run starts instead, doubled as after a losing probe (a screening is a walk of the
 //!   hierarchies, a few percent of a frame; a losing probe costs up to two frames). Only with
 //!   a culled frame at most [`SCREEN_AGE`] frames old, and by a direct frame of at least
@@ -282,7 +283,7 @@ impl DirectFrames {
         if cannot_pay {
             stats.counters.add(SCREENED, 1);
         }
-        self.choice.last_culled = Some((total, submitted));
+        self.choice.last_culled = Some((total, submitted, work));
         self.choice.last_culled_age = 0;
         self.choice.culled(total, work, tests_paid, plainly, cannot_pay);
         Ok(self.choice.direct_left > 0)
@@ -398,9 +399,9 @@ struct Choice {
     since_direct: u32,
     /// The last frame's work.
     last_work: u64,
-    /// The last culled frame's time and the triangles it submitted (its cost of culling is
-    /// its time beyond a direct frame of those triangles); the direct frames since.
-    last_culled: Option<(Duration, u64)>,
+    /// The last culled frame's time, the triangles it submitted (its cost of culling is its
+    /// time beyond a direct frame of those triangles) and its work; the direct frames since.
+    last_culled: Option<(Duration, u64, u64)>,
     last_culled_age: u32,
 }
 
@@ -450,12 +451,17 @@ impl Choice {
     /// Whether a probe may pay, on a view of `work` triangles of which at most `hidden` can be
     /// culled ([`Hierarchies::hidden_triangles`]): drawing the hidden ones directly must cost
     /// more than culling cost the last culled frame (its time beyond a direct frame of the
-    /// triangles it submitted: its tests, and its smaller batches' slower drawing). A bound in
-    /// culling's favour: a culled frame removes less, drawing occluders first.
+    /// triangles it submitted: its tests, and its smaller batches' slower drawing), scaled
+    /// down to this view's work when it is less than that frame's (tests meet what is in view:
+    /// on a street, a view of a facade holds a tenth of the view down the street before it,
+    /// and weighed against the whole cost of that view's culling its probe was never drawn,
+    /// measured). A bound in culling's favour: a culled frame removes less, drawing occluders
+    /// first.
     fn worth_probing(&self, hidden: u64, work: u64) -> bool {
         match (self.model(), self.last_culled) {
-            (Some(m), Some((total, submitted))) => {
-                let cost = total.as_nanos() as f64 - m.predict(submitted);
+            (Some(m), Some((total, submitted, culled_work))) => {
+                let share = (work as f64 / culled_work.max(1) as f64).min(1.0);
+                let cost = (total.as_nanos() as f64 - m.predict(submitted)) * share;
                 m.rate_ns * hidden.min(work) as f64 > cost
             }
             _ => true,
@@ -743,7 +749,7 @@ pub(crate) mod tests {
     }
 
     /// A probe is screened out when drawing the triangles that could be hidden costs less
-    /// than culling cost the last culled frame; screening needs a recent culled frame and a
+    /// than culling cost the last culled frame (scaled down to a view of less work); screening needs a recent culled frame and a
     /// direct frame of at least the least allowance; a
     /// first culled frame that cannot pay has the direct frames measured next.
     #[test]
@@ -751,12 +757,17 @@ pub(crate) mod tests {
         let mut c = measured(0.0, 10_000.0, 1);
         assert!(!c.screens(10 * MS), "no culled frame measured");
         // 14 ms for 1000 submitted triangles, 10 ms of drawing them directly: culling cost 4 ms.
-        c.last_culled = Some((14 * MS, 1000));
+        c.last_culled = Some((14 * MS, 1000, 1000));
         assert!(c.screens(10 * MS));
         assert!(!c.screens(MS), "a direct frame too short to say");
         assert!(!c.worth_probing(300, 1000), "at most 3 ms to save");
         assert!(c.worth_probing(500, 1000), "up to 5 ms to save");
+        // A view of half that frame's work: half its cost of culling, 2 ms.
+        assert!(c.worth_probing(250, 500), "2.5 ms to save");
+        assert!(!c.worth_probing(150, 500), "1.5 ms to save");
+        c.last_culled = Some((14 * MS, 1000, 200));
         assert!(!c.worth_probing(500, 300), "no more than the work is hidden");
+        assert!(c.worth_probing(500, 2000), "the cost is not scaled up");
         for _ in 0..SCREEN_AGE {
             c.direct(10 * MS, 9 * MS, 1000);
         }
