@@ -13,7 +13,9 @@
 //!   part (clear, walk) and its rasterization, a rate per triangle of work; the model is the
 //!   least of each over the last [`DIRECT_KEPT`] direct frames (noise only adds time);
 //! - a culled frame's time is compared with what the model predicts for its work, so that
-//!   frames of different views compare, and its gain (or loss) added to a decaying balance: a
+//!   frames of different views compare (with the fill the rate misses: what the frame's draws
+//!   shared over the threads took beyond twice the rate; a direct frame draws all it drew, and
+//!   on a view of near facades a triangle costs several times the rate), and its gain (or loss) added to a decaying balance: a
 //!   frame that loses while the balance is negative starts a **run** of direct frames when its
 //!   tests did not pay by their own measure or the culled frame before lost too (the model
 //!   knows triangles, not pixels: a near wall, few triangles and much to fill, is predicted
@@ -285,6 +287,10 @@ impl DirectFrames {
         }
         self.choice.last_culled = Some((total, submitted, work));
         self.choice.last_culled_age = 0;
+        self.choice.drawn = Drawn {
+            triangles: stats.triangles_shared,
+            ns: stats.raster_shared.as_nanos() as f64,
+        };
         self.choice.culled(total, work, tests_paid, plainly, cannot_pay);
         Ok(self.choice.direct_left > 0)
     }
@@ -369,6 +375,31 @@ impl Model {
     fn predict(&self, work: u64) -> f64 {
         self.fixed_ns + self.rate_ns * work as f64
     }
+
+    /// The expected time of a direct frame of `work` triangles of a view whose culled frame
+    /// drew what `drawn` says, ns: [`Model::predict`] and the fill the rate misses, what the
+    /// culled frame's shared draws took beyond [`FILL_MARGIN`] times the rate for their
+    /// triangles. A direct frame draws every triangle the culled one drew; on a view of near
+    /// facades a triangle costs several times the rate (its pixels), which the rate alone
+    /// misses. Within the margin, a shared draw's triangles may cost more than a direct
+    /// frame's for other reasons (index lists transform a triangle's corners one by one).
+    fn predict_after(&self, work: u64, drawn: Drawn) -> f64 {
+        let fill = drawn.ns - FILL_MARGIN * self.rate_ns * drawn.triangles as f64;
+        self.predict(work) + fill.max(0.0)
+    }
+}
+
+/// A culled frame's draws shared over the rasterizer's threads cost at most this many times
+/// the direct rate a triangle before the excess counts as fill the rate misses
+/// ([`Model::predict_after`]).
+const FILL_MARGIN: f64 = 2.0;
+
+/// What a culled frame drew in draws the rasterizer shared over its threads, at a direct
+/// frame's pace: their triangles and time, ns.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Drawn {
+    triangles: u64,
+    ns: f64,
 }
 
 /// The decision alone, on numbers: times and work.
@@ -379,9 +410,12 @@ struct Choice {
     first_by_time: bool,
     /// The last direct frames' models, newest last, at most [`DIRECT_KEPT`].
     measured: Vec<Model>,
-    /// Culled frames (time, work, whether their tests paid) not yet weighed: those before the
-    /// first direct frame.
-    unweighed: Vec<(Duration, u64, bool)>,
+    /// Culled frames (time, work, whether their tests paid, what they drew) not yet weighed:
+    /// those before the first direct frame.
+    unweighed: Vec<(Duration, u64, bool, Drawn)>,
+    /// What the last culled frame (the one being weighed) drew ([`Choice::culled`]; none:
+    /// the model alone).
+    drawn: Drawn,
     /// Culled frames in a row that did not plainly pay, before the first direct frame.
     unplain: u32,
     /// The balance of the recent culled frames: each one's gain (the predicted direct time of
@@ -451,7 +485,8 @@ impl Choice {
     /// Whether a probe may pay, on a view of `work` triangles of which at most `hidden` can be
     /// culled ([`Hierarchies::hidden_triangles`]): drawing the hidden ones directly must cost
     /// more than culling cost the last culled frame (its time beyond a direct frame of the
-    /// triangles it submitted: its tests, and its smaller batches' slower drawing), scaled
+    /// triangles it submitted, with the fill the rate misses, [`Model::predict_after`]: its
+    /// tests, and its smaller batches' slower drawing), scaled
     /// down to this view's work when it is less than that frame's (tests meet what is in view:
     /// on a street, a view of a facade holds a tenth of the view down the street before it,
     /// and weighed against the whole cost of that view's culling its probe was never drawn,
@@ -461,7 +496,7 @@ impl Choice {
         match (self.model(), self.last_culled) {
             (Some(m), Some((total, submitted, culled_work))) => {
                 let share = (work as f64 / culled_work.max(1) as f64).min(1.0);
-                let cost = (total.as_nanos() as f64 - m.predict(submitted)) * share;
+                let cost = (total.as_nanos() as f64 - m.predict_after(submitted, self.drawn)) * share;
                 m.rate_ns * hidden.min(work) as f64 > cost
             }
             _ => true,
@@ -507,7 +542,7 @@ impl Choice {
             if self.unweighed.len() == DIRECT_KEPT {
                 self.unweighed.remove(0);
             }
-            self.unweighed.push((total, work, tests_paid));
+            self.unweighed.push((total, work, tests_paid, self.drawn));
             return;
         }
         if self.judge(total, work, tests_paid) {
@@ -546,9 +581,10 @@ impl Choice {
         due
     }
 
-    /// Adds a culled frame's gain to the balance; true when it lost.
+    /// Adds a culled frame's gain to the balance (against a direct frame of its view,
+    /// [`Model::predict_after`] what it drew); true when it lost.
     fn weigh(&mut self, total: Duration, work: u64) -> bool {
-        let predicted = self.model().map_or(0.0, |m| m.predict(work));
+        let predicted = self.model().map_or(0.0, |m| m.predict_after(work, self.drawn));
         let gain = predicted - total.as_nanos() as f64;
         self.balance = 0.5 * self.balance + gain;
         gain < 0.0
@@ -568,7 +604,8 @@ impl Choice {
         // The culled frames before the first measurement, weighed now: straight into a run
         // when the last of them makes one due.
         let mut due = false;
-        for (t, w, paid) in std::mem::take(&mut self.unweighed) {
+        for (t, w, paid, drawn) in std::mem::take(&mut self.unweighed) {
+            self.drawn = drawn;
             due = self.judge(t, w, paid);
         }
         if due {
@@ -746,6 +783,42 @@ pub(crate) mod tests {
             "d".repeat(64)
         );
         assert_eq!(ways, expected[..120]);
+    }
+
+    /// A culled frame is weighed against a direct frame that draws what it drew: what its
+    /// shared draws cost beyond twice the rate is fill the rate misses, added to the model's
+    /// prediction (on a view of near facades, its few triangles cost more than the rate says,
+    /// and so would a direct frame's).
+    #[test]
+    fn a_direct_frame_draws_at_least_what_the_culled_frame_drew() {
+        // 10 µs a triangle: a direct frame of 1000 is predicted 10 ms.
+        let mut c = measured(0.0, 10_000.0, 2);
+        assert!(c.weigh(12 * MS, 1000), "12 ms against 10: lost");
+        // It drew 200 triangles in shared draws of 8 ms, 4 ms more than twice the rate: a
+        // direct frame takes 14 ms.
+        c.drawn = Drawn {
+            triangles: 200,
+            ns: 8e6,
+        };
+        assert!(!c.weigh(12 * MS, 1000), "12 ms against 14: won");
+        // Within twice the rate, the model's prediction stands.
+        c.drawn = Drawn {
+            triangles: 200,
+            ns: 3.9e6,
+        };
+        assert!(c.weigh(12 * MS, 1000), "12 ms against 10: lost");
+        let m = c.model().expect("measured");
+        assert_eq!(m.predict_after(1000, Drawn::default()), m.predict(1000));
+        assert_eq!(
+            m.predict_after(
+                1000,
+                Drawn {
+                    triangles: 100,
+                    ns: 5e6
+                }
+            ),
+            13e6
+        );
     }
 
     /// A probe is screened out when drawing the triangles that could be hidden costs less

@@ -463,7 +463,11 @@ fn draw_timed(
 ) {
     let t = Instant::now();
     let counts = raster.draw(view, frame, draws, occult_raster::RasterMode::Full);
-    stats.phases.add(Phase::Raster, t.elapsed());
+    let spent = t.elapsed();
+    stats.phases.add(Phase::Raster, spent);
+    if counts.triangles_shared > 0 {
+        stats.raster_shared += spent.mul_f64(counts.triangles_shared as f64 / counts.triangles_submitted as f64);
+    }
     stats.add_raster(counts);
 }
 

@@ -142,7 +142,8 @@ impl FrameStats {
     }
 
     /// Adds the triangle, fragment, node and box counts of `other` (a part of this frame drawn
-    /// apart: a worker's share, a redrawn frame); counters and phases are left to the caller.
+    /// apart: a worker's share, a redrawn frame), and its shared rasterization time; counters
+    /// and phases are left to the caller.
     pub fn add_counts(&mut self, other: &FrameStats) {
         self.triangles_submitted += other.triangles_submitted;
         self.triangles_rasterized += other.triangles_rasterized;
@@ -150,6 +151,8 @@ impl FrameStats {
         self.nodes_visited += other.nodes_visited;
         self.boxes_tested += other.boxes_tested;
         self.boxes_culled += other.boxes_culled;
+        self.raster_shared += other.raster_shared;
+        self.triangles_shared += other.triangles_shared;
     }
 
     /// Adds the counts of one rasterizer call.
@@ -157,6 +160,7 @@ impl FrameStats {
         self.triangles_submitted += counts.triangles_submitted;
         self.triangles_rasterized += counts.triangles_rasterized;
         self.fragments_written += counts.fragments_written;
+        self.triangles_shared += counts.triangles_shared;
     }
 }
 
@@ -188,6 +192,15 @@ pub struct FrameStats {
     pub total: Duration,
     /// Wall time per phase.
     pub phases: PhaseTimes,
+    /// The part of the [`Phase::Raster`] time spent in draws the rasterizer shared over its
+    /// threads (by their share of its triangles): what [`crate::direct`] takes as drawn at a
+    /// direct frame's pace. Not reported.
+    #[serde(skip)]
+    pub raster_shared: Duration,
+    /// The triangles of those draws ([`occult_raster::RasterCounts::triangles_shared`]). Not
+    /// reported.
+    #[serde(skip)]
+    pub triangles_shared: u64,
     /// The renderer's own counters.
     pub counters: Counters,
 }

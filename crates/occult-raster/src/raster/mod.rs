@@ -267,12 +267,16 @@ pub struct RasterCounts {
     pub triangles_rasterized: u64,
     /// Fragments that won their pixel when written.
     pub fragments_written: u64,
+    /// Triangles of the passes shared over more than one thread (banded, sort-last or
+    /// binned): those drawn as a large direct frame's are, at its rate.
+    pub triangles_shared: u64,
 }
 
 add_assign_fields!(RasterCounts {
     triangles_submitted,
     triangles_rasterized,
     fragments_written,
+    triangles_shared,
 });
 
 /// The rasterizer: configuration, thread pool and reusable scratch memory.
@@ -776,6 +780,7 @@ impl Rasterizer {
             // Every band set up every triangle: each counted them all.
             counts.triangles_rasterized = results[0].0;
             counts.fragments_written = results.iter().map(|r| r.1).sum();
+            counts.triangles_shared = if bands > 1 { counts.triangles_submitted } else { 0 };
             // The threads' time together: the setup counted once per band, so a triangle's
             // cost is overestimated by the setup (draws stay banded the more readily).
             self.measure(total, results.iter().map(|r| r.2).sum());
@@ -789,6 +794,7 @@ impl Rasterizer {
                 self.measure(total, thread_ns);
                 counts.triangles_rasterized = rasterized;
                 counts.fragments_written = written;
+                counts.triangles_shared = if threads > 1 { counts.triangles_submitted } else { 0 };
                 return counts;
             }
         }
@@ -833,6 +839,9 @@ impl Rasterizer {
             }
             counts.fragments_written += fragments.iter().sum::<u64>();
             start = round_end;
+        }
+        if threads > 1 {
+            counts.triangles_shared = counts.triangles_submitted;
         }
         counts
     }

@@ -25,7 +25,7 @@ fn grid(n: u32, side: f32) -> Mesh {
 
 /// On several threads, a fresh rasterizer's automatic strategy draws fewer than
 /// [`SORT_LAST_MIN_TRIANGLES`] triangles directly on the calling thread, small or large,
-/// with the binned path's frame and counts; larger draws go sort-last over the pool, and
+/// with the binned path's frame and counts (but the triangles shared); larger draws go sort-last over the pool, and
 /// forced strategies do what they say.
 #[test]
 fn small_draws_stay_on_the_calling_thread() {
@@ -67,6 +67,15 @@ fn small_draws_stay_on_the_calling_thread() {
         let (on_caller, used, binned) = pass(Strategy::Binned, &draw);
         assert!(!on_caller && used == Strategy::Binned);
         assert!(auto.fragments_written > 1000);
+        assert_eq!(auto.triangles_shared, 0, "on the caller");
+        assert_eq!(
+            binned.triangles_shared, binned.triangles_submitted,
+            "binned over the pool"
+        );
+        let binned = RasterCounts {
+            triangles_shared: 0,
+            ..binned
+        };
         assert_eq!(auto, binned, "{} triangles", mesh.triangle_count());
     }
     let (on_caller, used, _) = pass(Strategy::Auto, std::slice::from_ref(&sort_last));
@@ -121,18 +130,21 @@ fn long_small_draws_are_shared() {
     .expect("a valid two-thread configuration");
     let mut frame = Frame::new(320, 240).expect("a 320 × 240 frame");
     let pixels = 320.0 * 240.0;
-    r.draw(&view, &mut frame, &[draw(SHARED_MIN_TRIANGLES)], RasterMode::Full);
+    let c = r.draw(&view, &mut frame, &[draw(SHARED_MIN_TRIANGLES)], RasterMode::Full);
     assert_eq!(r.last_pass, Some((true, Strategy::Direct)), "nothing measured yet");
+    assert_eq!(c.triangles_shared, 0, "on the caller: none shared");
     assert!(r.triangle_ns() > 0.0, "the draw was measured");
     // One thread would take twice the threshold.
     let ns = 2.0 * SHARED_MIN_NS_PER_PIXEL * pixels / SHARED_MIN_TRIANGLES as f64;
     r.measured = (ns * 1000.0, 1000.0);
-    r.draw(&view, &mut frame, &[draw(SHARED_MIN_TRIANGLES)], RasterMode::Full);
+    let c = r.draw(&view, &mut frame, &[draw(SHARED_MIN_TRIANGLES)], RasterMode::Full);
     assert_eq!(r.last_pass, Some((false, Strategy::SortLast)), "long: shared");
+    assert_eq!(c.triangles_shared, SHARED_MIN_TRIANGLES as u64, "sort-last: all shared");
     // As long, but fill-bound (each triangle costing more than FILL_HEAVY_NS): bands.
     r.measured = (2.0 * FILL_HEAVY_NS * 1000.0, 1000.0);
-    r.draw(&view, &mut frame, &[draw(SHARED_MIN_TRIANGLES)], RasterMode::Full);
+    let c = r.draw(&view, &mut frame, &[draw(SHARED_MIN_TRIANGLES)], RasterMode::Full);
     assert_eq!(r.last_pass, Some((false, Strategy::Banded)), "fill-bound: bands");
+    assert_eq!(c.triangles_shared, SHARED_MIN_TRIANGLES as u64, "bands: all shared");
     r.measured = (ns * 1000.0, 1000.0);
     r.draw(&view, &mut frame, &[draw(SHARED_MIN_TRIANGLES - 1)], RasterMode::Full);
     assert_eq!(
@@ -169,7 +181,8 @@ fn staggered<'a>(view: &View, meshes: &'a [Mesh], dx: f32) -> Vec<Draw<'a>> {
         .collect()
 }
 
-/// A banded draw gives the direct draw's frame and counts, on any number of threads, bands
+/// A banded draw gives the direct draw's frame and counts (its triangles counted shared), on
+/// any number of threads, bands
 /// split across every triangle size (tiny, spanning bands, larger than the frame).
 #[test]
 fn banded_draws_are_direct_draws() {
@@ -193,6 +206,11 @@ fn banded_draws_are_direct_draws() {
     assert!(counts.fragments_written > 10_000, "the view shows the grids");
     for threads in [2, 3, 5] {
         let (c, f) = run(threads, Strategy::Banded);
+        assert_eq!(c.triangles_shared, c.triangles_submitted, "{threads} threads");
+        let c = RasterCounts {
+            triangles_shared: 0,
+            ..c
+        };
         assert_eq!(c, counts, "{threads} threads");
         assert!(f.same_visibility(&frame), "{threads} threads");
         assert!(f
