@@ -285,12 +285,13 @@ impl DirectFrames {
         if cannot_pay {
             stats.counters.add(SCREENED, 1);
         }
-        self.choice.last_culled = Some((total, submitted, work));
-        self.choice.last_culled_age = 0;
-        self.choice.drawn = Drawn {
+        let drawn = Drawn {
             triangles: stats.triangles_shared,
             ns: stats.raster_shared.as_nanos() as f64,
         };
+        self.choice.last_culled = Some((total, submitted, work, drawn));
+        self.choice.last_culled_age = 0;
+        self.choice.drawn = drawn;
         self.choice.culled(total, work, tests_paid, plainly, cannot_pay);
         Ok(self.choice.direct_left > 0)
     }
@@ -413,8 +414,8 @@ struct Choice {
     /// Culled frames (time, work, whether their tests paid, what they drew) not yet weighed:
     /// those before the first direct frame.
     unweighed: Vec<(Duration, u64, bool, Drawn)>,
-    /// What the last culled frame (the one being weighed) drew ([`Choice::culled`]; none:
-    /// the model alone).
+    /// What the culled frame [`Choice::culled`] weighs drew (set just before; none: the model
+    /// alone).
     drawn: Drawn,
     /// Culled frames in a row that did not plainly pay, before the first direct frame.
     unplain: u32,
@@ -434,8 +435,9 @@ struct Choice {
     /// The last frame's work.
     last_work: u64,
     /// The last culled frame's time, the triangles it submitted (its cost of culling is its
-    /// time beyond a direct frame of those triangles) and its work; the direct frames since.
-    last_culled: Option<(Duration, u64, u64)>,
+    /// time beyond a direct frame of those triangles), its work and what it drew; the direct
+    /// frames since.
+    last_culled: Option<(Duration, u64, u64, Drawn)>,
     last_culled_age: u32,
 }
 
@@ -494,9 +496,10 @@ impl Choice {
     /// first.
     fn worth_probing(&self, hidden: u64, work: u64) -> bool {
         match (self.model(), self.last_culled) {
-            (Some(m), Some((total, submitted, culled_work))) => {
+            (_, _) if work == 0 => true,
+            (Some(m), Some((total, submitted, culled_work, drawn))) => {
                 let share = (work as f64 / culled_work.max(1) as f64).min(1.0);
-                let cost = (total.as_nanos() as f64 - m.predict_after(submitted, self.drawn)) * share;
+                let cost = (total.as_nanos() as f64 - m.predict_after(submitted, drawn)) * share;
                 m.rate_ns * hidden.min(work) as f64 > cost
             }
             _ => true,
@@ -545,7 +548,7 @@ impl Choice {
             self.unweighed.push((total, work, tests_paid, self.drawn));
             return;
         }
-        if self.judge(total, work, tests_paid) {
+        if self.judge(total, work, tests_paid, self.drawn) {
             self.start_run();
             return;
         }
@@ -574,8 +577,8 @@ impl Choice {
     /// culled frame before lost too. A single loss of a frame whose tests paid is a view the
     /// model predicts badly (a near wall: few triangles, much to fill), not a reason to stop
     /// culling.
-    fn judge(&mut self, total: Duration, work: u64, tests_paid: bool) -> bool {
-        let lost = self.weigh(total, work);
+    fn judge(&mut self, total: Duration, work: u64, tests_paid: bool, drawn: Drawn) -> bool {
+        let lost = self.weigh(total, work, drawn);
         let due = self.balance < 0.0 && lost && (!tests_paid || self.lost_last);
         self.lost_last = lost;
         due
@@ -583,8 +586,8 @@ impl Choice {
 
     /// Adds a culled frame's gain to the balance (against a direct frame of its view,
     /// [`Model::predict_after`] what it drew); true when it lost.
-    fn weigh(&mut self, total: Duration, work: u64) -> bool {
-        let predicted = self.model().map_or(0.0, |m| m.predict_after(work, self.drawn));
+    fn weigh(&mut self, total: Duration, work: u64, drawn: Drawn) -> bool {
+        let predicted = self.model().map_or(0.0, |m| m.predict_after(work, drawn));
         let gain = predicted - total.as_nanos() as f64;
         self.balance = 0.5 * self.balance + gain;
         gain < 0.0
@@ -605,8 +608,7 @@ impl Choice {
         // when the last of them makes one due.
         let mut due = false;
         for (t, w, paid, drawn) in std::mem::take(&mut self.unweighed) {
-            self.drawn = drawn;
-            due = self.judge(t, w, paid);
+            due = self.judge(t, w, paid, drawn);
         }
         if due {
             self.start_run();
@@ -793,20 +795,29 @@ pub(crate) mod tests {
     fn a_direct_frame_draws_at_least_what_the_culled_frame_drew() {
         // 10 µs a triangle: a direct frame of 1000 is predicted 10 ms.
         let mut c = measured(0.0, 10_000.0, 2);
-        assert!(c.weigh(12 * MS, 1000), "12 ms against 10: lost");
+        assert!(c.weigh(12 * MS, 1000, Drawn::default()), "12 ms against 10: lost");
         // It drew 200 triangles in shared draws of 8 ms, 4 ms more than twice the rate: a
         // direct frame takes 14 ms.
-        c.drawn = Drawn {
+        let filled = Drawn {
             triangles: 200,
             ns: 8e6,
         };
-        assert!(!c.weigh(12 * MS, 1000), "12 ms against 14: won");
+        assert!(!c.weigh(12 * MS, 1000, filled), "12 ms against 14: won");
         // Within twice the rate, the model's prediction stands.
-        c.drawn = Drawn {
+        let quick = Drawn {
             triangles: 200,
             ns: 3.9e6,
         };
-        assert!(c.weigh(12 * MS, 1000), "12 ms against 10: lost");
+        assert!(c.weigh(12 * MS, 1000, quick), "12 ms against 10: lost");
+        // The frames before the first measurement are weighed with what each drew.
+        let mut first = Choice {
+            drawn: filled,
+            ..Choice::default()
+        };
+        first.culled(12 * MS, 1000, true, false, false);
+        first.drawn = quick;
+        first.culled(12 * MS, 1000, true, false, false);
+        assert_eq!(first.unweighed.iter().map(|u| u.3).collect::<Vec<_>>(), [filled, quick]);
         let m = c.model().expect("measured");
         assert_eq!(m.predict_after(1000, Drawn::default()), m.predict(1000));
         assert_eq!(
@@ -830,7 +841,7 @@ pub(crate) mod tests {
         let mut c = measured(0.0, 10_000.0, 1);
         assert!(!c.screens(10 * MS), "no culled frame measured");
         // 14 ms for 1000 submitted triangles, 10 ms of drawing them directly: culling cost 4 ms.
-        c.last_culled = Some((14 * MS, 1000, 1000));
+        c.last_culled = Some((14 * MS, 1000, 1000, Drawn::default()));
         assert!(c.screens(10 * MS));
         assert!(!c.screens(MS), "a direct frame too short to say");
         assert!(!c.worth_probing(300, 1000), "at most 3 ms to save");
@@ -838,9 +849,10 @@ pub(crate) mod tests {
         // A view of half that frame's work: half its cost of culling, 2 ms.
         assert!(c.worth_probing(250, 500), "2.5 ms to save");
         assert!(!c.worth_probing(150, 500), "1.5 ms to save");
-        c.last_culled = Some((14 * MS, 1000, 200));
+        c.last_culled = Some((14 * MS, 1000, 200, Drawn::default()));
         assert!(!c.worth_probing(500, 300), "no more than the work is hidden");
         assert!(c.worth_probing(500, 2000), "the cost is not scaled up");
+        assert!(c.worth_probing(0, 0), "a view of no work says nothing");
         for _ in 0..SCREEN_AGE {
             c.direct(10 * MS, 9 * MS, 1000);
         }

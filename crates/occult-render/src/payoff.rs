@@ -46,7 +46,7 @@
 //!
 //! What a frame draws untested before its tests begin (`hzb`'s visible list,
 //! [`FramePayoff::untested_first`], [`FramePayoff::tests_begin`]) is neither a cost nor a gain
-//! of its tests: only the give-up rules weighs it.
+//! of its tests: only the give-up rules weigh it.
 //!
 //! Counters, registered by each renderer that uses it: `payoff_stopped` (1 when the frame
 //! stopped testing), `payoff_untested` (the tests then skipped).
@@ -316,7 +316,7 @@ impl FramePayoff {
         // of the frame at its pace so far would take longer than a direct frame by a margin.
         let progress =
             ((self.raster_triangles + self.saved_triangles) as f64 / self.direct_work.max(1) as f64).min(1.0);
-        let given_up = self.gives_up(elapsed, progress) || self.forced_to_give_up();
+        let given_up = self.gives_up(elapsed, progress, true) || self.forced_to_give_up();
         self.given_up = given_up;
         self.stopped = given_up
             || (self.direct_frame_ns.is_none()
@@ -330,13 +330,14 @@ impl FramePayoff {
     }
 
     /// The rules of [`FramePayoff::given_up`] after `elapsed` ns, `progress` (0..=1)
-    /// of the frame done.
-    fn gives_up(&self, elapsed: f64, progress: f64) -> bool {
+    /// of the frame done; the early rule only when `early` (its pace is in triangles met, a
+    /// progress of the same kind).
+    fn gives_up(&self, elapsed: f64, progress: f64, early: bool) -> bool {
         let expected = self.direct_frame_ns.unwrap_or_else(|| self.estimated_direct_ns());
         let least = MIN_ALLOWANCE_TIME.as_nanos() as f64;
         self.direct_work > 0
             && ((elapsed > expected.max(least) && elapsed * (1.0 - progress) > ABANDON_MARGIN * expected * progress)
-                || self.gives_up_early(elapsed, progress, expected.max(least)))
+                || (early && self.gives_up_early(elapsed, progress, expected.max(least))))
     }
 
     /// The early rule, for the renderer's first frame (no visible list or cells of a last
@@ -372,13 +373,14 @@ impl FramePayoff {
     }
 
     /// For a renderer whose tests are not per triangle (rays): `progress` (0..=1) of the
-    /// frame's tests is done; weighs giving up by the same rules as the triangle count does
-    /// ([`FramePayoff::given_up`]) and returns it. Never gives up when payoff is off or the
-    /// frame's work is unknown.
+    /// frame's tests is done; weighs giving up by the same rule as the triangle count does
+    /// ([`FramePayoff::given_up`]), not the early rule (whose pace is in triangles met: at the
+    /// first wave of rays, none of their gain is known), and returns it. Never gives up when
+    /// payoff is off or the frame's work is unknown.
     pub fn progressed(&mut self, progress: f64) -> bool {
         if self.enabled && !self.given_up {
             let elapsed = self.start.elapsed().as_nanos() as f64;
-            let given_up = self.gives_up(elapsed, progress.clamp(0.0, 1.0)) || self.forced_to_give_up();
+            let given_up = self.gives_up(elapsed, progress.clamp(0.0, 1.0), false) || self.forced_to_give_up();
             self.given_up = given_up;
             self.stopped |= given_up;
         }
@@ -580,7 +582,7 @@ mod tests {
     /// A renderer's first frame is given up once its tests
     /// met a quarter of its work and removed less than an eighth of what they met, and its
     /// pace says the whole would take longer than the margin; not one whose tests remove, nor
-    /// one on pace (one thread), nor one still drawing untested, nor a
+    /// one on pace (one thread), nor one still drawing untested, nor by its rays' progress, nor a
     /// later frame, nor once a direct frame was measured.
     #[test]
     fn gives_up_early_a_first_frame_whose_tests_remove_nothing() {
@@ -615,6 +617,13 @@ mod tests {
         f.tests_begin(Instant::now());
         f.rasterized(3_000, Duration::from_millis(30), false);
         assert!(f.given_up(), "its tests met a quarter and removed nothing");
+        // Rays (`progressed`): the early rule does not weigh them, the triangle check does.
+        let mut f = p.begin(ago(40));
+        f.direct_work = 0;
+        f.rasterized(3_000, Duration::from_millis(30), false);
+        f.direct_work = 10_000;
+        assert!(!f.progressed(0.0), "no ray's gain known yet");
+        assert!(f.check(Instant::now()), "its tests met a quarter and removed nothing");
         let mut later = Payoff::new(true, 10_000);
         later.set_direct(None, 10_000, 2);
         later.end(&later.begin(Instant::now()));

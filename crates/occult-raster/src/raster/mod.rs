@@ -780,7 +780,12 @@ impl Rasterizer {
             // Every band set up every triangle: each counted them all.
             counts.triangles_rasterized = results[0].0;
             counts.fragments_written = results.iter().map(|r| r.1).sum();
-            counts.triangles_shared = if bands > 1 { counts.triangles_submitted } else { 0 };
+            // Without helpers the caller draws every band in turn: not shared.
+            counts.triangles_shared = if bands > 1 && self.helpers.is_some() {
+                counts.triangles_submitted
+            } else {
+                0
+            };
             // The threads' time together: the setup counted once per band, so a triangle's
             // cost is overestimated by the setup (draws stay banded the more readily).
             self.measure(total, results.iter().map(|r| r.2).sum());
@@ -794,7 +799,12 @@ impl Rasterizer {
                 self.measure(total, thread_ns);
                 counts.triangles_rasterized = rasterized;
                 counts.fragments_written = written;
-                counts.triangles_shared = if threads > 1 { counts.triangles_submitted } else { 0 };
+                // Blocks are handed out whole: a pass of one block is one worker's.
+                counts.triangles_shared = if threads > 1 && total > merge::SORT_LAST_BLOCK {
+                    counts.triangles_submitted
+                } else {
+                    0
+                };
                 return counts;
             }
         }

@@ -1340,7 +1340,8 @@ impl Lzb {
         }
         // A cancelled frame measures nothing: the rates below stay as they were.
         crate::check_cancel(&self.raster)?;
-        if self.opts.near_cull && self.opts.near_temporal && !payoff.given_up() {
+        // A frame given up is finished whole too: what it shows leads the next.
+        if self.opts.near_cull && self.opts.near_temporal {
             let t = Instant::now();
             self.remember_visible(frame, &instances);
             stats.phases.add(Phase::Other, t.elapsed());

@@ -323,7 +323,7 @@ impl Lzb {
                 } else {
                     pairs.extend(near[leaves.start as usize..leaves.end as usize].iter().copied());
                 }
-                state[inst as usize].drawn += count;
+                state[inst as usize].drawn = state[inst as usize].drawn.saturating_add(count);
                 gathered += count as usize;
             }
             // Draw it: index lists per instance (each triangle once), whole meshes whole.

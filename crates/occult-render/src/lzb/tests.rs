@@ -318,6 +318,40 @@ fn far_cull_drops_the_far_leaves_behind_the_near_set() {
     assert!(stats.counters.get("rays") > 0);
 }
 
+/// A frame given up between waves of rays (`crate::payoff`; its near set drawn whole,
+/// untested): no ray is cast, its far leaves are drawn directly, it is not drawn again, and
+/// it is the reference frame.
+#[test]
+fn a_frame_given_up_before_its_rays_finishes_directly() {
+    use crate::direct::tests::ForceDirect;
+    // A near wall too small to hide the far one: far leaves left to the rays.
+    let (scene, view, reference) = walls(1.5);
+    let opts = LzbOptions {
+        plane: Plane::Static,
+        plane_fraction: 0.8,
+        near_cull: false,
+        near_temporal: false,
+        ..LzbOptions::default()
+    };
+    let mut lzb = Lzb::new(scene, &RenderOptions::default(), &opts).expect("lzb builds");
+    lzb.force(0, true);
+    let mut frame = Frame::new(96, 64).expect("a frame");
+    let stats = lzb.render(&view, &mut frame).expect("a frame");
+    assert!(frame.same_visibility(&reference));
+    assert_eq!(stats.counters.get("payoff_stopped"), 1);
+    assert!(stats.counters.get("oor_polygons") > 0, "its far leaves were projected");
+    assert_eq!(stats.counters.get("rays"), 0, "given up before the first wave");
+    assert!(
+        stats.counters.get("far_direct_triangles") > 0,
+        "the far wall drawn directly"
+    );
+    assert_eq!(
+        stats.counters.get(crate::direct::COUNTER),
+        0,
+        "finished, not drawn again"
+    );
+}
+
 /// No leaf and no hit: nothing costs anything; the plane is the near plane.
 #[test]
 fn nothing_in_view_puts_the_plane_at_the_near_plane() {

@@ -64,8 +64,7 @@
 //!   expected to pay and the frame is drawn again directly, untested, and measured as the
 //!   first direct frame (counters `payoff_screened`, `payoff_direct`); weighed as a culled
 //!   frame that lost, it starts a run of direct frames (when it took at least
-//!   [`MIN_ALLOWANCE_TIME`](crate::payoff::MIN_ALLOWANCE_TIME)), as `lzb`'s redrawn frames
-//!   do. A forest or a city seen from outside no longer pays its tests and its small draws
+//!   [`MIN_ALLOWANCE_TIME`](crate::payoff::MIN_ALLOWANCE_TIME)). A forest or a city seen from outside no longer pays its tests and its small draws
 //!   first. The screening counts triangles, not time: it holds on small scenes too.
 //!
 //! # First frame
