@@ -495,8 +495,10 @@ impl Choice {
     /// measured). A bound in culling's favour: a culled frame removes less, drawing occluders
     /// first.
     fn worth_probing(&self, hidden: u64, work: u64) -> bool {
+        if work == 0 {
+            return true;
+        }
         match (self.model(), self.last_culled) {
-            (_, _) if work == 0 => true,
             (Some(m), Some((total, submitted, culled_work, drawn))) => {
                 let share = (work as f64 / culled_work.max(1) as f64).min(1.0);
                 let cost = (total.as_nanos() as f64 - m.predict_after(submitted, drawn)) * share;

@@ -280,16 +280,16 @@ impl Lzb {
                 // The rest of a frame given up: an instance wholly near of which at most half
                 // was drawn is drawn whole (its vertices shared, no list to build), once.
                 let at = &mut state[inst as usize];
-                if finishing && !is_whole && at.whole {
-                    continue;
-                }
-                if finishing && !is_whole && at.all_near {
+                if finishing && !is_whole {
+                    if at.whole {
+                        continue;
+                    }
                     let all = self
                         .scene
                         .node(rec.node)
                         .mesh()
                         .map_or(0, occult_core::Mesh::triangle_count);
-                    if 2 * at.drawn as usize <= all {
+                    if at.all_near && 2 * at.drawn as usize <= all {
                         at.whole = true;
                         whole.push((*rec, *base));
                         gathered += all;
