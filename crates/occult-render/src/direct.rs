@@ -112,6 +112,9 @@ pub struct DirectFrames {
     pyramid: Option<ZPyramid>,
     /// The threads a direct frame's draws are shared over (the renderer's rasterizer's).
     threads: usize,
+    /// Workers that draw a culled frame at once, each on one thread (strips of columns,
+    /// [`DirectFrames::culled_on`]); 1 when a culled frame is one walk.
+    culled_workers: usize,
 }
 
 impl DirectFrames {
@@ -126,7 +129,17 @@ impl DirectFrames {
             choice: Choice::default(),
             pyramid: None,
             threads: raster.thread_count().max(1),
+            culled_workers: 1,
         })
+    }
+
+    /// The same, for a renderer whose culled frames are drawn by `workers` workers at once,
+    /// each on one thread ([`crate::columns`]): their statistics' rasterization time is the
+    /// workers' together, so the frame's cost of a triangle in wall time, which the time of
+    /// the frame is weighed against, is that over the workers.
+    pub fn culled_on(mut self, workers: usize) -> Self {
+        self.culled_workers = workers.max(1);
+        self
     }
 
     /// The same, judging the renderer's first culled frame (of at least
@@ -258,7 +271,10 @@ impl DirectFrames {
     ) -> Result<bool> {
         let work = self.choice.last_work;
         let submitted = stats.triangles_submitted;
+        // A triangle's cost on one thread, and in the frame's wall time (less when several
+        // workers drew at once).
         let raster_ns = stats.phases.get(Phase::Raster).as_nanos() as f64 / submitted.max(1) as f64;
+        let wall_ns = raster_ns / self.culled_workers as f64;
         let first = self.choice.model().is_none();
         // The renderer's first culled frame: a direct frame is measured next unless it paid
         // plainly by time alone.
@@ -269,7 +285,7 @@ impl DirectFrames {
             && if first_frame {
                 Self::plainly_first(tests_paid, total, raster_ns / self.threads as f64, work)
             } else {
-                Self::plainly(tests_paid, total, submitted, raster_ns, work)
+                Self::plainly(tests_paid, total, submitted, wall_ns, work)
             };
         // Culling pays only if drawing the hidden triangles costs more than what culling cost
         // this frame beyond drawing what it submitted (both at this frame's rate: a direct
@@ -280,8 +296,7 @@ impl DirectFrames {
             && total >= MIN_ALLOWANCE_TIME
             && (slower
                 || (!first_frame
-                    && raster_ns * (self.hidden_triangles(view, frame)? + submitted) as f64
-                        <= total.as_nanos() as f64));
+                    && wall_ns * (self.hidden_triangles(view, frame)? + submitted) as f64 <= total.as_nanos() as f64));
         if cannot_pay {
             stats.counters.add(SCREENED, 1);
         }

@@ -76,6 +76,7 @@ pub mod bands;
 #[cfg(test)]
 mod cancel_tests;
 pub mod clusters;
+pub mod columns;
 pub mod direct;
 pub mod frustum;
 mod hash;

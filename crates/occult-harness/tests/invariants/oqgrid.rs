@@ -34,6 +34,13 @@ identical_on_every_generator! {
     /// The pyramid over a uniform grid, gathered draws, two threads.
     pyramid_uniform_flush_is_identical_on_every_generator:
         assert_variant_identical_on_every_generator("oqgrid:grid=uniform,resolution=16,flush=300,whole=0", 2);
+    /// Strips of columns, each queried against its own depth of them by a worker a thread.
+    columns_are_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("oqgrid:parallel=columns", 2);
+    /// Three strips a worker, every frame queried, whole draws: a box judged by its strip's
+    /// pixels alone.
+    columns_without_payoff_are_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("oqgrid:parallel=columns,strips=3,payoff=off,whole=1", 2);
 }
 
 #[test]
@@ -71,6 +78,18 @@ fn identical_on_paths() {
             "oqgrid:test=query,whole=0,nodes=off",
             "forest:trees=3,patches=2,levels=1",
             "circle:10",
+        ),
+        // Strips whose columns move from frame to frame, each with its own visible list.
+        ("oqgrid:parallel=columns", "city:blocks=3,detail=3", "street:12"),
+        (
+            "oqgrid:parallel=columns,strips=1,payoff=off",
+            "forest:trees=3,patches=2,levels=1",
+            "circle:10",
+        ),
+        (
+            "oqgrid:parallel=columns,bands=2",
+            "plant:units=2,floors=2,pipes=10",
+            "street:12",
         ),
     ] {
         assert_identical_on_path(&spec(algo), scene, path, 160, 120);
@@ -110,6 +129,9 @@ fn bad_parameters_are_clear_errors() {
         ("oqgrid:flush=0", "flush=0"),
         ("oqgrid:whole=101", "whole=101"),
         ("oqgrid:nodes=maybe", "nodes=maybe"),
+        ("oqgrid:strips=0", "strips=0"),
+        ("oqgrid:strips=17", "strips=17"),
+        ("oqgrid:parallel=rows", "parallel=rows"),
     ] {
         let m = build_err(s);
         assert!(

@@ -180,6 +180,7 @@ use occult_core::{Affine3A, NodeId, NodeKind, Scene, View};
 use occult_raster::{Frame, Rasterizer, ZPyramid};
 use occult_spatial::{HybridOctree, HybridOctreeConfig};
 
+use crate::columns::{Columns, StripWorker, BUSY, IDLE, STRIPS};
 use crate::direct::DirectFrames;
 use crate::list_choice::ListChoice;
 use crate::nodes::{instance_boxes, per_node, triangle_boxes};
@@ -222,11 +223,8 @@ pub enum Distribution {
     Auto,
 }
 
-/// Triangle instances from which `parallel=auto` chooses the columns distribution. The
-/// strips' fixed part (a second frame cleared, the columns copied, the upper octree levels
-/// walked per strip) is about a millisecond a frame at 1280x720; it pays on the suite's scenes
-/// of 9-45 M triangles (frames of 60-190 ms with `zbuffer`) and not on those of 1-5 M.
-pub const AUTO_COLUMNS: u64 = 8_000_000;
+/// Triangle instances from which `parallel=auto` chooses the columns distribution.
+pub use crate::columns::AUTO_COLUMNS;
 
 impl Distribution {
     /// [`Distribution::Auto`] resolved for `scene` drawn on `threads` threads; others as they are.
@@ -243,11 +241,9 @@ impl Distribution {
 /// range is 1..=32).
 const MAX_DEPTH: u32 = 32;
 
-/// Most workers of a distribution.
-pub const MAX_WORKERS: usize = 8;
-
-/// Most strips of columns a worker under [`Distribution::Columns`].
-pub const MAX_STRIPS: usize = 16;
+/// Most workers of a distribution, and most strips of columns a worker under
+/// [`Distribution::Columns`].
+pub use crate::columns::{MAX_STRIPS, MAX_WORKERS};
 
 /// Tunables of [`Hzb`]; every part can be switched off to measure it.
 #[derive(Clone, Debug, PartialEq)]
@@ -465,9 +461,6 @@ pub const COUNTERS: [&str; 22] = [
     STRIPS,
 ];
 
-/// The counter of the strips of columns a frame was drawn as (`parallel=columns`).
-pub(crate) const STRIPS: &str = "strips";
-
 /// Every counter a frame may report: [`COUNTERS`], then the workers' busy and idle times.
 const DECLARED: [&str; COUNTERS.len() + 2 * MAX_WORKERS] = {
     let mut all = [""; COUNTERS.len() + 2 * MAX_WORKERS];
@@ -627,6 +620,32 @@ struct Worker {
     list_way: ListWay,
 }
 
+impl StripWorker for Worker {
+    fn raster(&mut self) -> &mut Rasterizer {
+        &mut self.raster
+    }
+
+    fn ready(&mut self, width: u32, height: u32) -> Result<bool> {
+        if !matches!(&self.frame, Some(f) if f.width() == width && f.height() == height) {
+            self.frame = None;
+            self.frame = Some(Frame::new(width, height)?);
+            self.pyramid = None;
+        }
+        let made = !matches!(&self.pyramid, Some(p) if p.width() == width && p.height() == height);
+        if made {
+            self.pyramid = Some(ZPyramid::new(width, height)?);
+        }
+        Ok(made)
+    }
+
+    fn frame(&self) -> &Frame {
+        match &self.frame {
+            Some(f) => f,
+            None => unreachable!("made by `ready` before a strip is drawn"),
+        }
+    }
+}
+
 impl Worker {
     fn memory_bytes(&self) -> usize {
         self.pyramid.as_ref().map_or(0, ZPyramid::memory_bytes)
@@ -662,20 +681,15 @@ pub struct Hzb {
     /// The rasterizer of direct frames under the columns distribution (on all threads; the
     /// workers' rasterize on one each).
     direct_raster: Option<Rasterizer>,
-    /// The strips' columns under the columns distribution.
-    columns: crate::bands::ColumnShare,
-    /// Under the columns distribution, what each strip of columns keeps from frame to frame.
-    strips: Vec<std::sync::Mutex<Strip>>,
+    /// The strips of the columns distribution (none under the others).
+    columns: Columns<StripState>,
 }
 
-/// One strip of columns of [`Distribution::Columns`]: what its walk keeps from frame to frame,
-/// whichever worker draws it.
-struct Strip {
+/// What a strip of columns of [`Distribution::Columns`] keeps from frame to frame besides its
+/// payoff, whichever worker draws it.
+struct StripState {
     visible: Vec<VisEntry>,
     list_way: ListWay,
-    payoff: Payoff,
-    /// How long it took last frame (after the one-time setup of the worker that drew it).
-    time: std::time::Duration,
 }
 
 /// What decides whether a frame draws the visible list first: its precision at the last
@@ -703,28 +717,6 @@ impl Default for ListWay {
 
 /// The counter of the visible list's precision at the last recheck, percent.
 pub(crate) const PRECISION: &str = "visible_list_precision_pct";
-
-/// Counter names per worker (counters are named by static strings).
-pub(crate) const BUSY: [&str; MAX_WORKERS] = [
-    "worker0_busy_us",
-    "worker1_busy_us",
-    "worker2_busy_us",
-    "worker3_busy_us",
-    "worker4_busy_us",
-    "worker5_busy_us",
-    "worker6_busy_us",
-    "worker7_busy_us",
-];
-pub(crate) const IDLE: [&str; MAX_WORKERS] = [
-    "worker0_idle_us",
-    "worker1_idle_us",
-    "worker2_idle_us",
-    "worker3_idle_us",
-    "worker4_idle_us",
-    "worker5_idle_us",
-    "worker6_idle_us",
-    "worker7_idle_us",
-];
 
 /// Ensures `slot` holds a pyramid of the frame's size, cleared.
 fn ready_pyramid(slot: &mut Option<ZPyramid>, width: u32, height: u32) -> Result<&mut ZPyramid> {
@@ -833,28 +825,29 @@ impl Hzb {
             (true, Distribution::Off) => (Some(DirectFrames::new(scene.clone(), &workers[0].raster)?), None),
             (true, Distribution::Columns) => {
                 let raster = crate::scene_rasterizer(&scene, options)?;
+                // Not `culled_on(workers)`: weighed at the strips' cost of a triangle in thread
+                // time, the culled frames that win on `city:blocks=32`'s orbit are kept
+                // (measured, two runs: 1.32 and 1.23× `zbuffer`; 1.09 and 0.94× weighed in
+                // wall time, which sent them to direct frames).
                 (Some(DirectFrames::new(scene.clone(), &raster)?), Some(raster))
             }
             _ => (None, None),
         };
         let strips = match hzb.distribution {
-            Distribution::Columns => (0..hzb.workers * hzb.strips)
-                .map(|_| {
-                    std::sync::Mutex::new(Strip {
-                        visible: Vec::new(),
-                        list_way: ListWay::default(),
-                        payoff: Payoff::new(hzb.payoff, scene.item_count()),
-                        time: std::time::Duration::ZERO,
-                    })
-                })
-                .collect(),
-            _ => Vec::new(),
+            Distribution::Columns => hzb.workers * hzb.strips,
+            _ => 0,
         };
+        let columns = Columns::new(strips, || {
+            let state = StripState {
+                visible: Vec::new(),
+                list_way: ListWay::default(),
+            };
+            (state, Payoff::new(hzb.payoff, scene.item_count()))
+        });
         Ok(Self {
             direct,
             direct_raster,
-            strips,
-            columns: crate::bands::ColumnShare::default(),
+            columns,
             scene,
             options: hzb,
             per_node: PerNode {
@@ -1053,15 +1046,11 @@ impl Hzb {
 }
 
 impl Hzb {
-    /// Sort-first by columns ([`Distribution::Columns`]): the view is cut into strips of
-    /// columns (`bands[k]`, the frame's view restricted to strip `k`'s columns), handed out
-    /// one at a time, the slowest of last frame first, to whichever worker is free. A worker
-    /// walks the whole scene for the strip's view into its own frame (made on its thread at the
-    /// first frame or a new size), cleared over the strip and blocked beside it, with its own
-    /// pyramid and one rasterizer thread, and the strip's own visible list and payoff; then it
-    /// copies the strip's columns into `frame` (one worker at a time). The statistics add the
-    /// strips' counts, counters and phases (thread time: together more than the frame's wall
-    /// time; a triangle drawn in two strips counts twice); the copies are `other`.
+    /// Sort-first by columns ([`Distribution::Columns`], [`crate::columns`]): each strip of
+    /// columns (`bands[k]`, the frame's view restricted to strip `k`'s columns) walked by a
+    /// worker into its own frame, cleared over the strip and blocked beside it, with its own
+    /// pyramid and one rasterizer thread, and the strip's own visible list and payoff. The
+    /// phases add the strips' thread times; what a strip's walk did not time is its culling.
     ///
     /// Also returns how long making the workers' frames and pyramids took (at the first frame
     /// or a new size; the slowest worker's): a one-time cost that the frame-level choice
@@ -1072,45 +1061,16 @@ impl Hzb {
         recheck: bool,
         bands: &[View],
     ) -> Result<(FrameStats, std::time::Duration)> {
-        use std::sync::atomic::{AtomicUsize, Ordering};
-        use std::sync::{Mutex, PoisonError};
-        use std::time::Duration;
-        let (scene, octrees, options) = (&*self.scene, &self.octrees[..], &self.options);
-        let (per_node, strips) = (&self.per_node, &self.strips[..]);
-        let (width, height) = (frame.width(), frame.height());
-        // The slowest strips of last frame first (the longest jobs first balance best).
-        let mut order: Vec<usize> = (0..bands.len()).collect();
-        order.sort_by_key(|&k| std::cmp::Reverse(strips[k].lock().unwrap_or_else(PoisonError::into_inner).time));
-        let next = AtomicUsize::new(0);
-        let out = Mutex::new(&mut *frame);
-        let copied = Mutex::new(Duration::ZERO);
-        /// What a worker did: per strip drawn its statistics and time, its busy time, its setup.
-        type Done = (Vec<(FrameStats, Duration)>, Duration, Duration);
-        let job = |w: &mut Worker| -> Result<Done> {
-            let t = Instant::now();
-            if !matches!(&w.frame, Some(f) if f.width() == width && f.height() == height) {
-                w.frame = None;
-                w.frame = Some(Frame::new(width, height)?);
-                w.pyramid = None;
-            }
-            let made = !matches!(&w.pyramid, Some(p) if p.width() == width && p.height() == height);
-            if made {
-                w.pyramid = Some(ZPyramid::new(width, height)?);
-            }
-            let (Some(f), Some(p)) = (w.frame.as_mut(), w.pyramid.as_mut()) else {
-                unreachable!("made above");
-            };
-            let setup = if made { t.elapsed() } else { Duration::ZERO };
-            let mut done = Vec::new();
-            loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                let Some(&k) = order.get(i) else { break };
-                let band = &bands[k];
-                let mut strip = strips[k].lock().unwrap_or_else(PoisonError::into_inner);
+        let (scene, octrees, options, per_node) = (&*self.scene, &self.octrees[..], &self.options, &self.per_node);
+        let workers = self.workers.iter_mut().collect();
+        self.columns
+            .render(workers, frame, bands, &[PRECISION], |w: &mut Worker, strip, band| {
                 let t = Instant::now();
+                let (Some(f), Some(p)) = (w.frame.as_mut(), w.pyramid.as_mut()) else {
+                    unreachable!("made by `ready`");
+                };
                 let (_, _, cleared) = crate::begin_frame(&mut w.raster, band, f)?;
                 p.clear_for(f);
-                let strip = &mut *strip;
                 let mut stats = walk_frame(
                     scene,
                     octrees,
@@ -1119,8 +1079,8 @@ impl Hzb {
                     &mut w.raster,
                     f,
                     p,
-                    &mut strip.visible,
-                    &mut strip.list_way,
+                    &mut strip.state.visible,
+                    &mut strip.state.list_way,
                     walk::Share::ALL,
                     recheck,
                     &mut w.stamps,
@@ -1128,69 +1088,12 @@ impl Hzb {
                     &mut strip.payoff,
                 );
                 stats.phases.merge(&cleared.phases);
-                strip.time = t.elapsed();
                 // What the walk did not time is its culling.
                 let p = &stats.phases;
                 let accounted = p.get(Phase::Clear) + p.get(Phase::Raster) + p.get(Phase::DepthStructure);
-                stats.phases.add(Phase::Cull, strip.time.saturating_sub(accounted));
-                let c = Instant::now();
-                {
-                    let mut out = out.lock().unwrap_or_else(PoisonError::into_inner);
-                    copy_columns(&mut out, f, band.columns());
-                }
-                *copied.lock().unwrap_or_else(PoisonError::into_inner) += c.elapsed();
-                done.push((stats, strip.time));
-                crate::check_cancel(&w.raster)?;
-            }
-            Ok((done, t.elapsed(), setup))
-        };
-        let results = crate::bands::on_threads(self.workers.iter_mut().collect(), job);
-        let results = results.into_iter().collect::<Result<Vec<_>>>()?;
-        let slowest = results.iter().map(|r| r.1).max().unwrap_or_default();
-        let mut stats = FrameStats::default();
-        let mut precision = (0, 0);
-        for (k, (done, busy, _)) in results.iter().enumerate() {
-            for (s, _) in done {
-                stats.add_counts(s);
-                stats.counters.merge(&s.counters);
-                stats.phases.merge(&s.phases);
-                if s.counters.0.iter().any(|(k, _)| *k == PRECISION) {
-                    precision = (precision.0 + s.counters.get(PRECISION), precision.1 + 1);
-                }
-            }
-            stats.counters.add(BUSY[k], busy.as_micros() as u64);
-            stats.counters.add(IDLE[k], (slowest - *busy).as_micros() as u64);
-        }
-        // The strips' precisions, averaged (not added as the other counters are).
-        if let Some((_, v)) = stats.counters.0.iter_mut().find(|(k, _)| *k == PRECISION) {
-            *v = precision.0 / precision.1.max(1);
-        }
-        stats.counters.add(STRIPS, bands.len() as u64);
-        stats.phases.add(
-            Phase::Other,
-            copied.into_inner().unwrap_or_else(PoisonError::into_inner),
-        );
-        // Strips in column order, each with its time.
-        let times: Vec<Duration> = self
-            .strips
-            .iter_mut()
-            .map(|s| s.get_mut().unwrap_or_else(PoisonError::into_inner).time)
-            .collect();
-        self.columns.balance(&times);
-        let setup = results.iter().map(|r| r.2).max().unwrap_or_default();
-        Ok((stats, setup))
-    }
-}
-
-/// Copies the pixels of `columns` of `from` into `out` (frames of one size).
-fn copy_columns(out: &mut Frame, from: &Frame, columns: std::ops::Range<u32>) {
-    let w = out.width() as usize;
-    let c = columns.start as usize..columns.end as usize;
-    let (depth, items) = out.buffers_mut();
-    for (row, (d, i)) in depth.chunks_mut(w).zip(items.chunks_mut(w)).enumerate() {
-        let at = row * w;
-        d[c.clone()].copy_from_slice(&from.depth()[at + c.start..at + c.end]);
-        i[c.clone()].copy_from_slice(&from.items()[at + c.start..at + c.end]);
+                stats.phases.add(Phase::Cull, t.elapsed().saturating_sub(accounted));
+                Ok(stats)
+            })
     }
 }
 
@@ -1227,18 +1130,10 @@ impl Renderer for Hzb {
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
         check_frame(view, frame)?;
         let start = Instant::now();
-        let columns = match self.options.distribution {
-            Distribution::Columns => self.columns.ranges(view.columns().len() as u32, self.strips.len()),
+        let bands = match self.options.distribution {
+            Distribution::Columns => self.columns.views(view, "hzb")?,
             _ => Vec::new(),
         };
-        let bands = columns
-            .iter()
-            .map(|c| {
-                let first = view.columns().start;
-                view.with_region(first + c.start..first + c.end, view.rows())
-            })
-            .collect::<std::result::Result<Vec<View>, _>>()
-            .map_err(|e| RenderError::BadParameter(format!("hzb: parallel=columns: {e}")))?;
         if let Some(direct) = &mut self.direct {
             let raster = self.direct_raster.as_mut().unwrap_or(&mut self.workers[0].raster);
             if let Some(stats) = direct.render_if_due(raster, view, frame)? {
@@ -1249,19 +1144,7 @@ impl Renderer for Hzb {
                     direct.arm(&mut w.payoff, w.raster.thread_count());
                 }
             } else {
-                // Each strip against its share of a whole direct frame: the work in view by its
-                // share of the columns, on one thread, in the time a worker has for it (the
-                // frame's, over the strips each worker draws).
-                let (expected, work) = (direct.expected_ns(), direct.work());
-                let width = view.columns().len().max(1) as f64;
-                let per_worker = bands.len() as f64 / self.workers.len() as f64;
-                for (strip, band) in self.strips.iter_mut().zip(&bands) {
-                    let share = band.columns().len() as f64 / width;
-                    let strip = strip.get_mut().unwrap_or_else(std::sync::PoisonError::into_inner);
-                    strip
-                        .payoff
-                        .set_direct(expected.map(|e| e / per_worker), (work as f64 * share) as u64, 1);
-                }
+                self.columns.arm(direct, view, &bands, self.workers.len());
             }
         }
         self.frames_since_recheck += 1;
@@ -1311,12 +1194,7 @@ impl Renderer for Hzb {
         crate::check_cancel(&self.workers[0].raster)?;
         if let Some(direct) = &mut self.direct {
             let paid = match self.options.distribution {
-                Distribution::Columns => self.strips.iter_mut().take(bands.len()).all(|s| {
-                    s.get_mut()
-                        .unwrap_or_else(std::sync::PoisonError::into_inner)
-                        .payoff
-                        .last_paid()
-                }),
+                Distribution::Columns => self.columns.paid(bands.len()),
                 _ => self.workers.iter().all(|w| w.payoff.last_paid()),
             };
             let t = Instant::now();
@@ -1352,16 +1230,8 @@ impl Renderer for Hzb {
             + self.direct.as_ref().map_or(0, DirectFrames::memory_bytes)
             + self.direct_raster.as_ref().map_or(0, Rasterizer::memory_bytes)
             + self
-                .strips
-                .iter()
-                .map(|s| {
-                    s.lock()
-                        .unwrap_or_else(std::sync::PoisonError::into_inner)
-                        .visible
-                        .capacity()
-                        * std::mem::size_of::<VisEntry>()
-                })
-                .sum::<usize>()
+                .columns
+                .memory_bytes(|s| s.visible.capacity() * std::mem::size_of::<VisEntry>())
     }
 }
 #[cfg(test)]
@@ -1372,11 +1242,8 @@ impl crate::direct::tests::ForceDirect for Hzb {
         for w in &mut self.workers {
             w.payoff.force_stop = abandon;
         }
-        for s in &mut self.strips {
-            s.get_mut()
-                .unwrap_or_else(std::sync::PoisonError::into_inner)
-                .payoff
-                .force_stop = abandon;
+        for s in self.columns.strips_mut() {
+            s.payoff.force_stop = abandon;
         }
     }
 

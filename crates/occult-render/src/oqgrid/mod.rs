@@ -69,6 +69,16 @@
 //!   (`frustum`'s way, per triangle in view), runs of frames are drawn directly (counter
 //!   `payoff_direct`), querying probed between them; a frame headed for more than a direct
 //!   frame's time is given up: it stops querying the same way, keeping what it drew.
+//! - Strips of columns ([`OqGridOptions::parallel`], `parallel=columns`, [`crate::columns`]):
+//!   a queried frame's walk is serial and its draws too small to share over the rasterizer's
+//!   threads, so on two cores it runs on one while a direct frame runs on both. Under
+//!   `columns` the screen is cut into `strips` strips of columns a worker (a worker a
+//!   rasterizer thread), each queried and drawn by a worker as a view restricted to its
+//!   columns, against its own depth of them, with its own visible list, shares and payoff; the
+//!   frame-level choice stays the renderer's, its direct frames drawn whole on all threads, and
+//!   it weighs a queried frame at its cost of a triangle in wall time (the workers' raster time
+//!   over their count). `auto`, the default, takes `columns` on scenes of at least
+//!   [`crate::columns::AUTO_COLUMNS`] triangle instances drawn on two threads or more.
 //!
 //! # Instanced scenes
 //! The scene DAG is not flattened. A grid is built per *unique* node, in the node's own space:
@@ -119,23 +129,25 @@
 //! threads.
 
 mod query;
+mod walk;
+
+use walk::{Depth, Grids, Temporal};
 
 pub use query::{any_sample_passes, query_cell, QueryOutcome};
 
-use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use occult_core::{Containment, Mat4, Mesh, NodeId, NodeKind, Scene, Vec3, View};
-use occult_raster::{Draw, DrawTriangles, Frame, PixelRect, Rasterizer, ZPyramid};
+use occult_core::{Mat4, NodeId, NodeKind, Scene, View};
+use occult_raster::{Frame, Rasterizer, ZPyramid};
 pub use occult_spatial::grid::Resolution;
-use occult_spatial::grid::{GridCell, GridConfig, GridError, MeshTriangles, NestedGrid, WeightedBoxes, NO_CHILD};
+use occult_spatial::grid::{GridConfig, GridError, MeshTriangles, NestedGrid, WeightedBoxes};
 
+use crate::columns::{Columns, StripWorker, MAX_STRIPS, MAX_WORKERS};
 use crate::direct::DirectFrames;
-use crate::hash::FxBuild;
 use crate::params::read_params;
-use crate::payoff::{FramePayoff, Payoff, DIRECT_BATCH};
-use crate::walk::{NodeAt, NodeTest, Placed, SceneWalk, Visitor};
+use crate::payoff::Payoff;
+use crate::walk::Placed;
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
 
 /// Registry entry: every [`OqGridOptions`] field is a parameter.
@@ -228,6 +240,16 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             default: "on",
             help: "stop querying for the rest of a frame once queries cost more than they save, and draw the rest directly; draw runs of frames as frustum does while queried frames are slower than such direct frames (not in the paper)",
         },
+        ParamDoc {
+            key: "parallel",
+            default: "auto",
+            help: "off: one walk, parallelism the rasterizer's own; columns: each of the rasterizer's threads (at most 8) queries and draws strips of the screen's columns with its own depth (not in the paper); auto: columns on scenes of at least 8,000,000 triangle instances drawn on 2 threads or more, else off",
+        },
+        ParamDoc {
+            key: "strips",
+            default: "2",
+            help: "parallel=columns: strips of columns a worker, 1..=16, handed out one at a time to whichever worker is free",
+        },
     ],
     counters: &[
         "cells_visited",
@@ -249,6 +271,23 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         crate::payoff::COUNTERS[1],
         crate::direct::COUNTER,
         crate::direct::SCREENED,
+        crate::columns::STRIPS,
+        crate::columns::BUSY[0],
+        crate::columns::BUSY[1],
+        crate::columns::BUSY[2],
+        crate::columns::BUSY[3],
+        crate::columns::BUSY[4],
+        crate::columns::BUSY[5],
+        crate::columns::BUSY[6],
+        crate::columns::BUSY[7],
+        crate::columns::IDLE[0],
+        crate::columns::IDLE[1],
+        crate::columns::IDLE[2],
+        crate::columns::IDLE[3],
+        crate::columns::IDLE[4],
+        crate::columns::IDLE[5],
+        crate::columns::IDLE[6],
+        crate::columns::IDLE[7],
     ],
     conservative: true,
     bands: true,
@@ -274,6 +313,31 @@ pub enum CellTest {
     /// A max-depth pyramid of the current depth first, the query only where the pyramid does
     /// not find the cell hidden ([`query_cell`]).
     Pyramid,
+}
+
+/// Whether culled frames are drawn as strips of columns ([`crate::columns`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Parallel {
+    /// One walk; parallelism is the rasterizer's own.
+    Off,
+    /// Each worker (one a rasterizer thread, at most [`MAX_WORKERS`]) queries and draws strips
+    /// of the screen's columns, each against its own depth of them.
+    Columns,
+    /// [`Parallel::Columns`] on a scene of at least [`crate::columns::AUTO_COLUMNS`] triangle
+    /// instances drawn on two threads or more, else [`Parallel::Off`]; chosen when the renderer
+    /// is built.
+    Auto,
+}
+
+impl Parallel {
+    /// [`Parallel::Auto`] resolved for `scene` drawn on `threads` threads; others as they are.
+    pub fn resolve(self, scene: &Scene, threads: usize) -> Self {
+        match self {
+            Self::Auto if scene.item_count() >= crate::columns::AUTO_COLUMNS && threads >= 2 => Self::Columns,
+            Self::Auto => Self::Off,
+            p => p,
+        }
+    }
 }
 
 /// Order in which a grid's cells are queried.
@@ -334,6 +398,10 @@ pub struct OqGridOptions {
     pub payoff: bool,
     /// Bound on all grids' bytes, checked before allocating.
     pub max_memory_bytes: usize,
+    /// Culled frames as strips of columns (not in the paper).
+    pub parallel: Parallel,
+    /// Under [`Parallel::Columns`], strips of columns a worker (1 ..= [`MAX_STRIPS`]).
+    pub strips: usize,
 }
 
 impl Default for OqGridOptions {
@@ -356,6 +424,8 @@ impl Default for OqGridOptions {
             coherence: true,
             payoff: true,
             max_memory_bytes: 4 << 30,
+            parallel: Parallel::Auto,
+            strips: 2,
         }
     }
 }
@@ -408,7 +478,12 @@ impl OqGridOptions {
             "none" => Order::Unordered,
             _ => Order::Slabs,
         };
-        read_params!(params, o, { stamps: flag "stamps", coherence: flag "coherence", payoff: flag "payoff" });
+        read_params!(params, o, { stamps: flag "stamps", coherence: flag "coherence", payoff: flag "payoff", strips: "strips" });
+        o.parallel = match params.choice("parallel", &["auto", "off", "columns"], "auto")? {
+            "off" => Parallel::Off,
+            "columns" => Parallel::Columns,
+            _ => Parallel::Auto,
+        };
         o.validate()?;
         Ok(o)
     }
@@ -448,6 +523,12 @@ impl OqGridOptions {
         if self.query_threshold == 0 {
             return bad("threshold=0: must be at least 1 (1 queries every cell)".into());
         }
+        if !(1..=MAX_STRIPS).contains(&self.strips) {
+            return bad(format!(
+                "strips={}: strips a worker must be in 1..={MAX_STRIPS}",
+                self.strips
+            ));
+        }
         if self.max_depth > 16 {
             return bad(format!("depth={}: at most 16 nested levels", self.max_depth));
         }
@@ -472,29 +553,54 @@ impl OqGridOptions {
 /// The occlusion-query grid renderer.
 pub struct OqGrid {
     scene: Arc<Scene>,
+    /// On all threads: the walk's under `parallel=off`, and direct frames'.
     raster: Rasterizer,
     options: OqGridOptions,
     /// Per node of the scene: its grid, in the node's space.
     grids: Vec<NestedGrid>,
-    /// Max-depth pyramid of the frame being drawn ([`CellTest::Pyramid`]).
-    pyramid: ZPyramid,
-    /// Per node: the epoch at which each element (triangle or instance) was last drawn.
-    stamps: Vec<Vec<u32>>,
-    epoch: u32,
-    /// Per mesh occurrence (by its first item id, unique to it): the share of its triangles the
-    /// last traversal of its grid drew, and the frames it was drawn whole since.
-    shares: HashMap<u64, (f32, u32), FxBuild>,
+    /// The walk's pyramid and stamps under `parallel=off`.
+    depth: Depth,
+    /// What the frames keep from frame to frame under `parallel=off`.
+    temporal: Temporal,
     last_counts: OqGridCounts,
-    /// What the queries' balance learned from earlier frames ([`crate::payoff`]).
+    /// What the queries' balance learned from earlier frames ([`crate::payoff`]), under
+    /// `parallel=off`.
     payoff: Payoff,
     /// Frames drawn directly where querying does not pay (`payoff=on`).
     direct: Option<DirectFrames>,
-    /// The last queried frame's visible cells, drawn first by the next ([`OqGridOptions::coherence`]).
-    visible: VisibleCells,
-    /// The list being recorded by the frame in progress.
-    next_visible: VisibleCells,
-    /// The cells the frame in progress drew first: (first item of the occurrence, cell key).
-    predrawn: HashSet<(u64, u64), FxBuild>,
+    /// The workers of `parallel=columns` (none under `off`).
+    workers: Vec<Worker>,
+    /// The strips of `parallel=columns`, each with its own temporal state and payoff.
+    columns: Columns<Temporal>,
+}
+
+/// A worker of `parallel=columns`: a one-thread rasterizer, its frame, pyramid and stamps.
+struct Worker {
+    raster: Rasterizer,
+    frame: Option<Frame>,
+    depth: Depth,
+}
+
+impl StripWorker for Worker {
+    fn raster(&mut self) -> &mut Rasterizer {
+        &mut self.raster
+    }
+
+    fn ready(&mut self, width: u32, height: u32) -> Result<bool> {
+        if matches!(&self.frame, Some(f) if f.width() == width && f.height() == height) {
+            return Ok(false);
+        }
+        self.frame = None;
+        self.frame = Some(Frame::new(width, height)?);
+        Ok(true)
+    }
+
+    fn frame(&self) -> &Frame {
+        match &self.frame {
+            Some(f) => f,
+            None => unreachable!("made by `ready` before a strip is drawn"),
+        }
+    }
 }
 
 /// The visible leaf cells of mesh occurrences found in one frame, grouped by occurrence
@@ -576,24 +682,58 @@ impl OqGrid {
             grids.push(grid);
             stamps.push(vec![0u32; if oq.stamps { elements } else { 0 }]);
         }
+        let mut settings = oq.clone();
+        settings.parallel = settings.parallel.resolve(&scene, raster.thread_count());
+        let (workers, strips) = match settings.parallel {
+            Parallel::Columns => {
+                let one = occult_raster::RasterConfig {
+                    threads: 1,
+                    ..options.raster.clone()
+                };
+                let n = raster.thread_count().clamp(1, MAX_WORKERS);
+                let workers = (0..n)
+                    .map(|_| {
+                        Ok(Worker {
+                            raster: Rasterizer::new(one.clone())?,
+                            frame: None,
+                            depth: Depth {
+                                pyramid: ZPyramid::default(),
+                                stamps: stamps.clone(),
+                                epoch: 0,
+                            },
+                        })
+                    })
+                    .collect::<Result<Vec<_>>>()?;
+                (workers, n * settings.strips)
+            }
+            _ => (Vec::new(), 0),
+        };
+        let columns = Columns::new(strips, || {
+            (Temporal::default(), Payoff::new(oq.payoff, scene.item_count()))
+        });
         Ok(Self {
             payoff: Payoff::new(oq.payoff, scene.item_count()),
             direct: match oq.payoff {
-                true => Some(DirectFrames::new(scene.clone(), &raster)?.judging_first_by_time()),
+                true => Some(
+                    DirectFrames::new(scene.clone(), &raster)?
+                        .judging_first_by_time()
+                        .culled_on(workers.len()),
+                ),
                 false => None,
             },
             scene,
             raster,
-            options: oq.clone(),
+            options: settings,
             grids,
-            pyramid: ZPyramid::default(),
-            shares: HashMap::default(),
-            stamps,
-            epoch: 0,
+            depth: Depth {
+                pyramid: ZPyramid::default(),
+                stamps,
+                epoch: 0,
+            },
+            temporal: Temporal::default(),
             last_counts: OqGridCounts::default(),
-            visible: VisibleCells::default(),
-            next_visible: VisibleCells::default(),
-            predrawn: HashSet::default(),
+            workers,
+            columns,
         })
     }
 
@@ -682,6 +822,33 @@ pub struct OqGridCounts {
 }
 
 impl OqGridCounts {
+    /// Adds `other`'s counts (another strip's of the same frame).
+    fn add(&mut self, other: &Self) {
+        let mut sum = self.values();
+        for (s, o) in sum.iter_mut().zip(other.values()) {
+            *s += o;
+        }
+        let [cells_visited, cells_in_frustum, queries, queries_hidden, queries_skipped, cells_visible, node_occurrences, parallel_batches, pyramid_hidden, draws, node_queries, nodes_hidden, whole_drawn, coherent_cells, coherent_triangles] =
+            sum;
+        *self = Self {
+            cells_visited,
+            cells_in_frustum,
+            queries,
+            queries_hidden,
+            queries_skipped,
+            cells_visible,
+            node_occurrences,
+            parallel_batches,
+            pyramid_hidden,
+            draws,
+            node_queries,
+            nodes_hidden,
+            whole_drawn,
+            coherent_cells,
+            coherent_triangles,
+        };
+    }
+
     /// The counts in the order of [`INFO`]'s counter names.
     fn values(&self) -> [u64; 15] {
         [
@@ -704,581 +871,6 @@ impl OqGridCounts {
     }
 }
 
-/// A node occurrence being traversed.
-struct Occurrence<'a> {
-    at: NodeAt<'a>,
-    clip_from_object: Mat4,
-    /// The camera in the node's space, for slab keys.
-    eye: Vec3,
-    dir: Vec3,
-    epoch: u32,
-    grid: &'a NestedGrid,
-}
-
-/// Visible triangles of one mesh occurrence gathered for the next draw.
-struct Pending<'a> {
-    mesh: &'a Mesh,
-    /// Its triangle indices: `Walk::gathered[start..end]`; None: all of them.
-    gathered: Option<(usize, usize)>,
-    clip_from_object: Mat4,
-    first_item: u64,
-}
-
-/// Per-frame traversal state.
-struct Walk<'a> {
-    walk: SceneWalk<'a>,
-    grids: &'a [NestedGrid],
-    stamps: &'a mut [Vec<u32>],
-    epoch: &'a mut u32,
-    shares: &'a mut HashMap<u64, (f32, u32), FxBuild>,
-    /// Triangles gathered for drawing so far in the frame.
-    gathered_count: u64,
-    raster: &'a mut Rasterizer,
-    options: &'a OqGridOptions,
-    frame: &'a mut Frame,
-    counts: OqGridCounts,
-    query_time: Duration,
-    raster_time: Duration,
-    /// Time spent bringing the pyramid up to date.
-    pyramid_time: Duration,
-    /// The pyramid of `frame` ([`CellTest::Pyramid`]), up to date but for the `dirty` rectangles.
-    pyramid: Option<&'a mut ZPyramid>,
-    /// Triangle indices of the pending draws.
-    gathered: Vec<u32>,
-    pending: Vec<Pending<'a>>,
-    /// Triangles of the pending draws.
-    pending_triangles: usize,
-    /// Where the pending draws may change the depth.
-    dirty: Vec<PixelRect>,
-    /// Whether the queries still pay this frame.
-    payoff: FramePayoff,
-    /// Records this frame's visible cells, when coherence is on.
-    record: Option<&'a mut VisibleCells>,
-    /// The cells drawn first this frame (keys as in [`OqGrid::predrawn`]).
-    predrawn: HashSet<(u64, u64), FxBuild>,
-}
-
-impl<'a> Visitor<'a> for Walk<'a> {
-    /// The node's box is tested but not counted: this renderer's box tests are its queries.
-    const NODE_TEST: NodeTest = NodeTest::Uncounted;
-
-    fn walk(&mut self) -> &mut SceneWalk<'a> {
-        &mut self.walk
-    }
-
-    /// Traverses the occurrence's grid from its top level.
-    fn visit(&mut self, at: &NodeAt<'a>) {
-        self.counts.node_occurrences += 1;
-        self.next_epoch();
-        let view = self.walk.view();
-        let clip_from_object = view.clip_from_object(&at.place.world_from_node);
-        if self.options.queries && self.options.node_queries && !self.node_visible(at, &clip_from_object) {
-            return;
-        }
-        if let NodeKind::Mesh(_) = at.node.kind() {
-            if self.predrawn.contains(&(at.place.first_item, WHOLE)) {
-                // Drawn whole first, from last frame's list: visible still (its box passed).
-                if let Some((_, since)) = self.shares.get_mut(&at.place.first_item) {
-                    *since += 1;
-                }
-                self.counts.whole_drawn += 1;
-                self.remember(at.place, &[WHOLE]);
-                return;
-            }
-        }
-        if let (NodeKind::Mesh(mesh), true) = (at.node.kind(), self.payoff.stopped() && at.inside) {
-            // Queries stopped paying: a mesh occurrence wholly in view is drawn whole.
-            self.push_whole(mesh, at, clip_from_object);
-            self.remember(at.place, &[WHOLE]);
-            return;
-        }
-        let whole = self.options.whole_percent;
-        if let (NodeKind::Mesh(mesh), true) = (at.node.kind(), whole > 0) {
-            if let Some((share, since)) = self.shares.get_mut(&at.place.first_item) {
-                if *share * 100.0 >= whole as f32 && *since + 1 < WHOLE_PROBE_PERIOD {
-                    *since += 1;
-                    self.counts.whole_drawn += 1;
-                    self.push_whole(mesh, at, clip_from_object);
-                    self.remember(at.place, &[WHOLE]);
-                    return;
-                }
-            }
-        }
-        let gathered_before = self.gathered_count;
-        // A mesh's cells are recorded by `batch` while its grid is traversed (a group's
-        // instances record their own).
-        let recorded_before = match at.node.kind() {
-            NodeKind::Mesh(_) => self.record.as_ref().map(|r| r.cells.len()),
-            NodeKind::Group(_) => None,
-        };
-        let node_from_world = at.place.world_from_node.inverse();
-        let camera = view.camera();
-        let occ = Occurrence {
-            at: *at,
-            clip_from_object,
-            eye: node_from_world.transform_point3(camera.eye),
-            dir: node_from_world.transform_vector3(camera.direction()),
-            epoch: *self.epoch,
-            grid: &self.grids[at.place.id.index()],
-        };
-        self.level(&occ, 0);
-        if let (Some(record), Some(start)) = (self.record.as_deref_mut(), recorded_before) {
-            if record.cells.len() > start {
-                record.occurrences.push((at.place, start, record.cells.len()));
-            }
-        }
-        if let (NodeKind::Mesh(mesh), true) = (at.node.kind(), whole > 0) {
-            let drawn = (self.gathered_count - gathered_before) as f32;
-            if self.shares.len() >= MAX_REMEMBERED_SHARES {
-                self.shares.clear(); // bounded memory on scenes of countless occurrences
-            }
-            self.shares
-                .insert(at.place.first_item, (drawn / mesh.triangle_count().max(1) as f32, 0));
-        }
-    }
-}
-
-impl<'a> Walk<'a> {
-    /// Traverses level `level_index` of the occurrence's grid: §3.3 slabs, §3.4 batches.
-    fn level(&mut self, occ: &Occurrence<'a>, level_index: u32) {
-        let level = &occ.grid.levels()[level_index as usize];
-        let thickness = occ.dir.abs().dot(level.cell_size);
-        let thickness = if thickness.is_finite() && thickness > 0.0 {
-            thickness
-        } else {
-            1.0
-        };
-        let mut order: Vec<(i64, u32)> = Vec::with_capacity(level.cells.len());
-        for (i, cell) in level.cells.iter().enumerate() {
-            self.counts.cells_visited += 1;
-            if occ.at.frustum.classify_aabb(&cell.tight) == Containment::Outside {
-                continue;
-            }
-            let key = match self.options.order {
-                // §3.3: the slab of the cell's centre along the view direction.
-                Order::Slabs => ((cell.tight.center() - occ.eye).dot(occ.dir) / thickness).floor() as i64,
-                Order::Unordered => 0,
-            };
-            order.push((key, i as u32));
-        }
-        self.counts.cells_in_frustum += order.len() as u64;
-        if self.options.order == Order::Slabs {
-            order.sort_unstable();
-        }
-        let mut start = 0;
-        while start < order.len() {
-            let slab = order[start].0;
-            let end = start + order[start..].iter().take_while(|(k, _)| *k == slab).count();
-            // §3.4: the slab's cells n at a time; each batch drawn before the next is queried,
-            // and the whole slab before the next slab.
-            for batch in order[start..end].chunks(self.options.batch) {
-                self.batch(occ, level_index, batch);
-            }
-            start = end;
-        }
-    }
-
-    /// Queries the cells of one batch against the same depth state, then draws the visible
-    /// ones (§3.4) and recurses into the visible ones' subgrids (§3.2) and instances.
-    fn batch(&mut self, occ: &Occurrence<'a>, level_index: u32, batch: &[(i64, u32)]) {
-        if self.raster.config().control.is_cancelled() {
-            return; // the frame is not drawn at all
-        }
-        let cells: &'a [GridCell] = &occ.grid.levels()[level_index as usize].cells;
-        let options = self.options;
-        let wants_query = |c: &GridCell| options.queries && c.weight >= options.query_threshold;
-        // One balance check for the batch: its queries run together.
-        let wanted = batch.iter().filter(|(_, i)| wants_query(&cells[*i as usize])).count() as u64;
-        let testing = wanted == 0 || self.payoff.test();
-        if !testing {
-            self.payoff.skipped(wanted.saturating_sub(1));
-        }
-        let needs_query = |c: &GridCell| testing && wants_query(c);
-        let view = self.walk.view();
-        let t = Instant::now();
-        let pyramid = self.pyramid.as_deref();
-        let query = |c: &GridCell| -> QueryOutcome {
-            if needs_query(c) {
-                query_cell(self.frame, view, &occ.clip_from_object, &c.tight, pyramid)
-            } else {
-                QueryOutcome::Visible
-            }
-        };
-        let queried = batch.iter().filter(|(_, i)| needs_query(&cells[*i as usize])).count() as u64;
-        // Deviation (§3.4): a batch's queries run in parallel only when their screen area makes
-        // it pay; small queries cost less than handing them to other threads.
-        let parallel = queried > 1 && {
-            let (w, h) = (view.width() as f32, view.height() as f32);
-            let area: f32 = batch
-                .iter()
-                .filter(|(_, i)| needs_query(&cells[*i as usize]))
-                .map(|(_, i)| screen_area_estimate(&occ.clip_from_object, &cells[*i as usize].tight, w, h))
-                .sum();
-            area >= PARALLEL_QUERY_MIN_PIXELS
-        };
-        let outcomes: Vec<QueryOutcome> = if parallel {
-            use rayon::prelude::*;
-            self.counts.parallel_batches += 1;
-            self.raster
-                .install(|| batch.par_iter().map(|(_, i)| query(&cells[*i as usize])).collect())
-        } else {
-            batch.iter().map(|(_, i)| query(&cells[*i as usize])).collect()
-        };
-        if queried > 0 {
-            self.query_time += t.elapsed();
-        }
-        self.counts.pyramid_hidden += outcomes.iter().filter(|&&o| o == QueryOutcome::HiddenByPyramid).count() as u64;
-        let visible: Vec<bool> = outcomes.iter().map(|&o| o == QueryOutcome::Visible).collect();
-        let visible_count = visible.iter().filter(|&&v| v).count() as u64;
-        let hidden = batch
-            .iter()
-            .zip(&visible)
-            .filter(|((_, i), v)| !**v && needs_query(&cells[*i as usize]))
-            .count() as u64;
-        self.counts.queries += queried;
-        self.counts.queries_hidden += hidden;
-        let saved: u64 = batch
-            .iter()
-            .zip(&visible)
-            .filter(|(_, v)| !**v)
-            .map(|((_, i), _)| cells[*i as usize].weight)
-            .sum();
-        self.payoff.saved(saved);
-        self.counts.queries_skipped += batch.len() as u64 - queried;
-        self.counts.cells_visible += visible_count;
-        if visible_count == 0 {
-            return;
-        }
-        let elements = occ.grid.elements();
-        match occ.at.node.kind() {
-            NodeKind::Mesh(mesh) => {
-                // The visible leaf cells' triangles, each once per occurrence (§3.1 stamps).
-                let start = self.gathered.len();
-                let (w, h) = (view.width(), view.height());
-                for (&(_, i), _) in batch.iter().zip(&visible).filter(|(_, v)| **v) {
-                    let cell = &cells[i as usize];
-                    if cell.child != NO_CHILD {
-                        continue;
-                    }
-                    let key = cell_key(level_index, i);
-                    if let Some(record) = self.record.as_deref_mut() {
-                        if record.cells.len() < MAX_VISIBLE_CELLS {
-                            record.cells.push(key);
-                        }
-                    }
-                    if !self.predrawn.is_empty() && self.predrawn.contains(&(occ.at.place.first_item, key)) {
-                        continue; // drawn first, from last frame's list
-                    }
-                    let tris = &elements[cell.range()];
-                    if options.stamps {
-                        let stamps = &mut self.stamps[occ.at.place.id.index()];
-                        for &t in tris {
-                            if stamps[t as usize] != occ.epoch {
-                                stamps[t as usize] = occ.epoch;
-                                self.gathered.push(t);
-                            }
-                        }
-                    } else {
-                        self.gathered.extend_from_slice(tris);
-                    }
-                    // The pyramid is brought up to date over the cell's own box only: the parts of
-                    // its triangles outside it are left to the cells they cross (a pyramid that
-                    // misses pixels drawn is stale there, which is conservative).
-                    if self.pyramid.is_some() {
-                        if let Some(r) = query::screen_rect(&occ.clip_from_object, &cell.tight, w, h) {
-                            self.dirty.push(r);
-                        }
-                    }
-                }
-                if self.gathered.len() > start {
-                    self.pending_triangles += self.gathered.len() - start;
-                    self.gathered_count += (self.gathered.len() - start) as u64;
-                    self.pending.push(Pending {
-                        mesh,
-                        gathered: Some((start, self.gathered.len())),
-                        clip_from_object: occ.clip_from_object,
-                        first_item: occ.at.place.first_item,
-                    });
-                    if self.pending_triangles >= self.flush_at() {
-                        self.flush();
-                    }
-                }
-                for (&(_, i), _) in batch.iter().zip(&visible).filter(|(_, v)| **v) {
-                    let child = cells[i as usize].child;
-                    if child != NO_CHILD {
-                        self.level(occ, child);
-                    }
-                }
-            }
-            NodeKind::Group(_) => {
-                for (&(_, i), _) in batch.iter().zip(&visible).filter(|(_, v)| **v) {
-                    let cell = &cells[i as usize];
-                    if cell.child != NO_CHILD {
-                        self.level(occ, cell.child);
-                        continue;
-                    }
-                    for &e in &elements[cell.range()] {
-                        if options.stamps {
-                            let s = &mut self.stamps[occ.at.place.id.index()][e as usize];
-                            if *s == occ.epoch {
-                                continue;
-                            }
-                            *s = occ.epoch;
-                        }
-                        self.enter(occ.at.child(e as usize), false);
-                    }
-                }
-            }
-        }
-    }
-}
-
-impl<'a> Walk<'a> {
-    /// A fresh stamp epoch for the next occurrence.
-    fn next_epoch(&mut self) {
-        *self.epoch = self.epoch.wrapping_add(1);
-        if *self.epoch == 0 {
-            // After 2^32 occurrences: forget every stamp once, so old epochs cannot match.
-            self.stamps.iter_mut().for_each(|s| s.fill(0));
-            *self.epoch = 1;
-        }
-    }
-
-    /// Records cells `keys` of mesh occurrence `place` in this frame's visible list.
-    fn remember(&mut self, place: Placed, keys: &[u64]) {
-        if let Some(record) = self.record.as_deref_mut() {
-            if record.cells.len() + keys.len() <= MAX_VISIBLE_CELLS {
-                let start = record.cells.len();
-                record.cells.extend_from_slice(keys);
-                record.occurrences.push((place, start, record.cells.len()));
-            }
-        }
-    }
-
-    /// Draws last frame's visible list first, unqueried (frame-to-frame coherence): each
-    /// remembered mesh occurrence in view, whole or its remembered cells in view, as one draw
-    /// (shared over the rasterizer's threads when large), then the pyramid brought up to date
-    /// over them. Their keys go to `predrawn`, so the traversal does not draw them again.
-    fn predraw(&mut self, last: &VisibleCells) {
-        let view = self.walk.view();
-        let scene = self.walk.scene();
-        let (w, h) = (view.width(), view.height());
-        for &(place, start, end) in &last.occurrences {
-            let node = scene.node(place.id);
-            let NodeKind::Mesh(mesh) = node.kind() else {
-                continue;
-            };
-            let frustum = view.frustum(&place.world_from_node);
-            let bounds = node.bounds();
-            if bounds.is_empty() || frustum.classify_aabb(&bounds) == Containment::Outside {
-                continue;
-            }
-            let clip_from_object = view.clip_from_object(&place.world_from_node);
-            let keys = &last.cells[start..end];
-            // Drawn whole when the traversal would draw it whole (`visit`'s rule); not drawn
-            // first when its grid is due to be traversed again, to measure its share.
-            let whole_percent = self.options.whole_percent as f32;
-            let share = self.shares.get(&place.first_item);
-            let probe_due = share.is_some_and(|&(_, since)| since + 1 >= WHOLE_PROBE_PERIOD);
-            let whole = if keys == [WHOLE] {
-                if probe_due {
-                    continue;
-                }
-                true
-            } else {
-                whole_percent > 0.0 && !probe_due && share.is_some_and(|&(s, _)| s * 100.0 >= whole_percent)
-            };
-            if whole {
-                self.predrawn.insert((place.first_item, WHOLE));
-                self.counts.coherent_cells += 1;
-                self.counts.coherent_triangles += mesh.triangle_count() as u64;
-                self.pend_whole(mesh, &bounds, place.first_item, clip_from_object);
-                continue;
-            }
-            self.next_epoch();
-            let epoch = *self.epoch;
-            let grid = &self.grids[place.id.index()];
-            let elements = grid.elements();
-            let first = self.gathered.len();
-            for &key in keys {
-                let (level, index) = ((key >> 32) as usize, key as u32 as usize);
-                let Some(cell) = grid.levels().get(level).and_then(|l| l.cells.get(index)) else {
-                    continue;
-                };
-                if frustum.classify_aabb(&cell.tight) == Containment::Outside {
-                    continue;
-                }
-                self.predrawn.insert((place.first_item, key));
-                self.counts.coherent_cells += 1;
-                let tris = &elements[cell.range()];
-                if self.options.stamps {
-                    let stamps = &mut self.stamps[place.id.index()];
-                    for &t in tris {
-                        if stamps[t as usize] != epoch {
-                            stamps[t as usize] = epoch;
-                            self.gathered.push(t);
-                        }
-                    }
-                } else {
-                    self.gathered.extend_from_slice(tris);
-                }
-                if self.pyramid.is_some() {
-                    if let Some(r) = query::screen_rect(&clip_from_object, &cell.tight, w, h) {
-                        self.dirty.push(r);
-                    }
-                }
-            }
-            if self.gathered.len() > first {
-                let n = self.gathered.len() - first;
-                self.counts.coherent_triangles += n as u64;
-                self.pending_triangles += n;
-                self.pending.push(Pending {
-                    mesh,
-                    gathered: Some((first, self.gathered.len())),
-                    clip_from_object,
-                    first_item: place.first_item,
-                });
-            }
-        }
-        self.flush();
-    }
-
-    /// Queries the box of occurrence `at` before its grid is traversed; false when hidden.
-    fn node_visible(&mut self, at: &NodeAt<'a>, clip_from_object: &Mat4) -> bool {
-        if !self.payoff.test() {
-            return true;
-        }
-        let t = Instant::now();
-        let outcome = query_cell(
-            self.frame,
-            self.walk.view(),
-            clip_from_object,
-            &at.node.bounds(),
-            self.pyramid.as_deref(),
-        );
-        self.query_time += t.elapsed();
-        self.counts.node_queries += 1;
-        if outcome == QueryOutcome::Visible {
-            return true;
-        }
-        self.counts.nodes_hidden += 1;
-        self.counts.pyramid_hidden += (outcome == QueryOutcome::HiddenByPyramid) as u64;
-        self.payoff.saved(at.node.item_count());
-        false
-    }
-
-    /// Adds every triangle of mesh occurrence `at` to the pending draws, drawn once enough
-    /// are pending.
-    fn push_whole(&mut self, mesh: &'a Mesh, at: &NodeAt<'a>, clip_from_object: Mat4) {
-        self.pend_whole(mesh, &at.node.bounds(), at.place.first_item, clip_from_object);
-        if self.pending_triangles >= self.flush_at() {
-            self.flush();
-        }
-    }
-
-    /// Adds every triangle of the mesh occurrence with box `bounds` and first item `first_item`
-    /// to the pending draws (and its screen rectangle to the pyramid's dirty ones).
-    fn pend_whole(&mut self, mesh: &'a Mesh, bounds: &occult_core::Aabb, first_item: u64, clip_from_object: Mat4) {
-        if self.pyramid.is_some() {
-            let (w, h) = (self.frame.width(), self.frame.height());
-            if let Some(r) = query::screen_rect(&clip_from_object, bounds, w, h) {
-                self.dirty.push(r);
-            }
-        }
-        self.pending_triangles += mesh.triangle_count();
-        self.pending.push(Pending {
-            mesh,
-            gathered: None,
-            clip_from_object,
-            first_item,
-        });
-    }
-
-    /// Triangles gathered before a draw: the option's, or large threaded batches once the
-    /// frame stopped querying.
-    fn flush_at(&self) -> usize {
-        if self.payoff.stopped() {
-            DIRECT_BATCH.max(self.options.flush_triangles)
-        } else {
-            self.options.flush_triangles
-        }
-    }
-
-    /// Draws the pending triangles as one draw list, then brings the pyramid up to date where
-    /// they may have changed the depth.
-    fn flush(&mut self) {
-        if self.pending.is_empty() {
-            return;
-        }
-        let view = self.walk.view();
-        let draws: Vec<Draw<'_>> = self
-            .pending
-            .iter()
-            .map(|p| Draw {
-                mesh: p.mesh,
-                triangles: match p.gathered {
-                    Some((start, end)) => DrawTriangles::List(&self.gathered[start..end]),
-                    None => DrawTriangles::All,
-                },
-                clip_from_object: p.clip_from_object,
-                first_item: p.first_item,
-            })
-            .collect();
-        let t = Instant::now();
-        crate::rasterize(self.raster, view, self.frame, &draws, &mut self.walk.stats);
-        drop(draws);
-        self.counts.draws += 1;
-        let spent = t.elapsed();
-        self.raster_time += spent;
-        let shared = self.pending_triangles >= DIRECT_BATCH;
-        self.payoff.rasterized(self.pending_triangles as u64, spent, shared);
-        // Only where the batch wrote: its rectangles cut to the box of the triangles that wrote
-        // a fragment (none left when it was wholly hidden).
-        match crate::written_region(self.raster, view) {
-            Some(w) => {
-                self.dirty.retain_mut(|r| match r.intersect(&w) {
-                    Some(cut) => {
-                        *r = cut;
-                        true
-                    }
-                    None => false,
-                });
-            }
-            None => self.dirty.clear(),
-        }
-        // Once the frame stopped querying, nothing reads the pyramid.
-        let stopped = self.payoff.stopped();
-        if let Some(pyramid) = self
-            .pyramid
-            .as_deref_mut()
-            .filter(|_| !self.dirty.is_empty() && !stopped)
-        {
-            let t = Instant::now();
-            // Rectangles overlap: where their bounding rectangle is no larger than their areas
-            // together, one pass over it is less work.
-            let area: u64 = self.dirty.iter().map(|r| r.area()).sum();
-            let union = self.dirty.iter().fold(self.dirty[0], |u, r| PixelRect {
-                x0: u.x0.min(r.x0),
-                y0: u.y0.min(r.y0),
-                x1: u.x1.max(r.x1),
-                y1: u.y1.max(r.y1),
-            });
-            if union.area() <= area {
-                pyramid.update(self.frame, union);
-            } else {
-                for &r in &self.dirty {
-                    pyramid.update(self.frame, r);
-                }
-            }
-            self.pyramid_time += t.elapsed();
-        }
-        self.pending.clear();
-        self.pending_triangles = 0;
-        self.gathered.clear();
-        self.dirty.clear();
-    }
-}
-
 impl Renderer for OqGrid {
     fn name(&self) -> &'static str {
         "oqgrid"
@@ -1286,103 +878,72 @@ impl Renderer for OqGrid {
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
         crate::check_frame(view, frame)?;
+        let start = Instant::now();
+        let bands = match self.options.parallel {
+            Parallel::Columns => self.columns.views(view, "oqgrid")?,
+            _ => Vec::new(),
+        };
         if let Some(direct) = &mut self.direct {
             if let Some(stats) = direct.render_if_due(&mut self.raster, view, frame)? {
                 return crate::end_frame(&self.raster, stats);
             }
-            direct.arm(&mut self.payoff, self.raster.thread_count());
-        }
-        let (start, t, cleared) = crate::begin_frame(&mut self.raster, view, frame)?;
-        let control = self.raster.config().control.clone();
-        let pyramid = match self.options.test {
-            CellTest::Query => None,
-            CellTest::Pyramid => {
-                if (self.pyramid.width(), self.pyramid.height()) != (frame.width(), frame.height()) {
-                    self.pyramid = ZPyramid::new(frame.width(), frame.height())?;
-                }
-                self.pyramid.clear_for(frame);
-                Some(&mut self.pyramid)
+            if bands.is_empty() {
+                direct.arm(&mut self.payoff, self.raster.thread_count());
+            } else {
+                self.columns.arm(direct, view, &bands, self.workers.len());
             }
-        };
-        let mut walk = Walk {
-            walk: SceneWalk::new(&self.scene, view),
+        }
+        let grids = Grids {
+            scene: &self.scene,
             grids: &self.grids,
-            stamps: &mut self.stamps,
-            epoch: &mut self.epoch,
-            shares: &mut self.shares,
-            gathered_count: 0,
-            raster: &mut self.raster,
             options: &self.options,
-            frame,
-            counts: OqGridCounts::default(),
-            query_time: Duration::ZERO,
-            raster_time: Duration::ZERO,
-            pyramid_time: Duration::ZERO,
-            pyramid,
-            gathered: Vec::new(),
-            pending: Vec::new(),
-            pending_triangles: 0,
-            dirty: Vec::new(),
-            payoff: self.payoff.begin(t),
-            record: None,
-            predrawn: std::mem::take(&mut self.predrawn),
         };
-        walk.walk.stats = cleared;
-        walk.predrawn.clear();
-        if self.options.coherence && self.options.queries {
-            // Last frame's visible list first (its keys in `predrawn`), then the traversal,
-            // which records this frame's list.
-            walk.predraw(&self.visible);
-            self.next_visible.clear();
-            walk.record = Some(&mut self.next_visible);
-        }
-        walk.run();
-        walk.flush();
-        let walked = t.elapsed();
-        let Walk {
-            walk,
-            counts,
-            query_time,
-            raster_time,
-            pyramid_time,
-            payoff,
-            predrawn,
-            record,
-            ..
-        } = walk;
-        self.predrawn = predrawn;
-        let recorded = record.is_some();
-        // A cancelled frame's list is incomplete, and its costs are no measure: both dropped.
-        if control.is_cancelled() {
-            return Err(crate::RenderError::Cancelled);
-        }
-        self.payoff.end(&payoff);
-        let mut stats = walk.finish("oqgrid")?;
-        if recorded {
-            // This frame's list replaces the last (one that stopped querying, given up or not,
-            // lists what it drew untested).
-            std::mem::swap(&mut self.visible, &mut self.next_visible);
-        }
-        stats.phases.add(Phase::Query, query_time);
-        stats.phases.add(Phase::DepthStructure, pyramid_time);
-        stats.phases.add(
-            Phase::Cull,
-            walked.saturating_sub(query_time + raster_time + pyramid_time),
-        );
-        stats.boxes_tested += counts.queries + counts.node_queries;
-        stats.boxes_culled += counts.queries_hidden + counts.nodes_hidden;
-        // The counters are named in `INFO.counters`, in the order of `OqGridCounts::values`.
-        debug_assert_eq!(
-            INFO.counters.len(),
-            counts.values().len() + crate::payoff::COUNTERS.len() + 2 // and `direct`'s two
-        );
-        for (&name, n) in INFO.counters.iter().zip(counts.values()) {
-            stats.counters.add(name, n);
-        }
-        stats.counters.add_all(payoff.counters());
+        let (mut stats, counts, setup) = if bands.is_empty() {
+            let (stats, counts) = grids.walk_frame(
+                view,
+                &mut self.raster,
+                frame,
+                &mut self.depth,
+                &mut self.temporal,
+                &mut self.payoff,
+            )?;
+            (stats, counts, Duration::ZERO)
+        } else {
+            if view.is_band() {
+                // Nested in a band of its own (the `bands` wrapper): the strips copy in the
+                // band's columns; beside it the frame is blocked as every band's frame is.
+                let (c, r) = (view.columns(), view.rows());
+                self.raster.clear_region(frame, [c.start, r.start, c.end, r.end]);
+            }
+            let counts = std::sync::Mutex::new(OqGridCounts::default());
+            let workers = self.workers.iter_mut().collect();
+            let (stats, setup) = self
+                .columns
+                .render(workers, frame, &bands, &[], |w: &mut Worker, strip, band| {
+                    let Some(f) = w.frame.as_mut() else {
+                        unreachable!("made by `ready`");
+                    };
+                    let (stats, c) = grids.walk_frame(
+                        band,
+                        &mut w.raster,
+                        f,
+                        &mut w.depth,
+                        &mut strip.state,
+                        &mut strip.payoff,
+                    )?;
+                    counts.lock().unwrap_or_else(std::sync::PoisonError::into_inner).add(&c);
+                    Ok(stats)
+                })?;
+            let counts = counts.into_inner().unwrap_or_else(std::sync::PoisonError::into_inner);
+            (stats, counts, setup)
+        };
         if let Some(direct) = &mut self.direct {
+            let paid = match bands.is_empty() {
+                true => self.payoff.last_paid(),
+                false => self.columns.paid(bands.len()),
+            };
             let t = Instant::now();
-            direct.culled(view, frame, start.elapsed(), &mut stats, self.payoff.last_paid())?;
+            direct.culled(view, frame, start.elapsed().saturating_sub(setup), &mut stats, paid)?;
             stats.phases.add(Phase::Other, t.elapsed());
         }
         stats.total = start.elapsed();
@@ -1392,14 +953,18 @@ impl Renderer for OqGrid {
 
     fn memory_bytes(&self) -> usize {
         self.grids.iter().map(NestedGrid::memory_bytes).sum::<usize>()
-            + self.stamps.iter().map(|s| s.len() * 4).sum::<usize>()
-            + self.pyramid.memory_bytes()
-            + self.shares.capacity() * std::mem::size_of::<(u64, (f32, u32))>()
+            + self.depth.memory_bytes()
+            + self.temporal.memory_bytes()
             + self.raster.memory_bytes()
             + self.direct.as_ref().map_or(0, DirectFrames::memory_bytes)
-            + self.visible.memory_bytes()
-            + self.next_visible.memory_bytes()
-            + self.predrawn.capacity() * 16
+            + self
+                .workers
+                .iter()
+                .map(|w| {
+                    w.depth.memory_bytes() + w.raster.memory_bytes() + w.frame.as_ref().map_or(0, Frame::memory_bytes)
+                })
+                .sum::<usize>()
+            + self.columns.memory_bytes(Temporal::memory_bytes)
     }
 }
 
@@ -1409,9 +974,63 @@ impl crate::direct::tests::ForceDirect for OqGrid {
         let direct = self.direct.as_mut().expect("payoff is on by default");
         direct.force(n, abandon);
         self.payoff.force_stop = abandon;
+        for s in self.columns.strips_mut() {
+            s.payoff.force_stop = abandon;
+        }
     }
 
     fn direct(&self) -> &DirectFrames {
         self.direct.as_ref().expect("payoff is on by default")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn auto_takes_columns_on_large_scenes_drawn_on_several_threads() {
+        let (small, large) = (crate::test_quad_rows(2, 4096), crate::test_quad_rows(1024, 4096));
+        let auto = OqGridOptions::from_params(&Params::new("oqgrid")).expect("the defaults are valid");
+        assert_eq!(auto.parallel, Parallel::Auto);
+        assert_eq!(Parallel::Auto.resolve(&large, 2), Parallel::Columns);
+        assert_eq!(Parallel::Auto.resolve(&large, 1), Parallel::Off);
+        assert_eq!(Parallel::Auto.resolve(&small, 2), Parallel::Off);
+        for p in [Parallel::Off, Parallel::Columns] {
+            assert_eq!(p.resolve(&large, 2), p, "an explicit choice stays");
+        }
+        let columns = Params::new("oqgrid").with("parallel", "columns").with("strips", "3");
+        let o = OqGridOptions::from_params(&columns).expect("valid");
+        assert_eq!((o.parallel, o.strips), (Parallel::Columns, 3));
+    }
+
+    /// Under `parallel=columns` a frame is drawn as strips of columns by a worker a thread, its
+    /// counts those of the strips together.
+    #[test]
+    fn columns_draw_strips_on_every_thread() {
+        let scene = Arc::new(crate::test_quad_rows(8, 8));
+        let options = RenderOptions {
+            raster: occult_raster::RasterConfig {
+                threads: 2,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let o = OqGridOptions {
+            parallel: Parallel::Columns,
+            strips: 3,
+            payoff: false,
+            ..Default::default()
+        };
+        let mut r = OqGrid::with_options(scene, &options, &o).expect("builds");
+        assert_eq!(r.workers.len(), 2);
+        let eye = occult_core::Vec3::new(4.0, 4.0, 12.0);
+        let camera = occult_core::Camera::look_at(eye, occult_core::Vec3::new(4.0, 4.0, 0.0));
+        let view = View::new(camera, 160, 96).expect("a view");
+        let mut frame = Frame::new(160, 96).expect("frame");
+        let stats = r.render(&view, &mut frame).expect("renders");
+        assert_eq!(stats.counters.get(crate::columns::STRIPS), 6);
+        assert_eq!(r.last_counts().queries, stats.counters.get("queries"));
+        assert!(r.last_counts().queries > 0);
     }
 }
