@@ -39,6 +39,13 @@ use crate::{FrameStats, Phase, RenderError, Result};
 /// 1-5 M.
 pub const AUTO_COLUMNS: u64 = 8_000_000;
 
+/// Whether a renderer's `parallel=auto` takes the columns distribution for `scene` drawn on
+/// `threads` threads: scenes of at least [`AUTO_COLUMNS`] triangle instances, two threads or
+/// more.
+pub fn auto_takes_columns(scene: &occult_core::Scene, threads: usize) -> bool {
+    scene.item_count() >= AUTO_COLUMNS && threads >= 2
+}
+
 /// Most workers of a distribution.
 pub const MAX_WORKERS: usize = 8;
 
@@ -71,6 +78,29 @@ pub const IDLE: [&str; MAX_WORKERS] = [
     "worker6_idle_us",
     "worker7_idle_us",
 ];
+
+/// A renderer's `counters` (with [`STRIPS`] among them) followed by the workers' [`BUSY`] and
+/// [`IDLE`]: every counter it may report under the columns distribution, for its registry
+/// entry (`N` = `counters.len() + 2 *` [`MAX_WORKERS`], checked when it is evaluated).
+pub(crate) const fn declared<const N: usize>(counters: &[&'static str]) -> [&'static str; N] {
+    assert!(
+        counters.len() + 2 * MAX_WORKERS == N,
+        "N: the counters and two a worker"
+    );
+    let mut all = [""; N];
+    let mut i = 0;
+    while i < counters.len() {
+        all[i] = counters[i];
+        i += 1;
+    }
+    let mut k = 0;
+    while k < MAX_WORKERS {
+        all[i + k] = BUSY[k];
+        all[i + MAX_WORKERS + k] = IDLE[k];
+        k += 1;
+    }
+    all
+}
 
 /// What one strip of columns keeps from frame to frame, whichever worker draws it: the
 /// renderer's own temporal state `S` and the strip's payoff.
@@ -169,10 +199,10 @@ impl<S: Send> Columns<S> {
         self.strips_mut().take(n).all(|s| s.payoff.last_paid())
     }
 
-    /// Draws `frame` as the strips `bands` ([`Columns::views`]) over `workers`, each strip by
-    /// `draw`, which culls and draws the strip's view into the worker's frame and returns its
-    /// statistics with every phase accounted for (the worker's frame is made and the frame
-    /// begun over the strip before). Counters named in `means` are averaged over the strips
+    /// Draws `frame` as the strips `bands` ([`Columns::views`]) over `workers` (at most
+    /// [`MAX_WORKERS`]), each strip by `draw`, which begins the strip's frame in the worker's
+    /// (made by [`StripWorker::ready`] before), culls and draws the strip's view into it and
+    /// returns its statistics with every phase accounted for. Counters named in `means` are averaged over the strips
     /// that report them instead of added. Also returns how long making the workers' frames
     /// took (at the first frame or a new size; the slowest worker's): a one-time cost that the
     /// frame-level choice between culling and drawing directly should not weigh.
@@ -187,6 +217,7 @@ impl<S: Send> Columns<S> {
         means: &[&'static str],
         draw: impl Fn(&mut W, &mut Strip<S>, &View) -> Result<FrameStats> + Sync,
     ) -> Result<(FrameStats, Duration)> {
+        debug_assert!(workers.len() <= MAX_WORKERS, "a counter name per worker");
         let strips = &self.strips[..];
         let (width, height) = (frame.width(), frame.height());
         // The slowest strips of last frame first (the longest jobs first balance best).

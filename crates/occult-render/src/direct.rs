@@ -136,7 +136,10 @@ impl DirectFrames {
     /// The same, for a renderer whose culled frames are drawn by `workers` workers at once,
     /// each on one thread ([`crate::columns`]): their statistics' rasterization time is the
     /// workers' together, so the frame's cost of a triangle in wall time, which the time of
-    /// the frame is weighed against, is that over the workers.
+    /// the frame is weighed against, is that over the workers. Every judgement of a culled
+    /// frame by its own rate then holds its wall time to the same bar as a frame of one walk
+    /// (whose wall time is its thread time): a first frame that culls in about a direct
+    /// frame's time on all threads is not taken for one that plainly pays.
     pub fn culled_on(mut self, workers: usize) -> Self {
         self.culled_workers = workers.max(1);
         self
@@ -255,7 +258,8 @@ impl DirectFrames {
     /// Before a direct frame was measured, a culled frame that did not plainly pay is
     /// screened: when even removing every triangle hidden behind its final depth
     /// ([`Hierarchies::hidden_triangles`]) would save less than its culling cost, at its own
-    /// rasterization cost of a triangle, the direct frames are measured next. Not the first
+    /// rasterization cost of a triangle in wall time ([`DirectFrames::culled_on`]), the direct
+    /// frames are measured next. Not the first
     /// culled frame of a renderer [judging it by time](DirectFrames::judging_first_by_time),
     /// whose not paying plainly is enough: a direct frame is measured next without the walk.
     ///
@@ -280,10 +284,10 @@ impl DirectFrames {
         // plainly by time alone.
         // (One that submitted nothing has no rate: the share judges it.)
         let first_frame = self.choice.first_by_time && first && self.choice.unweighed.is_empty() && submitted > 0;
-        let slower = submitted > 0 && self.choice.first_lost(total, raster_ns, self.threads);
+        let slower = submitted > 0 && self.choice.first_lost(total, wall_ns, self.threads);
         let plainly = !slower
             && if first_frame {
-                Self::plainly_first(tests_paid, total, raster_ns / self.threads as f64, work)
+                Self::plainly_first(tests_paid, total, wall_ns / self.threads as f64, work)
             } else {
                 Self::plainly(tests_paid, total, submitted, wall_ns, work)
             };
@@ -696,10 +700,30 @@ pub(crate) mod tests {
             ..Default::default()
         };
         let lzb = crate::lzb::Lzb::new(scene.clone(), &options, &lzb_options).expect("lzb builds");
+        // Strips of columns on two threads.
+        let two = RenderOptions {
+            raster: RasterConfig {
+                threads: 2,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let columns = crate::oqgrid::OqGridOptions {
+            parallel: crate::oqgrid::Parallel::Columns,
+            ..Default::default()
+        };
+        let oqgrid_columns = crate::oqgrid::OqGrid::with_options(scene.clone(), &two, &columns).expect("oqgrid builds");
+        let columns = crate::hzb::HzbOptions {
+            distribution: crate::hzb::Distribution::Columns,
+            ..Default::default()
+        };
+        let hzb_columns = crate::hzb::Hzb::new(scene.clone(), &two, &columns).expect("hzb builds");
         let mut renderers: Vec<(&str, Box<dyn ForceDirect>)> = vec![
             ("hzb", Box::new(hzb)),
             ("oqgrid", Box::new(oqgrid)),
             ("lzb", Box::new(lzb)),
+            ("oqgrid:parallel=columns", Box::new(oqgrid_columns)),
+            ("hzb:parallel=columns", Box::new(hzb_columns)),
         ];
         for (name, r) in &mut renderers {
             r.force(2, false);
@@ -715,7 +739,9 @@ pub(crate) mod tests {
             assert!(f.same_visibility(&reference), "{name} given up");
             // Finished untested, not drawn again.
             assert_eq!(s.counters.get(COUNTER), 0, "{name}: a frame given up is finished");
-            assert_eq!(s.counters.get("payoff_stopped"), 1, "{name}");
+            // Once a strip of columns (each strip stops).
+            let strips = s.counters.get(crate::columns::STRIPS).max(1);
+            assert_eq!(s.counters.get("payoff_stopped"), strips, "{name}");
             // The frame after, from what the given-up frame left (its list, its state).
             let mut f = Frame::new(96, 64).expect("a 96x64 frame");
             r.render(&view, &mut f).expect("the renderer renders the view");

@@ -723,6 +723,8 @@ mod tests {
             "lzb:oor=off,coherence=off,caster=octree",
             "oqgrid",
             "oqgrid:grid=uniform,queries=off",
+            "oqgrid:parallel=columns,strips=3",
+            "hzb:parallel=columns",
             "nbuffer",
             "nbuffer:test=query,hierarchy=flat",
             "rzb",

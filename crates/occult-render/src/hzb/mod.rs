@@ -230,7 +230,7 @@ impl Distribution {
     /// [`Distribution::Auto`] resolved for `scene` drawn on `threads` threads; others as they are.
     pub fn resolve(self, scene: &Scene, threads: usize) -> Self {
         match self {
-            Self::Auto if scene.item_count() >= AUTO_COLUMNS && threads >= 2 => Self::Columns,
+            Self::Auto if crate::columns::auto_takes_columns(scene, threads) => Self::Columns,
             Self::Auto => Self::Off,
             d => d,
         }
@@ -462,21 +462,7 @@ pub const COUNTERS: [&str; 22] = [
 ];
 
 /// Every counter a frame may report: [`COUNTERS`], then the workers' busy and idle times.
-const DECLARED: [&str; COUNTERS.len() + 2 * MAX_WORKERS] = {
-    let mut all = [""; COUNTERS.len() + 2 * MAX_WORKERS];
-    let mut i = 0;
-    while i < COUNTERS.len() {
-        all[i] = COUNTERS[i];
-        i += 1;
-    }
-    let mut k = 0;
-    while k < MAX_WORKERS {
-        all[COUNTERS.len() + k] = BUSY[k];
-        all[COUNTERS.len() + MAX_WORKERS + k] = IDLE[k];
-        k += 1;
-    }
-    all
-};
+const DECLARED: [&str; COUNTERS.len() + 2 * MAX_WORKERS] = crate::columns::declared(&COUNTERS);
 
 /// Registry entry of [`Hzb`].
 pub static INFO: AlgorithmInfo = AlgorithmInfo {

@@ -100,7 +100,8 @@
 //!   and fill; ours is the pixels scanned until the first passing one.
 //! - Deviation: "in flight" means evaluated in parallel (rayon) against the same depth state,
 //!   when the batch's queries cover at least [`PARALLEL_QUERY_MIN_PIXELS`] (below that, handing
-//!   them to other threads cost more than the queries, measured); there is no pipeline to keep
+//!   them to other threads cost more than the queries, measured) and the walk's rasterizer has
+//!   more than one thread (a worker of `parallel=columns` has one); there is no pipeline to keep
 //!   full, but the culling lost to a batch (cells of a batch do not see each other's geometry)
 //!   is the same as in §3.4.
 //! - A batch's visible triangles are one draw (or gathered with later ones, `flush`); the
@@ -251,50 +252,41 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             help: "parallel=columns: strips of columns a worker, 1..=16, handed out one at a time to whichever worker is free",
         },
     ],
-    counters: &[
-        "cells_visited",
-        "cells_in_frustum",
-        "queries",
-        "queries_hidden",
-        "queries_skipped",
-        "cells_visible",
-        "node_occurrences",
-        "parallel_batches",
-        "pyramid_hidden",
-        "draws",
-        "node_queries",
-        "nodes_hidden",
-        "whole_drawn",
-        "coherent_cells",
-        "coherent_triangles",
-        crate::payoff::COUNTERS[0],
-        crate::payoff::COUNTERS[1],
-        crate::direct::COUNTER,
-        crate::direct::SCREENED,
-        crate::columns::STRIPS,
-        crate::columns::BUSY[0],
-        crate::columns::BUSY[1],
-        crate::columns::BUSY[2],
-        crate::columns::BUSY[3],
-        crate::columns::BUSY[4],
-        crate::columns::BUSY[5],
-        crate::columns::BUSY[6],
-        crate::columns::BUSY[7],
-        crate::columns::IDLE[0],
-        crate::columns::IDLE[1],
-        crate::columns::IDLE[2],
-        crate::columns::IDLE[3],
-        crate::columns::IDLE[4],
-        crate::columns::IDLE[5],
-        crate::columns::IDLE[6],
-        crate::columns::IDLE[7],
-    ],
+    counters: &DECLARED,
     conservative: true,
     bands: true,
     build: |scene, options, params| {
         Ok(Box::new(OqGrid::with_options(scene, options, &OqGridOptions::from_params(params)?)?))
     },
 };
+
+/// The counters of [`OqGridCounts`] (in the order of [`OqGridCounts::values`]), then the
+/// payoff's, the frame-level choice's and the columns distribution's.
+const COUNTERS: [&str; 20] = [
+    "cells_visited",
+    "cells_in_frustum",
+    "queries",
+    "queries_hidden",
+    "queries_skipped",
+    "cells_visible",
+    "node_occurrences",
+    "parallel_batches",
+    "pyramid_hidden",
+    "draws",
+    "node_queries",
+    "nodes_hidden",
+    "whole_drawn",
+    "coherent_cells",
+    "coherent_triangles",
+    crate::payoff::COUNTERS[0],
+    crate::payoff::COUNTERS[1],
+    crate::direct::COUNTER,
+    crate::direct::SCREENED,
+    crate::columns::STRIPS,
+];
+
+/// Every counter a frame may report: [`COUNTERS`], then the workers' busy and idle times.
+const DECLARED: [&str; COUNTERS.len() + 2 * MAX_WORKERS] = crate::columns::declared(&COUNTERS);
 
 /// Uniform (§3.1) or nested (§3.2) grids.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -333,7 +325,7 @@ impl Parallel {
     /// [`Parallel::Auto`] resolved for `scene` drawn on `threads` threads; others as they are.
     pub fn resolve(self, scene: &Scene, threads: usize) -> Self {
         match self {
-            Self::Auto if scene.item_count() >= crate::columns::AUTO_COLUMNS && threads >= 2 => Self::Columns,
+            Self::Auto if crate::columns::auto_takes_columns(scene, threads) => Self::Columns,
             Self::Auto => Self::Off,
             p => p,
         }
@@ -579,6 +571,8 @@ struct Worker {
     raster: Rasterizer,
     frame: Option<Frame>,
     depth: Depth,
+    /// Its walks query through a pyramid ([`CellTest::Pyramid`]), made with its frame.
+    pyramid: bool,
 }
 
 impl StripWorker for Worker {
@@ -592,6 +586,10 @@ impl StripWorker for Worker {
         }
         self.frame = None;
         self.frame = Some(Frame::new(width, height)?);
+        if self.pyramid {
+            self.depth.pyramid = ZPyramid::default();
+            self.depth.pyramid = ZPyramid::new(width, height)?;
+        }
         Ok(true)
     }
 
@@ -701,6 +699,7 @@ impl OqGrid {
                                 stamps: stamps.clone(),
                                 epoch: 0,
                             },
+                            pyramid: settings.test == CellTest::Pyramid,
                         })
                     })
                     .collect::<Result<Vec<_>>>()?;
@@ -727,7 +726,8 @@ impl OqGrid {
             grids,
             depth: Depth {
                 pyramid: ZPyramid::default(),
-                stamps,
+                // The workers' own under `parallel=columns`.
+                stamps: if workers.is_empty() { stamps } else { Vec::new() },
                 epoch: 0,
             },
             temporal: Temporal::default(),
@@ -878,7 +878,6 @@ impl Renderer for OqGrid {
 
     fn render(&mut self, view: &View, frame: &mut Frame) -> Result<FrameStats> {
         crate::check_frame(view, frame)?;
-        let start = Instant::now();
         let bands = match self.options.parallel {
             Parallel::Columns => self.columns.views(view, "oqgrid")?,
             _ => Vec::new(),
@@ -893,10 +892,12 @@ impl Renderer for OqGrid {
                 self.columns.arm(direct, view, &bands, self.workers.len());
             }
         }
+        let start = Instant::now();
         let grids = Grids {
             scene: &self.scene,
             grids: &self.grids,
             options: &self.options,
+            strips: bands.len().max(1),
         };
         let (mut stats, counts, setup) = if bands.is_empty() {
             let (stats, counts) = grids.walk_frame(
@@ -1002,6 +1003,51 @@ mod tests {
         let columns = Params::new("oqgrid").with("parallel", "columns").with("strips", "3");
         let o = OqGridOptions::from_params(&columns).expect("valid");
         assert_eq!((o.parallel, o.strips), (Parallel::Columns, 3));
+    }
+
+    /// Each count is reported under its own name: the registry's first names follow the
+    /// order of [`OqGridCounts::values`].
+    #[test]
+    fn counts_are_reported_by_their_names() {
+        let names = [
+            "cells_visited",
+            "cells_in_frustum",
+            "queries",
+            "queries_hidden",
+            "queries_skipped",
+            "cells_visible",
+            "node_occurrences",
+            "parallel_batches",
+            "pyramid_hidden",
+            "draws",
+            "node_queries",
+            "nodes_hidden",
+            "whole_drawn",
+            "coherent_cells",
+            "coherent_triangles",
+        ];
+        let counts = OqGridCounts {
+            cells_visited: 1,
+            cells_in_frustum: 2,
+            queries: 3,
+            queries_hidden: 4,
+            queries_skipped: 5,
+            cells_visible: 6,
+            node_occurrences: 7,
+            parallel_batches: 8,
+            pyramid_hidden: 9,
+            draws: 10,
+            node_queries: 11,
+            nodes_hidden: 12,
+            whole_drawn: 13,
+            coherent_cells: 14,
+            coherent_triangles: 15,
+        };
+        assert_eq!(counts.values(), std::array::from_fn(|i| i as u64 + 1));
+        assert_eq!(&INFO.counters[..names.len()], &names[..]);
+        let mut twice = counts;
+        twice.add(&counts);
+        assert_eq!(twice.values(), std::array::from_fn(|i| 2 * (i as u64 + 1)));
     }
 
     /// Under `parallel=columns` a frame is drawn as strips of columns by a worker a thread, its

@@ -69,8 +69,12 @@ struct Walk<'a> {
     payoff: FramePayoff,
     /// Records this frame's visible cells, when coherence is on.
     record: Option<&'a mut VisibleCells>,
-    /// The cells drawn first this frame (keys as in [`OqGrid::predrawn`]).
+    /// The cells drawn first this frame (keys as in [`Temporal::predrawn`]).
     predrawn: HashSet<(u64, u64), FxBuild>,
+    /// Most cells the frame's list records and most shares remembered: the renderer's bounds
+    /// shared over its strips of columns ([`Grids::strips`]).
+    max_cells: usize,
+    max_shares: usize,
 }
 
 impl<'a> Visitor<'a> for Walk<'a> {
@@ -144,7 +148,7 @@ impl<'a> Visitor<'a> for Walk<'a> {
         }
         if let (NodeKind::Mesh(mesh), true) = (at.node.kind(), whole > 0) {
             let drawn = (self.gathered_count - gathered_before) as f32;
-            if self.shares.len() >= MAX_REMEMBERED_SHARES {
+            if self.shares.len() >= self.max_shares {
                 self.shares.clear(); // bounded memory on scenes of countless occurrences
             }
             self.shares
@@ -222,7 +226,7 @@ impl<'a> Walk<'a> {
         let queried = batch.iter().filter(|(_, i)| needs_query(&cells[*i as usize])).count() as u64;
         // Deviation (§3.4): a batch's queries run in parallel only when their screen area makes
         // it pay; small queries cost less than handing them to other threads.
-        let parallel = queried > 1 && {
+        let parallel = queried > 1 && self.raster.thread_count() > 1 && {
             let (w, h) = (view.width() as f32, view.height() as f32);
             let area: f32 = batch
                 .iter()
@@ -277,7 +281,7 @@ impl<'a> Walk<'a> {
                     }
                     let key = cell_key(level_index, i);
                     if let Some(record) = self.record.as_deref_mut() {
-                        if record.cells.len() < MAX_VISIBLE_CELLS {
+                        if record.cells.len() < self.max_cells {
                             record.cells.push(key);
                         }
                     }
@@ -362,7 +366,7 @@ impl<'a> Walk<'a> {
     /// Records cells `keys` of mesh occurrence `place` in this frame's visible list.
     fn remember(&mut self, place: Placed, keys: &[u64]) {
         if let Some(record) = self.record.as_deref_mut() {
-            if record.cells.len() + keys.len() <= MAX_VISIBLE_CELLS {
+            if record.cells.len() + keys.len() <= self.max_cells {
                 let start = record.cells.len();
                 record.cells.extend_from_slice(keys);
                 record.occurrences.push((place, start, record.cells.len()));
@@ -641,6 +645,9 @@ pub(super) struct Grids<'a> {
     pub(super) scene: &'a Scene,
     pub(super) grids: &'a [NestedGrid],
     pub(super) options: &'a OqGridOptions,
+    /// The strips of columns a frame is drawn as (1: one walk): the visible lists and shares
+    /// are bounded per strip by the renderer's bounds over this.
+    pub(super) strips: usize,
 }
 
 impl Grids<'_> {
@@ -695,6 +702,8 @@ impl Grids<'_> {
             payoff: payoff.begin(t),
             record: None,
             predrawn: std::mem::take(&mut temporal.predrawn),
+            max_cells: MAX_VISIBLE_CELLS / self.strips.max(1),
+            max_shares: MAX_REMEMBERED_SHARES / self.strips.max(1),
         };
         walk.walk.stats = cleared;
         walk.predrawn.clear();
