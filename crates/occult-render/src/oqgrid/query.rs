@@ -35,7 +35,9 @@ pub enum QueryOutcome {
 }
 
 /// True when some pixel inside the box's projected silhouette has a stored depth not nearer
-/// than the box's nearest point (a fragment of the box could pass); see the module doc.
+/// than the box's nearest point (a fragment of the box could pass); see the module doc. Only
+/// the pixels of the view's region count ([`View::with_region`]: a frame drawn in strips or
+/// bands holds the blocked depth beside its region, which no box passes).
 pub fn any_sample_passes(frame: &Frame, view: &View, clip_from_object: &Mat4, aabb: &Aabb) -> bool {
     query_cell(frame, view, clip_from_object, aabb, None) == QueryOutcome::Visible
 }
@@ -88,6 +90,10 @@ pub fn query_cell(
     // The hull's bounding box is the corners' (its vertices are corners, the extreme ones among
     // them), so the rectangle is known before the hull is.
     let (px0, py0, px1, py1) = pixel_bounds(&pts, w, h);
+    // The view's region only: beside it a frame drawn in parts is blocked.
+    let (c, r) = (view.columns(), view.rows());
+    let (px0, px1) = (px0.max(i64::from(c.start)), px1.min(i64::from(c.end)));
+    let (py0, py1) = (py0.max(i64::from(r.start)), py1.min(i64::from(r.end)));
     if px1 <= px0 || py1 <= py0 {
         return Hidden;
     }
@@ -264,6 +270,35 @@ mod tests {
             self.0 ^= self.0 >> 7;
             self.0 ^= self.0 << 17;
             r.start + (r.end - r.start) * ((self.0 >> 40) as f32 / (1u64 << 24) as f32)
+        }
+    }
+
+    /// A view restricted to a region ([`View::with_region`]) is asked about its region's
+    /// pixels only: a box whose far pixels lie beside the region is hidden to it, visible to
+    /// the whole view; one with far pixels inside it is visible to both, pyramid or not.
+    #[test]
+    fn a_region_is_asked_about_its_pixels_only() {
+        let view = View::new(Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO), 64, 32).expect("a 64x32 view");
+        let clip = view.clip_from_object(&Affine3A::IDENTITY);
+        let left = view.with_region(0..32, 0..32).expect("the left half");
+        let right = view.with_region(32..64, 0..32).expect("the right half");
+        // Near depth on the left half, far (cleared, 0 in reversed z) on the right.
+        let mut frame = Frame::new(64, 32).expect("a 64x32 frame");
+        let near = 0.5f32; // reversed z: at a fifth of a unit from the eye
+        {
+            let (depth, _) = frame.buffers_mut();
+            for row in depth.chunks_mut(64) {
+                row[..32].fill(near);
+            }
+        }
+        let mut pyramid = ZPyramid::new(64, 32).expect("a pyramid");
+        pyramid.rebuild(&frame);
+        // A box across the middle, well behind the near depth.
+        let b = Aabb::new(Vec3::new(-1.0, -0.5, -1.0), Vec3::new(1.0, 0.5, 0.0));
+        for p in [None, Some(&pyramid)] {
+            assert_eq!(query_cell(&frame, &view, &clip, &b, p), QueryOutcome::Visible);
+            assert_eq!(query_cell(&frame, &right, &clip, &b, p), QueryOutcome::Visible);
+            assert_ne!(query_cell(&frame, &left, &clip, &b, p), QueryOutcome::Visible);
         }
     }
 
