@@ -88,7 +88,9 @@
 //! not counted as a box test, the queries being this renderer's box tests); at each
 //! node occurrence it traverses that node's grid with the cells placed by `clip_from_object`.
 //! A visible cell of a group grid visits its instances (each once per occurrence of the group,
-//! by stamp), recursing into their grids. Memory is the sum over unique nodes: linear in the
+//! by stamp) nearest first (the nearest point of each placed box to the eye), recursing into
+//! their grids: a cell holds the near and the far of a street, and an instance entered before
+//! its occluders are drawn passes its queries and is drawn. Memory is the sum over unique nodes: linear in the
 //! unique triangles and stored instances, whatever the number of triangle instances. Stamps are
 //! per unique node too: an epoch is drawn per node *occurrence* (a node is never re-entered
 //! while its own occurrence is being traversed, as the DAG has no cycles).
@@ -114,7 +116,7 @@
 //!   index space; both order cells approximately front to back by planes orthogonal to the view.
 //! - Deviation: a grid per unique DAG node (see above) instead of one world grid, so that
 //!   instanced scenes stay instanced; occlusion between instances is still found because group
-//!   grids are traversed front to back and their instances recursed into in that order.
+//!   grids are traversed front to back and a cell's instances recursed into nearest first.
 //! - Deviation: a level never has more cells than elements
 //!   ([`occult_spatial::grid::GridConfig::cells_per_element`] 1), so the resolution applies in
 //!   full to large meshes and small groups get small grids.

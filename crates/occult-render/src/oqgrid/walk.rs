@@ -329,13 +329,18 @@ impl<'a> Walk<'a> {
                     }
                 }
             }
-            NodeKind::Group(_) => {
+            NodeKind::Group(instances) => {
+                let scene = self.walk.scene();
+                // A cell's instances nearest first: a cell holds the near and the far of a
+                // street, and an instance drawn before its occluders is drawn whole.
+                let mut near_first: Vec<(f32, u32)> = Vec::new();
                 for (&(_, i), _) in batch.iter().zip(&visible).filter(|(_, v)| **v) {
                     let cell = &cells[i as usize];
                     if cell.child != NO_CHILD {
                         self.level(occ, cell.child);
                         continue;
                     }
+                    near_first.clear();
                     for &e in &elements[cell.range()] {
                         if options.stamps {
                             let s = &mut self.stamps[occ.at.place.id.index()][e as usize];
@@ -344,6 +349,15 @@ impl<'a> Walk<'a> {
                             }
                             *s = occ.epoch;
                         }
+                        let instance = &instances[e as usize];
+                        let b = scene
+                            .node(instance.child)
+                            .bounds()
+                            .transformed(&instance.parent_from_child);
+                        near_first.push((occ.eye.clamp(b.min, b.max).distance_squared(occ.eye), e));
+                    }
+                    near_first.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+                    for &(_, e) in &near_first {
                         self.enter(occ.at.child(e as usize), false);
                     }
                 }
