@@ -726,12 +726,26 @@ pub(crate) mod tests {
             ("hzb:parallel=columns", Box::new(hzb_columns)),
         ];
         for (name, r) in &mut renderers {
+            if name.starts_with("oqgrid") {
+                // Two culled frames: the second draws the first's visible cells first.
+                for i in 0..2 {
+                    let mut f = Frame::new(96, 64).expect("a 96x64 frame");
+                    let s = r.render(&view, &mut f).expect("the renderer renders the view");
+                    assert!(f.same_visibility(&reference), "{name} culled frame {i}");
+                    assert_eq!(s.counters.get(COUNTER), 0, "{name} culled frame {i}");
+                    assert_eq!(s.counters.get("coherent_cells") > 0, i == 1, "{name} culled frame {i}");
+                }
+            }
             r.force(2, false);
             for i in 0..3 {
                 let mut f = Frame::new(96, 64).expect("a 96x64 frame");
                 let s = r.render(&view, &mut f).expect("the renderer renders the view");
                 assert!(f.same_visibility(&reference), "{name} frame {i}");
                 assert_eq!(s.counters.get(COUNTER), u64::from(i < 2), "{name} frame {i}");
+                if i == 2 && name.starts_with("oqgrid") {
+                    // Not the list of the view before the direct frames.
+                    assert_eq!(s.counters.get("coherent_cells"), 0, "{name} frame {i}");
+                }
             }
             r.force(0, true);
             let mut f = Frame::new(96, 64).expect("a 96x64 frame");

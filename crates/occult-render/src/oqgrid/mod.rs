@@ -566,6 +566,8 @@ pub struct OqGrid {
     workers: Vec<Worker>,
     /// The strips of `parallel=columns`, each with its own temporal state and payoff.
     columns: Columns<Temporal>,
+    /// The last frame was drawn directly: the visible lists are of an older view.
+    lists_stale: bool,
 }
 
 /// A worker of `parallel=columns`: a one-thread rasterizer, its frame, pyramid and stamps.
@@ -736,6 +738,7 @@ impl OqGrid {
             last_counts: OqGridCounts::default(),
             workers,
             columns,
+            lists_stale: false,
         })
     }
 
@@ -886,12 +889,22 @@ impl Renderer for OqGrid {
         };
         if let Some(direct) = &mut self.direct {
             if let Some(stats) = direct.render_if_due(&mut self.raster, view, frame)? {
+                self.lists_stale = true;
                 return crate::end_frame(&self.raster, stats);
             }
             if bands.is_empty() {
                 direct.arm(&mut self.payoff, self.raster.thread_count());
             } else {
                 self.columns.arm(direct, view, &bands, self.workers.len());
+            }
+        }
+        if std::mem::take(&mut self.lists_stale) {
+            // Frame-to-frame coherence is between consecutive frames: a list recorded before a
+            // run of direct frames is of a view since left (on an orbit of eight steps, 90° or
+            // more away), and drawn first it is mostly hidden now.
+            self.temporal.visible.clear();
+            for s in self.columns.strips_mut() {
+                s.state.visible.clear();
             }
         }
         let start = Instant::now();
