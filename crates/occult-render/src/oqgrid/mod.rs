@@ -52,9 +52,10 @@
 //!   cells that only looked visible because their occluders came later in the traversal are
 //!   culled (on `plant`'s orbit, 1.56 M of 2.28 M triangles drawn per frame without the list,
 //!   0.24 M with it). The frame records its own list for the next (cells found visible, drawn
-//!   first or not); a cell no longer visible drops out of it. Frame-to-frame coherence is the
-//!   paper's §6 future work; the list is hzb's §3.3 visible list at cell granularity. Counters
-//!   `coherent_cells`, `coherent_triangles`.
+//!   first or not); a cell no longer visible drops out of it. A frame drawn directly records no
+//!   list and drops the one it finds: the next queried frame's view is no longer the list's.
+//!   Frame-to-frame coherence is the paper's §6 future work; the list is hzb's §3.3 visible
+//!   list at cell granularity. Counters `coherent_cells`, `coherent_triangles`.
 //! - Gathered draws ([`OqGridOptions::flush_triangles`], `flush=1`): visible triangles may be
 //!   gathered over batches (and node occurrences) into one draw of at least that many, which
 //!   the rasterizer shares over its threads past its sort-last size; queries meanwhile see a
