@@ -889,8 +889,12 @@ impl Renderer for OqGrid {
             _ => Vec::new(),
         };
         if let Some(direct) = &mut self.direct {
-            if let Some(stats) = direct.render_if_due(&mut self.raster, view, frame)? {
+            let drawn = direct.render_if_due(&mut self.raster, view, frame);
+            if !matches!(drawn, Ok(None)) {
+                // Drawn directly, or begun so and cancelled.
                 self.lists_stale = true;
+            }
+            if let Some(stats) = drawn? {
                 return crate::end_frame(&self.raster, stats);
             }
             if bands.is_empty() {
@@ -901,8 +905,8 @@ impl Renderer for OqGrid {
         }
         if std::mem::take(&mut self.lists_stale) {
             // Frame-to-frame coherence is between consecutive frames: a list recorded before a
-            // run of direct frames is of a view since left (on an orbit of eight steps, 90° or
-            // more away), and drawn first it is mostly hidden now.
+            // run of direct frames is of a view since left (on an orbit of eight steps, 90° away
+            // after one direct frame), and drawn first it is mostly hidden now.
             self.temporal.visible.clear();
             for s in self.columns.strips_mut() {
                 s.state.visible.clear();

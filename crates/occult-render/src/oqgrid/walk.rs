@@ -23,7 +23,7 @@ use crate::{FrameStats, Phase, Result};
 struct Occurrence<'a> {
     at: NodeAt<'a>,
     clip_from_object: Mat4,
-    /// The camera in the node's space, for slab keys.
+    /// The camera in the node's space, for slab keys and the order of a cell's instances.
     eye: Vec3,
     dir: Vec3,
     epoch: u32,
@@ -636,7 +636,8 @@ pub(super) struct Temporal {
     /// Per mesh occurrence (by its first item id, unique to it): the share of its triangles the
     /// last traversal of its grid drew, and the frames it was drawn whole since.
     pub(super) shares: HashMap<u64, (f32, u32), FxBuild>,
-    /// The last queried frame's visible cells, drawn first by the next ([`OqGridOptions::coherence`]).
+    /// The last queried frame's visible cells, drawn first by the next ([`OqGridOptions::coherence`]);
+    /// dropped when a frame is drawn directly.
     pub(super) visible: VisibleCells,
     /// The list being recorded by the frame in progress.
     pub(super) next_visible: VisibleCells,
