@@ -48,7 +48,8 @@
 //!   beyond a direct frame of the triangles it submitted; scaled down by the views' work when
 //!   this view holds less), the probe cannot pay and the next
 //!   run starts instead, doubled as after a losing probe (a screening is a walk of the
-//!   hierarchies, a few percent of a frame; a losing probe costs up to two frames). Only with
+//!   hierarchies, its mesh hierarchies shared over the rasterizer's threads, a few percent of
+//!   a frame; a losing probe costs up to two frames). Only with
 //!   a culled frame at most [`SCREEN_AGE`] frames old, and by a direct frame of at least
 //!   [`MIN_ALLOWANCE_TIME`] (a view of next to nothing says nothing of the next); before the first direct frame, a culled
 //!   frame that did not plainly pay is screened the same way on its own depth, at its own
@@ -112,6 +113,9 @@ pub struct DirectFrames {
     pyramid: Option<ZPyramid>,
     /// The threads a direct frame's draws are shared over (the renderer's rasterizer's).
     threads: usize,
+    /// The rasterizer's thread pool, which screenings share their walk over (`None`: the
+    /// caller's).
+    pool: Option<Arc<rayon::ThreadPool>>,
     /// Workers that draw a culled frame at once, each on one thread (strips of columns,
     /// [`DirectFrames::culled_on`]); 1 when a culled frame is one walk.
     culled_workers: usize,
@@ -129,6 +133,7 @@ impl DirectFrames {
             choice: Choice::default(),
             pyramid: None,
             threads: raster.thread_count().max(1),
+            pool: raster.thread_pool(),
             culled_workers: 1,
         })
     }
@@ -208,7 +213,9 @@ impl DirectFrames {
             self.pyramid = Some(ZPyramid::new(frame.width(), frame.height())?);
         }
         let pyramid = self.pyramid.as_mut().expect("made above");
-        Ok(self.frustum.hidden_triangles(view, frame, pyramid))
+        Ok(self
+            .frustum
+            .hidden_triangles(view, frame, pyramid, self.pool.as_deref()))
     }
 
     /// Draws the frame directly, neither measured nor counted (for frames a renderer cannot
@@ -958,7 +965,7 @@ pub(crate) mod tests {
         let raster = Rasterizer::new(RasterConfig::default()).expect("default rasterizer");
         let d = DirectFrames::new(scene, &raster).expect("frustum hierarchies build");
         let mut pyramid = ZPyramid::new(96, 64).expect("small pyramid");
-        let hidden = d.frustum.hidden_triangles(&view, &reference, &mut pyramid);
+        let hidden = d.frustum.hidden_triangles(&view, &reference, &mut pyramid, None);
         let shown: std::collections::HashSet<_> = reference
             .items()
             .iter()
@@ -973,7 +980,16 @@ pub(crate) mod tests {
             shown.len()
         );
         let empty = Frame::new(96, 64).expect("small frame");
-        assert_eq!(d.frustum.hidden_triangles(&view, &empty, &mut pyramid), 0);
+        assert_eq!(d.frustum.hidden_triangles(&view, &empty, &mut pyramid, None), 0);
+        // Shared over threads, the same count.
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .expect("a small pool");
+            let shared = d.frustum.hidden_triangles(&view, &reference, &mut pyramid, Some(&pool));
+            assert_eq!(shared, hidden, "{threads} threads");
+        }
     }
 
     /// Culling that wins keeps culling (after the first measurement's direct frames, and

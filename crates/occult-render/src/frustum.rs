@@ -20,6 +20,7 @@ use std::time::Instant;
 use occult_core::{NodeKind, Scene, View};
 use occult_raster::{Draw, DrawTriangles, Frame, PyramidCounts, Rasterizer, ZPyramid};
 use occult_spatial::Bvh;
+use rayon::prelude::*;
 
 use crate::hzb::boxtest::Occlusion;
 use crate::nodes::{instance_boxes, per_node, triangle_boxes};
@@ -249,20 +250,52 @@ impl Hierarchies {
     /// with every occluder already drawn. No culling renderer's frame of the view removes more
     /// at this granularity, drawing occluders first as it must ([`crate::direct`] screens its
     /// probes with it).
-    pub fn hidden_triangles(&self, view: &View, frame: &Frame, pyramid: &mut ZPyramid) -> u64 {
+    ///
+    /// The groups are walked on the calling thread; the mesh occurrences met, each a descent
+    /// of its mesh's hierarchy (nearly all the boxes), are then shared over `pool`'s threads
+    /// (the caller's pool when `None`). The count does not depend on the threads.
+    pub fn hidden_triangles(
+        &self,
+        view: &View,
+        frame: &Frame,
+        pyramid: &mut ZPyramid,
+        pool: Option<&rayon::ThreadPool>,
+    ) -> u64 {
         pyramid.rebuild(frame);
+        let pyramid: &ZPyramid = pyramid;
         let mut w = Hidden {
             walk: SceneWalk::new(&self.scene, view),
             hierarchies: &self.hierarchies,
             occlusion: Occlusion::hierarchical(frame, pyramid, view),
             counts: PyramidCounts::default(),
             hidden: 0,
+            meshes: Vec::new(),
         };
         w.run();
-        w.hidden
+        let (hidden, meshes) = (w.hidden, w.meshes);
+        let hierarchies = &self.hierarchies;
+        let occlusion = Occlusion::hierarchical(frame, pyramid, view);
+        let in_meshes = || {
+            meshes
+                .par_chunks(HIDDEN_MESHES_PER_TASK)
+                .map(|chunk| {
+                    let mut m = MeshHidden::default();
+                    for at in chunk {
+                        if let Some(bvh) = &hierarchies[at.place.id.index()] {
+                            m.descend(&occlusion, view, at, bvh);
+                        }
+                    }
+                    m.hidden
+                })
+                .sum::<u64>()
+        };
+        hidden + pool.map_or_else(in_meshes, |p| p.install(in_meshes))
     }
 }
 
+/// Mesh occurrences one task of [`Hierarchies::hidden_triangles`] descends (a few hundred
+/// boxes each: a task of tens of microseconds).
+const HIDDEN_MESHES_PER_TASK: usize = 16;
 /// Most clusters in one draw of a kept subtree: the rasterizer finds where a range of a draw's
 /// triangles begins by a walk of its clusters, once per range of a shared draw (2,048 triangles),
 /// so one draw of a large subtree's clusters would cost the square of its size.
@@ -278,14 +311,17 @@ fn leaf_clusters(mesh: &occult_core::Mesh, bvh: &Bvh) -> Result<RunClusters> {
 }
 
 /// The walk of [`Hierarchies::hidden_triangles`]: the frustum walk, each box also tested
-/// against the final depth.
+/// against the final depth; the mesh occurrences with a hierarchy kept for
+/// [`MeshHidden::descend`].
 struct Hidden<'a> {
     walk: SceneWalk<'a>,
     hierarchies: &'a [Option<Bvh>],
     occlusion: Occlusion<'a>,
     counts: PyramidCounts,
-    /// Triangle instances under the hidden boxes.
+    /// Triangle instances under the hidden boxes of the groups.
     hidden: u64,
+    /// The mesh occurrences met, their own box not hidden.
+    meshes: Vec<NodeAt<'a>>,
 }
 
 impl Counts for Hidden<'_> {
@@ -313,13 +349,7 @@ impl<'a> Visitor<'a> for Hidden<'a> {
         let scene = self.walk.scene();
         let hierarchy = self.hierarchies[at.place.id.index()].as_ref();
         match (at.node.kind(), hierarchy) {
-            (NodeKind::Mesh(_), Some(bvh)) => cull_bvh(self, bvh, &at.frustum, |w, _, bn, _| {
-                if w.occlusion.box_hidden(&clip, &bn.bounds, eye, &mut w.counts) {
-                    w.hidden += bn.range().len() as u64;
-                    return false;
-                }
-                true
-            }),
+            (NodeKind::Mesh(_), Some(_)) => self.meshes.push(*at),
             (NodeKind::Mesh(_), None) => {}
             (NodeKind::Group(instances), Some(bvh)) => cull_bvh(self, bvh, &at.frustum, |w, _, bn, inside| {
                 let under = &bvh.primitive_indices()[bn.range()];
@@ -343,6 +373,37 @@ impl<'a> Visitor<'a> for Hidden<'a> {
                 }
             }
         }
+    }
+}
+
+/// One task's share of [`Hierarchies::hidden_triangles`]: the descents of mesh hierarchies.
+#[derive(Default)]
+struct MeshHidden {
+    stats: FrameStats,
+    counts: PyramidCounts,
+    /// Triangle instances under the hidden boxes.
+    hidden: u64,
+}
+
+impl Counts for MeshHidden {
+    fn counts(&mut self) -> &mut FrameStats {
+        &mut self.stats
+    }
+}
+
+impl MeshHidden {
+    /// The frustum-culled descent of `bvh`, the hierarchy of the mesh occurrence `at`, adding
+    /// the triangles under its hidden boxes.
+    fn descend(&mut self, occlusion: &Occlusion<'_>, view: &View, at: &NodeAt<'_>, bvh: &Bvh) {
+        let clip = view.clip_from_object(&at.place.world_from_node);
+        let eye = at.place.world_from_node.inverse().transform_point3(view.camera().eye);
+        cull_bvh(self, bvh, &at.frustum, |m, _, bn, _| {
+            if occlusion.box_hidden(&clip, &bn.bounds, eye, &mut m.counts) {
+                m.hidden += bn.range().len() as u64;
+                return false;
+            }
+            true
+        });
     }
 }
 

@@ -430,6 +430,12 @@ impl Rasterizer {
             .map_or_else(rayon::current_num_threads, |p| p.current_num_threads())
     }
 
+    /// This rasterizer's thread pool, for a caller's own parallel work kept apart from the
+    /// rasterizer (`None`: it draws in the pool its caller runs in).
+    pub fn thread_pool(&self) -> Option<std::sync::Arc<rayon::ThreadPool>> {
+        self.pool.clone()
+    }
+
     /// Runs `f` on this rasterizer's thread pool (so that callers' own parallel work uses the
     /// same threads).
     pub fn install<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
