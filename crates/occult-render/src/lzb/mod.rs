@@ -145,6 +145,10 @@ const PRIOR_NS_PER_FAR_LEAF: f64 = 500.0;
 /// rays at the slowest rates measured, so a frame given up overshoots little.
 const RAY_WAVE: usize = 4096;
 
+/// Bands of rows per thread that §III.C's done-mask is marked in at once ([`oor::mark`]):
+/// more than one, so that a thread done with a band of few far leaves takes another.
+const OOR_BANDS_PER_THREAD: usize = 2;
+
 /// Triangles of the near pass's first batch (`near_cull=on`), drawn untested: the nearest
 /// units, occluders of the rest.
 const NEAR_FIRST_BATCH: usize = 4096;
@@ -1152,15 +1156,20 @@ impl Lzb {
             frame.depth().iter().map(|&d| unfinished(d)).collect()
         };
         if self.opts.oor && !no_rays {
-            let marked = oor::mark(
-                &cast_mask,
-                &far,
-                &instances,
-                &self.accel,
-                view.camera().eye,
-                [w, h],
-                ctx.near,
-            );
+            let bands = (OOR_BANDS_PER_THREAD * self.raster.thread_count()) as u32;
+            let accel = &self.accel;
+            let marked = self.raster.install(|| {
+                oor::mark(
+                    &cast_mask,
+                    &far,
+                    &instances,
+                    accel,
+                    view.camera().eye,
+                    [w, h],
+                    ctx.near,
+                    bands,
+                )
+            });
             let (polygons, instances_skipped) = (marked.polygons, marked.instances_skipped);
             let done = marked.mask;
             stats.counters.add("oor_polygons", polygons);

@@ -2,6 +2,7 @@
 //! done-mask of pixels that get a ray.
 
 use occult_core::{Aabb, ItemId, Mat4, Vec2, Vec3, Vec4};
+use rayon::prelude::*;
 
 use super::cast::InstanceRec;
 use super::Accel;
@@ -164,9 +165,11 @@ const OOR_SCAN_PER_LEAF: u64 = 64;
 pub(super) struct Marked {
     /// Per pixel: unfinished and inside the screen polygon of some far leaf (gets a ray).
     pub mask: Vec<bool>,
-    /// Far leaves whose box projected to a polygon or the whole screen.
+    /// Far leaves whose box projected to a polygon meeting a band's rows, or to the whole
+    /// screen, summed over the bands ([`mark`]).
     pub polygons: u64,
-    /// Far instances skipped whole: their box's rectangle held no pixel left to mark.
+    /// Far instances skipped whole: their box's rectangle held no pixel of a band left to
+    /// mark, summed over the bands.
     pub instances_skipped: u64,
 }
 
@@ -174,6 +177,12 @@ pub(super) struct Marked {
 /// pixels inside the screen polygon of a far leaf (`far`: instance and leaf, an instance's
 /// leaves in one run; `instances` place them, `accel` holds their octrees), seen from `eye`
 /// with the near plane at `near`.
+///
+/// Marked in `bands` bands of rows at once, on the threads of the pool this runs in: each
+/// band meets the far instances in the same order and marks only its own rows. The mask does
+/// not depend on the bands; its counts are summed over them (a leaf whose polygon spans two
+/// bands is projected, and counted, in each).
+#[allow(clippy::too_many_arguments)]
 pub(super) fn mark(
     cast_mask: &[bool],
     far: &[(u32, u32)],
@@ -182,25 +191,13 @@ pub(super) fn mark(
     eye: Vec3,
     [w, h]: [u32; 2],
     near: f32,
+    bands: u32,
 ) -> Marked {
-    let mut done = vec![false; cast_mask.len()];
-    let mut polygons = 0u64;
-    // Whether a pixel rectangle holds a pixel left to mark: a box whose rectangle holds
-    // none marks nothing (seen from outside a city, most far leaves lie behind marked
-    // ones), and needs no hull.
-    let open = |done: &[bool], rect: [u32; 4]| {
-        (rect[2]..=rect[3]).any(|y| {
-            let row = (y * w) as usize;
-            let span = row + rect[0] as usize..=row + rect[1] as usize;
-            cast_mask[span.clone()].iter().zip(&done[span]).any(|(&c, &d)| c && !d)
-        })
-    };
     // The far list holds an instance's leaves in one run. The runs go nearest instance
     // first, so that the leaves in front mark the pixels that those behind then find
     // marked; an instance whose box lies (when small enough for the scan to cost less
     // than its leaves' projections) on pixels all finished or marked is skipped whole.
     // The mask is the same in any order.
-    let mut instances_skipped = 0u64;
     let mut runs: Vec<(f32, usize, usize)> = Vec::new();
     let mut first = 0;
     while first < far.len() {
@@ -214,63 +211,147 @@ pub(super) fn mark(
         first = end;
     }
     runs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
-    'runs: for &(_, first, end) in &runs {
-        let (rec, _, clip) = &instances[far[first].0 as usize];
-        let Accel::Mesh { octree, .. } = &accel[rec.node.index()] else {
-            continue;
+    let mut done = vec![false; cast_mask.len()];
+    if done.is_empty() {
+        return Marked {
+            mask: done,
+            polygons: 0,
+            instances_skipped: 0,
         };
-        // Judged with twice the near margin: an instance skipped has no corner near
-        // enough for a leaf of it to cover the screen, however its corners round.
-        let skip = match project_box(clip, &octree.bounds(), w, h, 2.0 * near) {
-            Projection::Nothing | Projection::Screen => false,
-            Projection::Polygon { rect, .. } => {
-                // Grown by a pixel: a leaf's corners, summed otherwise, may round past
-                // the instance's rectangle where their faces meet.
-                let rect = [
-                    rect[0].saturating_sub(1),
-                    (rect[1] + 1).min(w - 1),
-                    rect[2].saturating_sub(1),
-                    (rect[3] + 1).min(h - 1),
-                ];
-                let area = u64::from(rect[1] - rect[0] + 1) * u64::from(rect[3] - rect[2] + 1);
-                area <= OOR_SCAN_PER_LEAF * (end - first) as u64 && !open(&done, rect)
-            }
-        };
-        if skip {
-            instances_skipped += 1;
-            continue;
-        }
-        for &(_, leaf) in &far[first..end] {
-            let b = octree.nodes()[leaf as usize].bounds;
-            match project_box(clip, &b, w, h, near) {
-                Projection::Nothing => {}
-                Projection::Screen => {
-                    polygons += 1;
-                    done.copy_from_slice(cast_mask);
-                    break 'runs;
+    }
+    let rows = h.div_ceil(bands.clamp(1, h.max(1))).max(1);
+    let counts: Vec<(u64, u64)> = done
+        .par_chunks_mut((rows * w) as usize)
+        .enumerate()
+        .map(|(k, band)| {
+            let y0 = k as u32 * rows;
+            let band = Band {
+                cast_mask,
+                done: band,
+                w,
+                h,
+                y0,
+                y1: (y0 + rows).min(h) - 1,
+            };
+            band.mark(&runs, far, instances, accel, near)
+        })
+        .collect();
+    Marked {
+        mask: done,
+        polygons: counts.iter().map(|c| c.0).sum(),
+        instances_skipped: counts.iter().map(|c| c.1).sum(),
+    }
+}
+
+/// The rows `y0..=y1` of the done-mask being marked ([`mark`]): `done` holds them, and
+/// `cast_mask` the whole frame.
+struct Band<'a> {
+    cast_mask: &'a [bool],
+    done: &'a mut [bool],
+    w: u32,
+    h: u32,
+    y0: u32,
+    y1: u32,
+}
+
+impl Band<'_> {
+    /// The pixel rectangle `rect` (inclusive) cut to the band's rows, or `None` when it has
+    /// none of them.
+    fn cut(&self, rect: [u32; 4]) -> Option<[u32; 4]> {
+        let (y0, y1) = (rect[2].max(self.y0), rect[3].min(self.y1));
+        (y0 <= y1).then_some([rect[0], rect[1], y0, y1])
+    }
+
+    /// Whether the rectangle `rect` (inclusive, within the band's rows) holds a pixel left to
+    /// mark: one whose rectangle holds none marks nothing (seen from outside a city, most far
+    /// leaves lie behind marked ones), and needs no hull.
+    fn open(&self, rect: [u32; 4]) -> bool {
+        (rect[2]..=rect[3]).any(|y| {
+            let row = (y * self.w) as usize;
+            let local = ((y - self.y0) * self.w) as usize;
+            let span = rect[0] as usize..=rect[1] as usize;
+            self.cast_mask[row + rect[0] as usize..=row + rect[1] as usize]
+                .iter()
+                .zip(&self.done[local + span.start()..=local + span.end()])
+                .any(|(&c, &d)| c && !d)
+        })
+    }
+
+    /// Marks the band from the far leaves of `runs` (sorted, nearest instance first), as
+    /// [`mark`] says; its counts of polygons and instances skipped.
+    fn mark(
+        self,
+        runs: &[(f32, usize, usize)],
+        far: &[(u32, u32)],
+        instances: &[(InstanceRec, ItemId, Mat4)],
+        accel: &[Accel],
+        near: f32,
+    ) -> (u64, u64) {
+        let (w, h) = (self.w, self.h);
+        let (mut polygons, mut instances_skipped) = (0u64, 0u64);
+        'runs: for &(_, first, end) in runs {
+            let (rec, _, clip) = &instances[far[first].0 as usize];
+            let Accel::Mesh { octree, .. } = &accel[rec.node.index()] else {
+                continue;
+            };
+            // Judged with twice the near margin: an instance skipped has no corner near
+            // enough for a leaf of it to cover the screen, however its corners round.
+            let skip = match project_box(clip, &octree.bounds(), w, h, 2.0 * near) {
+                Projection::Nothing | Projection::Screen => false,
+                Projection::Polygon { rect, .. } => {
+                    // Grown by a pixel: a leaf's corners, summed otherwise, may round past
+                    // the instance's rectangle where their faces meet.
+                    let rect = [
+                        rect[0].saturating_sub(1),
+                        (rect[1] + 1).min(w - 1),
+                        rect[2].saturating_sub(1),
+                        (rect[3] + 1).min(h - 1),
+                    ];
+                    // Not a row of the band: nothing of it to mark here.
+                    self.cut(rect).is_none_or(|r| {
+                        let area = u64::from(r[1] - r[0] + 1) * u64::from(r[3] - r[2] + 1);
+                        area <= OOR_SCAN_PER_LEAF * (end - first) as u64 && !self.open(r)
+                    })
                 }
-                Projection::Polygon { corners, rect } => {
-                    polygons += 1;
-                    if !open(&done, rect) {
-                        continue;
+            };
+            if skip {
+                instances_skipped += 1;
+                continue;
+            }
+            for &(_, leaf) in &far[first..end] {
+                let b = octree.nodes()[leaf as usize].bounds;
+                match project_box(clip, &b, w, h, near) {
+                    Projection::Nothing => {}
+                    Projection::Screen => {
+                        polygons += 1;
+                        let rows = (self.y0 * w) as usize..((self.y1 + 1) * w) as usize;
+                        self.done.copy_from_slice(&self.cast_mask[rows]);
+                        break 'runs;
                     }
-                    let hull = Hull::of(corners);
-                    for y in rect[2]..=rect[3] {
-                        for x in rect[0]..=rect[1] {
-                            let i = (y * w + x) as usize;
-                            if cast_mask[i] && !done[i] && hull.inside(x as f32 + 0.5, y as f32 + 0.5) {
-                                done[i] = true;
+                    Projection::Polygon { corners, rect } => {
+                        let Some(rect) = self.cut(rect) else {
+                            continue;
+                        };
+                        polygons += 1;
+                        if !self.open(rect) {
+                            continue;
+                        }
+                        let hull = Hull::of(corners);
+                        for y in rect[2]..=rect[3] {
+                            let local = ((y - self.y0) * w) as usize;
+                            for x in rect[0]..=rect[1] {
+                                let i = (y * w + x) as usize;
+                                let d = &mut self.done[local + x as usize];
+                                if self.cast_mask[i] && !*d && hull.inside(x as f32 + 0.5, y as f32 + 0.5) {
+                                    *d = true;
+                                }
                             }
                         }
                     }
                 }
             }
         }
-    }
-    Marked {
-        mask: done,
-        polygons,
-        instances_skipped,
+        (polygons, instances_skipped)
     }
 }
 

@@ -318,6 +318,36 @@ fn far_cull_drops_the_far_leaves_behind_the_near_set() {
     assert!(stats.counters.get("rays") > 0);
 }
 
+/// §III.C's mask is marked in bands of rows, a few a thread: the pixels given a ray, and the
+/// frame, do not depend on the threads.
+#[test]
+fn the_rays_cast_do_not_depend_on_the_threads() {
+    // A near wall too small to hide the far one: far leaves left to the rays.
+    let (scene, view, reference) = walls(1.5);
+    let opts = LzbOptions {
+        plane: Plane::Static,
+        plane_fraction: 0.8,
+        payoff: false,
+        far_cull: false,
+        ..LzbOptions::default()
+    };
+    let rays: Vec<u64> = [1, 2, 5]
+        .into_iter()
+        .map(|threads| {
+            let mut ro = RenderOptions::default();
+            ro.raster.threads = threads;
+            let mut lzb = Lzb::new(scene.clone(), &ro, &opts).expect("lzb builds");
+            let mut frame = Frame::new(96, 64).expect("a frame");
+            let stats = lzb.render(&view, &mut frame).expect("a frame");
+            assert!(frame.same_visibility(&reference), "{threads} threads");
+            assert!(stats.counters.get("oor_polygons") > 0, "far leaves projected");
+            stats.counters.get("rays")
+        })
+        .collect();
+    assert!(rays[0] > 0);
+    assert!(rays.iter().all(|&r| r == rays[0]), "rays cast: {rays:?}");
+}
+
 /// A frame given up between waves of rays (`crate::payoff`; its near set drawn whole,
 /// untested): no ray is cast, its far leaves are drawn directly, it is not drawn again, and
 /// it is the reference frame.
