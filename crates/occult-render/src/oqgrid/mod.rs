@@ -1070,6 +1070,39 @@ mod tests {
         assert_eq!(twice.values(), std::array::from_fn(|i| 2 * (i as u64 + 1)));
     }
 
+    /// A cell of a group's grid enters its instances nearest first, whatever their order in
+    /// the group: a row of boxes along the view, stored farthest first in one cell, draws the
+    /// nearest box and the ground only (the boxes behind are queried hidden).
+    #[test]
+    fn a_cell_enters_its_instances_nearest_first() {
+        use occult_core::Vec3;
+        let scene = crate::tests::cubes_on_ground(
+            [-9.0, 9.0, -20.0, 2.0],
+            (0..9).rev().map(|i| Vec3::new(0.0, 0.0, -2.0 * i as f32)),
+        );
+        let mut reference = Frame::new(96, 64).expect("frame");
+        let eye = Vec3::new(0.0, 0.0, 4.0);
+        let view = View::new(occult_core::Camera::look_at(eye, Vec3::new(0.0, 0.0, -4.0)), 96, 64).expect("a view");
+        crate::zbuffer::ZBuffer::new(scene.clone(), &RenderOptions::default())
+            .expect("zbuffer builds")
+            .render(&view, &mut reference)
+            .expect("zbuffer renders");
+        let o = OqGridOptions {
+            resolution: Resolution::Cells(1),
+            payoff: false,
+            ..Default::default()
+        };
+        let mut r = OqGrid::with_options(scene, &RenderOptions::default(), &o).expect("builds");
+        let mut frame = Frame::new(96, 64).expect("frame");
+        let stats = r.render(&view, &mut frame).expect("renders");
+        assert!(frame.same_visibility(&reference));
+        // The ground's 2 triangles and the nearest box's 12.
+        assert_eq!(
+            stats.triangles_submitted, 14,
+            "the boxes behind the first are not drawn"
+        );
+    }
+
     /// Under `parallel=columns` a frame is drawn as strips of columns by a worker a thread, its
     /// counts those of the strips together.
     #[test]
