@@ -963,7 +963,7 @@ pub(crate) mod tests {
     fn hidden_triangles_are_not_shown() {
         let (scene, view, reference) = scene_view_reference();
         let raster = Rasterizer::new(RasterConfig::default()).expect("default rasterizer");
-        let d = DirectFrames::new(scene, &raster).expect("frustum hierarchies build");
+        let d = DirectFrames::new(scene.clone(), &raster).expect("frustum hierarchies build");
         let mut pyramid = ZPyramid::new(96, 64).expect("small pyramid");
         let hidden = d.frustum.hidden_triangles(&view, &reference, &mut pyramid, None);
         let shown: std::collections::HashSet<_> = reference
@@ -981,15 +981,26 @@ pub(crate) mod tests {
         );
         let empty = Frame::new(96, 64).expect("small frame");
         assert_eq!(d.frustum.hidden_triangles(&view, &empty, &mut pyramid, None), 0);
-        // Shared over threads, the same count.
-        for threads in [1, 3] {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .expect("a small pool");
-            let shared = d.frustum.hidden_triangles(&view, &reference, &mut pyramid, Some(&pool));
-            assert_eq!(shared, hidden, "{threads} threads");
-        }
+        // With a hierarchy in every mesh (cubes of two triangles a leaf), the 41 mesh
+        // occurrences' descents shared over threads: the same count, one thread or three.
+        let fine = FrustumOptions {
+            mesh_leaf_size: 2,
+            ..FrustumOptions::default()
+        };
+        let fine = Hierarchies::build(scene, &raster, &fine).expect("frustum hierarchies build");
+        let counts: Vec<u64> = [1, 3]
+            .into_iter()
+            .map(|threads| {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .expect("a small pool");
+                fine.hidden_triangles(&view, &reference, &mut pyramid, Some(&pool))
+            })
+            .collect();
+        // A visible cube's faces behind its front are hidden too: the meshes' part counted.
+        assert!(counts[0] > hidden, "finer boxes hide more: {counts:?}, {hidden}");
+        assert_eq!(counts[0], counts[1], "one thread or three");
     }
 
     /// Culling that wins keeps culling (after the first measurement's direct frames, and

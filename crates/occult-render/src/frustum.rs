@@ -296,6 +296,7 @@ impl Hierarchies {
 /// Mesh occurrences one task of [`Hierarchies::hidden_triangles`] descends (a few hundred
 /// boxes each: a task of tens of microseconds).
 const HIDDEN_MESHES_PER_TASK: usize = 16;
+
 /// Most clusters in one draw of a kept subtree: the rasterizer finds where a range of a draw's
 /// triangles begins by a walk of its clusters, once per range of a shared draw (2,048 triangles),
 /// so one draw of a large subtree's clusters would cost the square of its size.
@@ -318,7 +319,8 @@ struct Hidden<'a> {
     hierarchies: &'a [Option<Bvh>],
     occlusion: Occlusion<'a>,
     counts: PyramidCounts,
-    /// Triangle instances under the hidden boxes of the groups.
+    /// Triangle instances under the hidden boxes met so far: of the groups' hierarchies, and
+    /// of the node occurrences whose own box is hidden.
     hidden: u64,
     /// The mesh occurrences met, their own box not hidden.
     meshes: Vec<NodeAt<'a>>,

@@ -165,12 +165,21 @@ const OOR_SCAN_PER_LEAF: u64 = 64;
 pub(super) struct Marked {
     /// Per pixel: unfinished and inside the screen polygon of some far leaf (gets a ray).
     pub mask: Vec<bool>,
-    /// Far leaves whose box projected to a polygon meeting a band's rows, or to the whole
-    /// screen, summed over the bands ([`mark`]).
+    /// Far leaves whose box projected to a polygon or to the whole screen, counted in each
+    /// band of rows the polygon meets ([`mark`]).
     pub polygons: u64,
-    /// Far instances skipped whole: their box's rectangle held no pixel of a band left to
-    /// mark, summed over the bands.
+    /// Far instances skipped whole: their box's rectangle held no pixel left to mark, counted
+    /// in each band of rows the rectangle meets.
     pub instances_skipped: u64,
+}
+
+/// A far instance's run of leaves in the list (`first..end`), with what decides whether it
+/// may be skipped whole: the pixel rectangle of its box, grown by a pixel, when it is small
+/// enough for a scan to cost less than its leaves' projections ([`OOR_SCAN_PER_LEAF`]).
+struct Run {
+    first: usize,
+    end: usize,
+    skippable: Option<[u32; 4]>,
 }
 
 /// §III.C: the done-mask of `cast_mask` (the unfinished pixels of a `w × h` frame): the
@@ -179,9 +188,9 @@ pub(super) struct Marked {
 /// with the near plane at `near`.
 ///
 /// Marked in `bands` bands of rows at once, on the threads of the pool this runs in: each
-/// band meets the far instances in the same order and marks only its own rows. The mask does
-/// not depend on the bands; its counts are summed over them (a leaf whose polygon spans two
-/// bands is projected, and counted, in each).
+/// band meets the far instances in the same order (each instance's box projected once, before)
+/// and marks only its own rows. The mask does not depend on the bands; a leaf whose polygon
+/// spans several bands is projected, and counted, in each.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn mark(
     cast_mask: &[bool],
@@ -193,20 +202,39 @@ pub(super) fn mark(
     near: f32,
     bands: u32,
 ) -> Marked {
+    debug_assert_eq!(cast_mask.len(), w as usize * h as usize, "a mask of the frame's pixels");
     // The far list holds an instance's leaves in one run. The runs go nearest instance
     // first, so that the leaves in front mark the pixels that those behind then find
     // marked; an instance whose box lies (when small enough for the scan to cost less
     // than its leaves' projections) on pixels all finished or marked is skipped whole.
     // The mask is the same in any order.
-    let mut runs: Vec<(f32, usize, usize)> = Vec::new();
+    let mut runs: Vec<(f32, Run)> = Vec::new();
     let mut first = 0;
     while first < far.len() {
         let inst = far[first].0;
         let end = first + far[first..].iter().take_while(|&&(i, _)| i == inst).count();
-        let rec = &instances[inst as usize].0;
+        let (rec, _, clip) = &instances[inst as usize];
         if let Accel::Mesh { octree, .. } = &accel[rec.node.index()] {
             let b = octree.bounds().transformed(&rec.world_from_object);
-            runs.push((eye.clamp(b.min, b.max).distance_squared(eye), first, end));
+            // Judged with twice the near margin: an instance skipped has no corner near
+            // enough for a leaf of it to cover the screen, however its corners round.
+            let skippable = match project_box(clip, &octree.bounds(), w, h, 2.0 * near) {
+                Projection::Nothing | Projection::Screen => None,
+                Projection::Polygon { rect, .. } => {
+                    // Grown by a pixel: a leaf's corners, summed otherwise, may round past
+                    // the instance's rectangle where their faces meet.
+                    let rect = [
+                        rect[0].saturating_sub(1),
+                        (rect[1] + 1).min(w - 1),
+                        rect[2].saturating_sub(1),
+                        (rect[3] + 1).min(h - 1),
+                    ];
+                    let area = u64::from(rect[1] - rect[0] + 1) * u64::from(rect[3] - rect[2] + 1);
+                    (area <= OOR_SCAN_PER_LEAF * (end - first) as u64).then_some(rect)
+                }
+            };
+            let run = Run { first, end, skippable };
+            runs.push((eye.clamp(b.min, b.max).distance_squared(eye), run));
         }
         first = end;
     }
@@ -219,7 +247,7 @@ pub(super) fn mark(
             instances_skipped: 0,
         };
     }
-    let rows = h.div_ceil(bands.clamp(1, h.max(1))).max(1);
+    let rows = h.div_ceil(bands.clamp(1, h)).max(1);
     let counts: Vec<(u64, u64)> = done
         .par_chunks_mut((rows * w) as usize)
         .enumerate()
@@ -270,7 +298,7 @@ impl Band<'_> {
             let row = (y * self.w) as usize;
             let local = ((y - self.y0) * self.w) as usize;
             let span = rect[0] as usize..=rect[1] as usize;
-            self.cast_mask[row + rect[0] as usize..=row + rect[1] as usize]
+            self.cast_mask[row + span.start()..=row + span.end()]
                 .iter()
                 .zip(&self.done[local + span.start()..=local + span.end()])
                 .any(|(&c, &d)| c && !d)
@@ -281,7 +309,7 @@ impl Band<'_> {
     /// [`mark`] says; its counts of polygons and instances skipped.
     fn mark(
         self,
-        runs: &[(f32, usize, usize)],
+        runs: &[(f32, Run)],
         far: &[(u32, u32)],
         instances: &[(InstanceRec, ItemId, Mat4)],
         accel: &[Accel],
@@ -289,36 +317,22 @@ impl Band<'_> {
     ) -> (u64, u64) {
         let (w, h) = (self.w, self.h);
         let (mut polygons, mut instances_skipped) = (0u64, 0u64);
-        'runs: for &(_, first, end) in runs {
-            let (rec, _, clip) = &instances[far[first].0 as usize];
+        'runs: for (_, run) in runs {
+            let (rec, _, clip) = &instances[far[run.first].0 as usize];
             let Accel::Mesh { octree, .. } = &accel[rec.node.index()] else {
                 continue;
             };
-            // Judged with twice the near margin: an instance skipped has no corner near
-            // enough for a leaf of it to cover the screen, however its corners round.
-            let skip = match project_box(clip, &octree.bounds(), w, h, 2.0 * near) {
-                Projection::Nothing | Projection::Screen => false,
-                Projection::Polygon { rect, .. } => {
-                    // Grown by a pixel: a leaf's corners, summed otherwise, may round past
-                    // the instance's rectangle where their faces meet.
-                    let rect = [
-                        rect[0].saturating_sub(1),
-                        (rect[1] + 1).min(w - 1),
-                        rect[2].saturating_sub(1),
-                        (rect[3] + 1).min(h - 1),
-                    ];
-                    // Not a row of the band: nothing of it to mark here.
-                    self.cut(rect).is_none_or(|r| {
-                        let area = u64::from(r[1] - r[0] + 1) * u64::from(r[3] - r[2] + 1);
-                        area <= OOR_SCAN_PER_LEAF * (end - first) as u64 && !self.open(r)
-                    })
+            if let Some(rect) = run.skippable {
+                // Its leaves lie within the rectangle: none of them reaches a band it misses.
+                let Some(rect) = self.cut(rect) else {
+                    continue;
+                };
+                if !self.open(rect) {
+                    instances_skipped += 1;
+                    continue;
                 }
-            };
-            if skip {
-                instances_skipped += 1;
-                continue;
             }
-            for &(_, leaf) in &far[first..end] {
+            for &(_, leaf) in &far[run.first..run.end] {
                 let b = octree.nodes()[leaf as usize].bounds;
                 match project_box(clip, &b, w, h, near) {
                     Projection::Nothing => {}

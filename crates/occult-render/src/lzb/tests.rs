@@ -348,6 +348,62 @@ fn the_rays_cast_do_not_depend_on_the_threads() {
     assert!(rays.iter().all(|&r| r == rays[0]), "rays cast: {rays:?}");
 }
 
+/// §III.C's mask marked in any number of bands of rows is the mask of one band: every leaf
+/// of two walls far, over a pattern of unfinished pixels, seen from before them, and from so
+/// near the first that its leaves cover the screen.
+#[test]
+fn the_oor_mask_does_not_depend_on_its_bands() {
+    use occult_core::Vec3;
+    let (scene, _, _) = walls(1.5);
+    let lzb = Lzb::new(scene.clone(), &RenderOptions::default(), &LzbOptions::default()).expect("lzb builds");
+    let (w, h) = (96u32, 64u32);
+    let cast_mask: Vec<bool> = (0..w * h).map(|i| (i % w + i / w) % 3 != 0).collect();
+    for (eye, whole) in [(Vec3::new(0.3, 0.2, 3.0), false), (Vec3::new(0.0, 0.0, 0.01), true)] {
+        let (view, _) = crate::test_view(eye, Vec3::new(0.0, 0.0, -1.0), w, h);
+        let mut instances = Vec::new();
+        let mut far = Vec::new();
+        scene.for_each_mesh_instance(|world_from_object, node, _, first_item| {
+            let Accel::Mesh { octree, .. } = &lzb.accel[node.index()] else {
+                return;
+            };
+            let inst = instances.len() as u32;
+            far.extend(
+                (0..octree.nodes().len() as u32)
+                    .filter(|&n| octree.nodes()[n as usize].is_leaf() && octree.nodes()[n as usize].count > 0)
+                    .map(|n| (inst, n)),
+            );
+            let rec = cast::InstanceRec {
+                node,
+                world_from_object: *world_from_object,
+            };
+            instances.push((rec, first_item, view.clip_from_object(world_from_object)));
+        });
+        let mark = |bands| {
+            oor::mark(
+                &cast_mask,
+                &far,
+                &instances,
+                &lzb.accel,
+                eye,
+                [w, h],
+                view.camera().near,
+                bands,
+            )
+            .mask
+        };
+        let one = mark(1);
+        assert!(one.iter().any(|&m| m), "some pixel marked");
+        assert!(
+            one.iter().zip(&cast_mask).all(|(&m, &c)| c || !m),
+            "only unfinished pixels"
+        );
+        assert_eq!(one == cast_mask, whole, "the screen covered from near the wall");
+        for bands in [0, 2, 3, 7, h - 1, h, h + 7] {
+            assert!(mark(bands) == one, "{bands} bands, eye at {eye}");
+        }
+    }
+}
+
 /// A frame given up between waves of rays (`crate::payoff`; its near set drawn whole,
 /// untested): no ray is cast, its far leaves are drawn directly, it is not drawn again, and
 /// it is the reference frame.
