@@ -107,6 +107,7 @@ mod cast;
 mod near;
 mod oor;
 mod options;
+mod owned;
 mod plane;
 pub mod shared;
 
@@ -201,9 +202,12 @@ pub(crate) enum Accel {
         leaves: u32,
         /// The near pass's units of an instance all of whose leaves are near ([`near::near_chunks`]).
         chunks: Vec<near::NearChunk>,
-        /// Per triangle: a leaf that holds it (`u32::MAX`: none), so that a pixel's item
-        /// names a leaf (`near_temporal`).
+        /// Per triangle: the leaf that owns it, one of those that list it (`u32::MAX`: none;
+        /// [`owned`]), so that a pixel's item names a leaf (`near_temporal`).
         leaf_of: Vec<u32>,
+        /// The leaves' own triangles as clusters, and those they borrow ([`owned`]): how the
+        /// near pass draws leaves.
+        clusters: Box<owned::LeafClusters>,
         /// What the rays walk with `caster=bvh`.
         bvh: Option<MeshBvh>,
     },
@@ -262,9 +266,11 @@ impl Accel {
                 leaf_of,
                 bvh,
                 chunks,
+                clusters,
                 ..
             } => {
                 octree.memory_bytes()
+                    + clusters.memory_bytes()
                     + chunks.capacity() * std::mem::size_of::<near::NearChunk>()
                     + refs.capacity() * std::mem::size_of::<RefTriangle>()
                     + (leaf_base.capacity() + leaf_of.capacity()) * 4
@@ -312,6 +318,9 @@ pub struct Lzb {
     accel: Vec<Accel>,
     /// Per mesh node: a stamp per triangle (PVL without duplicates).
     stamps: Vec<Vec<u32>>,
+    /// Per mesh node: a stamp per octree node, the stamp of the instance whose leaf it drew
+    /// last ([`owned`]).
+    leaf_stamps: Vec<Vec<u32>>,
     stamp: u32,
     plane_cache: Option<PlaneCache>,
     build_time: Duration,
@@ -512,16 +521,16 @@ impl Lzb {
                                     .intersection(Aabb::new(b.min - grow, b.max + grow))
                             });
                             let refs = leaf_triangles(m, &normals, octree.primitives());
-                            // Only `near_temporal` reads it.
-                            let temporal = opts.near_cull && opts.near_temporal;
-                            let mut leaf_of = vec![u32::MAX; if temporal { m.triangle_count() } else { 0 }];
+                            // Each triangle's owner: the last leaf that lists it.
+                            let mut leaf_of = vec![u32::MAX; m.triangle_count()];
                             for (n, node) in octree.nodes().iter().enumerate() {
-                                if temporal && node.is_leaf() {
+                                if node.is_leaf() {
                                     for &t in &octree.primitives()[node.range()] {
                                         leaf_of[t as usize] = n as u32;
                                     }
                                 }
                             }
+                            let clusters = Box::new(owned::LeafClusters::build(m, &octree, &leaf_of)?);
                             let bvh = match opts.caster {
                                 CasterKind::Bvh => Some(MeshBvh::build(m, &normals, opts.bvh_leaf).map_err(|e| {
                                     RenderError::BadParameter(format!("lzb: BVH of node '{}': {e}", node.name()))
@@ -540,6 +549,7 @@ impl Lzb {
                                     refs,
                                     leaf_base,
                                     leaf_of,
+                                    clusters,
                                     bvh,
                                 },
                                 shallower,
@@ -594,6 +604,13 @@ impl Lzb {
             .iter()
             .map(|n| vec![0u32; n.mesh().map_or(0, |m| m.triangle_count())])
             .collect();
+        let leaf_stamps = accel
+            .iter()
+            .map(|a| match a {
+                Accel::Mesh { octree, .. } => vec![0u32; octree.nodes().len()],
+                _ => Vec::new(),
+            })
+            .collect();
         let direct = match opts.payoff {
             true => Some(DirectFrames::new(scene.clone(), &raster)?.judging_first_by_time()),
             false => None,
@@ -606,6 +623,7 @@ impl Lzb {
             opts: opts.clone(),
             accel,
             stamps,
+            leaf_stamps,
             stamp: 0,
             plane_cache: None,
             direct,
@@ -716,6 +734,7 @@ impl Lzb {
     fn reserve_stamps(&mut self, n: u32) -> u32 {
         if self.stamp >= u32::MAX - n {
             self.stamps.iter_mut().for_each(|s| s.fill(0));
+            self.leaf_stamps.iter_mut().for_each(|s| s.fill(0));
             self.stamp = 0;
         }
         let first = self.stamp + 1;
@@ -1430,6 +1449,7 @@ impl Lzb {
     fn memory_bytes_of_all(&self) -> usize {
         self.accel.iter().map(Accel::memory_bytes).sum::<usize>()
             + self.stamps.iter().map(|s| s.capacity() * 4).sum::<usize>()
+            + self.leaf_stamps.iter().map(|s| s.capacity() * 4).sum::<usize>()
             + self.raster.memory_bytes()
             + self.pyramid.as_ref().map_or(0, ZPyramid::memory_bytes)
             + self.near_visible.capacity() * std::mem::size_of::<(ItemId, u32)>()

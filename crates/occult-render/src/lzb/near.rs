@@ -23,7 +23,7 @@ impl Lzb {
     ) {
         let t = Instant::now();
         // A mesh instance all of whose leaves are near is drawn whole (its vertices shared, no
-        // list to build); the others by their near leaves' triangles.
+        // list to build); the others by their near leaves' clusters ([`super::owned`]).
         let (mut near_groups, mut whole) = (Vec::new(), Vec::new());
         for (inst, r) in group_ranges(near) {
             let (rec, base, _) = instances[inst as usize];
@@ -33,15 +33,19 @@ impl Lzb {
             }
         }
         let near_leaves: Vec<u32> = near.iter().map(|&(_, l)| l).collect();
-        let mut pool = Vec::new();
-        let near_lists = self.emit(&near_groups, &near_leaves, &mut pool, Entries::OctreeLeaves, None);
+        let first = self.reserve_stamps(near_groups.len() as u32);
+        let stamps: Vec<u32> = (first..first + near_groups.len() as u32).collect();
+        let mut lists = super::owned::LeafLists::default();
+        self.emit_leaves(&near_groups, &near_leaves, &stamps, &mut lists);
         let whole_triangles: usize = whole
             .iter()
             .filter_map(|(rec, _)| self.scene.node(rec.node).mesh().map(|m| m.triangle_count()))
             .sum();
-        stats.counters.add(counter, (pool.len() + whole_triangles) as u64);
+        stats
+            .counters
+            .add(counter, (lists.triangle_count() + whole_triangles) as u64);
         stats.phases.add(Phase::Other, t.elapsed());
-        let mut draws = make_draws(&self.scene, view, &near_lists, &pool);
+        let mut draws = lists.draws(&self.scene, &self.accel, view);
         draws.extend(whole.iter().filter_map(|(rec, base)| {
             Some(Draw {
                 mesh: self.scene.node(rec.node).mesh()?,
@@ -93,6 +97,7 @@ impl Lzb {
             groups,
             eyes,
             state,
+            lists,
         } = &mut scratch;
         ordered.clear();
         parts.clear();
@@ -326,8 +331,9 @@ impl Lzb {
                 state[inst as usize].drawn = state[inst as usize].drawn.saturating_add(count);
                 gathered += count as usize;
             }
-            // Draw it: index lists per instance (each triangle once), whole meshes whole.
-            // An instance's stamp is the frame's: what an earlier batch listed is not again.
+            // Draw it: the leaves' clusters and borrowed triangles per instance, whole meshes
+            // whole. An instance's stamp is the frame's: a triangle whose owner an earlier batch
+            // drew is not drawn again.
             pairs.sort_unstable();
             let ranges = group_ranges(&pairs);
             let stamps: Vec<u32> = ranges.iter().map(|&(inst, _)| first_stamp + inst).collect();
@@ -339,9 +345,9 @@ impl Lzb {
                 })
                 .collect();
             let leaves: Vec<u32> = pairs.iter().map(|&(_, l)| l).collect();
-            let mut pool = Vec::new();
-            let lists = self.emit(&groups, &leaves, &mut pool, Entries::OctreeLeaves, Some(&stamps));
-            let mut draws = make_draws(&self.scene, view, &lists, &pool);
+            lists.clear();
+            self.emit_leaves(&groups, &leaves, &stamps, lists);
+            let mut draws = lists.draws(&self.scene, &self.accel, view);
             draws.extend(whole.iter().filter_map(|(rec, base)| {
                 Some(Draw {
                     mesh: self.scene.node(rec.node).mesh()?,
@@ -350,7 +356,7 @@ impl Lzb {
                     first_item: *base,
                 })
             }));
-            let submitted = pool.len()
+            let submitted = lists.triangle_count()
                 + whole
                     .iter()
                     .filter_map(|(rec, _)| self.scene.node(rec.node).mesh().map(|m| m.triangle_count()))
@@ -614,6 +620,8 @@ pub(super) struct NearScratch {
     eyes: Vec<Option<Vec3>>,
     /// Per instance: what the rest of a frame given up draws whole.
     state: Vec<NearInstance>,
+    /// A batch's draw lists.
+    lists: super::owned::LeafLists,
 }
 
 /// An instance in the near pass ([`NearScratch::state`]).
@@ -638,6 +646,7 @@ impl NearScratch {
             + self.groups.capacity() * std::mem::size_of::<NearGroup>()
             + self.eyes.capacity() * std::mem::size_of::<Option<Vec3>>()
             + self.state.capacity() * std::mem::size_of::<NearInstance>()
+            + self.lists.memory_bytes()
     }
 }
 

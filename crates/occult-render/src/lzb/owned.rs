@@ -1,0 +1,320 @@
+//! A mesh octree's leaves drawn as clusters (the near pass, and what it draws directly).
+//!
+//! An octree leaf lists every triangle that overlaps its octant, so a triangle across octants is
+//! listed by several leaves (about twice on the suite's meshes: 1.9 references a triangle on
+//! `city` and `plant`, 2.2 on `forest`). Drawn as index lists, each of a leaf's triangles
+//! projects its three corners one by one, and the lists are built triangle by triangle with a
+//! stamp each so that a triangle two drawn leaves list is drawn once. Here each triangle is
+//! **owned** by one of the leaves that list it (the last in node order, the leaf that
+//! `near_temporal` names for it): a leaf's own triangles are clusters of few vertices
+//! ([`RunClusters`]), drawn by their cluster indices, each vertex projected once; the
+//! triangles it lists but does not own (**borrowed**) are drawn with it as an index list only
+//! when their owner is not drawn in the frame so far (a stamp per leaf). What a drawn leaf
+//! lists is thus always drawn; a borrowed triangle whose owner is drawn by a later batch is
+//! drawn twice, which draws the same frame.
+
+use std::ops::Range;
+
+use occult_core::{ItemId, Mesh, Scene, View};
+use occult_raster::{Draw, DrawTriangles, Meshlets};
+use occult_spatial::RayOctree;
+
+use super::cast::InstanceRec;
+use super::{Accel, Lzb};
+use crate::runs::RunClusters;
+use crate::Result;
+
+/// A mesh octree's leaves as clusters of the triangles they own, and the lists of those they
+/// borrow ([module doc](self)).
+pub(crate) struct LeafClusters {
+    /// Run `n`, one per octree node (empty but for leaves): the triangles leaf `n` owns.
+    owned: RunClusters,
+    /// Leaf `n`'s borrowed triangles by owner: runs `runs[run_starts[n]..run_starts[n + 1]]`,
+    /// each `(owner, end)`: the triangles of `borrowed` from the end of the run before (or
+    /// the leaf's first) to `end`, all owned by leaf `owner` (one test of the owner a run).
+    run_starts: Vec<u32>,
+    runs: Vec<(u32, u32)>,
+    borrowed: Vec<u32>,
+}
+
+impl LeafClusters {
+    /// The clusters of `octree`'s leaves over `mesh`, each triangle owned by leaf `owner[t]`
+    /// (a leaf that lists it).
+    ///
+    /// # Errors
+    /// [`crate::RenderError::Raster`] for a leaf list naming a triangle the mesh lacks.
+    pub(crate) fn build(mesh: &Mesh, octree: &RayOctree, owner: &[u32]) -> Result<Self> {
+        let nodes = octree.nodes();
+        let mut owned = Vec::with_capacity(mesh.triangle_count());
+        let mut starts = Vec::with_capacity(nodes.len() + 1);
+        starts.push(0);
+        let (mut run_starts, mut runs) = (Vec::with_capacity(nodes.len() + 1), Vec::new());
+        run_starts.push(0);
+        let mut borrowed: Vec<(u32, u32)> = Vec::new();
+        let mut flat = Vec::new();
+        for (n, node) in nodes.iter().enumerate() {
+            if node.is_leaf() {
+                borrowed.clear();
+                for &t in octree.leaf_primitives(n as u32) {
+                    match owner.get(t as usize) {
+                        Some(&o) if o == n as u32 => owned.push(t),
+                        Some(&o) => borrowed.push((o, t)),
+                        None => {}
+                    }
+                }
+                borrowed.sort_unstable();
+                for (i, &(o, t)) in borrowed.iter().enumerate() {
+                    flat.push(t);
+                    if borrowed.get(i + 1).is_none_or(|next| next.0 != o) {
+                        runs.push((o, flat.len() as u32));
+                    }
+                }
+            }
+            starts.push(owned.len() as u32);
+            run_starts.push(runs.len() as u32);
+        }
+        Ok(Self {
+            owned: RunClusters::build(mesh, &owned, starts)?,
+            run_starts,
+            runs,
+            borrowed: flat,
+        })
+    }
+
+    /// The mesh's clusters, and those of the triangles leaf `leaf` owns.
+    #[inline]
+    pub(crate) fn owned(&self, leaf: u32) -> (&Meshlets, &[u32]) {
+        self.owned.runs(leaf as usize..leaf as usize + 1)
+    }
+
+    /// The mesh's clusters.
+    pub(crate) fn meshlets(&self) -> &Meshlets {
+        self.owned.runs(0..0).0
+    }
+
+    /// The triangles leaf `leaf` lists and does not own, by owner: `(owner, its triangles)`.
+    #[inline]
+    pub(crate) fn borrowed(&self, leaf: u32) -> impl Iterator<Item = (u32, &[u32])> {
+        let runs = &self.runs[self.run_starts[leaf as usize] as usize..self.run_starts[leaf as usize + 1] as usize];
+        // The first run starts where the leaf's runs before end.
+        let mut start = match self.run_starts[leaf as usize] {
+            0 => 0,
+            r => self.runs[r as usize - 1].1,
+        };
+        runs.iter().map(move |&(owner, end)| {
+            let of = &self.borrowed[start as usize..end as usize];
+            start = end;
+            (owner, of)
+        })
+    }
+
+    /// Bytes held.
+    pub(crate) fn memory_bytes(&self) -> usize {
+        self.owned.memory_bytes()
+            + (self.run_starts.capacity() + self.borrowed.capacity() + 2 * self.runs.capacity()) * 4
+    }
+}
+
+/// The draw lists of some leaves of some instances ([`Lzb::emit_leaves`]), kept from batch to
+/// batch and cleared before each.
+#[derive(Default)]
+pub(super) struct LeafLists {
+    /// Per instance, its owned triangles' clusters: a range of `clusters`.
+    owned: Vec<(InstanceRec, ItemId, Range<usize>)>,
+    clusters: Vec<u32>,
+    /// Per instance, the borrowed triangles to draw: a range of `triangles`.
+    borrowed: Vec<(InstanceRec, ItemId, Range<usize>)>,
+    triangles: Vec<u32>,
+    /// The triangles of both.
+    count: usize,
+}
+
+impl LeafLists {
+    pub(super) fn clear(&mut self) {
+        self.owned.clear();
+        self.clusters.clear();
+        self.borrowed.clear();
+        self.triangles.clear();
+        self.count = 0;
+    }
+
+    /// The triangles the lists draw.
+    pub(super) fn triangle_count(&self) -> usize {
+        self.count
+    }
+
+    /// One draw per instance of each kind: its clusters, its borrowed triangles.
+    pub(super) fn draws<'s>(&'s self, scene: &'s Scene, accel: &'s [Accel], view: &View) -> Vec<Draw<'s>> {
+        let owned = self.owned.iter().filter_map(|(rec, first_item, r)| {
+            let Accel::Mesh { clusters, .. } = &accel[rec.node.index()] else {
+                return None;
+            };
+            Some(Draw {
+                mesh: scene.node(rec.node).mesh()?,
+                triangles: DrawTriangles::Clusters {
+                    meshlets: clusters.meshlets(),
+                    list: &self.clusters[r.clone()],
+                },
+                clip_from_object: view.clip_from_object(&rec.world_from_object),
+                first_item: *first_item,
+            })
+        });
+        let borrowed = self.borrowed.iter().filter_map(|(rec, first_item, r)| {
+            Some(Draw {
+                mesh: scene.node(rec.node).mesh()?,
+                triangles: DrawTriangles::List(&self.triangles[r.clone()]),
+                clip_from_object: view.clip_from_object(&rec.world_from_object),
+                first_item: *first_item,
+            })
+        });
+        owned.chain(borrowed).collect()
+    }
+
+    /// Bytes held.
+    pub(super) fn memory_bytes(&self) -> usize {
+        (self.owned.capacity() + self.borrowed.capacity()) * std::mem::size_of::<(InstanceRec, ItemId, Range<usize>)>()
+            + (self.clusters.capacity() + self.triangles.capacity()) * 4
+    }
+}
+
+impl Lzb {
+    /// Adds to `lists` the leaves of `(instance, leaf)` pairs grouped by instance (`groups`:
+    /// each instance with its range of `leaves`), group `g` drawn under stamp `stamps_of[g]`
+    /// (the caller's, [`Lzb::reserve_stamps`]; one stamp an instance a frame, so that later
+    /// calls know its leaves drawn before): each leaf's own clusters, and the triangles it
+    /// borrows whose owner was not drawn under that stamp (nor listed already).
+    pub(super) fn emit_leaves(
+        &mut self,
+        groups: &[(InstanceRec, ItemId, Range<usize>)],
+        leaves: &[u32],
+        stamps_of: &[u32],
+        lists: &mut LeafLists,
+    ) {
+        for ((rec, first_item, range), &stamp) in groups.iter().zip(stamps_of) {
+            let node = rec.node.index();
+            let Accel::Mesh { clusters, .. } = &self.accel[node] else {
+                continue;
+            };
+            let of = &leaves[range.clone()];
+            let marks = &mut self.leaf_stamps[node];
+            for &leaf in of {
+                marks[leaf as usize] = stamp;
+            }
+            let start = lists.clusters.len();
+            for &leaf in of {
+                let (meshlets, list) = clusters.owned(leaf);
+                lists.clusters.extend_from_slice(list);
+                lists.count += meshlets.list_len(list);
+            }
+            if lists.clusters.len() > start {
+                lists.owned.push((*rec, *first_item, start..lists.clusters.len()));
+            }
+            let stamps = &mut self.stamps[node];
+            let start = lists.triangles.len();
+            for &leaf in of {
+                for (owner, triangles) in clusters.borrowed(leaf) {
+                    if marks[owner as usize] == stamp {
+                        continue;
+                    }
+                    for &t in triangles {
+                        if stamps[t as usize] != stamp {
+                            stamps[t as usize] = stamp;
+                            lists.triangles.push(t);
+                        }
+                    }
+                }
+            }
+            if lists.triangles.len() > start {
+                lists.count += lists.triangles.len() - start;
+                lists.borrowed.push((*rec, *first_item, start..lists.triangles.len()));
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use occult_core::Vec3;
+    use occult_spatial::RayOctreeConfig;
+    use rand::{Rng, SeedableRng};
+
+    /// Each leaf's own triangles and those it borrows are, together, exactly what it lists;
+    /// every listed triangle is owned by one leaf, its owner; a borrowed run names the owner
+    /// of each of its triangles. Long thin triangles across many octants, so most leaves
+    /// borrow.
+    #[test]
+    fn a_leaf_owns_or_borrows_each_triangle_it_lists() {
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(3);
+        let mut positions = Vec::new();
+        let mut triangles = Vec::new();
+        for i in 0..600u32 {
+            let a = Vec3::new(
+                rng.random_range(0.0..10.0),
+                rng.random_range(0.0..10.0),
+                rng.random_range(0.0..10.0),
+            );
+            let long = if i % 3 == 0 { 6.0 } else { 0.3 };
+            let b = a + Vec3::new(rng.random_range(-long..long), rng.random_range(-0.3..0.3), 0.1);
+            let c = a + Vec3::new(0.1, rng.random_range(-long..long), rng.random_range(-0.3..0.3));
+            positions.extend([a, b, c]);
+            triangles.push([3 * i, 3 * i + 1, 3 * i + 2]);
+        }
+        let mesh = Mesh::new(positions.clone(), triangles.clone()).expect("a valid mesh");
+        let octree = RayOctree::build_triangles(
+            &positions,
+            &triangles,
+            RayOctreeConfig {
+                max_depth: 6,
+                max_leaf_size: 8,
+            },
+        )
+        .expect("a valid octree");
+        let mut owner = vec![u32::MAX; triangles.len()];
+        for (n, node) in octree.nodes().iter().enumerate() {
+            if node.is_leaf() {
+                for &t in octree.leaf_primitives(n as u32) {
+                    owner[t as usize] = n as u32;
+                }
+            }
+        }
+        let leaves = LeafClusters::build(&mesh, &octree, &owner).expect("valid lists");
+        let (mut owned_total, mut borrowed_total) = (0, 0);
+        for (n, node) in octree.nodes().iter().enumerate() {
+            let leaf = n as u32;
+            let (meshlets, list) = leaves.owned(leaf);
+            let mut got: Vec<u32> = list
+                .iter()
+                .flat_map(|&c| meshlets.triangles(c as usize).iter().copied())
+                .collect();
+            assert!(
+                got.iter().all(|&t| owner[t as usize] == leaf),
+                "leaf {n} owns only its own"
+            );
+            owned_total += got.len();
+            for (o, of) in leaves.borrowed(leaf) {
+                assert_ne!(o, leaf, "leaf {n} borrows from itself");
+                assert!(
+                    of.iter().all(|&t| owner[t as usize] == o),
+                    "a run of leaf {n} names its owner"
+                );
+                borrowed_total += of.len();
+                got.extend_from_slice(of);
+            }
+            got.sort_unstable();
+            let mut want = if node.is_leaf() {
+                octree.leaf_primitives(leaf).to_vec()
+            } else {
+                Vec::new()
+            };
+            want.sort_unstable();
+            assert_eq!(got, want, "leaf {n}");
+        }
+        let listed = owner.iter().filter(|&&o| o != u32::MAX).count();
+        assert_eq!(owned_total, listed, "each listed triangle owned once");
+        assert!(
+            borrowed_total > listed / 2,
+            "the test's leaves borrow ({borrowed_total} of {listed})"
+        );
+    }
+}
