@@ -443,10 +443,13 @@ fn counters_and_multithreaded_pvl_match_single_threaded() {
                 },
                 ..RenderOptions::default()
             };
-            // The algorithm itself: with payoff a frame may be drawn directly, without rays.
-            let mut r = spec(&format!("lzb:coherence=off,payoff=off,caster={caster},pvl=leaves"))
-                .build(scene.clone(), &o)
-                .unwrap();
+            // The algorithm itself: with payoff a frame may be drawn directly, without rays;
+            // the paper's plane, so that rays are cast (the cost plane may put every leaf near).
+            let mut r = spec(&format!(
+                "lzb:coherence=off,payoff=off,caster={caster},pvl=leaves,plane=dynamic"
+            ))
+            .build(scene.clone(), &o)
+            .unwrap();
             let mut f = Frame::new(160, 120).unwrap();
             let s = r.render(&view, &mut f).unwrap();
             assert_eq!(s.rays_cast, s.counters.get("rays"));

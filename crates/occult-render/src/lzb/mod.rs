@@ -346,8 +346,8 @@ pub struct Lzb {
     ns_per_ray: f64,
     /// The share of the far leaves' triangles last frame's PVL held (`plane=cost`).
     pvl_share: f64,
-    /// The share of the near leaves' triangle references the near pass last drew
-    /// (`plane=cost`; 1 without `near_cull`).
+    /// The share of the near leaves' triangles (those they own, [`owned`]) the near pass last
+    /// drew (`plane=cost`; 1 without `near_cull`).
     near_share: f64,
     /// Wall ns per far leaf outside rays and rasterization, last measured (`plane=cost`).
     ns_per_far_leaf: f64,
@@ -541,7 +541,7 @@ impl Lzb {
                                 Accel::Mesh {
                                     leaves: octree.nodes().iter().filter(|n| n.is_leaf() && n.count > 0).count() as u32,
                                     chunks: if opts.near_cull {
-                                        near::near_chunks(&octree)
+                                        near::near_chunks(&octree, clusters.owned_counts())
                                     } else {
                                         Vec::new()
                                     },
@@ -808,8 +808,8 @@ struct NearGroup {
     /// Its units: a range of the units (of those in the order they were built, then of those
     /// sorted group by group).
     units: std::ops::Range<u32>,
-    /// Its units' triangle references.
-    count: u64,
+    /// The triangles its units' leaves own ([`owned`]).
+    owned: u64,
     /// The union of its units' boxes.
     bounds: Aabb,
 }
@@ -825,8 +825,11 @@ struct NearUnit {
     leaves: std::ops::Range<u32>,
     /// The instance's mesh has one leaf: drawn whole.
     whole: bool,
-    /// Its triangle references.
+    /// Its triangle references (what a batch's size counts).
     count: u32,
+    /// The triangles its leaves own ([`owned`]; a mesh's drawn whole: all): what its test
+    /// saves when it is hidden.
+    owned: u32,
     /// The union of its leaves' boxes.
     bounds: Aabb,
 }
@@ -890,8 +893,8 @@ struct Walk<'a> {
     instances: Vec<(InstanceRec, ItemId, Mat4)>,
     near: Vec<(u32, u32)>,
     far: Vec<(u32, u32)>,
-    /// `plane=cost`: every leaf `(instance, leaf, least view distance, triangles)`, split once
-    /// the plane is chosen.
+    /// `plane=cost`: every leaf `(instance, leaf, least view distance, triangles it owns)`,
+    /// split once the plane is chosen.
     deferred: Option<Vec<(u32, u32, f32, u32)>>,
 }
 
@@ -937,7 +940,8 @@ impl<'a> Visitor<'a> for Walk<'a> {
         let lzb: &'a Lzb = self.lzb;
         match &lzb.accel[at.place.id.index()] {
             Accel::Empty => {}
-            Accel::Mesh { octree, .. } => {
+            Accel::Mesh { octree, clusters, .. } => {
+                let owned = clusters.owned_counts();
                 let clip = self.ctx.view.clip_from_object(&at.place.world_from_node);
                 let w_row = row_w(&clip);
                 let inst = self.instances.len() as u32;
@@ -948,9 +952,10 @@ impl<'a> Visitor<'a> for Walk<'a> {
                     let on = &octree.nodes()[n as usize];
                     any = true;
                     walk.meet_triangles(on.count as u64);
-                    // The leaf's tight box (`RayOctree::tighten_leaves`).
+                    // The leaf's tight box (`RayOctree::tighten_leaves`); its own triangles,
+                    // each of the mesh's counted once ([`owned`]).
                     if let Some(d) = deferred {
-                        d.push((inst, n, near_distance(w_row, &on.bounds), on.count));
+                        d.push((inst, n, near_distance(w_row, &on.bounds), owned[n as usize]));
                     } else if ctx.is_near(w_row, &on.bounds) {
                         near.push((inst, n));
                     } else {
@@ -1124,7 +1129,7 @@ impl Lzb {
             .iter()
             .map(
                 |&(inst, leaf)| match &self.accel[instances[inst as usize].0.node.index()] {
-                    Accel::Mesh { octree, .. } => u64::from(octree.nodes()[leaf as usize].count),
+                    Accel::Mesh { clusters, .. } => u64::from(clusters.owned_counts()[leaf as usize]),
                     _ => 0,
                 },
             )

@@ -137,16 +137,23 @@ impl Lzb {
         // NEAR_GROUP consecutive units of an instance, tested as one box first.
         units.clear();
         groups.clear();
-        let mut visible_triangles = 0usize;
+        // Last frame's visible leaves: their triangles, and their references (the first
+        // batch's size).
+        let (mut visible_triangles, mut visible_refs) = (0usize, 0usize);
         for (inst, r, seen) in parts.drain(..).filter(|p| !p.1.is_empty()) {
             let first_unit = units.len();
             let (rec, _, clip) = &instances[inst as usize];
             let Accel::Mesh {
-                octree, leaves, chunks, ..
+                octree,
+                leaves,
+                chunks,
+                clusters,
+                ..
             } = &self.accel[rec.node.index()]
             else {
                 continue;
             };
+            let owned_of = clusters.owned_counts();
             let w_row = row_w(clip);
             let whole = r.len() == *leaves as usize && *leaves == 1;
             // Every leaf near, in the walk's order (a part of several leaves holding them all
@@ -155,7 +162,8 @@ impl Lzb {
             if full {
                 for c in chunks {
                     if seen {
-                        visible_triangles += c.count as usize;
+                        visible_triangles += c.owned as usize;
+                        visible_refs += c.count as usize;
                     }
                     units.push(NearUnit {
                         distance: if seen {
@@ -167,6 +175,7 @@ impl Lzb {
                         leaves: r.start as u32 + c.leaves.start..r.start as u32 + c.leaves.end,
                         whole: false,
                         count: c.count,
+                        owned: c.owned,
                         bounds: c.bounds,
                     });
                 }
@@ -174,16 +183,18 @@ impl Lzb {
             // Otherwise formed here from the frame's leaves, the same way.
             let mut at = if full { r.end } else { r.start };
             while at < r.end {
-                let (end, mut count, bounds) = near_unit(octree, |i| near[i].1, at..r.end);
+                let (end, mut count, mut owned, bounds) = near_unit(octree, owned_of, |i| near[i].1, at..r.end);
                 if whole {
                     count = self
                         .scene
                         .node(rec.node)
                         .mesh()
                         .map_or(0, |m| m.triangle_count() as u32);
+                    owned = count;
                 }
                 if seen {
-                    visible_triangles += count as usize;
+                    visible_triangles += owned as usize;
+                    visible_refs += count as usize;
                 }
                 units.push(NearUnit {
                     distance: if seen {
@@ -195,6 +206,7 @@ impl Lzb {
                     leaves: at as u32..end as u32,
                     whole,
                     count,
+                    owned,
                     bounds,
                 });
                 at = end;
@@ -205,7 +217,7 @@ impl Lzb {
                     distance: of.iter().map(|u| u.distance).fold(f32::INFINITY, f32::min),
                     inst,
                     units: start as u32..(start + of.len()) as u32,
-                    count: of.iter().map(|u| u64::from(u.count)).sum(),
+                    owned: of.iter().map(|u| u64::from(u.owned)).sum(),
                     bounds: of.iter().fold(Aabb::EMPTY, |a, u| a.union(u.bounds)),
                 });
             }
@@ -236,8 +248,8 @@ impl Lzb {
         let mut pyramid_time = Duration::ZERO;
         let mut counts = PyramidCounts::default();
         // The first batch, drawn untested: last frame's visible leaves, or the nearest units.
-        let mut batch_triangles = if visible_triangles > 0 {
-            visible_triangles.min(NEAR_MAX_BATCH)
+        let mut batch_triangles = if visible_refs > 0 {
+            visible_refs.min(NEAR_MAX_BATCH)
         } else {
             NEAR_FIRST_BATCH
         };
@@ -265,8 +277,8 @@ impl Lzb {
                             culled_groups += 1;
                             culled_boxes += 1;
                             culled_units += g.units.len() as u64;
-                            culled_triangles += g.count;
-                            payoff.saved(g.count);
+                            culled_triangles += g.owned;
+                            payoff.saved(g.owned);
                             next = g.units.end as usize;
                             continue;
                         }
@@ -277,6 +289,7 @@ impl Lzb {
                     ref leaves,
                     whole: is_whole,
                     count,
+                    owned,
                     bounds: b,
                     ..
                 } = units[order[next] as usize];
@@ -310,8 +323,8 @@ impl Lzb {
                     if Occlusion::hierarchical(frame, &pyramid, view).box_hidden(clip, &b, e, &mut counts) {
                         culled_units += 1;
                         culled_boxes += 1;
-                        culled_triangles += u64::from(count);
-                        payoff.saved(u64::from(count));
+                        culled_triangles += u64::from(owned);
+                        payoff.saved(u64::from(owned));
                         continue;
                     }
                 }
@@ -328,7 +341,7 @@ impl Lzb {
                 } else {
                     pairs.extend(near[leaves.start as usize..leaves.end as usize].iter().copied());
                 }
-                state[inst as usize].drawn = state[inst as usize].drawn.saturating_add(count);
+                state[inst as usize].drawn = state[inst as usize].drawn.saturating_add(owned);
                 gathered += count as usize;
             }
             // Draw it: the leaves' clusters and borrowed triangles per instance, whole meshes
@@ -389,7 +402,7 @@ impl Lzb {
                 }
                 pyramid_time += t.elapsed();
             }
-            batch_triangles = if first && visible_triangles > 0 {
+            batch_triangles = if first && visible_refs > 0 {
                 NEAR_FIRST_BATCH
             } else {
                 (batch_triangles * 2).min(NEAR_MAX_BATCH)
@@ -545,6 +558,8 @@ pub(crate) struct NearChunk {
     leaves: std::ops::Range<u32>,
     /// Its triangle references.
     count: u32,
+    /// The triangles its leaves own ([`super::owned`]).
+    owned: u32,
     /// The union of its leaves' boxes.
     bounds: Aabb,
 }
@@ -554,7 +569,7 @@ pub(crate) struct NearChunk {
 /// consecutive non-empty leaves, in the order [`super::cull_octree`] meets them, of up to
 /// [`super::NEAR_UNIT`] triangle references, exactly as the near pass forms them from a frame's
 /// leaves, which reads every near leaf's node.
-pub(super) fn near_chunks(octree: &RayOctree) -> Vec<NearChunk> {
+pub(super) fn near_chunks(octree: &RayOctree, owned_of: &[u32]) -> Vec<NearChunk> {
     let mut order = Vec::new();
     let mut stack = vec![0u32];
     while let Some(n) = stack.pop() {
@@ -570,10 +585,11 @@ pub(super) fn near_chunks(octree: &RayOctree) -> Vec<NearChunk> {
     let mut chunks = Vec::new();
     let mut at = 0;
     while at < order.len() {
-        let (end, count, bounds) = near_unit(octree, |i| order[i], at..order.len());
+        let (end, count, owned, bounds) = near_unit(octree, owned_of, |i| order[i], at..order.len());
         chunks.push(NearChunk {
             leaves: at as u32..end as u32,
             count,
+            owned,
             bounds,
         });
         at = end;
@@ -583,20 +599,24 @@ pub(super) fn near_chunks(octree: &RayOctree) -> Vec<NearChunk> {
 
 /// The near pass's unit that starts at the first of the leaves `run` (`leaf(i)` the node of
 /// the `i`th): it and the leaves after it while they hold fewer than [`super::NEAR_UNIT`] triangle
-/// references. Returns where it ends, its references and the union of its leaves' boxes.
+/// references. Returns where it ends, its references, the triangles its leaves own (`owned`:
+/// per node) and the union of its leaves' boxes.
 pub(super) fn near_unit(
     octree: &RayOctree,
+    owned: &[u32],
     leaf: impl Fn(usize) -> u32,
     run: std::ops::Range<usize>,
-) -> (usize, u32, Aabb) {
-    let (mut end, mut count, mut bounds) = (run.start, 0u32, Aabb::EMPTY);
+) -> (usize, u32, u32, Aabb) {
+    let (mut end, mut count, mut own, mut bounds) = (run.start, 0u32, 0u32, Aabb::EMPTY);
     while end < run.end && (end == run.start || count < NEAR_UNIT) {
-        let on = &octree.nodes()[leaf(end) as usize];
+        let n = leaf(end);
+        let on = &octree.nodes()[n as usize];
         count += on.count;
+        own += owned[n as usize];
         bounds = bounds.union(on.bounds);
         end += 1;
     }
-    (end, count, bounds)
+    (end, count, own, bounds)
 }
 
 /// The near pass's lists (`near_cull=on`), kept from frame to frame and cleared before each: on
@@ -631,7 +651,7 @@ struct NearInstance {
     all_near: bool,
     /// Drawn whole, in the rest of a frame given up.
     whole: bool,
-    /// Triangle references of its units drawn.
+    /// Triangles its units' leaves own, of its units drawn.
     drawn: u32,
 }
 

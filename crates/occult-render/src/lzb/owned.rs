@@ -35,6 +35,9 @@ pub(crate) struct LeafClusters {
     run_starts: Vec<u32>,
     runs: Vec<(u32, u32)>,
     borrowed: Vec<u32>,
+    /// Per octree node, the triangles it owns (0 but for leaves): a leaf's share of the mesh's
+    /// triangles, which sum to the triangles its leaves list (each counted once).
+    owned_counts: Vec<u32>,
 }
 
 impl LeafClusters {
@@ -73,7 +76,9 @@ impl LeafClusters {
             starts.push(owned.len() as u32);
             run_starts.push(runs.len() as u32);
         }
+        let owned_counts = starts.windows(2).map(|w| w[1] - w[0]).collect();
         Ok(Self {
+            owned_counts,
             owned: RunClusters::build(mesh, &owned, starts)?,
             run_starts,
             runs,
@@ -85,6 +90,11 @@ impl LeafClusters {
     #[inline]
     pub(crate) fn owned(&self, leaf: u32) -> (&Meshlets, &[u32]) {
         self.owned.runs(leaf as usize..leaf as usize + 1)
+    }
+
+    /// Per octree node, the triangles it owns.
+    pub(crate) fn owned_counts(&self) -> &[u32] {
+        &self.owned_counts
     }
 
     /// The mesh's clusters.
@@ -111,7 +121,11 @@ impl LeafClusters {
     /// Bytes held.
     pub(crate) fn memory_bytes(&self) -> usize {
         self.owned.memory_bytes()
-            + (self.run_starts.capacity() + self.borrowed.capacity() + 2 * self.runs.capacity()) * 4
+            + (self.run_starts.capacity()
+                + self.borrowed.capacity()
+                + 2 * self.runs.capacity()
+                + self.owned_counts.capacity())
+                * 4
     }
 }
 
@@ -291,6 +305,7 @@ mod tests {
                 got.iter().all(|&t| owner[t as usize] == leaf),
                 "leaf {n} owns only its own"
             );
+            assert_eq!(leaves.owned_counts()[n] as usize, got.len(), "leaf {n}'s count");
             owned_total += got.len();
             for (o, of) in leaves.borrowed(leaf) {
                 assert_ne!(o, leaf, "leaf {n} borrows from itself");
