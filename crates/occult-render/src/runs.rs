@@ -46,6 +46,11 @@ impl RunClusters {
         })
     }
 
+    /// The mesh's clusters.
+    pub(crate) fn meshlets(&self) -> &Meshlets {
+        &self.meshlets
+    }
+
     /// The mesh's clusters, and those of runs `runs`.
     #[inline]
     pub(crate) fn runs(&self, runs: Range<usize>) -> (&Meshlets, &[u32]) {

@@ -344,10 +344,11 @@ pub struct Lzb {
     /// Wall time of a rasterized triangle and of a ray, last measured (`plane=cost`).
     ns_per_triangle: f64,
     ns_per_ray: f64,
-    /// The share of the far leaves' triangles last frame's PVL held (`plane=cost`).
+    /// The triangles last frame's PVL held per triangle the far leaves own ([`owned`]; may
+    /// exceed 1: the PVL also holds triangles that near leaves own) (`plane=cost`).
     pvl_share: f64,
-    /// The share of the near leaves' triangles (those they own, [`owned`]) the near pass last
-    /// drew (`plane=cost`; 1 without `near_cull`).
+    /// The triangles the near pass last drew per triangle the near leaves own (`plane=cost`;
+    /// 1 without `near_cull`; may exceed 1 by borrowed triangles drawn twice).
     near_share: f64,
     /// Wall ns per far leaf outside rays and rasterization, last measured (`plane=cost`).
     ns_per_far_leaf: f64,
@@ -521,15 +522,7 @@ impl Lzb {
                                     .intersection(Aabb::new(b.min - grow, b.max + grow))
                             });
                             let refs = leaf_triangles(m, &normals, octree.primitives());
-                            // Each triangle's owner: the last leaf that lists it.
-                            let mut leaf_of = vec![u32::MAX; m.triangle_count()];
-                            for (n, node) in octree.nodes().iter().enumerate() {
-                                if node.is_leaf() {
-                                    for &t in &octree.primitives()[node.range()] {
-                                        leaf_of[t as usize] = n as u32;
-                                    }
-                                }
-                            }
+                            let leaf_of = owned::owners(&octree, m.triangle_count())?;
                             let clusters = Box::new(owned::LeafClusters::build(m, &octree, &leaf_of)?);
                             let bvh = match opts.caster {
                                 CasterKind::Bvh => Some(MeshBvh::build(m, &normals, opts.bvh_leaf).map_err(|e| {
@@ -1125,15 +1118,19 @@ impl Lzb {
         stats.counters.add("near_leaves", near.len() as u64);
         stats.counters.add("far_leaves", far.len() as u64);
         let far_leaves = far.len();
-        let far_triangles: u64 = far
-            .iter()
-            .map(
-                |&(inst, leaf)| match &self.accel[instances[inst as usize].0.node.index()] {
-                    Accel::Mesh { clusters, .. } => u64::from(clusters.owned_counts()[leaf as usize]),
-                    _ => 0,
-                },
-            )
-            .sum();
+        // The triangles the near and the far leaves own ([`owned`]), what `plane=cost` weighs.
+        let owned_by = |leaves: &[(u32, u32)]| -> u64 {
+            leaves
+                .iter()
+                .map(
+                    |&(inst, leaf)| match &self.accel[instances[inst as usize].0.node.index()] {
+                        Accel::Mesh { clusters, .. } => u64::from(clusters.owned_counts()[leaf as usize]),
+                        _ => 0,
+                    },
+                )
+                .sum()
+        };
+        let (near_owned, far_triangles) = (owned_by(&near), owned_by(&far));
         stats.phases.add(Phase::Cull, t.elapsed());
 
         // Step 3: local rendering of S_near with the z-buffer (occlusion-culled front to back
@@ -1405,13 +1402,12 @@ impl Lzb {
             if submitted >= MIN_RATE_TRIANGLES {
                 self.ns_per_triangle = blend(self.ns_per_triangle, raster.as_nanos() as f64 / submitted as f64);
             }
-            // The near pass's share, from a near set large enough to say (`near_cull=on`).
-            let (drawn, culled) = (
-                stats.counters.get("near_triangles"),
-                stats.counters.get("near_culled_triangles"),
-            );
-            if self.opts.near_cull && drawn + culled >= MIN_RATE_TRIANGLES {
-                self.near_share = 0.5 * (self.near_share + drawn as f64 / (drawn + culled) as f64);
+            // The near pass's share, from a near set large enough to say (`near_cull=on`): the
+            // triangles it drew (borrowed ones and those drawn twice included) per triangle
+            // its leaves own.
+            let drawn = stats.counters.get("near_triangles");
+            if self.opts.near_cull && near_owned >= MIN_RATE_TRIANGLES {
+                self.near_share = 0.5 * (self.near_share + drawn as f64 / near_owned as f64);
             }
             let pvl = stats.counters.get("pvl_triangles");
             if far_triangles > 0 && !naive {

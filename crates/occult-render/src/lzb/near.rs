@@ -44,6 +44,11 @@ impl Lzb {
         stats
             .counters
             .add(counter, (lists.triangle_count() + whole_triangles) as u64);
+        if counter == "near_triangles" {
+            stats
+                .counters
+                .add("near_borrowed_triangles", lists.take_borrowed_count());
+        }
         stats.phases.add(Phase::Other, t.elapsed());
         let mut draws = lists.draws(&self.scene, &self.accel, view);
         draws.extend(whole.iter().filter_map(|(rec, base)| {
@@ -417,6 +422,9 @@ impl Lzb {
         stats.counters.add("near_culled_groups", culled_groups);
         stats.counters.add("near_culled_triangles", culled_triangles);
         stats.counters.add("near_visible_triangles", visible_triangles as u64);
+        stats
+            .counters
+            .add("near_borrowed_triangles", scratch.lists.take_borrowed_count());
         self.pyramid = Some(pyramid);
         self.near_scratch = scratch;
         Ok(())

@@ -137,6 +137,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "near_culled_groups",
         "near_culled_triangles",
         "near_visible_triangles",
+        "near_borrowed_triangles",
         "far_culled_leaves",
         "far_direct_triangles",
         crate::payoff::COUNTERS[0],

@@ -1,17 +1,18 @@
 //! A mesh octree's leaves drawn as clusters (the near pass, and what it draws directly).
 //!
 //! An octree leaf lists every triangle that overlaps its octant, so a triangle across octants is
-//! listed by several leaves (about twice on the suite's meshes: 1.9 references a triangle on
-//! `city` and `plant`, 2.2 on `forest`). Drawn as index lists, each of a leaf's triangles
-//! projects its three corners one by one, and the lists are built triangle by triangle with a
-//! stamp each so that a triangle two drawn leaves list is drawn once. Here each triangle is
-//! **owned** by one of the leaves that list it (the last in node order, the leaf that
-//! `near_temporal` names for it): a leaf's own triangles are clusters of few vertices
-//! ([`RunClusters`]), drawn by their cluster indices, each vertex projected once; the
-//! triangles it lists but does not own (**borrowed**) are drawn with it as an index list only
-//! when their owner is not drawn in the frame so far (a stamp per leaf). What a drawn leaf
-//! lists is thus always drawn; a borrowed triangle whose owner is drawn by a later batch is
-//! drawn twice, which draws the same frame.
+//! listed by several leaves (about two on the suite's meshes). Drawn as index lists, each of a
+//! leaf's triangles projects its three corners one by one, and the lists are built triangle by
+//! triangle with a stamp each so that a triangle two drawn leaves list is drawn once. Here each
+//! triangle is **owned** by one of the leaves that list it ([`owners`]: the last in node order,
+//! the leaf that `near_temporal` names for it): a leaf's own triangles are clusters of few
+//! vertices ([`RunClusters`]), drawn by their cluster indices, each vertex projected once; the
+//! triangles it lists but does not own (**borrowed**) are drawn with it as an index list unless
+//! their owner's mark says it was drawn for the same instance in the frame so far (a mark per
+//! leaf of the mesh, holding the stamp of the instance that drew it last: another instance of
+//! the mesh drawing it in between only makes a triangle drawn again). What a drawn leaf lists
+//! is thus always drawn; a triangle drawn twice (a borrowed one whose owner is drawn later)
+//! draws the same frame. Counter `near_borrowed_triangles`: the borrowed triangles drawn.
 
 use std::ops::Range;
 
@@ -22,7 +23,7 @@ use occult_spatial::RayOctree;
 use super::cast::InstanceRec;
 use super::{Accel, Lzb};
 use crate::runs::RunClusters;
-use crate::Result;
+use crate::{RenderError, Result};
 
 /// A mesh octree's leaves as clusters of the triangles they own, and the lists of those they
 /// borrow ([module doc](self)).
@@ -40,12 +41,34 @@ pub(crate) struct LeafClusters {
     owned_counts: Vec<u32>,
 }
 
+/// Each of a mesh's `triangle_count` triangles' owner among `octree`'s leaves: the last leaf in
+/// node order that lists it (`u32::MAX` for a triangle no leaf lists).
+///
+/// # Errors
+/// [`RenderError::BadParameter`] for a leaf list naming a triangle the mesh lacks.
+pub(crate) fn owners(octree: &RayOctree, triangle_count: usize) -> Result<Vec<u32>> {
+    let mut owner = vec![u32::MAX; triangle_count];
+    for (n, node) in octree.nodes().iter().enumerate() {
+        if node.is_leaf() {
+            for &t in octree.leaf_primitives(n as u32) {
+                *owner.get_mut(t as usize).ok_or_else(|| {
+                    RenderError::BadParameter(format!(
+                        "lzb: octree leaf {n} lists triangle {t} of a mesh of {triangle_count}"
+                    ))
+                })? = n as u32;
+            }
+        }
+    }
+    Ok(owner)
+}
+
 impl LeafClusters {
     /// The clusters of `octree`'s leaves over `mesh`, each triangle owned by leaf `owner[t]`
-    /// (a leaf that lists it).
+    /// (a leaf that lists it, [`owners`]).
     ///
     /// # Errors
-    /// [`crate::RenderError::Raster`] for a leaf list naming a triangle the mesh lacks.
+    /// [`RenderError::BadParameter`] for a leaf list naming a triangle that `owner` lacks;
+    /// [`RenderError::Raster`] for one the mesh lacks.
     pub(crate) fn build(mesh: &Mesh, octree: &RayOctree, owner: &[u32]) -> Result<Self> {
         let nodes = octree.nodes();
         let mut owned = Vec::with_capacity(mesh.triangle_count());
@@ -61,8 +84,18 @@ impl LeafClusters {
                 for &t in octree.leaf_primitives(n as u32) {
                     match owner.get(t as usize) {
                         Some(&o) if o == n as u32 => owned.push(t),
-                        Some(&o) => borrowed.push((o, t)),
-                        None => {}
+                        Some(&o) => {
+                            debug_assert!(
+                                nodes.get(o as usize).is_some_and(|l| l.is_leaf()),
+                                "triangle {t}'s owner {o} is a leaf"
+                            );
+                            borrowed.push((o, t));
+                        }
+                        None => {
+                            return Err(RenderError::BadParameter(format!(
+                                "lzb: octree leaf {n} lists triangle {t}, which has no owner"
+                            )))
+                        }
                     }
                 }
                 borrowed.sort_unstable();
@@ -99,7 +132,7 @@ impl LeafClusters {
 
     /// The mesh's clusters.
     pub(crate) fn meshlets(&self) -> &Meshlets {
-        self.owned.runs(0..0).0
+        self.owned.meshlets()
     }
 
     /// The triangles leaf `leaf` lists and does not own, by owner: `(owner, its triangles)`.
@@ -141,9 +174,13 @@ pub(super) struct LeafLists {
     triangles: Vec<u32>,
     /// The triangles of both.
     count: usize,
+    /// The borrowed triangles listed since the lists were made (not reset by
+    /// [`LeafLists::clear`]: a frame's count).
+    borrowed_count: u64,
 }
 
 impl LeafLists {
+    /// Empties the lists for the next batch.
     pub(super) fn clear(&mut self) {
         self.owned.clear();
         self.clusters.clear();
@@ -155,6 +192,11 @@ impl LeafLists {
     /// The triangles the lists draw.
     pub(super) fn triangle_count(&self) -> usize {
         self.count
+    }
+
+    /// The borrowed triangles listed since the count was last taken, and the count reset.
+    pub(super) fn take_borrowed_count(&mut self) -> u64 {
+        std::mem::take(&mut self.borrowed_count)
     }
 
     /// One draw per instance of each kind: its clusters, its borrowed triangles.
@@ -196,7 +238,8 @@ impl Lzb {
     /// each instance with its range of `leaves`), group `g` drawn under stamp `stamps_of[g]`
     /// (the caller's, [`Lzb::reserve_stamps`]; one stamp an instance a frame, so that later
     /// calls know its leaves drawn before): each leaf's own clusters, and the triangles it
-    /// borrows whose owner was not drawn under that stamp (nor listed already).
+    /// borrows unless their owner's mark holds that stamp (or they were listed under it
+    /// already).
     pub(super) fn emit_leaves(
         &mut self,
         groups: &[(InstanceRec, ItemId, Range<usize>)],
@@ -204,13 +247,18 @@ impl Lzb {
         stamps_of: &[u32],
         lists: &mut LeafLists,
     ) {
+        assert_eq!(groups.len(), stamps_of.len(), "a stamp for every group");
         for ((rec, first_item, range), &stamp) in groups.iter().zip(stamps_of) {
+            // Marks start at 0: no stamp is (`reserve_stamps` gives from 1).
+            debug_assert_ne!(stamp, 0, "a reserved stamp");
             let node = rec.node.index();
             let Accel::Mesh { clusters, .. } = &self.accel[node] else {
                 continue;
             };
             let of = &leaves[range.clone()];
             let marks = &mut self.leaf_stamps[node];
+            // Every leaf of the group marked before any borrowed triangle is weighed: what a
+            // leaf of the same group owns is drawn with it.
             for &leaf in of {
                 marks[leaf as usize] = stamp;
             }
@@ -240,6 +288,7 @@ impl Lzb {
             }
             if lists.triangles.len() > start {
                 lists.count += lists.triangles.len() - start;
+                lists.borrowed_count += (lists.triangles.len() - start) as u64;
                 lists.borrowed.push((*rec, *first_item, start..lists.triangles.len()));
             }
         }
@@ -254,9 +303,10 @@ mod tests {
     use rand::{Rng, SeedableRng};
 
     /// Each leaf's own triangles and those it borrows are, together, exactly what it lists;
-    /// every listed triangle is owned by one leaf, its owner; a borrowed run names the owner
+    /// every listed triangle is owned by one leaf that lists it; a borrowed run names the owner
     /// of each of its triangles. Long thin triangles across many octants, so most leaves
-    /// borrow.
+    /// borrow; at depth 1 the leaves hold hundreds of triangles, each cut into several clusters
+    /// of at most 256 vertices.
     #[test]
     fn a_leaf_owns_or_borrows_each_triangle_it_lists() {
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(3);
@@ -275,61 +325,70 @@ mod tests {
             triangles.push([3 * i, 3 * i + 1, 3 * i + 2]);
         }
         let mesh = Mesh::new(positions.clone(), triangles.clone()).expect("a valid mesh");
-        let octree = RayOctree::build_triangles(
-            &positions,
-            &triangles,
-            RayOctreeConfig {
-                max_depth: 6,
+        for max_depth in [6, 1] {
+            let config = RayOctreeConfig {
+                max_depth,
                 max_leaf_size: 8,
-            },
-        )
-        .expect("a valid octree");
-        let mut owner = vec![u32::MAX; triangles.len()];
-        for (n, node) in octree.nodes().iter().enumerate() {
-            if node.is_leaf() {
-                for &t in octree.leaf_primitives(n as u32) {
-                    owner[t as usize] = n as u32;
-                }
-            }
-        }
-        let leaves = LeafClusters::build(&mesh, &octree, &owner).expect("valid lists");
-        let (mut owned_total, mut borrowed_total) = (0, 0);
-        for (n, node) in octree.nodes().iter().enumerate() {
-            let leaf = n as u32;
-            let (meshlets, list) = leaves.owned(leaf);
-            let mut got: Vec<u32> = list
-                .iter()
-                .flat_map(|&c| meshlets.triangles(c as usize).iter().copied())
-                .collect();
-            assert!(
-                got.iter().all(|&t| owner[t as usize] == leaf),
-                "leaf {n} owns only its own"
-            );
-            assert_eq!(leaves.owned_counts()[n] as usize, got.len(), "leaf {n}'s count");
-            owned_total += got.len();
-            for (o, of) in leaves.borrowed(leaf) {
-                assert_ne!(o, leaf, "leaf {n} borrows from itself");
-                assert!(
-                    of.iter().all(|&t| owner[t as usize] == o),
-                    "a run of leaf {n} names its owner"
-                );
-                borrowed_total += of.len();
-                got.extend_from_slice(of);
-            }
-            got.sort_unstable();
-            let mut want = if node.is_leaf() {
-                octree.leaf_primitives(leaf).to_vec()
-            } else {
-                Vec::new()
             };
-            want.sort_unstable();
-            assert_eq!(got, want, "leaf {n}");
+            let octree = RayOctree::build_triangles(&positions, &triangles, config).expect("a valid octree");
+            let owner = owners(&octree, triangles.len()).expect("valid lists");
+            let leaves = LeafClusters::build(&mesh, &octree, &owner).expect("valid lists");
+            let (mut owned_total, mut borrowed_total, mut clusters) = (0, 0, 0);
+            for (n, node) in octree.nodes().iter().enumerate() {
+                let leaf = n as u32;
+                let (meshlets, list) = leaves.owned(leaf);
+                clusters = clusters.max(list.len());
+                let mut got: Vec<u32> = list
+                    .iter()
+                    .flat_map(|&c| meshlets.triangles(c as usize).iter().copied())
+                    .collect();
+                assert!(
+                    got.iter().all(|&t| owner[t as usize] == leaf),
+                    "depth {max_depth}: leaf {n} owns only its own"
+                );
+                assert_eq!(leaves.owned_counts()[n] as usize, got.len(), "leaf {n}'s count");
+                owned_total += got.len();
+                for (o, of) in leaves.borrowed(leaf) {
+                    assert_ne!(o, leaf, "leaf {n} borrows from itself");
+                    assert!(
+                        of.iter()
+                            .all(|&t| owner[t as usize] == o && octree.leaf_primitives(o).contains(&t)),
+                        "a run of leaf {n} names its owner, a leaf that lists its triangles"
+                    );
+                    borrowed_total += of.len();
+                    got.extend_from_slice(of);
+                }
+                got.sort_unstable();
+                let mut want = if node.is_leaf() {
+                    octree.leaf_primitives(leaf).to_vec()
+                } else {
+                    Vec::new()
+                };
+                want.sort_unstable();
+                assert_eq!(got, want, "depth {max_depth}: leaf {n}");
+            }
+            let listed = owner.iter().filter(|&&o| o != u32::MAX).count();
+            assert_eq!(listed, triangles.len(), "every triangle lies in a leaf");
+            assert_eq!(owned_total, listed, "each listed triangle owned once");
+            assert!(
+                borrowed_total > listed / 8,
+                "depth {max_depth}: the test's leaves borrow ({borrowed_total} of {listed})"
+            );
+            if max_depth == 1 {
+                assert!(clusters > 1, "a leaf of several clusters");
+            }
         }
-        let listed = owner.iter().filter(|&&o| o != u32::MAX).count();
-        assert_eq!(owned_total, listed, "each listed triangle owned once");
-        assert!(
-            borrowed_total > listed / 2,
-            "the test's leaves borrow ({borrowed_total} of {listed})"
-        );
+    }
+
+    /// A leaf list naming a triangle the mesh lacks is an error, not a panic.
+    #[test]
+    fn a_list_beyond_the_mesh_is_an_error() {
+        let positions = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z];
+        let triangles = vec![[0, 1, 2], [0, 1, 3]];
+        let octree = RayOctree::build_triangles(&positions, &triangles, RayOctreeConfig::default()).expect("an octree");
+        assert!(owners(&octree, 1).is_err());
+        let mesh = Mesh::new(positions, vec![[0, 1, 2]]).expect("a valid mesh");
+        let owner = owners(&octree, 2).expect("valid lists");
+        assert!(LeafClusters::build(&mesh, &octree, &owner[..1]).is_err());
     }
 }

@@ -523,3 +523,40 @@ fn distance_keys_order_as_total_cmp() {
         }
     }
 }
+
+/// The near pass draws a leaf's own triangles as clusters and those it borrows when their
+/// owner is not drawn: with the middle of the far wall hidden behind a narrower near one, the
+/// far wall's drawn leaves at the edge of the hidden part borrow triangles whose owners are
+/// culled, and the frame is still `zbuffer`'s (with and without last frame's leaves first).
+#[test]
+fn borrowed_triangles_of_hidden_owners_are_drawn() {
+    let (scene, view, reference) = walls(1.5);
+    for near_temporal in [false, true] {
+        let opts = LzbOptions {
+            plane: Plane::Static,
+            plane_fraction: 1.0,
+            payoff: false,
+            leaf: 8,
+            near_temporal,
+            ..LzbOptions::default()
+        };
+        let mut lzb = Lzb::new(scene.clone(), &RenderOptions::default(), &opts).expect("lzb builds");
+        let mut frame = Frame::new(96, 64).expect("a frame");
+        for frame_no in 0..2 {
+            let stats = lzb.render(&view, &mut frame).expect("a frame");
+            assert!(
+                frame.same_visibility(&reference),
+                "near_temporal={near_temporal}, frame {frame_no}"
+            );
+            assert_eq!(stats.counters.get("far_leaves"), 0, "every leaf near");
+            assert!(
+                stats.counters.get("near_culled_units") > 0,
+                "the far wall's middle is hidden"
+            );
+            assert!(
+                stats.counters.get("near_borrowed_triangles") > 0,
+                "leaves borrow triangles they do not own"
+            );
+        }
+    }
+}
