@@ -318,9 +318,8 @@ pub struct Lzb {
     accel: Vec<Accel>,
     /// Per mesh node: a stamp per triangle (PVL without duplicates).
     stamps: Vec<Vec<u32>>,
-    /// Per mesh node: a stamp per octree node, the stamp of the instance whose leaf it drew
-    /// last ([`owned`]).
-    leaf_stamps: Vec<Vec<u32>>,
+    /// The leaves the frame drew, per instance ([`owned`]).
+    drawn: owned::DrawnLeaves,
     stamp: u32,
     plane_cache: Option<PlaneCache>,
     build_time: Duration,
@@ -597,13 +596,7 @@ impl Lzb {
             .iter()
             .map(|n| vec![0u32; n.mesh().map_or(0, |m| m.triangle_count())])
             .collect();
-        let leaf_stamps = accel
-            .iter()
-            .map(|a| match a {
-                Accel::Mesh { octree, .. } => vec![0u32; octree.nodes().len()],
-                _ => Vec::new(),
-            })
-            .collect();
+
         let direct = match opts.payoff {
             true => Some(DirectFrames::new(scene.clone(), &raster)?.judging_first_by_time()),
             false => None,
@@ -616,7 +609,7 @@ impl Lzb {
             opts: opts.clone(),
             accel,
             stamps,
-            leaf_stamps,
+            drawn: owned::DrawnLeaves::default(),
             stamp: 0,
             plane_cache: None,
             direct,
@@ -727,7 +720,6 @@ impl Lzb {
     fn reserve_stamps(&mut self, n: u32) -> u32 {
         if self.stamp >= u32::MAX - n {
             self.stamps.iter_mut().for_each(|s| s.fill(0));
-            self.leaf_stamps.iter_mut().for_each(|s| s.fill(0));
             self.stamp = 0;
         }
         let first = self.stamp + 1;
@@ -1133,6 +1125,8 @@ impl Lzb {
         let (near_owned, far_triangles) = (owned_by(&near), owned_by(&far));
         stats.phases.add(Phase::Cull, t.elapsed());
 
+        // No leaf drawn yet (`owned`: the near pass, and the far leaves of a frame given up).
+        self.drawn.reset(instances.len());
         // Step 3: local rendering of S_near with the z-buffer (occlusion-culled front to back
         // with `near_cull=on`).
         // §IV: by rank 0, whose near depth buffer every rank then receives.
@@ -1450,7 +1444,7 @@ impl Lzb {
     fn memory_bytes_of_all(&self) -> usize {
         self.accel.iter().map(Accel::memory_bytes).sum::<usize>()
             + self.stamps.iter().map(|s| s.capacity() * 4).sum::<usize>()
-            + self.leaf_stamps.iter().map(|s| s.capacity() * 4).sum::<usize>()
+            + self.drawn.memory_bytes()
             + self.raster.memory_bytes()
             + self.pyramid.as_ref().map_or(0, ZPyramid::memory_bytes)
             + self.near_visible.capacity() * std::mem::size_of::<(ItemId, u32)>()

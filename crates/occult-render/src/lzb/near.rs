@@ -29,14 +29,14 @@ impl Lzb {
             let (rec, base, _) = instances[inst as usize];
             match &self.accel[rec.node.index()] {
                 Accel::Mesh { leaves, .. } if r.len() == *leaves as usize => whole.push((rec, base)),
-                _ => near_groups.push((rec, base, r)),
+                _ => near_groups.push((inst, rec, base, r)),
             }
         }
         let near_leaves: Vec<u32> = near.iter().map(|&(_, l)| l).collect();
         let first = self.reserve_stamps(near_groups.len() as u32);
         let stamps: Vec<u32> = (first..first + near_groups.len() as u32).collect();
         let mut lists = super::owned::LeafLists::default();
-        self.emit_leaves(&near_groups, &near_leaves, &stamps, &mut lists);
+        self.emit_leaves(&near_groups, &near_leaves, &stamps, &mut lists, None);
         let whole_triangles: usize = whole
             .iter()
             .filter_map(|(rec, _)| self.scene.node(rec.node).mesh().map(|m| m.triangle_count()))
@@ -103,7 +103,9 @@ impl Lzb {
             eyes,
             state,
             lists,
+            deferred,
         } = &mut scratch;
+        deferred.clear();
         ordered.clear();
         parts.clear();
         state.clear();
@@ -350,8 +352,8 @@ impl Lzb {
                 gathered += count as usize;
             }
             // Draw it: the leaves' clusters and borrowed triangles per instance, whole meshes
-            // whole. An instance's stamp is the frame's: a triangle whose owner an earlier batch
-            // drew is not drawn again.
+            // whole. A triangle whose owner an earlier batch drew for the instance is not drawn
+            // again, nor one an earlier batch listed (an instance's stamp is the frame's).
             pairs.sort_unstable();
             let ranges = group_ranges(&pairs);
             let stamps: Vec<u32> = ranges.iter().map(|&(inst, _)| first_stamp + inst).collect();
@@ -359,12 +361,12 @@ impl Lzb {
                 .into_iter()
                 .map(|(inst, r)| {
                     let (rec, base, _) = instances[inst as usize];
-                    (rec, base, r)
+                    (inst, rec, base, r)
                 })
                 .collect();
             let leaves: Vec<u32> = pairs.iter().map(|&(_, l)| l).collect();
             lists.clear();
-            self.emit_leaves(&groups, &leaves, &stamps, lists);
+            self.emit_leaves(&groups, &leaves, &stamps, lists, Some(deferred));
             let mut draws = lists.draws(&self.scene, &self.accel, view);
             draws.extend(whole.iter().filter_map(|(rec, base)| {
                 Some(Draw {
@@ -413,6 +415,33 @@ impl Lzb {
                 (batch_triangles * 2).min(NEAR_MAX_BATCH)
             };
             first = false;
+        }
+        // The triangles the drawn leaves borrow whose owner was not drawn for their instance
+        // (hidden, far, or beyond the frustum), in one last batch; none of an instance drawn
+        // whole in the rest of a frame given up.
+        deferred.retain(|&(inst, _)| !state[inst as usize].whole);
+        if !deferred.is_empty() {
+            let t = Instant::now();
+            deferred.sort_unstable();
+            let ranges = group_ranges(deferred);
+            let stamps: Vec<u32> = ranges.iter().map(|&(inst, _)| first_stamp + inst).collect();
+            let groups: Vec<_> = ranges
+                .into_iter()
+                .map(|(inst, r)| {
+                    let (rec, base, _) = instances[inst as usize];
+                    (inst, rec, base, r)
+                })
+                .collect();
+            let leaves: Vec<u32> = deferred.iter().map(|&(_, l)| l).collect();
+            lists.clear();
+            self.emit_borrowed(&groups, &leaves, &stamps, lists);
+            let draws = lists.draws(&self.scene, &self.accel, view);
+            near_triangles += lists.triangle_count() as u64;
+            stats.phases.add(Phase::Other, t.elapsed());
+            let raster_before = stats.phases.get(Phase::Raster);
+            crate::rasterize(&mut self.raster, view, frame, &draws, stats);
+            let raster_time = stats.phases.get(Phase::Raster).saturating_sub(raster_before);
+            payoff.rasterized(lists.triangle_count() as u64, raster_time, false);
         }
         stats.phases.add(Phase::DepthStructure, pyramid_time);
         stats.boxes_tested += tested;
@@ -650,6 +679,9 @@ pub(super) struct NearScratch {
     state: Vec<NearInstance>,
     /// A batch's draw lists.
     lists: super::owned::LeafLists,
+    /// The drawn leaves that borrow triangles, `(instance, leaf)`: their borrowed triangles
+    /// are weighed once the pass drew every leaf it draws.
+    deferred: Vec<(u32, u32)>,
 }
 
 /// An instance in the near pass ([`NearScratch::state`]).
@@ -675,6 +707,7 @@ impl NearScratch {
             + self.eyes.capacity() * std::mem::size_of::<Option<Vec3>>()
             + self.state.capacity() * std::mem::size_of::<NearInstance>()
             + self.lists.memory_bytes()
+            + self.deferred.capacity() * 8
     }
 }
 

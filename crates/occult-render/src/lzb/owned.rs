@@ -7,12 +7,13 @@
 //! triangle is **owned** by one of the leaves that list it ([`owners`]: the last in node order,
 //! the leaf that `near_temporal` names for it): a leaf's own triangles are clusters of few
 //! vertices ([`RunClusters`]), drawn by their cluster indices, each vertex projected once; the
-//! triangles it lists but does not own (**borrowed**) are drawn with it as an index list unless
-//! their owner's mark says it was drawn for the same instance in the frame so far (a mark per
-//! leaf of the mesh, holding the stamp of the instance that drew it last: another instance of
-//! the mesh drawing it in between only makes a triangle drawn again). What a drawn leaf lists
-//! is thus always drawn; a triangle drawn twice (a borrowed one whose owner is drawn later)
-//! draws the same frame. Counter `near_borrowed_triangles`: the borrowed triangles drawn.
+//! triangles it lists but does not own (**borrowed**) are drawn as an index list unless their
+//! owner was drawn for the same instance ([`DrawnLeaves`]: a bit per node of its mesh, for each
+//! instance that drew a leaf). The near pass weighs them once it drew every leaf it draws, in a
+//! last batch (a borrowed triangle whose owner a later batch draws is then not drawn twice); a
+//! single draw of leaves (`near_cull=off`, the far leaves of a frame given up) weighs them at
+//! once. What a drawn leaf lists is thus always drawn (a triangle drawn twice draws the same
+//! frame). Counter `near_borrowed_triangles`: the borrowed triangles drawn.
 
 use std::ops::Range;
 
@@ -151,6 +152,12 @@ impl LeafClusters {
         })
     }
 
+    /// Whether leaf `leaf` borrows any triangle.
+    #[inline]
+    pub(crate) fn borrows(&self, leaf: u32) -> bool {
+        self.run_starts[leaf as usize] != self.run_starts[leaf as usize + 1]
+    }
+
     /// Bytes held.
     pub(crate) fn memory_bytes(&self) -> usize {
         self.owned.memory_bytes()
@@ -159,6 +166,40 @@ impl LeafClusters {
                 + 2 * self.runs.capacity()
                 + self.owned_counts.capacity())
                 * 4
+    }
+}
+
+/// The leaves a frame drew, per instance of the frame: a bit per node of its mesh, made when the
+/// instance draws its first leaf (so a frame holds bits for the instances it drew, not for
+/// every instance of every mesh), kept from frame to frame and reset before each.
+#[derive(Default)]
+pub(super) struct DrawnLeaves {
+    /// Per instance of the frame, the first of its words (`usize::MAX`: none drawn yet).
+    first: Vec<usize>,
+    words: Vec<u64>,
+}
+
+impl DrawnLeaves {
+    /// Nothing drawn, for a frame of `instances` instances.
+    pub(super) fn reset(&mut self, instances: usize) {
+        self.first.clear();
+        self.first.resize(instances, usize::MAX);
+        self.words.clear();
+    }
+
+    /// The bits of instance `inst`, whose mesh's octree has `nodes` nodes.
+    fn of(&mut self, inst: u32, nodes: usize) -> &mut [u64] {
+        let at = &mut self.first[inst as usize];
+        if *at == usize::MAX {
+            *at = self.words.len();
+            self.words.resize(self.words.len() + nodes.div_ceil(64), 0);
+        }
+        &mut self.words[*at..*at + nodes.div_ceil(64)]
+    }
+
+    /// Bytes held.
+    pub(super) fn memory_bytes(&self) -> usize {
+        self.first.capacity() * 8 + self.words.capacity() * 8
     }
 }
 
@@ -235,32 +276,34 @@ impl LeafLists {
 
 impl Lzb {
     /// Adds to `lists` the leaves of `(instance, leaf)` pairs grouped by instance (`groups`:
-    /// each instance with its range of `leaves`), group `g` drawn under stamp `stamps_of[g]`
-    /// (the caller's, [`Lzb::reserve_stamps`]; one stamp an instance a frame, so that later
-    /// calls know its leaves drawn before): each leaf's own clusters, and the triangles it
-    /// borrows unless their owner's mark holds that stamp (or they were listed under it
-    /// already).
+    /// each instance of the frame with its range of `leaves`), group `g` listing its borrowed
+    /// triangles under stamp `stamps_of[g]` (the caller's, [`Lzb::reserve_stamps`]): each
+    /// leaf's own clusters, and the triangles it borrows unless their owner was drawn for the
+    /// instance in the frame so far ([`Lzb::drawn`], which this marks) or they were listed
+    /// under that stamp already. With `deferred`, the borrowed triangles are not weighed now:
+    /// each leaf that borrows is added there as `(instance, leaf)`, for
+    /// [`Lzb::emit_borrowed`] once every leaf that the frame draws is marked (a borrowed
+    /// triangle whose owner a later batch draws is then not drawn twice).
     pub(super) fn emit_leaves(
         &mut self,
-        groups: &[(InstanceRec, ItemId, Range<usize>)],
+        groups: &[(u32, InstanceRec, ItemId, Range<usize>)],
         leaves: &[u32],
         stamps_of: &[u32],
         lists: &mut LeafLists,
+        deferred: Option<&mut Vec<(u32, u32)>>,
     ) {
         assert_eq!(groups.len(), stamps_of.len(), "a stamp for every group");
-        for ((rec, first_item, range), &stamp) in groups.iter().zip(stamps_of) {
-            // Marks start at 0: no stamp is (`reserve_stamps` gives from 1).
-            debug_assert_ne!(stamp, 0, "a reserved stamp");
+        for (inst, rec, first_item, range) in groups {
             let node = rec.node.index();
             let Accel::Mesh { clusters, .. } = &self.accel[node] else {
                 continue;
             };
             let of = &leaves[range.clone()];
-            let marks = &mut self.leaf_stamps[node];
+            let marks = self.drawn.of(*inst, clusters.owned_counts().len());
             // Every leaf of the group marked before any borrowed triangle is weighed: what a
             // leaf of the same group owns is drawn with it.
             for &leaf in of {
-                marks[leaf as usize] = stamp;
+                marks[leaf as usize / 64] |= 1 << (leaf % 64);
             }
             let start = lists.clusters.len();
             for &leaf in of {
@@ -271,11 +314,46 @@ impl Lzb {
             if lists.clusters.len() > start {
                 lists.owned.push((*rec, *first_item, start..lists.clusters.len()));
             }
+        }
+        match deferred {
+            Some(d) => {
+                for (inst, rec, _, range) in groups {
+                    if let Accel::Mesh { clusters, .. } = &self.accel[rec.node.index()] {
+                        d.extend(
+                            leaves[range.clone()]
+                                .iter()
+                                .filter(|&&leaf| clusters.borrows(leaf))
+                                .map(|&leaf| (*inst, leaf)),
+                        );
+                    }
+                }
+            }
+            None => self.emit_borrowed(groups, leaves, stamps_of, lists),
+        }
+    }
+
+    /// Adds to `lists` the triangles that the leaves of `groups` (as [`Lzb::emit_leaves`]
+    /// takes them, marked drawn already) borrow, unless their owner was drawn for the
+    /// instance in the frame so far or they were listed under the group's stamp already.
+    pub(super) fn emit_borrowed(
+        &mut self,
+        groups: &[(u32, InstanceRec, ItemId, Range<usize>)],
+        leaves: &[u32],
+        stamps_of: &[u32],
+        lists: &mut LeafLists,
+    ) {
+        assert_eq!(groups.len(), stamps_of.len(), "a stamp for every group");
+        for ((inst, rec, first_item, range), &stamp) in groups.iter().zip(stamps_of) {
+            let node = rec.node.index();
+            let Accel::Mesh { clusters, .. } = &self.accel[node] else {
+                continue;
+            };
+            let marks = self.drawn.of(*inst, clusters.owned_counts().len());
             let stamps = &mut self.stamps[node];
             let start = lists.triangles.len();
-            for &leaf in of {
+            for &leaf in &leaves[range.clone()] {
                 for (owner, triangles) in clusters.borrowed(leaf) {
-                    if marks[owner as usize] == stamp {
+                    if marks[owner as usize / 64] & (1 << (owner % 64)) != 0 {
                         continue;
                     }
                     for &t in triangles {
