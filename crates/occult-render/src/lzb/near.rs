@@ -354,17 +354,7 @@ impl Lzb {
             // Draw it: the leaves' clusters and borrowed triangles per instance, whole meshes
             // whole. A triangle whose owner an earlier batch drew for the instance is not drawn
             // again, nor one an earlier batch listed (an instance's stamp is the frame's).
-            pairs.sort_unstable();
-            let ranges = group_ranges(&pairs);
-            let stamps: Vec<u32> = ranges.iter().map(|&(inst, _)| first_stamp + inst).collect();
-            let groups: Vec<_> = ranges
-                .into_iter()
-                .map(|(inst, r)| {
-                    let (rec, base, _) = instances[inst as usize];
-                    (inst, rec, base, r)
-                })
-                .collect();
-            let leaves: Vec<u32> = pairs.iter().map(|&(_, l)| l).collect();
+            let (groups, leaves, stamps) = instance_groups(&mut pairs, instances, first_stamp);
             lists.clear();
             self.emit_leaves(&groups, &leaves, &stamps, lists, Some(deferred));
             let mut draws = lists.draws(&self.scene, &self.accel, view);
@@ -422,17 +412,7 @@ impl Lzb {
         deferred.retain(|&(inst, _)| !state[inst as usize].whole);
         if !deferred.is_empty() {
             let t = Instant::now();
-            deferred.sort_unstable();
-            let ranges = group_ranges(deferred);
-            let stamps: Vec<u32> = ranges.iter().map(|&(inst, _)| first_stamp + inst).collect();
-            let groups: Vec<_> = ranges
-                .into_iter()
-                .map(|(inst, r)| {
-                    let (rec, base, _) = instances[inst as usize];
-                    (inst, rec, base, r)
-                })
-                .collect();
-            let leaves: Vec<u32> = deferred.iter().map(|&(_, l)| l).collect();
+            let (groups, leaves, stamps) = instance_groups(deferred, instances, first_stamp);
             lists.clear();
             self.emit_borrowed(&groups, &leaves, &stamps, lists);
             let draws = lists.draws(&self.scene, &self.accel, view);
@@ -586,6 +566,32 @@ impl Lzb {
             _ => Ok(ZPyramid::new(w, h)?),
         }
     }
+}
+
+/// The `(instance, leaf)` pairs `pairs` (sorted here) as [`Lzb::emit_leaves`] takes them: per
+/// instance its record and range of the leaves, the leaves, and per instance its stamp of the
+/// frame (`first_stamp` and the instance's index).
+#[allow(clippy::type_complexity)]
+fn instance_groups(
+    pairs: &mut [(u32, u32)],
+    instances: &[(InstanceRec, ItemId, Mat4)],
+    first_stamp: u32,
+) -> (
+    Vec<(u32, InstanceRec, ItemId, std::ops::Range<usize>)>,
+    Vec<u32>,
+    Vec<u32>,
+) {
+    pairs.sort_unstable();
+    let ranges = group_ranges(pairs);
+    let stamps = ranges.iter().map(|&(inst, _)| first_stamp + inst).collect();
+    let groups = ranges
+        .into_iter()
+        .map(|(inst, r)| {
+            let (rec, base, _) = instances[inst as usize];
+            (inst, rec, base, r)
+        })
+        .collect();
+    (groups, pairs.iter().map(|&(_, l)| l).collect(), stamps)
 }
 
 /// A unit of the near pass of an instance all of whose leaves are near ([`near_chunks`]).
