@@ -171,6 +171,12 @@ const NEAR_MAX_BATCH: usize = 1 << 18;
 /// reads of a stride of 2 found the same first batches (docs/lzb.md).
 const VISIBLE_STRIDE: usize = 8;
 
+/// Words of a frame's drawn-leaf bits ([`owned::DrawnLeaves`]) a leaf in view may add to their
+/// budget, beyond [`DRAWN_MIN_WORDS`]: the bits stay within a few times the frame's own lists.
+const DRAWN_WORDS_PER_LEAF: usize = 4;
+/// Words of the drawn-leaf bits any frame may hold (512 KiB).
+const DRAWN_MIN_WORDS: usize = 1 << 16;
+
 /// Pixels one task casts (one [`Caster`], so one coherence chain).
 const CHUNK: usize = 256;
 
@@ -343,11 +349,11 @@ pub struct Lzb {
     /// Wall time of a rasterized triangle and of a ray, last measured (`plane=cost`).
     ns_per_triangle: f64,
     ns_per_ray: f64,
-    /// The triangles last frame's PVL held per triangle the far leaves own ([`owned`]; may
-    /// exceed 1: the PVL also holds triangles that near leaves own) (`plane=cost`).
+    /// The triangles last frame's PVL held per triangle reference of the far leaves
+    /// (`plane=cost`).
     pvl_share: f64,
-    /// The triangles the near pass last drew per triangle the near leaves own (`plane=cost`;
-    /// 1 without `near_cull`; may exceed 1 by borrowed triangles drawn twice).
+    /// The triangles the near pass last drew per triangle reference of the near leaves
+    /// (`plane=cost`; 1 without `near_cull`).
     near_share: f64,
     /// Wall ns per far leaf outside rays and rasterization, last measured (`plane=cost`).
     ns_per_far_leaf: f64,
@@ -810,7 +816,8 @@ struct NearUnit {
     leaves: std::ops::Range<u32>,
     /// The instance's mesh has one leaf: drawn whole.
     whole: bool,
-    /// Its triangle references (what a batch's size counts).
+    /// Its triangle references (what a batch's size counts, though a batch draws only the
+    /// triangles its leaves own: the borrowed ones come last, [`owned`]).
     count: u32,
     /// The triangles its leaves own ([`owned`]; a mesh's drawn whole: all): what its test
     /// saves when it is hidden.
@@ -878,7 +885,7 @@ struct Walk<'a> {
     instances: Vec<(InstanceRec, ItemId, Mat4)>,
     near: Vec<(u32, u32)>,
     far: Vec<(u32, u32)>,
-    /// `plane=cost`: every leaf `(instance, leaf, least view distance, triangles it owns)`,
+    /// `plane=cost`: every leaf `(instance, leaf, least view distance, triangle references)`,
     /// split once the plane is chosen.
     deferred: Option<Vec<(u32, u32, f32, u32)>>,
 }
@@ -925,8 +932,7 @@ impl<'a> Visitor<'a> for Walk<'a> {
         let lzb: &'a Lzb = self.lzb;
         match &lzb.accel[at.place.id.index()] {
             Accel::Empty => {}
-            Accel::Mesh { octree, clusters, .. } => {
-                let owned = clusters.owned_counts();
+            Accel::Mesh { octree, .. } => {
                 let clip = self.ctx.view.clip_from_object(&at.place.world_from_node);
                 let w_row = row_w(&clip);
                 let inst = self.instances.len() as u32;
@@ -937,10 +943,9 @@ impl<'a> Visitor<'a> for Walk<'a> {
                     let on = &octree.nodes()[n as usize];
                     any = true;
                     walk.meet_triangles(on.count as u64);
-                    // The leaf's tight box (`RayOctree::tighten_leaves`); its own triangles,
-                    // each of the mesh's counted once ([`owned`]).
+                    // The leaf's tight box (`RayOctree::tighten_leaves`).
                     if let Some(d) = deferred {
-                        d.push((inst, n, near_distance(w_row, &on.bounds), owned[n as usize]));
+                        d.push((inst, n, near_distance(w_row, &on.bounds), on.count));
                     } else if ctx.is_near(w_row, &on.bounds) {
                         near.push((inst, n));
                     } else {
@@ -1110,23 +1115,26 @@ impl Lzb {
         stats.counters.add("near_leaves", near.len() as u64);
         stats.counters.add("far_leaves", far.len() as u64);
         let far_leaves = far.len();
-        // The triangles the near and the far leaves own ([`owned`]), what `plane=cost` weighs.
-        let owned_by = |leaves: &[(u32, u32)]| -> u64 {
+        // The near and the far leaves' triangle references, what `plane=cost` weighs them by.
+        let references = |leaves: &[(u32, u32)]| -> u64 {
             leaves
                 .iter()
                 .map(
                     |&(inst, leaf)| match &self.accel[instances[inst as usize].0.node.index()] {
-                        Accel::Mesh { clusters, .. } => u64::from(clusters.owned_counts()[leaf as usize]),
+                        Accel::Mesh { octree, .. } => u64::from(octree.nodes()[leaf as usize].count),
                         _ => 0,
                     },
                 )
                 .sum()
         };
-        let (near_owned, far_triangles) = (owned_by(&near), owned_by(&far));
+        let (near_references, far_references) = (references(&near), references(&far));
         stats.phases.add(Phase::Cull, t.elapsed());
 
         // No leaf drawn yet (`owned`: the near pass, and the far leaves of a frame given up).
-        self.drawn.reset(instances.len());
+        self.drawn.reset(
+            instances.len(),
+            DRAWN_WORDS_PER_LEAF * (near.len() + far.len()) + DRAWN_MIN_WORDS,
+        );
         // Step 3: local rendering of S_near with the z-buffer (occlusion-culled front to back
         // with `near_cull=on`).
         // §IV: by rank 0, whose near depth buffer every rank then receives.
@@ -1397,16 +1405,15 @@ impl Lzb {
                 self.ns_per_triangle = blend(self.ns_per_triangle, raster.as_nanos() as f64 / submitted as f64);
             }
             // The near pass's share, from a near set large enough to say (`near_cull=on`): the
-            // triangles it drew (borrowed ones and those drawn twice included) per triangle
-            // its leaves own.
+            // triangles it drew per triangle reference of the near leaves.
             let drawn = stats.counters.get("near_triangles");
-            if self.opts.near_cull && near_owned >= MIN_RATE_TRIANGLES {
-                self.near_share = 0.5 * (self.near_share + drawn as f64 / near_owned as f64);
+            if self.opts.near_cull && near_references >= MIN_RATE_TRIANGLES {
+                self.near_share = 0.5 * (self.near_share + drawn as f64 / near_references as f64);
             }
             let pvl = stats.counters.get("pvl_triangles");
-            if far_triangles > 0 && !naive {
+            if far_references > 0 && !naive {
                 // An empty PVL is a measurement too (a share of 0), unlike a zero time.
-                self.pvl_share = 0.5 * (self.pvl_share + pvl as f64 / far_triangles as f64);
+                self.pvl_share = 0.5 * (self.pvl_share + pvl as f64 / far_references as f64);
                 // With `far_cull`, its tests are part of what a far leaf costs.
                 let other = (stats.phases.get(Phase::Other) + far_cull_time).as_nanos() as f64;
                 self.ns_per_far_leaf = blend(self.ns_per_far_leaf, other / far_leaves as f64);

@@ -68,13 +68,18 @@ impl Lzb {
     /// a single leaf) tested against the depth drawn so far, as `hzb` tests its boxes
     /// (Greene's face test through a pyramid updated after each batch), after its group
     /// (consecutive units of the instance, [`NEAR_GROUP`]) was tested as one box; hidden
-    /// units are not drawn. The near z-buffer ends the same (a hidden unit draws no pixel), so
-    /// are the unfinished pixels and the frame. With `near_temporal`, the near leaves that
-    /// showed a pixel in the last frame ([`Lzb::remember_visible`]) make the first batch,
-    /// untested (up to [`NEAR_MAX_BATCH`] triangles: the set may be stale): the rest is then
+    /// units are not drawn. A batch draws its leaves' own triangles ([`super::owned`]); the
+    /// triangles they borrow whose owner was not drawn for the instance come in a last batch,
+    /// once every leaf the pass draws is known (none of an instance drawn whole in the rest of
+    /// a frame given up: its whole draw holds them). The near z-buffer ends the same (a hidden
+    /// unit draws no pixel), so are the unfinished pixels and the frame. With `near_temporal`,
+    /// the near leaves that showed a pixel in the last frame ([`Lzb::remember_visible`]) make
+    /// the first batch, untested (up to [`NEAR_MAX_BATCH`] references: the set may be stale):
+    /// the rest is then
     /// tested against nearly the frame's final depth, as `hzb`'s visible list does. Counters
     /// `near_culled_units`, `near_culled_groups`, `near_culled_triangles`,
-    /// `near_visible_triangles` (those of last frame's visible leaves).
+    /// `near_visible_triangles` (those last frame's visible leaves own),
+    /// `near_borrowed_triangles`.
     ///
     /// # Errors
     /// [`RenderError::Raster`] when the pyramid cannot be allocated.
@@ -351,9 +356,8 @@ impl Lzb {
                 state[inst as usize].drawn = state[inst as usize].drawn.saturating_add(owned);
                 gathered += count as usize;
             }
-            // Draw it: the leaves' clusters and borrowed triangles per instance, whole meshes
-            // whole. A triangle whose owner an earlier batch drew for the instance is not drawn
-            // again, nor one an earlier batch listed (an instance's stamp is the frame's).
+            // Draw it: the leaves' own triangles as clusters per instance (those they borrow
+            // are weighed in the last batch), whole meshes whole.
             let (groups, leaves, stamps) = instance_groups(&mut pairs, instances, first_stamp);
             lists.clear();
             self.emit_leaves(&groups, &leaves, &stamps, lists, Some(deferred));

@@ -10,10 +10,14 @@
 //! triangles it lists but does not own (**borrowed**) are drawn as an index list unless their
 //! owner was drawn for the same instance ([`DrawnLeaves`]: a bit per node of its mesh, for each
 //! instance that drew a leaf). The near pass weighs them once it drew every leaf it draws, in a
-//! last batch (a borrowed triangle whose owner a later batch draws is then not drawn twice); a
-//! single draw of leaves (`near_cull=off`, the far leaves of a frame given up) weighs them at
-//! once. What a drawn leaf lists is thus always drawn (a triangle drawn twice draws the same
-//! frame). Counter `near_borrowed_triangles`: the borrowed triangles drawn.
+//! last batch (a borrowed triangle whose owner a later batch draws is then not drawn twice),
+//! but for an instance it drew whole in the rest of a frame given up (the whole draw holds
+//! them); a single draw of leaves (`near_cull=off`, and the far leaves of a frame given up,
+//! which see the near pass's marks) weighs them at once. What a drawn leaf lists is thus always
+//! drawn; a triangle still drawn twice (the near pass's last batch and the far leaves of a
+//! frame given up, an instance drawn whole after some of its clusters) draws the same frame,
+//! ties going to the same item. Counter `near_borrowed_triangles`: the borrowed triangles
+//! drawn.
 
 use std::ops::Range;
 
@@ -152,6 +156,12 @@ impl LeafClusters {
         })
     }
 
+    /// Whether any leaf borrows a triangle.
+    #[inline]
+    pub(crate) fn any_borrowed(&self) -> bool {
+        !self.runs.is_empty()
+    }
+
     /// Whether leaf `leaf` borrows any triangle.
     #[inline]
     pub(crate) fn borrows(&self, leaf: u32) -> bool {
@@ -170,31 +180,56 @@ impl LeafClusters {
 }
 
 /// The leaves a frame drew, per instance of the frame: a bit per node of its mesh, made when the
-/// instance draws its first leaf (so a frame holds bits for the instances it drew, not for
-/// every instance of every mesh), kept from frame to frame and reset before each.
+/// instance draws its first leaf (so a frame holds bits for the instances it drew of meshes
+/// whose leaves borrow, not for every instance of every mesh), within a budget of words the
+/// frame sets: an instance beyond it has no bits, and its leaves count as not drawn (its
+/// borrowed triangles are all drawn: more work, the same frame). Kept from frame to frame and
+/// reset before each.
 #[derive(Default)]
 pub(super) struct DrawnLeaves {
-    /// Per instance of the frame, the first of its words (`usize::MAX`: none drawn yet).
+    /// Per instance of the frame, the first of its words ([`NOT_YET`], [`REFUSED`]).
     first: Vec<usize>,
     words: Vec<u64>,
+    /// Most words the frame may hold.
+    budget: usize,
 }
 
+/// An instance that drew no leaf yet.
+const NOT_YET: usize = usize::MAX;
+/// An instance whose bits would have exceeded the budget.
+const REFUSED: usize = usize::MAX - 1;
+
 impl DrawnLeaves {
-    /// Nothing drawn, for a frame of `instances` instances.
-    pub(super) fn reset(&mut self, instances: usize) {
+    /// Nothing drawn, for a frame of `instances` instances holding at most `budget` words.
+    pub(super) fn reset(&mut self, instances: usize, budget: usize) {
         self.first.clear();
-        self.first.resize(instances, usize::MAX);
+        self.first.resize(instances, NOT_YET);
         self.words.clear();
+        if self.words.capacity() > 4 * budget {
+            self.words.shrink_to(budget);
+        }
+        self.budget = budget;
     }
 
-    /// The bits of instance `inst`, whose mesh's octree has `nodes` nodes.
-    fn of(&mut self, inst: u32, nodes: usize) -> &mut [u64] {
+    /// The bits of instance `inst`, whose mesh's octree has `nodes` nodes; `None` when they
+    /// would exceed the budget.
+    fn of(&mut self, inst: u32, nodes: usize) -> Option<&mut [u64]> {
+        let n = nodes.div_ceil(64);
         let at = &mut self.first[inst as usize];
-        if *at == usize::MAX {
-            *at = self.words.len();
-            self.words.resize(self.words.len() + nodes.div_ceil(64), 0);
+        if *at == NOT_YET {
+            *at = if self.words.len() + n <= self.budget {
+                self.words.len()
+            } else {
+                REFUSED
+            };
+            if *at != REFUSED {
+                self.words.resize(self.words.len() + n, 0);
+            }
         }
-        &mut self.words[*at..*at + nodes.div_ceil(64)]
+        match *at {
+            REFUSED => None,
+            at => Some(&mut self.words[at..at + n]),
+        }
     }
 
     /// Bytes held.
@@ -299,11 +334,15 @@ impl Lzb {
                 continue;
             };
             let of = &leaves[range.clone()];
-            let marks = self.drawn.of(*inst, clusters.owned_counts().len());
             // Every leaf of the group marked before any borrowed triangle is weighed: what a
-            // leaf of the same group owns is drawn with it.
-            for &leaf in of {
-                marks[leaf as usize / 64] |= 1 << (leaf % 64);
+            // leaf of the same group owns is drawn with it. Only where leaves borrow: the marks
+            // serve nothing else.
+            if clusters.any_borrowed() {
+                if let Some(marks) = self.drawn.of(*inst, clusters.owned_counts().len()) {
+                    for &leaf in of {
+                        marks[leaf as usize / 64] |= 1 << (leaf % 64);
+                    }
+                }
             }
             let start = lists.clusters.len();
             for &leaf in of {
@@ -349,11 +388,16 @@ impl Lzb {
                 continue;
             };
             let marks = self.drawn.of(*inst, clusters.owned_counts().len());
+            let drawn = |owner: u32| {
+                marks
+                    .as_ref()
+                    .is_some_and(|m| m[owner as usize / 64] & (1 << (owner % 64)) != 0)
+            };
             let stamps = &mut self.stamps[node];
             let start = lists.triangles.len();
             for &leaf in &leaves[range.clone()] {
                 for (owner, triangles) in clusters.borrowed(leaf) {
-                    if marks[owner as usize / 64] & (1 << (owner % 64)) != 0 {
+                    if drawn(owner) {
                         continue;
                     }
                     for &t in triangles {
@@ -456,6 +500,22 @@ mod tests {
                 assert!(clusters > 1, "a leaf of several clusters");
             }
         }
+    }
+
+    /// An instance's bits are made once, kept within the frame's budget (an instance beyond it
+    /// has none, for the whole frame), and start clear each frame.
+    #[test]
+    fn drawn_leaves_keep_to_their_budget() {
+        let mut d = DrawnLeaves::default();
+        d.reset(3, 3);
+        d.of(0, 100).expect("two words")[1] = 5;
+        assert!(d.of(1, 129).is_none(), "three more words exceed the budget");
+        assert_eq!(d.of(0, 100).expect("made").to_vec(), [0, 5]);
+        assert!(d.of(1, 1).is_none(), "refused for the frame");
+        assert_eq!(d.of(2, 64).expect("one word fits").len(), 1);
+        d.reset(3, 3);
+        assert_eq!(d.of(0, 100).expect("two words").to_vec(), [0, 0], "clear again");
+        assert!(d.of(1, 64).is_some(), "a new frame");
     }
 
     /// A leaf list naming a triangle the mesh lacks is an error, not a panic.

@@ -560,3 +560,32 @@ fn borrowed_triangles_of_hidden_owners_are_drawn() {
         }
     }
 }
+
+/// A frame given up in its near pass, whose leaves borrow: instances drawn whole in its rest
+/// drop the borrowed triangles their earlier clusters left for the last batch, and the far
+/// leaves drawn directly see the near pass's marks; the frame is still `zbuffer`'s.
+#[test]
+fn a_frame_given_up_with_borrowing_leaves_is_identical() {
+    use crate::direct::tests::ForceDirect;
+    let (scene, view, reference) = walls(1.5);
+    for plane_fraction in [1.0, 0.8] {
+        let opts = LzbOptions {
+            plane: Plane::Static,
+            plane_fraction,
+            leaf: 8,
+            ..LzbOptions::default()
+        };
+        let mut lzb = Lzb::new(scene.clone(), &RenderOptions::default(), &opts).expect("lzb builds");
+        lzb.force(0, true);
+        let mut frame = Frame::new(96, 64).expect("a frame");
+        let stats = lzb.render(&view, &mut frame).expect("a frame");
+        assert!(frame.same_visibility(&reference), "plane at {plane_fraction}");
+        assert_eq!(stats.counters.get("payoff_stopped"), 1, "given up");
+        if plane_fraction < 1.0 {
+            assert!(
+                stats.counters.get("far_direct_triangles") > 0,
+                "the far leaves drawn directly"
+            );
+        }
+    }
+}
