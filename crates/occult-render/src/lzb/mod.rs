@@ -136,10 +136,6 @@ const PRIOR_NS_PER_TRIANGLE: f64 = 20.0;
 const MIN_RATE_TRIANGLES: u64 = 10_000;
 /// Cost of a ray, wall ns, before `plane=cost` measured one.
 const PRIOR_NS_PER_RAY: f64 = 1000.0;
-/// Triangles the near pass draws per triangle its leaves own, before `plane=cost` measured
-/// it: twice, for what drawing a near triangle costs beyond drawing it (its unit's test, its
-/// gathering, small batches), which the rate of a triangle does not hold.
-const PRIOR_NEAR_SHARE: f64 = 2.0;
 /// Share of the far leaves' triangles the rays' PVL holds, before `plane=cost` measured it.
 const PRIOR_PVL_SHARE: f64 = 0.5;
 /// Wall ns per far leaf outside rays and rasterization (its object-oriented polygon over the
@@ -353,14 +349,12 @@ pub struct Lzb {
     /// Wall time of a rasterized triangle and of a ray, last measured (`plane=cost`).
     ns_per_triangle: f64,
     ns_per_ray: f64,
-    /// The triangles last frame's PVL held per triangle the far leaves own ([`owned`]; may
-    /// exceed 1: the PVL also holds triangles near leaves own) (`plane=cost`).
+    /// The triangles last frame's PVL held per triangle reference of the far leaves
+    /// (`plane=cost`).
     pvl_share: f64,
-    /// The triangles the near pass last drew per triangle the near leaves own (`plane=cost`;
-    /// [`PRIOR_NEAR_SHARE`] before a measurement with `near_cull`, 1 without).
+    /// The triangles the near pass last drew per triangle reference of the near leaves
+    /// (`plane=cost`; 1 without `near_cull`).
     near_share: f64,
-    /// Whether `near_share` was measured yet (the first measurement replaces the prior).
-    near_share_measured: bool,
     /// Wall ns per far leaf outside rays and rasterization, last measured (`plane=cost`).
     ns_per_far_leaf: f64,
 }
@@ -629,8 +623,7 @@ impl Lzb {
             ns_per_triangle: PRIOR_NS_PER_TRIANGLE,
             ns_per_ray: PRIOR_NS_PER_RAY,
             pvl_share: PRIOR_PVL_SHARE,
-            near_share: if opts.near_cull { PRIOR_NEAR_SHARE } else { 1.0 },
-            near_share_measured: false,
+            near_share: 1.0,
             ns_per_far_leaf: PRIOR_NS_PER_FAR_LEAF,
             pyramid: None,
             near_visible: Vec::new(),
@@ -892,7 +885,7 @@ struct Walk<'a> {
     instances: Vec<(InstanceRec, ItemId, Mat4)>,
     near: Vec<(u32, u32)>,
     far: Vec<(u32, u32)>,
-    /// `plane=cost`: every leaf `(instance, leaf, least view distance, triangles it owns)`,
+    /// `plane=cost`: every leaf `(instance, leaf, least view distance, triangle references)`,
     /// split once the plane is chosen.
     deferred: Option<Vec<(u32, u32, f32, u32)>>,
 }
@@ -939,8 +932,7 @@ impl<'a> Visitor<'a> for Walk<'a> {
         let lzb: &'a Lzb = self.lzb;
         match &lzb.accel[at.place.id.index()] {
             Accel::Empty => {}
-            Accel::Mesh { octree, clusters, .. } => {
-                let owned = clusters.owned_counts();
+            Accel::Mesh { octree, .. } => {
                 let clip = self.ctx.view.clip_from_object(&at.place.world_from_node);
                 let w_row = row_w(&clip);
                 let inst = self.instances.len() as u32;
@@ -951,10 +943,9 @@ impl<'a> Visitor<'a> for Walk<'a> {
                     let on = &octree.nodes()[n as usize];
                     any = true;
                     walk.meet_triangles(on.count as u64);
-                    // The leaf's tight box (`RayOctree::tighten_leaves`); its own triangles,
-                    // each of the mesh's counted once ([`owned`]).
+                    // The leaf's tight box (`RayOctree::tighten_leaves`).
                     if let Some(d) = deferred {
-                        d.push((inst, n, near_distance(w_row, &on.bounds), owned[n as usize]));
+                        d.push((inst, n, near_distance(w_row, &on.bounds), on.count));
                     } else if ctx.is_near(w_row, &on.bounds) {
                         near.push((inst, n));
                     } else {
@@ -1124,19 +1115,19 @@ impl Lzb {
         stats.counters.add("near_leaves", near.len() as u64);
         stats.counters.add("far_leaves", far.len() as u64);
         let far_leaves = far.len();
-        // The triangles the near and the far leaves own ([`owned`]), what `plane=cost` weighs.
-        let owned_by = |leaves: &[(u32, u32)]| -> u64 {
+        // The near and the far leaves' triangle references, what `plane=cost` weighs them by.
+        let references = |leaves: &[(u32, u32)]| -> u64 {
             leaves
                 .iter()
                 .map(
                     |&(inst, leaf)| match &self.accel[instances[inst as usize].0.node.index()] {
-                        Accel::Mesh { clusters, .. } => u64::from(clusters.owned_counts()[leaf as usize]),
+                        Accel::Mesh { octree, .. } => u64::from(octree.nodes()[leaf as usize].count),
                         _ => 0,
                     },
                 )
                 .sum()
         };
-        let (near_owned, far_owned) = (owned_by(&near), owned_by(&far));
+        let (near_references, far_references) = (references(&near), references(&far));
         stats.phases.add(Phase::Cull, t.elapsed());
 
         // No leaf drawn yet (`owned`: the near pass, and the far leaves of a frame given up).
@@ -1414,22 +1405,15 @@ impl Lzb {
                 self.ns_per_triangle = blend(self.ns_per_triangle, raster.as_nanos() as f64 / submitted as f64);
             }
             // The near pass's share, from a near set large enough to say (`near_cull=on`): the
-            // triangles it drew per triangle the near leaves own.
+            // triangles it drew per triangle reference of the near leaves.
             let drawn = stats.counters.get("near_triangles");
-            if self.opts.near_cull && near_owned >= MIN_RATE_TRIANGLES {
-                let share = drawn as f64 / near_owned as f64;
-                // The first measurement replaces the prior.
-                self.near_share = if self.near_share_measured {
-                    0.5 * (self.near_share + share)
-                } else {
-                    share
-                };
-                self.near_share_measured = true;
+            if self.opts.near_cull && near_references >= MIN_RATE_TRIANGLES {
+                self.near_share = 0.5 * (self.near_share + drawn as f64 / near_references as f64);
             }
             let pvl = stats.counters.get("pvl_triangles");
-            if far_owned > 0 && !naive {
+            if far_references > 0 && !naive {
                 // An empty PVL is a measurement too (a share of 0), unlike a zero time.
-                self.pvl_share = 0.5 * (self.pvl_share + pvl as f64 / far_owned as f64);
+                self.pvl_share = 0.5 * (self.pvl_share + pvl as f64 / far_references as f64);
                 // With `far_cull`, its tests are part of what a far leaf costs.
                 let other = (stats.phases.get(Phase::Other) + far_cull_time).as_nanos() as f64;
                 self.ns_per_far_leaf = blend(self.ns_per_far_leaf, other / far_leaves as f64);

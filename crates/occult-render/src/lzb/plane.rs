@@ -4,12 +4,12 @@
 use super::NEAR_MARGIN;
 
 /// `plane=cost`: the partition plane's view distance whose frame is expected to cost least.
-/// `leaves`: every leaf in the frustum as (its least view distance, the triangles it owns,
-/// [`super::owned`]); `hits`: the coarse rays' first-hit distances (`None`: no hit), each
-/// standing for `pixels / hits.len()` pixels; `ns_per_triangle` and `ns_per_ray`: wall time of
-/// a rasterized triangle and of a ray; `near_share`: the triangles the near pass draws per
-/// triangle the near leaves own (1 without `near_cull`); `pvl_share`: the triangles the rays'
-/// PVL holds per triangle the far leaves own;
+/// `leaves`: every leaf in the frustum as (its least view distance, its triangle references);
+/// `hits`: the coarse rays' first-hit distances (`None`: no hit), each standing for `pixels /
+/// hits.len()` pixels; `ns_per_triangle` and `ns_per_ray`: wall time of a rasterized triangle
+/// and of a ray; `near_share`: the triangles the near pass draws per reference of the near
+/// leaves (1 without `near_cull`); `pvl_share`: the triangles the rays' PVL holds per reference
+/// of the far leaves;
 /// `ns_per_far_leaf`: the rest of a far leaf's cost (its polygon, the PVL's assembly). A
 /// plane at `z` draws the leaves nearer than `z · (1 + NEAR_MARGIN)`, casts the pixels whose
 /// first hit lies at `z` or beyond (those nearer are finished by the near pass; those that hit
