@@ -74,6 +74,12 @@ identical_on_every_generator! {
         "lzb:payoff=off,pvl=hits,bvh_leaf=1,group_leaf=1,plane=static,plane_fraction=0.0001",
         0
     );
+    /// Octree leaves as large as `leaf=auto` makes them on scenes of tens of millions of
+    /// triangles (a few leaves a mesh here): with the cost plane, and with the plane halfway.
+    large_leaves_are_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("lzb:payoff=off,leaf=4000", 1);
+    large_leaves_plane_halfway_are_identical_on_every_generator:
+        assert_variant_identical_on_every_generator("lzb:payoff=off,leaf=2000,plane=static,plane_fraction=0.5", 2);
 }
 
 #[test]
@@ -404,7 +410,7 @@ fn octrees_over_their_budget_are_built_shallower() {
     let scene = Arc::new(built.scene);
     let o = RenderOptions::default();
     let opts = occult_render::lzb::LzbOptions {
-        leaf: 1,
+        leaf: Some(1),
         depth: 24,
         payoff: false,
         ..Default::default()

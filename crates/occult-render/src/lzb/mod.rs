@@ -47,6 +47,11 @@
 //!   is linear in unique geometry. PVL entries are `(instance, leaf)`; triangles are
 //!   deduplicated per instance with a stamp per unique triangle.
 //! - Octree boxes are octants of the node's bounds (not a cube).
+//! - The mesh octrees' leaf size (`leaf=auto`, the default; [`LzbOptions::leaf_size`]): the
+//!   paper's 150 where leaves make the PVL (`pvl=leaves`, `pvl=triangles`); with the
+//!   triangle-exact PVL or naive rays, the scene's triangle instances / 16,384 (at least 150):
+//!   a frame's work per leaf in view (the walk, the split, the polygons, the near pass's units)
+//!   stays bounded on scenes of tens of millions of triangles (docs/lzb.md).
 //! - The static plane's fraction is of the depth over which the scene lies in the frustum
 //!   (`near` to the farther of the scene bounds and the far plane), not of `[near, far]`:
 //!   with far planes far beyond the scene the paper's 15–30 % would hold all of it.
@@ -329,6 +334,8 @@ pub struct Lzb {
     stamp: u32,
     plane_cache: Option<PlaneCache>,
     build_time: Duration,
+    /// Most triangles per mesh octree leaf ([`LzbOptions::leaf_size`]).
+    leaf_size: usize,
     cull_backfaces: bool,
     /// What the rays' balance learned from earlier frames ([`crate::payoff`]).
     payoff: Payoff,
@@ -466,9 +473,10 @@ impl Lzb {
         opts.check()?;
         let start = Instant::now();
         let raster = crate::scene_rasterizer(&scene, options)?;
+        let leaf_size = opts.leaf_size(&scene);
         let mesh_cfg = RayOctreeConfig {
             max_depth: opts.depth,
-            max_leaf_size: opts.leaf,
+            max_leaf_size: leaf_size,
         };
         let group_cfg = RayOctreeConfig {
             max_depth: opts.depth,
@@ -630,7 +638,14 @@ impl Lzb {
             near_scratch: near::NearScratch::default(),
             lists: FrameLists::default(),
             build_time: start.elapsed(),
+            leaf_size,
         })
+    }
+
+    /// Most triangles per mesh octree leaf, as `leaf` (or `auto`) chose for the scene
+    /// ([`LzbOptions::leaf_size`]; counter `octree_leaf`).
+    pub fn leaf_size(&self) -> usize {
+        self.leaf_size
     }
 
     /// Preprocessing time (octree builds, §II.A).
@@ -1040,6 +1055,7 @@ impl Lzb {
             direct.arm(&mut self.payoff, self.raster.thread_count());
         }
         let (start, cleared, mut stats) = crate::begin_frame(&mut self.raster, view, frame)?;
+        stats.counters.add("octree_leaf", self.leaf_size as u64);
         let mut payoff = self.payoff.begin(cleared);
         let mut ctx = FrameCtx::new(view, self.cull_backfaces);
 

@@ -536,7 +536,7 @@ fn borrowed_triangles_of_hidden_owners_are_drawn() {
             plane: Plane::Static,
             plane_fraction: 1.0,
             payoff: false,
-            leaf: 8,
+            leaf: Some(8),
             near_temporal,
             ..LzbOptions::default()
         };
@@ -572,7 +572,7 @@ fn a_frame_given_up_with_borrowing_leaves_is_identical() {
         let opts = LzbOptions {
             plane: Plane::Static,
             plane_fraction,
-            leaf: 8,
+            leaf: Some(8),
             ..LzbOptions::default()
         };
         let mut lzb = Lzb::new(scene.clone(), &RenderOptions::default(), &opts).expect("lzb builds");
@@ -588,4 +588,35 @@ fn a_frame_given_up_with_borrowing_leaves_is_identical() {
             );
         }
     }
+}
+
+/// `leaf=auto`: the paper's 150 on scenes of up to 150 × 16,384 triangle instances and where
+/// the PVL is made of leaves; beyond, a leaf per 16,384th of the scene, at most 16,384; a
+/// number given is kept. The octree is built with it, and each frame says it.
+#[test]
+fn auto_leaves_grow_with_the_scene_where_they_do_not_make_the_pvl() {
+    assert_eq!(options::auto_leaf(0), options::PAPER_LEAF);
+    assert_eq!(options::auto_leaf(2_000_000), 150);
+    assert_eq!(options::auto_leaf(29_467_866), 1_799);
+    assert_eq!(options::auto_leaf(45_001_728), 2_747);
+    assert_eq!(options::auto_leaf(u64::MAX), options::AUTO_LEAF_MAX);
+    let (scene, view, _) = two_walls();
+    let spec = |s: &str| LzbOptions::from_params(&crate::AlgoSpec::parse(s).expect("parses").params).expect("valid");
+    let items = scene.item_count();
+    assert_eq!(spec("lzb").leaf, None);
+    assert_eq!(spec("lzb:leaf=auto").leaf, None);
+    assert_eq!(spec("lzb").leaf_size(&scene), options::auto_leaf(items));
+    assert_eq!(spec("lzb:leaf=7").leaf_size(&scene), 7);
+    assert_eq!(spec("lzb:caster=octree").leaf_size(&scene), 150, "a PVL of leaves");
+    assert_eq!(
+        spec("lzb:pvl=triangles").leaf_size(&scene),
+        150,
+        "a PVL of leaves' triangles"
+    );
+    assert_eq!(spec("lzb:mode=naive").leaf_size(&scene), options::auto_leaf(items));
+    let mut lzb = Lzb::new(scene, &RenderOptions::default(), &spec("lzb:leaf=9")).expect("lzb builds");
+    assert_eq!(lzb.leaf_size(), 9);
+    let mut frame = Frame::new(96, 64).expect("a frame");
+    let stats = lzb.render(&view, &mut frame).expect("a frame");
+    assert_eq!(stats.counters.get("octree_leaf"), 9);
 }
