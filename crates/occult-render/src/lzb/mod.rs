@@ -48,10 +48,10 @@
 //!   deduplicated per instance with a stamp per unique triangle.
 //! - Octree boxes are octants of the node's bounds (not a cube).
 //! - The mesh octrees' leaf size (`leaf=auto`, the default; [`LzbOptions::leaf_size`]): the
-//!   paper's 150 where leaves make the PVL (`pvl=leaves`, `pvl=triangles`); with the
-//!   triangle-exact PVL or naive rays, the scene's triangle instances / 16,384 (at least 150):
-//!   a frame's work per leaf in view (the walk, the split, the polygons, the near pass's units)
-//!   stays bounded on scenes of tens of millions of triangles (docs/lzb.md).
+//!   paper's 150 where the rays walk the octree (`caster=octree`); with `caster=bvh` (the
+//!   default), the scene's triangle instances / 16,384, within 150..=16,384: a frame's work
+//!   per leaf in view (the walk, the split, the polygons, the near pass's units) stays bounded
+//!   on scenes of tens of millions of triangles (docs/lzb.md).
 //! - The static plane's fraction is of the depth over which the scene lies in the frustum
 //!   (`near` to the farther of the scene bounds and the far plane), not of `[near, far]`:
 //!   with far planes far beyond the scene the paper's 15–30 % would hold all of it.
@@ -116,7 +116,9 @@ mod owned;
 mod plane;
 pub mod shared;
 
-pub use options::{CasterKind, LzbOptions, Mode, Plane, Pvl, Selection, INFO};
+pub use options::{
+    auto_leaf, CasterKind, LzbOptions, Mode, Plane, Pvl, Selection, AUTO_LEAF_BUDGET, AUTO_LEAF_MAX, INFO, PAPER_LEAF,
+};
 pub use plane::cost_plane;
 
 use std::sync::Arc;
@@ -1049,7 +1051,8 @@ impl Lzb {
     ) -> Result<FrameStats> {
         crate::check_frame(view, frame)?;
         if let Some(direct) = &mut self.direct {
-            if let Some(stats) = direct.render_if_due(&mut self.raster, view, frame)? {
+            if let Some(mut stats) = direct.render_if_due(&mut self.raster, view, frame)? {
+                stats.counters.add("octree_leaf", self.leaf_size as u64);
                 return crate::end_frame(&self.raster, stats);
             }
             direct.arm(&mut self.payoff, self.raster.thread_count());

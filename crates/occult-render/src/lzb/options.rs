@@ -11,7 +11,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc {
             key: "leaf",
             default: "auto",
-            help: "max triangles per mesh octree leaf (>= 1; §II.A, the paper's Octree-o used 150), or auto: 150 where the PVL is made of leaves (pvl=leaves|triangles), else the scene's triangle instances / 16384, at least 150 and at most 16384 (a frame's work per leaf in view stays bounded on scenes of tens of millions of triangles; not in the paper)",
+            help: "max triangles per mesh octree leaf (>= 1; §II.A, the paper's Octree-o used 150), or auto: 150 with caster=octree (whose rays walk the octree's leaves), else the scene's triangle instances / 16384, at least 150 and at most 16384 (a frame's work per leaf in view stays bounded on scenes of tens of millions of triangles; not in the paper)",
         },
         ParamDoc {
             key: "depth",
@@ -264,17 +264,19 @@ impl Default for LzbOptions {
 
 /// The paper's most triangles per octree leaf (Octree-o, §II.A), and `leaf=auto`'s least.
 pub const PAPER_LEAF: usize = 150;
-/// Leaves `leaf=auto` sizes a scene's triangle instances into, at most (counting each
-/// instance's leaves): a frame's work per leaf in view (the frustum walk, the near/far split,
-/// the object-oriented polygons, the near pass's units) then stays bounded however large the
-/// scene. Measured on `city:blocks=32` (29.5 M): 150 → 1,800 triangles a leaf took `street:16`
-/// from 5.2× to 6.7× `zbuffer` and `circle:8` from 0.96× to 1.13× (docs/lzb.md).
+/// Full leaves `leaf=auto` cuts a scene's triangle instances into (each instance's leaves
+/// counted; leaves are seldom full, so a view from outside holds several times this many):
+/// a frame's work per leaf in view (the frustum walk, the near/far split, the cost plane, the
+/// object-oriented polygons, the near pass's units) then stays bounded however large the
+/// scene. On `city:blocks=32` (29.5 M), 150 → 1,799 triangles a leaf took the suite's
+/// `city32-street` from 5.45× to 6.33× `zbuffer` and `city32-orbit` from 0.92× to 1.12×
+/// (docs/lzb.md).
 pub const AUTO_LEAF_BUDGET: u64 = 16_384;
 /// `leaf=auto`'s most triangles per leaf.
 pub const AUTO_LEAF_MAX: usize = 16_384;
 
-/// `leaf=auto`'s leaf size for a scene of `items` triangle instances where leaves do not make
-/// the PVL: `items / AUTO_LEAF_BUDGET`, within `PAPER_LEAF..=AUTO_LEAF_MAX`.
+/// `leaf=auto`'s leaf size for a scene of `items` triangle instances where the rays do not walk
+/// the octree: `items / AUTO_LEAF_BUDGET` rounded up, within `PAPER_LEAF..=AUTO_LEAF_MAX`.
 pub fn auto_leaf(items: u64) -> usize {
     usize::try_from(items.div_ceil(AUTO_LEAF_BUDGET))
         .unwrap_or(AUTO_LEAF_MAX)
@@ -282,15 +284,22 @@ pub fn auto_leaf(items: u64) -> usize {
 }
 
 impl LzbOptions {
-    /// Most triangles per mesh octree leaf for `scene`: `leaf=N` as given; `leaf=auto`, the
-    /// paper's 150 where the PVL is made of leaves (lazy rays with `pvl=leaves` or
-    /// `pvl=triangles`: a larger leaf is a larger PVL), else [`auto_leaf`] of the scene's
-    /// triangle instances (with `pvl=hits` the PVL is triangle-exact whatever the leaves).
+    /// Most triangles per mesh octree leaf for `scene`: [`LzbOptions::leaf_size_for`] of its
+    /// triangle instances.
     pub fn leaf_size(&self, scene: &occult_core::Scene) -> usize {
+        self.leaf_size_for(scene.item_count())
+    }
+
+    /// Most triangles per mesh octree leaf for a scene of `items` triangle instances: `leaf=N`
+    /// as given; `leaf=auto`, the paper's 150 where the rays walk the octree
+    /// (`caster=octree`: naive rays test every triangle of the leaves they reach, lazy ones
+    /// make the PVL of them), else [`auto_leaf`] (`caster=bvh`: the rays walk each mesh's BVH,
+    /// and the PVL is made of its leaves or of triangles whatever the octree's leaves).
+    pub fn leaf_size_for(&self, items: u64) -> usize {
         match self.leaf {
             Some(n) => n,
-            None if self.mode == Mode::Lazy && self.pvl != Pvl::Hits => PAPER_LEAF,
-            None => auto_leaf(scene.item_count()),
+            None if self.caster == CasterKind::Octree => PAPER_LEAF,
+            None => auto_leaf(items),
         }
     }
 

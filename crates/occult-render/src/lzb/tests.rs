@@ -591,31 +591,49 @@ fn a_frame_given_up_with_borrowing_leaves_is_identical() {
 }
 
 /// `leaf=auto`: the paper's 150 on scenes of up to 150 × 16,384 triangle instances and where
-/// the PVL is made of leaves; beyond, a leaf per 16,384th of the scene, at most 16,384; a
-/// number given is kept. The octree is built with it, and each frame says it.
+/// the rays walk the octree (`caster=octree`); beyond, a leaf per 16,384th of the scene, at
+/// most 16,384; a number given is kept. The octree is built with it, and each frame says it.
 #[test]
-fn auto_leaves_grow_with_the_scene_where_they_do_not_make_the_pvl() {
+fn auto_leaves_grow_with_the_scene_where_the_rays_do_not_walk_them() {
     assert_eq!(options::auto_leaf(0), options::PAPER_LEAF);
-    assert_eq!(options::auto_leaf(2_000_000), 150);
+    assert_eq!(options::auto_leaf(2_457_600), 150);
+    assert_eq!(options::auto_leaf(2_457_601), 151);
     assert_eq!(options::auto_leaf(29_467_866), 1_799);
     assert_eq!(options::auto_leaf(45_001_728), 2_747);
+    assert_eq!(options::auto_leaf(16_384 * 16_384), options::AUTO_LEAF_MAX);
+    assert_eq!(options::auto_leaf(16_384 * 16_384 + 1), options::AUTO_LEAF_MAX);
     assert_eq!(options::auto_leaf(u64::MAX), options::AUTO_LEAF_MAX);
-    let (scene, view, _) = two_walls();
     let spec = |s: &str| LzbOptions::from_params(&crate::AlgoSpec::parse(s).expect("parses").params).expect("valid");
-    let items = scene.item_count();
     assert_eq!(spec("lzb").leaf, None);
     assert_eq!(spec("lzb:leaf=auto").leaf, None);
-    assert_eq!(spec("lzb").leaf_size(&scene), options::auto_leaf(items));
-    assert_eq!(spec("lzb:leaf=7").leaf_size(&scene), 7);
-    assert_eq!(spec("lzb:caster=octree").leaf_size(&scene), 150, "a PVL of leaves");
-    assert_eq!(
-        spec("lzb:pvl=triangles").leaf_size(&scene),
-        150,
-        "a PVL of leaves' triangles"
-    );
-    assert_eq!(spec("lzb:mode=naive").leaf_size(&scene), options::auto_leaf(items));
+    let big = 29_467_866;
+    for (s, leaf) in [
+        ("lzb", 1_799),
+        ("lzb:leaf= Auto ", 1_799),
+        ("lzb:leaf=7", 7),
+        ("lzb:caster=octree", 150),
+        ("lzb:pvl=triangles", 150),
+        ("lzb:pvl=leaves", 150),
+        ("lzb:caster=bvh,pvl=leaves", 1_799),
+        ("lzb:mode=naive", 1_799),
+        ("lzb:mode=naive,caster=octree,packets=off", 150),
+    ] {
+        assert_eq!(spec(s).leaf_size_for(big), leaf, "{s}");
+    }
+    // Built with it: no leaf of the walls' octree holds more (its grid holds thousands).
+    let (scene, view, _) = walls(1.5);
     let mut lzb = Lzb::new(scene, &RenderOptions::default(), &spec("lzb:leaf=9")).expect("lzb builds");
     assert_eq!(lzb.leaf_size(), 9);
+    let leaves: Vec<u32> = lzb
+        .accel
+        .iter()
+        .filter_map(|a| match a {
+            Accel::Mesh { octree, .. } => Some(octree),
+            _ => None,
+        })
+        .flat_map(|o| o.nodes().iter().filter(|n| n.is_leaf()).map(|n| n.count))
+        .collect();
+    assert!(leaves.len() > 1 && leaves.iter().all(|&c| c <= 9), "{leaves:?}");
     let mut frame = Frame::new(96, 64).expect("a frame");
     let stats = lzb.render(&view, &mut frame).expect("a frame");
     assert_eq!(stats.counters.get("octree_leaf"), 9);
