@@ -49,8 +49,8 @@
 //!   this view holds less), the probe cannot pay and the next
 //!   run starts instead, doubled as after a losing probe (a screening is a walk of the
 //!   hierarchies, its mesh hierarchies shared over the rasterizer's threads and, beyond 128
-//!   of them, a stride of 64 descended: a few percent of a frame; a losing probe costs up to
-//!   two frames). Only with
+//!   of them, a sample descended, its estimate erring high: a few percent of a frame; a
+//!   losing probe costs up to two frames). Only with
 //!   a culled frame at most [`SCREEN_AGE`] frames old, and by a direct frame of at least
 //!   [`MIN_ALLOWANCE_TIME`] (a view of next to nothing says nothing of the next); before the first direct frame, a culled
 //!   frame that did not plainly pay is screened the same way on its own depth, at its own

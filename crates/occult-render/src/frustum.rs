@@ -253,11 +253,12 @@ impl Hierarchies {
     ///
     /// The groups are walked on the calling thread; the mesh occurrences met, each a descent
     /// of its mesh's hierarchy (nearly all the boxes), are then shared over `pool`'s threads
-    /// (the caller's pool when `None`). With more than twice [`HIDDEN_SAMPLED_MESHES`] of
-    /// them, an estimate: every `n / HIDDEN_SAMPLED_MESHES`-th occurrence is descended, the
-    /// share of its triangles hidden standing for all of them (a screening weighs the count
-    /// against a cost; it needs its size, not every triangle). The count does not depend on the
-    /// threads.
+    /// (the caller's pool when `None`). Beyond twice [`HIDDEN_SAMPLED_MESHES`] occurrences,
+    /// the count is an estimate that errs high, in culling's favour as the screenings use it:
+    /// every occurrence holding at least a [`HIDDEN_SAMPLED_MESHES`]-th of their triangles is
+    /// descended, and of the others a stride of about [`HIDDEN_SAMPLED_MESHES`]; their share of
+    /// hidden triangles, raised by two standard errors, stands for all the others. The count
+    /// does not depend on the threads.
     pub fn hidden_triangles(
         &self,
         view: &View,
@@ -266,10 +267,11 @@ impl Hierarchies {
         pool: Option<&rayon::ThreadPool>,
     ) -> u64 {
         self.hidden_triangles_sampling(view, frame, pyramid, pool, HIDDEN_SAMPLED_MESHES)
+            .hidden
     }
 
-    /// [`Hierarchies::hidden_triangles`], sampling the mesh occurrences beyond twice `sampled`
-    /// of them (`usize::MAX`: the exact count).
+    /// [`Hierarchies::hidden_triangles`], sampling beyond twice `sampled` mesh occurrences
+    /// (`usize::MAX`: the exact count).
     fn hidden_triangles_sampling(
         &self,
         view: &View,
@@ -277,7 +279,7 @@ impl Hierarchies {
         pyramid: &mut ZPyramid,
         pool: Option<&rayon::ThreadPool>,
         sampled: usize,
-    ) -> u64 {
+    ) -> HiddenCount {
         pyramid.rebuild(frame);
         let pyramid: &ZPyramid = pyramid;
         let mut w = Hidden {
@@ -289,45 +291,125 @@ impl Hierarchies {
             meshes: Vec::new(),
         };
         w.run();
-        let (hidden, mut meshes) = (w.hidden, w.meshes);
-        // Many mesh occurrences: every `stride`-th is descended, and the share of their
-        // triangles found hidden stands for all of them.
-        let stride = meshes.len() / sampled.max(1);
-        let all_items: u64 = meshes.iter().map(|at| at.node.item_count()).sum();
-        if stride >= 2 {
-            meshes = meshes.into_iter().step_by(stride).collect();
-        }
-        let sampled_items: u64 = meshes.iter().map(|at| at.node.item_count()).sum();
+        let (hidden, meshes) = (w.hidden, w.meshes);
+        let met = meshes.len();
+        let sample = MeshSample::of(meshes, sampled);
         let hierarchies = &self.hierarchies;
         let occlusion = Occlusion::hierarchical(frame, pyramid, view);
         let in_meshes = || {
-            meshes
+            sample
+                .descended
                 .par_chunks(HIDDEN_MESHES_PER_TASK)
                 .map(|chunk| {
                     let mut m = MeshHidden::default();
-                    for at in chunk {
-                        if let Some(bvh) = &hierarchies[at.place.id.index()] {
-                            m.descend(&occlusion, view, at, bvh);
-                        }
-                    }
-                    m.hidden
+                    chunk
+                        .iter()
+                        .map(|at| {
+                            let before = m.hidden;
+                            if let Some(bvh) = &hierarchies[at.place.id.index()] {
+                                m.descend(&occlusion, view, at, bvh);
+                            }
+                            m.hidden - before
+                        })
+                        .collect::<Vec<u64>>()
                 })
-                .sum::<u64>()
+                .collect::<Vec<_>>()
+                .concat()
         };
-        let in_sampled = pool.map_or_else(in_meshes, |p| p.install(in_meshes));
-        let in_all = if sampled_items == all_items {
-            in_sampled
-        } else {
-            (in_sampled as f64 * all_items as f64 / sampled_items.max(1) as f64).round() as u64
-        };
-        hidden + in_all.min(all_items)
+        let counts = pool.map_or_else(in_meshes, |p| p.install(in_meshes));
+        HiddenCount {
+            hidden: hidden + sample.estimate(&counts),
+            met,
+            descended: sample.descended.len(),
+        }
     }
 }
 
-/// Mesh occurrences [`Hierarchies::hidden_triangles`] descends at least when it samples them:
-/// it descends every one up to twice this many, and a stride of them beyond (the descents of
-/// `forest`'s 257 trees were 5 ms of a 5.5 ms screening; a share of hidden triangles measured
-/// over 64 occurrences or more is what a screening's comparison needs).
+/// What [`Hierarchies::hidden_triangles`] found, and how many mesh occurrences it met and
+/// descended (tests).
+struct HiddenCount {
+    hidden: u64,
+    #[cfg_attr(not(test), allow(dead_code))]
+    met: usize,
+    #[cfg_attr(not(test), allow(dead_code))]
+    descended: usize,
+}
+
+/// The mesh occurrences [`Hierarchies::hidden_triangles`] descends: all, or those counted
+/// exactly (the large ones) followed by a systematic sample of the rest.
+struct MeshSample<'a> {
+    descended: Vec<NodeAt<'a>>,
+    /// How many of `descended`, from the first, are counted exactly.
+    exact: usize,
+    /// The triangles and the number of the occurrences the sample stands for (the rest).
+    rest: (u64, usize),
+}
+
+impl<'a> MeshSample<'a> {
+    /// All of `meshes` up to twice `sampled`; beyond, those holding at least a `sampled`-th of
+    /// all their triangles, and a stride of the rest starting halfway into the first stride
+    /// (the walk's order follows the scene's hierarchies: not always its first occurrence).
+    fn of(meshes: Vec<NodeAt<'a>>, sampled: usize) -> Self {
+        let sampled = sampled.max(1);
+        if meshes.len() <= sampled.saturating_mul(2) {
+            return Self {
+                exact: meshes.len(),
+                descended: meshes,
+                rest: (0, 0),
+            };
+        }
+        let all: u64 = meshes.iter().map(|at| at.node.item_count()).sum();
+        let large = all / sampled as u64;
+        let (mut descended, rest): (Vec<_>, Vec<_>) = meshes.into_iter().partition(|at| at.node.item_count() >= large);
+        let exact = descended.len();
+        let stride = (rest.len() / sampled).max(1);
+        let rest_items = rest.iter().map(|at| at.node.item_count()).sum();
+        let rest_len = rest.len();
+        descended.extend(rest.into_iter().skip(stride / 2).step_by(stride));
+        Self {
+            descended,
+            exact,
+            rest: (rest_items, rest_len),
+        }
+    }
+
+    /// The hidden triangles of every occurrence from `counts`, those of the descended ones in
+    /// order: the exact ones' own, and for the rest the sampled ones' share of hidden
+    /// triangles (a ratio estimate) raised by two standard errors, at most all of the rest.
+    fn estimate(&self, counts: &[u64]) -> u64 {
+        let exact: u64 = counts[..self.exact].iter().sum();
+        let (rest_items, rest_len) = self.rest;
+        let pairs: Vec<(f64, f64)> = self.descended[self.exact..]
+            .iter()
+            .zip(&counts[self.exact..])
+            .map(|(at, &h)| (h as f64, at.node.item_count() as f64))
+            .collect();
+        if rest_len == pairs.len() {
+            return exact + counts[self.exact..].iter().sum::<u64>();
+        }
+        exact + (upper_share(&pairs, rest_len) * rest_items as f64).ceil() as u64
+    }
+}
+
+/// The share of triangles hidden over a population of `population` occurrences, from a
+/// sample of `(hidden, triangles)` pairs: the ratio of the sums raised by two standard errors
+/// of the ratio estimator (with the finite population correction), at most 1.
+fn upper_share(pairs: &[(f64, f64)], population: usize) -> f64 {
+    let n = pairs.len() as f64;
+    let (hidden, items) = pairs.iter().fold((0.0, 0.0), |(h, w), p| (h + p.0, w + p.1));
+    if n < 2.0 || items <= 0.0 {
+        return 1.0;
+    }
+    let ratio = hidden / items;
+    let spread = pairs.iter().map(|&(h, w)| (h - ratio * w).powi(2)).sum::<f64>() / (n - 1.0);
+    let correction = (1.0 - n / population.max(1) as f64).max(0.0);
+    let error = (correction * spread / n).sqrt() / (items / n);
+    (ratio + 2.0 * error).min(1.0)
+}
+
+/// Mesh occurrences [`Hierarchies::hidden_triangles`] descends beyond twice this many: about
+/// this many of the smaller ones, and every large one (each descent visits nearly all of its
+/// mesh's boxes; on a scene of many instances the descents are nearly all of a screening).
 const HIDDEN_SAMPLED_MESHES: usize = 64;
 
 /// Mesh occurrences one task of [`Hierarchies::hidden_triangles`] descends (a few hundred
@@ -642,39 +724,106 @@ mod tests {
         Ok((stats, f))
     }
 
-    /// Beyond twice [`HIDDEN_SAMPLED_MESHES`] mesh occurrences, the hidden triangles are
-    /// estimated from a stride of them: near the exact count (all descended), never more than
-    /// the triangles in view.
-    #[test]
-    fn many_mesh_occurrences_are_sampled_near_the_exact_count() {
-        // 12 rows of 16 cubes seen from above: 192 occurrences in view, each with a hierarchy,
-        // the faces of each behind its front hidden.
-        let at = (0..192).map(|i| Vec3::new((i % 16) as f32 * 1.5 - 12.0, 0.0, -((i / 16) as f32) * 2.0));
-        let scene = crate::tests::cubes_on_ground([-14.0, 14.0, -26.0, 2.0], at);
+    /// 12 rows of 16 cubes seen from above (192 mesh occurrences in view, the faces of each
+    /// behind its front hidden), on a ground of `ground` quads a side (one mesh, under them).
+    fn cubes_from_above(ground: u32) -> (Arc<Scene>, View, Frame) {
+        let mut b = SceneBuilder::new();
+        let cube = b
+            .add_mesh("cube", crate::tests::cube_mesh())
+            .expect("a valid mesh adds");
+        let ground = b.add_mesh("ground", grid(ground)).expect("a valid mesh adds");
+        let mut instances = vec![Instance {
+            // The unit grid in x, y laid on y = -0.5 over x in -14..14, z in -26..2.
+            parent_from_child: Affine3A::from_scale_rotation_translation(
+                Vec3::new(28.0, 28.0, 1.0),
+                occult_core::glam::Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2),
+                Vec3::new(-14.0, -0.5, 2.0),
+            ),
+            child: ground,
+        }];
+        instances.extend((0..192).map(|i| Instance {
+            parent_from_child: Affine3A::from_translation(Vec3::new(
+                (i % 16) as f32 * 1.5 - 12.0,
+                0.0,
+                -((i / 16) as f32) * 2.0,
+            )),
+            child: cube,
+        }));
+        let root = b.add_group("cubes", instances).expect("a group of known nodes adds");
+        let scene = Arc::new(b.build(root).expect("the cubes build"));
         let (view, _) = crate::test_view(Vec3::new(0.3, 14.0, 8.0), Vec3::new(0.0, 0.0, -11.0), 96, 64);
         let mut frame = Frame::new(96, 64).expect("a 96x64 frame");
         crate::zbuffer::ZBuffer::new(scene.clone(), &RenderOptions::default())
             .expect("zbuffer builds")
             .render(&view, &mut frame)
             .expect("zbuffer renders the view");
+        (scene, view, frame)
+    }
+
+    /// Beyond twice [`HIDDEN_SAMPLED_MESHES`] mesh occurrences, the hidden triangles are
+    /// estimated from a sample of them, erring high: near the exact count (every occurrence
+    /// descended), with a large occurrence among small ones too (descended whole, not stood
+    /// for by the small ones' share), the same on one thread or three.
+    #[test]
+    fn many_mesh_occurrences_are_sampled_near_the_exact_count() {
         let raster = Rasterizer::new(occult_raster::RasterConfig::default()).expect("default rasterizer");
         let options = FrustumOptions {
             mesh_leaf_size: 2,
             ..FrustumOptions::default()
         };
-        let h = Hierarchies::build(scene, &raster, &options).expect("frustum hierarchies build");
         let mut pyramid = ZPyramid::new(96, 64).expect("small pyramid");
-        let exact = h.hidden_triangles_sampling(&view, &frame, &mut pyramid, None, usize::MAX);
-        let estimate = h.hidden_triangles(&view, &frame, &mut pyramid, None);
-        let in_view = h.triangles_in_view(&view);
-        assert!(
-            exact > in_view / 8,
-            "the cubes' far faces are hidden: {exact} of {in_view}"
+        // A ground of 2 triangles, then of 8,192 (more than the cubes' 2,304 together).
+        for side in [1, 64] {
+            let (scene, view, frame) = cubes_from_above(side);
+            let h = Hierarchies::build(scene, &raster, &options).expect("frustum hierarchies build");
+            let exact = h.hidden_triangles_sampling(&view, &frame, &mut pyramid, None, usize::MAX);
+            let sampled = h.hidden_triangles_sampling(&view, &frame, &mut pyramid, None, HIDDEN_SAMPLED_MESHES);
+            assert!(exact.met > 2 * HIDDEN_SAMPLED_MESHES, "{} occurrences met", exact.met);
+            assert_eq!((exact.descended, sampled.met), (exact.met, exact.met));
+            assert!(
+                sampled.descended < sampled.met / 2,
+                "{} of {} descended",
+                sampled.descended,
+                sampled.met
+            );
+            assert!(
+                exact.hidden > h.triangles_in_view(&view) / 8,
+                "the cubes' far faces are hidden"
+            );
+            let (e, x) = (sampled.hidden as f64, exact.hidden as f64);
+            assert!(
+                (0.95 * x..=1.25 * x).contains(&e),
+                "ground {side}: estimate {e} against exact {x}"
+            );
+            let counts: Vec<u64> = [1, 3]
+                .into_iter()
+                .map(|threads| {
+                    let pool = rayon::ThreadPoolBuilder::new()
+                        .num_threads(threads)
+                        .build()
+                        .expect("a small pool");
+                    h.hidden_triangles(&view, &frame, &mut pyramid, Some(&pool))
+                })
+                .collect();
+            assert_eq!(counts, [sampled.hidden; 2], "one thread or three");
+        }
+    }
+
+    /// The upper share of a sample: the ratio of its sums when every pair holds it, more
+    /// when they spread, and less with the whole population sampled.
+    #[test]
+    fn the_upper_share_is_the_ratio_raised_by_the_spread() {
+        let even = [(5.0, 10.0); 8];
+        assert_eq!(upper_share(&even, 100), 0.5);
+        let spread = [(0.0, 10.0), (10.0, 10.0), (2.0, 10.0), (8.0, 10.0)];
+        let high = upper_share(&spread, 100);
+        assert!(high > 0.5 && high < 1.0, "{high}");
+        assert_eq!(upper_share(&spread, 4), 0.5, "the whole population: the ratio");
+        assert_eq!(
+            upper_share(&[(1.0, 10.0)], 100),
+            1.0,
+            "one pair says nothing of the spread"
         );
-        assert_ne!(estimate, exact, "sampled, not descended whole");
-        let error = (estimate as f64 - exact as f64).abs() / exact as f64;
-        assert!(error < 0.2, "estimate {estimate} against exact {exact}");
-        assert!(estimate <= in_view);
     }
 
     /// Batches of any size draw the frame and count what one batch does.

@@ -631,10 +631,8 @@ mod tests {
     use super::*;
     use occult_core::{Affine3A, Camera, Instance, Mesh, SceneBuilder, Vec3};
 
-    /// Unit cubes (one mesh, instanced) centred at `at` on a ground quad at y = -0.5 spanning
-    /// `[x0, x1, z0, z1]`: the test scene of this crate's tests, where cubes hide each other
-    /// and the ground.
-    pub(crate) fn cubes_on_ground(ground: [f32; 4], at: impl IntoIterator<Item = Vec3>) -> Arc<Scene> {
+    /// A unit cube about the origin, 12 triangles wound outward.
+    pub(crate) fn cube_mesh() -> Mesh {
         let p = [
             Vec3::new(-0.5, -0.5, -0.5),
             Vec3::new(0.5, -0.5, -0.5),
@@ -659,13 +657,15 @@ mod tests {
             [1, 2, 6],
             [1, 6, 5],
         ];
+        Mesh::new(p.to_vec(), t).expect("a cube of in-range triangles is a valid mesh")
+    }
+
+    /// Unit cubes (one mesh, instanced) centred at `at` on a ground quad at y = -0.5 spanning
+    /// `[x0, x1, z0, z1]`: the test scene of this crate's tests, where cubes hide each other
+    /// and the ground.
+    pub(crate) fn cubes_on_ground(ground: [f32; 4], at: impl IntoIterator<Item = Vec3>) -> Arc<Scene> {
         let mut b = SceneBuilder::new();
-        let cube = b
-            .add_mesh(
-                "cube",
-                Mesh::new(p.to_vec(), t).expect("a cube of in-range triangles is a valid mesh"),
-            )
-            .expect("a valid mesh adds");
+        let cube = b.add_mesh("cube", cube_mesh()).expect("a valid mesh adds");
         let [x0, x1, z0, z1] = ground;
         let ground = Mesh::new(
             vec![
