@@ -989,16 +989,9 @@ pub(crate) mod tests {
             ..FrustumOptions::default()
         };
         let fine = Hierarchies::build(scene, &raster, &fine).expect("frustum hierarchies build");
-        let counts: Vec<u64> = [1, 3]
-            .into_iter()
-            .map(|threads| {
-                let pool = rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
-                    .expect("a small pool");
-                fine.hidden_triangles(&view, &reference, &mut pyramid, Some(&pool))
-            })
-            .collect();
+        let counts = crate::tests::on_threads(&[1, 3], |pool| {
+            fine.hidden_triangles(&view, &reference, &mut pyramid, Some(pool))
+        });
         // A visible cube's faces behind its front are hidden too: the meshes' part counted.
         assert!(counts[0] > hidden, "finer boxes hide more: {counts:?}, {hidden}");
         assert_eq!(counts[0], counts[1], "one thread or three");

@@ -795,16 +795,9 @@ mod tests {
                 (0.95 * x..=1.25 * x).contains(&e),
                 "ground {side}: estimate {e} against exact {x}"
             );
-            let counts: Vec<u64> = [1, 3]
-                .into_iter()
-                .map(|threads| {
-                    let pool = rayon::ThreadPoolBuilder::new()
-                        .num_threads(threads)
-                        .build()
-                        .expect("a small pool");
-                    h.hidden_triangles(&view, &frame, &mut pyramid, Some(&pool))
-                })
-                .collect();
+            let counts = crate::tests::on_threads(&[1, 3], |pool| {
+                h.hidden_triangles(&view, &frame, &mut pyramid, Some(pool))
+            });
             assert_eq!(counts, [sampled.hidden; 2], "one thread or three");
         }
     }

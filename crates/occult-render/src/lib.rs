@@ -631,6 +631,20 @@ mod tests {
     use super::*;
     use occult_core::{Affine3A, Camera, Instance, Mesh, SceneBuilder, Vec3};
 
+    /// `f` run in a pool of each of `threads` threads, in turn.
+    pub(crate) fn on_threads<T>(threads: &[usize], mut f: impl FnMut(&rayon::ThreadPool) -> T) -> Vec<T> {
+        threads
+            .iter()
+            .map(|&n| {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(n)
+                    .build()
+                    .expect("a small pool");
+                f(&pool)
+            })
+            .collect()
+    }
+
     /// A unit cube about the origin, 12 triangles wound outward.
     pub(crate) fn cube_mesh() -> Mesh {
         let p = [
