@@ -48,8 +48,8 @@
 //!   beyond a direct frame of the triangles it submitted; scaled down by the views' work when
 //!   this view holds less), the probe cannot pay and the next
 //!   run starts instead, doubled as after a losing probe (a screening is a walk of the
-//!   hierarchies, its mesh hierarchies shared over the rasterizer's threads and, beyond 128
-//!   of them, a sample descended, its estimate erring high: a few percent of a frame; a
+//!   hierarchies, its mesh hierarchies shared over the rasterizer's threads and, beyond 512
+//!   of them, a sample descended, its estimate leaning high: a few percent of a frame; a
 //!   losing probe costs up to two frames). Only with
 //!   a culled frame at most [`SCREEN_AGE`] frames old, and by a direct frame of at least
 //!   [`MIN_ALLOWANCE_TIME`] (a view of next to nothing says nothing of the next); before the first direct frame, a culled
