@@ -669,11 +669,7 @@ pub(crate) mod tests {
         let at = (0..40).map(|i| Vec3::new((i % 8) as f32 * 1.5 - 6.0, 0.0, -((i / 8) as f32) * 2.0));
         let scene = crate::tests::cubes_on_ground([-9.0, 9.0, -20.0, 2.0], at);
         let (view, _) = crate::test_view(Vec3::new(0.5, 1.0, 4.0), Vec3::new(0.0, 0.0, -4.0), 96, 64);
-        let mut reference = Frame::new(96, 64).expect("a 96x64 frame");
-        crate::zbuffer::ZBuffer::new(scene.clone(), &RenderOptions::default())
-            .expect("zbuffer builds")
-            .render(&view, &mut reference)
-            .expect("zbuffer renders the view");
+        let reference = crate::tests::zbuffer_frame(&scene, &view);
         (scene, view, reference)
     }
 

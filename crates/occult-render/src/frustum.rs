@@ -764,11 +764,7 @@ mod tests {
         let root = b.add_group("cubes", instances).expect("a group of known nodes adds");
         let scene = Arc::new(b.build(root).expect("the cubes build"));
         let (view, _) = crate::test_view(Vec3::new(0.3, 14.0, 8.0), Vec3::new(0.0, 0.0, -11.0), 96, 64);
-        let mut frame = Frame::new(96, 64).expect("a 96x64 frame");
-        crate::zbuffer::ZBuffer::new(scene.clone(), &RenderOptions::default())
-            .expect("zbuffer builds")
-            .render(&view, &mut frame)
-            .expect("zbuffer renders the view");
+        let frame = crate::tests::zbuffer_frame(&scene, &view);
         (scene, view, frame)
     }
 

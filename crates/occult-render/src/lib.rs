@@ -631,6 +631,17 @@ mod tests {
     use super::*;
     use occult_core::{Affine3A, Camera, Instance, Mesh, SceneBuilder, Vec3};
 
+    /// `zbuffer`'s frame of `view` of `scene`: the reference a conservative renderer's frames
+    /// are held to.
+    pub(crate) fn zbuffer_frame(scene: &Arc<Scene>, view: &View) -> Frame {
+        let mut f = Frame::new(view.width(), view.height()).expect("a frame of the view's size");
+        crate::zbuffer::ZBuffer::new(scene.clone(), &RenderOptions::default())
+            .expect("zbuffer builds")
+            .render(view, &mut f)
+            .expect("zbuffer renders the view");
+        f
+    }
+
     /// `f` run in a pool of each of `threads` threads, in turn.
     pub(crate) fn on_threads<T>(threads: &[usize], mut f: impl FnMut(&rayon::ThreadPool) -> T) -> Vec<T> {
         threads

@@ -132,11 +132,7 @@ fn walls(near_size: f32) -> (Arc<Scene>, View, Frame) {
         .expect("a group");
     let scene = Arc::new(b.build(root).expect("a scene"));
     let (view, _) = crate::test_view(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 96, 64);
-    let mut reference = Frame::new(96, 64).expect("a frame");
-    crate::zbuffer::ZBuffer::new(scene.clone(), &RenderOptions::default())
-        .expect("zbuffer")
-        .render(&view, &mut reference)
-        .expect("a frame");
+    let reference = crate::tests::zbuffer_frame(&scene, &view);
     (scene, view, reference)
 }
 
