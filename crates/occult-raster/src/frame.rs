@@ -159,7 +159,7 @@ impl Frame {
     }
     /// The distinct items visible in the frame, sorted: the exactly visible set. Neighbouring
     /// pixels of a row mostly hold the same item, so each run of one item is taken once
-    /// before the sort (a frame's pixels sorted whole took longer than drawing many frames).
+    /// before the sort (not every covered pixel's id sorted).
     pub fn visible_items(&self) -> Vec<ItemId> {
         let mut v = Vec::new();
         let mut last = NO_ITEM;
