@@ -34,7 +34,13 @@
 //!    unless the instance is wholly inside it, then Greene's whole-box test, one pyramid test
 //!    a cluster). The clusters not hidden that the first pass did not draw are drawn as one
 //!    batch, and the pyramid is updated over the batch's screen region: the first windows
-//!    hold the near occluders, the later ones are large enough for the rasterizer's threads;
+//!    hold the near occluders, the later ones are large enough for the rasterizer's threads.
+//!    With `behind` (the default), a cluster not hidden whose box lies behind its instance's
+//!    centre (its nearest point farther from the eye than the centre of the instance's box)
+//!    waits: its pyramid query (rectangle and nearest depth) is asked again once the
+//!    window's batch is drawn, beside the next window's tests, and it is drawn in the next
+//!    batch if still not hidden. The front of a building hides its back, which a window's
+//!    tests, made before any of it is drawn, cannot see;
 //! 3. keeps as visible for the next frame the clusters the second pass found not hidden
 //!    (those the first pass drew included: they are tested too, and drop out once hidden).
 //!
@@ -47,7 +53,8 @@
 //!
 //! Cost: O(instances in view + clusters of the instances not hidden) tests per frame, and
 //! about `log2(MAX_BATCH / batch)` batches beyond the first pass, one more per [`MAX_BATCH`]
-//! triangles in view after that. The flattened instances
+//! triangles in view after that (and one for the last window's waiting clusters); a
+//! waiting cluster's second query reads only the pyramid. The flattened instances
 //! are bounded ([`MAX_INSTANCES`], checked before anything is allocated): scenes of more mesh
 //! instances are for `hzb`, whose walk never flattens the scene.
 //!
@@ -56,7 +63,8 @@
 //! (boxes hidden whole), `first_triangles` (triangles the first pass drew), `batches` (draws of
 //! the second pass), `removed_triangles` (triangles of the instances in view not drawn),
 //! `precision_pct` (the share of last frame's visible clusters in view still visible, that
-//! `trust` weighs), and the payoff's `payoff_direct` and `payoff_screened` ([`crate::direct`]).
+//! `trust` weighs), `clusters_deferred` (clusters that waited for their window's front,
+//! `behind`), and the payoff's `payoff_direct` and `payoff_screened` ([`crate::direct`]).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -103,6 +111,9 @@ pub struct ClusterOptions {
     /// Draw runs of frames directly, as `frustum` does, while culled frames are slower than
     /// such direct frames ([`crate::direct`]).
     pub payoff: bool,
+    /// Draw the clusters found not hidden behind their instance's centre after the front of
+    /// their window, tested again: the front of a building hides its back.
+    pub behind: bool,
 }
 
 impl Default for ClusterOptions {
@@ -114,6 +125,7 @@ impl Default for ClusterOptions {
             trust: TRUST,
             weigh: true,
             payoff: true,
+            behind: true,
         }
     }
 }
@@ -178,6 +190,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             default: "on",
             help: "draw runs of frames as frustum does while culled frames are slower than such direct frames",
         },
+        ParamDoc {
+            key: "behind",
+            default: "on",
+            help: "clusters not hidden that lie behind their instance's centre wait for the front of their window to be drawn and are tested again; off = drawn with it",
+        },
     ],
     counters: &[
         "clusters_tested",
@@ -187,6 +204,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "batches",
         "removed_triangles",
         "precision_pct",
+        "clusters_deferred",
         crate::direct::COUNTER,
         crate::direct::SCREENED,
     ],
@@ -201,6 +219,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             trust: "trust",
             weigh: flag "weigh",
             payoff: flag "payoff",
+            behind: flag "behind",
         });
         Ok(Box::new(ClusterCulling::new(scene, options, &co)?))
     },
@@ -559,35 +578,106 @@ struct PassCounts {
     /// Clusters of the instances in view visible last frame, and those of them visible now.
     was_visible: u64,
     still_visible: u64,
+    /// Clusters behind their instance's centre, asked again after their window's front.
+    deferred: u64,
+}
+
+impl PassCounts {
+    /// Records that cluster `at` (its bit in `visible`) was found `shown` or hidden, as next
+    /// frame's visible set and in the counts.
+    fn record(&mut self, visible: &mut [u64], at: u64, shown: bool) {
+        let was = bit(visible, at);
+        self.was_visible += u64::from(was);
+        self.still_visible += u64::from(was && shown);
+        self.culled += u64::from(!shown);
+        set_bit(visible, at, shown);
+    }
+}
+
+/// Queues the clusters `take` of instance `p` (their boxes' union `bounds`, empty when none)
+/// for the batch, and grows `dirty` by their screen rectangle.
+#[allow(clippy::too_many_arguments)]
+fn queue<'a>(
+    pending: &mut Vec<Pending<'a>>,
+    scratch: &mut Vec<u32>,
+    dirty: &mut Option<PixelRect>,
+    view: &View,
+    p: &Placed,
+    mesh: &'a Mesh,
+    mc: &'a MeshClusters,
+    take: &[bool],
+    bounds: Aabb,
+) {
+    if bounds.is_empty() {
+        return;
+    }
+    let clip = view.clip_from_object(&p.world_from_object);
+    gather(pending, scratch, mesh, mc, clip, p.first_item, |c| take[c]);
+    if let Some(r) = screen_rect(&clip, &bounds, view.width(), view.height()) {
+        *dirty = Some(union_rect(*dirty, r));
+    }
+}
+
+/// What the second pass found of one cluster.
+#[derive(Clone, Copy)]
+enum Found {
+    /// Outside the frustum or hidden.
+    Hidden,
+    /// Not hidden.
+    Shown,
+    /// Not hidden, and behind its instance's centre (its box's nearest point farther from the
+    /// eye than the centre of the instance's box): its pyramid query ([`Occlusion::whole_box_query`]),
+    /// asked again once the front of its window is drawn. `Found::Shown` when the query
+    /// needed no pyramid.
+    Behind(PixelRect, f32),
 }
 
 /// What the second pass found of one instance: `None` when its box is hidden whole, else
-/// per cluster whether it may be seen (in the frustum and not hidden).
+/// each cluster's [`Found`].
 struct Tested {
-    shown: Option<Vec<bool>>,
+    found: Option<Vec<Found>>,
 }
 
 /// Tests one instance's box, then, unless it is hidden, each of its clusters (the frustum
-/// first, skipped for an instance wholly inside it; then the face test).
-fn test_instance(view: &View, occlusion: &Occlusion<'_>, p: &Placed, mc: &MeshClusters) -> Tested {
+/// first, skipped for an instance wholly inside it; then the face test). With `behind`, the
+/// clusters behind the instance's centre that are not hidden are [`Found::Behind`].
+fn test_instance(view: &View, occlusion: &Occlusion<'_>, p: &Placed, mc: &MeshClusters, behind: bool) -> Tested {
     let mut pc = PyramidCounts::default();
     let eye = view.camera().eye;
     if occlusion.box_hidden(&view.clip_from_world(), &p.bounds, eye, &mut pc) {
-        return Tested { shown: None };
+        return Tested { found: None };
     }
     let clip = view.clip_from_object(&p.world_from_object);
     let eye_object = p.world_from_object.inverse().transform_point3(eye);
     let frustum = view.frustum(&p.world_from_object);
     let inside = frustum.classify_aabb(&view_box(p, mc)) == Containment::Inside;
-    let shown = mc
+    let centre = eye_object.distance_squared(mc.bounds.center());
+    let found = mc
         .boxes
         .iter()
         .map(|b| {
-            (inside || frustum.classify_aabb(b) != Containment::Outside)
-                && !occlusion.box_hidden_whole(&clip, b, eye_object, &mut pc)
+            if !inside && frustum.classify_aabb(b) == Containment::Outside {
+                return Found::Hidden;
+            }
+            match occlusion.whole_box_query(&clip, b, eye_object) {
+                Err(true) => Found::Hidden,
+                Err(false) => Found::Shown,
+                Ok((r, nearest)) if occlusion.rect_hidden(r, nearest, &mut pc) => Found::Hidden,
+                Ok((r, nearest)) if behind && eye_object.clamp(b.min, b.max).distance_squared(eye_object) > centre => {
+                    Found::Behind(r, nearest)
+                }
+                Ok(_) => Found::Shown,
+            }
         })
         .collect();
-    Tested { shown: Some(shown) }
+    Tested { found: Some(found) }
+}
+
+/// Clusters of one instance found [`Found::Behind`], with their queries.
+struct Deferred {
+    /// Index into the flattened instances.
+    instance: u32,
+    clusters: Vec<(u32, PixelRect, f32)>,
 }
 
 /// The object-space box of an instance's clusters.
@@ -721,7 +811,10 @@ impl ClusterCulling {
         let mut budget = options.batch.max(first / 4).min(MAX_BATCH.max(options.batch));
         let mut cull_time = std::time::Duration::ZERO;
         let mut next = 0;
-        while next < order.len() {
+        // Clusters of the last window behind their instances' centres: asked again once the
+        // window's front is drawn, with the next window's tests, and drawn in its batch.
+        let mut deferred: Vec<Deferred> = Vec::new();
+        while next < order.len() || !deferred.is_empty() {
             let t = Instant::now();
             // The window: instances until their triangles reach the budget.
             let mut end = next;
@@ -734,31 +827,66 @@ impl ClusterCulling {
             let window = &order[next..end];
             next = end;
             let occlusion = Occlusion::hierarchical(frame, pyramid, view);
-            let tested: Vec<Tested> = {
+            let (tested, again): (Vec<Tested>, Vec<Vec<bool>>) = {
                 let placed: &[Placed] = placed;
                 let clusters: &[Option<MeshClusters>] = clusters;
                 let occlusion = &occlusion;
+                let deferred = &deferred;
+                let behind = options.behind;
                 raster.install(|| {
-                    window
-                        .par_iter()
-                        .map(|&(_, i)| {
-                            let p = &placed[i as usize];
-                            let mc = clusters[p.node.index()]
-                                .as_ref()
-                                .expect("placed instances have clusters");
-                            test_instance(view, occlusion, p, mc)
-                        })
-                        .collect()
+                    rayon::join(
+                        || {
+                            window
+                                .par_iter()
+                                .map(|&(_, i)| {
+                                    let p = &placed[i as usize];
+                                    let mc = clusters[p.node.index()]
+                                        .as_ref()
+                                        .expect("placed instances have clusters");
+                                    test_instance(view, occlusion, p, mc, behind)
+                                })
+                                .collect()
+                        },
+                        || {
+                            deferred
+                                .par_iter()
+                                .map(|d| {
+                                    let mut pc = PyramidCounts::default();
+                                    d.clusters
+                                        .iter()
+                                        .map(|&(_, r, nearest)| !occlusion.rect_hidden(r, nearest, &mut pc))
+                                        .collect()
+                                })
+                                .collect()
+                        },
+                    )
                 })
             };
             let mut dirty: Option<PixelRect> = None;
+            // Last window's clusters behind their centres: those still not hidden.
+            for (d, again) in deferred.drain(..).zip(again) {
+                let p = &placed[d.instance as usize];
+                let (NodeKind::Mesh(mesh), Some(mc)) = (scene.node(p.node).kind(), &clusters[p.node.index()]) else {
+                    continue;
+                };
+                let mut bounds = Aabb::EMPTY;
+                let mut take = vec![false; mc.len()];
+                for (&(c, _, _), shown) in d.clusters.iter().zip(again) {
+                    counts.record(visible, p.base + c as u64, shown);
+                    if shown {
+                        take[c as usize] = true;
+                        bounds = bounds.union(mc.boxes[c as usize]);
+                    }
+                }
+                queue(&mut pending, &mut scratch, &mut dirty, view, p, mesh, mc, &take, bounds);
+            }
             for (&(_, i), tested) in window.iter().zip(tested) {
                 let p = &placed[i as usize];
                 let (NodeKind::Mesh(mesh), Some(mc)) = (scene.node(p.node).kind(), &clusters[p.node.index()]) else {
                     continue;
                 };
                 counts.tested += 1;
-                let Some(shown) = tested.shown else {
+                let Some(found) = tested.found else {
                     counts.instances_culled += 1;
                     for c in 0..mc.len() as u64 {
                         counts.was_visible += u64::from(bit(visible, p.base + c));
@@ -766,29 +894,37 @@ impl ClusterCulling {
                     }
                     continue;
                 };
-                counts.tested += shown.len() as u64;
+                counts.tested += found.len() as u64;
                 let mut bounds = Aabb::EMPTY;
-                let mut take = shown;
-                for (c, t) in take.iter_mut().enumerate() {
+                let mut take = vec![false; mc.len()];
+                let mut later = Vec::new();
+                for (c, f) in found.into_iter().enumerate() {
                     let at = p.base + c as u64;
                     let was = bit(visible, at);
-                    counts.was_visible += u64::from(was);
-                    counts.still_visible += u64::from(was && *t);
-                    set_bit(visible, at, *t);
-                    counts.culled += u64::from(!*t);
-                    *t &= !(was && use_first);
-                    if *t {
+                    let shown = match f {
+                        Found::Hidden => false,
+                        Found::Shown => true,
+                        // Drawn by the first pass already: nothing to wait for.
+                        Found::Behind(..) if was && use_first => true,
+                        Found::Behind(r, nearest) => {
+                            later.push((c as u32, r, nearest));
+                            continue;
+                        }
+                    };
+                    counts.record(visible, at, shown);
+                    if shown && !(was && use_first) {
+                        take[c] = true;
                         bounds = bounds.union(mc.boxes[c]);
                     }
                 }
-                if bounds.is_empty() {
-                    continue;
+                if !later.is_empty() {
+                    counts.deferred += later.len() as u64;
+                    deferred.push(Deferred {
+                        instance: i,
+                        clusters: later,
+                    });
                 }
-                let clip = view.clip_from_object(&p.world_from_object);
-                gather(&mut pending, &mut scratch, mesh, mc, clip, p.first_item, |c| take[c]);
-                if let Some(r) = screen_rect(&clip, &bounds, w, h) {
-                    dirty = Some(union_rect(dirty, r));
-                }
+                queue(&mut pending, &mut scratch, &mut dirty, view, p, mesh, mc, &take, bounds);
             }
             cull_time += t.elapsed();
             if !pending.is_empty() {
@@ -800,7 +936,7 @@ impl ClusterCulling {
                 let written = crate::written_region(raster, view);
                 if let (Some(d), true) = (
                     dirty.zip(written).and_then(|(d, w)| d.intersect(&w)),
-                    next < order.len(),
+                    next < order.len() || !deferred.is_empty(),
                 ) {
                     pyramid.update(frame, d);
                 }
@@ -835,6 +971,7 @@ impl ClusterCulling {
             ("batches", counts.batches),
             ("removed_triangles", in_view.saturating_sub(stats.triangles_submitted)),
             ("precision_pct", (100.0 * *precision).round() as u64),
+            ("clusters_deferred", counts.deferred),
         ]);
         stats.total = start.elapsed();
         Ok(stats)

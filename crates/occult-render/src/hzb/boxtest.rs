@@ -150,7 +150,7 @@ impl<'a> Occlusion<'a> {
     /// in object space) is hidden behind what is drawn: every front face of the box is hidden
     /// over its screen box, compared at the face's nearest corner; a box at most
     /// `WHOLE_BOX_PIXELS` wide and tall on screen is tested whole instead, as
-    /// [`Occlusion::box_hidden_whole`] does. An empty box is hidden; a box
+    /// [`Occlusion::whole_box_query`] and [`Occlusion::rect_hidden`] do. An empty box is hidden; a box
     /// holding the eye or reaching the near plane is not.
     pub fn box_hidden(&self, clip_from_object: &Mat4, b: &Aabb, eye: Vec3, counts: &mut PyramidCounts) -> bool {
         let c = match Self::testable(clip_from_object, b, eye) {
@@ -222,22 +222,39 @@ impl<'a> Occlusion<'a> {
 }
 
 impl Occlusion<'_> {
-    /// Greene's test of the box `b` as a whole: hidden when its screen rectangle (over all
-    /// eight corners) is hidden at the box's nearest depth. One pyramid test where
+    /// [`Occlusion::whole_box_query`] and [`Occlusion::rect_hidden`] in one call.
+    #[cfg(test)]
+    pub fn box_hidden_whole(&self, clip_from_object: &Mat4, b: &Aabb, eye: Vec3, counts: &mut PyramidCounts) -> bool {
+        match self.whole_box_query(clip_from_object, b, eye) {
+            Ok((r, nearest)) => self.rect_hidden(r, nearest, counts),
+            Err(hidden) => hidden,
+        }
+    }
+
+    /// Greene's test of the box `b` as a whole, its first half: the box is hidden when its
+    /// screen rectangle (over all eight corners) is hidden at the box's nearest depth
+    /// ([`Occlusion::rect_hidden`], the second half). One pyramid test where
     /// [`Occlusion::box_hidden`] makes one per front face: cheaper, and as tight for a box
     /// small on screen (a cluster); looser for a large box seen at an angle, whose nearest
-    /// corner then stands for faces that lie far behind it. Same margins and the same
-    /// untestable boxes (empty: hidden; the eye inside or a corner at the near plane: not).
-    pub fn box_hidden_whole(&self, clip_from_object: &Mat4, b: &Aabb, eye: Vec3, counts: &mut PyramidCounts) -> bool {
-        let c = match Self::testable(clip_from_object, b, eye) {
-            Ok(c) => c,
-            Err(hidden) => return hidden,
-        };
+    /// corner then stands for faces that lie far behind it.
+    ///
+    /// Returns the rectangle and the nearest depth, or `Err` with the answer where no pyramid
+    /// test is needed, with `box_hidden`'s margins and untestable boxes: an empty box or one
+    /// beyond the far plane is hidden; one holding the eye or with a corner at the near plane
+    /// is not. The rectangle and depth do not depend on the pyramid, so a box can be asked
+    /// about again, after more is drawn, by `rect_hidden` alone.
+    pub fn whole_box_query(&self, clip_from_object: &Mat4, b: &Aabb, eye: Vec3) -> Result<(PixelRect, f32), bool> {
+        let c = Self::testable(clip_from_object, b, eye)?;
         let nearest = c.iter().map(|v| v.z / v.w).fold(0.0f32, f32::max) * (1.0 + DEPTH_MARGIN);
         if nearest < self.far_depth * (1.0 - DEPTH_MARGIN) {
-            return true; // beyond the far plane: draws nothing
+            return Err(true); // beyond the far plane: draws nothing
         }
-        let r = rect_of(&c, 0..8, self.frame.width(), self.frame.height());
+        Ok((rect_of(&c, 0..8, self.frame.width(), self.frame.height()), nearest))
+    }
+
+    /// Whether every pixel of `r` holds a depth nearer than `nearest` as the pyramid stands
+    /// (a query of [`Occlusion::whole_box_query`]).
+    pub fn rect_hidden(&self, r: PixelRect, nearest: f32, counts: &mut PyramidCounts) -> bool {
         self.pyramid.occludes(self.frame, r, nearest, self.how, counts)
     }
 }
