@@ -32,9 +32,12 @@
 //!    parallel against the pyramid as it stands: an instance whose box is hidden (Georges'
 //!    face test) is skipped whole; otherwise each of its clusters is tested (the frustum,
 //!    unless the instance is wholly inside it, then Greene's whole-box test, one pyramid test
-//!    a cluster). The clusters not hidden that the first pass did not draw are drawn as one
-//!    batch, and the pyramid is updated over the batch's screen region: the first windows
-//!    hold the near occluders, the later ones are large enough for the rasterizer's threads.
+//!    a cluster), down a tree of groups of [`GROUP`] clusters in Morton order: a group
+//!    hidden hides the clusters below it in one test (while a mesh's groups are found hidden
+//!    often enough to pay, `GroupRate`). The clusters not hidden that the first pass did not
+//!    draw are drawn as one batch, and the pyramid is updated over the batch's screen
+//!    region: the first windows hold the near occluders, the later ones are large enough for
+//!    the rasterizer's threads.
 //!    With `behind` (the default), a cluster not hidden whose box lies behind its instance's
 //!    centre (its nearest point farther from the eye than the centre of the instance's box)
 //!    waits: its pyramid query (rectangle and nearest depth) is asked again once the
@@ -51,7 +54,8 @@
 //! this frame, and depth only grows while a frame is drawn: the frame is `zbuffer`'s,
 //! bit for bit (item ids are the meshes' own triangle indices; the clusters only list them).
 //!
-//! Cost: O(instances in view + clusters of the instances not hidden) tests per frame, and
+//! Cost: O(instances in view + clusters of the instances not hidden) tests per frame (fewer
+//! where groups of clusters are hidden whole), and
 //! about `log2(MAX_BATCH / batch)` batches beyond the first pass, one more per [`MAX_BATCH`]
 //! triangles in view after that (and one for the last window's waiting clusters); a
 //! waiting cluster's second query reads only the pyramid. The flattened instances
@@ -64,7 +68,8 @@
 //! the second pass), `removed_triangles` (triangles of the instances in view not drawn),
 //! `precision_pct` (the share of last frame's visible clusters in view still visible, that
 //! `trust` weighs), `clusters_deferred` (clusters that waited for their window's front,
-//! `behind`), and the payoff's `payoff_direct` and `payoff_screened` ([`crate::direct`]).
+//! `behind`), `group_tests` (tests of groups of clusters), and the payoff's `payoff_direct`
+//! and `payoff_screened` ([`crate::direct`]).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -205,6 +210,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         "removed_triangles",
         "precision_pct",
         "clusters_deferred",
+        "group_tests",
         crate::direct::COUNTER,
         crate::direct::SCREENED,
     ],
@@ -234,6 +240,88 @@ pub(crate) struct MeshClusters {
     boxes: Vec<Aabb>,
     /// Their union.
     bounds: Aabb,
+    /// The clusters in Morton order of their boxes' centres.
+    order: Vec<u32>,
+    /// Boxes of groups of [`GROUP`] over that order: `groups[0][i]` bounds the clusters
+    /// `order[GROUP * i..][..GROUP]`, `groups[k][i]` the groups `groups[k - 1][GROUP * i..][..GROUP]`,
+    /// up to a level of at most [`GROUP`] boxes; none for a mesh of at most [`GROUP`] clusters.
+    /// A group hidden hides every cluster below it, in one test.
+    groups: Vec<Vec<Aabb>>,
+}
+
+/// How often a mesh's groups of clusters were found hidden, over the frames (decaying).
+///
+/// A group's test costs about a cluster's; found hidden, it saves the tests of the
+/// [`GROUP`] or more clusters below it, found not hidden it adds one. Groups are tested while
+/// more than one test in [`GROUP`] finds its group hidden (and until the rate is known); where
+/// fewer do (foliage, whose groups overlap; a mesh mostly in view) the clusters are tested
+/// directly, and every [`GROUP_RETRY`]th time the mesh is met its groups are tested again.
+#[derive(Clone, Copy, Debug, Default)]
+struct GroupRate {
+    tests: f32,
+    hidden: f32,
+    /// Times the mesh was met since its groups were last tested.
+    skipped: u32,
+}
+
+/// See [`GroupRate`].
+const GROUP_RETRY: u32 = 16;
+
+impl GroupRate {
+    /// Whether to test the mesh's groups this time.
+    fn pays(&self) -> bool {
+        self.tests < GROUP as f32 || self.hidden * GROUP as f32 > self.tests || self.skipped >= GROUP_RETRY
+    }
+
+    /// Records a test of an instance: `tests` group tests of which `hidden` found the group
+    /// hidden (none: groups were not tested).
+    fn record(&mut self, tests: u64, hidden: u64) {
+        if tests == 0 {
+            self.skipped += 1;
+            return;
+        }
+        self.skipped = 0;
+        self.tests = self.tests * 0.75 + tests as f32;
+        self.hidden = self.hidden * 0.75 + hidden as f32;
+    }
+}
+
+/// Children of a group of clusters ([`MeshClusters::groups`]).
+pub const GROUP: usize = 8;
+
+/// The Morton order of `boxes`' centres within `bounds`, and the boxes of groups of
+/// [`GROUP`] over it, level by level ([`MeshClusters::groups`]).
+fn cluster_groups(boxes: &[Aabb], bounds: Aabb) -> (Vec<u32>, Vec<Vec<Aabb>>) {
+    let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
+    if boxes.len() <= GROUP {
+        return (order, Vec::new());
+    }
+    let scale = Vec3::splat(1023.0) / bounds.size().max(Vec3::splat(f32::MIN_POSITIVE));
+    let key = |b: &Aabb| {
+        let q = ((b.center() - bounds.min) * scale).clamp(Vec3::ZERO, Vec3::splat(1023.0));
+        spread(q.x as u32) | spread(q.y as u32) << 1 | spread(q.z as u32) << 2
+    };
+    order.sort_by_key(|&c| (key(&boxes[c as usize]), c));
+    let mut levels = Vec::new();
+    let mut below: Vec<Aabb> = order.iter().map(|&c| boxes[c as usize]).collect();
+    while below.len() > GROUP {
+        let up: Vec<Aabb> = below
+            .chunks(GROUP)
+            .map(|g| g.iter().fold(Aabb::EMPTY, |u, b| u.union(*b)))
+            .collect();
+        levels.push(up.clone());
+        below = up;
+    }
+    (order, levels)
+}
+
+/// The low 10 bits of `v` spread to every third bit (a Morton code's axis).
+fn spread(v: u32) -> u32 {
+    let mut x = v & 0x3ff;
+    x = (x | x << 16) & 0x0300_00ff;
+    x = (x | x << 8) & 0x0300_f00f;
+    x = (x | x << 4) & 0x030c_30c3;
+    (x | x << 2) & 0x0924_9249
 }
 
 impl MeshClusters {
@@ -328,10 +416,13 @@ impl MeshClusters {
             })
             .collect();
         let bounds = boxes.iter().fold(Aabb::EMPTY, |u: Aabb, b| u.union(*b));
+        let (order, groups) = cluster_groups(&boxes, bounds);
         Ok(Self {
             meshlets: Meshlets::new(mesh, &triangles, &starts)?,
             boxes,
             bounds,
+            order,
+            groups,
         })
     }
 
@@ -341,7 +432,10 @@ impl MeshClusters {
     }
 
     fn memory_bytes(&self) -> usize {
-        self.meshlets.memory_bytes() + self.boxes.capacity() * std::mem::size_of::<Aabb>()
+        self.meshlets.memory_bytes()
+            + (self.boxes.capacity() + self.groups.iter().map(Vec::capacity).sum::<usize>())
+                * std::mem::size_of::<Aabb>()
+            + self.order.capacity() * 4
     }
 }
 
@@ -381,6 +475,8 @@ pub struct ClusterCulling {
     last_first: bool,
     /// Frame times with the first pass and without it (`weigh`).
     choice: ListChoice,
+    /// Per node: how often its mesh's groups of clusters were found hidden.
+    group_rates: Vec<GroupRate>,
 }
 
 impl ClusterCulling {
@@ -422,6 +518,7 @@ impl ClusterCulling {
             true => Some(DirectFrames::new(Arc::clone(&scene), &raster)?),
             false => None,
         };
+        let group_rates = vec![GroupRate::default(); scene.nodes().len()];
         Ok(Self {
             scene,
             raster,
@@ -429,6 +526,7 @@ impl ClusterCulling {
             precision: 1.0,
             last_first: true,
             choice: ListChoice::default(),
+            group_rates,
             options: co.clone(),
             clusters,
             placed,
@@ -580,6 +678,8 @@ struct PassCounts {
     still_visible: u64,
     /// Clusters behind their instance's centre, asked again after their window's front.
     deferred: u64,
+    /// Groups of clusters tested.
+    groups: u64,
 }
 
 impl PassCounts {
@@ -619,7 +719,7 @@ fn queue<'a>(
 }
 
 /// What the second pass found of one cluster.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 enum Found {
     /// Outside the frustum or hidden.
     Hidden,
@@ -636,41 +736,87 @@ enum Found {
 /// each cluster's [`Found`].
 struct Tested {
     found: Option<Vec<Found>>,
+    /// Groups of clusters tested ([`MeshClusters::groups`]), and those found hidden.
+    group_tests: u64,
+    groups_hidden: u64,
 }
 
 /// Tests one instance's box, then, unless it is hidden, each of its clusters (the frustum
 /// first, skipped for an instance wholly inside it; then the face test). With `behind`, the
 /// clusters behind the instance's centre that are not hidden are [`Found::Behind`].
-fn test_instance(view: &View, occlusion: &Occlusion<'_>, p: &Placed, mc: &MeshClusters, behind: bool) -> Tested {
+fn test_instance(
+    view: &View,
+    occlusion: &Occlusion<'_>,
+    p: &Placed,
+    mc: &MeshClusters,
+    behind: bool,
+    groups: bool,
+) -> Tested {
     let mut pc = PyramidCounts::default();
     let eye = view.camera().eye;
     if occlusion.box_hidden(&view.clip_from_world(), &p.bounds, eye, &mut pc) {
-        return Tested { found: None };
+        return Tested {
+            found: None,
+            group_tests: 0,
+            groups_hidden: 0,
+        };
     }
     let clip = view.clip_from_object(&p.world_from_object);
     let eye_object = p.world_from_object.inverse().transform_point3(eye);
     let frustum = view.frustum(&p.world_from_object);
     let inside = frustum.classify_aabb(&view_box(p, mc)) == Containment::Inside;
     let centre = eye_object.distance_squared(mc.bounds.center());
-    let found = mc
-        .boxes
-        .iter()
-        .map(|b| {
-            if !inside && frustum.classify_aabb(b) == Containment::Outside {
-                return Found::Hidden;
+    let hidden = |b: &Aabb, pc: &mut PyramidCounts| -> Result<Option<(PixelRect, f32)>, ()> {
+        if !inside && frustum.classify_aabb(b) == Containment::Outside {
+            return Err(());
+        }
+        match occlusion.whole_box_query(&clip, b, eye_object) {
+            Err(true) => Err(()),
+            Err(false) => Ok(None),
+            Ok((r, nearest)) if occlusion.rect_hidden(r, nearest, pc) => Err(()),
+            Ok(query) => Ok(Some(query)),
+        }
+    };
+    let cluster = |b: &Aabb, pc: &mut PyramidCounts| match hidden(b, pc) {
+        Err(()) => Found::Hidden,
+        Ok(Some((r, nearest))) if behind && eye_object.clamp(b.min, b.max).distance_squared(eye_object) > centre => {
+            Found::Behind(r, nearest)
+        }
+        Ok(_) => Found::Shown,
+    };
+    let (mut group_tests, mut groups_hidden) = (0, 0);
+    let found = if !groups || mc.groups.is_empty() {
+        mc.boxes.iter().map(|b| cluster(b, &mut pc)).collect()
+    } else {
+        // Down the groups from the top level: a group hidden leaves its clusters hidden.
+        let mut found = vec![Found::Hidden; mc.len()];
+        let top = mc.groups.len();
+        let mut stack: Vec<(usize, usize)> = (0..mc.groups[top - 1].len()).rev().map(|i| (top, i)).collect();
+        while let Some((level, i)) = stack.pop() {
+            if level == 0 {
+                let c = mc.order[i] as usize;
+                found[c] = cluster(&mc.boxes[c], &mut pc);
+                continue;
             }
-            match occlusion.whole_box_query(&clip, b, eye_object) {
-                Err(true) => Found::Hidden,
-                Err(false) => Found::Shown,
-                Ok((r, nearest)) if occlusion.rect_hidden(r, nearest, &mut pc) => Found::Hidden,
-                Ok((r, nearest)) if behind && eye_object.clamp(b.min, b.max).distance_squared(eye_object) > centre => {
-                    Found::Behind(r, nearest)
-                }
-                Ok(_) => Found::Shown,
+            group_tests += 1;
+            if hidden(&mc.groups[level - 1][i], &mut pc).is_err() {
+                groups_hidden += 1;
+                continue;
             }
-        })
-        .collect();
-    Tested { found: Some(found) }
+            let below = if level == 1 {
+                mc.len()
+            } else {
+                mc.groups[level - 2].len()
+            };
+            stack.extend((GROUP * i..(GROUP * (i + 1)).min(below)).rev().map(|j| (level - 1, j)));
+        }
+        found
+    };
+    Tested {
+        found: Some(found),
+        group_tests,
+        groups_hidden,
+    }
 }
 
 /// Clusters of one instance found [`Found::Behind`], with their queries.
@@ -749,6 +895,7 @@ impl ClusterCulling {
             precision,
             last_first,
             choice,
+            group_rates,
         } = self;
         // The first pass only while last frame's set was mostly still visible: where the view
         // jumps (a cut, a street corner), it would draw what is hidden now.
@@ -832,6 +979,7 @@ impl ClusterCulling {
                 let clusters: &[Option<MeshClusters>] = clusters;
                 let occlusion = &occlusion;
                 let deferred = &deferred;
+                let group_rates: &[GroupRate] = group_rates;
                 let behind = options.behind;
                 raster.install(|| {
                     rayon::join(
@@ -843,7 +991,8 @@ impl ClusterCulling {
                                     let mc = clusters[p.node.index()]
                                         .as_ref()
                                         .expect("placed instances have clusters");
-                                    test_instance(view, occlusion, p, mc, behind)
+                                    let groups = group_rates[p.node.index()].pays();
+                                    test_instance(view, occlusion, p, mc, behind, groups)
                                 })
                                 .collect()
                         },
@@ -886,6 +1035,7 @@ impl ClusterCulling {
                     continue;
                 };
                 counts.tested += 1;
+                counts.groups += tested.group_tests;
                 let Some(found) = tested.found else {
                     counts.instances_culled += 1;
                     for c in 0..mc.len() as u64 {
@@ -895,6 +1045,7 @@ impl ClusterCulling {
                     continue;
                 };
                 counts.tested += found.len() as u64;
+                group_rates[p.node.index()].record(tested.group_tests, tested.groups_hidden);
                 let mut bounds = Aabb::EMPTY;
                 let mut take = vec![false; mc.len()];
                 let mut later = Vec::new();
@@ -972,6 +1123,7 @@ impl ClusterCulling {
             ("removed_triangles", in_view.saturating_sub(stats.triangles_submitted)),
             ("precision_pct", (100.0 * *precision).round() as u64),
             ("clusters_deferred", counts.deferred),
+            ("group_tests", counts.groups),
         ]);
         stats.total = start.elapsed();
         Ok(stats)
@@ -1006,7 +1158,87 @@ mod tests {
             }
         }
         assert!(seen.iter().all(|&n| n == 1), "a triangle in no cluster or in several");
+        // The groups: over a permutation of the clusters, each level bounding the one below,
+        // up to at most GROUP boxes.
+        let mut order = mc.order.clone();
+        order.sort_unstable();
+        assert!(order.iter().copied().eq(0..mc.len() as u32));
+        assert_eq!(mc.groups.is_empty(), mc.len() <= GROUP);
+        let mut below: Vec<Aabb> = mc.order.iter().map(|&c| mc.boxes[c as usize]).collect();
+        for (level, boxes) in mc.groups.iter().enumerate() {
+            assert_eq!(boxes.len(), below.len().div_ceil(GROUP), "level {level}");
+            for (i, g) in boxes.iter().enumerate() {
+                for b in &below[GROUP * i..(GROUP * (i + 1)).min(below.len())] {
+                    assert!(
+                        g.contains_point(b.min) && g.contains_point(b.max),
+                        "level {level} group {i}"
+                    );
+                }
+            }
+            below = boxes.clone();
+        }
+        assert!(mc.groups.last().is_none_or(|top| top.len() <= GROUP));
         mc
+    }
+
+    #[test]
+    fn groups_are_tested_while_they_are_found_hidden() {
+        let mut rate = GroupRate::default();
+        assert!(rate.pays(), "tested until the rate is known");
+        rate.record(20, 1);
+        assert!(!rate.pays(), "one group in twenty hidden");
+        for _ in 0..GROUP_RETRY - 1 {
+            rate.record(0, 0);
+            assert!(!rate.pays());
+        }
+        rate.record(0, 0);
+        assert!(rate.pays(), "tested again after {GROUP_RETRY} instances without");
+        rate.record(20, 10);
+        assert!(rate.pays(), "half of them hidden");
+    }
+
+    #[test]
+    fn groups_of_clusters_find_what_the_clusters_find() {
+        use occult_core::{Instance, SceneBuilder};
+        // A grid of 8,192 triangles (128 clusters under two levels of groups), its lower half
+        // hidden behind a copy nearer the eye.
+        let mut b = SceneBuilder::new();
+        let grid = b.add_mesh("grid", crate::test_grid(64)).expect("a mesh node");
+        let placed = |at: Vec3| Instance {
+            parent_from_child: Affine3A::from_translation(at),
+            child: grid,
+        };
+        let root = b
+            .add_group(
+                "two",
+                vec![placed(Vec3::new(-0.5, -0.5, 0.0)), placed(Vec3::new(-0.5, -1.0, 0.5))],
+            )
+            .expect("a group of the grid");
+        let scene = Arc::new(b.build(root).expect("a scene"));
+        let (view, _) = crate::test_view(Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO, 96, 64);
+        let frame = crate::tests::zbuffer_frame(&scene, &view);
+        let mut pyramid = ZPyramid::new(96, 64).expect("a pyramid");
+        pyramid.rebuild(&frame);
+        let occlusion = Occlusion::hierarchical(&frame, &pyramid, &view);
+        let r = ClusterCulling::new(scene.clone(), &RenderOptions::default(), &ClusterOptions::default())
+            .expect("clusters build");
+        let (mut hidden, mut shown) = (0, 0);
+        for p in &r.placed {
+            let mc = r.clusters[p.node.index()].as_ref().expect("a mesh's clusters");
+            assert_eq!(mc.groups.len(), 2);
+            for behind in [false, true] {
+                let with = test_instance(&view, &occlusion, p, mc, behind, true);
+                let without = test_instance(&view, &occlusion, p, mc, behind, false);
+                assert_eq!(with.found, without.found, "behind {behind}");
+                assert_eq!(without.group_tests, 0);
+                hidden += with.groups_hidden;
+                shown += with.found.iter().flatten().filter(|f| **f != Found::Hidden).count();
+            }
+        }
+        assert!(
+            hidden > 0 && shown > 0,
+            "{hidden} groups hidden, {shown} clusters not hidden"
+        );
     }
 
     #[test]
