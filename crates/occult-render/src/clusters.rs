@@ -47,7 +47,7 @@
 //! 3. keeps as visible for the next frame the clusters the second pass found not hidden
 //!    (those the first pass drew included: they are tested too, and drop out once hidden).
 //!
-//! An instance all of whose clusters are drawn is drawn whole; otherwise its clusters are one
+//! An instance all of whose clusters are drawn in one batch is drawn whole; otherwise its clusters are one
 //! cluster draw ([`DrawTriangles::Clusters`]: each cluster's vertices projected once).
 //!
 //! **Exact.** A cluster is skipped only when its box is hidden behind depth already drawn
@@ -119,6 +119,9 @@ pub struct ClusterOptions {
     /// Draw the clusters found not hidden behind their instance's centre after the front of
     /// their window, tested again: the front of a building hides its back.
     pub behind: bool,
+    /// Test each mesh's clusters down its tree of groups ([`MeshClusters::groups`]) while
+    /// that pays; off: every cluster by its own test.
+    pub groups: bool,
 }
 
 impl Default for ClusterOptions {
@@ -131,6 +134,7 @@ impl Default for ClusterOptions {
             weigh: true,
             payoff: true,
             behind: true,
+            groups: true,
         }
     }
 }
@@ -200,6 +204,11 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             default: "on",
             help: "clusters not hidden that lie behind their instance's centre wait for the front of their window to be drawn and are tested again; off = drawn with it",
         },
+        ParamDoc {
+            key: "groups",
+            default: "on",
+            help: "test each mesh's clusters down a tree of groups of 8 (a hidden group hides its clusters in one test) while that pays; off = every cluster by its own test",
+        },
     ],
     counters: &[
         "clusters_tested",
@@ -226,6 +235,7 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
             weigh: flag "weigh",
             payoff: flag "payoff",
             behind: flag "behind",
+            groups: flag "groups",
         });
         Ok(Box::new(ClusterCulling::new(scene, options, &co)?))
     },
@@ -249,13 +259,15 @@ pub(crate) struct MeshClusters {
     groups: Vec<Vec<Aabb>>,
 }
 
-/// How often a mesh's groups of clusters were found hidden, over the frames (decaying).
+/// How often a mesh's groups of clusters were found hidden (the count of each instance
+/// tested added to three quarters of the counts before).
 ///
 /// A group's test costs about a cluster's; found hidden, it saves the tests of the
 /// [`GROUP`] or more clusters below it, found not hidden it adds one. Groups are tested while
 /// more than one test in [`GROUP`] finds its group hidden (and until the rate is known); where
 /// fewer do (foliage, whose groups overlap; a mesh mostly in view) the clusters are tested
-/// directly, and every [`GROUP_RETRY`]th time the mesh is met its groups are tested again.
+/// directly, and once the mesh was met [`GROUP_RETRY`] times so, its groups are tested again
+/// (in every instance of it in the next window: a window's instances are tested together).
 #[derive(Clone, Copy, Debug, Default)]
 struct GroupRate {
     tests: f32,
@@ -726,16 +738,18 @@ enum Found {
     /// Not hidden.
     Shown,
     /// Not hidden, and behind its instance's centre (its box's nearest point farther from the
-    /// eye than the centre of the instance's box): its pyramid query ([`Occlusion::whole_box_query`]),
-    /// asked again once the front of its window is drawn. `Found::Shown` when the query
-    /// needed no pyramid.
-    Behind(PixelRect, f32),
+    /// eye than the centre of the instance's box): its pyramid query
+    /// ([`Occlusion::whole_box_query`]) is in [`Tested::behind`], asked again once the front
+    /// of its window is drawn. `Found::Shown` when the query needed no pyramid.
+    Behind,
 }
 
 /// What the second pass found of one instance: `None` when its box is hidden whole, else
 /// each cluster's [`Found`].
 struct Tested {
     found: Option<Vec<Found>>,
+    /// The clusters [`Found::Behind`], with their queries (rectangle, nearest depth).
+    behind: Vec<(u32, PixelRect, f32)>,
     /// Groups of clusters tested ([`MeshClusters::groups`]), and those found hidden.
     group_tests: u64,
     groups_hidden: u64,
@@ -757,6 +771,7 @@ fn test_instance(
     if occlusion.box_hidden(&view.clip_from_world(), &p.bounds, eye, &mut pc) {
         return Tested {
             found: None,
+            behind: Vec::new(),
             group_tests: 0,
             groups_hidden: 0,
         };
@@ -777,16 +792,23 @@ fn test_instance(
             Ok(query) => Ok(Some(query)),
         }
     };
-    let cluster = |b: &Aabb, pc: &mut PyramidCounts| match hidden(b, pc) {
-        Err(()) => Found::Hidden,
-        Ok(Some((r, nearest))) if behind && eye_object.clamp(b.min, b.max).distance_squared(eye_object) > centre => {
-            Found::Behind(r, nearest)
+    let mut queries = Vec::new();
+    let mut cluster = |c: usize, pc: &mut PyramidCounts| {
+        let b = &mc.boxes[c];
+        match hidden(b, pc) {
+            Err(()) => Found::Hidden,
+            Ok(Some((r, nearest)))
+                if behind && eye_object.clamp(b.min, b.max).distance_squared(eye_object) > centre =>
+            {
+                queries.push((c as u32, r, nearest));
+                Found::Behind
+            }
+            Ok(_) => Found::Shown,
         }
-        Ok(_) => Found::Shown,
     };
     let (mut group_tests, mut groups_hidden) = (0, 0);
     let found = if !groups || mc.groups.is_empty() {
-        mc.boxes.iter().map(|b| cluster(b, &mut pc)).collect()
+        (0..mc.len()).map(|c| cluster(c, &mut pc)).collect()
     } else {
         // Down the groups from the top level: a group hidden leaves its clusters hidden.
         let mut found = vec![Found::Hidden; mc.len()];
@@ -795,7 +817,7 @@ fn test_instance(
         while let Some((level, i)) = stack.pop() {
             if level == 0 {
                 let c = mc.order[i] as usize;
-                found[c] = cluster(&mc.boxes[c], &mut pc);
+                found[c] = cluster(c, &mut pc);
                 continue;
             }
             group_tests += 1;
@@ -814,6 +836,7 @@ fn test_instance(
     };
     Tested {
         found: Some(found),
+        behind: queries,
         group_tests,
         groups_hidden,
     }
@@ -980,6 +1003,7 @@ impl ClusterCulling {
                 let occlusion = &occlusion;
                 let deferred = &deferred;
                 let group_rates: &[GroupRate] = group_rates;
+                let use_groups = options.groups;
                 let behind = options.behind;
                 raster.install(|| {
                     rayon::join(
@@ -991,7 +1015,7 @@ impl ClusterCulling {
                                     let mc = clusters[p.node.index()]
                                         .as_ref()
                                         .expect("placed instances have clusters");
-                                    let groups = group_rates[p.node.index()].pays();
+                                    let groups = use_groups && group_rates[p.node.index()].pays();
                                     test_instance(view, occlusion, p, mc, behind, groups)
                                 })
                                 .collect()
@@ -1048,7 +1072,6 @@ impl ClusterCulling {
                 group_rates[p.node.index()].record(tested.group_tests, tested.groups_hidden);
                 let mut bounds = Aabb::EMPTY;
                 let mut take = vec![false; mc.len()];
-                let mut later = Vec::new();
                 for (c, f) in found.into_iter().enumerate() {
                     let at = p.base + c as u64;
                     let was = bit(visible, at);
@@ -1056,11 +1079,9 @@ impl ClusterCulling {
                         Found::Hidden => false,
                         Found::Shown => true,
                         // Drawn by the first pass already: nothing to wait for.
-                        Found::Behind(..) if was && use_first => true,
-                        Found::Behind(r, nearest) => {
-                            later.push((c as u32, r, nearest));
-                            continue;
-                        }
+                        Found::Behind if was && use_first => true,
+                        // Waits (below): its bit stays last frame's until it is asked again.
+                        Found::Behind => continue,
                     };
                     counts.record(visible, at, shown);
                     if shown && !(was && use_first) {
@@ -1068,6 +1089,11 @@ impl ClusterCulling {
                         bounds = bounds.union(mc.boxes[c]);
                     }
                 }
+                let later: Vec<(u32, PixelRect, f32)> = tested
+                    .behind
+                    .into_iter()
+                    .filter(|&(c, _, _)| !(use_first && bit(visible, p.base + c as u64)))
+                    .collect();
                 if !later.is_empty() {
                     counts.deferred += later.len() as u64;
                     deferred.push(Deferred {
@@ -1215,30 +1241,37 @@ mod tests {
             )
             .expect("a group of the grid");
         let scene = Arc::new(b.build(root).expect("a scene"));
-        let (view, _) = crate::test_view(Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO, 96, 64);
-        let frame = crate::tests::zbuffer_frame(&scene, &view);
-        let mut pyramid = ZPyramid::new(96, 64).expect("a pyramid");
-        pyramid.rebuild(&frame);
-        let occlusion = Occlusion::hierarchical(&frame, &pyramid, &view);
         let r = ClusterCulling::new(scene.clone(), &RenderOptions::default(), &ClusterOptions::default())
             .expect("clusters build");
-        let (mut hidden, mut shown) = (0, 0);
-        for p in &r.placed {
-            let mc = r.clusters[p.node.index()].as_ref().expect("a mesh's clusters");
-            assert_eq!(mc.groups.len(), 2);
-            for behind in [false, true] {
-                let with = test_instance(&view, &occlusion, p, mc, behind, true);
-                let without = test_instance(&view, &occlusion, p, mc, behind, false);
-                assert_eq!(with.found, without.found, "behind {behind}");
-                assert_eq!(without.group_tests, 0);
-                hidden += with.groups_hidden;
-                shown += with.found.iter().flatten().filter(|f| **f != Found::Hidden).count();
+        // From afar, all in view; and from near, the frustum cutting the grids.
+        for eye in [Vec3::new(0.0, 0.0, 2.0), Vec3::new(0.3, -0.2, 0.9)] {
+            let (view, _) = crate::test_view(eye, Vec3::new(eye.x, eye.y, 0.0), 96, 64);
+            let frame = crate::tests::zbuffer_frame(&scene, &view);
+            let mut pyramid = ZPyramid::new(96, 64).expect("a pyramid");
+            pyramid.rebuild(&frame);
+            let occlusion = Occlusion::hierarchical(&frame, &pyramid, &view);
+            let (mut hidden, mut shown, mut behind_found) = (0, 0, 0);
+            for p in &r.placed {
+                let mc = r.clusters[p.node.index()].as_ref().expect("a mesh's clusters");
+                assert_eq!(mc.groups.len(), 2);
+                for behind in [false, true] {
+                    let with = test_instance(&view, &occlusion, p, mc, behind, true);
+                    let without = test_instance(&view, &occlusion, p, mc, behind, false);
+                    assert_eq!(with.found, without.found, "{eye}, behind {behind}");
+                    let mut queries = (with.behind, without.behind);
+                    queries.0.sort_unstable_by_key(|q| q.0);
+                    assert_eq!(queries.0, queries.1, "{eye}, behind {behind}");
+                    behind_found += queries.0.len();
+                    assert_eq!(without.group_tests, 0);
+                    hidden += with.groups_hidden;
+                    shown += with.found.iter().flatten().filter(|f| **f != Found::Hidden).count();
+                }
             }
+            assert!(
+                hidden > 0 && shown > 0 && behind_found > 0,
+                "{eye}: {hidden} groups hidden, {shown} clusters not hidden, {behind_found} behind"
+            );
         }
-        assert!(
-            hidden > 0 && shown > 0,
-            "{hidden} groups hidden, {shown} clusters not hidden"
-        );
     }
 
     #[test]

@@ -28,6 +28,7 @@ fn every_configuration_is_identical() {
         "clusters:payoff=off",
         "clusters:payoff=off,temporal=off",
         "clusters:payoff=off,behind=off",
+        "clusters:payoff=off,groups=off",
         "clusters:payoff=off,weigh=off,trust=0",
         "clusters:payoff=off,size=8,batch=1",
         "clusters:payoff=off,size=512,batch=1000000",
