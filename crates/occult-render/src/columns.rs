@@ -194,9 +194,10 @@ impl<S: Send> Columns<S> {
         }
     }
 
-    /// Whether the tests of each of the last frame's `n` strips paid.
+    /// Whether the tests of the last frame's `n` strips paid, together
+    /// ([`Payoff::paid_together`]).
     pub(crate) fn paid(&mut self, n: usize) -> bool {
-        self.strips_mut().take(n).all(|s| s.payoff.last_paid())
+        Payoff::paid_together(self.strips_mut().take(n).map(|s| &s.payoff))
     }
 
     /// Draws `frame` as the strips `bands` ([`Columns::views`]) over `workers` (at most

@@ -37,7 +37,8 @@
 //!   culled frame that wins by a thin margin (more than [`REMEASURE_SHARE`] of the predicted
 //!   direct time) measures it again once the measurement is [`REMEASURE_AFTER`] frames old;
 //!   a single measurement (it may be cold or interrupted) is taken again after
-//!   [`REMEASURE_FIRST`] culled frames, whatever they win;
+//!   [`REMEASURE_FIRST`] culled frames, unless they win by more than a cold measurement
+//!   could make up (less than [`COLD_SHARE`] of its prediction);
 //! - a culled frame shorter than [`MIN_ALLOWANCE_TIME`] never starts a run (small scenes keep
 //!   their tests whatever the clock says);
 //! - probes are **screened**: the last direct frame of a run has its final depth, and what a
@@ -88,6 +89,12 @@ pub const REMEASURE_AFTER: u32 = 16;
 /// next ones on `city` `circle:32`), and one cold measurement made culled frames slower than
 /// a warm direct frame look like wins for 16 frames.
 pub const REMEASURE_FIRST: u32 = 4;
+/// ... unless the culled frame took less than this share of the single measurement's
+/// prediction: the coldest measurement seen was 3.3× a warm one (61–67 ms against 20–25 on
+/// `city` `circle:32`), which cannot make a win that wide a loss, and on a street of
+/// `city:blocks=32`, where a direct frame takes ten culled frames' time (145 and 181 ms
+/// against 9–20), measuring it again costs more than a cold measurement could.
+pub const COLD_SHARE: f64 = 0.25;
 /// Direct frames whose measurements are kept (the model takes the least of each part).
 pub const DIRECT_KEPT: usize = 4;
 /// Direct frames drawn in a row for the first measurement: a renderer's first direct frame
@@ -587,10 +594,12 @@ impl Choice {
         // A thin win against a direct frame measured long ago is measured again; against a
         // single measurement, soon, and after a loss that started no run too (every loss is
         // "thin": the measurement may be cold). A single measurement is taken again soon
-        // whatever the win: a cold or interrupted one (a first direct frame of 61-67 ms where
-        // warm ones take 20-25, `city` `circle:32`) made culled frames of 33-46 ms wide wins,
-        // kept for 15-30 frames; it costs one direct frame where culling wins.
-        let thin = self.ratio(total, work) > Some(REMEASURE_SHARE) || self.measured.len() == 1;
+        // unless the win is wider than a cold one could make (COLD_SHARE): a cold or
+        // interrupted one (a first direct frame of 61-67 ms where warm ones take 20-25, `city`
+        // `circle:32`) made culled frames of 33-46 ms wide wins, kept for 15-30 frames; it
+        // costs one direct frame where culling wins.
+        let ratio = self.ratio(total, work);
+        let thin = ratio > Some(REMEASURE_SHARE) || (self.measured.len() == 1 && ratio > Some(COLD_SHARE));
         let after = match (self.measured.len(), self.lost_last) {
             (..=1, _) => REMEASURE_FIRST,
             (_, false) => REMEASURE_AFTER,
@@ -1071,20 +1080,22 @@ pub(crate) mod tests {
 
     /// A single measurement is taken again after [`REMEASURE_FIRST`] culled frames, even
     /// against wide wins (it may have been cold: 64 ms where warm frames take 20); the least
-    /// of two is trusted then.
+    /// of two is trusted then. Not against a win wider than a cold measurement could make
+    /// ([`COLD_SHARE`]).
     #[test]
-    fn a_single_measurement_is_taken_again_whatever_the_win() {
-        let run = |measurements: usize| {
+    fn a_single_measurement_is_taken_again_unless_the_win_is_wider_than_cold() {
+        let run = |measurements: usize, culled_ms: u32| {
             let mut c = measured(0.0, 64_000.0, measurements); // 64 ms for 1,000 triangles
             let mut culled = 0;
             while !c.take_direct() && culled < 40 {
-                c.culled(33 * MS, 1000, true, true, false); // a win of 0.52
+                c.culled(culled_ms * MS, 1000, true, true, false);
                 culled += 1;
             }
             culled
         };
-        assert_eq!(run(1), REMEASURE_FIRST);
-        assert_eq!(run(2), 40, "two measurements: a wide win is trusted");
+        assert_eq!(run(1, 33), REMEASURE_FIRST, "a win of 0.52");
+        assert_eq!(run(2, 33), 40, "two measurements: a wide win is trusted");
+        assert_eq!(run(1, 15), 40, "a win of 0.23: no cold measurement makes it a loss");
     }
 
     /// A loss starts a run when its tests did not pay, or after another loss; a single loss

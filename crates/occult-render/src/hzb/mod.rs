@@ -1181,7 +1181,7 @@ impl Renderer for Hzb {
         if let Some(direct) = &mut self.direct {
             let paid = match self.options.distribution {
                 Distribution::Columns => self.columns.paid(bands.len()),
-                _ => self.workers.iter().all(|w| w.payoff.last_paid()),
+                _ => Payoff::paid_together(self.workers.iter().map(|w| &w.payoff)),
             };
             let t = Instant::now();
             direct.culled(view, frame, start.elapsed().saturating_sub(setup), &mut stats, paid)?;
