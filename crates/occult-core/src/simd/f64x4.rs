@@ -53,6 +53,21 @@ impl F64x4 {
         M64x4(unsafe { _mm256_cmp_pd::<_CMP_GT_OQ>(self.0, o.0) })
     }
 
+    /// Lane-wise `if self < o { self } else { o }`: the instruction's rule, which gives `o`
+    /// where either is NaN or both are zero (as [`F32x8::min`](super::F32x8::min)).
+    #[inline(always)]
+    pub fn min(self, o: Self) -> Self {
+        // SAFETY: as in `abs`.
+        Self(unsafe { _mm256_min_pd(self.0, o.0) })
+    }
+
+    /// Lane-wise `if self > o { self } else { o }` (the rule of [`F64x4::min`]).
+    #[inline(always)]
+    pub fn max(self, o: Self) -> Self {
+        // SAFETY: as in `abs`.
+        Self(unsafe { _mm256_max_pd(self.0, o.0) })
+    }
+
     /// Lane-wise `as f32` (rounded to nearest, ties to even, in the default rounding mode).
     #[inline(always)]
     pub fn to_f32(self) -> F32x4 {
@@ -94,6 +109,8 @@ mod tests {
         assert_eq!(bits(a / b), want(|p, q| p / q));
         assert_eq!(bits(-a), x.map(|p| key(-p)));
         assert_eq!(bits(a.abs()), x.map(|p| key(p.abs())));
+        assert_eq!(bits(a.min(b)), want(|p, q| if p < q { p } else { q }));
+        assert_eq!(bits(a.max(b)), want(|p, q| if p > q { p } else { q }));
         assert_eq!(a.lt(b).bits(), flags(|p, q| p < q));
         assert_eq!(a.gt(b).bits(), flags(|p, q| p > q));
         let narrow = |p: f32| if p.is_nan() { f32::NAN.to_bits() } else { p.to_bits() };

@@ -4,6 +4,9 @@
 //! conservative: depth ×(1 + 1e-5) for rounding, 1/64 pixel for vertex snapping (1/256 px), and
 //! any corner at or in front of the near plane (within 1e-5) makes a box untestable (visible).
 
+use occult_core::simd::Isa;
+#[cfg(target_arch = "x86_64")]
+use occult_core::simd::{Avx2, F32x8, F64x4, M32x8};
 use occult_core::{Aabb, Mat4, Vec3, Vec4};
 use occult_raster::{Frame, PixelRect, PyramidCounts, PyramidTest, ZPyramid};
 
@@ -33,6 +36,176 @@ fn clip_corners(clip_from_object: &Mat4, b: &Aabb) -> Option<[Vec4; 8]> {
 fn screen_xy(v: Vec4, w: f64, h: f64) -> (f64, f64) {
     let cw = v.w as f64;
     ((v.x as f64 / cw * 0.5 + 0.5) * w, (0.5 - v.y as f64 / cw * 0.5) * h)
+}
+
+/// A box's eight corners projected for a frame: screen positions in pixels ([`screen_xy`]) and
+/// depths (`z / w`), corner `i` taking `max` on axis `a` when bit `a` is set.
+struct Corners {
+    x: [f64; 8],
+    y: [f64; 8],
+    depth: [f32; 8],
+}
+
+/// The corners of `b` placed by `clip_from_object` ([`clip_corners`]) and projected for a `w × h`
+/// frame; None when one is not finite or reaches the near plane. In eight lanes where the
+/// processor has AVX2 (the eight corners transformed and divided at once): the scalar path's
+/// operations in its order, so its bits (`eight_lanes_project_as_the_scalar_path_does`).
+#[inline]
+fn project_corners(clip_from_object: &Mat4, b: &Aabb, w: f64, h: f64) -> Option<Corners> {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(avx2) = Isa::detected().avx2() {
+        // SAFETY: the token proves AVX2.
+        return unsafe { project_corners_avx2(avx2, clip_from_object, b, w, h) };
+    }
+    project_corners_scalar(clip_from_object, b, w, h)
+}
+
+/// [`project_corners`], one corner at a time.
+#[inline]
+fn project_corners_scalar(clip_from_object: &Mat4, b: &Aabb, w: f64, h: f64) -> Option<Corners> {
+    let c = clip_corners(clip_from_object, b)?;
+    let xy = c.map(|v| screen_xy(v, w, h));
+    Some(Corners {
+        x: xy.map(|p| p.0),
+        y: xy.map(|p| p.1),
+        depth: c.map(|v| v.z / v.w),
+    })
+}
+
+/// [`project_corners`] in eight lanes, one a corner: each clip coordinate as glam's
+/// `Mat4 * Vec4` forms it (`((x_axis·x + y_axis·y) + z_axis·z) + w_axis·1`), the near-plane
+/// and finiteness tests of [`clip_corners`], and [`screen_xy`]'s divisions in f64.
+///
+/// # Safety
+/// The processor must have AVX2 (as the token `avx2` proves).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn project_corners_avx2(avx2: Avx2, m: &Mat4, b: &Aabb, w: f64, h: f64) -> Option<Corners> {
+    let l = unsafe { project_lanes(avx2, m, b) }?;
+    let [x0, x1, y0, y1] = screen_lanes(avx2, &l, w, h).map(F64x4::to_array);
+    let join = |lo: [f64; 4], hi: [f64; 4]| std::array::from_fn(|i| if i < 4 { lo[i] } else { hi[i - 4] });
+    Some(Corners {
+        x: join(x0, x1),
+        y: join(y0, y1),
+        depth: (l.cz / l.cw).to_array(),
+    })
+}
+
+/// [`screen_xy`] of the corners in `l`, in f64 lanes: `[x of corners 0-3, x of 4-7, y of 0-3,
+/// y of 4-7]`.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn screen_lanes(avx2: Avx2, l: &Lanes, w: f64, h: f64) -> [F64x4; 4] {
+    let d = |v: f64| F64x4::splat(avx2, v);
+    let sx = |x: F64x4, cw: F64x4| (x / cw * d(0.5) + d(0.5)) * d(w);
+    let sy = |y: F64x4, cw: F64x4| (d(0.5) - y / cw * d(0.5)) * d(h);
+    let (lo_w, hi_w) = (l.cw.low_f64(), l.cw.high_f64());
+    [
+        sx(l.cx.low_f64(), lo_w),
+        sx(l.cx.high_f64(), hi_w),
+        sy(l.cy.low_f64(), lo_w),
+        sy(l.cy.high_f64(), hi_w),
+    ]
+}
+
+/// What Greene's whole-box test needs of a box's projection: the span of its corners on
+/// screen, pixels (`[min x, max x, min y, max y]`), and its nearest corner's depth (before the
+/// margin); None as [`project_corners`].
+#[inline]
+fn project_span(clip_from_object: &Mat4, b: &Aabb, w: f64, h: f64) -> Option<([f64; 4], f32)> {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(avx2) = Isa::detected().avx2() {
+        // SAFETY: the token proves AVX2.
+        if let Some(span) = unsafe { project_span_avx2(avx2, clip_from_object, b, w, h) } {
+            return span;
+        }
+    }
+    project_span_scalar(clip_from_object, b, w, h)
+}
+
+/// [`project_span`] from [`project_corners_scalar`].
+#[inline]
+fn project_span_scalar(clip_from_object: &Mat4, b: &Aabb, w: f64, h: f64) -> Option<([f64; 4], f32)> {
+    let c = project_corners_scalar(clip_from_object, b, w, h)?;
+    let span = |v: &[f64; 8]| {
+        v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+            (lo.min(x), hi.max(x))
+        })
+    };
+    let ((minx, maxx), (miny, maxy)) = (span(&c.x), span(&c.y));
+    Some(([minx, maxx, miny, maxy], c.depth.iter().copied().fold(0.0f32, f32::max)))
+}
+
+/// [`project_span`] in eight lanes ([`project_corners_avx2`]), reduced in lanes: the scalar
+/// span's values wherever every corner lies in front of the eye (`w > 0`), where no lane is
+/// NaN and the lanes' `min`/`max` rule agrees with `f64::min`/`max` but for the sign of a zero,
+/// which changes no rectangle or comparison. `Some(None)`: refused as [`project_corners`];
+/// `None`: a corner at or behind the eye, left to the scalar path.
+///
+/// # Safety
+/// The processor must have AVX2 (as the token `avx2` proves).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::option_option)]
+unsafe fn project_span_avx2(avx2: Avx2, m: &Mat4, b: &Aabb, w: f64, h: f64) -> Option<Option<([f64; 4], f32)>> {
+    let Some(l) = (unsafe { project_lanes(avx2, m, b) }) else {
+        return Some(None);
+    };
+    if l.cw.gt(F32x8::zero(avx2)).bits() != 0xff {
+        return None;
+    }
+    let [x0, x1, y0, y1] = screen_lanes(avx2, &l, w, h);
+    let lanes_min = |v: F64x4| v.to_array().into_iter().fold(f64::INFINITY, f64::min);
+    let lanes_max = |v: F64x4| v.to_array().into_iter().fold(f64::NEG_INFINITY, f64::max);
+    let depth = (l.cz / l.cw).to_array().into_iter().fold(0.0f32, f32::max);
+    Some(Some((
+        [
+            lanes_min(x0.min(x1)),
+            lanes_max(x0.max(x1)),
+            lanes_min(y0.min(y1)),
+            lanes_max(y0.max(y1)),
+        ],
+        depth,
+    )))
+}
+
+/// A box's corners in clip space, one a lane ([`project_corners_avx2`]).
+#[cfg(target_arch = "x86_64")]
+struct Lanes {
+    cx: F32x8,
+    cy: F32x8,
+    cz: F32x8,
+    cw: F32x8,
+}
+
+/// The clip-space corners of `b` in eight lanes, as glam's `Mat4 * Vec4` forms them
+/// (`((x_axis·x + y_axis·y) + z_axis·z) + w_axis·1`); None as [`clip_corners`] (a corner not
+/// finite or at the near plane).
+///
+/// # Safety
+/// The processor must have AVX2 (as the token `avx2` proves).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn project_lanes(avx2: Avx2, m: &Mat4, b: &Aabb) -> Option<Lanes> {
+    let s = |v: f32| F32x8::splat(avx2, v);
+    let pick = |lo: f32, hi: f32, bits: u32| F32x8::select(M32x8::from_bits(avx2, bits), s(hi), s(lo));
+    let (x, y, z) = (
+        pick(b.min.x, b.max.x, 0xaa),
+        pick(b.min.y, b.max.y, 0xcc),
+        pick(b.min.z, b.max.z, 0xf0),
+    );
+    let row = |r: usize| ((s(m.x_axis[r]) * x + s(m.y_axis[r]) * y) + s(m.z_axis[r]) * z) + s(m.w_axis[r]);
+    let (cx, cy, cz, cw) = (row(0), row(1), row(2), row(3));
+    let inf = s(f32::INFINITY);
+    let finite = cx
+        .abs()
+        .lt(inf)
+        .and(cy.abs().lt(inf))
+        .and(cz.abs().lt(inf))
+        .and(cw.abs().lt(inf));
+    let near = (cz * s(1.0 + DEPTH_MARGIN)).gt(cw);
+    (finite.and_not(near).bits() == 0xff).then_some(Lanes { cx, cy, cz, cw })
 }
 
 /// `ceil(x)` clamped to `[0, hi]` (`hi` a whole number below 2^31; NaN gives 0), as
@@ -131,10 +304,9 @@ impl<'a> Occlusion<'a> {
         }
     }
 
-    /// What both tests settle before any pyramid read: `Err(hidden)` for an empty box
-    /// (hidden), one holding the eye or reaching the near plane (not hidden); else the box's
-    /// clip-space corners.
-    fn testable(clip_from_object: &Mat4, b: &Aabb, eye: Vec3) -> Result<[Vec4; 8], bool> {
+    /// `Err(hidden)` for an empty box (hidden) or one holding the eye (not hidden).
+    #[inline]
+    fn outside(b: &Aabb, eye: Vec3) -> Result<(), bool> {
         if b.is_empty() {
             return Err(true);
         }
@@ -143,7 +315,16 @@ impl<'a> Occlusion<'a> {
         if (eye.cmpge(b.min - slack) & eye.cmple(b.max + slack)).all() {
             return Err(false);
         }
-        clip_corners(clip_from_object, b).ok_or(false)
+        Ok(())
+    }
+
+    /// What both tests settle before any pyramid read: `Err(hidden)` for an empty box
+    /// (hidden), one holding the eye or reaching the near plane (not hidden); else the box's
+    /// corners projected.
+    fn testable(&self, clip_from_object: &Mat4, b: &Aabb, eye: Vec3) -> Result<Corners, bool> {
+        Self::outside(b, eye)?;
+        let (w, h) = (self.frame.width() as f64, self.frame.height() as f64);
+        project_corners(clip_from_object, b, w, h).ok_or(false)
     }
 
     /// §3.2: true when the box `b` (object space, placed by `clip_from_object`, the eye at `eye`
@@ -153,14 +334,14 @@ impl<'a> Occlusion<'a> {
     /// [`Occlusion::whole_box_query`] and [`Occlusion::rect_hidden`] do. An empty box is hidden; a box
     /// holding the eye or reaching the near plane is not.
     pub fn box_hidden(&self, clip_from_object: &Mat4, b: &Aabb, eye: Vec3, counts: &mut PyramidCounts) -> bool {
-        let c = match Self::testable(clip_from_object, b, eye) {
+        // Each corner projected once (screen position and depth), shared by the faces it is on.
+        let c = match self.testable(clip_from_object, b, eye) {
             Ok(c) => c,
             Err(hidden) => return hidden,
         };
         let (w, h) = (self.frame.width() as f64, self.frame.height() as f64);
-        // Each corner projected once (screen position and depth), shared by the faces it is on.
-        let xy = c.map(|v| screen_xy(v, w, h));
-        let depth = c.map(|v| v.z / v.w);
+        let xy: [(f64, f64); 8] = std::array::from_fn(|i| (c.x[i], c.y[i]));
+        let depth = c.depth;
         // A box small on screen: Greene's whole-box test (one rectangle at the nearest depth of
         // all corners) culls about as much as one test per face, for one pyramid test.
         let (mut minx, mut maxx, mut miny, mut maxy) =
@@ -244,12 +425,14 @@ impl Occlusion<'_> {
     /// is not. The rectangle and depth do not depend on the pyramid, so a box can be asked
     /// about again, after more is drawn, by `rect_hidden` alone.
     pub fn whole_box_query(&self, clip_from_object: &Mat4, b: &Aabb, eye: Vec3) -> Result<(PixelRect, f32), bool> {
-        let c = Self::testable(clip_from_object, b, eye)?;
-        let nearest = c.iter().map(|v| v.z / v.w).fold(0.0f32, f32::max) * (1.0 + DEPTH_MARGIN);
+        Self::outside(b, eye)?;
+        let (w, h) = (self.frame.width() as f64, self.frame.height() as f64);
+        let ([minx, maxx, miny, maxy], nearest) = project_span(clip_from_object, b, w, h).ok_or(false)?;
+        let nearest = nearest * (1.0 + DEPTH_MARGIN);
         if nearest < self.far_depth * (1.0 - DEPTH_MARGIN) {
             return Err(true); // beyond the far plane: draws nothing
         }
-        Ok((rect_of(&c, 0..8, self.frame.width(), self.frame.height()), nearest))
+        Ok((rect_of_span(minx, maxx, miny, maxy, w, h), nearest))
     }
 
     /// Whether every pixel of `r` holds a depth nearer than `nearest` as the pyramid stands
@@ -262,6 +445,68 @@ impl Occlusion<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The eight-lane projection gives the scalar path's bits: corner positions and depths,
+    /// and the same refusals (a corner at the near plane, one not finite), over views from
+    /// inside and outside random boxes; the span reduced in lanes, the scalar span.
+    #[test]
+    fn eight_lanes_project_as_the_scalar_path_does() {
+        use rand::{Rng, SeedableRng};
+        let Some(avx2) = Isa::detected().avx2() else {
+            return; // nothing to compare on this processor
+        };
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(7);
+        let (mut projected, mut refused, mut behind) = (0, 0, 0);
+        for k in 0..20_000 {
+            let v = |rng: &mut rand_pcg::Pcg64Mcg, r: f32| {
+                Vec3::new(
+                    rng.random_range(-r..r),
+                    rng.random_range(-r..r),
+                    rng.random_range(-r..r),
+                )
+            };
+            let eye = v(&mut rng, 50.0);
+            let camera = occult_core::Camera::look_at(eye, eye + v(&mut rng, 1.0) + Vec3::new(0.0, 0.0, 1e-3));
+            let view = occult_core::View::new(camera, 640, 360).expect("a view");
+            let placed = Mat4::from_scale_rotation_translation(
+                Vec3::splat(rng.random_range(0.1..3.0)),
+                occult_core::glam::Quat::from_rotation_y(rng.random_range(0.0..6.3)),
+                v(&mut rng, 20.0),
+            );
+            let m = view.clip_from_world() * placed;
+            let c = v(&mut rng, 30.0);
+            let mut b = Aabb::new(c, c + v(&mut rng, 10.0).abs());
+            if k % 997 == 0 {
+                b.max.x = f32::INFINITY;
+            }
+            let (w, h) = (640.0, 360.0);
+            let scalar = project_corners_scalar(&m, &b, w, h);
+            // SAFETY: the token proves AVX2.
+            let lanes = unsafe { project_corners_avx2(avx2, &m, &b, w, h) };
+            match (scalar, lanes) {
+                (None, None) => refused += 1,
+                (Some(a), Some(l)) => {
+                    projected += 1;
+                    assert_eq!(a.x.map(f64::to_bits), l.x.map(f64::to_bits), "box {k}");
+                    assert_eq!(a.y.map(f64::to_bits), l.y.map(f64::to_bits), "box {k}");
+                    assert_eq!(a.depth.map(f32::to_bits), l.depth.map(f32::to_bits), "box {k}");
+                }
+                (a, l) => panic!("box {k}: scalar {:?}, lanes {:?}", a.is_some(), l.is_some()),
+            }
+            // The span reduced in lanes: the same values (a zero's sign aside) where the
+            // lanes take it, the scalar path's refusal where they refuse.
+            let scalar = project_span_scalar(&m, &b, w, h);
+            // SAFETY: the token proves AVX2.
+            match unsafe { project_span_avx2(avx2, &m, &b, w, h) } {
+                Some(lanes) => assert_eq!(lanes, scalar, "box {k}"),
+                None => behind += 1,
+            }
+        }
+        assert!(
+            projected > 1000 && refused > 1000 && behind < projected / 10,
+            "{projected} projected, {refused} refused, {behind} left to the scalar span"
+        );
+    }
 
     #[test]
     fn inline_rounding_is_the_library_rounding() {
