@@ -247,36 +247,21 @@ fn rect_of_span(minx: f64, maxx: f64, miny: f64, maxy: f64, w: f64, h: f64) -> P
     }
 }
 
-/// The pixels whose centres the projection of the given corners may reach (empty rectangle
-/// when none), for a `width × height` frame.
-#[inline]
-fn rect_of(c: &[Vec4; 8], corners: impl Iterator<Item = usize>, width: u32, height: u32) -> PixelRect {
-    let (w, h) = (width as f64, height as f64);
-    let (mut minx, mut maxx, mut miny, mut maxy) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
-    for i in corners {
-        let (x, y) = screen_xy(c[i], w, h);
-        minx = minx.min(x);
-        maxx = maxx.max(x);
-        miny = miny.min(y);
-        maxy = maxy.max(y);
-    }
-    rect_of_span(minx, maxx, miny, maxy, w, h)
-}
-
 /// The screen rectangle `b` may draw into (the whole frame when it reaches the near plane);
 /// None for an empty box or an empty rectangle.
 pub(crate) fn screen_rect(clip_from_object: &Mat4, b: &Aabb, width: u32, height: u32) -> Option<PixelRect> {
     if b.is_empty() {
         return None;
     }
-    let r = match clip_corners(clip_from_object, b) {
+    let (w, h) = (width as f64, height as f64);
+    let r = match project_span(clip_from_object, b, w, h) {
         None => PixelRect {
             x0: 0,
             y0: 0,
             x1: width,
             y1: height,
         },
-        Some(c) => rect_of(&c, 0..8, width, height),
+        Some(([minx, maxx, miny, maxy], _)) => rect_of_span(minx, maxx, miny, maxy, w, h),
     };
     (r.x0 < r.x1 && r.y0 < r.y1).then_some(r)
 }
