@@ -102,10 +102,9 @@ pub struct Payoff {
     direct_work: u64,
     /// Threads a direct frame's draws are shared over (for the estimate before a measurement).
     direct_threads: usize,
-    /// Whether the last frame's tests saved more than they cost ([`FramePayoff::paid`]).
-    last_paid: bool,
-    /// The last frame's cost and gain of its tests, ns ([`Payoff::paid_together`]).
-    last_balance: (f64, f64),
+    /// The last frame's cost and gain of its tests ([`Payoff::last_paid`],
+    /// [`Payoff::paid_together`]).
+    last_balance: Balance,
     /// Whether a frame ended yet ([`Payoff::end`]): the first knows nothing of the view.
     ended: bool,
     /// Tests: every frame stops at its first check.
@@ -126,8 +125,10 @@ impl Payoff {
             direct_frame_ns: None,
             direct_work: 0,
             direct_threads: 1,
-            last_paid: false,
-            last_balance: (0.0, 0.0),
+            last_balance: Balance {
+                cost_ns: 0.0,
+                gain_ns: 0.0,
+            },
             ended: false,
             #[cfg(test)]
             force_stop: false,
@@ -153,21 +154,23 @@ impl Payoff {
     /// Whether the last frame's tests saved more than they cost ([`FramePayoff::paid`] at its
     /// end).
     pub fn last_paid(&self) -> bool {
-        self.last_paid
+        Self::paid_together([self])
     }
 
     /// Whether the last frames of `parts`, drawn side by side as one frame (strips of
     /// columns, workers), paid together: their tests' costs summed no more than their gains
-    /// summed, with one [`MIN_ALLOWANCE_TIME`]. A part whose own tests did not pay (a strip of
-    /// sky, where nothing is hidden) does not make a frame whose other parts removed most of
-    /// the work one that lost (measured: `hzb` on `city:blocks=32` `street:16`, one strip of
-    /// four stopped, and the direct frames measured after it took 145 and 181 ms against
-    /// culled frames of 9-20).
+    /// summed (both in thread time), with one [`MIN_ALLOWANCE_TIME`] a part, so that a frame
+    /// whose every part paid by [`FramePayoff::paid`] pays together too. A part whose own
+    /// tests did not pay (a strip of sky, where nothing is hidden) does not make a frame
+    /// whose other parts removed most of the work one that lost (measured: `hzb` on
+    /// `city:blocks=32` `street:16`, one strip of four stopped, and the direct frames measured
+    /// after it took 145 and 181 ms against culled frames of 9-20).
     pub fn paid_together<'a>(parts: impl IntoIterator<Item = &'a Payoff>) -> bool {
-        let (cost, gain) = parts
-            .into_iter()
-            .fold((0.0, 0.0), |(c, g), p| (c + p.last_balance.0, g + p.last_balance.1));
-        cost <= gain + MIN_ALLOWANCE_TIME.as_nanos() as f64
+        let allowance = MIN_ALLOWANCE_TIME.as_nanos() as f64;
+        let (cost, gain) = parts.into_iter().fold((0.0, 0.0), |(c, g), p| {
+            (c + p.last_balance.cost_ns, g + p.last_balance.gain_ns + allowance)
+        });
+        cost <= gain
     }
 
     /// Starts weighing a frame that began at `start`.
@@ -200,9 +203,10 @@ impl Payoff {
     /// Learns from a finished frame: the allowance, the cost of a triangle, the work in view.
     pub fn end(&mut self, f: &FramePayoff) {
         self.ended = true;
-        let now = Instant::now();
-        self.last_balance = (f.cost_ns(now), f.gain_ns());
-        self.last_paid = f.paid(now);
+        self.last_balance = Balance {
+            cost_ns: f.cost_ns(Instant::now()),
+            gain_ns: f.gain_ns(),
+        };
         self.ns_per_triangle = f.ns_per_triangle();
         if f.shared.0 > 0 {
             let measured = f.shared.1.as_nanos() as f64 / f.shared.0 as f64;
@@ -211,10 +215,17 @@ impl Payoff {
         self.in_view = f.raster_triangles + f.saved_triangles;
         if f.stopped {
             self.allowance = (self.allowance * 0.5).max(MIN_ALLOWANCE);
-        } else if f.gain_ns() >= f.cost_ns(Instant::now()) {
+        } else if self.last_balance.gain_ns >= self.last_balance.cost_ns {
             self.allowance = (self.allowance * 2.0).min(MAX_ALLOWANCE);
         }
     }
+}
+
+/// What a finished frame's tests cost and saved, ns of thread time ([`FramePayoff::paid`]).
+#[derive(Clone, Copy, Debug)]
+struct Balance {
+    cost_ns: f64,
+    gain_ns: f64,
 }
 
 /// One frame's balance of test cost against gain ([module doc](self)).

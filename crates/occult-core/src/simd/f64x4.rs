@@ -111,6 +111,10 @@ mod tests {
         assert_eq!(bits(a.abs()), x.map(|p| key(p.abs())));
         assert_eq!(bits(a.min(b)), want(|p, q| if p < q { p } else { q }));
         assert_eq!(bits(a.max(b)), want(|p, q| if p > q { p } else { q }));
+        // The other way round: `o` wherever either is NaN or both are zero.
+        let flip = |f: fn(f64, f64) -> f64| std::array::from_fn::<u64, 4, _>(|i| key(f(y[i], x[i])));
+        assert_eq!(bits(b.min(a)), flip(|p, q| if p < q { p } else { q }));
+        assert_eq!(bits(b.max(a)), flip(|p, q| if p > q { p } else { q }));
         assert_eq!(a.lt(b).bits(), flags(|p, q| p < q));
         assert_eq!(a.gt(b).bits(), flags(|p, q| p > q));
         let narrow = |p: f32| if p.is_nan() { f32::NAN.to_bits() } else { p.to_bits() };
