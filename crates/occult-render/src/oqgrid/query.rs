@@ -175,36 +175,9 @@ fn pixel_bounds(pts: &[(f64, f64)], w: f64, h: f64) -> (i64, i64, i64, i64) {
     (px0, py0, px1, py1)
 }
 
-/// The pixels a box may draw into: the bounding rectangle of its projected corners, widened by
-/// [`SNAP_MARGIN`], or the whole frame when a corner is not finite or reaches the near plane;
-/// None when empty. The region a pyramid update must cover after the box's contents are drawn.
-pub(super) fn screen_rect(clip_from_object: &Mat4, aabb: &Aabb, width: u32, height: u32) -> Option<PixelRect> {
-    if aabb.is_empty() {
-        return None;
-    }
-    let (w, h) = (width as f64, height as f64);
-    let mut pts = [(0.0f64, 0.0f64); 8];
-    for (p, c) in pts.iter_mut().zip(aabb.corners()) {
-        let c = *clip_from_object * c.extend(1.0);
-        if !c.is_finite() || c.z * (1.0 + 1e-5) > c.w {
-            return Some(PixelRect {
-                x0: 0,
-                y0: 0,
-                x1: width,
-                y1: height,
-            });
-        }
-        let (x, y, cw) = (c.x as f64, c.y as f64, c.w as f64);
-        *p = ((x / cw * 0.5 + 0.5) * w, (0.5 - y / cw * 0.5) * h);
-    }
-    let (x0, y0, x1, y1) = pixel_bounds(&pts, w, h);
-    (x1 > x0 && y1 > y0).then_some(PixelRect {
-        x0: x0 as u32,
-        y0: y0 as u32,
-        x1: x1 as u32,
-        y1: y1 as u32,
-    })
-}
+// The pixels a box may draw into (the region a pyramid update must cover after the box's
+// contents are drawn): `hzb`'s, with the same margins, its corners projected in lanes.
+pub(super) use crate::hzb::boxtest::screen_rect;
 
 /// True when some depth in `span` is not nearer than `nearest`; compares 16 at a time without
 /// branches so the loop vectorizes.
