@@ -690,11 +690,15 @@ impl Rasterizer {
                 vertex_total += d.mesh.positions().len();
             }
         }
-        // Every entry is overwritten below; resizing only writes entries the buffer never had.
-        self.vertices.resize(vertex_total, ProjVertex::default());
+        // Every entry used is overwritten below. The buffer never shrinks: growing it again
+        // after a smaller draw would write each entry twice (in a culled frame, small draws and
+        // whole meshes alternate, and a whole mesh's vertices were filled before projected).
+        if self.vertices.len() < vertex_total {
+            self.vertices.resize(vertex_total, ProjVertex::default());
+        }
         let isa = self.isa;
         {
-            let mut rest = &mut self.vertices[..];
+            let mut rest = &mut self.vertices[..vertex_total];
             let mut jobs = Vec::new();
             for d in draws.iter().filter(|d| matches!(d.triangles, DrawTriangles::All)) {
                 let (head, tail) = rest.split_at_mut(d.mesh.positions().len());
