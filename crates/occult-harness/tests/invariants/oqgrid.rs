@@ -265,8 +265,9 @@ fn whole_draws_from_earlier_frames_are_identical() {
     assert!(whole.iter().sum::<u64>() > 0, "no mesh was drawn whole");
 }
 
-/// Frame-to-frame coherence: last frame's visible cells are drawn first, unqueried. Frames stay
-/// identical with it on and off over a path. On a view seen again (without whole draws, whose
+/// Frame-to-frame coherence (`weigh=off`: whatever the frame times): last frame's visible
+/// cells are drawn first, unqueried. Frames stay identical with it on, off and weighed over a
+/// path. On a view seen again (without whole draws, whose
 /// grids are traversed again now and then), the cells drawn first are all the traversal finds
 /// visible (each was visible against less depth before), so the frame draws no more than the
 /// first did, all of it from the list.
@@ -279,9 +280,12 @@ fn coherence_draws_last_frames_cells_first() {
     let opts = RenderOptions::default();
     let mut z = Algorithm::ZBUFFER.build(scene.clone(), &opts).unwrap();
     let mut renderers: Vec<_> = [
-        "oqgrid:payoff=off",
+        "oqgrid:payoff=off,weigh=off",
         "oqgrid:payoff=off,coherence=off",
-        "oqgrid:payoff=off,whole=0",
+        "oqgrid:payoff=off,whole=0,weigh=off",
+        // Weighed by frame times: whether the list is drawn depends on the clock, the frames
+        // do not.
+        "oqgrid:payoff=off",
     ]
     .iter()
     .map(|s| spec(s).build(scene.clone(), &opts).expect("oqgrid builds"))

@@ -15,6 +15,7 @@ use super::{
     MAX_REMEMBERED_SHARES, MAX_VISIBLE_CELLS, PARALLEL_QUERY_MIN_PIXELS, WHOLE, WHOLE_PROBE_PERIOD,
 };
 use crate::hash::FxBuild;
+use crate::list_choice::ListChoice;
 use crate::payoff::{FramePayoff, Payoff, DIRECT_BATCH};
 use crate::walk::{NodeAt, NodeTest, Placed, SceneWalk, Visitor};
 use crate::{FrameStats, Phase, Result};
@@ -643,6 +644,8 @@ pub(super) struct Temporal {
     pub(super) next_visible: VisibleCells,
     /// The cells the frame in progress drew first: (first item of the occurrence, cell key).
     pub(super) predrawn: HashSet<(u64, u64), FxBuild>,
+    /// Frame times with the list drawn first and without it ([`OqGridOptions::weigh`]).
+    pub(super) choice: ListChoice,
 }
 
 impl Temporal {
@@ -722,10 +725,15 @@ impl Grids<'_> {
         };
         walk.walk.stats = cleared;
         walk.predrawn.clear();
-        if options.coherence && options.queries {
-            // Last frame's visible list first (its keys in `predrawn`), then the traversal,
-            // which records this frame's list.
-            walk.predraw(&temporal.visible);
+        let coherent = options.coherence && options.queries;
+        if coherent {
+            // Last frame's visible list first (its keys in `predrawn`) unless the frame times
+            // say it costs more than it saves, then the traversal, which records this frame's
+            // list (what its queries found visible, drawn first or not: a list whatever this
+            // frame drew first).
+            if !(options.weigh && temporal.choice.skip()) {
+                walk.predraw(&temporal.visible);
+            }
             temporal.next_visible.clear();
             walk.record = Some(&mut temporal.next_visible);
         }
@@ -750,6 +758,10 @@ impl Grids<'_> {
             return Err(crate::RenderError::Cancelled);
         }
         payoff.end(&frame_payoff);
+        if coherent && options.weigh {
+            // A frame that stopped querying is recorded too: its time is what its way cost.
+            temporal.choice.record(counts.coherent_cells > 0, walked);
+        }
         let mut stats = walk.finish("oqgrid")?;
         if recorded {
             // This frame's list replaces the last (one that stopped querying, given up or not,
