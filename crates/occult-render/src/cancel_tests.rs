@@ -1,7 +1,7 @@
 //! Cancellation and progress ([`FrameControl`]) across every renderer: a cancelled frame is
 //! [`RenderError::Cancelled`] wherever it is cancelled, leaves the renderer's frame-to-frame
 //! state (visible lists, caches, planes) fit for the next frame, and a complete frame reports a
-//! progress of 1.
+//! progress of 1. And preparation ([`Renderer::prepare`]) changes no frame.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -339,4 +339,33 @@ fn a_cancelled_rzb_frame_leaves_the_epsilon_search_as_it_was() {
             Err(e) => panic!("{e}"),
         }
     }
+}
+
+/// [`Renderer::prepare`] changes no frame: every renderer prepared for one size draws the
+/// frames an unprepared one draws, at that size and at another. A rasterizer on two threads
+/// makes its sort-last private frame at preparation (`zbuffer`'s memory grows by it).
+#[test]
+fn a_prepared_renderer_draws_the_frames_an_unprepared_one_draws() {
+    let scene = walls();
+    let mut options = RenderOptions::default();
+    options.raster.threads = 2;
+    let control = options.raster.control.clone();
+    for spec in specs() {
+        let mut plain = build(&spec, &scene, &options);
+        let mut prepared = build(&spec, &scene, &options);
+        prepared.prepare(64, 48).expect("the renderer prepares");
+        for view in views(64, 48).iter().chain(&views(48, 32)[..1]) {
+            let a = frame_of(plain.as_mut(), &control, view);
+            let b = frame_of(prepared.as_mut(), &control, view);
+            assert!(same(&a, &b), "{spec}: a prepared renderer drew another frame");
+        }
+    }
+    let mut z = build("zbuffer", &scene, &options);
+    let before = z.memory_bytes();
+    z.prepare(64, 48).expect("zbuffer prepares");
+    let frame = 64 * 48 * (std::mem::size_of::<f32>() + std::mem::size_of::<occult_core::ItemId>());
+    assert!(
+        z.memory_bytes() >= before + frame,
+        "the second thread's private frame is made at preparation"
+    );
 }

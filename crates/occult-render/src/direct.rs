@@ -180,6 +180,18 @@ impl DirectFrames {
         self.choice.first_by_time
     }
 
+    /// [`crate::Renderer::prepare`]'s part: the screenings' depth pyramid for frames of
+    /// `width × height`, and the private frames of `raster`'s sort-last draws, which its
+    /// direct frames use.
+    ///
+    /// # Errors
+    /// Allocation refused.
+    pub fn prepare(&mut self, raster: &mut Rasterizer, width: u32, height: u32) -> Result<()> {
+        crate::prepare_raster(raster, self.frustum.scene(), width, height)?;
+        crate::sized_pyramid(&mut self.pyramid, width, height)?;
+        Ok(())
+    }
+
     /// Draws this frame directly when the choice says so (counting it in `payoff_direct` and
     /// measuring its rate); `None` when the frame is to be culled: its work is then counted
     /// (what [`DirectFrames::arm`] hands over).

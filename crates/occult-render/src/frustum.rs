@@ -148,6 +148,11 @@ impl FrustumCulling {
 }
 
 impl Hierarchies {
+    /// The scene.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
     /// Builds the per-node hierarchies of `scene` (on `raster`'s threads).
     ///
     /// # Errors
@@ -714,6 +719,10 @@ impl Renderer for FrustumCulling {
 
     fn memory_bytes(&self) -> usize {
         self.culling.memory_bytes() + self.raster.memory_bytes()
+    }
+
+    fn prepare(&mut self, width: u32, height: u32) -> Result<()> {
+        crate::prepare_raster(&mut self.raster, self.culling.scene(), width, height)
     }
 }
 

@@ -99,7 +99,7 @@ use std::time::Instant;
 
 use occult_core::{Scene, View};
 pub use occult_raster::FrameControl;
-use occult_raster::{Frame, RasterConfig, RasterError, Rasterizer};
+use occult_raster::{Frame, RasterConfig, RasterError, Rasterizer, ZPyramid};
 pub use params::{AlgoSpec, ParamDoc, Params};
 pub use stats::{Counters, FrameStats, FrameStatsMs, Phase, PhaseTimes};
 use thiserror::Error;
@@ -170,6 +170,19 @@ pub trait Renderer: Send {
     /// Bytes held by the renderer's own structures, its rasterizers' scratch memory included
     /// (not the scene's, nor the frame it draws into).
     fn memory_bytes(&self) -> usize;
+    /// Makes, ahead of the first frame, what frames of `width × height` need that a renderer
+    /// would otherwise make in its first frames: buffers the size of a frame (the private
+    /// frames of sort-last draws, workers' frames and depth pyramids), whose fresh pages cost
+    /// a first frame milliseconds. Preparation, not a frame, then pays for them; callers that
+    /// know the size call it after building. Frames do not change, and a frame of another size
+    /// makes its own, as before. The default does nothing.
+    ///
+    /// # Errors
+    /// Allocation refused.
+    fn prepare(&mut self, width: u32, height: u32) -> Result<()> {
+        let _ = (width, height);
+        Ok(())
+    }
     /// False for renderers whose frames are approximate (measured, not held identical).
     fn is_conservative(&self) -> bool {
         true
@@ -384,6 +397,31 @@ pub(crate) fn scene_rasterizer(scene: &Scene, options: &RenderOptions) -> Result
     let mut raster = Rasterizer::new(options.raster.clone())?;
     raster.reserve_vertices(scene.vertex_instance_count())?;
     Ok(raster)
+}
+
+/// [`Renderer::prepare`] for a rasterizer of `scene`: the private frames of its sort-last
+/// draws ([`Rasterizer::reserve_frames`]).
+///
+/// # Errors
+/// [`RasterError::OutOfMemory`] for the frames.
+pub(crate) fn prepare_raster(raster: &mut Rasterizer, scene: &Scene, width: u32, height: u32) -> Result<()> {
+    raster.reserve_frames(width, height, scene.item_count())?;
+    Ok(())
+}
+
+/// Makes `slot` a depth pyramid of `width × height` unless it holds one of that size
+/// ([`Renderer::prepare`]).
+///
+/// # Errors
+/// The pyramid refused.
+pub(crate) fn sized_pyramid(slot: &mut Option<ZPyramid>, width: u32, height: u32) -> Result<()> {
+    if !slot
+        .as_ref()
+        .is_some_and(|p| p.width() == width && p.height() == height)
+    {
+        *slot = Some(ZPyramid::new(width, height)?);
+    }
+    Ok(())
 }
 
 /// Rasterizes `draws` into `frame`, adding the time to [`Phase::Raster`] and the counts to

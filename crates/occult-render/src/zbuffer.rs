@@ -82,4 +82,8 @@ impl Renderer for ZBuffer {
     fn memory_bytes(&self) -> usize {
         self.raster.memory_bytes()
     }
+
+    fn prepare(&mut self, width: u32, height: u32) -> Result<()> {
+        crate::prepare_raster(&mut self.raster, &self.scene, width, height)
+    }
 }

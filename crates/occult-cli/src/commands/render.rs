@@ -42,7 +42,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let camera = scene::camera(&a.camera.view, &a.camera.overrides, &scene)?;
     let view = View::new(camera, a.size.width, a.size.height).context("view")?;
 
-    let (mut renderer, prepare_ms, progress) = super::build_renderer(&a.algo, &scene)?;
+    let (mut renderer, prepare_ms, progress) = super::build_renderer(&a.algo, &scene, a.size.width, a.size.height)?;
     progress.set_message(format!("rendering with {}", a.algo.label()));
     let mut frame = Frame::new(a.size.width, a.size.height)?;
     let t = Instant::now();

@@ -81,7 +81,8 @@ pub fn run(a: WalkArgs) -> Result<()> {
         occult_scenes::path::write_path_json(p, &cameras)?;
     }
 
-    let (mut renderer, prepare_ms, progress) = super::build_renderer(&a.algo, &scene)?;
+    let (mut renderer, prepare_ms, progress) =
+        super::build_renderer(&a.algo, &scene, a.frames.size.width, a.frames.size.height)?;
     drop(progress);
 
     let progress = Progress::bar(views.len() as u64, format!("{} on {}", a.algo.label(), a.frames.path));

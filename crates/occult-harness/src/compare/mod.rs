@@ -466,13 +466,10 @@ impl Checker {
             count,
         });
         let t = Instant::now();
-        let renderer = reference
-            .spec
-            .build(Arc::clone(scene), &config.options)
-            .map_err(|source| CompareError::Build {
-                algorithm: label.clone(),
-                source,
-            })?;
+        let renderer = build_prepared(&reference.spec, scene, config).map_err(|source| CompareError::Build {
+            algorithm: label.clone(),
+            source,
+        })?;
         progress(CompareProgress::Built {
             label: &label,
             prepare_ms: ms(t.elapsed()),
@@ -507,6 +504,19 @@ fn within_peak_window<T>(rss: Option<&PeakRss>, work: impl FnOnce() -> T) -> (T,
 
 /// Renderers a comparison builds: the line-up's, and the reference's second instance
 /// ([`Checker`]) when frames are checked.
+/// `spec`'s renderer of `scene`, prepared for frames of the comparison's size
+/// ([`Renderer::prepare`]): its preparation, not its first frame, pays for its frame-sized
+/// buffers.
+fn build_prepared(
+    spec: &AlgoSpec,
+    scene: &Arc<Scene>,
+    config: &CompareConfig,
+) -> occult_render::Result<Box<dyn Renderer>> {
+    let mut renderer = spec.build(Arc::clone(scene), &config.options)?;
+    renderer.prepare(config.width, config.height)?;
+    Ok(renderer)
+}
+
 fn lineup_builds(lineup: &Lineup) -> usize {
     lineup.entries.len() + usize::from(lineup.reference_label.is_some())
 }
@@ -529,7 +539,7 @@ fn build(
         });
         let ((renderer, prepare_ms), peak_rss_bytes) = within_peak_window(config.peak_rss.as_ref(), || {
             let t = Instant::now();
-            let renderer = spec.build(Arc::clone(scene), &config.options);
+            let renderer = build_prepared(spec, scene, config);
             (renderer, ms(t.elapsed()))
         });
         let renderer = renderer.map_err(|source| CompareError::Build {

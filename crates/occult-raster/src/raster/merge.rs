@@ -30,19 +30,8 @@ impl Rasterizer {
     ) -> Option<(u64, u64, f64, [u32; 4])> {
         let parts = workers.threads;
         let (w, h) = (vp.width as usize, vp.height as usize);
-        // Private frames are kept cleared between draws; one a panic left drawn is dropped.
-        if !self.scratch_clean {
-            self.scratch.clear();
-        }
-        self.scratch.retain(|(d, _)| d.len() == w * h);
-        while self.scratch.len() < parts - 1 {
-            let (mut d, mut i) = (Vec::new(), Vec::new());
-            if d.try_reserve_exact(w * h).is_err() || i.try_reserve_exact(w * h).is_err() {
-                return None;
-            }
-            d.resize(w * h, crate::CLEAR_DEPTH);
-            i.resize(w * h, occult_core::NO_ITEM);
-            self.scratch.push((d, i));
+        if !self.ready_scratch(parts - 1, w * h) {
+            return None;
         }
         self.scratch_clean = false;
         let isa = self.isa;
@@ -109,6 +98,29 @@ impl Rasterizer {
             .iter()
             .fold((0, 0, 0.0), |(r, f, t), &(rr, ff, _, tt)| (r + rr, f + ff, t + tt));
         Some((rasterized, written, thread_ns, written_box))
+    }
+}
+
+impl Rasterizer {
+    /// Makes `count` cleared private frames of `pixels` pixels ready for a sort-last draw
+    /// (those of another size dropped); false when memory is refused.
+    pub(super) fn ready_scratch(&mut self, count: usize, pixels: usize) -> bool {
+        // Private frames are kept cleared between draws; one a panic left drawn is dropped.
+        if !self.scratch_clean {
+            self.scratch.clear();
+            self.scratch_clean = true;
+        }
+        self.scratch.retain(|(d, _)| d.len() == pixels);
+        while self.scratch.len() < count {
+            let (mut d, mut i) = (Vec::new(), Vec::new());
+            if d.try_reserve_exact(pixels).is_err() || i.try_reserve_exact(pixels).is_err() {
+                return false;
+            }
+            d.resize(pixels, crate::CLEAR_DEPTH);
+            i.resize(pixels, occult_core::NO_ITEM);
+            self.scratch.push((d, i));
+        }
+        true
     }
 }
 

@@ -408,6 +408,34 @@ impl Rasterizer {
         Ok(())
     }
 
+    /// Makes, ahead of the first frame, the private frames that sort-last draws into frames of
+    /// `width × height` use (one for each thread beyond the first), when this rasterizer may
+    /// draw sort-last and a scene of `triangles` triangle instances can hand it a draw large
+    /// enough. A first large draw then does not pay for their fresh pages (several
+    /// milliseconds a frame of 1280×720). Frames do not change; a frame of another size makes
+    /// its own, as before.
+    ///
+    /// # Errors
+    /// [`crate::RasterError::OutOfMemory`] when the frames cannot be allocated.
+    pub fn reserve_frames(&mut self, width: u32, height: u32, triangles: u64) -> Result<(), crate::RasterError> {
+        let threads = self.thread_count();
+        let sort_last = match self.config.strategy {
+            Strategy::Auto => triangles >= SHARED_MIN_TRIANGLES as u64,
+            Strategy::SortLast => true,
+            Strategy::Direct | Strategy::Binned | Strategy::Banded => false,
+        };
+        if threads == 1 || !sort_last {
+            return Ok(());
+        }
+        let pixels = width as usize * height as usize;
+        if self.ready_scratch(threads - 1, pixels) {
+            Ok(())
+        } else {
+            let bytes = (threads - 1) * pixels * (std::mem::size_of::<f32>() + std::mem::size_of::<ItemId>());
+            Err(crate::RasterError::OutOfMemory(bytes))
+        }
+    }
+
     /// The configuration.
     pub fn config(&self) -> &RasterConfig {
         &self.config

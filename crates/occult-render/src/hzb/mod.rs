@@ -1199,6 +1199,28 @@ impl Renderer for Hzb {
         crate::end_frame(&self.workers[0].raster, stats)
     }
 
+    /// The workers' frames and pyramids (each worker's, under `parallel=columns` or `on`; the
+    /// first's pyramid otherwise), the direct frames' rasterizer and screening pyramid.
+    fn prepare(&mut self, width: u32, height: u32) -> Result<()> {
+        match self.options.distribution {
+            Distribution::Off => {
+                let w = &mut self.workers[0];
+                crate::prepare_raster(&mut w.raster, &self.scene, width, height)?;
+                ready_pyramid(&mut w.pyramid, width, height)?;
+            }
+            _ => {
+                for w in &mut self.workers {
+                    w.ready(width, height)?;
+                }
+            }
+        }
+        if let Some(direct) = &mut self.direct {
+            let raster = self.direct_raster.as_mut().unwrap_or(&mut self.workers[0].raster);
+            direct.prepare(raster, width, height)?;
+        }
+        Ok(())
+    }
+
     fn memory_bytes(&self) -> usize {
         self.octrees
             .iter()

@@ -1036,6 +1036,19 @@ impl Renderer for Lzb {
         self.memory_bytes_of_all()
     }
 
+    /// The rasterizer's private frames, the near pass's pyramid (`near_cull=on`), the direct
+    /// frames' screening pyramid.
+    fn prepare(&mut self, width: u32, height: u32) -> Result<()> {
+        crate::prepare_raster(&mut self.raster, &self.scene, width, height)?;
+        if self.opts.near_cull {
+            crate::sized_pyramid(&mut self.pyramid, width, height)?;
+        }
+        if let Some(direct) = &mut self.direct {
+            direct.prepare(&mut self.raster, width, height)?;
+        }
+        Ok(())
+    }
+
     fn is_conservative(&self) -> bool {
         self.opts.mode == Mode::Lazy
     }

@@ -1206,6 +1206,16 @@ impl Renderer for NBufferCulling {
         crate::end_frame(&self.raster, stats)
     }
 
+    /// The rasterizer's private frames and the direct frames' screening pyramid (the N-buffer
+    /// is made from each frame's depth).
+    fn prepare(&mut self, width: u32, height: u32) -> Result<()> {
+        crate::prepare_raster(&mut self.raster, &self.scene, width, height)?;
+        if let Some(direct) = &mut self.direct {
+            direct.prepare(&mut self.raster, width, height)?;
+        }
+        Ok(())
+    }
+
     fn memory_bytes(&self) -> usize {
         self.objects.capacity() * std::mem::size_of::<Object>()
             + self.instances.capacity() * std::mem::size_of::<InstanceRecord>()

@@ -990,6 +990,23 @@ impl Renderer for OqGrid {
         crate::end_frame(&self.raster, stats)
     }
 
+    /// The rasterizer's private frames, the pyramid of `test=pyramid`, the workers' frames and
+    /// pyramids under `parallel=columns`, the direct frames' screening pyramid.
+    fn prepare(&mut self, width: u32, height: u32) -> Result<()> {
+        crate::prepare_raster(&mut self.raster, &self.scene, width, height)?;
+        let pyramid = &self.depth.pyramid;
+        if self.options.test == CellTest::Pyramid && (pyramid.width(), pyramid.height()) != (width, height) {
+            self.depth.pyramid = ZPyramid::new(width, height)?;
+        }
+        for w in &mut self.workers {
+            w.ready(width, height)?;
+        }
+        if let Some(direct) = &mut self.direct {
+            direct.prepare(&mut self.raster, width, height)?;
+        }
+        Ok(())
+    }
+
     fn memory_bytes(&self) -> usize {
         self.grids.iter().map(NestedGrid::memory_bytes).sum::<usize>()
             + self.depth.memory_bytes()

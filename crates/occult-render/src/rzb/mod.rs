@@ -1441,6 +1441,15 @@ impl Renderer for Rzb {
         Ok(stats)
     }
 
+    /// The rasterizer's private frames (the §7.1 fallback) and the pyramid of `occlude=on`.
+    fn prepare(&mut self, width: u32, height: u32) -> Result<()> {
+        crate::prepare_raster(&mut self.raster, &self.scene, width, height)?;
+        if self.opts.occlude {
+            crate::sized_pyramid(&mut self.pyramid, width, height)?;
+        }
+        Ok(())
+    }
+
     fn memory_bytes(&self) -> usize {
         self.structures.iter().map(Structure::memory_bytes).sum::<usize>()
             + self.cache.as_ref().map_or(0, |c| c.bytes() + c.seen_bytes())
