@@ -79,6 +79,13 @@ pub const EARLY_PROGRESS: f64 = 0.25;
 /// Share of what a first frame's tests met that they must remove for the early rule to let it
 /// go on.
 pub const EARLY_REMOVED: f64 = 0.125;
+/// The early rule also gives up a first frame at half [`EARLY_PROGRESS`] whose tests removed
+/// less than half [`EARLY_REMOVED`] of what they met, at this many times its estimated direct
+/// pace: a view that culling plainly cannot help (on the suite's `forest`, terrain, Armadillo
+/// and lost-empire orbits, 0–7 % removed at 2–4× the pace by then; views whose culling pays had
+/// removed 10 % or more, or kept within twice the pace) costs an eighth of its work at that
+/// pace, not a quarter.
+pub const HOPELESS_PACE: f64 = 2.0;
 /// Tests between two checks of the balance (a check reads the clock).
 const CHECK_EVERY: u32 = 32;
 
@@ -380,17 +387,22 @@ impl FramePayoff {
     /// costs about 1.25 direct frames, not two; one whose tests remove much goes on, however
     /// slow its start. Later frames draw what was visible first, which their tests do not
     /// remove: the share would give up frames that pay (measured: `oqgrid` on `city`
-    /// streets, 1.77× → 1.28× `zbuffer`).
+    /// streets, 1.77× → 1.28× `zbuffer`). A frame plainly hopeless by half that progress is
+    /// given up then ([`HOPELESS_PACE`]).
     fn gives_up_early(&self, elapsed: f64, progress: f64, expected: f64) -> bool {
         let met = (self.raster_triangles + self.saved_triangles - self.base.2) as f64;
         let removed = (self.saved_triangles - self.base.3) as f64;
+        let by = |share: f64, removed_share: f64, pace: f64| {
+            met >= share * self.direct_work as f64
+                && removed < removed_share * met
+                && elapsed > pace * expected * progress
+        };
         self.first
             && self.direct_frame_ns.is_none()
             && !self.untested_first
             && elapsed > MIN_ALLOWANCE_TIME.as_nanos() as f64
-            && met >= EARLY_PROGRESS * self.direct_work as f64
-            && removed < EARLY_REMOVED * met
-            && elapsed > ABANDON_MARGIN * expected * progress
+            && (by(EARLY_PROGRESS, EARLY_REMOVED, ABANDON_MARGIN)
+                || by(EARLY_PROGRESS / 2.0, EARLY_REMOVED / 2.0, HOPELESS_PACE))
     }
 
     /// Tests (`force_stop`): a frame with a direct frame measured is given up at its
@@ -637,7 +649,8 @@ mod tests {
 
     /// A renderer's first frame is given up once its tests
     /// met a quarter of its work and removed less than an eighth of what they met, and its
-    /// pace says the whole would take longer than the margin; not one whose tests remove, nor
+    /// pace says the whole would take longer than the margin, or met an eighth and removed
+    /// less than a sixteenth at more than twice the pace; not one whose tests remove, nor
     /// one on pace (one thread), nor one still drawing untested, nor by its rays' progress, nor a
     /// later frame, nor once a direct frame was measured.
     #[test]
@@ -655,7 +668,19 @@ mod tests {
         p.set_direct(None, 10_000, 2);
         let f = frame(&p, ago(40), 3_000, 0);
         assert!(f.given_up() && f.stopped(), "40 ms, nothing removed");
-        assert!(!frame(&p, ago(30), 2_000, 0).given_up(), "less than a quarter met");
+        assert!(
+            !frame(&p, ago(18), 2_000, 0).given_up(),
+            "less than a quarter met, under twice the pace"
+        );
+        assert!(
+            frame(&p, ago(30), 2_000, 0).given_up(),
+            "an eighth met at three times the pace"
+        );
+        assert!(
+            !frame(&p, ago(30), 2_000, 200).given_up(),
+            "a tenth removed by an eighth"
+        );
+        assert!(!frame(&p, ago(30), 1_000, 0).given_up(), "less than an eighth met");
         assert!(!frame(&p, ago(30), 3_000, 500).given_up(), "a seventh removed");
         assert!(frame(&p, ago(40), 3_000, 400).given_up(), "less than an eighth removed");
         assert!(!frame(&p, ago(30), 3_000, 6_000).given_up(), "two thirds removed");
