@@ -81,7 +81,11 @@ impl ZPyramid {
         while w > 1 || h > 1 {
             w = w.div_ceil(2);
             h = h.div_ceil(2);
-            levels.push((w, h, vec![0.0; w as usize * h as usize]));
+            // Written, not allocated zeroed: the pages are made here (at a renderer's
+            // preparation, when it makes its pyramid then), not at the first frame's clear.
+            let mut samples = Vec::with_capacity(w as usize * h as usize);
+            samples.resize(w as usize * h as usize, 0.0);
+            levels.push((w, h, samples));
         }
         Ok(Self { width, height, levels })
     }

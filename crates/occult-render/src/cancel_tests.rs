@@ -350,9 +350,16 @@ fn a_prepared_renderer_draws_the_frames_an_unprepared_one_draws() {
     let mut options = RenderOptions::default();
     options.raster.threads = 2;
     let control = options.raster.control.clone();
-    for spec in specs() {
-        let mut plain = build(&spec, &scene, &options);
-        let mut prepared = build(&spec, &scene, &options);
+    // Forced sort-last as well: every large draw then reads the private frames made ahead.
+    let mut sort_last = options.clone();
+    sort_last.raster.strategy = occult_raster::Strategy::SortLast;
+    let runs = specs()
+        .into_iter()
+        .map(|s| (s, &options))
+        .chain(["zbuffer", "hzb:payoff=off", "oqgrid:payoff=off"].map(|s| (s.to_string(), &sort_last)));
+    for (spec, options) in runs {
+        let mut plain = build(&spec, &scene, options);
+        let mut prepared = build(&spec, &scene, options);
         prepared.prepare(64, 48).expect("the renderer prepares");
         for view in views(64, 48).iter().chain(&views(48, 32)[..1]) {
             let a = frame_of(plain.as_mut(), &control, view);

@@ -885,7 +885,7 @@ impl Renderer for ClusterCulling {
 
     /// The rasterizer's private frames, the pyramid, the direct frames' screening pyramid.
     fn prepare(&mut self, width: u32, height: u32) -> Result<()> {
-        crate::prepare_raster(&mut self.raster, &self.scene, width, height)?;
+        crate::prepare_raster(&mut self.raster, &self.scene, width, height);
         crate::sized_pyramid(&mut self.pyramid, width, height)?;
         if let Some(direct) = &mut self.direct {
             direct.prepare(&mut self.raster, width, height)?;

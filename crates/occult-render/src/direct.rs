@@ -187,7 +187,7 @@ impl DirectFrames {
     /// # Errors
     /// Allocation refused.
     pub fn prepare(&mut self, raster: &mut Rasterizer, width: u32, height: u32) -> Result<()> {
-        crate::prepare_raster(raster, self.frustum.scene(), width, height)?;
+        crate::prepare_raster(raster, self.frustum.scene(), width, height);
         crate::sized_pyramid(&mut self.pyramid, width, height)?;
         Ok(())
     }

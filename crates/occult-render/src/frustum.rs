@@ -722,7 +722,8 @@ impl Renderer for FrustumCulling {
     }
 
     fn prepare(&mut self, width: u32, height: u32) -> Result<()> {
-        crate::prepare_raster(&mut self.raster, self.culling.scene(), width, height)
+        crate::prepare_raster(&mut self.raster, self.culling.scene(), width, height);
+        Ok(())
     }
 }
 

@@ -400,13 +400,10 @@ pub(crate) fn scene_rasterizer(scene: &Scene, options: &RenderOptions) -> Result
 }
 
 /// [`Renderer::prepare`] for a rasterizer of `scene`: the private frames of its sort-last
-/// draws ([`Rasterizer::reserve_frames`]).
-///
-/// # Errors
-/// [`RasterError::OutOfMemory`] for the frames.
-pub(crate) fn prepare_raster(raster: &mut Rasterizer, scene: &Scene, width: u32, height: u32) -> Result<()> {
-    raster.reserve_frames(width, height, scene.item_count())?;
-    Ok(())
+/// draws ([`Rasterizer::reserve_frames`]), where memory allows (a speed-up, never an error:
+/// draws make them or fall back as without).
+pub(crate) fn prepare_raster(raster: &mut Rasterizer, scene: &Scene, width: u32, height: u32) {
+    let _ = raster.reserve_frames(width, height, scene.item_count());
 }
 
 /// Makes `slot` a depth pyramid of `width × height` unless it holds one of that size

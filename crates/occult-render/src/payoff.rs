@@ -40,7 +40,9 @@
 //! less than an eighth of what they met, when at its pace the whole frame would take
 //! more than 1.25 estimated direct frames (the estimate is the frame's own rate shared over
 //! the threads, so on two threads or more a frame drawn on one always is; drawn in small
-//! tested batches on one thread, a first view culling cannot help took about two). Once a
+//! tested batches on one thread, a first view culling cannot help took about two), or once
+//! they met an eighth and removed less than a sixteenth at more than twice that pace
+//! ([`HOPELESS_PACE`]). Once a
 //! direct frame was measured, any other frame is finished as begun, tests and all, unless
 //! given up; the frame-level choice weighs it.
 //!
@@ -669,7 +671,7 @@ mod tests {
         let f = frame(&p, ago(40), 3_000, 0);
         assert!(f.given_up() && f.stopped(), "40 ms, nothing removed");
         assert!(
-            !frame(&p, ago(18), 2_000, 0).given_up(),
+            !frame(&p, ago(10), 2_000, 0).given_up(),
             "less than a quarter met, under twice the pace"
         );
         assert!(

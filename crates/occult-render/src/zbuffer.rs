@@ -84,6 +84,7 @@ impl Renderer for ZBuffer {
     }
 
     fn prepare(&mut self, width: u32, height: u32) -> Result<()> {
-        crate::prepare_raster(&mut self.raster, &self.scene, width, height)
+        crate::prepare_raster(&mut self.raster, &self.scene, width, height);
+        Ok(())
     }
 }

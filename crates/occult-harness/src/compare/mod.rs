@@ -502,8 +502,6 @@ fn within_peak_window<T>(rss: Option<&PeakRss>, work: impl FnOnce() -> T) -> (T,
     (out, window.and_then(|w| w.end()))
 }
 
-/// Renderers a comparison builds: the line-up's, and the reference's second instance
-/// ([`Checker`]) when frames are checked.
 /// `spec`'s renderer of `scene`, prepared for frames of the comparison's size
 /// ([`Renderer::prepare`]): its preparation, not its first frame, pays for its frame-sized
 /// buffers.
@@ -517,6 +515,8 @@ fn build_prepared(
     Ok(renderer)
 }
 
+/// Renderers a comparison builds: the line-up's, and the reference's second instance
+/// ([`Checker`]) when frames are checked.
 fn lineup_builds(lineup: &Lineup) -> usize {
     lineup.entries.len() + usize::from(lineup.reference_label.is_some())
 }

@@ -413,11 +413,9 @@ impl Rasterizer {
     /// draw sort-last and a scene of `triangles` triangle instances can hand it a draw large
     /// enough. A first large draw then does not pay for their fresh pages (several
     /// milliseconds a frame of 1280×720). Frames do not change; a frame of another size makes
-    /// its own, as before.
-    ///
-    /// # Errors
-    /// [`crate::RasterError::OutOfMemory`] when the frames cannot be allocated.
-    pub fn reserve_frames(&mut self, width: u32, height: u32, triangles: u64) -> Result<(), crate::RasterError> {
+    /// its own, as before. False when the memory was refused: draws then make the frames
+    /// themselves or fall back to binning, as without.
+    pub fn reserve_frames(&mut self, width: u32, height: u32, triangles: u64) -> bool {
         let threads = self.thread_count();
         let sort_last = match self.config.strategy {
             Strategy::Auto => triangles >= SHARED_MIN_TRIANGLES as u64,
@@ -425,15 +423,9 @@ impl Rasterizer {
             Strategy::Direct | Strategy::Binned | Strategy::Banded => false,
         };
         if threads == 1 || !sort_last {
-            return Ok(());
+            return true;
         }
-        let pixels = width as usize * height as usize;
-        if self.ready_scratch(threads - 1, pixels) {
-            Ok(())
-        } else {
-            let bytes = (threads - 1) * pixels * (std::mem::size_of::<f32>() + std::mem::size_of::<ItemId>());
-            Err(crate::RasterError::OutOfMemory(bytes))
-        }
+        self.ready_scratch(threads - 1, width as usize * height as usize)
     }
 
     /// The configuration.

@@ -1205,7 +1205,7 @@ impl Renderer for Hzb {
         match self.options.distribution {
             Distribution::Off => {
                 let w = &mut self.workers[0];
-                crate::prepare_raster(&mut w.raster, &self.scene, width, height)?;
+                crate::prepare_raster(&mut w.raster, &self.scene, width, height);
                 ready_pyramid(&mut w.pyramid, width, height)?;
             }
             _ => {

@@ -1036,11 +1036,11 @@ impl Renderer for Lzb {
         self.memory_bytes_of_all()
     }
 
-    /// The rasterizer's private frames, the near pass's pyramid (`near_cull=on`), the direct
+    /// The rasterizer's private frames, the pyramid of `near_cull` and `far_cull`, the direct
     /// frames' screening pyramid.
     fn prepare(&mut self, width: u32, height: u32) -> Result<()> {
-        crate::prepare_raster(&mut self.raster, &self.scene, width, height)?;
-        if self.opts.near_cull {
+        crate::prepare_raster(&mut self.raster, &self.scene, width, height);
+        if self.opts.near_cull || self.opts.far_cull {
             crate::sized_pyramid(&mut self.pyramid, width, height)?;
         }
         if let Some(direct) = &mut self.direct {

@@ -1209,7 +1209,7 @@ impl Renderer for NBufferCulling {
     /// The rasterizer's private frames and the direct frames' screening pyramid (the N-buffer
     /// is made from each frame's depth).
     fn prepare(&mut self, width: u32, height: u32) -> Result<()> {
-        crate::prepare_raster(&mut self.raster, &self.scene, width, height)?;
+        crate::prepare_raster(&mut self.raster, &self.scene, width, height);
         if let Some(direct) = &mut self.direct {
             direct.prepare(&mut self.raster, width, height)?;
         }

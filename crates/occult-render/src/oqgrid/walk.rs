@@ -646,6 +646,11 @@ pub(super) struct Temporal {
     pub(super) predrawn: HashSet<(u64, u64), FxBuild>,
     /// Frame times with the list drawn first and without it ([`OqGridOptions::weigh`]).
     pub(super) choice: ListChoice,
+    /// Whether the last queried frame drew the list first: a list recorded by a frame that
+    /// did not holds cells found visible against a depth without it, hidden by that frame's
+    /// end, and drawing it is not what the list costs (not recorded, as `hzb` and `clusters`
+    /// do).
+    pub(super) drew_list: bool,
 }
 
 impl Temporal {
@@ -759,8 +764,14 @@ impl Grids<'_> {
         }
         payoff.end(&frame_payoff);
         if coherent && options.weigh {
-            // A frame that stopped querying is recorded too: its time is what its way cost.
-            temporal.choice.record(counts.coherent_cells > 0, walked);
+            // A frame that stopped querying is recorded too: its time is what its way cost. A
+            // frame that drew a list made by a frame without one is not (`drew_list`): a probe
+            // of the list then lasts two frames.
+            let drew = counts.coherent_cells > 0;
+            if !drew || temporal.drew_list {
+                temporal.choice.record(drew, walked);
+            }
+            temporal.drew_list = drew;
         }
         let mut stats = walk.finish("oqgrid")?;
         if recorded {

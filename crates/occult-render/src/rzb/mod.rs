@@ -1443,7 +1443,7 @@ impl Renderer for Rzb {
 
     /// The rasterizer's private frames (the §7.1 fallback) and the pyramid of `occlude=on`.
     fn prepare(&mut self, width: u32, height: u32) -> Result<()> {
-        crate::prepare_raster(&mut self.raster, &self.scene, width, height)?;
+        crate::prepare_raster(&mut self.raster, &self.scene, width, height);
         if self.opts.occlude {
             crate::sized_pyramid(&mut self.pyramid, width, height)?;
         }
