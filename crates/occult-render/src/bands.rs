@@ -302,6 +302,23 @@ impl Renderer for Bands {
         Ok(stats)
     }
 
+    /// Each band's frame and its renderer's own preparation, on the band's thread (as its first
+    /// frame would make them).
+    fn prepare(&mut self, width: u32, height: u32) -> Result<()> {
+        let work = self.parts.iter_mut().collect();
+        let results: Vec<Result<()>> = on_threads(work, |part: &mut Part| {
+            if part
+                .frame
+                .as_ref()
+                .is_none_or(|f| f.width() != width || f.height() != height)
+            {
+                part.frame = Some(Frame::new(width, height)?);
+            }
+            part.renderer.prepare(width, height)
+        });
+        results.into_iter().collect()
+    }
+
     fn memory_bytes(&self) -> usize {
         self.parts
             .iter()

@@ -343,7 +343,8 @@ fn a_cancelled_rzb_frame_leaves_the_epsilon_search_as_it_was() {
 
 /// [`Renderer::prepare`] changes no frame: every renderer prepared for one size draws the
 /// frames an unprepared one draws, at that size and at another. A rasterizer on two threads
-/// makes its sort-last private frame at preparation (`zbuffer`'s memory grows by it).
+/// makes its sort-last private frame at preparation (`zbuffer`'s memory grows by it), and
+/// `bands=N` each band's frame.
 #[test]
 fn a_prepared_renderer_draws_the_frames_an_unprepared_one_draws() {
     let scene = walls();
@@ -356,7 +357,8 @@ fn a_prepared_renderer_draws_the_frames_an_unprepared_one_draws() {
     let runs = specs()
         .into_iter()
         .map(|s| (s, &options))
-        .chain(["zbuffer", "hzb:payoff=off", "oqgrid:payoff=off"].map(|s| (s.to_string(), &sort_last)));
+        .chain(["zbuffer", "hzb:payoff=off", "oqgrid:payoff=off"].map(|s| (s.to_string(), &sort_last)))
+        .chain(["hzb:bands=2", "oqgrid:bands=2,payoff=off"].map(|s| (s.to_string(), &options)));
     for (spec, options) in runs {
         let mut plain = build(&spec, &scene, options);
         let mut prepared = build(&spec, &scene, options);
@@ -374,5 +376,12 @@ fn a_prepared_renderer_draws_the_frames_an_unprepared_one_draws() {
     assert!(
         z.memory_bytes() >= before + frame,
         "the second thread's private frame is made at preparation"
+    );
+    let mut banded = build("zbuffer:bands=2", &scene, &options);
+    let before = banded.memory_bytes();
+    banded.prepare(64, 48).expect("bands prepare");
+    assert!(
+        banded.memory_bytes() >= before + 2 * frame,
+        "each band's frame is made at preparation"
     );
 }
