@@ -601,7 +601,7 @@ fn instance_groups(
 /// A unit of the near pass of an instance all of whose leaves are near ([`near_chunks`]).
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct NearChunk {
-    /// Its leaves: positions in the order [`super::cull_octree`] meets the non-empty leaves.
+    /// Its leaves: positions in the order [`super::leaves::cull_octree`] meets the non-empty leaves.
     leaves: std::ops::Range<u32>,
     /// Its triangle references.
     count: u32,
@@ -613,7 +613,7 @@ pub(crate) struct NearChunk {
 
 /// The near pass's units of a mesh instance all of whose leaves are near (an instance wholly
 /// in the frustum before the plane: most of them when the plane lies far), made once: runs of
-/// consecutive non-empty leaves, in the order [`super::cull_octree`] meets them, of up to
+/// consecutive non-empty leaves, in the order [`super::leaves::cull_octree`] meets them, of up to
 /// [`super::NEAR_UNIT`] triangle references, exactly as the near pass forms them from a frame's
 /// leaves, which reads every near leaf's node.
 pub(super) fn near_chunks(octree: &RayOctree, owned_of: &[u32]) -> Vec<NearChunk> {
