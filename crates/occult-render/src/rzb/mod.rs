@@ -88,28 +88,32 @@
 //!   ([`occluded`], Greene's test with margins for the samples' own rounding, splats and the
 //!   Gaussian pass's reach and tolerance). A box of at least `split` samples that is not
 //!   hidden is split into its octree node's parts (a box of instances: into the instances,
-//!   entered), each tested in turn and sampled at the box's density ([`split`]). Counters `boxes_hidden`, `samples_hidden` (expected samples
-//!   skipped), `boxes_split`. The error does not grow (tested against `occlude=off`).
+//!   entered), each tested in turn (in parallel) and sampled at the density its own nearest
+//!   distance asks, never above the box's ([`split`]). Counters `boxes_hidden`,
+//!   `samples_hidden` (expected samples skipped), `boxes_split`. The error does not grow
+//!   (tested against `occlude=off`).
 
 pub mod cache;
+mod occlude;
 pub mod recon;
 pub mod sample;
 pub mod select;
 pub mod structure;
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
-use occult_core::{Aabb, Mat4, Vec3};
+use occult_core::{Aabb, Vec3};
 use occult_core::{ItemId, Scene, View, NO_ITEM};
-use occult_raster::{keep_fragment, Frame, PixelRect, PyramidCounts, PyramidTest, Rasterizer, ZPyramid};
+use occult_raster::{keep_fragment, Frame, PyramidCounts, Rasterizer, ZPyramid};
 use occult_spatial::SampleOctreeConfig;
 use rayon::prelude::*;
 
 use crate::params::read_params;
 use crate::{AlgorithmInfo, FrameStats, ParamDoc, Params, Phase, RenderError, RenderOptions, Renderer, Result};
 use cache::{quantize, CachedSample, Plan, SampleCache};
+use occlude::{occluded, occlusion_batches, split, PartTest, Reach};
 use sample::{box_rng, piece_rng, sample_count, SampleCounts, Sampler, Target};
 use select::Selection;
 use structure::Structure;
@@ -139,8 +143,8 @@ pub static INFO: AlgorithmInfo = AlgorithmInfo {
         ParamDoc { key: "backface", default: "auto", help: "reject back-facing samples (5.3.3): auto follows the rasterizer's back-face culling, on, off" },
         ParamDoc { key: "dynamic", default: "off", help: "sample from distribution trees (5.4) so that entries can be removed and inserted through Rzb::remove/insert" },
         ParamDoc { key: "max_samples", default: "1e9", help: "most samples per frame; beyond, counts are scaled down (counter samples_capped)" },
-        ParamDoc { key: "occlude", default: "on", help: "boxes sampled nearest first in batches; a box whose every sample would lose the depth test against what is drawn (large triangles, earlier batches, through a z-pyramid) gets none, and a large box that is not hidden is split into its octree parts, each tested and sampled at the box's density (not in the paper)" },
-        ParamDoc { key: "split", default: "128", help: "occlude=on: expected samples from which a box that is not hidden is split into its octree parts or entered instances, each tested in turn; 0 = never" },
+        ParamDoc { key: "occlude", default: "on", help: "boxes sampled nearest first in batches; a box whose every sample would lose the depth test against what is drawn (large triangles, earlier batches, through a z-pyramid) gets none, and a large box that is not hidden is split into its octree parts, each tested and sampled at the density of its own nearest distance (not in the paper)" },
+        ParamDoc { key: "split", default: "1024", help: "occlude=on: expected samples from which a box that is not hidden is split into its octree parts or entered instances, each tested in turn; 0 = never" },
     ],
     counters: &[
         "boxes_selected",
@@ -279,7 +283,7 @@ impl Default for RzbOptions {
             max_samples: 1e9,
             dynamic: false,
             occlude: true,
-            split: 128.0,
+            split: 1024.0,
         }
     }
 }
@@ -659,286 +663,8 @@ struct Unit {
     len: usize,
 }
 
-/// Relative depth margin of [`occluded`]: a sample's depth is computed through its own chain
-/// of instance transforms, the box's corners through the composed matrix.
-const OCCLUDE_DEPTH_MARGIN: f32 = 1e-4;
-/// Pixel margin of [`occluded`], for the same rounding on screen.
-const OCCLUDE_PIXEL_MARGIN: f32 = 0.5;
-
-/// `occlude=on`: true when no sample of `job` can change `frame` (or, with `gauss`, the
-/// Gaussian pass's colors): every pixel a sample in its bounds (grown by `grow`, structure
-/// space, for quantized cached sets) may write holds a depth nearer than the box's nearest
-/// corner, as far as `pyramid` (up to date with `frame`) shows. A sample writes the pixel its
-/// projection falls in, or a `splat`-sided square around it; the Gaussian pass writes within
-/// `reach` pixels and keeps samples within `keep` of a pixel's view distance, so its depth
-/// bound is that much nearer. A box reaching the near plane is never hidden.
-///
-/// Skipping such a box leaves the frame as it would have been: its samples would all have
-/// lost the depth test there, and depth only grows while a frame is drawn. Other boxes'
-/// samples do not change (each box has its own generator); a box that is [`split`] is
-/// sampled by its parts' generators instead, at the same density.
-fn occluded(
-    pyramid: &ZPyramid,
-    frame: &Frame,
-    clip_from_structure: &Mat4,
-    b: &Aabb,
-    reach: Reach,
-    counts: &mut PyramidCounts,
-) -> bool {
-    let mut nearest = f32::NEG_INFINITY;
-    let (mut x0, mut x1, mut y0, mut y1) = (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY);
-    let (w, h) = (frame.width() as f32, frame.height() as f32);
-    for p in b.corners() {
-        let c = *clip_from_structure * p.extend(1.0);
-        if !c.is_finite() || c.w <= 0.0 || c.z * (1.0 + OCCLUDE_DEPTH_MARGIN) >= c.w {
-            return false;
-        }
-        let inv_w = 1.0 / c.w;
-        nearest = nearest.max(c.z * inv_w);
-        let x = (c.x * inv_w * 0.5 + 0.5) * w;
-        let y = (0.5 - c.y * inv_w * 0.5) * h;
-        x0 = x0.min(x);
-        x1 = x1.max(x);
-        y0 = y0.min(y);
-        y1 = y1.max(y);
-    }
-    // Samples outside the view are dropped.
-    if x1 + OCCLUDE_PIXEL_MARGIN < 0.0
-        || y1 + OCCLUDE_PIXEL_MARGIN < 0.0
-        || x0 - OCCLUDE_PIXEL_MARGIN > w
-        || y0 - OCCLUDE_PIXEL_MARGIN > h
-    {
-        return true;
-    }
-    // The pixels samples fall in (clamped as the splat clamps them), grown by the splat.
-    let pixel = |v: f32, n: f32| (v.clamp(0.0, n) as i64).min(n as i64 - 1);
-    let (before, after) = (reach.before as i64, reach.after as i64);
-    let span = |lo: f32, hi: f32, n: f32| {
-        let a = pixel(lo - OCCLUDE_PIXEL_MARGIN, n) - before;
-        let b = pixel(hi + OCCLUDE_PIXEL_MARGIN, n) + after + 1;
-        (a.clamp(0, n as i64) as u32, b.clamp(0, n as i64) as u32)
-    };
-    let (rx0, rx1) = span(x0, x1, w);
-    let (ry0, ry1) = span(y0, y1, h);
-    let rect = PixelRect {
-        x0: rx0,
-        y0: ry0,
-        x1: rx1,
-        y1: ry1,
-    };
-    let how = PyramidTest {
-        global: true,
-        hierarchical: true,
-    };
-    pyramid.occludes(
-        frame,
-        rect,
-        nearest * (1.0 + OCCLUDE_DEPTH_MARGIN) * reach.depth_factor,
-        how,
-        counts,
-    )
-}
-
-/// How far a sample's effect reaches from the pixel it falls in: `before` pixels left and up,
-/// `after` right and down, and how much nearer than the sample a pixel's depth must be
-/// (a factor ≥ 1 on reversed depth) for the sample to leave it unchanged.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct Reach {
-    before: u32,
-    after: u32,
-    depth_factor: f32,
-}
-
-impl Reach {
-    /// A `splat`-sided square (§4.2), or with the Gaussian pass a `sigma` filter's 3σ support
-    /// and its visibility tolerance.
-    fn of(opts: &RzbOptions) -> Self {
-        let d = opts.splat;
-        let splat = Self {
-            before: (d - 1) / 2,
-            after: d - 1 - (d - 1) / 2,
-            depth_factor: 1.0,
-        };
-        match opts.recon {
-            Recon::Nearest => splat,
-            Recon::Gauss => {
-                let r = (3.0 * opts.sigma).ceil() as u32 + 1;
-                Self {
-                    before: splat.before.max(r),
-                    after: splat.after.max(r),
-                    depth_factor: 1.0 + opts.gauss_tolerance,
-                }
-            }
-        }
-    }
-}
-
-/// `occlude=on`: expected samples of the first batch, per pixel of the frame ...
-const FIRST_BATCH_PER_PIXEL: f64 = 0.5;
-/// ... and the factor from a batch to the next.
-const BATCH_GROWTH: f64 = 1.5;
-
-/// `occlude=on`: the parts of a selected box that failed its occlusion test, when it is the
-/// subtree of an inner octree node with at least `min_samples` expected samples: each child's
-/// subtree and the node's own entries, with their tight bounds, each sampled at the box's
-/// density (its share of the box's samples by area; depth accuracy and cached cells as the
-/// box's), so a part hidden behind what is drawn can be skipped while the visible ones are
-/// sampled as the whole box would have been. `None` for a box that cannot be split (a leaf, a
-/// node's own entries, a distribution tree's section).
-fn split(
-    scene: &Scene,
-    view: &View,
-    structures: &[Structure],
-    job: &select::Job,
-    min_samples: f64,
-) -> Option<Vec<select::Job>> {
-    if min_samples <= 0.0 || job.samples < min_samples {
-        return None;
-    }
-    let st = &structures[job.structure as usize];
-    if st.tree.is_some() {
-        return None;
-    }
-    let node = st.octree.nodes()[job.node as usize];
-    if job.own || node.is_leaf() {
-        return enter_instances(scene, view, structures, job);
-    }
-    if node.section() != job.range {
-        return None;
-    }
-    let area = |sec: &structure::Section| st.section_area(sec);
-    let whole = area(&structure::Section {
-        node: job.node,
-        own: false,
-        range: job.range.clone(),
-    });
-    if whole.is_nan() || whole <= 0.0 {
-        return None;
-    }
-    let mut parts = Vec::new();
-    let mut part = |sec: structure::Section, bounds: Aabb| {
-        let a = area(&sec);
-        if a > 0.0 && !bounds.is_empty() {
-            parts.push(select::Job {
-                node: sec.node,
-                own: sec.own,
-                range: sec.range,
-                bounds,
-                samples: job.samples * a / whole,
-                ..job.clone()
-            });
-        }
-    };
-    for c in node.children() {
-        let child = st.octree.nodes()[c as usize];
-        part(
-            structure::Section {
-                node: c,
-                own: false,
-                range: child.section(),
-            },
-            child.bounds,
-        );
-    }
-    if node.own_first < node.end {
-        part(
-            structure::Section {
-                node: job.node,
-                own: true,
-                range: node.own(),
-            },
-            node.own_bounds,
-        );
-    }
-    Some(parts)
-}
-
-/// [`split`] of a box that holds instances (a group's leaf or a node's own entries): each
-/// instance entered, as one box per orientation class of its child's structure, placed and
-/// numbered as the scene walk places it, at the box's density (the instance's share of the
-/// box's area). `None` for a box of triangles.
-fn enter_instances(
-    scene: &Scene,
-    view: &View,
-    structures: &[Structure],
-    job: &select::Job,
-) -> Option<Vec<select::Job>> {
-    let st = &structures[job.structure as usize];
-    let group = scene.node(occult_core::NodeId(job.structure));
-    if !matches!(group.kind(), occult_core::NodeKind::Group(_)) {
-        return None;
-    }
-    let whole = st.section_area(&structure::Section {
-        node: job.node,
-        own: job.own,
-        range: job.range.clone(),
-    });
-    if whole.is_nan() || whole <= 0.0 {
-        return None;
-    }
-    let at = crate::walk::Placed {
-        id: occult_core::NodeId(job.structure),
-        world_from_node: job.world_from_structure,
-        first_item: job.base,
-    };
-    let mut parts = Vec::new();
-    for &e in &st.octree.entries()[job.range.start as usize..job.range.end as usize] {
-        let inst = &group.instances()[e as usize];
-        let child = at.child_of(group, e as usize);
-        let cs = &structures[child.id.index()];
-        let share = structure::area_scale(&inst.parent_from_child) / whole;
-        let clip_from_structure = view.clip_from_object(&child.world_from_node);
-        let scale = structure::area_scale(&child.world_from_node).sqrt() as f32;
-        for root in cs.octree.roots().iter().flatten() {
-            let n = cs.octree.nodes()[*root as usize];
-            let sec = structure::Section {
-                node: *root,
-                own: false,
-                range: n.section(),
-            };
-            let a = cs.section_area(&sec) * share;
-            if a > 0.0 && !n.bounds.is_empty() {
-                parts.push(select::Job {
-                    structure: child.id.0,
-                    range: sec.range,
-                    node: *root,
-                    own: false,
-                    world_from_structure: child.world_from_node,
-                    clip_from_structure,
-                    base: child.first_item,
-                    bounds: n.bounds,
-                    samples: job.samples * a,
-                    z_min: job.z_min,
-                    scale,
-                });
-            }
-        }
-    }
-    Some(parts)
-}
-
-/// `occlude=on`: the boxes in `order` (nearest first) cut into batches of doubling expected
-/// samples (`samples` of a box), the first of about four samples per pixel of the frame's
-/// `pixels`: each batch is tested against the depth of the ones before, so the first holds
-/// the nearest surfaces and later ones are large enough that the pyramid's rebuild and the
-/// threads' merge stay small beside them.
-fn occlusion_batches(order: &[usize], samples: impl Fn(usize) -> f64, pixels: f64) -> Vec<std::ops::Range<usize>> {
-    let mut batches = Vec::new();
-    let (mut start, mut sum, mut target) = (0, 0.0, FIRST_BATCH_PER_PIXEL * pixels);
-    for (i, &k) in order.iter().enumerate() {
-        sum += samples(k);
-        if sum >= target {
-            batches.push(start..i + 1);
-            start = i + 1;
-            sum = 0.0;
-            target *= BATCH_GROWTH;
-        }
-    }
-    if start < order.len() || batches.is_empty() {
-        batches.push(start..order.len());
-    }
-    batches
-}
+/// Work units a drawing thread takes at a time from its batch.
+const UNITS_TAKEN: usize = 8;
 
 /// Where a selected box's samples come from this frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -1066,13 +792,11 @@ impl Renderer for Rzb {
                 stats.phases.add(Phase::DepthStructure, t.elapsed());
             }
             let (first_build, first_unit) = (to_build.len(), units.len());
-            // The batch's boxes, then the parts of those split (appended, tested in turn).
-            let mut work: Vec<usize> = order[batch].to_vec();
-            let mut accepted: Vec<usize> = Vec::with_capacity(work.len());
-            let mut next = 0;
-            while next < work.len() {
-                let k = work[next];
-                next += 1;
+            // The batch's boxes in turn; the parts of those split are tested (and split again)
+            // afterwards, in parallel.
+            let mut accepted: Vec<usize> = Vec::with_capacity(batch.len());
+            let mut to_resolve: Vec<select::Job> = Vec::new();
+            for &k in &order[batch] {
                 let job = &jobs[k];
                 // §7.2: a valid set, one to build (the box was selected in the frame before at
                 // a similar distance), or fresh samples ([`cache`]'s admission rule).
@@ -1081,7 +805,6 @@ impl Renderer for Rzb {
                 // look up and keep than to draw; the box itself is remembered and cached whole.
                 let key = job.key();
                 let plan = match &self.cache {
-                    Some(_) if k >= selected => Plan::Direct,
                     Some(c) => match c.plan(&key, job.z_min, frame_index) {
                         Plan::Build if !c.fits(job.samples * cap * (tol * tol) as f64) => Plan::Direct,
                         p => p,
@@ -1110,15 +833,11 @@ impl Renderer for Rzb {
                         Plan::Hit | Plan::Build => None,
                     };
                     if let Some(parts) = parts {
-                        if self.cache.is_some() && k < selected {
+                        if self.cache.is_some() {
                             noted.push((key, job.z_min));
                         }
                         split_count += 1;
-                        for part in parts {
-                            jobs.push(part);
-                            sources.push(None);
-                            work.push(jobs.len() - 1);
-                        }
+                        to_resolve.extend(parts);
                         continue;
                     }
                 }
@@ -1135,13 +854,35 @@ impl Renderer for Rzb {
                         Source::Built(to_build.len() - 1)
                     }
                     Plan::Direct => {
-                        if self.cache.is_some() && k < selected {
+                        if self.cache.is_some() {
                             noted.push((key, job.z_min));
                         }
                         Source::Direct
                     }
                 };
                 sources[k] = Some(src);
+            }
+            if let Some(p) = &pyramid {
+                let test = PartTest {
+                    scene: &self.scene,
+                    view,
+                    structures: &self.structures,
+                    pyramid: p,
+                    frame,
+                    reach,
+                    min_samples: self.opts.split,
+                    cap,
+                };
+                for parts in self.raster.install(|| test.resolve_all(to_resolve)) {
+                    hidden.0 += parts.hidden;
+                    hidden.1 += parts.hidden_samples;
+                    split_count += parts.splits;
+                    for part in parts.accepted {
+                        jobs.push(part);
+                        sources.push(Some(Source::Direct));
+                        accepted.push(jobs.len() - 1);
+                    }
+                }
             }
             // §7.2: build the missing sets (parallel over boxes), at the density needed at
             // z_min / tolerance, quantized to cells that project to at most one splat there.
@@ -1206,23 +947,18 @@ impl Renderer for Rzb {
                     piece += 1;
                 }
             }
-            // Contiguous runs of the batch's units, one per thread; run 0 draws into the frame,
-            // the others into scratch buffers merged afterwards under the (depth, item) rule.
+            // One target per thread, each taking the batch's units a few at a time in turn (their
+            // samples vary from one to thousands, so fixed runs left a thread idle); target 0 is
+            // the frame, the others scratch buffers merged afterwards under the (depth, item)
+            // rule, which does not depend on which target drew a sample.
             let batch_units = &units[first_unit..];
             let max_threads = (1usize << 30) / (pixels * 12).max(1);
-            let threads = self
+            let chunk_count = self
                 .raster
                 .thread_count()
                 .clamp(1, max_threads.max(1))
                 .min(batch_units.len().max(1));
-            let mut bounds: Vec<usize> = (0..=threads)
-                .map(|t| first_unit + t * batch_units.len() / threads)
-                .collect();
-            bounds.dedup();
-            if bounds.len() == 1 {
-                bounds.push(units.len());
-            }
-            let chunk_count = bounds.len() - 1;
+            let next_unit = AtomicUsize::new(first_unit);
             if batch_units.is_empty() && batch_index + 1 < batch_count {
                 // Nothing to draw (every part hidden, say): the parts go as after a draw.
                 if !gauss {
@@ -1258,35 +994,50 @@ impl Renderer for Rzb {
                 });
             }
             let batch_counts: Vec<SampleCounts> = {
-                let (units, sources, built, bounds) = (&units, &sources, &built, &bounds);
+                let (units, sources, built, next_unit) = (&units, &sources, &built, &next_unit);
                 self.raster.install(|| {
                     targets
                         .par_iter_mut()
-                        .enumerate()
-                        .map(|(c, target)| {
+                        .map(|target| {
                             let mut counts = SampleCounts::default();
-                            for u in &units[bounds[c]..bounds[c + 1]] {
-                                if control.is_cancelled() {
+                            let mut unreported = 0;
+                            loop {
+                                let first = next_unit.fetch_add(UNITS_TAKEN, Ordering::Relaxed);
+                                if first >= units.len() || control.is_cancelled() {
                                     break;
                                 }
-                                let job = &jobs[u.job];
-                                let set = match sources[u.job] {
-                                    Some(Source::Direct) => {
-                                        let mut rng = piece_rng(sampler.seed, job, u.piece);
-                                        sampler.draw_job(job, u.len as u64, &mut rng, target, &mut counts);
-                                        None
+                                for u in &units[first..(first + UNITS_TAKEN).min(units.len())] {
+                                    let job = &jobs[u.job];
+                                    let set = match sources[u.job] {
+                                        Some(Source::Direct) => {
+                                            let mut rng = piece_rng(sampler.seed, job, u.piece);
+                                            sampler.draw_job(job, u.len as u64, &mut rng, target, &mut counts);
+                                            None
+                                        }
+                                        Some(Source::Hit) => {
+                                            cache.map(|c| &c.samples(&job.key())[u.first..u.first + u.len])
+                                        }
+                                        Some(Source::Built(b)) => Some(&built[b].0[u.first..u.first + u.len]),
+                                        None => None,
+                                    };
+                                    if let Some(set) = set {
+                                        sampler.draw_cached(
+                                            &job.clip_from_structure,
+                                            job.base,
+                                            set,
+                                            target,
+                                            &mut counts,
+                                        );
                                     }
-                                    Some(Source::Hit) => {
-                                        cache.map(|c| &c.samples(&job.key())[u.first..u.first + u.len])
-                                    }
-                                    Some(Source::Built(b)) => Some(&built[b].0[u.first..u.first + u.len]),
-                                    None => None,
-                                };
-                                if let Some(set) = set {
-                                    sampler.draw_cached(&job.clip_from_structure, job.base, set, target, &mut counts);
+                                    unreported += u.len;
                                 }
-                                unit_done(u.len);
+                                // Progress told every few thousand samples, not per unit: the
+                                // shared counters are one cache line for every thread.
+                                if unreported >= PIECE as usize {
+                                    unit_done(std::mem::take(&mut unreported));
+                                }
                             }
+                            unit_done(unreported);
                             counts
                         })
                         .collect()
