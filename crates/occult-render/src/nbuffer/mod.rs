@@ -1213,6 +1213,20 @@ impl Renderer for NBufferCulling {
         if let Some(direct) = &mut self.direct {
             direct.prepare(&mut self.raster, width, height)?;
         }
+        // The N-buffer's levels (20 MB of 16-bit keys at 1280×720), made and written now
+        // rather than in the first culled frame (over a far map; each frame rebuilds them
+        // before a test). `query=on` reads the depth buffer instead.
+        if width > 0 && height > 0 && self.nbuffer.is_none() && !self.options.query {
+            let b = self.options.scale as usize;
+            let (cw, ch) = ((width as usize).div_ceil(b), (height as usize).div_ceil(b));
+            self.coarse_depth.clear();
+            self.coarse_depth.resize(cw * ch, 0.0);
+            let (depth, raster) = (&self.coarse_depth, &self.raster);
+            let built = raster.install(|| NBuffer::new(Extremum::Min, depth, cw as u32, ch as u32));
+            if let Ok(nb) = built {
+                self.nbuffer = Some(nb);
+            }
+        }
         Ok(())
     }
 
